@@ -1,0 +1,37 @@
+"""trackenv: learn when and where to tamp a ballasted railway track, on real vehicle-track dynamics.
+
+The physics (``trackenv.physics``) runs on its own; :class:`TrackDegradation` is the paper's iterative
+settlement loop; ``trackenv/Tamping-v0`` (registered on import) is the Gymnasium environment on top of it.
+"""
+
+from .degradation import DegradationHistory, IterationRecord, TrackDegradation
+from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
+from .physics.dynamics import PassResult, receptance, simulate_pass, simulate_passes, static_deflection
+from .physics.settlement import (
+    LAWS,
+    AlvaHurtadoSeligLaw,
+    HettlerLaw,
+    IndraratnaLaw,
+    SatoLaw,
+    SeligWatersLaw,
+    SettlementLaw,
+    SettlementState,
+    ShentonLaw,
+    make_law,
+)
+from .physics.track import Track
+from .physics.vehicle import Car, Train, VehicleSystem, Wheelset
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "LAWS", "AlvaHurtadoSeligLaw", "Car", "DegradationHistory", "HertzContact", "HettlerLaw", "IndraratnaLaw",
+    "IterationRecord", "LinearContact", "PassResult", "SatoLaw", "SeligWatersLaw", "SettlementLaw",
+    "SettlementState", "ShentonLaw", "Track", "TrackDegradation", "Train", "VehicleSystem", "Wheelset",
+    "make_law", "receptance", "simulate_pass", "simulate_passes", "static_deflection", "zhai_contact_constant",
+]
+
+try:  # the environment needs gymnasium; the physics does not
+    from . import envs as _envs  # noqa: F401  (registers trackenv/Tamping-v0)
+except ImportError:  # pragma: no cover
+    pass

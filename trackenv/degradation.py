@@ -1,0 +1,218 @@
+"""The paper's holistic loop as a stand-alone simulator: pass → sleeper forces → settlement → new rail level.
+
+One iteration: a vehicle pass over the standing track with the current rail level as irregularity gives the peak
+force on every sleeper; the settlement law, with curve shifting, advances every sleeper's settlement by ΔN load
+cycles (axle passes) under those forces; the settlement becomes the rail's level irregularity for the next pass.
+
+The track ends. A wheel does not load the sleepers at the ends of a finite rail the way it loads interior ones,
+and a vehicle starting on a rail end rocks before it settles down: fed back, those ends would form ramps that
+the next pass hits harder, and the loop runs away within a few iterations. So the dynamic model is longer than
+the evaluated track: approach and exit zones of ``approach_sleepers`` sleepers (plus the vehicle's axle span) are
+added at both ends, each a copy of the end sleeper it continues. Their level is not computed but held at the
+level of the nearest evaluated sleeper — they stand for more of the same track — so no ramp forms and the
+forces in the evaluated zone are those of a track that goes on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .physics._validation import check_array, check_scalar
+from .physics.dynamics import PassResult, _vehicle_system, simulate_passes
+from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState
+from .physics.track import Track
+
+
+@dataclass(frozen=True, eq=False)
+class IterationRecord:
+    """What one iteration did: the forces of the pass that drove it and the level after it."""
+
+    cycles: float  # load cycles (axle passes) since the start, after this iteration
+    settlement: np.ndarray  # (n_sleepers,) rail level after the iteration [m] (downward positive)
+    sleeper_force: np.ndarray  # (n_sleepers,) peak sleeper force of the driving pass [N]
+    contact_force: np.ndarray  # (n_sleepers,) peak contact force per sleeper bay of the driving pass [N]
+    max_contact_force: float  # [N]
+    passes: int  # dynamic passes run in the iteration (more than one with adaptive stepping)
+
+
+@dataclass(eq=False)
+class DegradationHistory:
+    """The iterations so far, stacked: ``settlement`` and ``sleeper_force`` are (iterations, sleepers)."""
+
+    sleeper_positions: np.ndarray
+    records: list[IterationRecord] = field(default_factory=list)
+
+    def _stack(self, name: str) -> np.ndarray:
+        return np.array([getattr(r, name) for r in self.records])
+
+    @property
+    def settlement(self) -> np.ndarray:
+        return self._stack("settlement")
+
+    @property
+    def sleeper_force(self) -> np.ndarray:
+        return self._stack("sleeper_force")
+
+    @property
+    def contact_force(self) -> np.ndarray:
+        return self._stack("contact_force")
+
+    @property
+    def max_contact_force(self) -> np.ndarray:
+        return self._stack("max_contact_force")
+
+    @property
+    def cycles(self) -> np.ndarray:
+        return self._stack("cycles")
+
+    @property
+    def passes(self) -> np.ndarray:
+        return self._stack("passes")
+
+    def to_dict(self) -> dict:
+        """JSON-ready: SI units, lists."""
+        return {"sleeper_positions_m": self.sleeper_positions.tolist(), "cycles": self.cycles.tolist(),
+                "settlement_m": self.settlement.tolist(), "sleeper_force_N": self.sleeper_force.tolist(),
+                "contact_force_N": self.contact_force.tolist(),
+                "max_contact_force_N": self.max_contact_force.tolist(), "passes": self.passes.tolist()}
+
+
+class TrackDegradation:
+    """Settlement of a track under repeated passes of one vehicle (the paper's iterative method).
+
+    ``law``: a settlement law (default :class:`HettlerLaw`, the paper's Eq. 7-8); ``cycles_per_iteration``:
+    ΔN axle passes per iteration; ``speed`` [m/s]; ``approach_sleepers``: length of the approach and exit zones
+    (see the module docstring); ``adaptive``: split an increment where the largest *differential* settlement
+    increment (deviation from the zone's mean increment, which is what changes the dynamics) would exceed
+    ``max_increment`` [m], so results do not depend on the step size; ``initial_level``: the rail level at the
+    start [m] per sleeper (downward positive). Remaining keywords go to :func:`simulate_passes` (``dt``,
+    ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    """
+
+    def __init__(self, track: Track, vehicle, law: SettlementLaw | None = None,
+                 cycles_per_iteration: float = 50_000, speed: float = 80 / 3.6, *, approach_sleepers: int = 10,
+                 adaptive: bool = False, max_increment: float = 0.1e-3, max_passes_per_iteration: int = 64,
+                 initial_level=None, **pass_options) -> None:
+        if not isinstance(track, Track):
+            raise ValueError(f"track must be a Track, got {type(track).__name__}")
+        self.track = track
+        self.vehicle = vehicle
+        self.system = _vehicle_system(vehicle)
+        self.law = HettlerLaw() if law is None else law
+        if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
+            raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
+        self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0,
+                                                 high=1e9)
+        self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+        if not isinstance(approach_sleepers, (int, np.integer)) or not 2 <= approach_sleepers <= 200:
+            raise ValueError(f"approach_sleepers must be an integer in [2, 200], got {approach_sleepers!r}")
+        self.adaptive = bool(adaptive)
+        self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1,
+                                          low_inclusive=False)
+        self.max_passes_per_iteration = int(check_scalar("max_passes_per_iteration", max_passes_per_iteration,
+                                                         low=1, high=10_000))
+        unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
+        if unknown:
+            raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
+        self.pass_options = pass_options
+        n = track.n_sleepers
+        self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
+        self.model_track = track.extended(self.n_extra, self.n_extra)
+        self.offset = (np.zeros(n) if initial_level is None
+                       else check_array("initial_level", initial_level, shape=(n,)))
+        self.state = SettlementState.zeros(n)
+        self.cycles = 0.0
+        self.history = DegradationHistory(track.sleeper_positions.copy())
+
+    # ------------------------------------------------------------------ state
+    @property
+    def level(self) -> np.ndarray:
+        """Rail level of the evaluated track per sleeper [m], downward positive."""
+        return self.offset + self.state.settlement
+
+    def model_irregularity(self, level: np.ndarray | None = None) -> np.ndarray:
+        """The level on the modelled track: the evaluated zone, with the approach and exit zones held at the
+        level of the end sleepers."""
+        lv = self.level if level is None else level
+        return np.concatenate([np.full(self.n_extra, lv[0]), lv, np.full(self.n_extra, lv[-1])])
+
+    def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
+        """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
+        return per_model_sleeper[..., self.n_extra:self.n_extra + self.track.n_sleepers]
+
+    # ------------------------------------------------------------------ loop
+    def simulate(self) -> PassResult:
+        """One pass over the current level (on the modelled track with its approach and exit zones)."""
+        return simulate_passes(self.model_track, self.vehicle, self.speed, [self.model_irregularity()],
+                               **self.pass_options)[0]
+
+    def settle(self, result: PassResult, cycles: float) -> int:
+        """Advance the settlement by ``cycles`` axle passes under the forces of ``result``; return how many
+        sub-steps it would take with adaptive stepping (1 when the whole increment is within the bound)."""
+        cycles = check_scalar("cycles", cycles, low=0.0)
+        force = self.evaluated(result.sleeper_force)
+        force = np.maximum(force, 0.0)
+        step = self._adaptive_step(force, cycles) if self.adaptive else cycles
+        self.state = self.state.advance(self.law, force, step)
+        self.cycles += step
+        return step
+
+    def _adaptive_step(self, force: np.ndarray, cycles: float) -> float:
+        """The largest ΔN <= cycles whose differential settlement increment stays within max_increment."""
+
+        def differential(dn: float) -> float:
+            inc = self.state.advance(self.law, force, dn).settlement - self.state.settlement
+            return float(np.max(np.abs(inc - inc.mean())))
+
+        if differential(cycles) <= self.max_increment:
+            return cycles
+        lo, hi = 0.0, math.log(cycles + 1.0)
+        for _ in range(40):  # bisection on log(1 + ΔN)
+            mid = 0.5 * (lo + hi)
+            if differential(math.expm1(mid)) <= self.max_increment:
+                lo = mid
+            else:
+                hi = mid
+        return max(math.expm1(lo), min(cycles, 1.0))
+
+    def advance(self, cycles: float | None = None) -> IterationRecord:
+        """One iteration of ``cycles`` axle passes (default ``cycles_per_iteration``); returns its record."""
+        total = self.cycles_per_iteration if cycles is None else check_scalar("cycles", cycles, low=0.0,
+                                                                               high=1e10)
+        done, passes, first = 0.0, 0, None
+        while done < total * (1 - 1e-12):
+            res = self.simulate()
+            first = first or res
+            remaining = total - done
+            if passes + 1 >= self.max_passes_per_iteration:
+                step = remaining
+                force = np.maximum(self.evaluated(res.sleeper_force), 0.0)
+                self.state = self.state.advance(self.law, force, step)
+                self.cycles += step
+            else:
+                step = self.settle(res, remaining)
+            done += step
+            passes += 1
+        if first is None:
+            first = self.simulate()
+        rec = IterationRecord(cycles=self.cycles, settlement=self.level.copy(),
+                              sleeper_force=self.evaluated(first.sleeper_force).copy(),
+                              contact_force=self.evaluated(first.contact_force_profile()).copy(),
+                              max_contact_force=float(self.evaluated(first.contact_force_profile()).max()),
+                              passes=passes)
+        self.history.records.append(rec)
+        return rec
+
+    def run(self, iterations: int, progress=None) -> DegradationHistory:
+        """Run ``iterations`` iterations of ``cycles_per_iteration``; ``progress`` is called after each with
+        (i, record) (e.g. to update a progress bar). Returns the whole history."""
+        if not isinstance(iterations, (int, np.integer)) or iterations < 0:
+            raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
+        for i in range(int(iterations)):
+            rec = self.advance()
+            if progress is not None:
+                progress(i, rec)
+        return self.history

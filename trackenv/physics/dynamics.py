@@ -1,0 +1,377 @@
+"""One pass of a vehicle over the standing track, and the track's static and harmonic responses.
+
+:func:`simulate_passes` is the one implementation of the time integration; it takes a leading batch axis (many
+tracks with the same mesh, many irregularities) and :func:`simulate_pass` is its batch of one. The integration
+is implicit (Newmark average acceleration), the Hertz contact is solved every step, and the track is integrated
+in a window that follows the axles (see :mod:`trackenv.physics._kernel`); ``window_bays=None`` integrates the
+whole track.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.interpolate
+import scipy.linalg
+
+from . import _kernel
+from ._validation import check_array, check_scalar
+from .contact import HertzContact, LinearContact
+from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
+from .vehicle import Car, Train, VehicleSystem, Wheelset
+
+Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
+SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
+
+
+@dataclass(frozen=True, eq=False)
+class PassResult:
+    """What one pass produced. Arrays over time have shape (n_steps + 1, n_axles).
+
+    ``sleeper_force`` is the peak downward force each sleeper puts into the ballast (ballast spring + damper)
+    during the pass [N], or, with ``sleeper_force_measure="pad_plus_ballast"``, the paper's measure: the peak of
+    the railpad and ballast forces on the sleeper added together. Both exclude the track's own dead weight.
+    """
+
+    time: np.ndarray  # (n_steps + 1,) [s]
+    wheel_position: np.ndarray  # (n_steps + 1, n_axles) [m]
+    contact_force: np.ndarray  # (n_steps + 1, n_axles) [N]
+    rail_displacement: np.ndarray  # (n_steps + 1, n_axles) rail deflection under each wheel [m]
+    wheel_displacement: np.ndarray  # (n_steps + 1, n_axles) [m]
+    irregularity: np.ndarray  # (n_steps + 1, n_axles) rail level under each wheel [m]
+    sleeper_force: np.ndarray  # (n_sleepers,) [N]
+    ballast_force: np.ndarray  # (n_sleepers,) peak ballast force [N]
+    pad_plus_ballast_force: np.ndarray  # (n_sleepers,) peak of pad + ballast force [N]
+    static_wheel_load: np.ndarray  # (n_axles,) [N]
+    sleeper_positions: np.ndarray  # (n_sleepers,) [m]
+    speed: float  # [m/s]
+    dt: float  # [s]
+
+    @property
+    def max_contact_force(self) -> float:
+        return float(self.contact_force.max())
+
+    def contact_force_profile(self, positions: np.ndarray | None = None) -> np.ndarray:
+        """Peak contact force of any axle within each sleeper bay (bay k spans ±s/2 around sleeper k) [N]."""
+        pos = self.sleeper_positions if positions is None else np.asarray(positions)
+        s = pos[1] - pos[0]
+        idx = np.clip(np.rint(self.wheel_position / s).astype(int), 0, pos.size - 1)
+        out = np.zeros(pos.size)
+        np.maximum.at(out, idx.ravel(), self.contact_force.ravel())
+        return out
+
+
+def _vehicle_system(vehicle) -> VehicleSystem:
+    if isinstance(vehicle, VehicleSystem):
+        return vehicle
+    if isinstance(vehicle, (Wheelset, Car, Train)):
+        return vehicle.system()
+    raise ValueError(f"vehicle must be a Wheelset, Car, Train or VehicleSystem, got {type(vehicle).__name__}")
+
+
+def _contact_law(contact):
+    if contact is None:
+        return HertzContact()
+    if isinstance(contact, (HertzContact, LinearContact)):
+        return contact
+    raise ValueError(f"contact must be a HertzContact or LinearContact, got {type(contact).__name__}")
+
+
+def _as_tracks(tracks) -> list[Track]:
+    if isinstance(tracks, Track):
+        return [tracks]
+    tracks = list(tracks)
+    if not tracks or not all(isinstance(t, Track) for t in tracks):
+        raise ValueError("track(s) must be a Track or a non-empty sequence of Track")
+    t0 = tracks[0]
+    for t in tracks[1:]:
+        if (t.n_sleepers, t.sleeper_spacing, t.elements_per_bay, t.rail_bending_stiffness, t.rail_mass) != (
+                t0.n_sleepers, t0.sleeper_spacing, t0.elements_per_bay, t0.rail_bending_stiffness, t0.rail_mass):
+            raise ValueError("tracks in one batch must share sleepers, spacing, mesh and rail; only support "
+                             "properties may differ")
+    return tracks
+
+
+def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M, C, K bands of every track, shape (batch, n_dof, 5): the rail is assembled once, supports per item."""
+    t0 = tracks[0]
+    lay = t0.dof_layout
+    zero = np.zeros(t0.n_sleepers)
+    rail = assemble_banded(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass, zero, zero, zero,
+                           zero, zero)
+    m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
+    w, d = lay.node_w[lay.sleeper_node], lay.sleeper
+    for b, t in enumerate(tracks):
+        for band, pad, bal in ((k[b], t.pad_stiffness, t.ballast_stiffness), (c[b], t.pad_damping,
+                                                                                t.ballast_damping)):
+            band[w, 0] += pad
+            band[d, 0] += pad + bal
+            band[d, d - w] -= pad
+        m[b, d, 0] += t.sleeper_mass
+    return m, c, k
+
+
+def lapack_lower(band: np.ndarray) -> np.ndarray:
+    """Our lower band storage ``band[i, k] = A[i, i-k]`` as LAPACK's ``ab[k, j] = A[j+k, j]``."""
+    n, b1 = band.shape
+    ab = np.zeros((b1, n), dtype=band.dtype)
+    for k in range(b1):
+        ab[k, : n - k] = band[k:, k]
+    return ab
+
+
+def _point_load_vector(track: Track, x: float) -> tuple[np.ndarray, np.ndarray]:
+    """DOF indices and Hermite weights of a point on the rail at position x."""
+    le = track.element_length
+    e = int(np.clip(np.floor(x / le), 0, track.n_nodes - 2))
+    lay = track.dof_layout
+    dofs = np.array([lay.node_w[e], lay.node_theta[e], lay.node_w[e + 1], lay.node_theta[e + 1]])
+    return dofs, hermite_shape(x / le - e, le)
+
+
+def static_deflection(track: Track, load: float = 100e3, x: float | None = None) -> float:
+    """Rail deflection [m] under a static point ``load`` [N] at position ``x`` [m] (default mid-track)."""
+    load = check_scalar("load", load, low=0.0, high=1e7)
+    x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
+    _, _, k = track.banded_matrices()
+    dofs, shp = _point_load_vector(track, x)
+    f = np.zeros(track.n_dof)
+    f[dofs] = shp * load
+    u = scipy.linalg.solveh_banded(lapack_lower(k), f, lower=True)
+    return float(shp @ u[dofs])
+
+
+def receptance(track: Track, x: float | None = None, frequencies=None) -> np.ndarray:
+    """Complex rail receptance w/F [m/N] at position ``x`` [m] for ``frequencies`` [Hz]: the direct
+    frequency response of the full track, (K + iωC − ω²M)⁻¹ at the load point."""
+    x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
+    f = check_array("frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies,
+                    low=0.0)
+    m, c, k = track.banded_matrices()
+    dofs, shp = _point_load_vector(track, x)
+    rhs = np.zeros(track.n_dof, dtype=complex)
+    rhs[dofs] = shp
+    b = HALF_BANDWIDTH
+    out = np.empty(f.size, dtype=complex)
+    for i, fi in enumerate(np.ravel(f)):
+        w = 2 * np.pi * fi
+        low = lapack_lower(k + 1j * w * c - w * w * m)
+        full = np.zeros((2 * b + 1, track.n_dof), dtype=complex)
+        full[b:] = low
+        for kk in range(1, b + 1):
+            full[b - kk, kk:] = low[kk, : track.n_dof - kk]
+        u = scipy.linalg.solve_banded((b, b), full, rhs)
+        out[i] = shp @ u[dofs]
+    return out.reshape(np.shape(f))
+
+
+def newmark_constants(dt: float, beta: float = 0.25, gamma: float = 0.5) -> np.ndarray:
+    """a0..a7 of the Newmark scheme in its effective-stiffness form (Bathe's notation)."""
+    return np.array([1 / (beta * dt * dt), gamma / (beta * dt), 1 / (beta * dt), 1 / (2 * beta) - 1,
+                     gamma / beta - 1, dt / 2 * (gamma / beta - 2), dt * (1 - gamma), gamma * dt])
+
+
+def _clusters(offsets: np.ndarray, gap: float) -> np.ndarray:
+    """Group axles (sorted by offset) whose neighbours are closer than ``gap`` into one track window."""
+    order = np.argsort(offsets)
+    cl = np.zeros(offsets.size, dtype=np.int64)
+    c = 0
+    for a, b in zip(order[:-1], order[1:]):
+        if offsets[b] - offsets[a] > gap:
+            c += 1
+        cl[b] = c
+    return cl
+
+
+def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
+    """Rail level at positions x from a per-sleeper or per-node profile (cubic spline) or a callable."""
+    if irr is None:
+        return np.zeros_like(x)
+    if callable(irr):
+        z = np.asarray(irr(x), dtype=float)
+        if z.shape != x.shape or not np.all(np.isfinite(z)):
+            raise ValueError(f"{name} callable must return finite values shaped like its input")
+        return z
+    arr = check_array(name, irr)
+    if arr.ndim != 1 or arr.size not in (track.n_sleepers, track.n_nodes):
+        raise ValueError(f"{name} must have one value per sleeper ({track.n_sleepers}) or per rail node "
+                         f"({track.n_nodes}), got shape {arr.shape}")
+    grid = track.sleeper_positions if arr.size == track.n_sleepers else track.node_positions
+    spline = scipy.interpolate.CubicSpline(grid, arr, bc_type="natural")
+    return spline(np.clip(x, 0.0, track.length))
+
+
+def _window_dofs(track: Track, x_axles: np.ndarray, margin_bays: int) -> tuple[int, int]:
+    """DOF range [lo, hi) of the track window around axles at ``x_axles`` (as the kernel places it)."""
+    n_s = track.n_sleepers
+    bays = np.clip((x_axles / track.sleeper_spacing).astype(int), 0, n_s - 2)
+    s_lo, s_hi = max(0, bays.min() - margin_bays), min(n_s - 1, bays.max() + 1 + margin_bays)
+    lay = track.dof_layout
+    return int(lay.node_w[lay.sleeper_node[s_lo]]), int(lay.sleeper[s_hi] + 1)
+
+
+def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray:
+    """Static displacements with the track outside the windows held at rest."""
+    u = np.zeros_like(f)
+    for lo, hi in windows:
+        u[lo:hi] = scipy.linalg.solveh_banded(lapack_lower(k_band[lo:hi]), f[lo:hi], lower=True)
+    return u
+
+
+def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irregularities=None, *,
+                    dt: float = 1e-4, contact=None, start: str = "static", x_start: float | None = None,
+                    x_end: float | None = None, window_bays: int | None = 6,
+                    sleeper_force_measure: str = "ballast") -> list[PassResult]:
+    """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
+
+    ``tracks``: one Track (shared by every row) or one per row; ``irregularities``: None, an array (n_rows,
+    n_sleepers or n_nodes) of rail level [m] (downward positive), or a list of such rows or callables z(x).
+    ``speed`` [m/s] > 0; ``dt`` [s]; ``start``: "static" (vehicle and track in static equilibrium at the start)
+    or "rest" (the paper's transient: the vehicle is set on the unloaded track and drops in).
+    ``x_start``/``x_end``: leading-axle positions [m] where the pass starts/ends (default: the whole vehicle
+    on the rail from the first to the last sleeper). ``window_bays``: sleeper bays of track integrated ahead of
+    the leading and behind the trailing axle of each axle group (None: the whole track).
+    """
+    tracks = _as_tracks(tracks)
+    sys_ = _vehicle_system(vehicle)
+    law = _contact_law(contact)
+    speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+    dt = check_scalar("dt", dt, low=1e-7, high=1.0)
+    if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
+        raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}, got "
+                         f"{sleeper_force_measure!r}")
+    if start not in ("static", "rest"):
+        raise ValueError(f"start must be 'static' or 'rest', got {start!r}")
+    t0 = tracks[0]
+    # The contact must be resolved in time: its period with the unsprung mass must span >= 20 steps.
+    k_contact = float(np.max(law.stiffness(max(sys_.static_wheel_loads.max(), 1.0) * 3.0)))
+    m_wheel = float(np.min(np.diag(sys_.mass)[sys_.wheel_dofs]))
+    period = 2 * np.pi * np.sqrt(m_wheel / k_contact)
+    if dt > period / 20:
+        raise ValueError(f"dt must be <= {period / 20:.3g} s to resolve the wheel-on-contact-spring vibration "
+                         f"(period {period:.3g} s), got {dt:g}")
+    if sys_.span >= t0.length:
+        raise ValueError(f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)")
+    x_start = sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
+    x_end = t0.length if x_end is None else check_scalar("x_end", x_end, low=x_start, high=t0.length,
+                                                          low_inclusive=False)
+    if window_bays is not None and (not isinstance(window_bays, (int, np.integer)) or window_bays < 2):
+        raise ValueError(f"window_bays must be an integer >= 2 or None, got {window_bays!r}")
+
+    # rows
+    if irregularities is None:
+        irr_rows = [None] * len(tracks)
+    elif callable(irregularities):
+        irr_rows = [irregularities]
+    else:
+        if isinstance(irregularities, np.ndarray) and irregularities.ndim == 1:
+            irr_rows = [irregularities]
+        else:
+            irr_rows = list(irregularities)
+    n_rows = max(len(tracks), len(irr_rows))
+    if len(tracks) == 1:
+        tracks = tracks * n_rows
+    if len(irr_rows) == 1:
+        irr_rows = irr_rows * n_rows
+    if len(tracks) != n_rows or len(irr_rows) != n_rows:
+        raise ValueError(f"irregularities has {len(irr_rows)} rows but there are {len(tracks)} tracks")
+
+    n_steps = int(np.ceil((x_end - x_start) / (speed * dt) - 1e-9))
+    time = np.arange(n_steps + 1) * dt
+    x_lead = np.minimum(x_start + speed * time, t0.length)
+    x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
+    z_axle = np.stack([_irregularity_at(irr, t0, x_axle, "irregularity") for irr in irr_rows])
+
+    # matrices
+    consts = newmark_constants(dt)
+    mb, cb, kb = batched_bands(tracks)
+    keff = kb + consts[0] * mb + consts[1] * cb
+    kv_eff = sys_.stiffness + consts[0] * sys_.mass + consts[1] * sys_.damping
+    kv_inv = np.linalg.inv(kv_eff)
+    lay = t0.dof_layout
+    n_axles = sys_.n_axles
+    margin = t0.n_sleepers if window_bays is None else int(window_bays)
+    cluster = _clusters(sys_.axle_offsets, 2 * (margin + 1) * t0.sleeper_spacing)
+    n_clusters = int(cluster.max()) + 1
+
+    # initial state: static equilibrium on the same windows the integration starts with
+    windows = [_window_dofs(t0, x_axle[0][cluster == c], margin) for c in range(n_clusters)]
+    nb = n_rows
+    u = np.zeros((nb, t0.n_dof))
+    v = np.zeros_like(u)
+    a = np.zeros_like(u)
+    q = np.zeros((nb, sys_.n_dof))
+    qd = np.zeros_like(q)
+    qdd = np.zeros_like(q)
+    f0 = np.zeros((nb, n_axles))
+    for b in range(nb):
+        z0 = z_axle[b, 0]
+        if start == "static":
+            loads = sys_.static_wheel_loads.copy()
+            for _ in range(4):  # loads on a compliant, uneven rail: a few fixed-point sweeps
+                f = np.zeros(t0.n_dof)
+                pts = [_point_load_vector(t0, x) for x in x_axle[0]]
+                for (dofs, shp), p in zip(pts, loads):
+                    f[dofs] += shp * p
+                u[b] = _static_in_windows(kb[b], f, windows)
+                w = np.array([shp @ u[b][dofs] for dofs, shp in pts])
+                q[b] = sys_.static_displacements(w + z0 + law.compression(loads))
+                new = sys_.force[sys_.wheel_dofs] - sys_.stiffness[sys_.wheel_dofs] @ q[b]
+                if np.allclose(new, loads, rtol=1e-12, atol=1e-9):
+                    break
+                loads = new
+            f0[b] = loads
+        else:
+            q[b] = sys_.static_displacements(z0)
+            qdd[b] = np.linalg.solve(sys_.mass, sys_.force - sys_.stiffness @ q[b])
+
+    out_force = np.zeros((nb, n_steps + 1, n_axles))
+    out_force[:, 0] = f0
+    out_rail = np.zeros_like(out_force)
+    out_wheel = np.zeros_like(out_force)
+    for b in range(nb):
+        for j, x in enumerate(x_axle[0]):
+            dofs, shp = _point_load_vector(t0, x)
+            out_rail[b, 0, j] = shp @ u[b][dofs]
+        out_wheel[b, 0] = q[b][sys_.wheel_dofs]
+    pad_k = np.stack([t.pad_stiffness for t in tracks])
+    pad_c = np.stack([t.pad_damping for t in tracks])
+    bal_k = np.stack([t.ballast_stiffness for t in tracks])
+    bal_c = np.stack([t.ballast_damping for t in tracks])
+    ws, ds = lay.node_w[lay.sleeper_node], lay.sleeper
+    peak_ballast = bal_k * u[:, ds]
+    peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
+
+    _kernel.run_batch(mb, cb, keff, lay.node_w, lay.sleeper, lay.sleeper_node, pad_k, pad_c, bal_k, bal_c,
+                      t0.element_length, t0.elements_per_bay, t0.sleeper_spacing, t0.n_sleepers,
+                      np.ascontiguousarray(sys_.mass), np.ascontiguousarray(sys_.damping), kv_inv,
+                      sys_.force.astype(float), sys_.wheel_dofs.astype(np.int64), cluster, n_clusters, margin,
+                      x_axle, z_axle, law.code, float(law.parameter), consts, u, v, a, q, qd, qdd,
+                      out_force, out_rail, out_wheel, peak_ballast, peak_total)
+
+    results = []
+    for b in range(nb):
+        sf = peak_ballast[b] if sleeper_force_measure == "ballast" else peak_total[b]
+        results.append(PassResult(time=time, wheel_position=x_axle, contact_force=out_force[b],
+                                  rail_displacement=out_rail[b], wheel_displacement=out_wheel[b],
+                                  irregularity=z_axle[b], sleeper_force=sf, ballast_force=peak_ballast[b],
+                                  pad_plus_ballast_force=peak_total[b],
+                                  static_wheel_load=sys_.static_wheel_loads.copy(),
+                                  sleeper_positions=t0.sleeper_positions, speed=speed, dt=dt))
+    return results
+
+
+def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
+    """One vehicle pass over one track: :func:`simulate_passes` with a batch of one. See there for options."""
+    if not isinstance(track, Track):
+        raise ValueError(f"track must be a Track, got {type(track).__name__}")
+    if irregularity is not None and not callable(irregularity):
+        arr = np.asarray(irregularity, dtype=float)
+        if arr.ndim != 1:
+            raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
+        irregularity = [arr]
+    elif irregularity is not None:
+        irregularity = [irregularity]
+    return simulate_passes(track, vehicle, speed, irregularity, **options)[0]

@@ -1,0 +1,297 @@
+"""Tamping: what a tamping machine does to the per-sleeper rail level and to later settlement.
+
+Model (all coefficients are parameters of :class:`TampingModel`; defaults are assumptions, see there):
+
+* **Partial restoration with ballast memory.** A tamping machine lifts the rail towards a reference line and
+  packs ballast under the sleepers, but the result depends on the geometry before: Audley & Andrews (2013)
+  fit ``SD_after = alpha + beta * SD_before`` with ``beta < 1`` to UK recording-car data, and RTRI reports that
+  the irregularity "gradually returns to its original shape after tamping" (ballast memory). We keep a
+  fraction ``beta = residual_fraction`` of the old shape about the reference line ``f`` and add an
+  independent random residual of SD ``alpha = residual_sd_m`` (the machine's own error)::
+
+      reference="design":     target_i =          beta * (z_i - f_i) + alpha * e_i,   e_i ~ N(0, 1)
+      reference="smoothing":  target_i = f_i +    beta * (z_i - f_i) + alpha * e_i
+
+  where ``z`` is the level before (m, downward positive, relative to the design line). In ``"design"`` mode
+  (default) ``f`` is the least-squares straight line through ``z`` over each contiguous tamped run, and the
+  run is lifted back to the design line (level 0) in mean and slope; only the shape about ``f`` survives,
+  scaled by ``beta``. In ``"smoothing"`` mode the machine's long reference chord rests on the untamped track
+  beyond the run, so ``f`` is the straight line through the two untamped neighbours (through the one
+  neighbour with least-squares slope if the run reaches an end of the array, the least-squares line if the
+  whole array is tamped) and the run stays at that line: no lift relative to the neighbours, hence no step,
+  but a uniformly settled track is not brought back to the design level. Levels are relative to the design
+  line; the extra overall lift a real machine adds so that it never has to push a sleeper down (it can only
+  raise the track) is a constant offset, which the vehicle does not feel, and is not modelled.
+* **Run-out ramp.** Real tampers ramp the lift in and out at the ends of a work site instead of leaving a
+  step. Inside each tamped run, the ``runout_sleepers`` sleepers next to an *untamped* neighbour receive a
+  linearly growing fraction of the full lift: ``new_i = (1 - w_i) * z_i + w_i * target_i`` with
+  ``w_i = min(1, d_i / (runout_sleepers + 1))`` and ``d_i`` the distance in sleepers to the nearest untamped
+  neighbour (1 for the first tamped sleeper). Runs that reach the ends of the array are not ramped there
+  (the track beyond is not modelled). Untamped sleepers are never changed.
+* **Consolidation restarts.** Tamping loosens the ballast bed, so the settlement law restarts its fast
+  initial phase on the tamped sleepers (``restarted_mask``; the settlement model acts on it).
+* **Ballast damage.** Tamping breaks ballast (aggregate degradation and fouling up to ~40 % reported by SNCF),
+  so each tamping makes later settlement faster. Assumed geometric growth: the settlement-rate factor is
+  ``(1 + damage_per_tamping) ** n`` after ``n`` tampings since renewal **[assumption]**. When a sleeper due for
+  tamping has already had ``max_tampings_before_renewal`` tampings (default 8, in the 5-10 range of practice
+  **[assumption]**) and ``renewal_resets`` is true, the intervention is a ballast renewal instead: the count
+  and the rate factor reset (0 and 1) and, since fresh ballast has no memory, the old shape is not kept
+  (``beta = 0`` for those sleepers).
+
+Tamping machines work at about 0.3-2.5 km/h; :meth:`TampingModel.duration_s` converts a tamped length to
+machine time with ``machine_speed_m_per_s``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from trackenv.physics._validation import check_array, check_scalar
+
+__all__ = ["TampingModel", "TampingResult", "tamp", "sd_after_tamping", "tamped_runs"]
+
+
+@dataclass(frozen=True)
+class TampingModel:
+    """Parameters of the tamping model (see the module docstring for the equations).
+
+    Attributes
+    ----------
+    residual_fraction : float
+        ``beta`` in [0, 1]: fraction of the pre-tamping shape (about the design-line fit) left after tamping.
+        Default 0.3 **[assumption]**, within the 0.2-0.5 suggested by ballast-memory observations (RTRI) and of
+        the order of the Audley & Andrews (2013) slope **[unverified]**.
+    residual_sd_m : float
+        ``alpha`` [m], >= 0: SD of the machine's random, sleeper-to-sleeper independent residual error.
+        Default 0.5 mm **[assumption]** (Audley & Andrews' intercept is of this order **[unverified]**).
+    damage_per_tamping : float
+        >= 0: each tamping multiplies the tamped sleepers' settlement rate by ``1 + damage_per_tamping``.
+        Default 0.15 **[assumption]** (ballast breakage per tamping; SNCF reports fouling up to 40 %).
+    max_tampings_before_renewal : int
+        >= 1: tampings a sleeper takes before the next intervention is a renewal. Default 8 **[assumption]**,
+        practice is about 5-10.
+    renewal_resets : bool
+        Whether renewal happens (resets count, rate factor and memory). Default True.
+    runout_sleepers : int
+        >= 0: length of the lift ramp at the ends of a tamped run next to untamped track. Default 3
+        **[assumption]** (real run-out ramps are set by a maximum lift gradient; 0 disables the ramp).
+    machine_speed_m_per_s : float
+        > 0: working speed of the tamping machine. Default 1 km/h = 0.2778 m/s, within 0.3-2.5 km/h.
+    reference : {"design", "smoothing"}
+        Line the machine restores (module docstring). Default "design": lift to the design line; in a track
+        whose neighbours have settled by ``s`` this leaves a lift step of ``s`` at each end of the run, spread
+        over the run-out (a 10 mm step over 3 run-out sleepers reads as about 4 mm in D1).
+    """
+
+    residual_fraction: float = 0.3
+    residual_sd_m: float = 0.5e-3
+    damage_per_tamping: float = 0.15
+    max_tampings_before_renewal: int = 8
+    renewal_resets: bool = True
+    runout_sleepers: int = 3
+    machine_speed_m_per_s: float = 1.0 / 3.6
+    reference: str = "design"
+
+    def __post_init__(self) -> None:
+        check_scalar("residual_fraction", self.residual_fraction, low=0.0, high=1.0)
+        check_scalar("residual_sd_m", self.residual_sd_m, low=0.0)
+        check_scalar("damage_per_tamping", self.damage_per_tamping, low=0.0)
+        _check_int("max_tampings_before_renewal", self.max_tampings_before_renewal, low=1)
+        _check_int("runout_sleepers", self.runout_sleepers, low=0)
+        if not isinstance(self.renewal_resets, (bool, np.bool_)):
+            raise ValueError(f"renewal_resets must be a bool, got {self.renewal_resets!r}")
+        check_scalar("machine_speed_m_per_s", self.machine_speed_m_per_s, low=0.0, low_inclusive=False)
+        if self.reference not in ("design", "smoothing"):
+            raise ValueError(f"reference must be 'design' or 'smoothing', got {self.reference!r}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> TampingModel:
+        """Build from a mapping of field names to values; an unknown key raises ValueError naming it."""
+        if not isinstance(d, Mapping):
+            raise ValueError(f"TampingModel.from_dict expects a mapping, got {type(d).__name__}")
+        known = {f.name for f in dataclasses.fields(cls)}
+        for key in d:
+            if key not in known:
+                raise ValueError(f"unknown TampingModel key {key!r}; allowed: {sorted(known)}")
+        return cls(**dict(d))
+
+    def rate_factor(self, tampings) -> np.ndarray:
+        """Settlement-rate factor ``(1 + damage_per_tamping) ** tampings`` for tamping counts ``tampings``."""
+        t = _check_counts("tampings", tampings, None)
+        return (1.0 + self.damage_per_tamping) ** t
+
+    def duration_s(self, length_m: float) -> float:
+        """Machine time [s] to tamp ``length_m`` metres of track at ``machine_speed_m_per_s``."""
+        return check_scalar("length_m", length_m, low=0.0) / self.machine_speed_m_per_s
+
+
+@dataclass(frozen=True, eq=False)
+class TampingResult:
+    """Outcome of :func:`tamp` (fresh arrays, shape (n,), safe to modify).
+
+    Attributes
+    ----------
+    level : float array [m]
+        Rail level after tamping (downward positive, relative to the design line).
+    rate_factor : float array
+        Settlement-rate multiplier per sleeper, ``(1 + damage_per_tamping) ** tampings``.
+    tampings : int array
+        Tampings since the last renewal per sleeper.
+    restarted_mask : bool array
+        Sleepers whose consolidation restarts (the tamped ones).
+    renewed_mask : bool array
+        Sleepers whose ballast was renewed instead of tamped.
+    lift : float array [m]
+        ``level_before - level_after`` (positive = raised), 0 on untamped sleepers. Tells a settlement model
+        with ballast memory where, and how much, the old shape was removed.
+    """
+
+    level: np.ndarray
+    rate_factor: np.ndarray
+    tampings: np.ndarray
+    restarted_mask: np.ndarray
+    renewed_mask: np.ndarray
+    lift: np.ndarray
+
+
+def _check_int(name: str, value, low: int) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _check_counts(name: str, value, shape) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype == np.bool_:
+        raise ValueError(f"{name} must be an array of integers >= 0, got booleans")
+    f = check_array(name, arr, shape=shape, low=0.0)
+    if np.any(f != np.round(f)):
+        raise ValueError(f"{name} must hold integers >= 0")
+    return f.astype(np.int64)
+
+
+def tamped_runs(mask) -> np.ndarray:
+    """Contiguous runs of True in a 1-D bool ``mask`` as an (m, 2) int array of [start, stop) pairs."""
+    m = np.asarray(mask, dtype=bool)
+    d = np.diff(np.concatenate(([0], m.astype(np.int8), [0])))
+    return np.stack((np.flatnonzero(d == 1), np.flatnonzero(d == -1)), axis=1).astype(np.int64)
+
+
+def _line_fit(y: np.ndarray) -> np.ndarray:
+    """Least-squares straight line through ``y`` against its index (the mean when fewer than 2 points)."""
+    n = y.size
+    if n < 2:
+        return np.full_like(y, y.mean())
+    t = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
+    slope = float(t @ (y - y.mean())) / float(t @ t)
+    return y.mean() + slope * t
+
+
+def _anchored_line(z: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Reference line over ``z[start:stop]`` resting on the untamped neighbours ``start - 1`` and ``stop``."""
+    n = z.size
+    i = np.arange(start, stop, dtype=np.float64)
+    left, right = start > 0, stop < n
+    if left and right:
+        a, b = start - 1, stop
+        return z[a] + (z[b] - z[a]) * (i - a) / (b - a)
+    if not (left or right):
+        return _line_fit(z[start:stop])
+    a = start - 1 if left else stop
+    t = i - a
+    slope = float(t @ (z[start:stop] - z[a])) / float(t @ t)
+    return z[a] + slope * t
+
+
+def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -> TampingResult:
+    """Tamp the sleepers in ``mask``; a pure function of its inputs and ``rng``'s state.
+
+    Parameters
+    ----------
+    level : array_like, shape (n,)
+        Rail level [m] per sleeper before tamping, downward positive, relative to the design line; finite.
+    mask : array_like of bool, shape (n,)
+        Sleepers being tamped.
+    model : TampingModel
+    rng : numpy.random.Generator
+        Draws exactly ``n`` standard normals (the residual ``e``), whatever the mask, so later draws do not
+        depend on how many sleepers were tamped.
+    tampings : array_like of int, shape (n,)
+        Tampings since renewal per sleeper, before this one.
+
+    Returns
+    -------
+    TampingResult
+        Per tamped sleeper (see module docstring): ``target = [f +] beta_i * (z - f) + alpha * e`` with
+        ``beta_i = residual_fraction`` (0 where renewed), ramped over ``runout_sleepers`` next to untamped
+        neighbours; ``tampings + 1`` (0 where renewed); rate factor ``(1 + damage) ** tampings``. Untamped
+        sleepers keep level and count.
+    """
+    if not isinstance(model, TampingModel):
+        raise ValueError(f"model must be a TampingModel, got {type(model).__name__}")
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    z = check_array("level", level)
+    if z.ndim != 1 or z.size == 0:
+        raise ValueError(f"level must be a non-empty 1-D array, got shape {z.shape}")
+    n = z.size
+    m = np.asarray(mask)
+    if m.shape != (n,):
+        raise ValueError(f"mask must have shape {(n,)} like level, got {m.shape}")
+    if m.dtype != np.bool_:
+        raise ValueError(f"mask must be a boolean array, got dtype {m.dtype}")
+    count = _check_counts("tampings", tampings, (n,))
+
+    noise = rng.standard_normal(n)
+
+    renewed = m & (count >= model.max_tampings_before_renewal) if model.renewal_resets else np.zeros(n, bool)
+    beta = np.where(renewed, 0.0, model.residual_fraction)
+
+    new = z.copy()
+    r = model.runout_sleepers
+    for start, stop in tamped_runs(m):
+        seg = z[start:stop]
+        if model.reference == "design":
+            ref, base = _line_fit(seg), 0.0
+        else:
+            ref = _anchored_line(z, start, stop)
+            base = ref
+        target = base + beta[start:stop] * (seg - ref) + model.residual_sd_m * noise[start:stop]
+        k = np.arange(stop - start, dtype=np.float64)
+        d_left = k + 1.0 if start > 0 else np.full_like(k, math.inf)
+        d_right = (stop - start) - k if stop < n else np.full_like(k, math.inf)
+        w = np.minimum(1.0, np.minimum(d_left, d_right) / (r + 1.0))
+        new[start:stop] = (1.0 - w) * seg + w * target
+
+    count_after = np.where(m, count + 1, count)
+    count_after = np.where(renewed, 0, count_after).astype(np.int64)
+    return TampingResult(
+        level=new,
+        rate_factor=(1.0 + model.damage_per_tamping) ** count_after,
+        tampings=count_after,
+        restarted_mask=m.copy(),
+        renewed_mask=renewed,
+        lift=z - new,
+    )
+
+
+def sd_after_tamping(sd_before, model: TampingModel, *, linear: bool = False) -> np.ndarray:
+    """Expected SD [m] of the level over a tamped run after tamping, given the SD before (about its fit).
+
+    Default: the RMS expectation of :func:`tamp` away from the run-out ramps, where the kept shape and the
+    independent residual add in variance: ``SD_after = sqrt(alpha^2 + (beta * SD_before)^2)``.
+    ``linear=True`` gives Audley & Andrews' (2013) empirical form ``SD_after = alpha + beta * SD_before``
+    with the same ``alpha = residual_sd_m``, ``beta = residual_fraction`` (an upper bound of the former; both
+    agree for ``SD_before = 0`` and for ``SD_before >> alpha / beta``). ``SD_before`` is measured about the
+    reference line of the run, as in :func:`tamp`; renewal (beta = 0) is not included.
+    """
+    if not isinstance(model, TampingModel):
+        raise ValueError(f"model must be a TampingModel, got {type(model).__name__}")
+    s = check_array("sd_before", sd_before, low=0.0)
+    a, b = model.residual_sd_m, model.residual_fraction
+    return a + b * s if linear else np.sqrt(a * a + (b * s) ** 2)
