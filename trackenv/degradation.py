@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
+import scipy.linalg
 
 from .physics._validation import check_array, check_scalar
-from .physics.dynamics import PassResult, _vehicle_system, simulate_passes
+from .physics.dynamics import PassResult, _vehicle_system, lapack_lower, simulate_passes
 from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState
+from .physics.tamping import TampingModel, TampingResult, tamp
 from .physics.track import Track
 
 
@@ -80,6 +83,20 @@ class DegradationHistory:
                 "max_contact_force_N": self.max_contact_force.tolist(), "passes": self.passes.tolist()}
 
 
+FEEDBACKS = ("irregularity", "support")
+INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
+
+
+def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
+    """Solve a x = b keeping the diagonals of ``a`` within ``band`` (the rest is negligibly small)."""
+    n = a.shape[0]
+    band = min(band, n - 1)
+    ab = np.zeros((2 * band + 1, n))
+    for k in range(-band, band + 1):
+        ab[band - k, max(k, 0):n + min(k, 0)] = np.diagonal(a, k)
+    return scipy.linalg.solve_banded((band, band), ab, b)
+
+
 class TrackDegradation:
     """Settlement of a track under repeated passes of one vehicle (the paper's iterative method).
 
@@ -88,14 +105,19 @@ class TrackDegradation:
     (see the module docstring); ``adaptive``: split an increment where the largest *differential* settlement
     increment (deviation from the zone's mean increment, which is what changes the dynamics) would exceed
     ``max_increment`` [m], so results do not depend on the step size; ``initial_level``: the rail level at the
-    start [m] per sleeper (downward positive). Remaining keywords go to :func:`simulate_passes` (``dt``,
+    start [m] per sleeper (downward positive); ``rate_factor``: per-sleeper multiplier of the law's
+    settlement (ballast condition varies along a track); ``feedback``: how settlement reaches the next pass:
+    "irregularity" (the paper's: the per-sleeper settlement, interpolated, is the rail's level irregularity) or
+    "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
+    settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
+    self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to :func:`simulate_passes` (``dt``,
     ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(self, track: Track, vehicle, law: SettlementLaw | None = None,
                  cycles_per_iteration: float = 50_000, speed: float = 80 / 3.6, *, approach_sleepers: int = 10,
                  adaptive: bool = False, max_increment: float = 0.1e-3, max_passes_per_iteration: int = 64,
-                 initial_level=None, **pass_options) -> None:
+                 initial_level=None, rate_factor=None, feedback: str = "irregularity", **pass_options) -> None:
         if not isinstance(track, Track):
             raise ValueError(f"track must be a Track, got {type(track).__name__}")
         self.track = track
@@ -118,12 +140,18 @@ class TrackDegradation:
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
         self.pass_options = pass_options
+        if feedback not in FEEDBACKS:
+            raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
+        self.feedback = feedback
         n = track.n_sleepers
         self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
         self.model_track = track.extended(self.n_extra, self.n_extra)
         self.offset = (np.zeros(n) if initial_level is None
                        else check_array("initial_level", initial_level, shape=(n,)))
-        self.state = SettlementState.zeros(n)
+        self.base_rate = (np.ones(n) if rate_factor is None
+                          else check_array("rate_factor", rate_factor, shape=(n,), low=0.0, low_inclusive=False))
+        self.state = SettlementState(np.zeros(n), np.zeros(n), self.base_rate)
+        self.tampings = np.zeros(n, dtype=np.int64)
         self.cycles = 0.0
         self.history = DegradationHistory(track.sleeper_positions.copy())
 
@@ -146,8 +174,7 @@ class TrackDegradation:
     # ------------------------------------------------------------------ loop
     def simulate(self) -> PassResult:
         """One pass over the current level (on the modelled track with its approach and exit zones)."""
-        return simulate_passes(self.model_track, self.vehicle, self.speed, [self.model_irregularity()],
-                               **self.pass_options)[0]
+        return simulate_batch([self])[0]
 
     def settle(self, result: PassResult, cycles: float) -> int:
         """Advance the settlement by ``cycles`` axle passes under the forces of ``result``; return how many
@@ -156,9 +183,54 @@ class TrackDegradation:
         force = self.evaluated(result.sleeper_force)
         force = np.maximum(force, 0.0)
         step = self._adaptive_step(force, cycles) if self.adaptive else cycles
-        self.state = self.state.advance(self.law, force, step)
+        if self.feedback == "support":
+            self.state = self._implicit_advance(force, step)
+        else:
+            self.state = self.state.advance(self.law, force, step)
         self.cycles += step
         return step
+
+    @cached_property
+    def support_influence(self) -> np.ndarray:
+        """S[i, j]: change of the static ballast force of evaluated sleeper i per metre of settlement of
+        evaluated sleeper j [N/m] (from the track's statics; negative on the diagonal: a settling sleeper
+        sheds load onto its neighbours)."""
+        t = self.model_track
+        lay = t.dof_layout
+        _, _, kband = t.banded_matrices()
+        ev = np.arange(self.n_extra, self.n_extra + self.track.n_sleepers)
+        rhs = np.zeros((t.n_dof, ev.size))
+        rhs[lay.sleeper[ev], np.arange(ev.size)] = t.ballast_stiffness[ev]
+        du = scipy.linalg.solveh_banded(lapack_lower(kband), rhs, lower=True)
+        kb = t.ballast_stiffness[ev]
+        return kb[:, None] * (du[lay.sleeper[ev]] - np.eye(ev.size))
+
+    def _implicit_advance(self, force: np.ndarray, cycles: float) -> SettlementState:
+        """Advance with the static load redistribution taken implicitly (backward Euler over the step).
+
+        As a sleeper settles its support force drops and its neighbours take the load (``support_influence``).
+        Over a large ΔN taken explicitly this feedback overshoots and oscillates, so the increment Δ solves
+        Δ = u(F0 + S·Δ, N + ΔN) − u_now, with F0 the forces of the pass at the start of the step (their dynamic
+        part is taken explicitly). Newton's method on the small dense system."""
+        s_mat = self.support_influence
+        u_now = self.state.settlement
+        delta = np.zeros_like(u_now)
+
+        def increment(d: np.ndarray) -> np.ndarray:
+            f = np.maximum(force + s_mat @ d, 0.0)
+            return self.state.advance(self.law, f, cycles).settlement - u_now
+
+        for _ in range(30):
+            r = delta - increment(delta)
+            if np.max(np.abs(r)) < 1e-9:
+                break
+            h = 1e-6
+            f = np.maximum(force + s_mat @ delta, 0.0)
+            du_df = (self.state.advance(self.law, f + h * 1e3, cycles).settlement
+                     - self.state.advance(self.law, f, cycles).settlement) / (h * 1e3)
+            jac = np.eye(delta.size) - du_df[:, None] * s_mat * (f > 0)[:, None]
+            delta = np.maximum(delta - _solve_near_banded(jac, r, INFLUENCE_BAND), 0.0)
+        return self.state.advance(self.law, np.maximum(force + s_mat @ delta, 0.0), cycles)
 
     def _adaptive_step(self, force: np.ndarray, cycles: float) -> float:
         """The largest ΔN <= cycles whose differential settlement increment stays within max_increment."""
@@ -206,6 +278,20 @@ class TrackDegradation:
         self.history.records.append(rec)
         return rec
 
+    def tamp(self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None
+             ) -> TampingResult:
+        """Tamp the sleepers where ``mask`` is True: the level is restored but for a residual, consolidation
+        restarts there and the ballast damage raises their settlement rate (see :mod:`physics.tamping`)."""
+        model = TampingModel() if model is None else model
+        rng = np.random.default_rng(0) if rng is None else rng
+        level = self.level
+        res = tamp(level, mask, model, rng, self.tampings)
+        restarted = res.restarted_mask
+        self.state = self.state.restarted(restarted, rate_factor=self.base_rate * res.rate_factor)
+        self.offset = np.where(restarted, res.level, self.offset)
+        self.tampings = res.tampings.astype(np.int64)
+        return res
+
     def run(self, iterations: int, progress=None) -> DegradationHistory:
         """Run ``iterations`` iterations of ``cycles_per_iteration``; ``progress`` is called after each with
         (i, record) (e.g. to update a progress bar). Returns the whole history."""
@@ -216,3 +302,22 @@ class TrackDegradation:
             if progress is not None:
                 progress(i, rec)
         return self.history
+
+
+def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
+    """One pass for each simulator, all in one batched call of the dynamics (same vehicle, speed and options;
+    tracks may differ in their supports)."""
+    if not sims:
+        return []
+    s0 = sims[0]
+    for s in sims[1:]:
+        if s.vehicle != s0.vehicle or s.speed != s0.speed or s.pass_options != s0.pass_options or (
+                s.model_track.n_sleepers != s0.model_track.n_sleepers):
+            raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
+    if any(s.feedback != s0.feedback for s in sims):
+        raise ValueError("simulate_batch needs simulators with the same feedback")
+    profiles = np.stack([s.model_irregularity() for s in sims])
+    if s0.feedback == "irregularity":
+        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options)
+    return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, None,
+                           support_settlement=profiles, **s0.pass_options)

@@ -7,12 +7,12 @@ contact compressions δ_j = y_j − (w_j + z_j) solve
 
     δ = δ_pred − (H_vehicle + H_track) F(δ)
 
-by Newton's method, where H are the flexibilities of the effective (Newmark) systems at the wheels. The track's
-effective stiffness is constant, so it is LU-factorised once and solved every step for the predictor and for one
-unit load under each wheel.
+by Newton's method, where H are the flexibilities of the effective (Newmark) systems at the wheels. The
+track's effective stiffness is constant, so it is LU-factorised once and solved every step for the predictor
+and for one unit load under each wheel.
 
-Conventions as in :mod:`trackenv.physics`: downward positive, the contact pushes the rail down and the wheel up,
-the track's dead weight is not modelled, the irregularity z lowers the rail level. Slow but simple.
+Conventions as in :mod:`trackenv.physics`: downward positive, the contact pushes the rail down and the wheel
+up, the track's dead weight is not modelled, the irregularity z lowers the rail level. Slow but simple.
 """
 
 from __future__ import annotations
@@ -40,16 +40,18 @@ class ReferenceResult:
 
 def shape_functions(xi: float, le: float) -> np.ndarray:
     """Hermite cubics of a beam element of length le at local coordinate xi ∈ [0, 1] (w1, θ1, w2, θ2)."""
-    return np.array([
-        1.0 - 3.0 * xi**2 + 2.0 * xi**3,
-        le * xi * (1.0 - xi) ** 2,
-        xi**2 * (3.0 - 2.0 * xi),
-        le * xi**2 * (xi - 1.0),
-    ])
+    return np.array(
+        [
+            1.0 - 3.0 * xi**2 + 2.0 * xi**3,
+            le * xi * (1.0 - xi) ** 2,
+            xi**2 * (3.0 - 2.0 * xi),
+            le * xi**2 * (xi - 1.0),
+        ]
+    )
 
 
 def load_vector(track, x: float) -> np.ndarray:
-    """Global vector N(x) with N·u the rail deflection at x (also the consistent nodal load of a unit force)."""
+    """Global vector N(x): N·u is the rail deflection at x, N the consistent nodal load of a unit force."""
     le = track.element_length
     e = min(max(int(np.floor(x / le)), 0), track.n_nodes - 2)
     lay = track.dof_layout
@@ -89,8 +91,9 @@ def newton_compressions(delta_pred, flexibility, law, delta0, tol=1e-16, max_ite
     return delta
 
 
-def reference_pass(track, vehicle, speed, irregularity=None, *, dt=1e-4, contact=None, x_start=None,
-                   x_end=None) -> ReferenceResult:
+def reference_pass(
+    track, vehicle, speed, irregularity=None, *, dt=1e-4, contact=None, x_start=None, x_end=None
+) -> ReferenceResult:
     """One pass of ``vehicle`` over the whole ``track`` from static equilibrium (see the module docstring)."""
     law = HertzContact() if contact is None else contact
     veh = vehicle.system()
@@ -114,9 +117,9 @@ def reference_pass(track, vehicle, speed, irregularity=None, *, dt=1e-4, contact
     kb, cb = track.ballast_stiffness, track.ballast_damping
     s_dof = lay.sleeper
 
-    # Newmark average acceleration: u_{n+1} = u_n + dt v_n + dt²/4 (a_n + a_{n+1}), v_{n+1} = v_n + dt/2 (a_n +
-    # a_{n+1}); in terms of u_{n+1}: a_{n+1} = 4/dt² (u_{n+1} − u_n) − 4/dt v_n − a_n and
-    # v_{n+1} = 2/dt (u_{n+1} − u_n) − v_n.
+    # Newmark average acceleration: u_{n+1} = u_n + dt v_n + dt²/4 (a_n + a_{n+1}),
+    # v_{n+1} = v_n + dt/2 (a_n + a_{n+1}); in terms of u_{n+1}:
+    # a_{n+1} = 4/dt² (u_{n+1} − u_n) − 4/dt v_n − a_n and v_{n+1} = 2/dt (u_{n+1} − u_n) − v_n.
     c_m, c_c = 4.0 / dt**2, 2.0 / dt
     lu_track = scipy.sparse.linalg.splu((K + c_m * M + c_c * C).tocsc())
     kv_eff_inv = np.linalg.inv(Kv + c_m * Mv + c_c * Cv)

@@ -9,6 +9,7 @@ whole track.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -94,13 +95,26 @@ def _as_tracks(tracks) -> list[Track]:
     return tracks
 
 
+@functools.lru_cache(maxsize=16)
+def _rail_bands_cached(n_sleepers: int, epb: int, element_length: float, ei: float, mass: float):
+    from .track import DofLayout
+
+    lay = DofLayout.build(n_sleepers, epb)
+    zero = np.zeros(n_sleepers)
+    return assemble_banded(lay, element_length, ei, mass, zero, zero, zero, zero, zero)
+
+
+def _rail_bands(lay, element_length: float, ei: float, mass: float):
+    """M, C, K of the bare rail (no supports), assembled once per mesh."""
+    return tuple(b.copy() for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length,
+                                                      ei, mass))
+
+
 def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """M, C, K bands of every track, shape (batch, n_dof, 5): the rail is assembled once, supports per item."""
     t0 = tracks[0]
     lay = t0.dof_layout
-    zero = np.zeros(t0.n_sleepers)
-    rail = assemble_banded(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass, zero, zero, zero,
-                           zero, zero)
+    rail = _rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)
     m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
     w, d = lay.node_w[lay.sleeper_node], lay.sleeper
     for b, t in enumerate(tracks):
@@ -185,6 +199,18 @@ def _clusters(offsets: np.ndarray, gap: float) -> np.ndarray:
     return cl
 
 
+def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Rail deflection of the displacement vector ``u`` at positions ``x`` (Hermite interpolation)."""
+    le = track.element_length
+    e = np.clip(np.floor(x / le).astype(int), 0, track.n_nodes - 2)
+    xi = x / le - e
+    lay = track.dof_layout
+    n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
+    n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
+    return (n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]]
+            + n4 * u[lay.node_theta[e + 1]])
+
+
 def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
     """Rail level at positions x from a per-sleeper or per-node profile (cubic spline) or a callable."""
     if irr is None:
@@ -223,7 +249,7 @@ def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray
 def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irregularities=None, *,
                     dt: float = 1e-4, contact=None, start: str = "static", x_start: float | None = None,
                     x_end: float | None = None, window_bays: int | None = 6,
-                    sleeper_force_measure: str = "ballast") -> list[PassResult]:
+                    sleeper_force_measure: str = "ballast", support_settlement=None) -> list[PassResult]:
     """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
 
     ``tracks``: one Track (shared by every row) or one per row; ``irregularities``: None, an array (n_rows,
@@ -233,6 +259,12 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     ``x_start``/``x_end``: leading-axle positions [m] where the pass starts/ends (default: the whole vehicle
     on the rail from the first to the last sleeper). ``window_bays``: sleeper bays of track integrated ahead of
     the leading and behind the trailing axle of each axle group (None: the whole track).
+    ``support_settlement``: None or (n_rows, n_sleepers) permanent settlement of the ballast under each sleeper
+    [m]: the base of each ballast spring is lowered by it and the rail bends over the settled supports. By
+    superposition (the track is linear) the rail's static sag becomes the wheel's irregularity and the
+    supports' static forces are added to the peak sleeper forces; a sleeper that settled more than its
+    neighbours hangs partly in the rail and carries less (negative values: the linear model's tension where a
+    real sleeper would lift off its ballast).
     """
     tracks = _as_tracks(tracks)
     sys_ = _vehicle_system(vehicle)
@@ -283,6 +315,24 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     x_lead = np.minimum(x_start + speed * time, t0.length)
     x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
     z_axle = np.stack([_irregularity_at(irr, t0, x_axle, "irregularity") for irr in irr_rows])
+    static_ballast = np.zeros((n_rows, t0.n_sleepers))
+    static_total = np.zeros((n_rows, t0.n_sleepers))
+    if support_settlement is not None:
+        g = check_array("support_settlement", support_settlement)
+        if g.ndim == 1:
+            g = np.broadcast_to(g, (n_rows, g.size))
+        if g.shape != (n_rows, t0.n_sleepers):
+            raise ValueError(f"support_settlement must have shape ({n_rows}, {t0.n_sleepers}), got {g.shape}")
+        lay0 = t0.dof_layout
+        for b, t in enumerate(tracks):
+            f = np.zeros(t0.n_dof)
+            f[lay0.sleeper] = t.ballast_stiffness * g[b]
+            _, _, kband = t.banded_matrices()
+            u0 = scipy.linalg.solveh_banded(lapack_lower(kband), f, lower=True)
+            z_axle[b] += _rail_at(t0, u0, x_axle)
+            us, uw = u0[lay0.sleeper], u0[lay0.node_w[lay0.sleeper_node]]
+            static_ballast[b] = t.ballast_stiffness * (us - g[b])
+            static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
 
     # matrices
     consts = newmark_constants(dt)
@@ -351,6 +401,8 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
                       x_axle, z_axle, law.code, float(law.parameter), consts, u, v, a, q, qd, qdd,
                       out_force, out_rail, out_wheel, peak_ballast, peak_total)
 
+    peak_ballast += static_ballast
+    peak_total += static_total
     results = []
     for b in range(nb):
         sf = peak_ballast[b] if sleeper_force_measure == "ballast" else peak_total[b]

@@ -236,7 +236,11 @@ class Track:
     # ------------------------------------------------------------- assembly
     def banded_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Mass, damping and stiffness in lower banded storage, ``band[i, k] = A[i, i - k]``, shape
-        (n_dof, HALF_BANDWIDTH + 1)."""
+        (n_dof, HALF_BANDWIDTH + 1). Fresh copies of the cached assembly."""
+        return tuple(b.copy() for b in self._bands)
+
+    @cached_property
+    def _bands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return assemble_banded(self.dof_layout, self.element_length, self.rail_bending_stiffness, self.rail_mass,
                                self.pad_stiffness, self.pad_damping, self.sleeper_mass, self.ballast_stiffness,
                                self.ballast_damping)

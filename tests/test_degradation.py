@@ -1,0 +1,234 @@
+"""TrackDegradation: the paper's iterative settlement loop (section 4) and its must-hold properties.
+
+Scenario A is the seed track with uniform ballast (the paper's Fig. 10), scenario B the same with the ballast
+10 % stiffer from sleeper 40 at 24 m (Fig. 11); both run 6 iterations of 50 000 cycles at 80 km/h with a
+loaded wheelset (108.8 kN static wheel load).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import trackenv as te
+
+SPEED = 80 / 3.6
+ITERATIONS = 6
+CYCLES = 50_000
+CHANGE_SLEEPER = 40  # scenario B: ballast +10 % from this sleeper on
+CHANGE_M = 24.0
+NEAR_M = 1.8  # "around 24 m": within 3 sleeper spacings
+
+
+def loaded_wheelset() -> te.Wheelset:
+    return te.Wheelset(mass=1800.0, static_load=100e3)
+
+
+def track_a() -> te.Track:
+    return te.Track.seed()
+
+
+def track_b() -> te.Track:
+    return te.Track.seed().scaled(ballast_stiffness=1.10, from_sleeper=CHANGE_SLEEPER)
+
+
+@pytest.fixture(scope="module")
+def history_a() -> te.DegradationHistory:
+    return te.TrackDegradation(track_a(), loaded_wheelset(), cycles_per_iteration=CYCLES, speed=SPEED).run(
+        ITERATIONS)
+
+
+@pytest.fixture(scope="module")
+def history_b() -> te.DegradationHistory:
+    return te.TrackDegradation(track_b(), loaded_wheelset(), cycles_per_iteration=CYCLES, speed=SPEED).run(
+        ITERATIONS)
+
+
+# ------------------------------------------------------------------------------------ the history itself
+@pytest.mark.parametrize("name", ["history_a", "history_b"])
+def test_history_shapes_and_monotone_settlement(name: str, request: pytest.FixtureRequest) -> None:
+    h: te.DegradationHistory = request.getfixturevalue(name)
+    n = te.Track.seed().n_sleepers
+    assert h.settlement.shape == (ITERATIONS, n)
+    assert h.sleeper_force.shape == (ITERATIONS, n)
+    assert h.contact_force.shape == (ITERATIONS, n)
+    assert h.max_contact_force.shape == (ITERATIONS,)
+    assert h.cycles.shape == h.passes.shape == (ITERATIONS,)
+    np.testing.assert_allclose(h.cycles, CYCLES * np.arange(1, ITERATIONS + 1))
+    assert np.all(h.passes >= 1)
+    np.testing.assert_allclose(h.sleeper_positions, 0.6 * np.arange(n))
+    for arr in (h.settlement, h.sleeper_force, h.contact_force, h.max_contact_force):
+        assert np.all(np.isfinite(arr))
+    # settlement is downward positive, and never decreases on any sleeper from one iteration to the next
+    assert np.all(h.settlement[0] > 0)
+    assert np.all(np.diff(h.settlement, axis=0) >= 0)
+    assert np.all(h.sleeper_force > 0)
+    # the peak per iteration is the largest of its profile
+    np.testing.assert_allclose(h.max_contact_force, h.contact_force.max(axis=1))
+    d = json.loads(json.dumps(h.to_dict()))
+    assert np.asarray(d["settlement_m"]).shape == (ITERATIONS, n)
+    assert np.asarray(d["contact_force_N"]).shape == (ITERATIONS, n)
+    assert set(d) >= {"sleeper_positions_m", "cycles", "settlement_m", "sleeper_force_N", "contact_force_N",
+                      "max_contact_force_N", "passes"}
+
+
+def test_progress_callback_and_level() -> None:
+    seen = []
+    sim = te.TrackDegradation(track_a(), loaded_wheelset())
+    hist = sim.run(2, progress=lambda i, rec: seen.append((i, rec)))
+    assert [i for i, _ in seen] == [0, 1]
+    assert seen[-1][1] is hist.records[-1]
+    np.testing.assert_array_equal(sim.level, hist.settlement[-1])
+    assert sim.cycles == pytest.approx(2 * CYCLES)
+
+
+def test_initial_level_is_kept_as_offset() -> None:
+    n = te.Track.seed().n_sleepers
+    lv0 = np.full(n, 0.5e-3)
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), initial_level=lv0)
+    np.testing.assert_allclose(sim.level, lv0)
+    rec = sim.advance()
+    assert np.all(rec.settlement > lv0)
+    # an advance of zero cycles records a pass but does not move the level
+    rec0 = sim.advance(0)
+    np.testing.assert_array_equal(rec0.settlement, rec.settlement)
+
+
+# ------------------------------------------------------------------------------------ scenario A (Fig. 10)
+def test_scenario_a_settles_uniformly_away_from_the_ends(history_a: te.DegradationHistory) -> None:
+    u = history_a.settlement[-1][3:48]  # sleepers 3..47
+    spread = (u.max() - u.min()) / u.mean()
+    assert spread < 0.02
+    # and the contact force stays (nearly) the same along the track: "negligible variations"
+    f = history_a.contact_force[-1][3:48]
+    assert (f.max() - f.min()) / f.mean() < 0.01
+
+
+# ------------------------------------------------------------------------------------ scenario B (Fig. 11)
+def test_scenario_b_differential_settlement_localises_and_grows(history_b: te.DegradationHistory) -> None:
+    x = history_b.sleeper_positions
+    diff = np.abs(np.diff(history_b.settlement, axis=1))  # between neighbouring sleepers
+    k = diff.argmax(axis=1)
+    where = 0.5 * (x[k] + x[k + 1])
+    assert np.all(np.abs(where - CHANGE_M) <= NEAR_M), where
+    largest = diff.max(axis=1)
+    assert np.all(np.diff(largest[1:]) > 0), largest  # grows over iterations 2..6 (at least)
+    # the settlement is no longer uniform: the differential is far above scenario A's
+    assert largest[-1] > 1e-5
+
+
+def test_scenario_b_contact_force_increase_localises_and_grows(history_b: te.DegradationHistory) -> None:
+    x = history_b.sleeper_positions
+    inc = history_b.contact_force - history_b.contact_force[0]  # vs iteration 1's profile
+    k = inc[1:].argmax(axis=1)
+    assert np.all(np.abs(x[k] - CHANGE_M) <= NEAR_M), x[k]
+    largest = inc.max(axis=1)
+    assert np.all(largest[1:] > 0)
+    assert np.all(np.diff(largest[1:]) > 0), largest  # grows over iterations 2..6
+    assert np.all(np.diff(history_b.max_contact_force[1:]) > 0)
+
+
+def test_scenario_b_stays_stable(history_b: te.DegradationHistory) -> None:
+    p0 = loaded_wheelset().wheel_load
+    assert p0 == pytest.approx(1800.0 / 2 * 9.81 + 100e3)
+    assert np.all(np.abs(history_b.max_contact_force - p0) <= 0.3 * p0), history_b.max_contact_force
+    # the wheel never leaves the rail
+    assert np.all(history_b.contact_force > 0.5 * p0)
+
+
+def test_scenario_b_matches_a_far_from_the_change(history_a: te.DegradationHistory,
+                                                  history_b: te.DegradationHistory) -> None:
+    """Far from the change (sleepers 3..30) both scenarios settle alike: the change acts locally."""
+    np.testing.assert_allclose(history_b.settlement[-1][3:31], history_a.settlement[-1][3:31], rtol=1e-3)
+
+
+# ------------------------------------------------------------------------------------ step size
+def test_halving_delta_n_with_adaptive_stepping_hardly_changes_the_result() -> None:
+    def final(cycles: float, iterations: int) -> np.ndarray:
+        sim = te.TrackDegradation(track_b(), loaded_wheelset(), cycles_per_iteration=cycles, adaptive=True)
+        return sim.run(iterations).settlement[-1]
+
+    coarse = final(50_000, 6)
+    fine = final(25_000, 12)
+    assert np.max(np.abs(coarse - fine) / fine) < 0.02
+
+
+def test_adaptive_stepping_splits_large_increments() -> None:
+    sim = te.TrackDegradation(track_b(), loaded_wheelset(), adaptive=True, max_increment=0.02e-3)
+    rec = sim.advance()
+    assert rec.passes > 1
+    assert rec.cycles == pytest.approx(CYCLES)
+    plain = te.TrackDegradation(track_b(), loaded_wheelset()).advance()
+    np.testing.assert_allclose(rec.settlement, plain.settlement, rtol=0.05)
+
+
+# ------------------------------------------------------------------------------------ other vehicles
+def test_car_on_realistic_track_runs_and_settles() -> None:
+    track = te.Track.realistic(30.0)
+    sim = te.TrackDegradation(track, te.Car.manchester_coach())
+    h = sim.run(2)
+    assert h.settlement.shape == (2, track.n_sleepers)
+    assert np.all(np.isfinite(h.settlement))
+    assert np.all(h.settlement[0] > 0)
+    assert np.all(h.settlement[1] >= h.settlement[0])
+    assert np.all(h.settlement[1] > h.settlement[0])
+    wheel_load = te.Car.manchester_coach().wheel_load
+    assert np.all(np.abs(h.max_contact_force - wheel_load) <= 0.3 * wheel_load)
+
+
+# ------------------------------------------------------------------------------------ bad input
+@pytest.fixture(scope="module")
+def sim_a() -> te.TrackDegradation:
+    return te.TrackDegradation(track_a(), loaded_wheelset())
+
+
+@pytest.mark.parametrize("cycles", [-1, -1e-3, float("nan"), float("inf")])
+def test_advance_rejects_bad_cycles(sim_a: te.TrackDegradation, cycles: float) -> None:
+    with pytest.raises(ValueError, match="cycles"):
+        sim_a.advance(cycles)
+
+
+@pytest.mark.parametrize("iterations", [-1, 1.5, "3"])
+def test_run_rejects_bad_iterations(sim_a: te.TrackDegradation, iterations) -> None:
+    with pytest.raises(ValueError, match="iterations"):
+        sim_a.run(iterations)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"initial_level": np.full(51, np.nan)}, "initial_level"),
+    ({"initial_level": np.zeros(50)}, "initial_level"),
+    ({"foo": 1}, "unknown option"),
+    ({"windowbays": 4}, "unknown option"),
+    ({"cycles_per_iteration": 0}, "cycles_per_iteration"),
+    ({"cycles_per_iteration": float("nan")}, "cycles_per_iteration"),
+    ({"speed": -1.0}, "speed"),
+    ({"speed": 0.0}, "speed"),
+    ({"approach_sleepers": 1}, "approach_sleepers"),
+    ({"max_increment": 0.0}, "max_increment"),
+    ({"law": object()}, "law"),
+])
+def test_constructor_rejects_bad_input(kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        te.TrackDegradation(track_a(), loaded_wheelset(), **kwargs)
+
+
+def test_constructor_rejects_bad_track_and_vehicle() -> None:
+    with pytest.raises(ValueError, match="track"):
+        te.TrackDegradation("seed", loaded_wheelset())  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="vehicle"):
+        te.TrackDegradation(track_a(), "wheelset")
+
+
+def test_make_law_rejects_unknown_parameter_and_name() -> None:
+    with pytest.raises(ValueError, match="foo"):
+        te.make_law("hettler", foo=1)
+    with pytest.raises(ValueError, match="unknown settlement law"):
+        te.make_law("no-such-law")
+
+
+def test_other_law_runs() -> None:
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), law=te.make_law("selig_waters"))
+    h = sim.run(2)
+    assert np.all(h.settlement[1] > h.settlement[0])

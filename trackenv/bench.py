@@ -1,0 +1,239 @@
+"""How fast the physics runs: one pass, batched passes on all cores and on one, a car, the paper loop and
+the env.
+
+:func:`run_benchmarks` returns a JSON-ready dict; :func:`format_benchmarks` renders it as a table. Every
+timing is the median wall time over repeats after a warm-up run (which also triggers numba's compilation, or
+loads it from numba's cache), measured with :func:`time.perf_counter`.
+
+* ``seed_pass``: one pass of ``Wheelset(mass=1800, static_load=100e3)`` over ``Track.seed()`` at 80 km/h,
+  dt = 1e-4 s;
+* ``batch``: throughput of :func:`simulate_passes` with 1, 16 and 64 rows, a different random irregularity in
+  every row, once with numba's default thread count (the batch loop is a ``prange``) and once with one thread;
+* ``car``: the 10-DOF ``Car.manchester_coach()`` over ``Track.realistic(120.0)`` at 80 km/h;
+* ``paper_b``: the paper's scenario B, 6 iterations of 50 000 cycles (:class:`TrackDegradation`);
+* ``env``: environment steps per second of ``trackenv/Tamping-v0`` with random actions, or "unavailable" and
+  the reason when the environment cannot be made.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from .degradation import TrackDegradation
+from .physics.dynamics import simulate_pass, simulate_passes
+from .physics.track import Track
+from .physics.vehicle import Car, Wheelset
+
+__all__ = ["run_benchmarks", "format_benchmarks"]
+
+SPEED = 80 / 3.6
+DT = 1e-4
+BATCH_SIZES = (1, 16, 64)
+
+
+def _loaded_wheelset() -> Wheelset:
+    return Wheelset(mass=1800.0, static_load=100e3)
+
+
+def _time(fn: Callable[[], object], repeats: int, warmup: int = 1) -> dict:
+    """Median, min and max wall time [s] of ``fn()`` over ``repeats`` calls after ``warmup`` calls."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return {"median_s": statistics.median(times), "min_s": min(times), "max_s": max(times),
+            "repeats": repeats}
+
+
+def _machine() -> dict:
+    import numba
+
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover (not on Linux)
+        affinity = None
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "python": sys.version.split()[0], "numpy": np.__version__, "numba": numba.__version__,
+            "cpu_count": os.cpu_count(), "cpus_usable": affinity, "numba_threads": numba.get_num_threads(),
+            "numba_threading_layer": _threading_layer(), "load_average_1min": _load_average()}
+
+
+def _load_average() -> float | None:
+    """The 1-minute load average when the benchmark starts: other work on the machine slows every figure."""
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):  # pragma: no cover (not on Unix)
+        return None
+
+
+def _threading_layer() -> str:
+    import numba
+
+    try:
+        return str(numba.threading_layer())
+    except ValueError:  # no parallel function has run yet
+        return "not initialised"
+
+
+def _irregularities(rows: int, n_sleepers: int, rng: np.random.Generator) -> np.ndarray:
+    """Different smooth random rail levels per row [m]: a few sines of 2-20 m wavelength, ~0.5 mm RMS."""
+    x = np.arange(n_sleepers) * 0.6
+    out = np.zeros((rows, n_sleepers))
+    for _ in range(4):
+        lam = rng.uniform(2.0, 20.0, size=(rows, 1))
+        amp = rng.uniform(0.1e-3, 0.5e-3, size=(rows, 1))
+        phase = rng.uniform(0.0, 2 * np.pi, size=(rows, 1))
+        out += amp * np.sin(2 * np.pi * x / lam + phase)
+    return out
+
+
+def _bench_seed_pass(repeats: int) -> dict:
+    track, wheel = Track.seed(), _loaded_wheelset()
+    res = simulate_pass(track, wheel, SPEED, dt=DT)
+    t = _time(lambda: simulate_pass(track, wheel, SPEED, dt=DT), repeats)
+    steps = res.time.size - 1
+    t.update({"time_steps": steps, "simulated_s": float(res.time[-1]),
+              "steps_per_s": steps / t["median_s"], "real_time_factor": float(res.time[-1]) / t["median_s"]})
+    return t
+
+
+def _bench_batches(repeats: int, sizes=BATCH_SIZES) -> dict:
+    import numba
+
+    track, wheel = Track.seed(), _loaded_wheelset()
+    rng = np.random.default_rng(12345)
+    default_threads = numba.get_num_threads()
+    out: dict = {"default_threads": default_threads, "rows": {}}
+    for label, threads in (("all_threads", default_threads), ("one_thread", 1)):
+        numba.set_num_threads(threads)
+        try:
+            for b in sizes:
+                irr = _irregularities(b, track.n_sleepers, rng)
+                t = _time(lambda irr=irr: simulate_passes(track, wheel, SPEED, irr, dt=DT), repeats)
+                out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"]}
+        finally:
+            numba.set_num_threads(default_threads)
+    for row in out["rows"].values():
+        row["parallel_speedup"] = row["all_threads"]["passes_per_s"] / row["one_thread"]["passes_per_s"]
+    return out
+
+
+def _bench_car(repeats: int) -> dict:
+    track, car = Track.realistic(120.0), Car.manchester_coach()
+    res = simulate_pass(track, car, SPEED, dt=DT)
+    t = _time(lambda: simulate_pass(track, car, SPEED, dt=DT), repeats)
+    steps = res.time.size - 1
+    t.update({"track": "Track.realistic(120.0)", "vehicle": "Car.manchester_coach() (10 DOF, 4 axles)",
+              "time_steps": steps, "simulated_s": float(res.time[-1]), "steps_per_s": steps / t["median_s"],
+              "real_time_factor": float(res.time[-1]) / t["median_s"]})
+    return t
+
+
+def _bench_paper_b(repeats: int, iterations: int = 6) -> dict:
+    track = Track.seed().scaled(ballast_stiffness=1.10, from_sleeper=40)
+
+    def run() -> None:
+        TrackDegradation(track, _loaded_wheelset(), cycles_per_iteration=50_000, speed=SPEED).run(iterations)
+
+    t = _time(run, repeats)
+    t.update({"iterations": iterations, "cycles_per_iteration": 50_000,
+              "per_iteration_s": t["median_s"] / iterations})
+    return t
+
+
+def _bench_env(steps: int, time_budget_s: float) -> dict:
+    """Random-action steps per second of trackenv/Tamping-v0, or why it is unavailable."""
+    try:
+        import gymnasium
+
+        import trackenv.envs  # noqa: F401  (registers the environment)
+
+        env = gymnasium.make("trackenv/Tamping-v0")
+    except Exception as exc:  # the environment is optional here: report, do not fail
+        return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
+    try:
+        env.action_space.seed(0)
+        t0 = time.perf_counter()
+        env.reset(seed=0)
+        reset_s = time.perf_counter() - t0
+        env.step(env.action_space.sample())  # warm-up
+        done_steps, resets = 0, 0
+        t0 = time.perf_counter()
+        while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            done_steps += 1
+            if terminated or truncated:
+                env.reset()
+                resets += 1
+        wall = time.perf_counter() - t0
+        return {"status": "ok", "steps": done_steps, "wall_s": wall, "steps_per_s": done_steps / wall,
+                "episodes_ended": resets, "first_reset_s": reset_s}
+    except Exception as exc:
+        return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
+    finally:
+        env.close()
+
+
+def run_benchmarks(quick: bool = False) -> dict:
+    """Run every benchmark and return the figures with the machine they ran on (JSON-ready).
+
+    ``quick``: fewer repeats (3 instead of 7 for single passes; 2 instead of 5 for batches and the paper
+    loop) and fewer env steps, for a smoke test; the figures are then rougher.
+    """
+    rep = 3 if quick else 7
+    rep_batch = 2 if quick else 5
+    t0 = time.perf_counter()
+    out = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
+    out["seed_pass"] = _bench_seed_pass(rep)
+    out["batch"] = _bench_batches(rep_batch)
+    out["car"] = _bench_car(3 if quick else 5)
+    out["paper_b"] = _bench_paper_b(1 if quick else 3)
+    out["env"] = _bench_env(20 if quick else 200, 10.0 if quick else 60.0)
+    out["machine"]["numba_threading_layer"] = _threading_layer()
+    out["total_wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def format_benchmarks(d: dict) -> str:
+    """The figures of :func:`run_benchmarks` as a small human-readable table."""
+    m = d["machine"]
+    lines = [f"machine: {m['platform']}, {m['processor']}, {m['cpu_count']} CPUs "
+             f"({m['cpus_usable']} usable), numba {m['numba']} with {m['numba_threads']} threads "
+             f"({m['numba_threading_layer']}), Python {m['python']}, load average {m['load_average_1min']}"
+             + ("  [quick]" if d["quick"] else "")]
+    rows = []
+    sp = d["seed_pass"]
+    rows.append(("seed pass (wheelset, 30 m, 80 km/h, dt 1e-4)", f"{sp['median_s'] * 1e3:.1f} ms",
+                 f"{sp['steps_per_s'] / 1e3:.0f} k steps/s, {sp['real_time_factor']:.0f}x real time"))
+    for b, row in d["batch"]["rows"].items():
+        a, o = row["all_threads"], row["one_thread"]
+        rows.append((f"simulate_passes batch {b}", f"{a['median_s'] * 1e3:.1f} ms",
+                     f"{a['passes_per_s']:.1f} passes/s ({d['batch']['default_threads']} threads), "
+                     f"{o['passes_per_s']:.1f} (1 thread), x{row['parallel_speedup']:.2f}"))
+    c = d["car"]
+    rows.append(("car (Manchester coach, 120 m)", f"{c['median_s'] * 1e3:.1f} ms",
+                 f"{c['steps_per_s'] / 1e3:.0f} k steps/s, {c['real_time_factor']:.1f}x real time"))
+    p = d["paper_b"]
+    rows.append((f"paper scenario B ({p['iterations']} iterations)", f"{p['median_s']:.2f} s",
+                 f"{p['per_iteration_s'] * 1e3:.0f} ms per iteration"))
+    e = d["env"]
+    if e["status"] == "ok":
+        rows.append(("env trackenv/Tamping-v0 (random actions)", f"{e['steps_per_s']:.1f} steps/s",
+                     f"{e['steps']} steps, {e['episodes_ended']} episodes ended"))
+    else:
+        rows.append(("env trackenv/Tamping-v0", "unavailable", e["reason"][:80]))
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(r[1]) for r in rows)
+    lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]
+    lines.append(f"total benchmark wall time {d['total_wall_s']:.1f} s")
+    return "\n".join(lines)

@@ -1,0 +1,184 @@
+"""The configuration of the tamping environment: one frozen, validated dataclass with documented defaults."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from ..physics._validation import check_scalar
+from ..physics.geometry import QualityLimits
+from ..physics.settlement import LAWS, make_law
+from ..physics.tamping import TampingModel
+from ..physics.vehicle import GRAVITY, Car, Wheelset
+
+VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
+
+
+@dataclass(frozen=True)
+class TampingEnvConfig:
+    """Everything that defines a tamping problem. SI units unless the name says otherwise.
+
+    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers) split into ``n_sections`` equal tamping
+    sections; supports from ``Track.realistic`` with per-sleeper ballast stiffness drawn lognormal with
+    coefficient of variation ``ballast_stiffness_cv``; with probability ``transition_probability`` a
+    transition zone (ballast ``transition_stiffness_ratio`` times stiffer from a random sleeper on, e.g. a
+    bridge approach); ``voided_sleepers_mean`` hanging sleepers on average (Poisson). Ballast condition varies
+    along the track: each sleeper's settlement rate is lognormal with CV ``settlement_rate_cv``, correlated
+    over ``settlement_rate_correlation_m``. The initial level is drawn from the German vertical PSD of
+    ``initial_quality`` ("low"/"high" disturbance).
+
+    Traffic: wheel load ``axle_load_t``·g/2 (a wheelset carrying it, or one of the car models in
+    ``vehicle``), ``speed_kmh``, ``axle_passes_per_year``, ``steps_per_year`` planning periods a year (each
+    step runs one dynamic pass and advances the settlement by axle_passes_per_year/steps_per_year cycles),
+    ``horizon_years`` (the episode is truncated there).
+
+    Settlement: ``law`` and ``law_params`` (see :data:`trackenv.physics.settlement.LAWS`). Default: Shenton's
+    power-plus-linear law with the force exponent of Hettler (1.6): a log law (the paper's) saturates and a
+    track following it would need almost no maintenance within a planning horizon, while real track keeps
+    degrading roughly linearly after consolidation. Tamping: ``tamping`` (a dict of
+    :class:`TampingModel` fields).
+
+    Costs (k€): ``mobilisation_cost`` per campaign (a step with any tamping), ``section_tamping_cost`` per
+    section tamped, ``geometry_cost_per_section_year`` times (SD/SD_alert)² per section and year (poor ride,
+    speed restrictions, faster wear), and per section and step at or above a limit ``alert_cost``,
+    ``intervention_cost``, ``immediate_action_cost`` (a large penalty: the line must be closed or slowed).
+    Quality limits: EN 13848-5 style table (``limits``, a dict of :class:`QualityLimits` fields, default
+    :meth:`QualityLimits.en13848`) at ``speed_kmh``; the SD alert value applies to our short sections as is.
+
+    ``min_steps_between_tampings``: a section tamped in the last k steps cannot be tamped again (masked).
+    """
+
+    track_length_m: float = 60.0
+    n_sections: int = 6
+    ballast_stiffness_cv: float = 0.15
+    transition_probability: float = 0.3
+    transition_stiffness_ratio: float = 2.0
+    voided_sleepers_mean: float = 0.3
+    settlement_rate_cv: float = 0.35
+    settlement_rate_correlation_m: float = 3.0
+    initial_quality: str = "low"
+    vehicle: str = "wheelset"
+    axle_load_t: float = 20.0
+    speed_kmh: float = 100.0
+    axle_passes_per_year: float = 2.0e6
+    steps_per_year: int = 4
+    horizon_years: float = 10.0
+    law: str = "shenton"
+    law_params: tuple = (("force_exponent", 1.6),)
+    tamping: tuple = ()
+    mobilisation_cost: float = 10.0
+    section_tamping_cost: float = 2.0
+    geometry_cost_per_section_year: float = 4.0
+    alert_cost: float = 0.5
+    intervention_cost: float = 3.0
+    immediate_action_cost: float = 50.0
+    limits: tuple = ()
+    min_steps_between_tampings: int = 1
+    dt: float = 1e-4
+
+    def __post_init__(self) -> None:
+        c = check_scalar
+        c("track_length_m", self.track_length_m, low=30.0, high=2000.0)
+        if not isinstance(self.n_sections, (int, np.integer)) or not 1 <= self.n_sections <= 64:
+            raise ValueError(f"n_sections must be an integer in [1, 64], got {self.n_sections!r}")
+        if self.n_sleepers < 3 * self.n_sections:
+            raise ValueError("n_sections must leave at least 3 sleepers per section")
+        c("ballast_stiffness_cv", self.ballast_stiffness_cv, low=0.0, high=1.0)
+        c("transition_probability", self.transition_probability, low=0.0, high=1.0)
+        c("transition_stiffness_ratio", self.transition_stiffness_ratio, low=0.2, high=10.0)
+        c("voided_sleepers_mean", self.voided_sleepers_mean, low=0.0, high=10.0)
+        c("settlement_rate_cv", self.settlement_rate_cv, low=0.0, high=2.0)
+        c("settlement_rate_correlation_m", self.settlement_rate_correlation_m, low=0.0, high=100.0)
+        if self.initial_quality not in ("low", "high"):
+            raise ValueError(f"initial_quality must be 'low' or 'high', got {self.initial_quality!r}")
+        if self.vehicle not in VEHICLES:
+            raise ValueError(f"vehicle must be one of {VEHICLES}, got {self.vehicle!r}")
+        c("axle_load_t", self.axle_load_t, low=1.0, high=40.0)
+        c("speed_kmh", self.speed_kmh, low=5.0, high=300.0)
+        c("axle_passes_per_year", self.axle_passes_per_year, low=1.0, high=1e8)
+        if not isinstance(self.steps_per_year, (int, np.integer)) or not 1 <= self.steps_per_year <= 52:
+            raise ValueError(f"steps_per_year must be an integer in [1, 52], got {self.steps_per_year!r}")
+        c("horizon_years", self.horizon_years, low=1.0 / self.steps_per_year, high=100.0)
+        if self.law not in LAWS:
+            raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")
+        object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
+        object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
+        object.__setattr__(self, "limits", _as_items("limits", self.limits))
+        self.settlement_law  # validates law_params
+        self.tamping_model
+        self.quality_limits.for_speed(self.speed_kmh / 3.6)
+        for name in ("mobilisation_cost", "section_tamping_cost", "geometry_cost_per_section_year",
+                     "alert_cost", "intervention_cost", "immediate_action_cost"):
+            c(name, getattr(self, name), low=0.0, high=1e9)
+        if not isinstance(self.min_steps_between_tampings, (int, np.integer)) or not (
+                0 <= self.min_steps_between_tampings <= 100):
+            raise ValueError("min_steps_between_tampings must be an integer in [0, 100], got "
+                             f"{self.min_steps_between_tampings!r}")
+        c("dt", self.dt, low=1e-6, high=5e-4)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TampingEnvConfig:
+        """Build from a dict; an unknown key raises ValueError naming it."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown TampingEnvConfig key(s) {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**d)
+
+    def replace(self, **changes) -> TampingEnvConfig:
+        """A copy with some fields changed (validated; unknown keys raise ValueError)."""
+        return self.from_dict({**self.to_dict(), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        for k in ("law_params", "tamping", "limits"):
+            d[k] = dict(getattr(self, k))
+        return d
+
+    # derived
+    @property
+    def n_sleepers(self) -> int:
+        return int(round(self.track_length_m / 0.6)) + 1
+
+    @property
+    def horizon_steps(self) -> int:
+        return int(round(self.horizon_years * self.steps_per_year))
+
+    @property
+    def cycles_per_step(self) -> float:
+        return self.axle_passes_per_year / self.steps_per_year
+
+    @property
+    def speed(self) -> float:
+        return self.speed_kmh / 3.6
+
+    @property
+    def settlement_law(self):
+        return make_law(self.law, **dict(self.law_params))
+
+    @property
+    def tamping_model(self) -> TampingModel:
+        return TampingModel.from_dict(dict(self.tamping))
+
+    @property
+    def quality_limits(self) -> QualityLimits:
+        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+    def make_vehicle(self):
+        wheel_load = self.axle_load_t * 1000.0 * GRAVITY / 2
+        if self.vehicle == "wheelset":
+            return Wheelset(mass=1800.0, static_load=max(wheel_load - 900.0 * GRAVITY, 0.0))
+        return getattr(Car, self.vehicle)()
+
+
+def _as_items(name: str, value) -> tuple:
+    """Mappings are stored as sorted (key, value) tuples so the config stays hashable and frozen."""
+    if isinstance(value, dict):
+        value = tuple(sorted(value.items()))
+    try:
+        items = tuple((str(k), v) for k, v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a mapping of parameter names to values") from None
+    return items

@@ -1,0 +1,151 @@
+"""One tamping episode as plain functions over a :class:`TrackDegradation`: what a step does, apart from the
+Gymnasium API. The single env and the vector env both call these, so the rules exist once."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from ..degradation import TrackDegradation
+from ..physics.dynamics import PassResult
+from ..physics.geometry import classify, d1_filter, german_psd, section_index, section_peak, section_sd
+from ..physics.geometry import synthesize_profile
+from ..physics.track import Track
+from .config import TampingEnvConfig
+
+COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
+
+
+@dataclass(eq=False)
+class Episode:
+    """The mutable state of one episode."""
+
+    config: TampingEnvConfig
+    sim: TrackDegradation
+    sections: np.ndarray  # (n_sleepers,) section of each sleeper
+    step_count: int = 0
+    last_tamped_step: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    section_tampings: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_force: np.ndarray = field(default_factory=lambda: np.zeros(0))  # per sleeper [N]
+    tamped_last: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    transition_sleeper: int = -1
+
+    @property
+    def n_sections(self) -> int:
+        return self.config.n_sections
+
+    def quality(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """D1 level per sleeper, SD and mean-to-peak per section [m]."""
+        d1 = d1_filter(self.sim.level, 0.6)
+        return d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections,
+                                                                                 self.n_sections)
+
+    def mask(self) -> np.ndarray:
+        """Sections that may be tamped now (not tamped within the last min_steps_between_tampings steps)."""
+        k = self.config.min_steps_between_tampings
+        return (self.step_count - self.last_tamped_step) > k
+
+
+def _correlated_lognormal(rng: np.random.Generator, n: int, cv: float, corr_sleepers: float) -> np.ndarray:
+    """Positive factors with mean 1 and coefficient of variation cv, correlated over corr_sleepers."""
+    if cv == 0:
+        return np.ones(n)
+    z = rng.standard_normal(n + 40)
+    if corr_sleepers > 0:
+        z = gaussian_filter1d(z, corr_sleepers, mode="wrap")
+    z = z[20:-20]
+    z = (z - z.mean()) / (z.std() + 1e-12)
+    sigma = np.sqrt(np.log1p(cv * cv))
+    return np.exp(sigma * z - sigma * sigma / 2)
+
+
+def new_episode(config: TampingEnvConfig, rng: np.random.Generator) -> Episode:
+    """Draw a track, its ballast condition and its initial level from ``rng``."""
+    c = config
+    n = c.n_sleepers
+    track = Track.realistic(c.track_length_m)
+    kb = track.ballast_stiffness * _correlated_lognormal(rng, n, c.ballast_stiffness_cv, 2.0)
+    transition = -1
+    if rng.random() < c.transition_probability:
+        transition = int(rng.integers(n // 5, 4 * n // 5))
+        kb[transition:] *= c.transition_stiffness_ratio
+    track = track.replace(ballast_stiffness=kb)
+    for _ in range(int(rng.poisson(c.voided_sleepers_mean))):
+        track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=0.05)
+    rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / 0.6)
+    level = synthesize_profile(track.sleeper_positions, partial(german_psd, quality=c.initial_quality), rng)
+    sim = TrackDegradation(track, c.make_vehicle(), law=c.settlement_law, cycles_per_iteration=c.cycles_per_step,
+                           speed=c.speed, initial_level=level, rate_factor=rate, feedback="support", dt=c.dt)
+    ep = Episode(config=c, sim=sim, sections=section_index(n, c.n_sections),
+                 last_tamped_step=np.full(c.n_sections, -10**6), section_tampings=np.zeros(c.n_sections),
+                 contact_force=np.zeros(n), tamped_last=np.zeros(c.n_sections, dtype=bool),
+                 transition_sleeper=transition)
+    return ep
+
+
+def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+    """Tamp the allowed sections among ``sections_to_tamp`` (bool, n_sections); return the tamping cost and
+    the sections actually tamped (masked ones are ignored)."""
+    c = ep.config
+    tamped = sections_to_tamp & ep.mask()
+    ep.tamped_last = tamped
+    if not tamped.any():
+        return 0.0, tamped
+    ep.sim.tamp(tamped[ep.sections], c.tamping_model, rng)
+    ep.last_tamped_step[tamped] = ep.step_count
+    ep.section_tampings[tamped] += 1
+    return c.mobilisation_cost + c.section_tamping_cost * int(tamped.sum()), tamped
+
+
+def traffic(ep: Episode, result: PassResult) -> None:
+    """The period's traffic: settle every sleeper under the forces of ``result`` (the pass over the current
+    geometry) for the step's axle passes."""
+    ep.contact_force = ep.sim.evaluated(result.contact_force_profile())
+    ep.sim.settle(result, ep.config.cycles_per_step)
+    ep.step_count += 1
+
+
+def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
+    """The period's costs in named parts (k€); the reward is minus their sum."""
+    c = ep.config
+    _, sd, peak = ep.quality()
+    lim = c.quality_limits.for_speed(c.speed)
+    cls = classify(peak, lim)
+    dt_years = 1.0 / c.steps_per_year
+    return {"tamping": float(tamping_cost),
+            "geometry": float(c.geometry_cost_per_section_year * dt_years * np.sum((sd / lim.sd_alert_m) ** 2)),
+            "alert": float(c.alert_cost * np.sum(cls == 1)),
+            "intervention": float(c.intervention_cost * np.sum(cls == 2)),
+            "immediate_action": float(c.immediate_action_cost * np.sum(cls == 3))}
+
+
+def observation(ep: Episode) -> dict[str, np.ndarray]:
+    """The observation dict (see TampingEnv's table)."""
+    c = ep.config
+    _, sd, peak = ep.quality()
+    years = (ep.step_count - ep.last_tamped_step) / c.steps_per_year
+    return {"level": np.clip(ep.sim.level * 1e3, -100.0, 200.0).astype(np.float32),
+            "contact_force": np.clip(ep.contact_force / 1e3, 0.0, 2000.0).astype(np.float32),
+            "section_sd": np.clip(sd * 1e3, 0.0, 100.0).astype(np.float32),
+            "section_peak": np.clip(peak * 1e3, 0.0, 200.0).astype(np.float32),
+            "tampings": np.clip(ep.section_tampings, 0, 1000).astype(np.float32),
+            "years_since_tamping": np.clip(years, 0.0, c.horizon_years + 1.0).astype(np.float32),
+            "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)], dtype=np.float32)}
+
+
+def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
+    _, sd, peak = ep.quality()
+    lim = ep.config.quality_limits.for_speed(ep.config.speed)
+    cls = classify(peak, lim)
+    return {"costs": parts, "cost": float(sum(parts.values())), "tamped_sections": tamped.copy(),
+            "section_sd_m": sd, "section_peak_m": peak, "section_class": cls,
+            "immediate_action_exceedances": int(np.sum(cls == 3)), "year": ep.step_count / ep.config.steps_per_year,
+            "max_contact_force_N": float(ep.contact_force.max())}
+
+
+def traffic_free_pass(ep: Episode) -> None:
+    """A pass without settlement: what the contact force looks like on the initial geometry."""
+    ep.contact_force = ep.sim.evaluated(ep.sim.simulate().contact_force_profile())

@@ -1,0 +1,168 @@
+"""TampingEnv: decide every planning period which sections of a ballasted track to tamp.
+
+Every step is physics: a vehicle pass over the standing track with its current level (implicit Newmark, Hertz
+contact), the per-sleeper forces through a settlement law with curve shifting for a quarter-year of traffic,
+and the new level fed back for the next pass (:class:`trackenv.TrackDegradation`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from . import episode as E
+from .config import TampingEnvConfig
+
+
+def observation_space(config: TampingEnvConfig) -> spaces.Dict:
+    n, s = config.n_sleepers, config.n_sections
+    f32 = np.float32
+    return spaces.Dict({
+        "level": spaces.Box(-100.0, 200.0, (n,), f32),
+        "contact_force": spaces.Box(0.0, 2000.0, (n,), f32),
+        "section_sd": spaces.Box(0.0, 100.0, (s,), f32),
+        "section_peak": spaces.Box(0.0, 200.0, (s,), f32),
+        "tampings": spaces.Box(0.0, 1000.0, (s,), f32),
+        "years_since_tamping": spaces.Box(0.0, config.horizon_years + 1.0, (s,), f32),
+        "time": spaces.Box(0.0, 1.0, (1,), f32),
+    })
+
+
+def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
+    if action_type == "multibinary":
+        return spaces.MultiBinary(config.n_sections)
+    if action_type == "discrete":
+        return spaces.Discrete(config.n_sections + 1)
+    raise ValueError(f"action_type must be 'multibinary' or 'discrete', got {action_type!r}")
+
+
+def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
+    """The sections to tamp (bool, n_sections) from an action; a malformed action raises ValueError."""
+    if action_type == "discrete":
+        a = np.asarray(action)
+        if a.size != 1 or not np.all(np.isfinite(a.astype(float))) or float(a.ravel()[0]) != int(a.ravel()[0]):
+            raise ValueError(f"action must be one integer in [0, {n_sections}], got {action!r}")
+        k = int(a.ravel()[0])
+        if not 0 <= k <= n_sections:
+            raise ValueError(f"action must be an integer in [0, {n_sections}] (0 = no tamping), got {k}")
+        out = np.zeros(n_sections, dtype=bool)
+        if k:
+            out[k - 1] = True
+        return out
+    try:
+        a = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}") from None
+    if a.shape != (n_sections,):
+        raise ValueError(f"action must have shape ({n_sections},) (one 0/1 per section), got {a.shape}")
+    if not np.all(np.isfinite(a)) or not np.all((a == 0) | (a == 1)):
+        raise ValueError(f"action values must be 0 or 1 (no NaN), got {a.tolist()}")
+    return a.astype(bool)
+
+
+class TampingEnv(gym.Env):
+    """Plan tamping of a ballasted track over a horizon of years.
+
+    **Description.** The track (default 60 m of UIC60 on concrete sleepers, 6 sections of 10 m) settles under
+    traffic; settlement varies along the track with the ballast condition and with the dynamic forces, which the
+    growing irregularity raises in turn. Each step is a planning period (default a quarter of a year, 500 000
+    axle passes): the agent picks the sections to tamp at the start of the period, then one vehicle pass is
+    simulated over the (tamped) geometry and the settlement advanced by the period's axle passes. Tamping
+    restores the level but for a residual that keeps part of the old shape, restarts the fast consolidation
+    phase, and damages the ballast so the section settles faster afterwards.
+
+    **Action space.** ``MultiBinary(n_sections)``: 1 = tamp this section now (``trackenv/Tamping-v0``); or
+    ``Discrete(n_sections + 1)``: 0 = nothing, k = tamp section k (``trackenv/TampingDiscrete-v0``). A section
+    tamped within the last ``min_steps_between_tampings`` steps is masked (:meth:`action_masks`) and a request
+    to tamp it is ignored (``info["tamped_sections"]`` says what was done). Malformed actions raise ValueError.
+
+    **Observation** (``Dict``, float32):
+
+    =====================  ====================================================  ======  ============
+    key                    quantity                                              unit    bounds
+    =====================  ====================================================  ======  ============
+    level                  rail level per sleeper (downward +, vs design line)   mm      [-100, 200]
+    contact_force          peak wheel/rail force per sleeper bay, last pass      kN      [0, 2000]
+    section_sd             SD of the D1 (3-25 m) level per section               mm      [0, 100]
+    section_peak           D1 mean-to-peak per section (isolated defects)        mm      [0, 200]
+    tampings               tampings per section this episode                     -       [0, 1000]
+    years_since_tamping    per section                                           year    [0, H+1]
+    time                   fraction of the horizon elapsed                       -       [0, 1]
+    =====================  ====================================================  ======  ============
+
+    **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
+    (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
+    ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
+    its speed band; the last a large penalty). reward = −Σ parts.
+
+    **Episode end.** No terminal state: truncation at the horizon (default 10 years = 40 steps).
+
+    **Arguments.** ``config`` (:class:`TampingEnvConfig` or dict) or its fields as keywords;
+    ``action_type``; ``render_mode`` ("rgb_array").
+
+    **Randomness.** Everything random (track supports, transition zone, voided sleepers, ballast condition,
+    initial level, tamping residual) draws from ``self.np_random``, seeded by ``reset(seed=...)``.
+
+    **Versions.** v0: first release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, config: TampingEnvConfig | dict | None = None, *, action_type: str = "multibinary",
+                 render_mode: str | None = None, **overrides: Any) -> None:
+        if config is None:
+            config = TampingEnvConfig()
+        elif isinstance(config, dict):
+            config = TampingEnvConfig.from_dict(config)
+        elif not isinstance(config, TampingEnvConfig):
+            raise ValueError(f"config must be a TampingEnvConfig or dict, got {type(config).__name__}")
+        if overrides:
+            config = config.replace(**overrides)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.config = config
+        self.action_type = action_type
+        self.render_mode = render_mode
+        self.observation_space = observation_space(config)
+        self.action_space = action_space(config, action_type)
+        self.episode: E.Episode | None = None
+        self._last_info: dict = {}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self.episode = E.new_episode(self.config, self.np_random)
+        E.traffic_free_pass(self.episode)
+        self._last_info = E.info(self.episode, dict.fromkeys(E.COST_KEYS, 0.0),
+                                 np.zeros(self.config.n_sections, dtype=bool))
+        return E.observation(self.episode), self._last_info
+
+    def step(self, action):
+        if self.episode is None:
+            raise RuntimeError("call reset() before step()")
+        want = decode_action(action, self.action_type, self.config.n_sections)
+        ep = self.episode
+        tamping_cost, tamped = E.apply_tamping(ep, want, self.np_random)
+        E.traffic(ep, ep.sim.simulate())
+        parts = E.costs(ep, tamping_cost)
+        reward = -float(sum(parts.values()))
+        truncated = ep.step_count >= self.config.horizon_steps
+        self._last_info = E.info(ep, parts, tamped)
+        return E.observation(ep), reward, False, truncated, self._last_info
+
+    def action_masks(self) -> np.ndarray:
+        """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): for MultiBinary, (2·n_sections,)
+        pairs [may-not-tamp, may-tamp] per section; for Discrete, (n_sections + 1,)."""
+        allowed = np.ones(self.config.n_sections, dtype=bool) if self.episode is None else self.episode.mask()
+        if self.action_type == "discrete":
+            return np.concatenate([[True], allowed])
+        return np.stack([np.ones_like(allowed), allowed], axis=1).ravel()
+
+    def render(self):
+        if self.render_mode != "rgb_array" or self.episode is None:
+            return None
+        from ..render import episode_frame
+
+        return episode_frame(self.episode, self._last_info)
