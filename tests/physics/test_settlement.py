@@ -121,15 +121,15 @@ HAND_VALUES = [
     # Selig & Waters: epsilon_1·(σ/σ_ref)^2·N^0.21·h, σ = F/0.7 m²
     (SeligWatersLaw(), 50e3, 1e6, 0.0035 * ((50e3 / 0.7) / 100e3) ** 2 * 1e6**0.21 * 0.40),
     (SeligWatersLaw(), 100e3, 1000, 0.0035 * ((100e3 / 0.7) / 100e3) ** 2 * 1000**0.21 * 0.40),
-    # Alva-Hurtado & Selig: 0.082·(100n − 38.2)·(σ[psi])² % ·(1 + C·log10 N)·h
+    # Alva-Hurtado & Selig: 0.082·(100n − 38.2)·(σ[kgf/cm²])² % ·(1 + C·log10 N)·h (default unit)
     (
         AlvaHurtadoSeligLaw(),
         50e3,
         1e6,
-        0.082 * (45 - 38.2) * (50e3 / 0.7 / PSI) ** 2 / 100 * (1 + 0.2 * 6) * 0.4,
+        0.082 * (45 - 38.2) * (50e3 / 0.7 / 98066.5) ** 2 / 100 * (1 + 0.2 * 6) * 0.4,
     ),
     (
-        AlvaHurtadoSeligLaw(),
+        AlvaHurtadoSeligLaw(stress_unit=PSI),
         20e3,
         100,
         0.082 * (45 - 38.2) * (20e3 / 0.7 / PSI) ** 2 / 100 * (1 + 0.2 * 2) * 0.4,

@@ -149,3 +149,12 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
 def traffic_free_pass(ep: Episode) -> None:
     """A pass without settlement: what the contact force looks like on the initial geometry."""
     ep.contact_force = ep.sim.evaluated(ep.sim.simulate().contact_force_profile())
+
+
+def action_mask(ep: Episode | None, action_type: str, n_sections: int) -> np.ndarray:
+    """Valid actions for masked algorithms: Discrete (n_sections + 1,), MultiBinary (2·n_sections,) as
+    [may-not-tamp, may-tamp] pairs per section (sb3-contrib's convention)."""
+    allowed = np.ones(n_sections, dtype=bool) if ep is None else ep.mask()
+    if action_type == "discrete":
+        return np.concatenate([[True], allowed])
+    return np.stack([np.ones_like(allowed), allowed], axis=1).ravel()

@@ -155,10 +155,7 @@ class TampingEnv(gym.Env):
     def action_masks(self) -> np.ndarray:
         """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): for MultiBinary, (2·n_sections,)
         pairs [may-not-tamp, may-tamp] per section; for Discrete, (n_sections + 1,)."""
-        allowed = np.ones(self.config.n_sections, dtype=bool) if self.episode is None else self.episode.mask()
-        if self.action_type == "discrete":
-            return np.concatenate([[True], allowed])
-        return np.stack([np.ones_like(allowed), allowed], axis=1).ravel()
+        return E.action_mask(self.episode, self.action_type, self.config.n_sections)
 
     def render(self):
         if self.render_mode != "rgb_array" or self.episode is None:

@@ -57,6 +57,7 @@ __all__ = [
 N_PER_KN = 1.0e3  # newtons per kilonewton
 M_PER_MM = 1.0e-3  # metres per millimetre
 PA_PER_PSI = 6894.757293168361  # pascals per pound-force per square inch (exact by definition of lbf and in)
+PA_PER_KGF_PER_CM2 = 98066.5  # pascals per kilogram-force per square centimetre (exact)
 
 _EPS = np.finfo(np.float64).eps
 
@@ -362,9 +363,11 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
 
     Caution on magnitude: taken literally (psi, %), the fit gives very large strains for sleeper-level
     stresses: F = 50 kN on 0.7 m² is σ1 ≈ 71 kPa ≈ 10.4 psi and, at n = 0.45, ε_1 ≈ 0.082·6.8·10.4² ≈ 60 %.
-    The unit of stress in the fit is therefore exposed as ``stress_unit`` [Pa per unit], default 1 psi as
-    published; e.g. ``stress_unit = 98066.5`` (kgf/cm²) gives ε_1 ≈ 0.3 % and a few mm per million cycles at
-    50 kN. Which unit the original fit used could not be checked here.
+    That is physically impossible, so the psi reading cannot be right for these stresses. The unit of stress
+    in the fit is exposed as ``stress_unit`` [Pa per unit]; the default is 1 kgf/cm² (98066.5 Pa), the
+    reading that gives realistic magnitudes (ε_1 ≈ 0.3 %, a few mm per million cycles at 50 kN)
+    **[unverified]**: which unit the original fit used could not be checked here. ``stress_unit=PA_PER_PSI``
+    gives the literal psi reading.
 
     Valid ranges: porosity in (0.382, 0.6), C in [0, 5], ballast_thickness in (0, 2] m,
     loaded_area in (0, 10] m², stress_unit > 0 Pa.
@@ -374,7 +377,7 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
     C: float = 0.20
     ballast_thickness: float = 0.40
     loaded_area: float = 0.7
-    stress_unit: float = PA_PER_PSI
+    stress_unit: float = PA_PER_KGF_PER_CM2
     name: ClassVar[str] = "alva_hurtado_selig"
 
     def __post_init__(self) -> None:
@@ -387,7 +390,7 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         """ε_1·h [m], the unit boundary of this law.
 
-        σ1 − σ3 ≈ F / loaded_area is converted Pa -> ``stress_unit`` (psi), ε_1 is converted % -> fraction.
+        σ1 − σ3 ≈ F / loaded_area is converted Pa -> ``stress_unit``, ε_1 is converted % -> fraction.
         """
         deviator = force / self.loaded_area / self.stress_unit
         eps1_percent = 0.082 * (100.0 * self.porosity - 38.2) * deviator**2

@@ -1,0 +1,31 @@
+# The README's two commands: `make demo` (set up, reproduce the paper, compare policies) and `make test`.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+
+$(BIN)/trackenv: pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -c constraints.txt -e ".[dev]"
+	touch $@
+
+.PHONY: setup demo test lint bench validate clean
+setup: $(BIN)/trackenv
+
+demo: setup
+	$(BIN)/trackenv validate
+	$(BIN)/trackenv paper
+	$(BIN)/trackenv evaluate --quick
+
+test: setup
+	$(BIN)/ruff check trackenv agents tests experiments
+	$(BIN)/python -m pytest -q
+
+bench: setup
+	$(BIN)/trackenv bench
+
+validate: setup
+	$(BIN)/trackenv validate
+
+clean:
+	rm -rf $(VENV) results runs .pytest_cache

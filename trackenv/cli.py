@@ -1,0 +1,156 @@
+"""The ``trackenv`` command: validate, paper, bench, evaluate, train.
+
+Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
+to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+
+def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
+    if args.json:
+        print(json.dumps(payload, default=_jsonable))
+    else:
+        print(human)
+
+
+def _jsonable(o: Any):
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return str(o)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .validation import run_validation
+
+    summary = run_validation(out_dir=args.out or "results/validation", make_plots=not args.no_plots)
+    lines = ["trackenv validate — track model against closed forms and the paper"]
+    lines += [f"  {k}: {v}" for k, v in summary.items() if not isinstance(v, (list, dict))]
+    for k, v in summary.items():
+        if isinstance(v, dict):
+            lines.append(f"  {k}:")
+            lines += [f"    {kk}: {vv}" for kk, vv in v.items() if not isinstance(vv, (list, dict))]
+    _emit(args, summary, "\n".join(lines))
+    return 0
+
+
+def cmd_paper(args: argparse.Namespace) -> int:
+    from .paper import format_summary, reproduce_paper
+
+    summary = reproduce_paper(out_dir=args.out or "results/paper", iterations=args.iterations,
+                              cycles_per_iteration=args.cycles, make_plots=not args.no_plots,
+                              progress=not args.json)
+    _emit(args, summary, format_summary(summary))
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench import format_benchmarks, run_benchmarks
+
+    result = run_benchmarks(quick=args.quick)
+    _emit(args, result, format_benchmarks(result))
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .compare import run_comparison
+
+    extra = {}
+    if args.policy in ("ppo", "all"):
+        try:
+            from agents.train import load_trained
+
+            extra["ppo"] = load_trained(args.model)
+        except Exception as exc:  # a missing or broken model must not hide the heuristics' results
+            if args.policy == "ppo":
+                raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
+            print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
+    t0 = time.perf_counter()
+    result = run_comparison(out_dir=args.out or "results/compare", n_test=args.n_test, n_train=args.n_train,
+                            quick=args.quick, progress=not args.json, extra_policies=extra)
+    result["wall_time_s"] = time.perf_counter() - t0
+    from agents.evaluation import format_table
+
+    _emit(args, result, format_table(result["results"]))
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from agents.train import train
+
+    t0 = time.perf_counter()
+    path = train(algo=args.algo, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
+                 out_dir=args.out or "runs/ppo", progress=not args.json)
+    wall = time.perf_counter() - t0
+    payload = {"model": str(path), "wall_time_s": wall}
+    _emit(args, payload, f"trained {args.algo} -> {path} in {wall:.0f} s")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="trackenv", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def common(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--json", action="store_true", help="print one JSON object instead of a summary")
+        sp.add_argument("--out", default=None, help="output folder for JSON and PNG")
+
+    sp = sub.add_parser("validate", help="static, receptance and moving-wheelset checks with plots")
+    common(sp)
+    sp.add_argument("--no-plots", action="store_true")
+    sp.set_defaults(func=cmd_validate)
+
+    sp = sub.add_parser("paper", help="reproduce the paper's settlement scenarios (Fig. 10 and 11)")
+    common(sp)
+    sp.add_argument("--iterations", type=int, default=6)
+    sp.add_argument("--cycles", type=float, default=50_000)
+    sp.add_argument("--no-plots", action="store_true")
+    sp.set_defaults(func=cmd_paper)
+
+    sp = sub.add_parser("bench", help="speed of the dynamics, the loop and the env")
+    common(sp)
+    sp.add_argument("--quick", action="store_true")
+    sp.set_defaults(func=cmd_bench)
+
+    sp = sub.add_parser("evaluate", help="score the trained policy and the tuned heuristics on held-out seeds")
+    common(sp)
+    sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all")
+    sp.add_argument("--model", default=None, help="path of a trained model (default: the shipped one)")
+    sp.add_argument("--n-test", type=int, default=None, help="held-out episodes (default: the harness's)")
+    sp.add_argument("--n-train", type=int, default=None, help="episodes for tuning the heuristics")
+    sp.add_argument("--quick", action="store_true", help="a small, fast configuration (about a minute)")
+    sp.set_defaults(func=cmd_evaluate)
+
+    sp = sub.add_parser("train", help="train a PPO agent (stable-baselines3)")
+    common(sp)
+    sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default="ppo")
+    sp.add_argument("--timesteps", type=int, default=None)
+    sp.add_argument("--n-envs", type=int, default=8)
+    sp.add_argument("--seed", type=int, default=0)
+    sp.set_defaults(func=cmd_train)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ValueError as exc:
+        print(f"trackenv {args.command}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
