@@ -144,6 +144,7 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
     tmp = np.zeros(m_max)
     shape = np.zeros((n_axles, 4))
     edofs = np.zeros((n_axles, 4), dtype=np.int64)
+    elem_of = np.zeros(n_axles, dtype=np.int64)
     wpred = np.zeros(n_axles)
     ypred = np.zeros(n_axles)
     H = np.zeros((n_axles, n_axles))
@@ -168,6 +169,7 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
             if e < 0:
                 e = 0
             xi = x / elem_len - e
+            elem_of[j] = e
             xi2 = xi * xi
             xi3 = xi2 * xi
             shape[j, 0] = 1.0 - 3.0 * xi2 + 2.0 * xi3
@@ -185,11 +187,7 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
-                bay = int(x_axle[step, j] / spacing)
-                if bay > n_sleepers - 2:
-                    bay = n_sleepers - 2
-                if bay < 0:
-                    bay = 0
+                bay = elem_of[j] // epb  # the bay of the axle's element, so element and bay always agree
                 if bay != bay_cache[j]:
                     changed = True
                 bay_min = min(bay_min, bay)
@@ -216,11 +214,7 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
-                bay = int(x_axle[step, j] / spacing)
-                if bay > n_sleepers - 2:
-                    bay = n_sleepers - 2
-                if bay < 0:
-                    bay = 0
+                bay = elem_of[j] // epb  # the bay of the axle's element, so element and bay always agree
                 bay_cache[j] = bay
                 for k in range(ncol):
                     # the bay's rail DOFs: (w, θ) of its epb+1 nodes; the sleeper DOF after node 0 is skipped

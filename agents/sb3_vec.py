@@ -1,0 +1,170 @@
+"""An SB3 :class:`~stable_baselines3.common.vec_env.VecEnv` over :class:`trackenv.envs.vector.TampingVectorEnv`.
+
+One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this adapter
+only translates conventions:
+
+* Gymnasium's SAME_STEP autoreset (``infos["final_obs"]`` at done envs, infos as a dict of arrays) becomes SB3's
+  (a list of per-env info dicts, ``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` at done
+  envs, the returned observation already the next episode's first);
+* ``env_method("action_masks")`` / :meth:`action_masks` give the masks sb3-contrib's MaskablePPO asks for;
+* seeds set by :meth:`seed` (SB3's convention: ``seed + i`` for env ``i``) are used at the next :meth:`reset`;
+* ``keep_per_sleeper=False`` drops the large per-sleeper arrays (``level``, ``contact_force``) from the
+  observation, keeping only the per-section summaries and time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv
+
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.vector import TampingVectorEnv
+
+PER_SLEEPER_KEYS = ("level", "contact_force")
+
+
+def observation_keys(space: spaces.Dict, keep_per_sleeper: bool = True) -> list[str]:
+    """The observation keys kept by the adapter, in the env's order."""
+    return [k for k in space.spaces if keep_per_sleeper or k not in PER_SLEEPER_KEYS]
+
+
+def filter_observation(obs: dict, keys: Sequence[str]) -> dict:
+    """The kept keys of an observation dict (single or batched), other keys dropped."""
+    return {k: obs[k] for k in keys}
+
+
+class TampingSB3VecEnv(VecEnv):
+    """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
+
+    ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults); ``action_type`` is
+    "multibinary" or "discrete"; ``seed`` (optional) seeds the first reset (env ``i`` gets ``seed + i``).
+    """
+
+    def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
+                 action_type: str = "multibinary", keep_per_sleeper: bool = True, seed: int | None = None) -> None:
+        self.venv = TampingVectorEnv(num_envs, config, action_type=action_type)
+        self.config = self.venv.config
+        self.action_type = action_type
+        self.keep_per_sleeper = bool(keep_per_sleeper)
+        full = self.venv.single_observation_space
+        self.obs_keys = observation_keys(full, self.keep_per_sleeper)
+        obs_space = spaces.Dict({k: full.spaces[k] for k in self.obs_keys})
+        self.render_mode = None
+        super().__init__(num_envs, obs_space, self.venv.single_action_space)
+        self._actions: np.ndarray | None = None
+        if seed is not None:
+            self.seed(seed)
+
+    # --- core API --------------------------------------------------------------------------------------------
+    def reset(self):
+        seeds = list(self._seeds)
+        if all(s is None for s in seeds):
+            obs, infos = self.venv.reset()
+        else:
+            obs, infos = self.venv.reset(seed=[None if s is None else int(s) for s in seeds])
+        self.reset_infos = _unstack_infos(infos, self.num_envs)
+        self._reset_seeds()
+        self._reset_options()
+        return filter_observation(obs, self.obs_keys)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self):
+        if self._actions is None:
+            raise RuntimeError("step_async() must be called before step_wait()")
+        actions, self._actions = self._actions, None
+        if self.action_type == "discrete":
+            actions = actions.reshape(self.num_envs)
+        obs, rewards, terminated, truncated, infos = self.venv.step(actions)
+        dones = np.logical_or(terminated, truncated)
+        info_list = _unstack_infos(infos, self.num_envs)
+        if dones.any():
+            final_obs = infos["final_obs"]
+            for i in np.flatnonzero(dones):
+                info_list[i]["terminal_observation"] = filter_observation(final_obs[i], self.obs_keys)
+                info_list[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        return (filter_observation(obs, self.obs_keys), rewards.astype(np.float32), dones, info_list)
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def action_masks(self) -> np.ndarray:
+        """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env."""
+        return self.venv.action_masks()
+
+    # --- attribute / method access (all envs share this one object) -----------------------------------------
+    def _indices(self, indices) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        if isinstance(indices, (int, np.integer)):
+            return [int(indices)]
+        return [int(i) for i in indices]
+
+    def _target(self, name: str):
+        if hasattr(self, name):
+            return getattr(self, name)
+        return getattr(self.venv, name)  # raises AttributeError if neither has it
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        value = self._target(attr_name)
+        return [value for _ in self._indices(indices)]
+
+    def has_attr(self, attr_name: str) -> bool:
+        try:
+            self._target(attr_name)
+            return True
+        except AttributeError:
+            return False
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        """Call a method of the envs; a method returning one row per env (like ``action_masks``) is split, so
+        each index gets its own row."""
+        idx = self._indices(indices)
+        result = self._target(method_name)(*method_args, **method_kwargs)
+        if isinstance(result, np.ndarray) and result.ndim >= 1 and result.shape[0] == self.num_envs:
+            return [result[i] for i in idx]
+        return [result for _ in idx]
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None for _ in range(self.num_envs)]
+
+
+def _unstack_infos(infos: dict, n: int) -> list[dict]:
+    """Gymnasium's dict-of-arrays infos as a list of per-env dicts (``_``-prefixed masks and final_* dropped)."""
+    out: list[dict] = [{} for _ in range(n)]
+    for key, val in infos.items():
+        if key.startswith("_") or key in ("final_obs", "final_info"):
+            continue
+        if isinstance(val, dict):
+            for i in range(n):
+                out[i][key] = {k: _item(v[i]) for k, v in val.items()}
+        else:
+            for i in range(n):
+                out[i][key] = _item(val[i])
+    return out
+
+
+def _item(x):
+    return x.item() if isinstance(x, np.generic) else x
+
+
+def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *, seed: int | None = None,
+                 action_type: str = "multibinary", keep_per_sleeper: bool = True) -> TampingSB3VecEnv:
+    """Convenience constructor (same arguments as :class:`TampingSB3VecEnv`)."""
+    return TampingSB3VecEnv(num_envs, config, action_type=action_type, keep_per_sleeper=keep_per_sleeper,
+                            seed=seed)
+
+
+__all__ = ["TampingSB3VecEnv", "make_vec_env", "observation_keys", "filter_observation",
+                          "PER_SLEEPER_KEYS"]

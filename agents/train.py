@@ -1,0 +1,317 @@
+"""Train PPO / MaskablePPO on the tamping environment, and load the shipped policy.
+
+* :func:`train` — SB3 PPO (or sb3-contrib MaskablePPO) on :class:`agents.sb3_vec.TampingSB3VecEnv` with
+  VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
+  evaluation callback and reproducible seeding. Hyper-parameters default to ``agents/ppo_config.json``.
+* :func:`load_trained` — the shipped policy (``agents/pretrained/ppo_tamping.zip`` + its observation
+  statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env observations.
+* :func:`evaluate_returns` — episode returns of a policy on given seeds with the batched vector env.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.tamping import action_space
+from trackenv.envs.vector import TampingVectorEnv
+
+from .sb3_vec import TampingSB3VecEnv, filter_observation
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_HYPERPARAMS = HERE / "ppo_config.json"
+DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
+DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_008))
+STATS_SUFFIX = "_obs_stats.json"
+
+# keys of ppo_config.json that go to the algorithm's constructor (the rest configure train() itself)
+_ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
+              "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
+_TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
+               "eval_freq", "checkpoint_every")
+
+
+def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
+    """The hyper-parameters in ``path`` (default ``agents/ppo_config.json``); unknown keys raise ValueError."""
+    with open(path or DEFAULT_HYPERPARAMS) as f:
+        hp = json.load(f)
+    unknown = set(hp) - set(_ALGO_KEYS) - set(_TRAIN_KEYS)
+    if unknown:
+        raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
+    return hp
+
+
+def _as_config(config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
+    if config is None:
+        return TampingEnvConfig()
+    if isinstance(config, dict):
+        return TampingEnvConfig.from_dict(config)
+    return config
+
+
+def _algo_class(algo: str):
+    if algo == "ppo":
+        from stable_baselines3 import PPO
+
+        return PPO
+    if algo == "maskable_ppo":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    raise ValueError(f"algo must be 'ppo' or 'maskable_ppo', got {algo!r}")
+
+
+# --- policies on raw observations -------------------------------------------------------------------------------
+class NormalizedPolicy:
+    """An SB3 model plus frozen VecNormalize observation statistics: ``predict`` on raw env observations
+    (one observation dict, or a batched one), the interface of SB3's ``model.predict``."""
+
+    def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
+                 epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo") -> None:
+        self.model = model
+        self.obs_keys = list(obs_keys)
+        self.mean = {k: np.asarray(mean[k], dtype=np.float64) for k in self.obs_keys}
+        self.var = {k: np.asarray(var[k], dtype=np.float64) for k in self.obs_keys}
+        self.clip_obs = float(clip_obs)
+        self.epsilon = float(epsilon)
+        self.name = name
+        self.algo = algo
+
+    @classmethod
+    def from_vecnormalize(cls, model, vecnorm, obs_keys: Sequence[str], **kw) -> NormalizedPolicy:
+        rms = vecnorm.obs_rms
+        return cls(model, obs_keys, {k: rms[k].mean.copy() for k in obs_keys},
+                   {k: rms[k].var.copy() for k in obs_keys}, clip_obs=vecnorm.clip_obs, epsilon=vecnorm.epsilon,
+                   **kw)
+
+    def normalize(self, obs: dict) -> dict:
+        obs = filter_observation(obs, self.obs_keys)
+        return {k: np.clip((np.asarray(obs[k], dtype=np.float64) - self.mean[k]) / np.sqrt(self.var[k]
+                                                                                           + self.epsilon),
+                           -self.clip_obs, self.clip_obs).astype(np.float32) for k in self.obs_keys}
+
+    def predict(self, observation: dict, state=None, episode_start=None, deterministic: bool = True,
+                action_masks: np.ndarray | None = None):
+        kw = {} if action_masks is None or self.algo != "maskable_ppo" else {"action_masks": action_masks}
+        return self.model.predict(self.normalize(observation), state=state, episode_start=episode_start,
+                                  deterministic=deterministic, **kw)
+
+    def stats_dict(self) -> dict:
+        return {"obs_keys": self.obs_keys, "mean": {k: v.tolist() for k, v in self.mean.items()},
+                "var": {k: v.tolist() for k, v in self.var.items()}, "clip_obs": self.clip_obs,
+                "epsilon": self.epsilon, "algo": self.algo}
+
+
+class ConstantPolicy:
+    """Always the same action per env: ``ConstantPolicy.no_maintenance(config)`` never tamps."""
+
+    def __init__(self, action: np.ndarray, name: str = "constant") -> None:
+        self.action = np.asarray(action)
+        self.name = name
+
+    @classmethod
+    def no_maintenance(cls, config: TampingEnvConfig | None = None, action_type: str = "multibinary"):
+        n = _as_config(config).n_sections
+        return cls(np.zeros(n, dtype=np.int8) if action_type == "multibinary" else np.int64(0), "no_maintenance")
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        batched = np.asarray(observation["time"]).ndim == 2
+        if not batched:
+            return self.action.copy(), state
+        n = np.asarray(observation["time"]).shape[0]
+        return np.repeat(self.action[None], n, axis=0), state
+
+
+class RandomPolicy:
+    """Uniformly random actions from the action space (seeded)."""
+
+    name = "random"
+
+    def __init__(self, config: TampingEnvConfig | None = None, action_type: str = "multibinary",
+                 seed: int = 0) -> None:
+        self.space = action_space(_as_config(config), action_type)
+        self.space.seed(seed)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        t = np.asarray(observation["time"])
+        if t.ndim == 1:
+            return self.space.sample(), state
+        return np.stack([self.space.sample() for _ in range(t.shape[0])]), state
+
+
+def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
+                     seeds: Sequence[int] = DEFAULT_EVAL_SEEDS, action_type: str = "multibinary",
+                     deterministic: bool = True) -> np.ndarray:
+    """Undiscounted episode return (−total cost, k€) of ``policy`` on each seed (one episode per seed, all run
+    together in one :class:`TampingVectorEnv`)."""
+    config = _as_config(config)
+    venv = TampingVectorEnv(len(seeds), config, action_type=action_type)
+    obs, _ = venv.reset(seed=[int(s) for s in seeds])
+    returns = np.zeros(len(seeds))
+    for _ in range(config.horizon_steps):
+        actions, _ = policy.predict(obs, deterministic=deterministic)
+        obs, rewards, _, _, _ = venv.step(np.asarray(actions))
+        returns += rewards
+    venv.close()
+    return returns
+
+
+# --- callbacks ---------------------------------------------------------------------------------------------------
+def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class HeldOutEvalCallback(BaseCallback):
+        """Every ``eval_freq`` timesteps (and at the end): deterministic returns on held-out seeds with the
+        current VecNormalize statistics; logs ``eval/mean_return``, keeps ``best_model.zip``."""
+
+        def __init__(self):
+            super().__init__(verbose)
+            self.last_eval = 0
+            self.best = -np.inf
+            self.history: list[dict] = []
+
+        def _evaluate(self) -> None:
+            self.last_eval = self.num_timesteps
+            policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(), obs_keys,
+                                                        algo=algo)
+            t0 = time.time()
+            ret = evaluate_returns(policy, config, eval_seeds, action_type)
+            rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
+                   "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
+            self.history.append(rec)
+            self.logger.record("eval/mean_return", rec["mean_return"])
+            self.logger.record("eval/std_return", rec["std_return"])
+            if verbose:
+                print(f"[eval] {rec}", flush=True)
+            (out_dir / "evaluations.json").write_text(json.dumps(self.history, indent=1))
+            if rec["mean_return"] > self.best:
+                self.best = rec["mean_return"]
+                _save_policy(self.model, policy, out_dir / "best_model.zip")
+
+        def _on_step(self) -> bool:
+            if eval_freq and self.num_timesteps - self.last_eval >= eval_freq:
+                self._evaluate()
+            return True
+
+        def _on_training_end(self) -> None:
+            if self.num_timesteps != self.last_eval:
+                self._evaluate()
+
+    return HeldOutEvalCallback()
+
+
+def _save_policy(model, policy: NormalizedPolicy, zip_path: Path, extra: dict | None = None) -> Path:
+    zip_path = Path(zip_path)
+    model.save(zip_path)
+    stats = {**policy.stats_dict(), **(extra or {})}
+    stats_path(zip_path).write_text(json.dumps(stats))
+    return zip_path
+
+
+def stats_path(zip_path: str | Path) -> Path:
+    """Where the observation statistics of the model ``zip_path`` live (``<stem>_obs_stats.json``)."""
+    zip_path = Path(zip_path)
+    return zip_path.with_name(zip_path.stem + STATS_SUFFIX)
+
+
+# --- training ----------------------------------------------------------------------------------------------------
+def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
+          total_timesteps: int | None = None, n_envs: int | None = None, seed: int = 0,
+          out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None, progress: bool = True,
+          eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
+          eval_freq: int | None = None, verbose: int = 1) -> Path:
+    """Train and save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
+
+    ``hyperparams``: a dict or a JSON path overriding ``agents/ppo_config.json`` key by key. Explicit
+    arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
+    or ``eval_freq=0`` disables the periodic held-out evaluation.
+    """
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    hp = load_hyperparams()
+    if isinstance(hyperparams, (str, Path)):
+        hyperparams = load_hyperparams(hyperparams)
+    hp.update(hyperparams or {})
+    algo = algo or hp.get("algo", "ppo")
+    n_envs = int(n_envs or hp.get("n_envs", 8))
+    total_timesteps = int(total_timesteps or hp.get("total_timesteps", 8000))
+    checkpoint_every = int(checkpoint_every if checkpoint_every is not None else hp.get("checkpoint_every", 0))
+    eval_freq = int(eval_freq if eval_freq is not None else hp.get("eval_freq", 0))
+    action_type = hp.get("action_type", "multibinary")
+    keep = bool(hp.get("keep_per_sleeper", True))
+    config = _as_config(config)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    AlgoClass = _algo_class(algo)
+
+    torch.set_num_threads(1)  # the physics (numba) wants the cores; the small MLP does not
+    set_random_seed(seed)
+    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed)
+    env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=float(hp.get("clip_obs", 10.0)),
+                       gamma=float(hp.get("gamma", 0.99)))
+    algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
+    policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
+    model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
+                      policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
+
+    callbacks = []
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // n_envs, 1),
+                                            save_path=str(out_dir / "checkpoints"), name_prefix="model",
+                                            save_vecnormalize=True))
+    eval_cb = None
+    if eval_seeds and eval_freq > 0:
+        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, action_type, raw.obs_keys,
+                                      algo, verbose)
+        callbacks.append(eval_cb)
+    meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
+            "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict()}
+    (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
+
+    t0 = time.time()
+    model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), progress_bar=progress,
+                tb_log_name=algo)
+    wall = time.time() - t0
+    env.save(str(out_dir / "vecnormalize.pkl"))
+    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo)
+    path = _save_policy(model, policy, out_dir / "model.zip",
+                        {"action_type": action_type, "config": config.to_dict()})
+    summary = {"timesteps": int(model.num_timesteps), "wall_seconds": wall,
+               "steps_per_second": model.num_timesteps / max(wall, 1e-9),
+               "evaluations": eval_cb.history if eval_cb is not None else []}
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
+    env.close()
+    return path
+
+
+def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED) -> Path:
+    """Copy a trained ``model.zip`` and its observation statistics to ``dest`` (default the shipped path)."""
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(model_zip, dest)
+    shutil.copyfile(stats_path(model_zip), stats_path(dest))
+    return dest
+
+
+def load_trained(path: str | Path | None = None, name: str = "ppo") -> NormalizedPolicy:
+    """The trained policy at ``path`` (default ``agents/pretrained/ppo_tamping.zip``) with its observation
+    statistics (``<stem>_obs_stats.json`` beside it): ``predict(obs, state=None, episode_start=None,
+    deterministic=True)`` on raw env observations (single or batched dict)."""
+    path = Path(path) if path is not None else DEFAULT_PRETRAINED
+    if not path.exists():
+        raise FileNotFoundError(f"no trained model at {path}")
+    stats = json.loads(stats_path(path).read_text())
+    algo = stats.get("algo", "ppo")
+    model = _algo_class(algo).load(str(path), device="cpu")
+    return NormalizedPolicy(model, stats["obs_keys"], stats["mean"], stats["var"], stats["clip_obs"],
+                            stats["epsilon"], name=name, algo=algo)

@@ -1,0 +1,48 @@
+"""Train PPO / MaskablePPO on the tamping environment.
+
+Example: ``python experiments/train_ppo.py --timesteps 8000 --n-envs 8 --out runs/ppo --export``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from agents.train import DEFAULT_PRETRAINED, export_policy, train
+from trackenv.envs.config import TampingEnvConfig
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--algo", choices=["ppo", "maskable_ppo"], default=None, help="default: ppo_config.json")
+    p.add_argument("--timesteps", type=int, default=None, help="total env steps (default: ppo_config.json)")
+    p.add_argument("--n-envs", type=int, default=None)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs/ppo")
+    p.add_argument("--config-json", default=None, help="JSON file of TampingEnvConfig fields")
+    p.add_argument("--hyperparams", default=None, help="JSON overriding agents/ppo_config.json")
+    p.add_argument("--eval-freq", type=int, default=None)
+    p.add_argument("--checkpoint-every", type=int, default=None)
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--export", action="store_true", help=f"copy the result to {DEFAULT_PRETRAINED}")
+    a = p.parse_args(argv)
+    config = None
+    if a.config_json:
+        with open(a.config_json) as f:
+            config = TampingEnvConfig.from_dict(json.load(f))
+    t0 = time.time()
+    path = train(algo=a.algo, config=config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed,
+                 out_dir=a.out, hyperparams=a.hyperparams, progress=not a.no_progress,
+                 eval_freq=a.eval_freq, checkpoint_every=a.checkpoint_every)
+    wall = time.time() - t0
+    with open(path.parent / "summary.json") as f:
+        summary = json.load(f)
+    print(f"saved {path}; {summary['timesteps']} steps in {summary['wall_seconds']:.0f} s of learning "
+          f"({summary['steps_per_second']:.1f} steps/s; {wall:.0f} s wall in all)")
+    if a.export:
+        print(f"exported to {export_policy(path)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,124 @@
+"""The SB3 adapter, a learning smoke test and the shipped policy."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from agents.sb3_vec import TampingSB3VecEnv  # noqa: E402
+from agents.train import (  # noqa: E402
+    DEFAULT_PRETRAINED,
+    ConstantPolicy,
+    RandomPolicy,
+    evaluate_returns,
+    load_trained,
+    stats_path,
+    train,
+)
+from trackenv.envs.config import TampingEnvConfig  # noqa: E402
+from trackenv.envs.tamping import TampingEnv  # noqa: E402
+
+TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
+
+
+def test_adapter_reset_step_and_terminal_observation():
+    env = TampingSB3VecEnv(2, TINY, seed=3)
+    obs = env.reset()
+    n, s = TINY.n_sleepers, TINY.n_sections
+    assert set(obs) == set(env.observation_space.spaces)
+    assert obs["level"].shape == (2, n) and obs["contact_force"].shape == (2, n)
+    assert obs["section_sd"].shape == (2, s) and obs["time"].shape == (2, 1)
+    assert env.observation_space.contains({k: v[0] for k, v in obs.items()})
+    masks = env.env_method("action_masks")
+    assert len(masks) == 2 and masks[0].shape == (2 * s,) and masks[0].all()
+    assert env.has_attr("action_masks")
+    for t in range(TINY.horizon_steps):
+        action = np.zeros((2, s), dtype=np.int8)
+        if t == 0:
+            action[0, 1] = 1
+        obs, rewards, dones, infos = env.step(action)
+        assert rewards.shape == (2,) and np.all(rewards <= 0) and len(infos) == 2
+        assert isinstance(infos[0], dict) and "cost" in infos[0] and "costs" in infos[0]
+        if t == 0:
+            assert infos[0]["tamped_sections"].tolist() == [False, True, False]
+            assert env.env_method("action_masks")[0].reshape(s, 2)[1].tolist() == [True, False]
+        if t < TINY.horizon_steps - 1:
+            assert not dones.any() and "terminal_observation" not in infos[0]
+    assert dones.all()
+    for info in infos:
+        assert info["TimeLimit.truncated"] is True
+        term = info["terminal_observation"]
+        assert term["time"][0] == pytest.approx(1.0) and term["level"].shape == (n,)
+    assert np.all(obs["time"] == 0.0)  # already the next episode's first observation
+    env.close()
+
+
+def test_adapter_seeding_and_dropping_per_sleeper_keys():
+    a = TampingSB3VecEnv(2, TINY, seed=7, keep_per_sleeper=False)
+    b = TampingSB3VecEnv(2, TINY, keep_per_sleeper=False)
+    b.seed(7)
+    oa, ob = a.reset(), b.reset()
+    assert "level" not in oa and "contact_force" not in oa and "section_sd" in oa
+    for k in oa:
+        np.testing.assert_array_equal(oa[k], ob[k])
+    assert not np.array_equal(oa["section_sd"][0], oa["section_sd"][1])
+
+
+def test_maskable_ppo_runs_on_adapter(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    from sb3_contrib import MaskablePPO
+    from sb3_contrib.common.maskable.utils import get_action_masks
+
+    env = TampingSB3VecEnv(2, TINY.replace(dt=2e-4), action_type="discrete", seed=0)
+    env.reset()
+    assert get_action_masks(env).shape == (2, TINY.n_sections + 1)
+    model = MaskablePPO("MultiInputPolicy", env, n_steps=4, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.learn(8)
+    assert model.num_timesteps >= 8
+
+
+@pytest.mark.slow
+def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path):
+    # Only tamping costs money: never tamping is optimal (return 0); a random policy tamps most steps.
+    cfg = TINY.replace(geometry_cost_per_section_year=0.0, alert_cost=0.0, intervention_cost=0.0,
+                       immediate_action_cost=0.0, dt=2e-4)
+    hp = {"n_steps": 16, "batch_size": 64, "n_epochs": 10, "learning_rate": 3e-3, "ent_coef": 0.0,
+          "net_arch": [32, 32], "gamma": 0.9}
+    path = train("ppo", cfg, total_timesteps=512, n_envs=8, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
+                 progress=False, eval_seeds=None, checkpoint_every=0, eval_freq=0, verbose=0)
+    assert path.exists() and stats_path(path).exists()
+    assert (tmp_path / "run" / "vecnormalize.pkl").exists()
+    seeds = list(range(100, 108))
+    trained = evaluate_returns(load_trained(path), cfg, seeds).mean()
+    random = evaluate_returns(RandomPolicy(cfg, seed=1), cfg, seeds).mean()
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["timesteps"] >= 512
+    assert random < -50.0
+    assert trained > random + 0.5 * abs(random), (trained, random)
+
+
+def test_constant_policy_batched_and_single():
+    pol = ConstantPolicy.no_maintenance(TINY)
+    obs = {"time": np.zeros((3, 1), dtype=np.float32)}
+    assert pol.predict(obs)[0].shape == (3, TINY.n_sections)
+    assert pol.predict({"time": np.zeros(1, dtype=np.float32)})[0].shape == (TINY.n_sections,)
+
+
+@pytest.mark.skipif(not DEFAULT_PRETRAINED.exists(), reason="no shipped policy")
+def test_shipped_policy_predicts_valid_actions():
+    policy = load_trained()
+    assert policy.name == "ppo"
+    env = TampingEnv()
+    obs, _ = env.reset(seed=0)
+    action, state = policy.predict(obs, deterministic=True)
+    assert state is None
+    assert env.action_space.contains(np.asarray(action, dtype=np.int8))
+    batched = {k: np.stack([v, v]) for k, v in obs.items()}
+    actions, _ = policy.predict(batched)
+    assert actions.shape == (2, env.config.n_sections)
+    np.testing.assert_array_equal(actions[0], action)
+    assert DEFAULT_PRETRAINED.stat().st_size < 5 * 2**20

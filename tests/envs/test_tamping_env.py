@@ -1,0 +1,351 @@
+"""TampingEnv: the Gymnasium and stable-baselines3 API contracts, determinism, the reward and episode rules,
+actions and masks, and the behaviour the physics must show (tamping helps, neglect hurts, ballast damage,
+stiffness transitions)."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import trackenv as te
+import trackenv.envs  # noqa: F401  (registers the ids)
+from trackenv.envs import TampingEnv, TampingEnvConfig
+from trackenv.physics.tamping import TampingModel
+
+IDS = ("trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0")
+TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0}  # 51 sleepers, 8 steps
+COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
+
+
+def tiny(**changes) -> TampingEnvConfig:
+    return TampingEnvConfig(**TINY).replace(**changes)
+
+
+def one_hot(k: int | None, n: int = 3) -> np.ndarray:
+    a = np.zeros(n, dtype=np.int8)
+    if k is not None:
+        a[k] = 1
+    return a
+
+
+def rollout(env: gym.Env, seed: int, actions) -> tuple:
+    obs0, info0 = env.reset(seed=seed)
+    steps = [env.step(a) for a in actions]
+    return obs0, info0, steps
+
+
+# Actions that tamp something now and then (MultiBinary, tiny config).
+ACTIONS_MB = [one_hot(None), one_hot(1), np.array([1, 0, 1], dtype=np.int8), one_hot(None), one_hot(0)]
+
+
+# ------------------------------------------------------------------------------------------- API checkers
+def _significant(caught: list[warnings.WarningMessage]) -> list[str]:
+    """The warnings that fail a checker test: everything except deprecation notices raised from outside
+    trackenv (e.g. torch or gymnasium internals announcing API changes), which say nothing about the env."""
+    bad = []
+    for w in caught:
+        housekeeping = issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, FutureWarning))
+        if housekeeping and "trackenv" not in str(w.filename):
+            continue
+        bad.append(f"{w.category.__name__}: {w.message} ({w.filename}:{w.lineno})")
+    return bad
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", IDS)
+def test_gymnasium_env_checker(env_id: str) -> None:
+    """Gymnasium's checker: spaces, reset/step signatures, obs in space with the right dtype, seeding
+    determinism of reset and step. No warning is tolerated (bar unrelated deprecation notices)."""
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make(env_id, config=tiny())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    assert not _significant(caught), _significant(caught)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", IDS)
+def test_stable_baselines3_env_checker(env_id: str) -> None:
+    """stable-baselines3's checker (Dict observation of Boxes, MultiBinary/Discrete actions). No warning is
+    tolerated (bar unrelated deprecation notices): e.g. its warnings about unbounded or non-symmetric Box
+    bounds, non-float32 observations or missing reset seeding would all fail this test."""
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    env = gym.make(env_id, track_length_m=30.0, n_sections=3, horizon_years=2.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3_checker.check_env(env, warn=True)
+    assert not _significant(caught), _significant(caught)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_registration(env_id: str) -> None:
+    spec = gym.spec(env_id)
+    assert spec.max_episode_steps == 40 == TampingEnvConfig().horizon_steps
+    assert spec.vector_entry_point == "trackenv.envs.vector:TampingVectorEnv"
+    env = gym.make(env_id)
+    assert env.unwrapped.config == TampingEnvConfig()
+    expected = gym.spaces.MultiBinary(6) if env_id.endswith("Tamping-v0") else gym.spaces.Discrete(7)
+    assert env.action_space == expected
+    obs_space = env.observation_space
+    assert set(obs_space.spaces) == {"level", "contact_force", "section_sd", "section_peak", "tampings",
+                                     "years_since_tamping", "time"}
+    assert obs_space["level"].shape == (101,) and obs_space["section_sd"].shape == (6,)
+    assert all(s.dtype == np.float32 and np.all(np.isfinite(s.low)) and np.all(np.isfinite(s.high))
+               for s in obs_space.values())
+
+
+@pytest.mark.xfail(strict=True, reason="BUG (envs/__init__.py): the registered TimeLimit of 40 steps cuts an "
+                   "episode whose configured horizon is longer (e.g. horizon_years=20 -> 80 steps) at step 40")
+def test_time_limit_does_not_cut_a_longer_configured_horizon() -> None:
+    env = gym.make("trackenv/Tamping-v0", **{**TINY, "horizon_years": 20.0})
+    limit = env.spec.max_episode_steps
+    assert limit is None or limit >= env.unwrapped.config.horizon_steps
+
+
+# ------------------------------------------------------------------------------------------- determinism
+def test_same_seed_same_rollout_different_seed_differs() -> None:
+    cfg = tiny()
+    a = rollout(TampingEnv(cfg), 7, ACTIONS_MB)
+    b = rollout(gym.make("trackenv/Tamping-v0", config=cfg), 7, ACTIONS_MB)  # fresh env, via the registry
+    np.testing.assert_equal(a, b)  # observations, infos, rewards, flags: all identical
+    c = rollout(TampingEnv(cfg), 8, ACTIONS_MB[:2])
+    assert not np.array_equal(a[0]["level"], c[0]["level"])
+    assert a[2][1][1] != c[2][1][1]  # rewards differ too
+
+
+def test_reset_reseeds_the_same_env() -> None:
+    env = TampingEnv(tiny())
+    first = rollout(env, 3, ACTIONS_MB[:3])
+    rollout(env, 4, ACTIONS_MB[:1])
+    again = rollout(env, 3, ACTIONS_MB[:3])
+    np.testing.assert_equal(first, again)
+
+
+def test_env_pickles_mid_episode_and_both_copies_continue_identically() -> None:
+    env = TampingEnv(tiny())
+    env.reset(seed=11)
+    for a in ACTIONS_MB[:3]:
+        env.step(a)
+    clone = pickle.loads(pickle.dumps(env))
+    rest = [one_hot(None), one_hot(2), one_hot(0)]  # also draws the tamping residual from np_random
+    np.testing.assert_equal([env.step(a) for a in rest], [clone.step(a) for a in rest])
+    # the registered, wrapped env pickles too
+    wrapped = gym.make("trackenv/Tamping-v0", config=tiny())
+    wrapped.reset(seed=1)
+    wrapped.step(one_hot(1))
+    wclone = pickle.loads(pickle.dumps(wrapped))
+    np.testing.assert_equal(wrapped.step(one_hot(0)), wclone.step(one_hot(0)))
+
+
+# ------------------------------------------------------------------------------------------- reward, episode end
+@pytest.mark.parametrize("env_id, actions", [
+    ("trackenv/Tamping-v0", [one_hot(None), one_hot(0), np.array([0, 1, 1]), one_hot(None), one_hot(None),
+                             np.array([1, 1, 1]), one_hot(None), one_hot(None)]),
+    ("trackenv/TampingDiscrete-v0", [0, 1, 3, 0, 0, 2, 0, 0]),
+])
+def test_reward_costs_and_truncation_over_a_whole_episode(env_id: str, actions) -> None:
+    cfg = tiny()
+    env = gym.make(env_id, config=cfg)
+    obs, info = env.reset(seed=5)
+    assert env.observation_space.contains(obs)
+    assert info["costs"] == dict.fromkeys(COST_KEYS, 0.0)
+    assert cfg.horizon_steps == len(actions) == 8
+    for t, a in enumerate(actions, start=1):
+        obs, reward, terminated, truncated, info = env.step(a)
+        assert env.observation_space.contains(obs)
+        assert tuple(info["costs"]) == COST_KEYS
+        parts = info["costs"]
+        assert all(np.isfinite(v) and v >= 0 for v in parts.values())
+        assert isinstance(reward, float)
+        assert reward == pytest.approx(-sum(parts.values()), rel=1e-12, abs=1e-12)
+        assert info["cost"] == pytest.approx(sum(parts.values()), rel=1e-12, abs=1e-12)
+        n_tamped = int(np.sum(info["tamped_sections"]))
+        expected_tamping = cfg.mobilisation_cost + cfg.section_tamping_cost * n_tamped if n_tamped else 0.0
+        assert parts["tamping"] == pytest.approx(expected_tamping)
+        assert parts["geometry"] > 0
+        assert terminated is False
+        assert truncated is (t == cfg.horizon_steps), t
+        assert obs["time"][0] == pytest.approx(t / cfg.horizon_steps)
+        assert info["year"] == pytest.approx(t / cfg.steps_per_year)
+
+
+# ------------------------------------------------------------------------------------------- actions and masks
+def test_invalid_multibinary_actions_raise_and_change_nothing() -> None:
+    env = TampingEnv(tiny())
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(one_hot(None))
+    env.reset(seed=0)
+    before = env.episode.sim.level.copy()
+    bad = [np.zeros(2), np.zeros(4), np.zeros((3, 1)), 0, np.array([0, 2, 0]), np.array([0.5, 0, 0]),
+           np.array([np.nan, 0, 0]), np.array([-1, 0, 0]), np.array([0, np.inf, 0]), ["a", "b", "c"], None]
+    for a in bad:
+        with pytest.raises(ValueError):
+            env.step(a)
+    assert env.episode.step_count == 0
+    np.testing.assert_array_equal(env.episode.sim.level, before)
+    for ok in ([0, 1, 0], np.array([True, False, False]), np.array([0.0, 0.0, 1.0])):
+        env.step(ok)
+    assert env.episode.step_count == 3
+
+
+def test_invalid_discrete_actions_raise() -> None:
+    env = TampingEnv(tiny(), action_type="discrete")
+    env.reset(seed=0)
+    for a in (-1, 4, 100, np.nan, 1.5, np.array([1, 2]), np.inf):
+        with pytest.raises(ValueError):
+            env.step(a)
+    assert env.episode.step_count == 0
+    for ok in (0, np.int64(3), np.array(2), np.array([1])):
+        env.step(ok)
+    assert env.episode.step_count == 4
+
+
+@pytest.mark.parametrize("action_type", ["multibinary", "discrete"])
+def test_action_masks_block_a_section_tamped_last_step(action_type: str) -> None:
+    env = TampingEnv(tiny(min_steps_between_tampings=1), action_type=action_type)
+    discrete = action_type == "discrete"
+    env.reset(seed=2)
+    mask = env.action_masks()
+    assert mask.dtype == bool
+    assert mask.shape == ((4,) if discrete else (6,))
+    assert mask.all()
+    tamp_1 = 2 if discrete else one_hot(1)  # section index 1
+    _, _, _, _, info = env.step(tamp_1)
+    assert info["tamped_sections"].tolist() == [False, True, False]
+    assert info["costs"]["tamping"] > 0
+    mask = env.action_masks()
+    if discrete:
+        assert mask.tolist() == [True, True, False, True]
+    else:  # [may-not-tamp, may-tamp] per section
+        assert mask.tolist() == [True, True, True, False, True, True]
+    # the masked request is ignored: nothing tamped, nothing paid, the count unchanged
+    obs, _, _, _, info = env.step(tamp_1)
+    assert info["tamped_sections"].tolist() == [False, False, False]
+    assert info["costs"]["tamping"] == 0.0
+    assert obs["tampings"].tolist() == [0.0, 1.0, 0.0]
+    # the period has passed: allowed again
+    assert env.action_masks().all()
+    _, _, _, _, info = env.step(tamp_1)
+    assert info["tamped_sections"].tolist() == [False, True, False]
+
+
+def test_masked_section_is_ignored_but_others_in_the_same_action_are_tamped() -> None:
+    env = TampingEnv(tiny(min_steps_between_tampings=1))
+    env.reset(seed=2)
+    env.step(one_hot(0))
+    _, _, _, _, info = env.step(np.array([1, 0, 1]))
+    assert info["tamped_sections"].tolist() == [False, False, True]
+    cfg = env.config
+    assert info["costs"]["tamping"] == pytest.approx(cfg.mobilisation_cost + cfg.section_tamping_cost)
+
+
+# ------------------------------------------------------------------------------------------- behaviour
+SEEDS = (0, 1, 2)
+
+
+@pytest.fixture(scope="module")
+def neglect() -> dict:
+    """Episodes of 4 years (16 steps) without any tamping on the tiny track, for three seeds; the state after
+    8 steps is kept (deep copies) to branch from."""
+    cfg = tiny(horizon_years=4.0)
+    out = {"sd": [], "cost": [], "obs": [], "branch": []}
+    for seed in SEEDS:
+        env = TampingEnv(cfg)
+        env.reset(seed=seed)
+        sd, cost, obs = [], [], []
+        for t in range(cfg.horizon_steps):
+            if t == 8:
+                out["branch"].append(copy.deepcopy(env))
+            o, r, _, _, _ = env.step(one_hot(None))
+            sd.append(float(np.mean(o["section_sd"])))
+            cost.append(-r)
+            obs.append(o)
+        out["sd"].append(sd)
+        out["cost"].append(cost)
+        out["obs"].append(obs)
+    return out
+
+
+@pytest.mark.slow
+def test_tamping_a_section_lowers_its_sd_at_once(neglect: dict) -> None:
+    for seed, branch, obs in zip(SEEDS, neglect["branch"][:2], neglect["obs"][:2]):
+        untamped = copy.deepcopy(branch).step(one_hot(None))[0]
+        np.testing.assert_equal(untamped, obs[8])  # the branch continues the recorded episode
+        for s in range(3):
+            o, _, _, _, info = copy.deepcopy(branch).step(one_hot(s))
+            assert info["tamped_sections"].tolist() == one_hot(s).astype(bool).tolist()
+            assert o["section_sd"][s] < 0.8 * untamped["section_sd"][s], (seed, s, o["section_sd"],
+                                                                            untamped["section_sd"])
+            assert o["tampings"][s] == 1.0
+            assert o["years_since_tamping"][s] == pytest.approx(0.25)
+
+
+@pytest.mark.slow
+def test_without_tamping_the_track_and_the_cost_get_worse(neglect: dict) -> None:
+    sd = np.array(neglect["sd"])  # (seeds, steps)
+    cost = np.array(neglect["cost"])
+    q = sd.shape[1] // 4
+    assert sd[:, -q:].mean() > 1.1 * sd[:, :q].mean(), sd
+    assert cost[:, -q:].mean() > 1.1 * cost[:, :q].mean(), cost
+    # every seed: mean SD keeps growing (the level only settles, nothing is restored)
+    assert np.all(sd[:, -1] > sd[:, 0]), sd
+
+
+def test_often_tamped_ballast_settles_faster_afterwards() -> None:
+    """Ballast damage: the same section tamped 4 times vs once (on a track with uniform properties, no
+    tamping residual, so the level after tamping is the same) settles more over the next period."""
+    track = te.Track.realistic(30.0)
+    assert np.ptp(track.ballast_stiffness) == 0
+    model = TampingModel(residual_fraction=0.0, residual_sd_m=0.0)
+    sim = te.TrackDegradation(track, te.Wheelset(mass=1800.0, static_load=100e3), cycles_per_iteration=500_000,
+                              speed=100 / 3.6, feedback="support")
+    sim.advance()
+    mask = np.zeros(track.n_sleepers, dtype=bool)
+    mask[15:36] = True
+    once, often = copy.deepcopy(sim), copy.deepcopy(sim)
+    once.tamp(mask, model)
+    for _ in range(4):
+        often.tamp(mask, model)
+    assert often.tampings[mask].tolist() == [4] * mask.sum() and once.tampings[mask].tolist() == [1] * mask.sum()
+    np.testing.assert_allclose(often.level, once.level, atol=1e-12)
+    l_once, l_often = once.level.copy(), often.level.copy()
+    once.advance()
+    often.advance()
+    core = slice(20, 31)  # away from the run-out ramps
+    d_once = (once.level - l_once)[core].mean()
+    d_often = (often.level - l_often)[core].mean()
+    assert d_once > 0
+    expected = (1 + model.damage_per_tamping) ** 3  # rate factor (1+d)^4 vs (1+d)^1
+    assert d_often > 1.2 * d_once
+    assert d_often / d_once == pytest.approx(expected, rel=0.15)
+
+
+def test_stiffer_ballast_next_to_softer_degrades_faster_at_the_joint() -> None:
+    track = te.Track.realistic(30.0).scaled(ballast_stiffness=2.0, from_sleeper=25)
+    sim = te.TrackDegradation(track, te.Wheelset(mass=1800.0, static_load=100e3), cycles_per_iteration=50_000,
+                              speed=80 / 3.6, feedback="support")
+    u = sim.run(4).settlement
+    diff = np.abs(np.diff(u, axis=1))  # (iterations, bays): bay i lies between sleepers i and i+1
+    near = diff[:, 21:28].max(axis=1)  # bays around sleeper 25
+    # elsewhere: the rest of the track, leaving out 6 sleepers at each end (see the xfail test below)
+    elsewhere = np.concatenate([diff[:, 6:19], diff[:, 31:44]], axis=1).max(axis=1)
+    assert np.all(near > 3 * elsewhere), (near, elsewhere)
+    assert np.all(np.diff(near) > 0), near  # and it grows
+    assert 21 <= diff[-1].argmax() <= 27 or diff[-1, 21:28].max() >= 0.9 * diff[-1].max()
+
+
+@pytest.mark.xfail(strict=True, reason="BUG (degradation.py, feedback='support'): the implicit load "
+                   "redistribution (support_influence) treats the approach/exit sleepers as not settling, "
+                   "so the end sleepers shed load and settle ~12 % less: ramps form at both track ends")
+def test_uniform_track_with_support_feedback_settles_uniformly_to_its_ends() -> None:
+    sim = te.TrackDegradation(te.Track.realistic(30.0), te.Wheelset(mass=1800.0, static_load=100e3),
+                              cycles_per_iteration=50_000, speed=80 / 3.6, feedback="support")
+    u = sim.run(2).settlement[-1]
+    assert (u.max() - u.min()) / u.mean() < 0.02, u
