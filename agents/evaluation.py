@@ -440,7 +440,8 @@ def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int,
     ax1.axhline(lim.sd_alert_m * 1e3, color="k", ls="--", lw=1, label="SD alert limit")
     ax1.set_ylabel("section SD of D1 level [mm]")
     ax1.legend(fontsize=7, ncol=2)
-    ax1.set_title(f"{policy_name(policy)} {_fmt_params(policy_params(policy))}, seed {seed} "
+    label = " ".join(x for x in (policy_name(policy), _fmt_params(policy_params(policy))) if x != "-")
+    ax1.set_title(f"{label}, seed {seed} "
                   f"(▼ tamping); total {tr['cost'].sum():.1f} k€")
     ax2.bar(tr["year"] - 0.5 / cfg.steps_per_year, tr["cost"], width=0.8 / cfg.steps_per_year, color="C3")
     ax2.set_xlabel("year")

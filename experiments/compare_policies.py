@@ -20,7 +20,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", default="results/compare", help="output folder")
     parser.add_argument("--quick", action="store_true", help="tiny track, short horizon, few seeds")
     parser.add_argument("--n-test", type=int, default=None, help="held-out test seeds (default 200; quick 6)")
-    parser.add_argument("--n-train", type=int, default=None, help="tuning seeds (default 100; quick 3)")
+    parser.add_argument("--n-train", type=int, default=None, help="tuning seeds (default 100; quick 2)")
     parser.add_argument("--batch-size", type=int, default=32, help="envs stepped together")
     parser.add_argument("--json", action="store_true", help="print the JSON instead of the table")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")

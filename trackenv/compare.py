@@ -20,7 +20,7 @@ from typing import Any
 from .envs.config import TampingEnvConfig
 
 QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
-QUICK_N_TEST, QUICK_N_TRAIN = 6, 3
+QUICK_N_TEST, QUICK_N_TRAIN = 6, 2
 
 
 def run_comparison(out_dir: str | Path | None = "results/compare",

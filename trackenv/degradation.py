@@ -23,7 +23,13 @@ import numpy as np
 import scipy.linalg
 
 from .physics._validation import check_array, check_scalar
-from .physics.dynamics import PassResult, _vehicle_system, lapack_lower, simulate_passes
+from .physics.dynamics import (
+    SLEEPER_FORCE_MEASURES,
+    PassResult,
+    _vehicle_system,
+    lapack_lower,
+    simulate_passes,
+)
 from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState
 from .physics.tamping import TampingModel, TampingResult, tamp
 from .physics.track import Track
@@ -49,6 +55,9 @@ class DegradationHistory:
     records: list[IterationRecord] = field(default_factory=list)
 
     def _stack(self, name: str) -> np.ndarray:
+        if not self.records:
+            per_sleeper = name in ("settlement", "sleeper_force", "contact_force")
+            return np.zeros((0, self.sleeper_positions.size) if per_sleeper else (0,))
         return np.array([getattr(r, name) for r in self.records])
 
     @property
@@ -140,6 +149,13 @@ class TrackDegradation:
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
         self.pass_options = pass_options
+        if "dt" in pass_options:
+            check_scalar("dt", pass_options["dt"], low=1e-7, high=1e-3)
+        if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
+            raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
+        wb = pass_options.get("window_bays", 6)
+        if wb is not None and (isinstance(wb, bool) or not isinstance(wb, (int, np.integer)) or wb < 2):
+            raise ValueError(f"window_bays must be an integer >= 2 or None, got {wb!r}")
         if feedback not in FEEDBACKS:
             raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
         self.feedback = feedback
@@ -295,7 +311,7 @@ class TrackDegradation:
     def run(self, iterations: int, progress=None) -> DegradationHistory:
         """Run ``iterations`` iterations of ``cycles_per_iteration``; ``progress`` is called after each with
         (i, record) (e.g. to update a progress bar). Returns the whole history."""
-        if not isinstance(iterations, (int, np.integer)) or iterations < 0:
+        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
         for i in range(int(iterations)):
             rec = self.advance()

@@ -39,7 +39,8 @@ def test_german_psd_hand_values():
 
 
 def test_fra_psd_hand_values():
-    # class 4, Omega = 1: 0.25 * 0.5376e-4 * 0.8245^2 / (1 * (1 + 0.8245^2)) = 9.13651e-6 / 1.67980 = 5.43905e-6
+    # class 4, Omega = 1: 0.25 * 0.5376e-4 * 0.8245^2 / (1 * (1 + 0.8245^2))
+    #                   = 9.13651e-6 / 1.67980 = 5.43905e-6
     # Omega = 0.1: 9.13651e-6 / (0.01 * 0.68980025) = 1.32452e-3
     np.testing.assert_allclose(fra_psd([0.1, 1.0], 4), [1.32452e-3, 5.43905e-6], rtol=1e-5)
     # classes scale with A_v, and class 1 is the roughest
@@ -85,8 +86,9 @@ def test_synthesis_narrow_band_long_track_and_uneven_positions():
     expected = psd_variance(psd, 2.0, 10.0)
     rng = np.random.default_rng(7)
     x = np.sort(rng.uniform(0.0, 400.0, size=1500))  # not equally spaced
-    var = np.mean([synthesize_profile(x, psd, rng, min_wavelength=2.0, max_wavelength=10.0).var()
-                   for _ in range(5)])
+    var = np.mean(
+        [synthesize_profile(x, psd, rng, min_wavelength=2.0, max_wavelength=10.0).var() for _ in range(5)]
+    )
     assert var == pytest.approx(expected, rel=0.10)
 
 
@@ -238,8 +240,14 @@ def test_limits_tables_stricter_at_higher_speed():
 
 
 def test_classify():
-    lim = BandLimits(alert_m=0.01, intervention_m=0.015, immediate_action_m=0.026, sd_alert_m=0.002,
-                     speed_low_kmh=80.0, speed_high_kmh=120.0)
+    lim = BandLimits(
+        alert_m=0.01,
+        intervention_m=0.015,
+        immediate_action_m=0.026,
+        sd_alert_m=0.002,
+        speed_low_kmh=80.0,
+        speed_high_kmh=120.0,
+    )
     peaks = np.array([0.0, 0.0099, 0.01, 0.0151, 0.026, 0.05])
     np.testing.assert_array_equal(classify(peaks, lim), [0, 0, 1, 2, 3, 3])
     sd = np.array([0.0025, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -251,8 +259,13 @@ def test_classify():
 
 
 def test_limits_from_dict_and_validation():
-    d = {"speed_upper_kmh": [100, 200], "alert_m": [0.01, 0.008], "intervention_m": [0.015, 0.012],
-         "immediate_action_m": [0.025, 0.02], "sd_alert_m": [0.002, 0.0015]}
+    d = {
+        "speed_upper_kmh": [100, 200],
+        "alert_m": [0.01, 0.008],
+        "intervention_m": [0.015, 0.012],
+        "immediate_action_m": [0.025, 0.02],
+        "sd_alert_m": [0.002, 0.0015],
+    }
     q = QualityLimits.from_dict(d)
     assert q.speed_upper_kmh == (100.0, 200.0)
     assert q.for_speed(150 / 3.6).alert_m == pytest.approx(0.008)

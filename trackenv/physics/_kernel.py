@@ -397,3 +397,18 @@ def run_batch(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal
                  cluster_of_axle, n_clusters, margin_bays, x_axle, z_axle[b], law, param, consts, u[b], v[b],
                  a[b], q[b], qd[b], qdd[b], out_force[b], out_rail[b], out_wheel[b], peak_ballast[b],
                  peak_total[b])
+
+
+@njit(cache=True)
+def run_serial(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_k, bal_c,
+               elem_len, epb, spacing, n_sleepers,
+               mv, cv, kv_inv, fv, wheel_dofs, cluster_of_axle, n_clusters, margin_bays,
+               x_axle, z_axle, law, param, consts, u, v, a, q, qd, qdd,
+               out_force, out_rail, out_wheel, peak_ballast, peak_total):
+    """:func:`run_batch` on one thread (a batch of one gains nothing from starting threads)."""
+    for b in range(mb.shape[0]):
+        _run_one(mb[b], cb[b], keff[b], node_w, sleeper_dof, sleeper_node, pad_k[b], pad_c[b], bal_k[b],
+                 bal_c[b], elem_len, epb, spacing, n_sleepers, mv, cv, kv_inv, fv, wheel_dofs,
+                 cluster_of_axle, n_clusters, margin_bays, x_axle, z_axle[b], law, param, consts, u[b], v[b],
+                 a[b], q[b], qd[b], qdd[b], out_force[b], out_rail[b], out_wheel[b], peak_ballast[b],
+                 peak_total[b])

@@ -394,7 +394,8 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     peak_ballast = bal_k * u[:, ds]
     peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
 
-    _kernel.run_batch(mb, cb, keff, lay.node_w, lay.sleeper, lay.sleeper_node, pad_k, pad_c, bal_k, bal_c,
+    run = _kernel.run_serial if nb == 1 else _kernel.run_batch
+    run(mb, cb, keff, lay.node_w, lay.sleeper, lay.sleeper_node, pad_k, pad_c, bal_k, bal_c,
                       t0.element_length, t0.elements_per_bay, t0.sleeper_spacing, t0.n_sleepers,
                       np.ascontiguousarray(sys_.mass), np.ascontiguousarray(sys_.damping), kv_inv,
                       sys_.force.astype(float), sys_.wheel_dofs.astype(np.int64), cluster, n_clusters, margin,

@@ -166,7 +166,6 @@ def psd_variance(psd: Callable, min_wavelength: float = 1.0, max_wavelength: flo
     quadrature, scipy.integrate.quad). Useful to calibrate expectations, e.g. the SD of a synthesised track.
     """
 
-
     lo, hi = _check_band(min_wavelength, max_wavelength)
     if not callable(psd):
         raise ValueError("psd must be a callable mapping wavenumber [rad/m] to S [m^2/(rad/m)]")
@@ -210,12 +209,12 @@ def synthesize_profile(
     Why a synthesis length: a track of length ``L`` cannot show wavelengths longer than about ``L``, and a
     frequency grid with ``dOmega = 2*pi/L`` would make the profile repeat with period ``L``. Using
     ``dOmega <= 2*pi/synthesis_length`` is the same as drawing a much longer profile (default
-    ``max(4 * span(x), 200 m)``) and cutting the track out of it. The band limits are the modelled wavelengths:
-    default 1-50 m (**[assumption]**): shorter waves are rail roughness, not ballast settlement, and are not
-    resolved at a 0.6 m sleeper spacing; longer waves are filtered away by the D1 measure (3-25 m) and hardly
-    excite a vehicle at the speeds of interest. Finally the sample mean over ``x`` is subtracted ("zero mean
-    over the track"): the level is relative to the design line, and a constant offset has no effect on the
-    dynamics.
+    ``max(4 * span(x), 200 m)``) and cutting the track out of it. The band limits are the modelled
+    wavelengths: default 1-50 m (**[assumption]**): shorter waves are rail roughness, not ballast
+    settlement, and are not resolved at a 0.6 m sleeper spacing; longer waves are filtered away by the D1
+    measure (3-25 m) and hardly excite a vehicle at the speeds of interest. Finally the sample mean over
+    ``x`` is subtracted ("zero mean over the track"): the level is relative to the design line, and a
+    constant offset has no effect on the dynamics.
 
     Parameters
     ----------
@@ -277,11 +276,23 @@ def synthesize_profile(
 
 
 @functools.lru_cache(maxsize=64)
-def _bandpass_sos(spacing: float, band_lo: float, band_hi: float, order: int) -> np.ndarray:
+def _bandpass_sos(spacing: float, band_lo: float, band_hi: float, order: int) -> tuple[np.ndarray, ...]:
+    """Butterworth band-pass second-order sections and their unit-step steady-state filter state."""
     fs = 1.0 / spacing  # samples per metre
     sos = signal.butter(order, [1.0 / band_hi, 1.0 / band_lo], btype="bandpass", fs=fs, output="sos")
-    sos.setflags(write=False)  # cached: callers get a copy (scipy's sosfilt needs a writable buffer)
-    return sos
+    zi = signal.sosfilt_zi(sos)
+    sos.setflags(write=False)  # cached: callers take copies (scipy's sosfilt needs a writable buffer)
+    zi.setflags(write=False)
+    return sos, zi
+
+
+def _filtfilt(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Forward-backward filtering of the rows of ``x`` (as scipy.signal.sosfiltfilt with padtype=None)."""
+    zi = zi[:, None, :]
+    y, _ = signal.sosfilt(sos, x, axis=-1, zi=zi * x[None, :, :1])
+    y = y[:, ::-1]
+    y, _ = signal.sosfilt(sos, y, axis=-1, zi=zi * y[None, :, :1])
+    return y[:, ::-1]
 
 
 def _ar_extension(y: np.ndarray, order: int, n_pad: int) -> tuple[np.ndarray, np.ndarray]:
@@ -299,14 +310,24 @@ def _ar_extension(y: np.ndarray, order: int, n_pad: int) -> tuple[np.ndarray, np
     col[0] *= 1.0 + 1e-9  # guard against round-off making the Toeplitz matrix singular
     coef = linalg.solve_toeplitz(col, r[1 : order + 1])
     den = np.concatenate(([1.0], -coef))
+    # all-pole recursion y[t] = sum_k coef[k-1] y[t-k] run on zero input from the state of the last `order`
+    # values (transposed direct form: zi[k] = sum_m coef[k+m] * y_recent[m], a Hankel product)
+    state = linalg.hankel(coef)
     zeros = np.zeros(n_pad)
-    fwd = signal.lfilter([1.0], den, zeros, zi=signal.lfiltic([1.0], den, y[::-1][:order]))[0]
-    bwd = signal.lfilter([1.0], den, zeros, zi=signal.lfiltic([1.0], den, y[:order]))[0]
+    fwd = signal.lfilter([1.0], den, zeros, zi=state @ y[::-1][:order])[0]
+    bwd = signal.lfilter([1.0], den, zeros, zi=state @ y[:order])[0]
     return bwd[::-1], fwd
 
 
-def d1_filter(z, spacing: float, band: tuple[float, float] = (3.0, 25.0), *, order: int = 4,
-              pad_wavelengths: float = 3.0, ar_order: int = 20) -> np.ndarray:
+def d1_filter(
+    z,
+    spacing: float,
+    band: tuple[float, float] = (3.0, 25.0),
+    *,
+    order: int = 4,
+    pad_wavelengths: float = 3.0,
+    ar_order: int = 20,
+) -> np.ndarray:
     """EN 13848 D1 longitudinal level: ``z`` band-passed to wavelengths ``band`` [m], zero phase.
 
     EN 13848-1 defines the D1 range as wavelengths 3 m < lambda <= 25 m (D2: 25-70 m). We approximate its
@@ -364,7 +385,7 @@ def d1_filter(z, spacing: float, band: tuple[float, float] = (3.0, 25.0), *, ord
     pad_w = check_scalar("pad_wavelengths", pad_wavelengths, low=0.0)
     p = _check_count("ar_order", ar_order)
 
-    sos = _bandpass_sos(dx, b_lo, b_hi, int(order)).copy()
+    sos, zi = _bandpass_sos(dx, b_lo, b_hi, int(order))
     shape = arr.shape
     n = shape[-1]
     rows = arr.reshape(-1, n)
@@ -380,7 +401,7 @@ def d1_filter(z, spacing: float, band: tuple[float, float] = (3.0, 25.0), *, ord
         ext[:, pad : pad + n] = resid
     else:
         ext = resid
-    out = signal.sosfiltfilt(sos, ext, axis=-1, padtype=None)[:, pad : pad + n]
+    out = _filtfilt(sos.copy(), zi, ext)[:, pad : pad + n]
     return np.ascontiguousarray(out).reshape(shape)
 
 
@@ -466,10 +487,10 @@ def section_peak(z, section_index, n_sections: int) -> np.ndarray:
 _MM = 1.0e-3
 _EN13848_SOURCE = (
     "EN 13848-5 (isolated defects, D1 mean-to-peak) / EN 13848-6 (200 m SD). Immediate-action limits "
-    "28/26/23/20/16 mm for V <= 80/120/160/230/300 km/h; alert and intervention limits are the mid-points "
-    "of the 80-120 km/h ranges (alert 8-16 -> 12 mm, intervention 11-20 -> 15.5 mm) scaled to the other bands "
-    "in proportion to the immediate-action limit, rounded to 0.5 mm; SD alert is the 80-120 km/h mid-point "
-    "(1.8-2.7 -> 2.25 mm) scaled likewise. All [unverified] against the standard."
+    "28/26/23/20/16 mm for V <= 80/120/160/230/300 km/h; alert and intervention limits are the mid-points"
+    " of the 80-120 km/h ranges (alert 8-16 -> 12 mm, intervention 11-20 -> 15.5 mm) scaled to the other "
+    "bands in proportion to the immediate-action limit, rounded to 0.5 mm; SD alert is the 80-120 km/h "
+    "mid-point (1.8-2.7 -> 2.25 mm) scaled likewise. All [unverified] against the standard."
 )
 
 

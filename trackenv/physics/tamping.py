@@ -3,11 +3,11 @@
 Model (all coefficients are parameters of :class:`TampingModel`; defaults are assumptions, see there):
 
 * **Partial restoration with ballast memory.** A tamping machine lifts the rail towards a reference line and
-  packs ballast under the sleepers, but the result depends on the geometry before: Audley & Andrews (2013)
-  fit ``SD_after = alpha + beta * SD_before`` with ``beta < 1`` to UK recording-car data, and RTRI reports that
+  packs ballast under the sleepers, but the result depends on the geometry before: Audley & Andrews (2013) fit
+  ``SD_after = alpha + beta * SD_before`` with ``beta < 1`` to UK recording-car data, and RTRI reports that
   the irregularity "gradually returns to its original shape after tamping" (ballast memory). We keep a
-  fraction ``beta = residual_fraction`` of the old shape about the reference line ``f`` and add an
-  independent random residual of SD ``alpha = residual_sd_m`` (the machine's own error)::
+  fraction ``beta = residual_fraction`` of the old shape about the reference line ``f`` and add an independent
+  random residual of SD ``alpha = residual_sd_m`` (the machine's own error)::
 
       reference="design":     target_i =          beta * (z_i - f_i) + alpha * e_i,   e_i ~ N(0, 1)
       reference="smoothing":  target_i = f_i +    beta * (z_i - f_i) + alpha * e_i
@@ -32,11 +32,11 @@ Model (all coefficients are parameters of :class:`TampingModel`; defaults are as
   initial phase on the tamped sleepers (``restarted_mask``; the settlement model acts on it).
 * **Ballast damage.** Tamping breaks ballast (aggregate degradation and fouling up to ~40 % reported by SNCF),
   so each tamping makes later settlement faster. Assumed geometric growth: the settlement-rate factor is
-  ``(1 + damage_per_tamping) ** n`` after ``n`` tampings since renewal **[assumption]**. When a sleeper due for
-  tamping has already had ``max_tampings_before_renewal`` tampings (default 8, in the 5-10 range of practice
-  **[assumption]**) and ``renewal_resets`` is true, the intervention is a ballast renewal instead: the count
-  and the rate factor reset (0 and 1) and, since fresh ballast has no memory, the old shape is not kept
-  (``beta = 0`` for those sleepers).
+  ``(1 + damage_per_tamping) ** n`` after ``n`` tampings since renewal **[assumption]**. When a sleeper due
+  for tamping has already had ``max_tampings_before_renewal`` tampings (default 8, in the 5-10 range of
+  practice **[assumption]**) and ``renewal_resets`` is true, the intervention is a ballast renewal instead:
+  the count and the rate factor reset (0 and 1) and, since fresh ballast has no memory, the old shape is not
+  kept (``beta = 0`` for those sleepers).
 
 Tamping machines work at about 0.3-2.5 km/h; :meth:`TampingModel.duration_s` converts a tamped length to
 machine time with ``machine_speed_m_per_s``.
@@ -64,8 +64,8 @@ class TampingModel:
     ----------
     residual_fraction : float
         ``beta`` in [0, 1]: fraction of the pre-tamping shape (about the design-line fit) left after tamping.
-        Default 0.3 **[assumption]**, within the 0.2-0.5 suggested by ballast-memory observations (RTRI) and of
-        the order of the Audley & Andrews (2013) slope **[unverified]**.
+        Default 0.3 **[assumption]**, within the 0.2-0.5 suggested by ballast-memory observations (RTRI) and
+        of the order of the Audley & Andrews (2013) slope **[unverified]**.
     residual_sd_m : float
         ``alpha`` [m], >= 0: SD of the machine's random, sleeper-to-sleeper independent residual error.
         Default 0.5 mm **[assumption]** (Audley & Andrews' intercept is of this order **[unverified]**).
