@@ -25,10 +25,32 @@ from .physics.vehicle import Car, Train, VehicleSystem, Wheelset
 __version__ = "0.1.0"
 
 __all__ = [
-    "LAWS", "AlvaHurtadoSeligLaw", "Car", "DegradationHistory", "HertzContact", "HettlerLaw", "IndraratnaLaw",
-    "IterationRecord", "LinearContact", "PassResult", "SatoLaw", "SeligWatersLaw", "SettlementLaw",
-    "SettlementState", "ShentonLaw", "Track", "TrackDegradation", "Train", "VehicleSystem", "Wheelset",
-    "make_law", "receptance", "simulate_pass", "simulate_passes", "static_deflection", "zhai_contact_constant",
+    "LAWS",
+    "AlvaHurtadoSeligLaw",
+    "Car",
+    "DegradationHistory",
+    "HertzContact",
+    "HettlerLaw",
+    "IndraratnaLaw",
+    "IterationRecord",
+    "LinearContact",
+    "PassResult",
+    "SatoLaw",
+    "SeligWatersLaw",
+    "SettlementLaw",
+    "SettlementState",
+    "ShentonLaw",
+    "Track",
+    "TrackDegradation",
+    "Train",
+    "VehicleSystem",
+    "Wheelset",
+    "make_law",
+    "receptance",
+    "simulate_pass",
+    "simulate_passes",
+    "static_deflection",
+    "zhai_contact_constant",
 ]
 
 try:  # the environment needs gymnasium; the physics does not

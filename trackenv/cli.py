@@ -49,9 +49,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_paper(args: argparse.Namespace) -> int:
     from .paper import format_summary, reproduce_paper
 
-    summary = reproduce_paper(out_dir=args.out or "results/paper", iterations=args.iterations,
-                              cycles_per_iteration=args.cycles, make_plots=not args.no_plots,
-                              progress=not args.json)
+    summary = reproduce_paper(
+        out_dir=args.out or "results/paper",
+        iterations=args.iterations,
+        cycles_per_iteration=args.cycles,
+        make_plots=not args.no_plots,
+        progress=not args.json,
+    )
     _emit(args, summary, format_summary(summary))
     return 0
 
@@ -78,8 +82,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                 raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
             print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
     t0 = time.perf_counter()
-    result = run_comparison(out_dir=args.out or "results/compare", n_test=args.n_test, n_train=args.n_train,
-                            quick=args.quick, progress=not args.json, extra_policies=extra)
+    result = run_comparison(
+        out_dir=args.out or "results/compare",
+        n_test=args.n_test,
+        n_train=args.n_train,
+        quick=args.quick,
+        progress=not args.json,
+        extra_policies=extra,
+    )
     result["wall_time_s"] = time.perf_counter() - t0
     from agents.evaluation import format_table
 
@@ -91,8 +101,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     from agents.train import train
 
     t0 = time.perf_counter()
-    path = train(algo=args.algo, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
-                 out_dir=args.out or "runs/ppo", progress=not args.json)
+    path = train(
+        algo=args.algo,
+        total_timesteps=args.timesteps,
+        n_envs=args.n_envs,
+        seed=args.seed,
+        out_dir=args.out or "runs/ppo",
+        progress=not args.json,
+    )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
     _emit(args, payload, f"trained {args.algo} -> {path} in {wall:.0f} s")
@@ -124,7 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quick", action="store_true")
     sp.set_defaults(func=cmd_bench)
 
-    sp = sub.add_parser("evaluate", help="score the trained policy and the tuned heuristics on held-out seeds")
+    sp = sub.add_parser(
+        "evaluate", help="score the trained policy and the tuned heuristics on held-out seeds"
+    )
     common(sp)
     sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all")
     sp.add_argument("--model", default=None, help="path of a trained model (default: the shipped one)")

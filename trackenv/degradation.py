@@ -86,14 +86,21 @@ class DegradationHistory:
 
     def to_dict(self) -> dict:
         """JSON-ready: SI units, lists."""
-        return {"sleeper_positions_m": self.sleeper_positions.tolist(), "cycles": self.cycles.tolist(),
-                "settlement_m": self.settlement.tolist(), "sleeper_force_N": self.sleeper_force.tolist(),
-                "contact_force_N": self.contact_force.tolist(),
-                "max_contact_force_N": self.max_contact_force.tolist(), "passes": self.passes.tolist()}
+        return {
+            "sleeper_positions_m": self.sleeper_positions.tolist(),
+            "cycles": self.cycles.tolist(),
+            "settlement_m": self.settlement.tolist(),
+            "sleeper_force_N": self.sleeper_force.tolist(),
+            "contact_force_N": self.contact_force.tolist(),
+            "max_contact_force_N": self.max_contact_force.tolist(),
+            "passes": self.passes.tolist(),
+        }
 
 
 FEEDBACKS = ("irregularity", "support")
-INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
+INFLUENCE_BAND = (
+    10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
+)
 
 
 def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
@@ -102,7 +109,7 @@ def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
     band = min(band, n - 1)
     ab = np.zeros((2 * band + 1, n))
     for k in range(-band, band + 1):
-        ab[band - k, max(k, 0):n + min(k, 0)] = np.diagonal(a, k)
+        ab[band - k, max(k, 0) : n + min(k, 0)] = np.diagonal(a, k)
     return scipy.linalg.solve_banded((band, band), ab, b)
 
 
@@ -123,10 +130,23 @@ class TrackDegradation:
     ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
-    def __init__(self, track: Track, vehicle, law: SettlementLaw | None = None,
-                 cycles_per_iteration: float = 50_000, speed: float = 80 / 3.6, *, approach_sleepers: int = 10,
-                 adaptive: bool = False, max_increment: float = 0.1e-3, max_passes_per_iteration: int = 64,
-                 initial_level=None, rate_factor=None, feedback: str = "irregularity", **pass_options) -> None:
+    def __init__(
+        self,
+        track: Track,
+        vehicle,
+        law: SettlementLaw | None = None,
+        cycles_per_iteration: float = 50_000,
+        speed: float = 80 / 3.6,
+        *,
+        approach_sleepers: int = 10,
+        adaptive: bool = False,
+        max_increment: float = 0.1e-3,
+        max_passes_per_iteration: int = 64,
+        initial_level=None,
+        rate_factor=None,
+        feedback: str = "irregularity",
+        **pass_options,
+    ) -> None:
         if not isinstance(track, Track):
             raise ValueError(f"track must be a Track, got {type(track).__name__}")
         self.track = track
@@ -135,16 +155,19 @@ class TrackDegradation:
         self.law = HettlerLaw() if law is None else law
         if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
             raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
-        self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0,
-                                                 high=1e9)
+        self.cycles_per_iteration = check_scalar(
+            "cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9
+        )
         self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
         if not isinstance(approach_sleepers, (int, np.integer)) or not 2 <= approach_sleepers <= 200:
             raise ValueError(f"approach_sleepers must be an integer in [2, 200], got {approach_sleepers!r}")
         self.adaptive = bool(adaptive)
-        self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1,
-                                          low_inclusive=False)
-        self.max_passes_per_iteration = int(check_scalar("max_passes_per_iteration", max_passes_per_iteration,
-                                                         low=1, high=10_000))
+        self.max_increment = check_scalar(
+            "max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False
+        )
+        self.max_passes_per_iteration = int(
+            check_scalar("max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000)
+        )
         unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
@@ -162,10 +185,14 @@ class TrackDegradation:
         n = track.n_sleepers
         self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
         self.model_track = track.extended(self.n_extra, self.n_extra)
-        self.offset = (np.zeros(n) if initial_level is None
-                       else check_array("initial_level", initial_level, shape=(n,)))
-        self.base_rate = (np.ones(n) if rate_factor is None
-                          else check_array("rate_factor", rate_factor, shape=(n,), low=0.0, low_inclusive=False))
+        self.offset = (
+            np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
+        )
+        self.base_rate = (
+            np.ones(n)
+            if rate_factor is None
+            else check_array("rate_factor", rate_factor, shape=(n,), low=0.0, low_inclusive=False)
+        )
         self.state = SettlementState(np.zeros(n), np.zeros(n), self.base_rate)
         self.tampings = np.zeros(n, dtype=np.int64)
         self.cycles = 0.0
@@ -185,7 +212,7 @@ class TrackDegradation:
 
     def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
         """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
-        return per_model_sleeper[..., self.n_extra:self.n_extra + self.track.n_sleepers]
+        return per_model_sleeper[..., self.n_extra : self.n_extra + self.track.n_sleepers]
 
     # ------------------------------------------------------------------ loop
     def simulate(self) -> PassResult:
@@ -242,8 +269,10 @@ class TrackDegradation:
                 break
             h = 1e-6
             f = np.maximum(force + s_mat @ delta, 0.0)
-            du_df = (self.state.advance(self.law, f + h * 1e3, cycles).settlement
-                     - self.state.advance(self.law, f, cycles).settlement) / (h * 1e3)
+            du_df = (
+                self.state.advance(self.law, f + h * 1e3, cycles).settlement
+                - self.state.advance(self.law, f, cycles).settlement
+            ) / (h * 1e3)
             jac = np.eye(delta.size) - du_df[:, None] * s_mat * (f > 0)[:, None]
             delta = np.maximum(delta - _solve_near_banded(jac, r, INFLUENCE_BAND), 0.0)
         return self.state.advance(self.law, np.maximum(force + s_mat @ delta, 0.0), cycles)
@@ -268,8 +297,11 @@ class TrackDegradation:
 
     def advance(self, cycles: float | None = None) -> IterationRecord:
         """One iteration of ``cycles`` axle passes (default ``cycles_per_iteration``); returns its record."""
-        total = self.cycles_per_iteration if cycles is None else check_scalar("cycles", cycles, low=0.0,
-                                                                               high=1e10)
+        total = (
+            self.cycles_per_iteration
+            if cycles is None
+            else check_scalar("cycles", cycles, low=0.0, high=1e10)
+        )
         done, passes, first = 0.0, 0, None
         while done < total * (1 - 1e-12):
             res = self.simulate()
@@ -286,16 +318,20 @@ class TrackDegradation:
             passes += 1
         if first is None:
             first = self.simulate()
-        rec = IterationRecord(cycles=self.cycles, settlement=self.level.copy(),
-                              sleeper_force=self.evaluated(first.sleeper_force).copy(),
-                              contact_force=self.evaluated(first.contact_force_profile()).copy(),
-                              max_contact_force=float(self.evaluated(first.contact_force_profile()).max()),
-                              passes=passes)
+        rec = IterationRecord(
+            cycles=self.cycles,
+            settlement=self.level.copy(),
+            sleeper_force=self.evaluated(first.sleeper_force).copy(),
+            contact_force=self.evaluated(first.contact_force_profile()).copy(),
+            max_contact_force=float(self.evaluated(first.contact_force_profile()).max()),
+            passes=passes,
+        )
         self.history.records.append(rec)
         return rec
 
-    def tamp(self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None
-             ) -> TampingResult:
+    def tamp(
+        self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None
+    ) -> TampingResult:
         """Tamp the sleepers where ``mask`` is True: the level is restored but for a residual, consolidation
         restarts there and the ballast damage raises their settlement rate (see :mod:`physics.tamping`)."""
         model = TampingModel() if model is None else model
@@ -327,13 +363,27 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
         return []
     s0 = sims[0]
     for s in sims[1:]:
-        if s.vehicle != s0.vehicle or s.speed != s0.speed or s.pass_options != s0.pass_options or (
-                s.model_track.n_sleepers != s0.model_track.n_sleepers):
-            raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
+        if (
+            s.vehicle != s0.vehicle
+            or s.speed != s0.speed
+            or s.pass_options != s0.pass_options
+            or (s.model_track.n_sleepers != s0.model_track.n_sleepers)
+        ):
+            raise ValueError(
+                "simulate_batch needs simulators with the same vehicle, speed, options and length"
+            )
     if any(s.feedback != s0.feedback for s in sims):
         raise ValueError("simulate_batch needs simulators with the same feedback")
     profiles = np.stack([s.model_irregularity() for s in sims])
     if s0.feedback == "irregularity":
-        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options)
-    return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, None,
-                           support_settlement=profiles, **s0.pass_options)
+        return simulate_passes(
+            [s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options
+        )
+    return simulate_passes(
+        [s.model_track for s in sims],
+        s0.vehicle,
+        s0.speed,
+        None,
+        support_settlement=profiles,
+        **s0.pass_options,
+    )

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from trackenv.physics.tamping import TampingModel, TampingResult, sd_after_tamping, tamp, tamped_runs
 
@@ -230,3 +232,23 @@ def test_model_from_dict_and_helpers():
     assert TampingModel().duration_s(100.0) == pytest.approx(360.0)  # 100 m at 1 km/h
     with pytest.raises(dataclasses.FrozenInstanceError):
         model.residual_fraction = 0.1  # type: ignore[misc]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    mask=st.lists(st.booleans(), min_size=1, max_size=40),
+    seed=st.integers(0, 2**32 - 1),
+    runout=st.integers(0, 5),
+    reference=st.sampled_from(["design", "smoothing"]),
+)
+def test_property_untamped_unchanged_and_finite(mask, seed, runout, reference):
+    m = np.array(mask, dtype=bool)
+    rng = np.random.default_rng(seed)
+    z = rng.normal(5e-3, 3e-3, size=m.size)
+    t0 = rng.integers(0, 10, size=m.size)
+    res = tamp(z, m, TampingModel(runout_sleepers=runout, reference=reference), rng, t0)
+    assert np.all(np.isfinite(res.level))
+    np.testing.assert_array_equal(res.level[~m], z[~m])
+    np.testing.assert_allclose(res.lift, z - res.level)
+    assert np.all(res.rate_factor >= 1.0)
+    assert np.all(res.tampings[m & ~res.renewed_mask] == t0[m & ~res.renewed_mask] + 1)

@@ -106,16 +106,25 @@ class TampingEnvConfig:
         object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
         object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
         object.__setattr__(self, "limits", _as_items("limits", self.limits))
-        self.settlement_law  # validates law_params
-        self.tamping_model
+        _ = self.settlement_law  # validates law_params
+        _ = self.tamping_model
         self.quality_limits.for_speed(self.speed_kmh / 3.6)
-        for name in ("mobilisation_cost", "section_tamping_cost", "geometry_cost_per_section_year",
-                     "alert_cost", "intervention_cost", "immediate_action_cost"):
+        for name in (
+            "mobilisation_cost",
+            "section_tamping_cost",
+            "geometry_cost_per_section_year",
+            "alert_cost",
+            "intervention_cost",
+            "immediate_action_cost",
+        ):
             c(name, getattr(self, name), low=0.0, high=1e9)
         if not isinstance(self.min_steps_between_tampings, (int, np.integer)) or not (
-                0 <= self.min_steps_between_tampings <= 100):
-            raise ValueError("min_steps_between_tampings must be an integer in [0, 100], got "
-                             f"{self.min_steps_between_tampings!r}")
+            0 <= self.min_steps_between_tampings <= 100
+        ):
+            raise ValueError(
+                "min_steps_between_tampings must be an integer in [0, 100], got "
+                f"{self.min_steps_between_tampings!r}"
+            )
         c("dt", self.dt, low=1e-6, high=5e-4)
 
     @classmethod

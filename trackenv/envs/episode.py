@@ -11,8 +11,15 @@ from scipy.ndimage import gaussian_filter1d
 
 from ..degradation import TrackDegradation
 from ..physics.dynamics import PassResult
-from ..physics.geometry import classify, d1_filter, german_psd, section_index, section_peak, section_sd
-from ..physics.geometry import synthesize_profile
+from ..physics.geometry import (
+    classify,
+    d1_filter,
+    german_psd,
+    section_index,
+    section_peak,
+    section_sd,
+    synthesize_profile,
+)
 from ..physics.track import Track
 from .config import TampingEnvConfig
 
@@ -40,8 +47,11 @@ class Episode:
     def quality(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """D1 level per sleeper, SD and mean-to-peak per section [m]."""
         d1 = d1_filter(self.sim.level, 0.6)
-        return d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections,
-                                                                                 self.n_sections)
+        return (
+            d1,
+            section_sd(d1, self.sections, self.n_sections),
+            section_peak(d1, self.sections, self.n_sections),
+        )
 
     def mask(self) -> np.ndarray:
         """Sections that may be tamped now (not tamped within the last min_steps_between_tampings steps)."""
@@ -77,16 +87,33 @@ def new_episode(config: TampingEnvConfig, rng: np.random.Generator) -> Episode:
         track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=0.05)
     rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / 0.6)
     level = synthesize_profile(track.sleeper_positions, partial(german_psd, quality=c.initial_quality), rng)
-    sim = TrackDegradation(track, c.make_vehicle(), law=c.settlement_law, cycles_per_iteration=c.cycles_per_step,
-                           speed=c.speed, initial_level=level, rate_factor=rate, feedback="support", dt=c.dt)
-    ep = Episode(config=c, sim=sim, sections=section_index(n, c.n_sections),
-                 last_tamped_step=np.full(c.n_sections, -10**6), section_tampings=np.zeros(c.n_sections),
-                 contact_force=np.zeros(n), tamped_last=np.zeros(c.n_sections, dtype=bool),
-                 transition_sleeper=transition)
+    sim = TrackDegradation(
+        track,
+        c.make_vehicle(),
+        law=c.settlement_law,
+        cycles_per_iteration=c.cycles_per_step,
+        speed=c.speed,
+        initial_level=level,
+        rate_factor=rate,
+        feedback="support",
+        dt=c.dt,
+    )
+    ep = Episode(
+        config=c,
+        sim=sim,
+        sections=section_index(n, c.n_sections),
+        last_tamped_step=np.full(c.n_sections, -(10**6)),
+        section_tampings=np.zeros(c.n_sections),
+        contact_force=np.zeros(n),
+        tamped_last=np.zeros(c.n_sections, dtype=bool),
+        transition_sleeper=transition,
+    )
     return ep
 
 
-def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+def apply_tamping(
+    ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Generator
+) -> tuple[float, np.ndarray]:
     """Tamp the allowed sections among ``sections_to_tamp`` (bool, n_sections); return the tamping cost and
     the sections actually tamped (masked ones are ignored)."""
     c = ep.config
@@ -115,11 +142,13 @@ def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     lim = c.quality_limits.for_speed(c.speed)
     cls = classify(peak, lim)
     dt_years = 1.0 / c.steps_per_year
-    return {"tamping": float(tamping_cost),
-            "geometry": float(c.geometry_cost_per_section_year * dt_years * np.sum((sd / lim.sd_alert_m) ** 2)),
-            "alert": float(c.alert_cost * np.sum(cls == 1)),
-            "intervention": float(c.intervention_cost * np.sum(cls == 2)),
-            "immediate_action": float(c.immediate_action_cost * np.sum(cls == 3))}
+    return {
+        "tamping": float(tamping_cost),
+        "geometry": float(c.geometry_cost_per_section_year * dt_years * np.sum((sd / lim.sd_alert_m) ** 2)),
+        "alert": float(c.alert_cost * np.sum(cls == 1)),
+        "intervention": float(c.intervention_cost * np.sum(cls == 2)),
+        "immediate_action": float(c.immediate_action_cost * np.sum(cls == 3)),
+    }
 
 
 def observation(ep: Episode) -> dict[str, np.ndarray]:
@@ -127,23 +156,32 @@ def observation(ep: Episode) -> dict[str, np.ndarray]:
     c = ep.config
     _, sd, peak = ep.quality()
     years = (ep.step_count - ep.last_tamped_step) / c.steps_per_year
-    return {"level": np.clip(ep.sim.level * 1e3, -100.0, 200.0).astype(np.float32),
-            "contact_force": np.clip(ep.contact_force / 1e3, 0.0, 2000.0).astype(np.float32),
-            "section_sd": np.clip(sd * 1e3, 0.0, 100.0).astype(np.float32),
-            "section_peak": np.clip(peak * 1e3, 0.0, 200.0).astype(np.float32),
-            "tampings": np.clip(ep.section_tampings, 0, 1000).astype(np.float32),
-            "years_since_tamping": np.clip(years, 0.0, c.horizon_years + 1.0).astype(np.float32),
-            "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)], dtype=np.float32)}
+    return {
+        "level": np.clip(ep.sim.level * 1e3, -100.0, 200.0).astype(np.float32),
+        "contact_force": np.clip(ep.contact_force / 1e3, 0.0, 2000.0).astype(np.float32),
+        "section_sd": np.clip(sd * 1e3, 0.0, 100.0).astype(np.float32),
+        "section_peak": np.clip(peak * 1e3, 0.0, 200.0).astype(np.float32),
+        "tampings": np.clip(ep.section_tampings, 0, 1000).astype(np.float32),
+        "years_since_tamping": np.clip(years, 0.0, c.horizon_years + 1.0).astype(np.float32),
+        "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)], dtype=np.float32),
+    }
 
 
 def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
     _, sd, peak = ep.quality()
     lim = ep.config.quality_limits.for_speed(ep.config.speed)
     cls = classify(peak, lim)
-    return {"costs": parts, "cost": float(sum(parts.values())), "tamped_sections": tamped.copy(),
-            "section_sd_m": sd, "section_peak_m": peak, "section_class": cls,
-            "immediate_action_exceedances": int(np.sum(cls == 3)), "year": ep.step_count / ep.config.steps_per_year,
-            "max_contact_force_N": float(ep.contact_force.max())}
+    return {
+        "costs": parts,
+        "cost": float(sum(parts.values())),
+        "tamped_sections": tamped.copy(),
+        "section_sd_m": sd,
+        "section_peak_m": peak,
+        "section_class": cls,
+        "immediate_action_exceedances": int(np.sum(cls == 3)),
+        "year": ep.step_count / ep.config.steps_per_year,
+        "max_contact_force_N": float(ep.contact_force.max()),
+    }
 
 
 def traffic_free_pass(ep: Episode) -> None:

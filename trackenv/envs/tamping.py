@@ -20,15 +20,17 @@ from .config import TampingEnvConfig
 def observation_space(config: TampingEnvConfig) -> spaces.Dict:
     n, s = config.n_sleepers, config.n_sections
     f32 = np.float32
-    return spaces.Dict({
-        "level": spaces.Box(-100.0, 200.0, (n,), f32),
-        "contact_force": spaces.Box(0.0, 2000.0, (n,), f32),
-        "section_sd": spaces.Box(0.0, 100.0, (s,), f32),
-        "section_peak": spaces.Box(0.0, 200.0, (s,), f32),
-        "tampings": spaces.Box(0.0, 1000.0, (s,), f32),
-        "years_since_tamping": spaces.Box(0.0, config.horizon_years + 1.0, (s,), f32),
-        "time": spaces.Box(0.0, 1.0, (1,), f32),
-    })
+    return spaces.Dict(
+        {
+            "level": spaces.Box(-100.0, 200.0, (n,), f32),
+            "contact_force": spaces.Box(0.0, 2000.0, (n,), f32),
+            "section_sd": spaces.Box(0.0, 100.0, (s,), f32),
+            "section_peak": spaces.Box(0.0, 200.0, (s,), f32),
+            "tampings": spaces.Box(0.0, 1000.0, (s,), f32),
+            "years_since_tamping": spaces.Box(0.0, config.horizon_years + 1.0, (s,), f32),
+            "time": spaces.Box(0.0, 1.0, (1,), f32),
+        }
+    )
 
 
 def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
@@ -43,7 +45,11 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
     """The sections to tamp (bool, n_sections) from an action; a malformed action raises ValueError."""
     if action_type == "discrete":
         a = np.asarray(action)
-        if a.size != 1 or not np.all(np.isfinite(a.astype(float))) or float(a.ravel()[0]) != int(a.ravel()[0]):
+        if (
+            a.size != 1
+            or not np.all(np.isfinite(a.astype(float)))
+            or float(a.ravel()[0]) != int(a.ravel()[0])
+        ):
             raise ValueError(f"action must be one integer in [0, {n_sections}], got {action!r}")
         k = int(a.ravel()[0])
         if not 0 <= k <= n_sections:
@@ -55,7 +61,9 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
     try:
         a = np.asarray(action, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}") from None
+        raise ValueError(
+            f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}"
+        ) from None
     if a.shape != (n_sections,):
         raise ValueError(f"action must have shape ({n_sections},) (one 0/1 per section), got {a.shape}")
     if not np.all(np.isfinite(a)) or not np.all((a == 0) | (a == 1)):
@@ -111,8 +119,14 @@ class TampingEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
-    def __init__(self, config: TampingEnvConfig | dict | None = None, *, action_type: str = "multibinary",
-                 render_mode: str | None = None, **overrides: Any) -> None:
+    def __init__(
+        self,
+        config: TampingEnvConfig | dict | None = None,
+        *,
+        action_type: str = "multibinary",
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
         if config is None:
             config = TampingEnvConfig()
         elif isinstance(config, dict):
@@ -135,8 +149,9 @@ class TampingEnv(gym.Env):
         super().reset(seed=seed)
         self.episode = E.new_episode(self.config, self.np_random)
         E.traffic_free_pass(self.episode)
-        self._last_info = E.info(self.episode, dict.fromkeys(E.COST_KEYS, 0.0),
-                                 np.zeros(self.config.n_sections, dtype=bool))
+        self._last_info = E.info(
+            self.episode, dict.fromkeys(E.COST_KEYS, 0.0), np.zeros(self.config.n_sections, dtype=bool)
+        )
         return E.observation(self.episode), self._last_info
 
     def step(self, action):

@@ -26,8 +26,14 @@ class TampingVectorEnv(VectorEnv):
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
 
-    def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
-                 action_type: str = "multibinary", **overrides: Any) -> None:
+    def __init__(
+        self,
+        num_envs: int = 8,
+        config: TampingEnvConfig | dict | None = None,
+        *,
+        action_type: str = "multibinary",
+        **overrides: Any,
+    ) -> None:
         if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 4096:
             raise ValueError(f"num_envs must be an integer in [1, 4096], got {num_envs!r}")
         overrides.pop("render_mode", None)
@@ -80,7 +86,9 @@ class TampingVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         actions = np.asarray(actions)
         if actions.shape[0] != self.num_envs:
-            raise ValueError(f"actions must have a leading axis of {self.num_envs}, got shape {actions.shape}")
+            raise ValueError(
+                f"actions must have a leading axis of {self.num_envs}, got shape {actions.shape}"
+            )
         wants = [decode_action(a, self.action_type, self.config.n_sections) for a in actions]
         tamping = [E.apply_tamping(ep, w, rng) for ep, w, rng in zip(self.episodes, wants, self._rngs)]
         for ep, res in zip(self.episodes, simulate_batch([ep.sim for ep in self.episodes])):
@@ -99,8 +107,9 @@ class TampingVectorEnv(VectorEnv):
             final_obs = [E.observation(self.episodes[i]) if i in done else None for i in range(self.num_envs)]
             self._new_episodes(done)
             info["final_obs"] = np.array(final_obs, dtype=object)
-            info["final_info"] = np.array([infos[i] if i in done else None for i in range(self.num_envs)],
-                                          dtype=object)
+            info["final_info"] = np.array(
+                [infos[i] if i in done else None for i in range(self.num_envs)], dtype=object
+            )
             info["_final_obs"] = truncated.copy()
             info["_final_info"] = truncated.copy()
         return self._observations(), rewards, np.zeros(self.num_envs, dtype=bool), truncated, info
@@ -108,6 +117,7 @@ class TampingVectorEnv(VectorEnv):
     def action_masks(self) -> np.ndarray:
         """(num_envs, ...) masks as :meth:`TampingEnv.action_masks` gives them for one env."""
         return np.array([E.action_mask(ep, self.action_type, self.config.n_sections) for ep in self.episodes])
+
 
 def _stack_infos(infos: list[dict]) -> dict:
     """Per-env info dicts as one dict of arrays (Gymnasium's vector convention)."""

@@ -60,16 +60,26 @@ def _solve(fw, bw, inv_diag, m, x):
             s -= fw[i, k] * x[i - k]
         x[i] = s
     for i in range(B, m):
-        x[i] = x[i] * inv_diag[i] - fw[i, 4] * x[i - 4] - fw[i, 3] * x[i - 3] - fw[i, 2] * x[i - 2] - (
-            fw[i, 1] * x[i - 1])
+        x[i] = (
+            x[i] * inv_diag[i]
+            - fw[i, 4] * x[i - 4]
+            - fw[i, 3] * x[i - 3]
+            - fw[i, 2] * x[i - 2]
+            - (fw[i, 1] * x[i - 1])
+        )
     for i in range(m - 1, max(m - 1 - B, -1), -1):
         s = x[i] * inv_diag[i]
         for k in range(m - 1 - i, 0, -1):
             s -= bw[i, k] * x[i + k]
         x[i] = s
     for i in range(m - 1 - B, -1, -1):
-        x[i] = x[i] * inv_diag[i] - bw[i, 4] * x[i + 4] - bw[i, 3] * x[i + 3] - bw[i, 2] * x[i + 2] - (
-            bw[i, 1] * x[i + 1])
+        x[i] = (
+            x[i] * inv_diag[i]
+            - bw[i, 4] * x[i + 4]
+            - bw[i, 3] * x[i + 3]
+            - bw[i, 2] * x[i + 2]
+            - (bw[i, 1] * x[i + 1])
+        )
 
 
 @njit(cache=True, fastmath=True)
@@ -83,9 +93,17 @@ def _mass_times(mfull, x, out, lo, hi):
                 s += mfull[i, d] * x[j]
         out[i - lo] = s
     for i in range(lo + B, hi - B):
-        out[i - lo] = (mfull[i, 0] * x[i - 4] + mfull[i, 1] * x[i - 3] + mfull[i, 2] * x[i - 2]
-                       + mfull[i, 3] * x[i - 1] + mfull[i, 4] * x[i] + mfull[i, 5] * x[i + 1]
-                       + mfull[i, 6] * x[i + 2] + mfull[i, 7] * x[i + 3] + mfull[i, 8] * x[i + 4])
+        out[i - lo] = (
+            mfull[i, 0] * x[i - 4]
+            + mfull[i, 1] * x[i - 3]
+            + mfull[i, 2] * x[i - 2]
+            + mfull[i, 3] * x[i - 1]
+            + mfull[i, 4] * x[i]
+            + mfull[i, 5] * x[i + 1]
+            + mfull[i, 6] * x[i + 2]
+            + mfull[i, 7] * x[i + 3]
+            + mfull[i, 8] * x[i + 4]
+        )
     for i in range(max(hi - B, lo + B), hi):
         s = 0.0
         for d in range(2 * B + 1):
@@ -108,11 +126,46 @@ def _contact(law, param, d):
 
 
 @njit(cache=True, fastmath=True)
-def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_k, bal_c,
-             elem_len, epb, spacing, n_sleepers,
-             mv, cv, kv_inv, fv, wheel_dofs, cluster_of_axle, n_clusters, margin_bays,
-             x_axle, z_axle, law, param, consts, u, v, a, q, qd, qdd,
-             out_force, out_rail, out_wheel, peak_ballast, peak_total):
+def _run_one(
+    mb,
+    cb,
+    keff,
+    node_w,
+    sleeper_dof,
+    sleeper_node,
+    pad_k,
+    pad_c,
+    bal_k,
+    bal_c,
+    elem_len,
+    epb,
+    spacing,
+    n_sleepers,
+    mv,
+    cv,
+    kv_inv,
+    fv,
+    wheel_dofs,
+    cluster_of_axle,
+    n_clusters,
+    margin_bays,
+    x_axle,
+    z_axle,
+    law,
+    param,
+    consts,
+    u,
+    v,
+    a,
+    q,
+    qd,
+    qdd,
+    out_force,
+    out_rail,
+    out_wheel,
+    peak_ballast,
+    peak_total,
+):
     n_steps = x_axle.shape[0] - 1
     n_axles = x_axle.shape[1]
     n = u.shape[0]
@@ -254,7 +307,8 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
             s = fv[i]
             for k in range(nv):
                 s += mv[i, k] * (a0 * q[k] + a2 * qd[k] + a3 * qdd[k]) + cv[i, k] * (
-                    a1 * q[k] + a4 * qd[k] + a5 * qdd[k])
+                    a1 * q[k] + a4 * qd[k] + a5 * qdd[k]
+                )
             rv[i] = s
         for i in range(nv):
             s = 0.0
@@ -292,7 +346,7 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
             res[j] = dp
         for j in range(n_axles):
             delta[j] = res[j] if force[j] <= 0.0 else delta[j]
-        for it in range(60):
+        for _it in range(60):
             for j in range(n_axles):
                 force[j], fprime[j] = _contact(law, param, delta[j])
             err = 0.0
@@ -332,8 +386,9 @@ def _run_one(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_
                 f2 = force[j] * shape[j, 2]
                 f3 = force[j] * shape[j, 3]
                 for i in range(hi - lo):
-                    pred[lo + i] += (f0 * cols[j, l0, i] + f1 * cols[j, l1, i] + f2 * cols[j, l2, i]
-                                     + f3 * cols[j, l3, i])
+                    pred[lo + i] += (
+                        f0 * cols[j, l0, i] + f1 * cols[j, l1, i] + f2 * cols[j, l2, i] + f3 * cols[j, l3, i]
+                    )
             for i in range(lo, hi):
                 an = a0 * (pred[i] - u[i]) - a2 * v[i] - a3 * a[i]
                 v[i] += a6 * a[i] + a7 * an
@@ -385,30 +440,170 @@ def _local(dof, base, epb):
 
 
 @njit(parallel=True, cache=True)
-def run_batch(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_k, bal_c,
-              elem_len, epb, spacing, n_sleepers,
-              mv, cv, kv_inv, fv, wheel_dofs, cluster_of_axle, n_clusters, margin_bays,
-              x_axle, z_axle, law, param, consts, u, v, a, q, qd, qdd,
-              out_force, out_rail, out_wheel, peak_ballast, peak_total):
+def run_batch(
+    mb,
+    cb,
+    keff,
+    node_w,
+    sleeper_dof,
+    sleeper_node,
+    pad_k,
+    pad_c,
+    bal_k,
+    bal_c,
+    elem_len,
+    epb,
+    spacing,
+    n_sleepers,
+    mv,
+    cv,
+    kv_inv,
+    fv,
+    wheel_dofs,
+    cluster_of_axle,
+    n_clusters,
+    margin_bays,
+    x_axle,
+    z_axle,
+    law,
+    param,
+    consts,
+    u,
+    v,
+    a,
+    q,
+    qd,
+    qdd,
+    out_force,
+    out_rail,
+    out_wheel,
+    peak_ballast,
+    peak_total,
+):
     """Run every item of the batch (leading axis) in parallel; arrays are filled in place."""
     for b in prange(mb.shape[0]):
-        _run_one(mb[b], cb[b], keff[b], node_w, sleeper_dof, sleeper_node, pad_k[b], pad_c[b], bal_k[b],
-                 bal_c[b], elem_len, epb, spacing, n_sleepers, mv, cv, kv_inv, fv, wheel_dofs,
-                 cluster_of_axle, n_clusters, margin_bays, x_axle, z_axle[b], law, param, consts, u[b], v[b],
-                 a[b], q[b], qd[b], qdd[b], out_force[b], out_rail[b], out_wheel[b], peak_ballast[b],
-                 peak_total[b])
+        _run_one(
+            mb[b],
+            cb[b],
+            keff[b],
+            node_w,
+            sleeper_dof,
+            sleeper_node,
+            pad_k[b],
+            pad_c[b],
+            bal_k[b],
+            bal_c[b],
+            elem_len,
+            epb,
+            spacing,
+            n_sleepers,
+            mv,
+            cv,
+            kv_inv,
+            fv,
+            wheel_dofs,
+            cluster_of_axle,
+            n_clusters,
+            margin_bays,
+            x_axle,
+            z_axle[b],
+            law,
+            param,
+            consts,
+            u[b],
+            v[b],
+            a[b],
+            q[b],
+            qd[b],
+            qdd[b],
+            out_force[b],
+            out_rail[b],
+            out_wheel[b],
+            peak_ballast[b],
+            peak_total[b],
+        )
 
 
 @njit(cache=True)
-def run_serial(mb, cb, keff, node_w, sleeper_dof, sleeper_node, pad_k, pad_c, bal_k, bal_c,
-               elem_len, epb, spacing, n_sleepers,
-               mv, cv, kv_inv, fv, wheel_dofs, cluster_of_axle, n_clusters, margin_bays,
-               x_axle, z_axle, law, param, consts, u, v, a, q, qd, qdd,
-               out_force, out_rail, out_wheel, peak_ballast, peak_total):
+def run_serial(
+    mb,
+    cb,
+    keff,
+    node_w,
+    sleeper_dof,
+    sleeper_node,
+    pad_k,
+    pad_c,
+    bal_k,
+    bal_c,
+    elem_len,
+    epb,
+    spacing,
+    n_sleepers,
+    mv,
+    cv,
+    kv_inv,
+    fv,
+    wheel_dofs,
+    cluster_of_axle,
+    n_clusters,
+    margin_bays,
+    x_axle,
+    z_axle,
+    law,
+    param,
+    consts,
+    u,
+    v,
+    a,
+    q,
+    qd,
+    qdd,
+    out_force,
+    out_rail,
+    out_wheel,
+    peak_ballast,
+    peak_total,
+):
     """:func:`run_batch` on one thread (a batch of one gains nothing from starting threads)."""
     for b in range(mb.shape[0]):
-        _run_one(mb[b], cb[b], keff[b], node_w, sleeper_dof, sleeper_node, pad_k[b], pad_c[b], bal_k[b],
-                 bal_c[b], elem_len, epb, spacing, n_sleepers, mv, cv, kv_inv, fv, wheel_dofs,
-                 cluster_of_axle, n_clusters, margin_bays, x_axle, z_axle[b], law, param, consts, u[b], v[b],
-                 a[b], q[b], qd[b], qdd[b], out_force[b], out_rail[b], out_wheel[b], peak_ballast[b],
-                 peak_total[b])
+        _run_one(
+            mb[b],
+            cb[b],
+            keff[b],
+            node_w,
+            sleeper_dof,
+            sleeper_node,
+            pad_k[b],
+            pad_c[b],
+            bal_k[b],
+            bal_c[b],
+            elem_len,
+            epb,
+            spacing,
+            n_sleepers,
+            mv,
+            cv,
+            kv_inv,
+            fv,
+            wheel_dofs,
+            cluster_of_axle,
+            n_clusters,
+            margin_bays,
+            x_axle,
+            z_axle[b],
+            law,
+            param,
+            consts,
+            u[b],
+            v[b],
+            a[b],
+            q[b],
+            qd[b],
+            qdd[b],
+            out_force[b],
+            out_rail[b],
+            out_wheel[b],
+            peak_ballast[b],
+            peak_total[b],
+        )

@@ -7,8 +7,15 @@ import math
 import numpy as np
 
 
-def check_scalar(name: str, value: float, *, low: float | None = None, high: float | None = None,
-                 low_inclusive: bool = True, high_inclusive: bool = True) -> float:
+def check_scalar(
+    name: str,
+    value: float,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> float:
     """Return ``value`` as float, or raise ValueError naming ``name`` and the allowed range."""
     try:
         v = float(value)
@@ -25,8 +32,15 @@ def check_scalar(name: str, value: float, *, low: float | None = None, high: flo
     return v
 
 
-def check_array(name: str, value, *, shape: tuple[int, ...] | None = None, low: float | None = None,
-                high: float | None = None, low_inclusive: bool = True) -> np.ndarray:
+def check_array(
+    name: str,
+    value,
+    *,
+    shape: tuple[int, ...] | None = None,
+    low: float | None = None,
+    high: float | None = None,
+    low_inclusive: bool = True,
+) -> np.ndarray:
     """Return ``value`` as a float64 array; raise ValueError naming ``name`` on NaN, bad shape or range."""
     try:
         arr = np.asarray(value, dtype=np.float64)

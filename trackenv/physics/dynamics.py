@@ -89,9 +89,16 @@ def _as_tracks(tracks) -> list[Track]:
     t0 = tracks[0]
     for t in tracks[1:]:
         if (t.n_sleepers, t.sleeper_spacing, t.elements_per_bay, t.rail_bending_stiffness, t.rail_mass) != (
-                t0.n_sleepers, t0.sleeper_spacing, t0.elements_per_bay, t0.rail_bending_stiffness, t0.rail_mass):
-            raise ValueError("tracks in one batch must share sleepers, spacing, mesh and rail; only support "
-                             "properties may differ")
+            t0.n_sleepers,
+            t0.sleeper_spacing,
+            t0.elements_per_bay,
+            t0.rail_bending_stiffness,
+            t0.rail_mass,
+        ):
+            raise ValueError(
+                "tracks in one batch must share sleepers, spacing, mesh and rail; only support "
+                "properties may differ"
+            )
     return tracks
 
 
@@ -106,8 +113,10 @@ def _rail_bands_cached(n_sleepers: int, epb: int, element_length: float, ei: flo
 
 def _rail_bands(lay, element_length: float, ei: float, mass: float):
     """M, C, K of the bare rail (no supports), assembled once per mesh."""
-    return tuple(b.copy() for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length,
-                                                      ei, mass))
+    return tuple(
+        b.copy()
+        for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length, ei, mass)
+    )
 
 
 def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -118,8 +127,10 @@ def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.n
     m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
     w, d = lay.node_w[lay.sleeper_node], lay.sleeper
     for b, t in enumerate(tracks):
-        for band, pad, bal in ((k[b], t.pad_stiffness, t.ballast_stiffness), (c[b], t.pad_damping,
-                                                                                t.ballast_damping)):
+        for band, pad, bal in (
+            (k[b], t.pad_stiffness, t.ballast_stiffness),
+            (c[b], t.pad_damping, t.ballast_damping),
+        ):
             band[w, 0] += pad
             band[d, 0] += pad + bal
             band[d, d - w] -= pad
@@ -161,8 +172,9 @@ def receptance(track: Track, x: float | None = None, frequencies=None) -> np.nda
     """Complex rail receptance w/F [m/N] at position ``x`` [m] for ``frequencies`` [Hz]: the direct
     frequency response of the full track, (K + iωC − ω²M)⁻¹ at the load point."""
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
-    f = check_array("frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies,
-                    low=0.0)
+    f = check_array(
+        "frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies, low=0.0
+    )
     m, c, k = track.banded_matrices()
     dofs, shp = _point_load_vector(track, x)
     rhs = np.zeros(track.n_dof, dtype=complex)
@@ -183,8 +195,18 @@ def receptance(track: Track, x: float | None = None, frequencies=None) -> np.nda
 
 def newmark_constants(dt: float, beta: float = 0.25, gamma: float = 0.5) -> np.ndarray:
     """a0..a7 of the Newmark scheme in its effective-stiffness form (Bathe's notation)."""
-    return np.array([1 / (beta * dt * dt), gamma / (beta * dt), 1 / (beta * dt), 1 / (2 * beta) - 1,
-                     gamma / beta - 1, dt / 2 * (gamma / beta - 2), dt * (1 - gamma), gamma * dt])
+    return np.array(
+        [
+            1 / (beta * dt * dt),
+            gamma / (beta * dt),
+            1 / (beta * dt),
+            1 / (2 * beta) - 1,
+            gamma / beta - 1,
+            dt / 2 * (gamma / beta - 2),
+            dt * (1 - gamma),
+            gamma * dt,
+        ]
+    )
 
 
 def _clusters(offsets: np.ndarray, gap: float) -> np.ndarray:
@@ -207,8 +229,12 @@ def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
     lay = track.dof_layout
     n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
     n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
-    return (n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]]
-            + n4 * u[lay.node_theta[e + 1]])
+    return (
+        n1 * u[lay.node_w[e]]
+        + n2 * u[lay.node_theta[e]]
+        + n3 * u[lay.node_w[e + 1]]
+        + n4 * u[lay.node_theta[e + 1]]
+    )
 
 
 def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
@@ -222,8 +248,10 @@ def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
         return z
     arr = check_array(name, irr)
     if arr.ndim != 1 or arr.size not in (track.n_sleepers, track.n_nodes):
-        raise ValueError(f"{name} must have one value per sleeper ({track.n_sleepers}) or per rail node "
-                         f"({track.n_nodes}), got shape {arr.shape}")
+        raise ValueError(
+            f"{name} must have one value per sleeper ({track.n_sleepers}) or per rail node "
+            f"({track.n_nodes}), got shape {arr.shape}"
+        )
     grid = track.sleeper_positions if arr.size == track.n_sleepers else track.node_positions
     spline = scipy.interpolate.CubicSpline(grid, arr, bc_type="natural")
     return spline(np.clip(x, 0.0, track.length))
@@ -246,10 +274,21 @@ def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray
     return u
 
 
-def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irregularities=None, *,
-                    dt: float = 1e-4, contact=None, start: str = "static", x_start: float | None = None,
-                    x_end: float | None = None, window_bays: int | None = 6,
-                    sleeper_force_measure: str = "ballast", support_settlement=None) -> list[PassResult]:
+def simulate_passes(
+    tracks: Track | Sequence[Track],
+    vehicle,
+    speed: float,
+    irregularities=None,
+    *,
+    dt: float = 1e-4,
+    contact=None,
+    start: str = "static",
+    x_start: float | None = None,
+    x_end: float | None = None,
+    window_bays: int | None = 6,
+    sleeper_force_measure: str = "ballast",
+    support_settlement=None,
+) -> list[PassResult]:
     """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
 
     ``tracks``: one Track (shared by every row) or one per row; ``irregularities``: None, an array (n_rows,
@@ -272,8 +311,9 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
     dt = check_scalar("dt", dt, low=1e-7, high=1.0)
     if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
-        raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}, got "
-                         f"{sleeper_force_measure!r}")
+        raise ValueError(
+            f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}, got {sleeper_force_measure!r}"
+        )
     if start not in ("static", "rest"):
         raise ValueError(f"start must be 'static' or 'rest', got {start!r}")
     t0 = tracks[0]
@@ -282,13 +322,22 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     m_wheel = float(np.min(np.diag(sys_.mass)[sys_.wheel_dofs]))
     period = 2 * np.pi * np.sqrt(m_wheel / k_contact)
     if dt > period / 20:
-        raise ValueError(f"dt must be <= {period / 20:.3g} s to resolve the wheel-on-contact-spring vibration "
-                         f"(period {period:.3g} s), got {dt:g}")
+        raise ValueError(
+            f"dt must be <= {period / 20:.3g} s to resolve the wheel-on-contact-spring vibration "
+            f"(period {period:.3g} s), got {dt:g}"
+        )
     if sys_.span >= t0.length:
-        raise ValueError(f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)")
-    x_start = sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
-    x_end = t0.length if x_end is None else check_scalar("x_end", x_end, low=x_start, high=t0.length,
-                                                          low_inclusive=False)
+        raise ValueError(
+            f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)"
+        )
+    x_start = (
+        sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
+    )
+    x_end = (
+        t0.length
+        if x_end is None
+        else check_scalar("x_end", x_end, low=x_start, high=t0.length, low_inclusive=False)
+    )
     if window_bays is not None and (not isinstance(window_bays, (int, np.integer)) or window_bays < 2):
         raise ValueError(f"window_bays must be an integer >= 2 or None, got {window_bays!r}")
 
@@ -395,28 +444,75 @@ def simulate_passes(tracks: Track | Sequence[Track], vehicle, speed: float, irre
     peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
 
     run = _kernel.run_serial if nb == 1 else _kernel.run_batch
-    run(mb, cb, keff, lay.node_w, lay.sleeper, lay.sleeper_node, pad_k, pad_c, bal_k, bal_c,
-                      t0.element_length, t0.elements_per_bay, t0.sleeper_spacing, t0.n_sleepers,
-                      np.ascontiguousarray(sys_.mass), np.ascontiguousarray(sys_.damping), kv_inv,
-                      sys_.force.astype(float), sys_.wheel_dofs.astype(np.int64), cluster, n_clusters, margin,
-                      x_axle, z_axle, law.code, float(law.parameter), consts, u, v, a, q, qd, qdd,
-                      out_force, out_rail, out_wheel, peak_ballast, peak_total)
+    run(
+        mb,
+        cb,
+        keff,
+        lay.node_w,
+        lay.sleeper,
+        lay.sleeper_node,
+        pad_k,
+        pad_c,
+        bal_k,
+        bal_c,
+        t0.element_length,
+        t0.elements_per_bay,
+        t0.sleeper_spacing,
+        t0.n_sleepers,
+        np.ascontiguousarray(sys_.mass),
+        np.ascontiguousarray(sys_.damping),
+        kv_inv,
+        sys_.force.astype(float),
+        sys_.wheel_dofs.astype(np.int64),
+        cluster,
+        n_clusters,
+        margin,
+        x_axle,
+        z_axle,
+        law.code,
+        float(law.parameter),
+        consts,
+        u,
+        v,
+        a,
+        q,
+        qd,
+        qdd,
+        out_force,
+        out_rail,
+        out_wheel,
+        peak_ballast,
+        peak_total,
+    )
 
     peak_ballast += static_ballast
     peak_total += static_total
     results = []
     for b in range(nb):
         sf = peak_ballast[b] if sleeper_force_measure == "ballast" else peak_total[b]
-        results.append(PassResult(time=time, wheel_position=x_axle, contact_force=out_force[b],
-                                  rail_displacement=out_rail[b], wheel_displacement=out_wheel[b],
-                                  irregularity=z_axle[b], sleeper_force=sf, ballast_force=peak_ballast[b],
-                                  pad_plus_ballast_force=peak_total[b],
-                                  static_wheel_load=sys_.static_wheel_loads.copy(),
-                                  sleeper_positions=t0.sleeper_positions, speed=speed, dt=dt))
+        results.append(
+            PassResult(
+                time=time,
+                wheel_position=x_axle,
+                contact_force=out_force[b],
+                rail_displacement=out_rail[b],
+                wheel_displacement=out_wheel[b],
+                irregularity=z_axle[b],
+                sleeper_force=sf,
+                ballast_force=peak_ballast[b],
+                pad_plus_ballast_force=peak_total[b],
+                static_wheel_load=sys_.static_wheel_loads.copy(),
+                sleeper_positions=t0.sleeper_positions,
+                speed=speed,
+                dt=dt,
+            )
+        )
     return results
 
 
-def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
+def simulate_pass(
+    track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options
+) -> PassResult:
     """One vehicle pass over one track: :func:`simulate_passes` with a batch of one. See there for options."""
     if not isinstance(track, Track):
         raise ValueError(f"track must be a Track, got {type(track).__name__}")

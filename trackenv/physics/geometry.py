@@ -165,7 +165,6 @@ def psd_variance(psd: Callable, min_wavelength: float = 1.0, max_wavelength: flo
     ``sigma^2 = integral_{2*pi/max_wavelength}^{2*pi/min_wavelength} S(Omega) dOmega`` (numerical
     quadrature, scipy.integrate.quad). Useful to calibrate expectations, e.g. the SD of a synthesised track.
     """
-
     lo, hi = _check_band(min_wavelength, max_wavelength)
     if not callable(psd):
         raise ValueError("psd must be a callable mapping wavenumber [rad/m] to S [m^2/(rad/m)]")

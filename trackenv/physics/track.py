@@ -56,18 +56,24 @@ class Track:
     def __post_init__(self) -> None:
         n = np.asarray(self.pad_stiffness).size
         if n < 3:
-            raise ValueError(f"pad_stiffness must have one value per sleeper and at least 3 sleepers, got {n}")
+            raise ValueError(
+                f"pad_stiffness must have one value per sleeper and at least 3 sleepers, got {n}"
+            )
         for f in PER_SLEEPER_FIELDS:
             low_inclusive = f in ("pad_damping", "ballast_damping")
             arr = check_array(f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, low_inclusive=low_inclusive)
             object.__setattr__(self, f, _readonly(arr))
-        object.__setattr__(self, "sleeper_spacing",
-                           check_scalar("sleeper_spacing", self.sleeper_spacing, low=0.05, high=5.0))
-        object.__setattr__(self, "rail_bending_stiffness",
-                           check_scalar("rail_bending_stiffness", self.rail_bending_stiffness, low=0.0,
-                                        low_inclusive=False))
-        object.__setattr__(self, "rail_mass",
-                           check_scalar("rail_mass", self.rail_mass, low=0.0, low_inclusive=False))
+        object.__setattr__(
+            self, "sleeper_spacing", check_scalar("sleeper_spacing", self.sleeper_spacing, low=0.05, high=5.0)
+        )
+        object.__setattr__(
+            self,
+            "rail_bending_stiffness",
+            check_scalar("rail_bending_stiffness", self.rail_bending_stiffness, low=0.0, low_inclusive=False),
+        )
+        object.__setattr__(
+            self, "rail_mass", check_scalar("rail_mass", self.rail_mass, low=0.0, low_inclusive=False)
+        )
         epb = self.elements_per_bay
         if not isinstance(epb, (int, np.integer)) or isinstance(epb, bool) or not 2 <= epb <= 64:
             raise ValueError(f"elements_per_bay must be an integer in [2, 64], got {epb!r}")
@@ -75,24 +81,47 @@ class Track:
 
     # ------------------------------------------------------------------ presets
     @classmethod
-    def uniform(cls, n_sleepers: int, *, pad_stiffness: float, pad_damping: float, sleeper_mass: float,
-                ballast_stiffness: float, ballast_damping: float, **scalars) -> Track:
+    def uniform(
+        cls,
+        n_sleepers: int,
+        *,
+        pad_stiffness: float,
+        pad_damping: float,
+        sleeper_mass: float,
+        ballast_stiffness: float,
+        ballast_damping: float,
+        **scalars,
+    ) -> Track:
         """A track whose supports are all alike."""
         if not isinstance(n_sleepers, (int, np.integer)) or n_sleepers < 3:
             raise ValueError(f"n_sleepers must be an integer >= 3, got {n_sleepers!r}")
         ones = np.ones(int(n_sleepers))
-        return cls(pad_stiffness=pad_stiffness * ones, pad_damping=pad_damping * ones,
-                   sleeper_mass=sleeper_mass * ones, ballast_stiffness=ballast_stiffness * ones,
-                   ballast_damping=ballast_damping * ones, **scalars)
+        return cls(
+            pad_stiffness=pad_stiffness * ones,
+            pad_damping=pad_damping * ones,
+            sleeper_mass=sleeper_mass * ones,
+            ballast_stiffness=ballast_stiffness * ones,
+            ballast_damping=ballast_damping * ones,
+            **scalars,
+        )
 
     @classmethod
     def seed(cls, *, elements_per_bay: int = 2) -> Track:
         """The paper's Table 3: 30 m, 51 sleepers at 0.6 m, EI 6.11e6 N·m², 60 kg/m, pad 200 MN/m and
         30 kN·s/m, half sleeper 157.4 kg, ballast 160 MN/m and 500 kN·s/m."""
-        return cls.uniform(51, pad_stiffness=200e6, pad_damping=30e3, sleeper_mass=157.4,
-                           ballast_stiffness=160e6, ballast_damping=500e3, sleeper_spacing=0.6,
-                           rail_bending_stiffness=6.11e6, rail_mass=60.0, elements_per_bay=elements_per_bay,
-                           name="seed")
+        return cls.uniform(
+            51,
+            pad_stiffness=200e6,
+            pad_damping=30e3,
+            sleeper_mass=157.4,
+            ballast_stiffness=160e6,
+            ballast_damping=500e3,
+            sleeper_spacing=0.6,
+            rail_bending_stiffness=6.11e6,
+            rail_mass=60.0,
+            elements_per_bay=elements_per_bay,
+            name="seed",
+        )
 
     @classmethod
     def realistic(cls, length: float = 60.0, *, elements_per_bay: int = 2) -> Track:
@@ -105,10 +134,19 @@ class Track:
         """
         length = check_scalar("length", length, low=3.0, high=10_000.0)
         n = int(round(length / 0.6)) + 1
-        return cls.uniform(n, pad_stiffness=200e6, pad_damping=30e3, sleeper_mass=157.4,
-                           ballast_stiffness=160e6, ballast_damping=60e3, sleeper_spacing=0.6,
-                           rail_bending_stiffness=210e9 * 3055e-8, rail_mass=60.21,
-                           elements_per_bay=elements_per_bay, name=f"realistic-{length:g}m")
+        return cls.uniform(
+            n,
+            pad_stiffness=200e6,
+            pad_damping=30e3,
+            sleeper_mass=157.4,
+            ballast_stiffness=160e6,
+            ballast_damping=60e3,
+            sleeper_spacing=0.6,
+            rail_bending_stiffness=210e9 * 3055e-8,
+            rail_mass=60.21,
+            elements_per_bay=elements_per_bay,
+            name=f"realistic-{length:g}m",
+        )
 
     # --------------------------------------------------------------- modifiers
     def replace(self, **changes) -> Track:
@@ -160,8 +198,16 @@ class Track:
         for nm, v in (("n_before", n_before), ("n_after", n_after)):
             if not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
-        changes = {f: np.concatenate([np.full(n_before, getattr(self, f)[0]), getattr(self, f),
-                                      np.full(n_after, getattr(self, f)[-1])]) for f in PER_SLEEPER_FIELDS}
+        changes = {
+            f: np.concatenate(
+                [
+                    np.full(n_before, getattr(self, f)[0]),
+                    getattr(self, f),
+                    np.full(n_after, getattr(self, f)[-1]),
+                ]
+            )
+            for f in PER_SLEEPER_FIELDS
+        }
         return self.replace(**changes)
 
     def _sleeper_slice(self, start: int, stop: int | None) -> slice:
@@ -226,8 +272,11 @@ class Track:
     @property
     def pinned_pinned_frequency(self) -> float:
         """(π/s)²·√(EI/m)/2π [Hz]: the rail's first bending mode between two rigid supports."""
-        return (np.pi / self.sleeper_spacing) ** 2 * np.sqrt(self.rail_bending_stiffness / self.rail_mass) / (
-            2 * np.pi)
+        return (
+            (np.pi / self.sleeper_spacing) ** 2
+            * np.sqrt(self.rail_bending_stiffness / self.rail_mass)
+            / (2 * np.pi)
+        )
 
     def winkler_deflection(self, load: float) -> float:
         """Static deflection under a point load on a Winkler beam, w0 = Pβ/(2k_f) [m]."""
@@ -241,9 +290,17 @@ class Track:
 
     @cached_property
     def _bands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return assemble_banded(self.dof_layout, self.element_length, self.rail_bending_stiffness, self.rail_mass,
-                               self.pad_stiffness, self.pad_damping, self.sleeper_mass, self.ballast_stiffness,
-                               self.ballast_damping)
+        return assemble_banded(
+            self.dof_layout,
+            self.element_length,
+            self.rail_bending_stiffness,
+            self.rail_mass,
+            self.pad_stiffness,
+            self.pad_damping,
+            self.sleeper_mass,
+            self.ballast_stiffness,
+            self.ballast_damping,
+        )
 
     def matrices(self):
         """Mass, damping and stiffness as scipy CSR matrices (for reference computations)."""
@@ -280,26 +337,53 @@ class DofLayout:
 def hermite_element_matrices(length: float, bending_stiffness: float, mass_per_length: float):
     """Stiffness and consistent mass of a Hermite cubic Euler-Bernoulli element, DOFs (w1, θ1, w2, θ2)."""
     L = length
-    k = bending_stiffness / L**3 * np.array([[12, 6 * L, -12, 6 * L],
-                                              [6 * L, 4 * L * L, -6 * L, 2 * L * L],
-                                              [-12, -6 * L, 12, -6 * L],
-                                              [6 * L, 2 * L * L, -6 * L, 4 * L * L]])
-    m = mass_per_length * L / 420.0 * np.array([[156, 22 * L, 54, -13 * L],
-                                                 [22 * L, 4 * L * L, 13 * L, -3 * L * L],
-                                                 [54, 13 * L, 156, -22 * L],
-                                                 [-13 * L, -3 * L * L, -22 * L, 4 * L * L]])
+    k = (
+        bending_stiffness
+        / L**3
+        * np.array(
+            [
+                [12, 6 * L, -12, 6 * L],
+                [6 * L, 4 * L * L, -6 * L, 2 * L * L],
+                [-12, -6 * L, 12, -6 * L],
+                [6 * L, 2 * L * L, -6 * L, 4 * L * L],
+            ]
+        )
+    )
+    m = (
+        mass_per_length
+        * L
+        / 420.0
+        * np.array(
+            [
+                [156, 22 * L, 54, -13 * L],
+                [22 * L, 4 * L * L, 13 * L, -3 * L * L],
+                [54, 13 * L, 156, -22 * L],
+                [-13 * L, -3 * L * L, -22 * L, 4 * L * L],
+            ]
+        )
+    )
     return k, m
 
 
 def hermite_shape(xi: float, length: float) -> np.ndarray:
     """Hermite cubic shape functions at ξ ∈ [0, 1] of an element of ``length``: w(ξ) = N·(w1, θ1, w2, θ2)."""
     xi2, xi3 = xi * xi, xi * xi * xi
-    return np.array([1 - 3 * xi2 + 2 * xi3, length * (xi - 2 * xi2 + xi3), 3 * xi2 - 2 * xi3,
-                     length * (xi3 - xi2)])
+    return np.array(
+        [1 - 3 * xi2 + 2 * xi3, length * (xi - 2 * xi2 + xi3), 3 * xi2 - 2 * xi3, length * (xi3 - xi2)]
+    )
 
 
-def assemble_banded(layout: DofLayout, element_length: float, ei: float, rail_mass: float, pad_k, pad_c,
-                    sleeper_m, ballast_k, ballast_c):
+def assemble_banded(
+    layout: DofLayout,
+    element_length: float,
+    ei: float,
+    rail_mass: float,
+    pad_k,
+    pad_c,
+    sleeper_m,
+    ballast_k,
+    ballast_c,
+):
     """Assemble M, C, K of the track in lower banded storage (see :meth:`Track.banded_matrices`)."""
     n, b = layout.n_dof, HALF_BANDWIDTH
     bands = [np.zeros((n, b + 1)) for _ in range(3)]

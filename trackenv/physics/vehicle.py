@@ -83,8 +83,9 @@ class Wheelset:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass", check_scalar("mass", self.mass, low=10.0, high=20_000.0))
-        object.__setattr__(self, "static_load", check_scalar("static_load", self.static_load, low=0.0,
-                                                             high=500e3))
+        object.__setattr__(
+            self, "static_load", check_scalar("static_load", self.static_load, low=0.0, high=500e3)
+        )
 
     @classmethod
     def seed(cls) -> Wheelset:
@@ -105,9 +106,15 @@ class Wheelset:
 
     def system(self) -> VehicleSystem:
         m = self.mass / 2
-        return VehicleSystem(mass=np.array([[m]]), damping=np.zeros((1, 1)), stiffness=np.zeros((1, 1)),
-                             force=np.array([self.wheel_load]), wheel_dofs=np.array([0]),
-                             axle_offsets=np.array([0.0]), dof_names=("wheel",))
+        return VehicleSystem(
+            mass=np.array([[m]]),
+            damping=np.zeros((1, 1)),
+            stiffness=np.zeros((1, 1)),
+            force=np.array([self.wheel_load]),
+            wheel_dofs=np.array([0]),
+            axle_offsets=np.array([0.0]),
+            dof_names=("wheel",),
+        )
 
 
 @dataclass(frozen=True)
@@ -134,12 +141,20 @@ class Car:
     name: str = field(default="car", compare=False)
 
     def __post_init__(self) -> None:
-        ranges = {"body_mass": (100.0, 200e3), "body_pitch_inertia": (1.0, 1e8), "bogie_mass": (10.0, 50e3),
-                  "bogie_pitch_inertia": (1.0, 1e6), "wheelset_mass": (10.0, 10e3),
-                  "primary_stiffness": (1e3, 1e10), "primary_damping": (0.0, 1e8),
-                  "secondary_stiffness": (1e3, 1e10), "secondary_damping": (0.0, 1e8),
-                  "bogie_wheelbase": (0.5, 10.0), "bogie_centre_distance": (1.0, 50.0),
-                  "length_over_buffers": (2.0, 60.0)}
+        ranges = {
+            "body_mass": (100.0, 200e3),
+            "body_pitch_inertia": (1.0, 1e8),
+            "bogie_mass": (10.0, 50e3),
+            "bogie_pitch_inertia": (1.0, 1e6),
+            "wheelset_mass": (10.0, 10e3),
+            "primary_stiffness": (1e3, 1e10),
+            "primary_damping": (0.0, 1e8),
+            "secondary_stiffness": (1e3, 1e10),
+            "secondary_damping": (0.0, 1e8),
+            "bogie_wheelbase": (0.5, 10.0),
+            "bogie_centre_distance": (1.0, 50.0),
+            "length_over_buffers": (2.0, 60.0),
+        }
         for name, (lo, hi) in ranges.items():
             object.__setattr__(self, name, check_scalar(name, getattr(self, name), low=lo, high=hi))
         if self.bogie_centre_distance <= self.bogie_wheelbase:
@@ -152,16 +167,42 @@ class Car:
         """The Manchester benchmark passenger coach (Iwnicki 1998): body 32 t, 1.97e6 kg·m²; bogie 2615 kg,
         1476 kg·m²; wheelset 1813 kg; primary 1.2 MN/m, 4 kN·s/m per axlebox; secondary 0.43 MN/m, 20 kN·s/m;
         wheelbase 2.56 m; bogie centres 19 m. Length over buffers 24.5 m is our assumption."""
-        return cls(32_000.0, 1.97e6, 2615.0, 1476.0, 1813.0, 1.2e6, 4e3, 0.43e6, 20e3, 2.56, 19.0, 24.5,
-                   name="manchester-coach")
+        return cls(
+            32_000.0,
+            1.97e6,
+            2615.0,
+            1476.0,
+            1813.0,
+            1.2e6,
+            4e3,
+            0.43e6,
+            20e3,
+            2.56,
+            19.0,
+            24.5,
+            name="manchester-coach",
+        )
 
     @classmethod
     def zhai_coach(cls) -> Car:
         """Zhai's passenger coach: body 29.6 t, 2.139e6 kg·m²; bogie 1700 kg; wheelset 1900 kg; primary
         0.873 MN/m, 30 kN·s/m; secondary 0.41 MN/m, 108.7 kN·s/m; wheelbase 2.4 m; bogie centres 18 m. Bogie
         pitch inertia 1700 kg·m² and length 24.0 m are our assumptions."""
-        return cls(29_600.0, 2.139e6, 1700.0, 1700.0, 1900.0, 0.873e6, 30e3, 0.41e6, 108.7e3, 2.4, 18.0, 24.0,
-                   name="zhai-coach")
+        return cls(
+            29_600.0,
+            2.139e6,
+            1700.0,
+            1700.0,
+            1900.0,
+            0.873e6,
+            30e3,
+            0.41e6,
+            108.7e3,
+            2.4,
+            18.0,
+            24.0,
+            name="zhai-coach",
+        )
 
     @classmethod
     def freight_wagon(cls) -> Car:
@@ -169,8 +210,21 @@ class Car:
         wheelbase 1.82 m, primary 3.27 MN/m and 80.2 kN·s/m. Assumptions (not in the source): body pitch
         inertia of a uniform 19.7 m body (m·L²/12), bogie pitch inertia 2600 kg·m², wheelset 1400 kg, and a
         stiff centre-pivot 'secondary' of 50 MN/m with 100 kN·s/m."""
-        return cls(29_480.0, 29_480.0 * 19.7**2 / 12, 5000.0, 2600.0, 1400.0, 3.27e6, 80.2e3, 50e6, 100e3, 1.82,
-                   14.2, 19.7, name="freight-sgns")
+        return cls(
+            29_480.0,
+            29_480.0 * 19.7**2 / 12,
+            5000.0,
+            2600.0,
+            1400.0,
+            3.27e6,
+            80.2e3,
+            50e6,
+            100e3,
+            1.82,
+            14.2,
+            19.7,
+            name="freight-sgns",
+        )
 
     @property
     def wheel_load(self) -> float:
@@ -180,8 +234,14 @@ class Car:
     def system(self) -> VehicleSystem:
         n = 10
         m = np.zeros((n, n))
-        diag = [self.body_mass / 2, self.body_pitch_inertia / 2, self.bogie_mass / 2,
-                self.bogie_pitch_inertia / 2, self.bogie_mass / 2, self.bogie_pitch_inertia / 2]
+        diag = [
+            self.body_mass / 2,
+            self.body_pitch_inertia / 2,
+            self.bogie_mass / 2,
+            self.bogie_pitch_inertia / 2,
+            self.bogie_mass / 2,
+            self.bogie_pitch_inertia / 2,
+        ]
         diag += [self.wheelset_mass / 2] * 4
         m[np.diag_indices(n)] = diag
         k, c = np.zeros((n, n)), np.zeros((n, n))
@@ -202,8 +262,18 @@ class Car:
                 connect(t, self.primary_stiffness, self.primary_damping)
         f = GRAVITY * np.array([m[i, i] if i in (0, 2, 4, 6, 7, 8, 9) else 0.0 for i in range(n)])
         offsets = np.array([0.0, 2 * lw, 2 * lc, 2 * lc + 2 * lw])
-        names = ("body", "body_pitch", "bogie1", "bogie1_pitch", "bogie2", "bogie2_pitch",
-                 "wheel1", "wheel2", "wheel3", "wheel4")
+        names = (
+            "body",
+            "body_pitch",
+            "bogie1",
+            "bogie1_pitch",
+            "bogie2",
+            "bogie2_pitch",
+            "wheel1",
+            "wheel2",
+            "wheel3",
+            "wheel4",
+        )
         return VehicleSystem(m, c, k, f, np.arange(6, 10), offsets, names)
 
 
@@ -236,11 +306,15 @@ class Train:
             start += car.length_over_buffers
             dof0 += s.n_dof
         offsets = np.concatenate(offsets)
-        return VehicleSystem(scipy.linalg.block_diag(*[s.mass for s in parts]),
-                             scipy.linalg.block_diag(*[s.damping for s in parts]),
-                             scipy.linalg.block_diag(*[s.stiffness for s in parts]),
-                             np.concatenate([s.force for s in parts]), np.concatenate(wheel_dofs),
-                             offsets - offsets[0], tuple(names))
+        return VehicleSystem(
+            scipy.linalg.block_diag(*[s.mass for s in parts]),
+            scipy.linalg.block_diag(*[s.damping for s in parts]),
+            scipy.linalg.block_diag(*[s.stiffness for s in parts]),
+            np.concatenate([s.force for s in parts]),
+            np.concatenate(wheel_dofs),
+            offsets - offsets[0],
+            tuple(names),
+        )
 
 
 Vehicle = Wheelset | Car | Train
