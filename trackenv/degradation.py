@@ -126,8 +126,8 @@ class TrackDegradation:
     "irregularity" (the paper's: the per-sleeper settlement, interpolated, is the rail's level irregularity) or
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
-    self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to :func:`simulate_passes` (``dt``,
-    ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to
+    :func:`simulate_passes` (``dt``, ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
