@@ -1,10 +1,10 @@
-"""An SB3 :class:`~stable_baselines3.common.vec_env.VecEnv` over :class:`trackenv.envs.vector.TampingVectorEnv`.
+"""An SB3 ``VecEnv`` over :class:`trackenv.envs.vector.TampingVectorEnv`.
 
-One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this adapter
-only translates conventions:
+One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this
+adapter only translates conventions:
 
-* Gymnasium's SAME_STEP autoreset (``infos["final_obs"]`` at done envs, infos as a dict of arrays) becomes SB3's
-  (a list of per-env info dicts, ``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` at done
+* Gymnasium's SAME_STEP autoreset (``infos["final_obs"]`` at done envs, infos as a dict of arrays) becomes
+  SB3's (a list of per-env info dicts, ``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` at done
   envs, the returned observation already the next episode's first);
 * ``env_method("action_masks")`` / :meth:`action_masks` give the masks sb3-contrib's MaskablePPO asks for;
 * seeds set by :meth:`seed` (SB3's convention: ``seed + i`` for env ``i``) are used at the next :meth:`reset`;
@@ -45,7 +45,8 @@ class TampingSB3VecEnv(VecEnv):
     """
 
     def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
-                 action_type: str = "multibinary", keep_per_sleeper: bool = True, seed: int | None = None) -> None:
+                 action_type: str = "multibinary", keep_per_sleeper: bool = True,
+                 seed: int | None = None) -> None:
         self.venv = TampingVectorEnv(num_envs, config, action_type=action_type)
         self.config = self.venv.config
         self.action_type = action_type
@@ -59,7 +60,7 @@ class TampingSB3VecEnv(VecEnv):
         if seed is not None:
             self.seed(seed)
 
-    # --- core API --------------------------------------------------------------------------------------------
+    # --- core API ---
     def reset(self):
         seeds = list(self._seeds)
         if all(s is None for s in seeds):
@@ -97,7 +98,7 @@ class TampingSB3VecEnv(VecEnv):
         """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env."""
         return self.venv.action_masks()
 
-    # --- attribute / method access (all envs share this one object) -----------------------------------------
+    # --- attribute / method access (all envs share this one object) ---
     def _indices(self, indices) -> list[int]:
         if indices is None:
             return list(range(self.num_envs))
@@ -141,7 +142,7 @@ class TampingSB3VecEnv(VecEnv):
 
 
 def _unstack_infos(infos: dict, n: int) -> list[dict]:
-    """Gymnasium's dict-of-arrays infos as a list of per-env dicts (``_``-prefixed masks and final_* dropped)."""
+    """Gymnasium's dict-of-arrays infos as a list of per-env dicts (``_`` masks and final_* dropped)."""
     out: list[dict] = [{} for _ in range(n)]
     for key, val in infos.items():
         if key.startswith("_") or key in ("final_obs", "final_info"):

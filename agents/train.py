@@ -4,7 +4,8 @@
   VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
   evaluation callback and reproducible seeding. Hyper-parameters default to ``agents/ppo_config.json``.
 * :func:`load_trained` — the shipped policy (``agents/pretrained/ppo_tamping.zip`` + its observation
-  statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env observations.
+  statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env
+  observations.
 * :func:`evaluate_returns` — episode returns of a policy on given seeds with the batched vector env.
 """
 
@@ -39,7 +40,8 @@ _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_times
 
 
 def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
-    """The hyper-parameters in ``path`` (default ``agents/ppo_config.json``); unknown keys raise ValueError."""
+    """The hyper-parameters in ``path`` (default ``agents/ppo_config.json``); unknown keys raise
+    ValueError."""
     with open(path or DEFAULT_HYPERPARAMS) as f:
         hp = json.load(f)
     unknown = set(hp) - set(_ALGO_KEYS) - set(_TRAIN_KEYS)
@@ -68,7 +70,7 @@ def _algo_class(algo: str):
     raise ValueError(f"algo must be 'ppo' or 'maskable_ppo', got {algo!r}")
 
 
-# --- policies on raw observations -------------------------------------------------------------------------------
+# --- policies on raw observations ---
 class NormalizedPolicy:
     """An SB3 model plus frozen VecNormalize observation statistics: ``predict`` on raw env observations
     (one observation dict, or a batched one), the interface of SB3's ``model.predict``."""
@@ -88,8 +90,8 @@ class NormalizedPolicy:
     def from_vecnormalize(cls, model, vecnorm, obs_keys: Sequence[str], **kw) -> NormalizedPolicy:
         rms = vecnorm.obs_rms
         return cls(model, obs_keys, {k: rms[k].mean.copy() for k in obs_keys},
-                   {k: rms[k].var.copy() for k in obs_keys}, clip_obs=vecnorm.clip_obs, epsilon=vecnorm.epsilon,
-                   **kw)
+                   {k: rms[k].var.copy() for k in obs_keys}, clip_obs=vecnorm.clip_obs,
+                   epsilon=vecnorm.epsilon, **kw)
 
     def normalize(self, obs: dict) -> dict:
         obs = filter_observation(obs, self.obs_keys)
@@ -119,7 +121,8 @@ class ConstantPolicy:
     @classmethod
     def no_maintenance(cls, config: TampingEnvConfig | None = None, action_type: str = "multibinary"):
         n = _as_config(config).n_sections
-        return cls(np.zeros(n, dtype=np.int8) if action_type == "multibinary" else np.int64(0), "no_maintenance")
+        action = np.zeros(n, dtype=np.int8) if action_type == "multibinary" else np.int64(0)
+        return cls(action, "no_maintenance")
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         batched = np.asarray(observation["time"]).ndim == 2
@@ -163,7 +166,7 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
     return returns
 
 
-# --- callbacks ---------------------------------------------------------------------------------------------------
+# --- callbacks ---
 def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose):
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -179,8 +182,8 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
 
         def _evaluate(self) -> None:
             self.last_eval = self.num_timesteps
-            policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(), obs_keys,
-                                                        algo=algo)
+            policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(),
+                                                        obs_keys, algo=algo)
             t0 = time.time()
             ret = evaluate_returns(policy, config, eval_seeds, action_type)
             rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
@@ -221,13 +224,14 @@ def stats_path(zip_path: str | Path) -> Path:
     return zip_path.with_name(zip_path.stem + STATS_SUFFIX)
 
 
-# --- training ----------------------------------------------------------------------------------------------------
+# --- training ---
 def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
           total_timesteps: int | None = None, n_envs: int | None = None, seed: int = 0,
-          out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None, progress: bool = True,
+          out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
+          progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
           eval_freq: int | None = None, verbose: int = 1) -> Path:
-    """Train and save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
+    """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
     ``hyperparams``: a dict or a JSON path overriding ``agents/ppo_config.json`` key by key. Explicit
     arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
@@ -245,7 +249,9 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     algo = algo or hp.get("algo", "ppo")
     n_envs = int(n_envs or hp.get("n_envs", 8))
     total_timesteps = int(total_timesteps or hp.get("total_timesteps", 8000))
-    checkpoint_every = int(checkpoint_every if checkpoint_every is not None else hp.get("checkpoint_every", 0))
+    if checkpoint_every is None:
+        checkpoint_every = hp.get("checkpoint_every", 0)
+    checkpoint_every = int(checkpoint_every)
     eval_freq = int(eval_freq if eval_freq is not None else hp.get("eval_freq", 0))
     action_type = hp.get("action_type", "multibinary")
     keep = bool(hp.get("keep_per_sleeper", True))
@@ -257,8 +263,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     torch.set_num_threads(1)  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
     raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed)
-    env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=float(hp.get("clip_obs", 10.0)),
-                       gamma=float(hp.get("gamma", 0.99)))
+    env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True,
+                       clip_obs=float(hp.get("clip_obs", 10.0)), gamma=float(hp.get("gamma", 0.99)))
     algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
     policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
     model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,

@@ -244,6 +244,9 @@ class TrackDegradation:
         ev = np.arange(self.n_extra, self.n_extra + self.track.n_sleepers)
         rhs = np.zeros((t.n_dof, ev.size))
         rhs[lay.sleeper[ev], np.arange(ev.size)] = t.ballast_stiffness[ev]
+        # the approach and exit zones are held at the level of the end sleepers: they settle with them
+        for zone, col in ((np.arange(self.n_extra), 0), (np.arange(ev[-1] + 1, t.n_sleepers), ev.size - 1)):
+            rhs[lay.sleeper[zone], col] = t.ballast_stiffness[zone]
         du = scipy.linalg.solveh_banded(lapack_lower(kband), rhs, lower=True)
         kb = t.ballast_stiffness[ev]
         return kb[:, None] * (du[lay.sleeper[ev]] - np.eye(ev.size))

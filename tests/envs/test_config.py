@@ -1,4 +1,4 @@
-"""TampingEnvConfig: frozen, validated, round-trips through dicts; bad input raises ValueError naming the field."""
+"""TampingEnvConfig: frozen, validated, round-trips through dicts; bad input raises ValueError naming it."""
 
 from __future__ import annotations
 

@@ -30,7 +30,7 @@ def _mask(start: int = 30, stop: int = 70) -> np.ndarray:
 def test_tamping_lowers_sd_and_restores_design_line():
     z = _level(1)
     m = _mask()
-    res = tamp(z, m, TampingModel(), np.random.default_rng(0), np.zeros(N, int))
+    res = tamp(z, m, TampingModel(reference="design"), np.random.default_rng(0), np.zeros(N, int))
     assert isinstance(res, TampingResult)
     inner = slice(34, 66)  # tamped run without its run-outs
     assert np.std(res.level[inner]) < 0.5 * np.std(z[inner])
@@ -67,6 +67,7 @@ def test_smoothing_mode_keeps_level_of_neighbours():
     np.testing.assert_allclose(exact.level[m] - chord, 0.3 * (z[m] - chord), atol=1e-15)
     with pytest.raises(ValueError, match="reference"):
         TampingModel(reference="absolute")
+    assert TampingModel().reference == "smoothing"  # the default (spot tamping of short sections)
 
 
 @pytest.mark.parametrize("reference", ["design", "smoothing"])
@@ -113,7 +114,7 @@ def test_rate_factor_grows_and_resets_at_renewal():
 def test_renewal_removes_memory():
     z = _level(6)
     m = np.ones(N, dtype=bool)
-    model = TampingModel(residual_sd_m=0.0, max_tampings_before_renewal=2)
+    model = TampingModel(reference="design", residual_sd_m=0.0, max_tampings_before_renewal=2)
     res = tamp(z, m, model, np.random.default_rng(0), np.full(N, 2))
     assert res.renewed_mask.all()
     np.testing.assert_allclose(res.level, 0.0, atol=1e-15)
@@ -122,20 +123,24 @@ def test_renewal_removes_memory():
 def test_runout_keeps_edge_step_small():
     z = np.full(N, 12e-3)  # uniformly settled 12 mm
     m = _mask()
-    model = TampingModel(residual_fraction=0.3, residual_sd_m=0.0, runout_sleepers=3)
+    model = TampingModel(reference="design", residual_fraction=0.3, residual_sd_m=0.0, runout_sleepers=3)
     res = tamp(z, m, model, np.random.default_rng(0), np.zeros(N, int))
     steps = np.abs(np.diff(res.level))
     assert steps.max() <= 12e-3 / 4 + 1e-12  # lift ramps over runout + 1 sleeper spacings
     np.testing.assert_allclose(res.level[30:34], 12e-3 * np.array([0.75, 0.5, 0.25, 0.0]), atol=1e-15)
     no_ramp = tamp(
-        z, m, TampingModel(residual_sd_m=0.0, runout_sleepers=0), np.random.default_rng(0), np.zeros(N, int)
+        z,
+        m,
+        TampingModel(reference="design", residual_sd_m=0.0, runout_sleepers=0),
+        np.random.default_rng(0),
+        np.zeros(N, int),
     )
     assert np.abs(np.diff(no_ramp.level)).max() == pytest.approx(12e-3)
 
 
 def test_run_touching_array_end_is_not_ramped():
     z = np.full(N, 12e-3)
-    model = TampingModel(residual_sd_m=0.0)
+    model = TampingModel(reference="design", residual_sd_m=0.0)
     res = tamp(z, _mask(0, 20), model, np.random.default_rng(0), np.zeros(N, int))
     assert res.level[0] == pytest.approx(0.0, abs=1e-15)
     assert res.level[19] == pytest.approx(12e-3 * 0.75)
@@ -156,7 +161,7 @@ def test_same_seed_same_result():
 def test_beta_behaviour_on_average():
     # away from the run-outs, SD after / SD before (about the line fit) is residual_fraction without
     # residual noise, and matches sd_after_tamping on average with it
-    model = TampingModel(residual_fraction=0.3, residual_sd_m=0.5e-3)
+    model = TampingModel(reference="design", residual_fraction=0.3, residual_sd_m=0.5e-3)
     inner = slice(34, 66)
     m = _mask()
     ratios, sds_before, sds_after = [], [], []
@@ -166,7 +171,13 @@ def test_beta_behaviour_on_average():
         t = np.arange(32)
         fit = np.polyval(np.polyfit(np.arange(40), z[m], 1), t + 4)
         sd_b = np.std(z[inner] - fit)
-        exact = tamp(z, m, TampingModel(residual_fraction=0.3, residual_sd_m=0.0), rng, np.zeros(N, int))
+        exact = tamp(
+            z,
+            m,
+            TampingModel(reference="design", residual_fraction=0.3, residual_sd_m=0.0),
+            rng,
+            np.zeros(N, int),
+        )
         ratios.append(np.std(exact.level[inner]) / sd_b)
         noisy = tamp(z, m, model, rng, np.zeros(N, int))
         sds_before.append(sd_b)

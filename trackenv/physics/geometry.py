@@ -331,7 +331,7 @@ def d1_filter(
 
     EN 13848-1 defines the D1 range as wavelengths 3 m < lambda <= 25 m (D2: 25-70 m). We approximate its
     band-pass by a Butterworth band-pass of ``order`` (per pass; cut-offs at wavenumbers 1/25 and 1/3
-    cycles/m) applied forwards and backwards (``scipy.signal.sosfiltfilt``), which has zero phase, so defects
+    cycles/m) applied forwards and backwards (as ``scipy.signal.sosfiltfilt``), so it has zero phase: defects
     stay where they are, and magnitude ``|H|^2``: 0.5 at the nominal band edges, ~1 in the middle of the band,
     falling as ``(lambda/3)^-16`` below 3 m and ``(lambda/25)^16`` above 25 m for ``order=4``. The standard's
     own filter characteristics are not reproduced **[unverified]**.
@@ -632,9 +632,8 @@ def classify(peaks, limits: BandLimits, sd=None) -> np.ndarray:
     level in our table).
     """
     if not isinstance(limits, BandLimits):
-        raise ValueError(
-            f"limits must be a BandLimits (e.g. QualityLimits.for_speed(v)), got {type(limits).__name__}"
-        )
+        kind = type(limits).__name__
+        raise ValueError(f"limits must be a BandLimits (e.g. QualityLimits.for_speed(v)), got {kind}")
     p = check_array("peaks", peaks, low=0.0)
     cls = (
         (p >= limits.alert_m).astype(np.int64)
