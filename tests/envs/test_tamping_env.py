@@ -299,12 +299,6 @@ def test_tamping_a_section_is_recorded_in_the_step(branches: list) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="BUG (tamping model defaults / env): on 10 m sections tamping often RAISES "
-                   "the section's SD: reference='design' lifts the section to the design line while its "
-                   "neighbours have settled ~5 mm (a step over the 3 run-out sleepers, inside the section), "
-                   "and the restarted consolidation (~2-3 mm in the first quarter, tamped sleepers only) "
-                   "re-creates steps and differential settlement within the period")
 def test_tamping_a_section_lowers_its_sd_at_once(branches: list) -> None:
     """The issue's must-hold: the step's section SD with the section tamped is below that without."""
     worse = [(seed, s, float(o["section_sd"][s]), float(untamped["section_sd"][s]))
@@ -360,17 +354,13 @@ def test_stiffer_ballast_next_to_softer_degrades_faster_at_the_joint() -> None:
     u = sim.run(4).settlement
     diff = np.abs(np.diff(u, axis=1))  # (iterations, bays): bay i lies between sleepers i and i+1
     near = diff[:, 21:28].max(axis=1)  # bays around sleeper 25
-    # elsewhere: the rest of the track, leaving out 6 sleepers at each end (see the xfail test below)
+    # elsewhere: the rest of the track, leaving out 6 sleepers at each end
     elsewhere = np.concatenate([diff[:, 6:19], diff[:, 31:44]], axis=1).max(axis=1)
     assert np.all(near > 3 * elsewhere), (near, elsewhere)
     assert np.all(np.diff(near) > 0), near  # and it grows
     assert 21 <= diff[-1].argmax() <= 27 or diff[-1, 21:28].max() >= 0.9 * diff[-1].max()
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="BUG (degradation.py, feedback='support'): the implicit load "
-                   "redistribution (support_influence) treats the approach/exit sleepers as not settling, "
-                   "so the end sleepers shed load and settle ~12 % less: ramps form at both track ends")
 def test_uniform_track_with_support_feedback_settles_uniformly_to_its_ends() -> None:
     sim = te.TrackDegradation(te.Track.realistic(30.0), te.Wheelset(mass=1800.0, static_load=100e3),
                               cycles_per_iteration=50_000, speed=80 / 3.6, feedback="support")
