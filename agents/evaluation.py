@@ -109,13 +109,6 @@ class EvaluationResult:
         }
 
 
-def _as_config(config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
-    if config is None:
-        return TampingEnvConfig()
-    if isinstance(config, dict):
-        return TampingEnvConfig.from_dict(config)
-    return config
-
 
 def _bound(policy: Any, config: TampingEnvConfig) -> Any:
     bind = getattr(policy, "bind", None)
@@ -184,7 +177,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
 
     Results are independent of the batching: each env draws only from its own seed's generator.
     """
-    cfg = _as_config(config)
+    cfg = TampingEnvConfig.coerce(config)
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must not be empty")
@@ -296,7 +289,7 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
     """
     from .heuristics import HEURISTICS
 
-    cfg = _as_config(config)
+    cfg = TampingEnvConfig.coerce(config)
     items = list(policies.items()) if isinstance(policies, Mapping) else [(None, p) for p in policies]
     items = [(label, HEURISTICS[p] if isinstance(p, str) else p) for label, p in items]
     tunable = [i for i, (_, p) in enumerate(items) if isinstance(p, type) and hasattr(p, "param_grid")]
@@ -409,7 +402,7 @@ def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, s
                    action_type: str = "multibinary") -> dict[str, np.ndarray]:
     """One episode's traces: section SD [mm] (steps+1, n_sections), tamped (steps, n_sections), cost and year
     per step."""
-    cfg = _as_config(config)
+    cfg = TampingEnvConfig.coerce(config)
     pol = _bound(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
     env = TampingVectorEnv(1, cfg, action_type=action_type)
     out = _run_chunk(env, [(0, int(seed))], [pol], action_type, record=True)
@@ -426,7 +419,7 @@ def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cfg = _as_config(config)
+    cfg = TampingEnvConfig.coerce(config)
     tr = record_episode(policy, cfg, seed)
     years = np.concatenate([[0.0], tr["year"]])
     lim = cfg.quality_limits.for_speed(cfg.speed)

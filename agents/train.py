@@ -36,7 +36,7 @@ STATS_SUFFIX = "_obs_stats.json"
 _ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
               "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
 _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
-               "eval_freq", "checkpoint_every")
+               "eval_freq", "checkpoint_every", "initial_tamp_logit")
 
 
 def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
@@ -49,13 +49,6 @@ def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
         raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
     return hp
 
-
-def _as_config(config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
-    if config is None:
-        return TampingEnvConfig()
-    if isinstance(config, dict):
-        return TampingEnvConfig.from_dict(config)
-    return config
 
 
 def _algo_class(algo: str):
@@ -120,7 +113,7 @@ class ConstantPolicy:
 
     @classmethod
     def no_maintenance(cls, config: TampingEnvConfig | None = None, action_type: str = "multibinary"):
-        n = _as_config(config).n_sections
+        n = TampingEnvConfig.coerce(config).n_sections
         action = np.zeros(n, dtype=np.int8) if action_type == "multibinary" else np.int64(0)
         return cls(action, "no_maintenance")
 
@@ -139,7 +132,7 @@ class RandomPolicy:
 
     def __init__(self, config: TampingEnvConfig | None = None, action_type: str = "multibinary",
                  seed: int = 0) -> None:
-        self.space = action_space(_as_config(config), action_type)
+        self.space = action_space(TampingEnvConfig.coerce(config), action_type)
         self.space.seed(seed)
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
@@ -154,7 +147,7 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
                      deterministic: bool = True) -> np.ndarray:
     """Undiscounted episode return (−total cost, k€) of ``policy`` on each seed (one episode per seed, all run
     together in one :class:`TampingVectorEnv`)."""
-    config = _as_config(config)
+    config = TampingEnvConfig.coerce(config)
     venv = TampingVectorEnv(len(seeds), config, action_type=action_type)
     obs, _ = venv.reset(seed=[int(s) for s in seeds])
     returns = np.zeros(len(seeds))
@@ -255,7 +248,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     eval_freq = int(eval_freq if eval_freq is not None else hp.get("eval_freq", 0))
     action_type = hp.get("action_type", "multibinary")
     keep = bool(hp.get("keep_per_sleeper", True))
-    config = _as_config(config)
+    config = TampingEnvConfig.coerce(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     AlgoClass = _algo_class(algo)
@@ -269,6 +262,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
     model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
                       policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
+    if "initial_tamp_logit" in hp:
+        _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
 
     callbacks = []
     if checkpoint_every > 0:
@@ -298,6 +293,21 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
     env.close()
     return path
+
+
+def _set_initial_tamp_logit(model, logit: float, action_type: str) -> None:
+    """Start from a policy that rarely tamps: the action head's bias sets the initial log-odds of tamping a
+    section (MultiBinary) or of choosing any section over "nothing" (Discrete). A random policy that tamps
+    half the sections every quarter is ruinous, and exploring from there wastes most of a small budget."""
+    import torch
+
+    with torch.no_grad():
+        bias = model.policy.action_net.bias
+        if action_type == "discrete":
+            bias.zero_()
+            bias[0] = -logit
+        else:
+            bias.fill_(logit)
 
 
 def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED) -> Path:

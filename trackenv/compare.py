@@ -48,10 +48,7 @@ def run_comparison(out_dir: str | Path | None = "results/compare",
     from agents.heuristics import HEURISTICS, RandomPolicy
 
     t0 = time.perf_counter()
-    if config is None:
-        config = TampingEnvConfig(**QUICK_CONFIG) if quick else TampingEnvConfig()
-    elif isinstance(config, dict):
-        config = TampingEnvConfig.from_dict(config)
+    config = TampingEnvConfig.coerce(QUICK_CONFIG if quick and config is None else config)
     if n_test is None:
         n_test = QUICK_N_TEST if quick else len(TEST_SEEDS)
     if n_train is None:

@@ -133,6 +133,17 @@ class TampingEnvConfig:
         c("dt", self.dt, low=1e-6, high=5e-4)
 
     @classmethod
+    def coerce(cls, config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
+        """A config from None (the defaults), a dict (validated) or a config; anything else raises."""
+        if config is None:
+            return cls()
+        if isinstance(config, dict):
+            return cls.from_dict(config)
+        if not isinstance(config, cls):
+            raise ValueError(f"config must be a TampingEnvConfig or dict, got {type(config).__name__}")
+        return config
+
+    @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TampingEnvConfig:
         """Build from a dict; an unknown key raises ValueError naming it."""
         known = {f.name for f in fields(cls)}

@@ -127,12 +127,7 @@ class TampingEnv(gym.Env):
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        if config is None:
-            config = TampingEnvConfig()
-        elif isinstance(config, dict):
-            config = TampingEnvConfig.from_dict(config)
-        elif not isinstance(config, TampingEnvConfig):
-            raise ValueError(f"config must be a TampingEnvConfig or dict, got {type(config).__name__}")
+        config = TampingEnvConfig.coerce(config)
         if overrides:
             config = config.replace(**overrides)
         if render_mode not in (None, "rgb_array"):

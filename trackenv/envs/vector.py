@@ -38,10 +38,7 @@ class TampingVectorEnv(VectorEnv):
             raise ValueError(f"num_envs must be an integer in [1, 4096], got {num_envs!r}")
         overrides.pop("render_mode", None)
         overrides.pop("max_episode_steps", None)
-        if config is None:
-            config = TampingEnvConfig()
-        elif isinstance(config, dict):
-            config = TampingEnvConfig.from_dict(config)
+        config = TampingEnvConfig.coerce(config)
         if overrides:
             config = config.replace(**overrides)
         self.config = config

@@ -58,3 +58,17 @@ def check_array(
     if high is not None and np.any(arr > high):
         raise ValueError(f"{name} must be <= {high:g} everywhere, got max {arr.max():g}")
     return arr
+
+
+def dataclass_from_dict(cls, d):
+    """``cls(**d)`` for a frozen parameter dataclass, raising ValueError naming any unknown key."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{cls.__name__}.from_dict expects a mapping, got {type(d).__name__}")
+    known = sorted(f.name for f in dataclasses.fields(cls))
+    unknown = sorted(str(k) for k in d if k not in known)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} key(s) {unknown}; allowed: {known}")
+    return cls(**dict(d))

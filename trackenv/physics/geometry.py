@@ -21,7 +21,6 @@ What is here and why:
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Callable, Mapping
@@ -30,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, linalg, signal
 
-from trackenv.physics._validation import check_array, check_scalar
+from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
 
 __all__ = [
     "GERMAN_PSD_PARAMETERS",
@@ -588,13 +587,7 @@ class QualityLimits:
     @classmethod
     def from_dict(cls, d: Mapping) -> QualityLimits:
         """Build from a mapping of field names (sequences for the per-band columns); unknown keys raise."""
-        if not isinstance(d, Mapping):
-            raise ValueError(f"QualityLimits.from_dict expects a mapping, got {type(d).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        for key in d:
-            if key not in known:
-                raise ValueError(f"unknown QualityLimits key {key!r}; allowed: {sorted(known)}")
-        return cls(**dict(d))
+        return dataclass_from_dict(cls, d)
 
     def for_speed(self, speed_m_per_s: float) -> BandLimits:
         """Limits for the band containing ``speed_m_per_s`` [m/s] (converted to km/h with 3.6).

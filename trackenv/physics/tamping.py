@@ -52,14 +52,13 @@ machine time with ``machine_speed_m_per_s``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from trackenv.physics._validation import check_array, check_scalar
+from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
 
 __all__ = ["TampingModel", "TampingResult", "tamp", "sd_after_tamping", "tamped_runs"]
 
@@ -121,13 +120,7 @@ class TampingModel:
     @classmethod
     def from_dict(cls, d: Mapping) -> TampingModel:
         """Build from a mapping of field names to values; an unknown key raises ValueError naming it."""
-        if not isinstance(d, Mapping):
-            raise ValueError(f"TampingModel.from_dict expects a mapping, got {type(d).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        for key in d:
-            if key not in known:
-                raise ValueError(f"unknown TampingModel key {key!r}; allowed: {sorted(known)}")
-        return cls(**dict(d))
+        return dataclass_from_dict(cls, d)
 
     def rate_factor(self, tampings) -> np.ndarray:
         """Settlement-rate factor ``(1 + damage_per_tamping) ** tampings`` for tamping counts ``tampings``."""
