@@ -13,6 +13,9 @@ import time
 from typing import Any
 
 
+DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
+
+
 def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
     if args.json:
         print(json.dumps(payload, default=_jsonable))
@@ -81,15 +84,26 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             if args.policy == "ppo":
                 raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
             print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
+    from pathlib import Path
+
+    import agents
+
+    tuned = None
+    shipped = Path(agents.__file__).parent / "tuned_heuristics.json"
+    if not (args.retune or args.quick) and shipped.exists():
+        tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
+    n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
     t0 = time.perf_counter()
     result = run_comparison(
         out_dir=args.out or "results/compare",
-        n_test=args.n_test,
+        n_test=n_test,
         n_train=args.n_train,
         quick=args.quick,
         progress=not args.json,
         extra_policies=extra,
+        tuned=tuned,
     )
+    result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
     from agents.evaluation import format_table
 
@@ -140,15 +154,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quick", action="store_true")
     sp.set_defaults(func=cmd_bench)
 
-    sp = sub.add_parser(
-        "evaluate", help="score the trained policy and the tuned heuristics on held-out seeds"
-    )
+    sp = sub.add_parser("evaluate", help="score the trained policy and the tuned heuristics on held-out seeds")
     common(sp)
     sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all")
     sp.add_argument("--model", default=None, help="path of a trained model (default: the shipped one)")
-    sp.add_argument("--n-test", type=int, default=None, help="held-out episodes (default: the harness's)")
+    sp.add_argument("--n-test", type=int, default=None, help="held-out episodes (default 24 of the 200 test seeds)")
     sp.add_argument("--n-train", type=int, default=None, help="episodes for tuning the heuristics")
     sp.add_argument("--quick", action="store_true", help="a small, fast configuration (about a minute)")
+    sp.add_argument(
+        "--retune", action="store_true", help="tune the heuristics again instead of using the shipped parameters"
+    )
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("train", help="train a PPO agent (stable-baselines3)")

@@ -23,11 +23,17 @@ QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
 QUICK_N_TEST, QUICK_N_TRAIN = 6, 2
 
 
-def run_comparison(out_dir: str | Path | None = "results/compare",
-                   config: TampingEnvConfig | dict | None = None,
-                   n_test: int | None = None, n_train: int | None = None, quick: bool = False,
-                   progress: bool = True, extra_policies: Mapping[str, Any] | None = None,
-                   batch_size: int = 32) -> dict[str, Any]:
+def run_comparison(
+    out_dir: str | Path | None = "results/compare",
+    config: TampingEnvConfig | dict | None = None,
+    n_test: int | None = None,
+    n_train: int | None = None,
+    quick: bool = False,
+    progress: bool = True,
+    extra_policies: Mapping[str, Any] | None = None,
+    batch_size: int = 32,
+    tuned: Mapping[str, dict] | str | Path | None = None,
+) -> dict[str, Any]:
     """Tune each heuristic of :data:`agents.heuristics.HEURISTICS` (but the random baseline) on the first
     ``n_train`` training seeds, evaluate them, a random baseline and ``extra_policies`` on the first
     ``n_test`` test seeds; returns ``{"results": [summaries sorted by mean cost], ...}`` and writes the files
@@ -54,34 +60,53 @@ def run_comparison(out_dir: str | Path | None = "results/compare",
     if n_train is None:
         n_train = QUICK_N_TRAIN if quick else len(TRAIN_SEEDS)
     if not 1 <= n_test <= len(TEST_SEEDS) or not 1 <= n_train <= len(TRAIN_SEEDS):
-        raise ValueError(f"n_test must be in [1, {len(TEST_SEEDS)}] and n_train in [1, {len(TRAIN_SEEDS)}], "
-                         f"got {n_test}, {n_train}")
+        raise ValueError(
+            f"n_test must be in [1, {len(TEST_SEEDS)}] and n_train in [1, {len(TRAIN_SEEDS)}], got {n_test}, {n_train}"
+        )
     test_seeds, train_seeds = list(TEST_SEEDS[:n_test]), list(TRAIN_SEEDS[:n_train])
 
     policies: dict[str, Any] = {name: cls for name, cls in HEURISTICS.items() if name != "random"}
+    if tuned is not None:  # parameters tuned earlier: evaluate those, do not tune again
+        if not isinstance(tuned, Mapping):
+            tuned = json.loads(Path(tuned).read_text())["best_params"]
+        for name, params in tuned.items():
+            if name not in policies:
+                raise ValueError(f"tuned parameters for unknown heuristic {name!r}")
+            policies[name] = HEURISTICS[name](**params)
     policies["random"] = RandomPolicy(p=0.05, seed=0)
     for name, pol in (extra_policies or {}).items():
         if name in policies:
             raise ValueError(f"extra policy name {name!r} clashes with a heuristic")
         policies[name] = pol
-    results, tuning = compare_results(policies, config, test_seeds, train_seeds, tune_heuristics=True,
-                                      batch_size=batch_size, progress=progress)
+    results, tuning = compare_results(
+        policies, config, test_seeds, train_seeds, tune_heuristics=True, batch_size=batch_size, progress=progress
+    )
     summaries = [r.summary() for r in results]
     best = results[0]
     paired = [paired_difference(r, best) for r in results[1:]]
-    out: dict[str, Any] = {"results": summaries, "tuning": tuning, "paired_vs_best": paired,
-                           "config": config.to_dict(), "test_seeds": test_seeds, "train_seeds": train_seeds,
-                           "quick": quick}
+    out: dict[str, Any] = {
+        "results": summaries,
+        "tuning": tuning,
+        "paired_vs_best": paired,
+        "config": config.to_dict(),
+        "test_seeds": test_seeds,
+        "train_seeds": train_seeds,
+        "quick": quick,
+    }
     if out_dir is not None:
         d = Path(out_dir)
         d.mkdir(parents=True, exist_ok=True)
         plot_comparison(results, str(d / "costs.png"))
         best_heur = next((r for r in results if r.policy in HEURISTICS and r.policy != "random"), None)
+        out["files"] = {"json": str(d / "comparison.json"), "costs": str(d / "costs.png")}
         if best_heur is not None:
             pol = HEURISTICS[best_heur.policy](**best_heur.params)
             plot_episode(pol, config, test_seeds[0], str(d / "episode.png"))
-        out["files"] = {"json": str(d / "comparison.json"), "costs": str(d / "costs.png"),
-                        "episode": str(d / "episode.png") if best_heur is not None else None}
+            out["files"]["episode"] = str(d / "episode.png")
+        for name, pol in (extra_policies or {}).items():  # the same held-out episode under each trained agent
+            plot_episode(pol, config, test_seeds[0], str(d / f"episode_{name}.png"))
+            out["files"][f"episode_{name}"] = str(d / f"episode_{name}.png")
+        out["best_params"] = {r.policy: r.params for r in results if r.policy in HEURISTICS and r.policy != "random"}
     out["wall_time_s"] = time.perf_counter() - t0
     out["table"] = format_table(summaries)
     if out_dir is not None:
