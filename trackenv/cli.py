@@ -12,7 +12,6 @@ import sys
 import time
 from typing import Any
 
-
 DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
 
 
