@@ -74,7 +74,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .compare import run_comparison
 
     extra = {}
-    if args.policy in ("ppo", "all"):
+    if args.quick and args.policy == "ppo":
+        raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
+    if args.policy in ("ppo", "all") and not args.quick:  # the shipped policy knows the default track only
         try:
             from agents.train import load_trained
 
