@@ -147,8 +147,8 @@ class Periodic(_Calendar):
 
     @classmethod
     def param_grid(cls):
-        return ([{"interval_years": y, "sections": "all"} for y in (1.0, 2.0, 3.0, 5.0)]
-                + [{"interval_years": y, "sections": "worst", "n_worst": 2} for y in (0.5, 1.0, 2.0)])
+        return ([{"interval_years": y, "sections": "all"} for y in (2.0, 3.0, 4.0, 5.0, 6.0, 7.0)]
+                + [{"interval_years": y, "sections": "worst", "n_worst": 2} for y in (1.0, 2.0, 4.0)])
 
 
 class SDThreshold(Heuristic):
@@ -164,7 +164,7 @@ class SDThreshold(Heuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"threshold_mm": v} for v in (0.8, 1.0, 1.3, 1.6, 2.0, 2.4)]
+        return [{"threshold_mm": v} for v in (1.6, 2.0, 2.4, 2.8, 3.2, 4.0)]
 
 
 class DefectThreshold(Heuristic):
@@ -180,7 +180,7 @@ class DefectThreshold(Heuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"threshold_mm": v} for v in (3.0, 4.5, 6.0, 8.0, 10.0, 12.0)]
+        return [{"threshold_mm": v} for v in (4.5, 6.0, 8.0, 10.0, 12.0, 15.0)]
 
 
 class WorstFirst(_Calendar):
@@ -216,7 +216,7 @@ class WorstFirst(_Calendar):
     @classmethod
     def param_grid(cls):
         return [{"budget_sections_per_year": b, "threshold_mm": t}
-                for b in (1.0, 2.0, 4.0) for t in (0.8, 1.2, 1.6)]
+                for b in (0.5, 1.0, 2.0) for t in (1.6, 2.2, 2.8)]
 
 
 class RandomPolicy(Heuristic):
