@@ -17,6 +17,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .envs.config import TampingEnvConfig
 
 QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
@@ -82,6 +84,7 @@ def run_comparison(
         policies, config, test_seeds, train_seeds, tune_heuristics=True, batch_size=batch_size, progress=progress
     )
     summaries = [r.summary() for r in results]
+    episode_costs = {r.policy: np.asarray(r.cost).tolist() for r in results}
     best = results[0]
     paired = [paired_difference(r, best) for r in results[1:]]
     out: dict[str, Any] = {
@@ -91,7 +94,7 @@ def run_comparison(
         "config": config.to_dict(),
         "test_seeds": test_seeds,
         "train_seeds": train_seeds,
-        "quick": quick,
+        "quick": quick, "episode_costs": episode_costs,
     }
     if out_dir is not None:
         d = Path(out_dir)
