@@ -15,7 +15,7 @@ setup: $(BIN)/trackenv
 demo: setup
 	$(BIN)/trackenv validate
 	$(BIN)/trackenv paper
-	$(BIN)/trackenv evaluate --quick
+	$(BIN)/trackenv evaluate
 
 test: setup
 	$(BIN)/ruff check trackenv agents tests experiments
