@@ -192,6 +192,7 @@ def _run_one(
     cols = np.zeros((n_axles, ncol, m_max))
     rhs = np.zeros(n)
     pred = np.zeros(n)
+    qdamp = np.zeros(n)
     rv = np.zeros(nv)
     qpred = np.zeros(nv)
     tmp = np.zeros(m_max)
@@ -287,18 +288,17 @@ def _run_one(
             m = hi - lo
             for i in range(lo, hi):
                 rhs[i] = a0 * u[i] + a2 * v[i] + a3 * a[i]
-                pred[i] = a1 * u[i] + a4 * v[i] + a5 * a[i]
-            _mass_times(mfull, rhs, tmp, lo, hi)
+                qdamp[i] = a1 * u[i] + a4 * v[i] + a5 * a[i]
+            window = pred[lo:hi]
+            _mass_times(mfull, rhs, window, lo, hi)
             # damping sits only in the pads and the ballast
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
                 d = sleeper_dof[s_]
                 w = node_w[sleeper_node[s_]]
-                fp = pad_c[s_] * (pred[w] - pred[d])
-                tmp[w - lo] += fp
-                tmp[d - lo] += bal_c[s_] * pred[d] - fp
-            _solve(Fw[c], Bw[c], invd[c], m, tmp)
-            for i in range(lo, hi):
-                pred[i] = tmp[i - lo]
+                fp = pad_c[s_] * (qdamp[w] - qdamp[d])
+                pred[w] += fp
+                pred[d] += bal_c[s_] * qdamp[d] - fp
+            _solve(Fw[c], Bw[c], invd[c], m, window)
 
         # ---- vehicle predictor
         for i in range(nv):
@@ -373,8 +373,33 @@ def _run_one(
         for c in range(n_clusters):
             lo = lo_c[c]
             hi = hi_c[c]
+            loaded = 0
+            last = -1
             for j in range(n_axles):
-                if cluster_of_axle[j] != c or force[j] == 0.0:
+                if cluster_of_axle[j] == c and force[j] != 0.0:
+                    loaded += 1
+                    last = j
+            if loaded == 1:  # one loaded wheel in this window (a wheelset): correction and update in one sweep
+                j = last
+                basej = node_w[sleeper_node[bay_cache[j]]]
+                c0 = cols[j, _local(edofs[j, 0], basej, epb)]
+                c1 = cols[j, _local(edofs[j, 1], basej, epb)]
+                c2 = cols[j, _local(edofs[j, 2], basej, epb)]
+                c3 = cols[j, _local(edofs[j, 3], basej, epb)]
+                f0 = force[j] * shape[j, 0]
+                f1 = force[j] * shape[j, 1]
+                f2 = force[j] * shape[j, 2]
+                f3 = force[j] * shape[j, 3]
+                for i in range(hi - lo):
+                    k = lo + i
+                    un = pred[k] + f0 * c0[i] + f1 * c1[i] + f2 * c2[i] + f3 * c3[i]
+                    an = a0 * (un - u[k]) - a2 * v[k] - a3 * a[k]
+                    v[k] += a6 * a[k] + a7 * an
+                    a[k] = an
+                    u[k] = un
+                loaded = -1  # done
+            for j in range(n_axles):
+                if loaded < 0 or cluster_of_axle[j] != c or force[j] == 0.0:
                     continue
                 basej = node_w[sleeper_node[bay_cache[j]]]
                 l0 = _local(edofs[j, 0], basej, epb)
@@ -390,6 +415,8 @@ def _run_one(
                         f0 * cols[j, l0, i] + f1 * cols[j, l1, i] + f2 * cols[j, l2, i] + f3 * cols[j, l3, i]
                     )
             for i in range(lo, hi):
+                if loaded < 0:
+                    break
                 an = a0 * (pred[i] - u[i]) - a2 * v[i] - a3 * a[i]
                 v[i] += a6 * a[i] + a7 * an
                 a[i] = an
