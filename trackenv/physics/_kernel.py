@@ -61,11 +61,7 @@ def _solve(fw, bw, inv_diag, m, x):
         x[i] = s
     for i in range(B, m):
         x[i] = (
-            x[i] * inv_diag[i]
-            - fw[i, 4] * x[i - 4]
-            - fw[i, 3] * x[i - 3]
-            - fw[i, 2] * x[i - 2]
-            - (fw[i, 1] * x[i - 1])
+            x[i] * inv_diag[i] - fw[i, 4] * x[i - 4] - fw[i, 3] * x[i - 3] - fw[i, 2] * x[i - 2] - (fw[i, 1] * x[i - 1])
         )
     for i in range(m - 1, max(m - 1 - B, -1), -1):
         s = x[i] * inv_diag[i]
@@ -74,11 +70,7 @@ def _solve(fw, bw, inv_diag, m, x):
         x[i] = s
     for i in range(m - 1 - B, -1, -1):
         x[i] = (
-            x[i] * inv_diag[i]
-            - bw[i, 4] * x[i + 4]
-            - bw[i, 3] * x[i + 3]
-            - bw[i, 2] * x[i + 2]
-            - (bw[i, 1] * x[i + 1])
+            x[i] * inv_diag[i] - bw[i, 4] * x[i + 4] - bw[i, 3] * x[i + 3] - bw[i, 2] * x[i + 2] - (bw[i, 1] * x[i + 1])
         )
 
 
@@ -466,171 +458,101 @@ def _local(dof, base, epb):
     return off
 
 
+@njit(cache=True)
+def _run_row(args, b):
+    """Row ``b`` of a batch packed as in :func:`run_batch`: per-row arrays are indexed, shared ones passed on."""
+    (
+        mb,
+        cb,
+        keff,
+        node_w,
+        sleeper_dof,
+        sleeper_node,
+        pad_k,
+        pad_c,
+        bal_k,
+        bal_c,
+        elem_len,
+        epb,
+        spacing,
+        n_sleepers,
+        mv,
+        cv,
+        kv_inv,
+        fv,
+        wheel_dofs,
+        cluster_of_axle,
+        n_clusters,
+        margin_bays,
+        x_axle,
+        z_axle,
+        law,
+        param,
+        consts,
+        u,
+        v,
+        a,
+        q,
+        qd,
+        qdd,
+        out_force,
+        out_rail,
+        out_wheel,
+        peak_ballast,
+        peak_total,
+    ) = args
+    _run_one(
+        mb[b],
+        cb[b],
+        keff[b],
+        node_w,
+        sleeper_dof,
+        sleeper_node,
+        pad_k[b],
+        pad_c[b],
+        bal_k[b],
+        bal_c[b],
+        elem_len,
+        epb,
+        spacing,
+        n_sleepers,
+        mv,
+        cv,
+        kv_inv,
+        fv,
+        wheel_dofs,
+        cluster_of_axle,
+        n_clusters,
+        margin_bays,
+        x_axle,
+        z_axle[b],
+        law,
+        param,
+        consts,
+        u[b],
+        v[b],
+        a[b],
+        q[b],
+        qd[b],
+        qdd[b],
+        out_force[b],
+        out_rail[b],
+        out_wheel[b],
+        peak_ballast[b],
+        peak_total[b],
+    )
+
+
 @njit(parallel=True, cache=True)
-def run_batch(
-    mb,
-    cb,
-    keff,
-    node_w,
-    sleeper_dof,
-    sleeper_node,
-    pad_k,
-    pad_c,
-    bal_k,
-    bal_c,
-    elem_len,
-    epb,
-    spacing,
-    n_sleepers,
-    mv,
-    cv,
-    kv_inv,
-    fv,
-    wheel_dofs,
-    cluster_of_axle,
-    n_clusters,
-    margin_bays,
-    x_axle,
-    z_axle,
-    law,
-    param,
-    consts,
-    u,
-    v,
-    a,
-    q,
-    qd,
-    qdd,
-    out_force,
-    out_rail,
-    out_wheel,
-    peak_ballast,
-    peak_total,
-):
-    """Run every item of the batch (leading axis) in parallel; arrays are filled in place."""
-    for b in prange(mb.shape[0]):
-        _run_one(
-            mb[b],
-            cb[b],
-            keff[b],
-            node_w,
-            sleeper_dof,
-            sleeper_node,
-            pad_k[b],
-            pad_c[b],
-            bal_k[b],
-            bal_c[b],
-            elem_len,
-            epb,
-            spacing,
-            n_sleepers,
-            mv,
-            cv,
-            kv_inv,
-            fv,
-            wheel_dofs,
-            cluster_of_axle,
-            n_clusters,
-            margin_bays,
-            x_axle,
-            z_axle[b],
-            law,
-            param,
-            consts,
-            u[b],
-            v[b],
-            a[b],
-            q[b],
-            qd[b],
-            qdd[b],
-            out_force[b],
-            out_rail[b],
-            out_wheel[b],
-            peak_ballast[b],
-            peak_total[b],
-        )
+def run_batch(args):
+    """Run every row of the batch (leading axis of the per-row arrays in ``args``, the argument list of
+    :func:`_run_one`) in parallel; arrays are filled in place."""
+    for b in prange(args[0].shape[0]):
+        _run_row(args, b)
 
 
 @njit(cache=True)
-def run_serial(
-    mb,
-    cb,
-    keff,
-    node_w,
-    sleeper_dof,
-    sleeper_node,
-    pad_k,
-    pad_c,
-    bal_k,
-    bal_c,
-    elem_len,
-    epb,
-    spacing,
-    n_sleepers,
-    mv,
-    cv,
-    kv_inv,
-    fv,
-    wheel_dofs,
-    cluster_of_axle,
-    n_clusters,
-    margin_bays,
-    x_axle,
-    z_axle,
-    law,
-    param,
-    consts,
-    u,
-    v,
-    a,
-    q,
-    qd,
-    qdd,
-    out_force,
-    out_rail,
-    out_wheel,
-    peak_ballast,
-    peak_total,
-):
+def run_serial(args):
     """:func:`run_batch` on one thread (a batch of one gains nothing from starting threads)."""
-    for b in range(mb.shape[0]):
-        _run_one(
-            mb[b],
-            cb[b],
-            keff[b],
-            node_w,
-            sleeper_dof,
-            sleeper_node,
-            pad_k[b],
-            pad_c[b],
-            bal_k[b],
-            bal_c[b],
-            elem_len,
-            epb,
-            spacing,
-            n_sleepers,
-            mv,
-            cv,
-            kv_inv,
-            fv,
-            wheel_dofs,
-            cluster_of_axle,
-            n_clusters,
-            margin_bays,
-            x_axle,
-            z_axle[b],
-            law,
-            param,
-            consts,
-            u[b],
-            v[b],
-            a[b],
-            q[b],
-            qd[b],
-            qdd[b],
-            out_force[b],
-            out_rail[b],
-            out_wheel[b],
-            peak_ballast[b],
-            peak_total[b],
-        )
+    for b in range(args[0].shape[0]):
+        _run_row(args, b)

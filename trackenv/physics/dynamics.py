@@ -96,8 +96,7 @@ def _as_tracks(tracks) -> list[Track]:
             t0.rail_mass,
         ):
             raise ValueError(
-                "tracks in one batch must share sleepers, spacing, mesh and rail; only support "
-                "properties may differ"
+                "tracks in one batch must share sleepers, spacing, mesh and rail; only support properties may differ"
             )
     return tracks
 
@@ -114,8 +113,7 @@ def _rail_bands_cached(n_sleepers: int, epb: int, element_length: float, ei: flo
 def _rail_bands(lay, element_length: float, ei: float, mass: float):
     """M, C, K of the bare rail (no supports), assembled once per mesh."""
     return tuple(
-        b.copy()
-        for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length, ei, mass)
+        b.copy() for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length, ei, mass)
     )
 
 
@@ -172,9 +170,7 @@ def receptance(track: Track, x: float | None = None, frequencies=None) -> np.nda
     """Complex rail receptance w/F [m/N] at position ``x`` [m] for ``frequencies`` [Hz]: the direct
     frequency response of the full track, (K + iωC − ω²M)⁻¹ at the load point."""
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
-    f = check_array(
-        "frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies, low=0.0
-    )
+    f = check_array("frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies, low=0.0)
     m, c, k = track.banded_matrices()
     dofs, shp = _point_load_vector(track, x)
     rhs = np.zeros(track.n_dof, dtype=complex)
@@ -229,12 +225,7 @@ def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
     lay = track.dof_layout
     n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
     n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
-    return (
-        n1 * u[lay.node_w[e]]
-        + n2 * u[lay.node_theta[e]]
-        + n3 * u[lay.node_w[e + 1]]
-        + n4 * u[lay.node_theta[e + 1]]
-    )
+    return n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]] + n4 * u[lay.node_theta[e + 1]]
 
 
 def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
@@ -327,16 +318,10 @@ def simulate_passes(
             f"(period {period:.3g} s), got {dt:g}"
         )
     if sys_.span >= t0.length:
-        raise ValueError(
-            f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)"
-        )
-    x_start = (
-        sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
-    )
+        raise ValueError(f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)")
+    x_start = sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
     x_end = (
-        t0.length
-        if x_end is None
-        else check_scalar("x_end", x_end, low=x_start, high=t0.length, low_inclusive=False)
+        t0.length if x_end is None else check_scalar("x_end", x_end, low=x_start, high=t0.length, low_inclusive=False)
     )
     if window_bays is not None and (not isinstance(window_bays, (int, np.integer)) or window_bays < 2):
         raise ValueError(f"window_bays must be an integer >= 2 or None, got {window_bays!r}")
@@ -445,44 +430,46 @@ def simulate_passes(
 
     run = _kernel.run_serial if nb == 1 else _kernel.run_batch
     run(
-        mb,
-        cb,
-        keff,
-        lay.node_w,
-        lay.sleeper,
-        lay.sleeper_node,
-        pad_k,
-        pad_c,
-        bal_k,
-        bal_c,
-        t0.element_length,
-        t0.elements_per_bay,
-        t0.sleeper_spacing,
-        t0.n_sleepers,
-        np.ascontiguousarray(sys_.mass),
-        np.ascontiguousarray(sys_.damping),
-        kv_inv,
-        sys_.force.astype(float),
-        sys_.wheel_dofs.astype(np.int64),
-        cluster,
-        n_clusters,
-        margin,
-        x_axle,
-        z_axle,
-        law.code,
-        float(law.parameter),
-        consts,
-        u,
-        v,
-        a,
-        q,
-        qd,
-        qdd,
-        out_force,
-        out_rail,
-        out_wheel,
-        peak_ballast,
-        peak_total,
+        (
+            mb,
+            cb,
+            keff,
+            lay.node_w,
+            lay.sleeper,
+            lay.sleeper_node,
+            pad_k,
+            pad_c,
+            bal_k,
+            bal_c,
+            t0.element_length,
+            t0.elements_per_bay,
+            t0.sleeper_spacing,
+            t0.n_sleepers,
+            np.ascontiguousarray(sys_.mass),
+            np.ascontiguousarray(sys_.damping),
+            kv_inv,
+            sys_.force.astype(float),
+            sys_.wheel_dofs.astype(np.int64),
+            cluster,
+            n_clusters,
+            margin,
+            x_axle,
+            z_axle,
+            law.code,
+            float(law.parameter),
+            consts,
+            u,
+            v,
+            a,
+            q,
+            qd,
+            qdd,
+            out_force,
+            out_rail,
+            out_wheel,
+            peak_ballast,
+            peak_total,
+        )
     )
 
     peak_ballast += static_ballast
@@ -510,9 +497,7 @@ def simulate_passes(
     return results
 
 
-def simulate_pass(
-    track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options
-) -> PassResult:
+def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
     """One vehicle pass over one track: :func:`simulate_passes` with a batch of one. See there for options."""
     if not isinstance(track, Track):
         raise ValueError(f"track must be a Track, got {type(track).__name__}")
