@@ -39,19 +39,22 @@ class Episode:
     contact_force: np.ndarray = field(default_factory=lambda: np.zeros(0))  # per sleeper [N]
     tamped_last: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     transition_sleeper: int = -1
+    _quality_cache: tuple | None = field(default=None, repr=False)
 
     @property
     def n_sections(self) -> int:
         return self.config.n_sections
 
     def quality(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """D1 level per sleeper, SD and mean-to-peak per section [m]."""
+        """D1 level per sleeper, SD and mean-to-peak per section [m] (computed once per geometry: the level
+        changes only when the simulator replaces its settlement state or offset)."""
+        cached = self._quality_cache
+        if cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset:
+            return cached[2]
         d1 = d1_filter(self.sim.level, 0.6)
-        return (
-            d1,
-            section_sd(d1, self.sections, self.n_sections),
-            section_peak(d1, self.sections, self.n_sections),
-        )
+        value = (d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections, self.n_sections))
+        self._quality_cache = (self.sim.state, self.sim.offset, value)
+        return value
 
     def mask(self) -> np.ndarray:
         """Sections that may be tamped now (not tamped within the last min_steps_between_tampings steps)."""
@@ -111,9 +114,7 @@ def new_episode(config: TampingEnvConfig, rng: np.random.Generator) -> Episode:
     return ep
 
 
-def apply_tamping(
-    ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Generator
-) -> tuple[float, np.ndarray]:
+def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Generator) -> tuple[float, np.ndarray]:
     """Tamp the allowed sections among ``sections_to_tamp`` (bool, n_sections); return the tamping cost and
     the sections actually tamped (masked ones are ignored)."""
     c = ep.config
@@ -175,8 +176,8 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
         "costs": parts,
         "cost": float(sum(parts.values())),
         "tamped_sections": tamped.copy(),
-        "section_sd_m": sd,
-        "section_peak_m": peak,
+        "section_sd_m": sd.copy(),
+        "section_peak_m": peak.copy(),
         "section_class": cls,
         "immediate_action_exceedances": int(np.sum(cls == 3)),
         "year": ep.step_count / ep.config.steps_per_year,
