@@ -12,26 +12,16 @@ import sys
 import time
 from typing import Any
 
+from ._json import json_default
+
 DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
 
 
 def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
     if args.json:
-        print(json.dumps(payload, default=_jsonable))
+        print(json.dumps(payload, default=json_default))
     else:
         print(human)
-
-
-def _jsonable(o: Any):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.bool_):
-        return bool(o)
-    return str(o)
 
 
 def cmd_validate(args: argparse.Namespace) -> int:

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ._json import json_default
 from .envs.config import TampingEnvConfig
 
 QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
@@ -94,7 +95,8 @@ def run_comparison(
         "config": config.to_dict(),
         "test_seeds": test_seeds,
         "train_seeds": train_seeds,
-        "quick": quick, "episode_costs": episode_costs,
+        "quick": quick,
+        "episode_costs": episode_costs,
     }
     if out_dir is not None:
         d = Path(out_dir)
@@ -113,20 +115,5 @@ def run_comparison(
     out["wall_time_s"] = time.perf_counter() - t0
     out["table"] = format_table(summaries)
     if out_dir is not None:
-        (Path(out_dir) / "comparison.json").write_text(json.dumps(out, indent=2, default=_jsonable))
+        (Path(out_dir) / "comparison.json").write_text(json.dumps(out, indent=2, default=json_default))
     return out
-
-
-def _jsonable(x: Any) -> Any:
-    try:
-        import numpy as np
-
-        if isinstance(x, np.generic):
-            return x.item()
-        if isinstance(x, np.ndarray):
-            return x.tolist()
-    except ImportError:  # pragma: no cover
-        pass
-    if isinstance(x, tuple):
-        return list(x)
-    return str(x)

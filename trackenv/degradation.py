@@ -98,9 +98,7 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
-INFLUENCE_BAND = (
-    10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
-)
+INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
 def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
@@ -155,16 +153,12 @@ class TrackDegradation:
         self.law = HettlerLaw() if law is None else law
         if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
             raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
-        self.cycles_per_iteration = check_scalar(
-            "cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9
-        )
+        self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
         self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
         if not isinstance(approach_sleepers, (int, np.integer)) or not 2 <= approach_sleepers <= 200:
             raise ValueError(f"approach_sleepers must be an integer in [2, 200], got {approach_sleepers!r}")
         self.adaptive = bool(adaptive)
-        self.max_increment = check_scalar(
-            "max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False
-        )
+        self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False)
         self.max_passes_per_iteration = int(
             check_scalar("max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000)
         )
@@ -185,9 +179,7 @@ class TrackDegradation:
         n = track.n_sleepers
         self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
         self.model_track = track.extended(self.n_extra, self.n_extra)
-        self.offset = (
-            np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
-        )
+        self.offset = np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
         self.base_rate = (
             np.ones(n)
             if rate_factor is None
@@ -219,13 +211,12 @@ class TrackDegradation:
         """One pass over the current level (on the modelled track with its approach and exit zones)."""
         return simulate_batch([self])[0]
 
-    def settle(self, result: PassResult, cycles: float) -> int:
-        """Advance the settlement by ``cycles`` axle passes under the forces of ``result``; return how many
-        sub-steps it would take with adaptive stepping (1 when the whole increment is within the bound)."""
+    def settle(self, result: PassResult, cycles: float, *, split: bool = True) -> float:
+        """Advance the settlement under the forces of ``result`` by ``cycles`` axle passes, or by fewer where
+        adaptive stepping (and ``split``) cuts the increment; return the cycles taken."""
         cycles = check_scalar("cycles", cycles, low=0.0)
-        force = self.evaluated(result.sleeper_force)
-        force = np.maximum(force, 0.0)
-        step = self._adaptive_step(force, cycles) if self.adaptive else cycles
+        force = np.maximum(self.evaluated(result.sleeper_force), 0.0)
+        step = self._adaptive_step(force, cycles) if self.adaptive and split else cycles
         if self.feedback == "support":
             self.state = self._implicit_advance(force, step)
         else:
@@ -262,20 +253,14 @@ class TrackDegradation:
         u_now = self.state.settlement
         delta = np.zeros_like(u_now)
 
-        def increment(d: np.ndarray) -> np.ndarray:
-            f = np.maximum(force + s_mat @ d, 0.0)
-            return self.state.advance(self.law, f, cycles).settlement - u_now
-
+        df = 1e-3  # [N] finite-difference step of the force
         for _ in range(30):
-            r = delta - increment(delta)
+            f = np.maximum(force + s_mat @ delta, 0.0)
+            u_f = self.state.advance(self.law, f, cycles).settlement
+            r = delta - (u_f - u_now)
             if np.max(np.abs(r)) < 1e-9:
                 break
-            h = 1e-6
-            f = np.maximum(force + s_mat @ delta, 0.0)
-            du_df = (
-                self.state.advance(self.law, f + h * 1e3, cycles).settlement
-                - self.state.advance(self.law, f, cycles).settlement
-            ) / (h * 1e3)
+            du_df = (self.state.advance(self.law, f + df, cycles).settlement - u_f) / df
             jac = np.eye(delta.size) - du_df[:, None] * s_mat * (f > 0)[:, None]
             delta = np.maximum(delta - _solve_near_banded(jac, r, INFLUENCE_BAND), 0.0)
         return self.state.advance(self.law, np.maximum(force + s_mat @ delta, 0.0), cycles)
@@ -300,23 +285,13 @@ class TrackDegradation:
 
     def advance(self, cycles: float | None = None) -> IterationRecord:
         """One iteration of ``cycles`` axle passes (default ``cycles_per_iteration``); returns its record."""
-        total = (
-            self.cycles_per_iteration
-            if cycles is None
-            else check_scalar("cycles", cycles, low=0.0, high=1e10)
-        )
+        total = self.cycles_per_iteration if cycles is None else check_scalar("cycles", cycles, low=0.0, high=1e10)
         done, passes, first = 0.0, 0, None
         while done < total * (1 - 1e-12):
             res = self.simulate()
             first = first or res
             remaining = total - done
-            if passes + 1 >= self.max_passes_per_iteration:
-                step = remaining
-                force = np.maximum(self.evaluated(res.sleeper_force), 0.0)
-                self.state = self.state.advance(self.law, force, step)
-                self.cycles += step
-            else:
-                step = self.settle(res, remaining)
+            step = self.settle(res, remaining, split=passes + 1 < self.max_passes_per_iteration)
             done += step
             passes += 1
         if first is None:
@@ -332,9 +307,7 @@ class TrackDegradation:
         self.history.records.append(rec)
         return rec
 
-    def tamp(
-        self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None
-    ) -> TampingResult:
+    def tamp(self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None) -> TampingResult:
         """Tamp the sleepers where ``mask`` is True: the level is restored but for a residual, consolidation
         restarts there and the ballast damage raises their settlement rate (see :mod:`physics.tamping`)."""
         model = TampingModel() if model is None else model
@@ -372,16 +345,12 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
             or s.pass_options != s0.pass_options
             or (s.model_track.n_sleepers != s0.model_track.n_sleepers)
         ):
-            raise ValueError(
-                "simulate_batch needs simulators with the same vehicle, speed, options and length"
-            )
+            raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
     if any(s.feedback != s0.feedback for s in sims):
         raise ValueError("simulate_batch needs simulators with the same feedback")
     profiles = np.stack([s.model_irregularity() for s in sims])
     if s0.feedback == "irregularity":
-        return simulate_passes(
-            [s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options
-        )
+        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options)
     return simulate_passes(
         [s.model_track for s in sims],
         s0.vehicle,

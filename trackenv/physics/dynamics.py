@@ -251,7 +251,9 @@ def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
 def _window_dofs(track: Track, x_axles: np.ndarray, margin_bays: int) -> tuple[int, int]:
     """DOF range [lo, hi) of the track window around axles at ``x_axles`` (as the kernel places it)."""
     n_s = track.n_sleepers
-    bays = np.clip((x_axles / track.sleeper_spacing).astype(int), 0, n_s - 2)
+    # the bay of the element under each axle, as the kernel finds it
+    elements = np.clip((x_axles / track.element_length).astype(int), 0, track.n_nodes - 2)
+    bays = elements // track.elements_per_bay
     s_lo, s_hi = max(0, bays.min() - margin_bays), min(n_s - 1, bays.max() + 1 + margin_bays)
     lay = track.dof_layout
     return int(lay.node_w[lay.sleeper_node[s_lo]]), int(lay.sleeper[s_hi] + 1)
@@ -349,6 +351,11 @@ def simulate_passes(
     x_lead = np.minimum(x_start + speed * time, t0.length)
     x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
     z_axle = np.stack([_irregularity_at(irr, t0, x_axle, "irregularity") for irr in irr_rows])
+    # matrices
+    consts = newmark_constants(dt)
+    mb, cb, kb = batched_bands(tracks)
+    keff = kb + consts[0] * mb + consts[1] * cb
+    lay = t0.dof_layout
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
     static_total = np.zeros((n_rows, t0.n_sleepers))
     if support_settlement is not None:
@@ -357,24 +364,16 @@ def simulate_passes(
             g = np.broadcast_to(g, (n_rows, g.size))
         if g.shape != (n_rows, t0.n_sleepers):
             raise ValueError(f"support_settlement must have shape ({n_rows}, {t0.n_sleepers}), got {g.shape}")
-        lay0 = t0.dof_layout
         for b, t in enumerate(tracks):
             f = np.zeros(t0.n_dof)
-            f[lay0.sleeper] = t.ballast_stiffness * g[b]
-            _, _, kband = t.banded_matrices()
-            u0 = scipy.linalg.solveh_banded(lapack_lower(kband), f, lower=True)
+            f[lay.sleeper] = t.ballast_stiffness * g[b]
+            u0 = scipy.linalg.solveh_banded(lapack_lower(kb[b]), f, lower=True)
             z_axle[b] += _rail_at(t0, u0, x_axle)
-            us, uw = u0[lay0.sleeper], u0[lay0.node_w[lay0.sleeper_node]]
+            us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
             static_ballast[b] = t.ballast_stiffness * (us - g[b])
             static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
-
-    # matrices
-    consts = newmark_constants(dt)
-    mb, cb, kb = batched_bands(tracks)
-    keff = kb + consts[0] * mb + consts[1] * cb
     kv_eff = sys_.stiffness + consts[0] * sys_.mass + consts[1] * sys_.damping
     kv_inv = np.linalg.inv(kv_eff)
-    lay = t0.dof_layout
     n_axles = sys_.n_axles
     margin = t0.n_sleepers if window_bays is None else int(window_bays)
     cluster = _clusters(sys_.axle_offsets, 2 * (margin + 1) * t0.sleeper_spacing)
