@@ -32,7 +32,7 @@ from trackenv.envs.vector import TampingVectorEnv
 
 __all__ = [
     "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bootstrap_ci", "compare", "compare_results",
-    "evaluate_many", "evaluate_policy", "format_markdown", "format_table", "paired_difference",
+    "evaluate_many", "evaluate_policy", "format_markdown", "format_table", "paired_difference", "tune_many",
     "plot_comparison", "plot_episode", "policy_name", "policy_params", "tune",
 ]
 
@@ -258,16 +258,18 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
             "best_mean_cost": table[0]["mean_cost"], "table": table}
 
 
-def _tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Sequence[int], batch_size: int,
+def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Sequence[int], batch_size: int,
                progress: bool) -> dict[int, dict]:
-    """:func:`tune` for several classes in one batched run."""
+    """:func:`tune` for several classes in one batched run (table rows also hold the per-episode costs, in
+    ``train_seeds`` order)."""
     cands = [(i, g) for i, cls in enumerate(classes) for g in cls.param_grid()]
     results = evaluate_many([classes[i](**g) for i, g in cands], cfg, train_seeds, batch_size=batch_size,
                             progress=progress, desc="tune")
     out: dict[int, dict] = {}
     for i, cls in enumerate(classes):
         rows = sorted(({"params": dict(g), "mean_cost": float(r.cost.mean()),
-                        "tampings_per_km_year": float(r.tampings_per_km_year.mean())}
+                        "tampings_per_km_year": float(r.tampings_per_km_year.mean()),
+                        "episode_costs": r.cost.tolist()}
                        for (j, g), r in zip(cands, results, strict=True) if j == i),
                       key=lambda row: row["mean_cost"])
         out[i] = {"policy": cls.name, "best_params": rows[0]["params"],
@@ -297,7 +299,7 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
     chosen: list[Any] = []
     tuned = {}
     if tune_heuristics and train_seeds is not None and tunable:
-        tuned = _tune_many([items[i][1] for i in tunable], cfg, list(train_seeds), batch_size, progress)
+        tuned = tune_many([items[i][1] for i in tunable], cfg, list(train_seeds), batch_size, progress)
     for i, (label, p) in enumerate(items):
         if isinstance(p, type):
             if i in tunable and tunable.index(i) in tuned:

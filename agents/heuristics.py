@@ -22,8 +22,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 __all__ = [
-    "HEURISTICS", "DefectThreshold", "Heuristic", "NoMaintenance", "Periodic", "RandomPolicy", "SDThreshold",
-    "WorstFirst", "make_policy",
+    "HEURISTICS", "Campaign", "DefectThreshold", "Heuristic", "NoMaintenance", "Periodic", "RandomPolicy",
+    "SDThreshold", "WorstFirst", "make_policy",
 ]
 
 _DEFAULT_HORIZON_YEARS = 10.0
@@ -147,7 +147,7 @@ class Periodic(_Calendar):
 
     @classmethod
     def param_grid(cls):
-        return ([{"interval_years": y, "sections": "all"} for y in (2.0, 3.0, 4.0, 5.0, 6.0, 7.0)]
+        return ([{"interval_years": y, "sections": "all"} for y in (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0)]
                 + [{"interval_years": y, "sections": "worst", "n_worst": 2} for y in (1.0, 2.0, 4.0)])
 
 
@@ -219,6 +219,36 @@ class WorstFirst(_Calendar):
                 for b in (0.5, 1.0, 2.0) for t in (1.6, 2.2, 2.8)]
 
 
+class Campaign(_Calendar):
+    """Condition-triggered campaign: when the worst section's SD reaches ``trigger_mm``, mobilise and tamp
+    every section at or above ``include_mm`` (0 = the whole track), unless fewer than ``stop_years`` of the
+    horizon remain (a late campaign's benefit falls mostly outside the planning horizon)."""
+
+    name = "campaign"
+
+    def __init__(self, trigger_mm: float = 3.0, include_mm: float = 0.0, stop_years: float = 1.0,
+                 horizon_years: float | None = None, steps_per_year: int | None = None) -> None:
+        if not trigger_mm > 0:
+            raise ValueError(f"trigger_mm must be > 0, got {trigger_mm!r}")
+        if not 0 <= include_mm <= trigger_mm:
+            raise ValueError(f"include_mm must be in [0, trigger_mm={trigger_mm}], got {include_mm!r}")
+        if not stop_years >= 0:
+            raise ValueError(f"stop_years must be >= 0, got {stop_years!r}")
+        super().__init__(horizon_years, steps_per_year, trigger_mm=float(trigger_mm),
+                         include_mm=float(include_mm), stop_years=float(stop_years))
+
+    def _act(self, obs):
+        remaining_years = self.horizon_years - self._step_index(obs) / self.steps_per_year
+        sd = obs["section_sd"]
+        go = (sd.max(axis=1) >= self.params["trigger_mm"]) & (remaining_years > self.params["stop_years"])
+        return go[:, None] & (sd >= self.params["include_mm"])
+
+    @classmethod
+    def param_grid(cls):
+        return [{"trigger_mm": t, "include_mm": i, "stop_years": y}
+                for t in (2.0, 2.5, 3.0) for i in (0.0, 1.5) for y in (1.0, 2.0)]
+
+
 class RandomPolicy(Heuristic):
     """Tamp each section independently with probability ``p`` (a baseline); its own generator from ``seed``.
 
@@ -245,7 +275,8 @@ class RandomPolicy(Heuristic):
 
 
 HEURISTICS: dict[str, type[Heuristic]] = {
-    cls.name: cls for cls in (NoMaintenance, Periodic, SDThreshold, DefectThreshold, WorstFirst, RandomPolicy)
+    cls.name: cls
+    for cls in (NoMaintenance, Periodic, SDThreshold, DefectThreshold, WorstFirst, Campaign, RandomPolicy)
 }
 
 

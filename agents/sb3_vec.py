@@ -8,6 +8,9 @@ adapter only translates conventions:
   envs, the returned observation already the next episode's first);
 * ``env_method("action_masks")`` / :meth:`action_masks` give the masks sb3-contrib's MaskablePPO asks for;
 * seeds set by :meth:`seed` (SB3's convention: ``seed + i`` for env ``i``) are used at the next :meth:`reset`;
+* ``action_type="ranked"`` (see :mod:`agents.actions`): the agent picks how many of the worst sections to tamp
+  (``Discrete(n_sections + 1)``), translated here to the MultiBinary env's action with the SD of the
+  observation it was chosen on;
 * ``keep_per_sleeper=False`` drops the large per-sleeper arrays (``level``, ``contact_force``) from the
   observation, keeping only the per-section summaries and time.
 """
@@ -23,6 +26,8 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.vector import TampingVectorEnv
+
+from .actions import RANKED, agent_action_space, env_action_type, ranked_to_sections
 
 PER_SLEEPER_KEYS = ("level", "contact_force")
 
@@ -41,13 +46,13 @@ class TampingSB3VecEnv(VecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
     ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults); ``action_type`` is
-    "multibinary" or "discrete"; ``seed`` (optional) seeds the first reset (env ``i`` gets ``seed + i``).
+    "multibinary", "discrete" or "ranked"; ``seed`` (optional) seeds the first reset (env ``i`` gets ``seed + i``).
     """
 
     def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  seed: int | None = None) -> None:
-        self.venv = TampingVectorEnv(num_envs, config, action_type=action_type)
+        self.venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
         self.config = self.venv.config
         self.action_type = action_type
         self.keep_per_sleeper = bool(keep_per_sleeper)
@@ -55,8 +60,9 @@ class TampingSB3VecEnv(VecEnv):
         self.obs_keys = observation_keys(full, self.keep_per_sleeper)
         obs_space = spaces.Dict({k: full.spaces[k] for k in self.obs_keys})
         self.render_mode = None
-        super().__init__(num_envs, obs_space, self.venv.single_action_space)
+        super().__init__(num_envs, obs_space, agent_action_space(self.config, action_type))
         self._actions: np.ndarray | None = None
+        self._section_sd = np.zeros((num_envs, self.config.n_sections))  # of the observation last returned
         if seed is not None:
             self.seed(seed)
 
@@ -70,6 +76,7 @@ class TampingSB3VecEnv(VecEnv):
         self.reset_infos = _unstack_infos(infos, self.num_envs)
         self._reset_seeds()
         self._reset_options()
+        self._section_sd = obs["section_sd"].copy()
         return filter_observation(obs, self.obs_keys)
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -81,7 +88,10 @@ class TampingSB3VecEnv(VecEnv):
         actions, self._actions = self._actions, None
         if self.action_type == "discrete":
             actions = actions.reshape(self.num_envs)
+        elif self.action_type == RANKED:
+            actions = ranked_to_sections(actions.reshape(self.num_envs), self._section_sd)
         obs, rewards, terminated, truncated, infos = self.venv.step(actions)
+        self._section_sd = obs["section_sd"].copy()
         dones = np.logical_or(terminated, truncated)
         info_list = _unstack_infos(infos, self.num_envs)
         if dones.any():
@@ -95,7 +105,10 @@ class TampingSB3VecEnv(VecEnv):
         self.venv.close()
 
     def action_masks(self) -> np.ndarray:
-        """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env."""
+        """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env (ranked:
+        every count is valid; a masked section among the worst is simply not tamped by the env)."""
+        if self.action_type == RANKED:
+            return np.ones((self.num_envs, self.config.n_sections + 1), dtype=bool)
         return self.venv.action_masks()
 
     # --- attribute / method access (all envs share this one object) ---

@@ -24,12 +24,13 @@ from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.tamping import action_space
 from trackenv.envs.vector import TampingVectorEnv
 
+from .actions import RANKED, env_action_type, ranked_to_sections
 from .sb3_vec import TampingSB3VecEnv, filter_observation
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_HYPERPARAMS = HERE / "ppo_config.json"
 DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
-DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_008))
+DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
 STATS_SUFFIX = "_obs_stats.json"
 
 # keys of ppo_config.json that go to the algorithm's constructor (the rest configure train() itself)
@@ -66,10 +67,14 @@ def _algo_class(algo: str):
 # --- policies on raw observations ---
 class NormalizedPolicy:
     """An SB3 model plus frozen VecNormalize observation statistics: ``predict`` on raw env observations
-    (one observation dict, or a batched one), the interface of SB3's ``model.predict``."""
+    (one observation dict, or a batched one), the interface of SB3's ``model.predict``.
+
+    A model trained in the ``ranked`` parameterisation (:mod:`agents.actions`) answers with the env's
+    MultiBinary actions (its count of worst sections translated on the observation's SD)."""
 
     def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
-                 epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo") -> None:
+                 epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo",
+                 action_type: str = "multibinary") -> None:
         self.model = model
         self.obs_keys = list(obs_keys)
         self.mean = {k: np.asarray(mean[k], dtype=np.float64) for k in self.obs_keys}
@@ -78,6 +83,7 @@ class NormalizedPolicy:
         self.epsilon = float(epsilon)
         self.name = name
         self.algo = algo
+        self.action_type = action_type
 
     @classmethod
     def from_vecnormalize(cls, model, vecnorm, obs_keys: Sequence[str], **kw) -> NormalizedPolicy:
@@ -95,13 +101,16 @@ class NormalizedPolicy:
     def predict(self, observation: dict, state=None, episode_start=None, deterministic: bool = True,
                 action_masks: np.ndarray | None = None):
         kw = {} if action_masks is None or self.algo != "maskable_ppo" else {"action_masks": action_masks}
-        return self.model.predict(self.normalize(observation), state=state, episode_start=episode_start,
-                                  deterministic=deterministic, **kw)
+        action, state = self.model.predict(self.normalize(observation), state=state, episode_start=episode_start,
+                                           deterministic=deterministic, **kw)
+        if self.action_type == RANKED:
+            action = ranked_to_sections(action, observation["section_sd"])
+        return action, state
 
     def stats_dict(self) -> dict:
         return {"obs_keys": self.obs_keys, "mean": {k: v.tolist() for k, v in self.mean.items()},
                 "var": {k: v.tolist() for k, v in self.var.items()}, "clip_obs": self.clip_obs,
-                "epsilon": self.epsilon, "algo": self.algo}
+                "epsilon": self.epsilon, "algo": self.algo, "action_type": self.action_type}
 
 
 class ConstantPolicy:
@@ -148,7 +157,7 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
     """Undiscounted episode return (−total cost, k€) of ``policy`` on each seed (one episode per seed, all run
     together in one :class:`TampingVectorEnv`)."""
     config = TampingEnvConfig.coerce(config)
-    venv = TampingVectorEnv(len(seeds), config, action_type=action_type)
+    venv = TampingVectorEnv(len(seeds), config, action_type=env_action_type(action_type))
     obs, _ = venv.reset(seed=[int(s) for s in seeds])
     returns = np.zeros(len(seeds))
     for _ in range(config.horizon_steps):
@@ -176,7 +185,7 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
         def _evaluate(self) -> None:
             self.last_eval = self.num_timesteps
             policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(),
-                                                        obs_keys, algo=algo)
+                                                        obs_keys, algo=algo, action_type=action_type)
             t0 = time.time()
             ret = evaluate_returns(policy, config, eval_seeds, action_type)
             rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
@@ -223,12 +232,16 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
           out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
-          eval_freq: int | None = None, verbose: int = 1) -> Path:
+          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None) -> Path:
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
     ``hyperparams``: a dict or a JSON path overriding ``agents/ppo_config.json`` key by key. Explicit
     arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
     or ``eval_freq=0`` disables the periodic held-out evaluation.
+
+    ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
+    are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
+    ``seed`` so that the continued run sees new episodes.
     """
     import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
@@ -236,6 +249,14 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     hp = load_hyperparams()
+    if resume is not None:
+        resume = Path(resume)
+        if not (resume / "model.zip").exists() or not (resume / "vecnormalize.pkl").exists():
+            raise FileNotFoundError(f"resume: no model.zip and vecnormalize.pkl in {resume}")
+        earlier = json.loads((resume / "train_meta.json").read_text())
+        hp.update(earlier["hyperparams"])
+        if config is None:
+            config = earlier["config"]
     if isinstance(hyperparams, (str, Path)):
         hyperparams = load_hyperparams(hyperparams)
     hp.update(hyperparams or {})
@@ -256,14 +277,21 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     torch.set_num_threads(1)  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
     raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed)
-    env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True,
-                       clip_obs=float(hp.get("clip_obs", 10.0)), gamma=float(hp.get("gamma", 0.99)))
-    algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
-    policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
-    model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
-                      policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
-    if "initial_tamp_logit" in hp:
-        _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
+    if resume is not None:
+        env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
+        env.training = True
+        model = AlgoClass.load(str(resume / "model.zip"), env=env, device="cpu", tensorboard_log=str(out_dir),
+                               verbose=verbose)
+        model.set_random_seed(seed)
+    else:
+        env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True,
+                           clip_obs=float(hp.get("clip_obs", 10.0)), gamma=float(hp.get("gamma", 0.99)))
+        algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
+        policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
+        model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
+                          policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
+        if "initial_tamp_logit" in hp:
+            _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
 
     callbacks = []
     if checkpoint_every > 0:
@@ -276,19 +304,22 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
                                       algo, verbose)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
-            "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict()}
+            "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),
+            "resumed_from": str(resume) if resume is not None else None}
     (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
 
     t0 = time.time()
+    start_steps = int(model.num_timesteps)
     model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), progress_bar=progress,
-                tb_log_name=algo)
+                tb_log_name=algo, reset_num_timesteps=resume is None)
     wall = time.time() - t0
     env.save(str(out_dir / "vecnormalize.pkl"))
-    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo)
+    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo, action_type=action_type)
     path = _save_policy(model, policy, out_dir / "model.zip",
                         {"action_type": action_type, "config": config.to_dict()})
-    summary = {"timesteps": int(model.num_timesteps), "wall_seconds": wall,
-               "steps_per_second": model.num_timesteps / max(wall, 1e-9),
+    summary = {"timesteps": int(model.num_timesteps), "timesteps_this_run": int(model.num_timesteps) - start_steps,
+               "wall_seconds": wall,
+               "steps_per_second": (model.num_timesteps - start_steps) / max(wall, 1e-9),
                "evaluations": eval_cb.history if eval_cb is not None else []}
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
     env.close()
@@ -303,7 +334,7 @@ def _set_initial_tamp_logit(model, logit: float, action_type: str) -> None:
 
     with torch.no_grad():
         bias = model.policy.action_net.bias
-        if action_type == "discrete":
+        if action_type in ("discrete", RANKED):
             bias.zero_()
             bias[0] = -logit
         else:
@@ -330,4 +361,5 @@ def load_trained(path: str | Path | None = None, name: str = "ppo") -> Normalize
     algo = stats.get("algo", "ppo")
     model = _algo_class(algo).load(str(path), device="cpu")
     return NormalizedPolicy(model, stats["obs_keys"], stats["mean"], stats["var"], stats["clip_obs"],
-                            stats["epsilon"], name=name, algo=algo)
+                            stats["epsilon"], name=name, algo=algo,
+                            action_type=stats.get("action_type", "multibinary"))

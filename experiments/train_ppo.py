@@ -1,6 +1,7 @@
 """Train PPO / MaskablePPO on the tamping environment.
 
-Example: ``python experiments/train_ppo.py --timesteps 8000 --n-envs 8 --out runs/ppo --export``
+Example: ``python experiments/train_ppo.py --timesteps 8000 --n-envs 8 --out runs/ppo --export``;
+continue a run for more steps: ``--resume runs/ppo --seed 1 --timesteps 8000 --out runs/ppo_more``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ def main(argv=None) -> None:
     p.add_argument("--hyperparams", default=None, help="JSON overriding agents/ppo_config.json")
     p.add_argument("--eval-freq", type=int, default=None)
     p.add_argument("--checkpoint-every", type=int, default=None)
+    p.add_argument("--resume", default=None, help="output folder of an earlier run to continue (--timesteps more)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--export", action="store_true", help=f"copy the result to {DEFAULT_PRETRAINED}")
     a = p.parse_args(argv)
@@ -34,12 +36,13 @@ def main(argv=None) -> None:
     t0 = time.time()
     path = train(algo=a.algo, config=config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed,
                  out_dir=a.out, hyperparams=a.hyperparams, progress=not a.no_progress,
-                 eval_freq=a.eval_freq, checkpoint_every=a.checkpoint_every)
+                 eval_freq=a.eval_freq, checkpoint_every=a.checkpoint_every, resume=a.resume)
     wall = time.time() - t0
     with open(path.parent / "summary.json") as f:
         summary = json.load(f)
-    print(f"saved {path}; {summary['timesteps']} steps in {summary['wall_seconds']:.0f} s of learning "
-          f"({summary['steps_per_second']:.1f} steps/s; {wall:.0f} s wall in all)")
+    print(f"saved {path}; {summary['timesteps_this_run']} steps ({summary['timesteps']} in all) in "
+          f"{summary['wall_seconds']:.0f} s of learning ({summary['steps_per_second']:.1f} steps/s; "
+          f"{wall:.0f} s wall in all)")
     if a.export:
         print(f"exported to {export_policy(path)}")
 

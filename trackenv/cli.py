@@ -113,6 +113,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         seed=args.seed,
         out_dir=args.out or "runs/ppo",
         progress=not args.json,
+        resume=args.resume,
     )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
@@ -163,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--timesteps", type=int, default=None)
     sp.add_argument("--n-envs", type=int, default=8)
     sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")
     sp.set_defaults(func=cmd_train)
     return p
 

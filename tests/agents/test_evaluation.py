@@ -17,6 +17,7 @@ from agents.evaluation import (
     format_table,
     paired_difference,
     tune,
+    tune_many,
 )
 from agents.heuristics import NoMaintenance, Periodic, SDThreshold
 from trackenv.envs.config import TampingEnvConfig
@@ -125,6 +126,16 @@ def test_tune_returns_grid_member():
     assert out["best_params"] in grid
     assert [row["mean_cost"] for row in out["table"]] == sorted(row["mean_cost"] for row in out["table"])
     assert out["best_mean_cost"] == out["table"][0]["mean_cost"]
+
+
+@pytest.mark.slow
+def test_tune_many_keeps_per_episode_costs():
+    out = tune_many([SDThreshold], CFG, [10, 11], batch_size=4, progress=False)
+    table = out[0]["table"]
+    assert len(table) == len(SDThreshold.param_grid())
+    for row in table:
+        assert len(row["episode_costs"]) == 2
+        assert np.mean(row["episode_costs"]) == pytest.approx(row["mean_cost"])
 
 
 @pytest.mark.slow

@@ -7,6 +7,7 @@ import pytest
 
 from agents.heuristics import (
     HEURISTICS,
+    Campaign,
     DefectThreshold,
     NoMaintenance,
     Periodic,
@@ -117,6 +118,17 @@ def test_worst_first_budget():
     assert not a.any()
 
 
+def test_campaign_triggers_on_the_worst_section_and_stops_before_the_horizon():
+    p = Campaign(trigger_mm=2.0, include_mm=1.0, stop_years=0.5).bind(CFG)  # 8 steps of a quarter year
+    assert not p.predict(obs_at(0, [1.5, 1.9, 0.5]))[0].any()
+    np.testing.assert_array_equal(p.predict(obs_at(0, [1.5, 2.1, 0.5]))[0], [1, 1, 0])
+    np.testing.assert_array_equal(Campaign(2.0).bind(CFG).predict(obs_at(0, [1.5, 2.1, 0.5]))[0], [1, 1, 1])
+    assert p.predict(obs_at(5, [1.5, 2.1, 0.5]))[0].any()  # 0.75 years left
+    assert not p.predict(obs_at(6, [1.5, 2.1, 0.5]))[0].any()  # 0.5 years left: too late
+    with pytest.raises(ValueError, match="include_mm"):
+        Campaign(trigger_mm=2.0, include_mm=3.0)
+
+
 def test_random_policy_reproducible():
     p = RandomPolicy(0.5, seed=3)
     a1 = [p.predict(obs_at(0, [1, 1, 1]))[0] for _ in range(5)]
@@ -127,7 +139,7 @@ def test_random_policy_reproducible():
 
 
 def test_registry_and_grids():
-    expected = {"no_maintenance", "periodic", "sd_threshold", "defect_threshold", "worst_first"}
+    expected = {"no_maintenance", "periodic", "sd_threshold", "defect_threshold", "worst_first", "campaign"}
     assert set(HEURISTICS) >= expected
     for name, cls in HEURISTICS.items():
         assert cls.name == name

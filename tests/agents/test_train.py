@@ -101,6 +101,34 @@ def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path):
     assert trained > random + 0.5 * abs(random), (trained, random)
 
 
+def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path):
+    cfg = TINY.replace(dt=2e-4)
+    hp = {"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16], "action_type": "ranked",
+          "keep_per_sleeper": False, "initial_tamp_logit": -2.0}
+    path = train("ppo", cfg, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
+                 progress=False, eval_seeds=[5], eval_freq=8, checkpoint_every=0, verbose=0)
+    policy = load_trained(path)
+    assert policy.action_type == "ranked"
+    env = TampingEnv(cfg)
+    obs, _ = env.reset(seed=0)
+    action, _ = policy.predict(obs)
+    assert env.action_space.contains(np.asarray(action, dtype=np.int8))
+    # the initial bias makes "tamp nothing" the likeliest choice: the deterministic answer tamps nothing
+    assert not np.any(action)
+    evaluations = json.loads((tmp_path / "run" / "evaluations.json").read_text())
+    assert evaluations and evaluations[-1]["timesteps"] >= 16
+    # continue the run: same hyper-parameters and config, the step counter goes on
+    more = train(total_timesteps=16, seed=1, out_dir=tmp_path / "more", progress=False, eval_seeds=None,
+                 checkpoint_every=0, verbose=0, resume=tmp_path / "run")
+    summary = json.loads((tmp_path / "more" / "summary.json").read_text())
+    assert summary["timesteps"] >= 32 and summary["timesteps_this_run"] >= 16
+    assert load_trained(more).action_type == "ranked"
+    meta = json.loads((tmp_path / "more" / "train_meta.json").read_text())
+    assert meta["config"]["track_length_m"] == cfg.track_length_m and meta["hyperparams"]["n_steps"] == 8
+    with pytest.raises(FileNotFoundError, match="resume"):
+        train(total_timesteps=8, out_dir=tmp_path / "x", resume=tmp_path / "missing", progress=False)
+
+
 def test_constant_policy_batched_and_single():
     pol = ConstantPolicy.no_maintenance(TINY)
     obs = {"time": np.zeros((3, 1), dtype=np.float32)}

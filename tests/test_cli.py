@@ -1,0 +1,28 @@
+"""The command line as a user runs it: ``trackenv evaluate --quick --json`` end to end."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from trackenv.cli import main
+
+
+@pytest.mark.slow
+def test_evaluate_quick_prints_one_json_object(tmp_path, capsys):
+    assert main(["evaluate", "--quick", "--json", "--out", str(tmp_path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    rows = out["results"]
+    names = {row["policy"] for row in rows}
+    assert {"periodic", "campaign", "no_maintenance", "random"} <= names
+    for row in rows:
+        assert row["ci_low"] <= row["mean_cost"] <= row["ci_high"]
+    costs = [row["mean_cost"] for row in rows]
+    assert costs == sorted(costs)
+    assert (tmp_path / "comparison.json").exists() and (tmp_path / "costs.png").exists()
+
+
+def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
+    with pytest.raises(SystemExit, match="default one"):
+        main(["evaluate", "--quick", "--policy", "ppo"])
