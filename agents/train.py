@@ -241,7 +241,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
 
     ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
     are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
-    ``seed`` so that the continued run sees new episodes.
+    ``seed`` so that the continued run sees new episodes. The algorithm's own hyper-parameters (learning rate,
+    n_steps, ...) are those saved with the model; ``hyperparams`` then only changes train()'s keys.
     """
     import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
