@@ -87,7 +87,7 @@ def test_stable_baselines3_env_checker(env_id: str) -> None:
 @pytest.mark.parametrize("env_id", IDS)
 def test_registration(env_id: str) -> None:
     spec = gym.spec(env_id)
-    assert spec.max_episode_steps == 40 == TampingEnvConfig().horizon_steps
+    assert spec.max_episode_steps is None  # the env truncates itself at its configured horizon
     assert spec.vector_entry_point == "trackenv.envs.vector:TampingVectorEnv"
     env = gym.make(env_id)
     assert env.unwrapped.config == TampingEnvConfig()
@@ -101,13 +101,13 @@ def test_registration(env_id: str) -> None:
                for s in obs_space.values())
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="BUG (envs/__init__.py): the registered TimeLimit of 40 steps cuts an episode "
-                   "whose configured horizon is longer (e.g. horizon_years=20 -> 80 steps) at step 40")
-def test_time_limit_does_not_cut_a_longer_configured_horizon() -> None:
-    env = gym.make("trackenv/Tamping-v0", **{**TINY, "horizon_years": 20.0})
-    limit = env.spec.max_episode_steps
-    assert limit is None or limit >= env.unwrapped.config.horizon_steps
+def test_registered_env_runs_a_longer_configured_horizon_to_its_end() -> None:
+    env = gym.make("trackenv/Tamping-v0", **{**TINY, "horizon_years": 12.0, "dt": 2e-4})
+    horizon = env.unwrapped.config.horizon_steps
+    assert horizon == 48 > TampingEnvConfig().horizon_steps
+    env.reset(seed=0)
+    truncated_at = [t for t in range(1, horizon + 1) if env.step(np.zeros(3, dtype=np.int8))[3]]
+    assert truncated_at == [horizon]
 
 
 # ------------------------------------------------------------------------------ determinism

@@ -1,11 +1,12 @@
-"""Gymnasium environments of trackenv, registered on import (safe to import twice)."""
+"""Gymnasium environments of trackenv, registered on import (safe to import twice).
+
+No ``max_episode_steps``: the env truncates itself at its configured horizon, so a registered TimeLimit could
+only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` runs its 80 steps)."""
 
 from gymnasium.envs.registration import register, registry
 
 from .config import TampingEnvConfig
 from .tamping import TampingEnv
-
-DEFAULT_HORIZON_STEPS = TampingEnvConfig().horizon_steps
 
 for _id, _kwargs in (
     ("trackenv/Tamping-v0", {"action_type": "multibinary"}),
@@ -16,7 +17,6 @@ for _id, _kwargs in (
             id=_id,
             entry_point="trackenv.envs.tamping:TampingEnv",
             kwargs=_kwargs,
-            max_episode_steps=DEFAULT_HORIZON_STEPS,
             vector_entry_point="trackenv.envs.vector:TampingVectorEnv",
         )
 
