@@ -243,28 +243,25 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
     """Grid search of ``policy_cls`` over ``grid`` (default ``policy_cls.param_grid()``) on ``train_seeds``.
 
     Returns ``{"policy", "best_params", "best_mean_cost", "table"}``; ``table`` lists every candidate's
-    params and mean cost on the training seeds, sorted by cost (ties: grid order).
+    params, mean cost and per-episode costs on the training seeds, sorted by cost (ties: grid order).
     """
     grid = list(policy_cls.param_grid() if grid is None else grid)
     if not grid:
         raise ValueError("empty parameter grid")
-    name = getattr(policy_cls, "name", policy_cls.__name__)
-    results = evaluate_many([policy_cls(**g) for g in grid], config, train_seeds, batch_size=batch_size,
-                            progress=progress, desc=f"tune {name}")
-    table = sorted(({"params": dict(g), "mean_cost": float(r.cost.mean()),
-                     "tampings_per_km_year": float(r.tampings_per_km_year.mean())}
-                    for g, r in zip(grid, results, strict=True)), key=lambda row: row["mean_cost"])
-    return {"policy": name, "best_params": table[0]["params"],
-            "best_mean_cost": table[0]["mean_cost"], "table": table}
+    return tune_many([policy_cls], TampingEnvConfig.coerce(config), list(train_seeds), batch_size, progress,
+                     grids=[grid])[0]
 
 
 def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Sequence[int], batch_size: int,
-               progress: bool) -> dict[int, dict]:
-    """:func:`tune` for several classes in one batched run (table rows also hold the per-episode costs, in
-    ``train_seeds`` order)."""
-    cands = [(i, g) for i, cls in enumerate(classes) for g in cls.param_grid()]
+              progress: bool, grids: Sequence[Sequence[dict]] | None = None) -> dict[int, dict]:
+    """:func:`tune` for several classes in one batched run, each over its grid (default its
+    ``param_grid()``); table rows also hold the per-episode costs, in ``train_seeds`` order."""
+    if grids is None:
+        grids = [cls.param_grid() for cls in classes]
+    cands = [(i, g) for i, grid in enumerate(grids) for g in grid]
+    desc = f"tune {getattr(classes[0], 'name', classes[0].__name__)}" if len(classes) == 1 else "tune"
     results = evaluate_many([classes[i](**g) for i, g in cands], cfg, train_seeds, batch_size=batch_size,
-                            progress=progress, desc="tune")
+                            progress=progress, desc=desc)
     out: dict[int, dict] = {}
     for i, cls in enumerate(classes):
         rows = sorted(({"params": dict(g), "mean_cost": float(r.cost.mean()),
@@ -272,7 +269,7 @@ def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Seque
                         "episode_costs": r.cost.tolist()}
                        for (j, g), r in zip(cands, results, strict=True) if j == i),
                       key=lambda row: row["mean_cost"])
-        out[i] = {"policy": cls.name, "best_params": rows[0]["params"],
+        out[i] = {"policy": getattr(cls, "name", cls.__name__), "best_params": rows[0]["params"],
                   "best_mean_cost": rows[0]["mean_cost"], "table": rows}
     return out
 

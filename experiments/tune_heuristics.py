@@ -4,12 +4,11 @@
 
 Each named heuristic is searched over its ``param_grid()`` on the first ``--n-train`` training seeds (all
 candidates batched in one run); the best parameters replace that heuristic's entry in ``--file`` (default
-``agents/tuned_heuristics.json``, which ``trackenv evaluate`` uses), with the seeds it was tuned on and its
-seeds it was tuned on. Entries of other heuristics are kept as they are. The full tuning tables, with the
-cost of every candidate in every episode, go to ``--out``, together with the **hindsight bound**: the mean over
-episodes of the cheapest candidate *of that episode*. No rule in the grids can beat it, and a learned policy
-that beats the best single rule by much more than the bound's margin would have to act better than every rule
-in hindsight.
+``agents/tuned_heuristics.json``, which ``trackenv evaluate`` uses), with the seeds it was tuned on. Entries
+of other heuristics are kept as they are. The full tuning tables, with the cost of every candidate in every
+episode, go to ``--out``, together with the **hindsight bound**: the mean over episodes of the cheapest
+candidate *of that episode*. No rule in the grids can beat it, and a learned policy that beats the best
+single rule by much more than the bound's margin would have to act better than every rule in hindsight.
 """
 
 from __future__ import annotations
