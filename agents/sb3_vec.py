@@ -11,6 +11,10 @@ adapter only translates conventions:
 * ``action_type="ranked"`` (see :mod:`agents.actions`): the agent picks how many of the worst sections to tamp
   (``Discrete(n_sections + 1)``), translated here to the MultiBinary env's action with the SD of the
   observation it was chosen on;
+* the planning horizon ends the problem: the life-cycle cost is summed over the horizon only and the
+  observation carries the time, so by default done envs are reported as terminal and SB3 does not bootstrap
+  past the horizon (``bootstrap_at_horizon=True`` marks them ``TimeLimit.truncated`` instead, as a Gymnasium
+  time limit; a learner then values tamping in the last year for benefits that no evaluation counts);
 * ``keep_per_sleeper=False`` drops the large per-sleeper arrays (``level``, ``contact_force``) from the
   observation, keeping only the per-section summaries and time.
 """
@@ -51,11 +55,12 @@ class TampingSB3VecEnv(VecEnv):
 
     def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
-                 seed: int | None = None) -> None:
+                 bootstrap_at_horizon: bool = False, seed: int | None = None) -> None:
         self.venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
         self.config = self.venv.config
         self.action_type = action_type
         self.keep_per_sleeper = bool(keep_per_sleeper)
+        self.bootstrap_at_horizon = bool(bootstrap_at_horizon)
         full = self.venv.single_observation_space
         self.obs_keys = observation_keys(full, self.keep_per_sleeper)
         obs_space = spaces.Dict({k: full.spaces[k] for k in self.obs_keys})
@@ -98,7 +103,8 @@ class TampingSB3VecEnv(VecEnv):
             final_obs = infos["final_obs"]
             for i in np.flatnonzero(dones):
                 info_list[i]["terminal_observation"] = filter_observation(final_obs[i], self.obs_keys)
-                info_list[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+                info_list[i]["TimeLimit.truncated"] = bool(self.bootstrap_at_horizon and truncated[i]
+                                                           and not terminated[i])
         return (filter_observation(obs, self.obs_keys), rewards.astype(np.float32), dones, info_list)
 
     def close(self) -> None:

@@ -37,7 +37,9 @@ STATS_SUFFIX = "_obs_stats.json"
 _ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
               "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
 _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
-               "eval_freq", "checkpoint_every", "initial_tamp_logit")
+               "eval_freq", "checkpoint_every", "initial_tamp_logit", "warm_start_rule", "warm_start_episodes",
+               "warm_start_epochs", "warm_start_label_smoothing", "warm_start_params",
+               "bootstrap_at_horizon")
 
 
 def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
@@ -169,7 +171,8 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
 
 
 # --- callbacks ---
-def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose):
+def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose,
+                        evaluate_at_start: bool = False):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class HeldOutEvalCallback(BaseCallback):
@@ -199,6 +202,10 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
             if rec["mean_return"] > self.best:
                 self.best = rec["mean_return"]
                 _save_policy(self.model, policy, out_dir / "best_model.zip")
+
+        def _on_training_start(self) -> None:
+            if evaluate_at_start:  # the warm-started policy is a candidate like every later one
+                self._evaluate()
 
         def _on_step(self) -> bool:
             if eval_freq and self.num_timesteps - self.last_eval >= eval_freq:
@@ -277,7 +284,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
 
     torch.set_num_threads(1)  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
-    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed)
+    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
+                           bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)))
     if resume is not None:
         env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
         env.training = True
@@ -293,6 +301,19 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
                           policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
         if "initial_tamp_logit" in hp:
             _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
+    warm = None
+    if resume is None and hp.get("warm_start_rule"):
+        from .imitation import warm_start
+
+        t_warm = time.time()
+        warm = warm_start(model, env, config, action_type, hp["warm_start_rule"],
+                          n_episodes=int(hp.get("warm_start_episodes", 64)),
+                          epochs=int(hp.get("warm_start_epochs", 300)), gamma=float(hp.get("gamma", 0.99)),
+                          label_smoothing=float(hp.get("warm_start_label_smoothing", 0.1)),
+                          params=hp.get("warm_start_params"), seed=seed)
+        warm["wall_seconds"] = time.time() - t_warm
+        if verbose:
+            print(f"[warm start] {warm}", flush=True)
 
     callbacks = []
     if checkpoint_every > 0:
@@ -302,11 +323,11 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     eval_cb = None
     if eval_seeds and eval_freq > 0:
         eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, action_type, raw.obs_keys,
-                                      algo, verbose)
+                                      algo, verbose, evaluate_at_start=warm is not None)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
             "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),
-            "resumed_from": str(resume) if resume is not None else None}
+            "resumed_from": str(resume) if resume is not None else None, "warm_start": warm}
     (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
 
     t0 = time.time()
@@ -321,7 +342,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     summary = {"timesteps": int(model.num_timesteps), "timesteps_this_run": int(model.num_timesteps) - start_steps,
                "wall_seconds": wall,
                "steps_per_second": (model.num_timesteps - start_steps) / max(wall, 1e-9),
-               "evaluations": eval_cb.history if eval_cb is not None else []}
+               "warm_start": warm, "evaluations": eval_cb.history if eval_cb is not None else []}
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
     env.close()
     return path

@@ -114,6 +114,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         out_dir=args.out or "runs/ppo",
         progress=not args.json,
         resume=args.resume,
+        hyperparams=args.hyperparams,
     )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
@@ -165,6 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--n-envs", type=int, default=8)
     sp.add_argument("--seed", type=int, default=0)
     sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")
+    sp.add_argument("--hyperparams", default=None, help="JSON file overriding agents/ppo_config.json key by key")
     sp.set_defaults(func=cmd_train)
     return p
 

@@ -25,8 +25,9 @@ from trackenv.envs.tamping import TampingEnv  # noqa: E402
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
 
 
-def test_adapter_reset_step_and_terminal_observation():
-    env = TampingSB3VecEnv(2, TINY, seed=3)
+@pytest.mark.parametrize("bootstrap_at_horizon", [False, True])
+def test_adapter_reset_step_and_terminal_observation(bootstrap_at_horizon):
+    env = TampingSB3VecEnv(2, TINY, seed=3, bootstrap_at_horizon=bootstrap_at_horizon)
     obs = env.reset()
     n, s = TINY.n_sleepers, TINY.n_sections
     assert set(obs) == set(env.observation_space.spaces)
@@ -50,7 +51,8 @@ def test_adapter_reset_step_and_terminal_observation():
             assert not dones.any() and "terminal_observation" not in infos[0]
     assert dones.all()
     for info in infos:
-        assert info["TimeLimit.truncated"] is True
+        # the horizon ends the problem (no bootstrapping past it) unless asked to treat it as a time limit
+        assert info["TimeLimit.truncated"] is bootstrap_at_horizon
         term = info["terminal_observation"]
         assert term["time"][0] == pytest.approx(1.0) and term["level"].shape == (n,)
     assert np.all(obs["time"] == 0.0)  # already the next episode's first observation

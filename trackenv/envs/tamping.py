@@ -106,7 +106,10 @@ class TampingEnv(gym.Env):
     ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
     its speed band; the last a large penalty). reward = −Σ parts.
 
-    **Episode end.** No terminal state: truncation at the horizon (default 10 years = 40 steps).
+    **Episode end.** No terminal state: truncation at the horizon (default 10 years = 40 steps). The
+    life-cycle cost counts the horizon only and ``time`` is observed, so a learner scored on that cost should
+    treat the horizon as the end of the problem and not bootstrap past it (else it values tamping in the last
+    year for benefits no evaluation counts); the SB3 adapter in ``agents/sb3_vec.py`` does so by default.
 
     **Arguments.** ``config`` (:class:`TampingEnvConfig` or dict) or its fields as keywords;
     ``action_type``; ``render_mode`` ("rgb_array").

@@ -1,0 +1,59 @@
+"""Warm start by behaviour cloning: the cloned policy acts like its teacher rule."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from agents.heuristics import Periodic  # noqa: E402
+from agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
+from agents.train import evaluate_returns, load_trained, train  # noqa: E402
+from trackenv.envs.config import TampingEnvConfig  # noqa: E402
+from trackenv.envs.vector import TampingVectorEnv  # noqa: E402
+
+TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
+
+
+def test_teacher_actions_in_agent_terms():
+    sections = np.array([[1, 1, 1], [0, 0, 0], [0, 1, 0]], dtype=np.int8)
+    assert teacher_to_agent_actions(sections, "ranked").tolist() == [3, 0, 1]
+    assert teacher_to_agent_actions(sections, "multibinary").tolist() == sections.tolist()
+    with pytest.raises(ValueError, match="action_type"):
+        teacher_to_agent_actions(sections, "discrete")
+
+
+def test_teacher_policy_defaults_to_tuned_parameters_and_rejects_unknown_rules():
+    tuned = json.loads(open("agents/tuned_heuristics.json").read())["best_params"]["periodic"]
+    teacher = teacher_policy("periodic", TINY)
+    assert isinstance(teacher, Periodic) and teacher.params["interval_years"] == tuned["interval_years"]
+    assert teacher.horizon_years == TINY.horizon_years
+    with pytest.raises(ValueError, match="warm_start_rule"):
+        teacher_policy("oracle", TINY)
+
+
+def test_warm_started_ranked_policy_acts_like_its_teacher(tmp_path):
+    params = {"interval_years": 0.75, "sections": "all"}  # tamps at steps 3 and 6 of the 8
+    hp = {"action_type": "ranked", "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
+          "learning_rate": 0.0, "warm_start_rule": "periodic", "warm_start_params": params,
+          "warm_start_episodes": 8, "warm_start_epochs": 200}
+    path = train("ppo", TINY, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
+                 progress=False, eval_seeds=[5, 6], eval_freq=1000, checkpoint_every=0, verbose=0)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    warm = summary["warm_start"]
+    assert warm["episodes"] >= 8 and warm["accuracy"] == 1.0
+    assert 0.5 < warm["teacher_probability"] < 0.99  # label smoothing leaves room to explore
+    assert summary["evaluations"][0]["timesteps"] == 0  # the clone itself is evaluated before PPO starts
+    # on unseen seeds the clone's deterministic actions are the teacher's, step by step
+    clone, teacher = load_trained(path), Periodic(**params).bind(TINY)
+    venv = TampingVectorEnv(3, TINY)
+    obs, _ = venv.reset(seed=[101, 102, 103])
+    for _ in range(TINY.horizon_steps):
+        expected, _ = teacher.predict(obs)
+        got, _ = clone.predict(obs)
+        np.testing.assert_array_equal(got, expected)
+        obs, *_ = venv.step(expected)
+    np.testing.assert_allclose(evaluate_returns(clone, TINY, [7, 8]), evaluate_returns(teacher, TINY, [7, 8]))
