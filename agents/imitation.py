@@ -47,7 +47,8 @@ def teacher_to_agent_actions(sections: np.ndarray, action_type: str) -> np.ndarr
         return sections.sum(axis=1)
     if action_type == "multibinary":
         return sections
-    raise ValueError(f"warm start supports action_type 'ranked' or 'multibinary', got {action_type!r}")
+    raise ValueError(f"warm start supports action_type 'ranked' or 'multibinary', got {action_type!r} "
+                     "(set warm_start_rule to null to train without a warm start)")
 
 
 def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamma: float) -> dict[str, Any]:
@@ -113,7 +114,7 @@ def _smoothed_nll(distribution, actions, label_smoothing: float):
 
 
 def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size: int = 256,
-               learning_rate: float = 1e-3, vf_coef: float = 0.5, label_smoothing: float = 0.1,
+               learning_rate: float = 1e-3, vf_coef: float = 0.5, label_smoothing: float = 0.02,
                seed: int = 0) -> dict[str, float]:
     """Fit ``model.policy`` to the demonstrations: cross-entropy on the actions (with ``label_smoothing``),
     squared error of the value on the returns (normalised by the env's reward scale). Returns the final losses,
@@ -156,7 +157,7 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
 
 
 def warm_start(model, env, config: TampingEnvConfig, action_type: str, rule: str, n_episodes: int = 64,
-               epochs: int = 300, gamma: float = 0.99, label_smoothing: float = 0.1,
+               epochs: int = 300, gamma: float = 0.99, label_smoothing: float = 0.02,
                params: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
     """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring);
     return a summary of the fit."""

@@ -309,7 +309,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
         warm = warm_start(model, env, config, action_type, hp["warm_start_rule"],
                           n_episodes=int(hp.get("warm_start_episodes", 64)),
                           epochs=int(hp.get("warm_start_epochs", 300)), gamma=float(hp.get("gamma", 0.99)),
-                          label_smoothing=float(hp.get("warm_start_label_smoothing", 0.1)),
+                          label_smoothing=float(hp.get("warm_start_label_smoothing", 0.02)),
                           params=hp.get("warm_start_params"), seed=seed)
         warm["wall_seconds"] = time.time() - t_warm
         if verbose:

@@ -39,7 +39,8 @@ def test_warm_started_ranked_policy_acts_like_its_teacher(tmp_path):
     params = {"interval_years": 0.75, "sections": "all"}  # tamps at steps 3 and 6 of the 8
     hp = {"action_type": "ranked", "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
           "learning_rate": 0.0, "warm_start_rule": "periodic", "warm_start_params": params,
-          "warm_start_episodes": 8, "warm_start_epochs": 200}
+          "warm_start_episodes": 8, "warm_start_epochs": 200,
+          "warm_start_label_smoothing": 0.1}
     path = train("ppo", TINY, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
                  progress=False, eval_seeds=[5, 6], eval_freq=1000, checkpoint_every=0, verbose=0)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())

@@ -89,7 +89,8 @@ def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path):
     cfg = TINY.replace(geometry_cost_per_section_year=0.0, alert_cost=0.0, intervention_cost=0.0,
                        immediate_action_cost=0.0, dt=2e-4)
     hp = {"n_steps": 8, "batch_size": 32, "n_epochs": 10, "learning_rate": 3e-3, "ent_coef": 0.0,
-          "net_arch": [32, 32], "gamma": 0.5, "action_type": "discrete", "keep_per_sleeper": False}
+          "net_arch": [32, 32], "gamma": 0.5, "action_type": "discrete", "keep_per_sleeper": False,
+          "warm_start_rule": None}  # learning from scratch, not from a rule
     path = train("ppo", cfg, total_timesteps=384, n_envs=8, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
                  progress=False, eval_seeds=None, checkpoint_every=0, eval_freq=0, verbose=0)
     assert path.exists() and stats_path(path).exists()
@@ -106,7 +107,7 @@ def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path):
 def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path):
     cfg = TINY.replace(dt=2e-4)
     hp = {"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16], "action_type": "ranked",
-          "keep_per_sleeper": False, "initial_tamp_logit": -2.0}
+          "keep_per_sleeper": False, "initial_tamp_logit": -2.0, "warm_start_rule": None}
     path = train("ppo", cfg, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
                  progress=False, eval_seeds=[5], eval_freq=8, checkpoint_every=0, verbose=0)
     policy = load_trained(path)
