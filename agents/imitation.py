@@ -83,11 +83,9 @@ def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamm
         returns[t] = running
     # keep only steps of completed episodes (the tail of a still-running episode has a truncated return)
     keep = np.zeros_like(done)
-    last_done = np.full(n_envs, -1)
     for i in range(n_envs):
         idx = np.flatnonzero(done[:, i])
         if idx.size:
-            last_done[i] = idx[-1]
             keep[: idx[-1] + 1, i] = True
     obs_cat = {k: np.stack([o[k] for o in observations])[keep] for k in observations[0]}
     return {"obs": obs_cat, "actions": np.stack(actions)[keep], "returns": returns[keep],
@@ -161,6 +159,12 @@ def warm_start(model, env, config: TampingEnvConfig, action_type: str, rule: str
                params: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
     """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring);
     return a summary of the fit."""
+    if int(n_episodes) < 1:
+        raise ValueError(f"warm_start_episodes must be >= 1, got {n_episodes!r}")
+    if int(epochs) < 1:
+        raise ValueError(f"warm_start_epochs must be >= 1, got {epochs!r}")
+    if not 0.0 <= label_smoothing < 1.0:
+        raise ValueError(f"warm_start_label_smoothing must be in [0, 1), got {label_smoothing!r}")
     teacher = teacher_policy(rule, config, params)
     demos = collect_demonstrations(env, teacher, action_type, n_episodes, gamma)
     fit = fit_policy(model, env, demos, epochs=epochs, label_smoothing=label_smoothing, seed=seed)

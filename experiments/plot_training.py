@@ -23,10 +23,14 @@ TUNED = Path(__file__).resolve().parents[1] / "agents" / "tuned_heuristics.json"
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", help="training output folders, in training order")
+    parser.add_argument("--labels", nargs="*", default=None, help="legend label per run (default: folder names)")
     parser.add_argument("--out", default="results/training_curve.png")
     parser.add_argument("--references", nargs="*", default=["periodic", "campaign", "no_maintenance"],
                         help="tuned heuristics drawn as lines")
     args = parser.parse_args(argv)
+    labels = args.labels or [f"PPO {Path(run).name}" for run in args.runs]
+    if len(labels) != len(args.runs):
+        parser.error(f"--labels needs one label per run ({len(args.runs)}), got {len(labels)}")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -37,12 +41,12 @@ def main(argv: list[str] | None = None) -> dict:
     refs = evaluate_many(policies, None, DEFAULT_EVAL_SEEDS, batch_size=len(DEFAULT_EVAL_SEEDS) * len(policies))
     fig, ax = plt.subplots(figsize=(7, 4))
     curves = {}
-    for run in args.runs:
+    for run, label in zip(args.runs, labels, strict=True):
         history = json.loads((Path(run) / "evaluations.json").read_text())
         steps = [h["timesteps"] for h in history]
         returns = [h["mean_return"] for h in history]
         curves[run] = list(zip(steps, returns, strict=True))
-        ax.plot(steps, returns, "o-", label=f"PPO {Path(run).name}")
+        ax.plot(steps, returns, "o-", label=label)
     for ref, style in zip(refs, ("--", "-.", ":", (0, (1, 3))), strict=False):
         ax.axhline(-ref.cost.mean(), color="k", ls=style, lw=1, label=f"{ref.policy} (tuned)")
     ax.set_xlabel("env steps")

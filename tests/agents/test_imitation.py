@@ -35,6 +35,15 @@ def test_teacher_policy_defaults_to_tuned_parameters_and_rejects_unknown_rules()
         teacher_policy("oracle", TINY)
 
 
+@pytest.mark.parametrize("key, value", [("warm_start_episodes", 0), ("warm_start_epochs", 0),
+                                        ("warm_start_label_smoothing", 1.0)])
+def test_warm_start_rejects_bad_settings(tmp_path, key, value):
+    hp = {"action_type": "ranked", "keep_per_sleeper": False, "warm_start_rule": "periodic", key: value}
+    with pytest.raises(ValueError, match=key):
+        train("ppo", TINY, total_timesteps=8, n_envs=2, out_dir=tmp_path, hyperparams=hp, progress=False,
+              eval_seeds=None, verbose=0)
+
+
 def test_warm_started_ranked_policy_acts_like_its_teacher(tmp_path):
     params = {"interval_years": 0.75, "sections": "all"}  # tamps at steps 3 and 6 of the 8
     hp = {"action_type": "ranked", "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
