@@ -31,6 +31,9 @@ HERE = Path(__file__).resolve().parent
 DEFAULT_HYPERPARAMS = HERE / "ppo_config.json"
 DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
 DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
+# training env i starts with seed DEFAULT_TRAIN_SEED + i: apart from the test (0-199), tuning (1000-1099) and
+# evaluation (10000-10015) seeds, so that no held-out episode is ever trained on
+DEFAULT_TRAIN_SEED = 20_000
 STATS_SUFFIX = "_obs_stats.json"
 
 # keys of ppo_config.json that go to the algorithm's constructor (the rest configure train() itself)
@@ -235,7 +238,7 @@ def stats_path(zip_path: str | Path) -> Path:
 
 # --- training ---
 def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
-          total_timesteps: int | None = None, n_envs: int | None = None, seed: int = 0,
+          total_timesteps: int | None = None, n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED,
           out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,

@@ -1,7 +1,7 @@
 """Train PPO / MaskablePPO on the tamping environment.
 
 Example: ``python experiments/train_ppo.py --timesteps 8000 --n-envs 8 --out runs/ppo --export``;
-continue a run for more steps: ``--resume runs/ppo --seed 1 --timesteps 8000 --out runs/ppo_more``.
+continue a run for more steps: ``--resume runs/ppo --seed 20100 --timesteps 8000 --out runs/ppo_more``.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import argparse
 import json
 import time
 
-from agents.train import DEFAULT_PRETRAINED, export_policy, train
+from agents.train import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
 from trackenv.envs.config import TampingEnvConfig
 
 
@@ -19,7 +19,8 @@ def main(argv=None) -> None:
     p.add_argument("--algo", choices=["ppo", "maskable_ppo"], default=None, help="default: ppo_config.json")
     p.add_argument("--timesteps", type=int, default=None, help="total env steps (default: ppo_config.json)")
     p.add_argument("--n-envs", type=int, default=None)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=DEFAULT_TRAIN_SEED,
+                   help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
     p.add_argument("--out", default="runs/ppo")
     p.add_argument("--config-json", default=None, help="JSON file of TampingEnvConfig fields")
     p.add_argument("--hyperparams", default=None, help="JSON overriding agents/ppo_config.json")
