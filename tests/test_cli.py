@@ -26,3 +26,11 @@ def test_evaluate_quick_prints_one_json_object(tmp_path, capsys):
 def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
     with pytest.raises(SystemExit, match="default one"):
         main(["evaluate", "--quick", "--policy", "ppo"])
+
+
+def test_train_seed_default_is_the_training_seed_of_agents_train():
+    pytest.importorskip("stable_baselines3")
+    from agents.train import DEFAULT_TRAIN_SEED
+    from trackenv.cli import build_parser
+
+    assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED

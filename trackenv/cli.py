@@ -164,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default="ppo")
     sp.add_argument("--timesteps", type=int, default=None)
     sp.add_argument("--n-envs", type=int, default=8)
+    # = agents.train.DEFAULT_TRAIN_SEED, written out: importing agents.train here would load torch for every command
     sp.add_argument("--seed", type=int, default=20_000,
                     help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
     sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")
