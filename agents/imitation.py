@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 from trackenv.envs.config import TampingEnvConfig
 
@@ -126,6 +127,8 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
     target = torch.as_tensor(demos["returns"] / ret_scale, dtype=torch.float32)
     obs_t = obs_as_tensor(obs, policy.device)
     act_t = torch.as_tensor(demos["actions"], device=policy.device)
+    if isinstance(policy.action_space, spaces.MultiBinary):
+        act_t = act_t.float()  # Bernoulli heads take their 0/1 targets as floats
     n = len(target)
     gen = torch.Generator().manual_seed(seed)
     optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate)

@@ -44,9 +44,10 @@ def test_warm_start_rejects_bad_settings(tmp_path, key, value):
               eval_seeds=None, verbose=0)
 
 
-def test_warm_started_ranked_policy_acts_like_its_teacher(tmp_path):
+@pytest.mark.parametrize("action_type", ["ranked", "multibinary"])
+def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type):
     params = {"interval_years": 0.75, "sections": "all"}  # tamps at steps 3 and 6 of the 8
-    hp = {"action_type": "ranked", "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
+    hp = {"action_type": action_type, "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
           "learning_rate": 0.0, "warm_start_rule": "periodic", "warm_start_params": params,
           "warm_start_episodes": 8, "warm_start_epochs": 200,
           "warm_start_label_smoothing": 0.1}
