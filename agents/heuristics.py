@@ -16,15 +16,20 @@ Each class has a ``name``, a ``params`` dict (its constructor arguments, JSON-fr
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
 __all__ = [
     "HEURISTICS", "Campaign", "DefectThreshold", "Heuristic", "NoMaintenance", "Periodic", "RandomPolicy",
-    "SDThreshold", "WorstFirst", "make_policy",
+    "SDThreshold", "TUNED_PARAMS_FILE", "WorstFirst", "make_policy", "tuned_params",
 ]
+
+# the parameters grid-tuned on training seeds that `trackenv evaluate` scores (experiments/tune_heuristics.py)
+TUNED_PARAMS_FILE = Path(__file__).resolve().parent / "tuned_heuristics.json"
 
 _DEFAULT_HORIZON_YEARS = 10.0
 _DEFAULT_STEPS_PER_YEAR = 4
@@ -287,3 +292,8 @@ def make_policy(name: str, **params: Any) -> Heuristic:
     except KeyError:
         raise ValueError(f"unknown heuristic {name!r}; known: {sorted(HEURISTICS)}") from None
     return cls(**params)
+
+
+def tuned_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
+    """The tuned parameters per heuristic name in ``path`` (default :data:`TUNED_PARAMS_FILE`)."""
+    return json.loads(Path(path or TUNED_PARAMS_FILE).read_text())["best_params"]

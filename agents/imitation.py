@@ -13,8 +13,6 @@ the value head to the normalised discounted returns of those episodes (squared e
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,9 +21,7 @@ from gymnasium import spaces
 from trackenv.envs.config import TampingEnvConfig
 
 from .actions import RANKED
-from .heuristics import HEURISTICS, make_policy
-
-TUNED_PARAMS = Path(__file__).resolve().parent / "tuned_heuristics.json"
+from .heuristics import HEURISTICS, make_policy, tuned_params
 
 
 def teacher_policy(rule: str, config: TampingEnvConfig, params: dict[str, Any] | None = None):
@@ -34,7 +30,7 @@ def teacher_policy(rule: str, config: TampingEnvConfig, params: dict[str, Any] |
     if rule not in HEURISTICS:
         raise ValueError(f"warm_start_rule must be one of {sorted(HEURISTICS)}, got {rule!r}")
     if params is None:
-        params = json.loads(TUNED_PARAMS.read_text())["best_params"].get(rule, {})
+        params = tuned_params().get(rule, {})
     return make_policy(rule, **params).bind(config)
 
 

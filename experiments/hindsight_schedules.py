@@ -26,10 +26,12 @@ import numpy as np
 from tqdm import tqdm
 
 from agents.evaluation import TRAIN_SEEDS
+from agents.heuristics import Periodic
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.vector import TampingVectorEnv
 
-PERIODIC_STEPS = (8, 10, 12, 14, 16, 18, 20, 24, 28)  # 2 to 7 years at 4 steps a year (the tuning grid)
+# the whole-track intervals of the periodic rule's tuning grid, in steps of the default calendar (4 a year)
+PERIODIC_STEPS = tuple(Periodic(**p).interval_steps for p in Periodic.param_grid() if p["sections"] == "all")
 
 
 def periodic_schedule(interval: int, horizon: int) -> tuple[int, ...]:

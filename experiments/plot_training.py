@@ -14,10 +14,8 @@ import json
 from pathlib import Path
 
 from agents.evaluation import evaluate_many
-from agents.heuristics import HEURISTICS
+from agents.heuristics import HEURISTICS, tuned_params
 from agents.train import DEFAULT_EVAL_SEEDS
-
-TUNED = Path(__file__).resolve().parents[1] / "agents" / "tuned_heuristics.json"
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -36,7 +34,7 @@ def main(argv: list[str] | None = None) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tuned = json.loads(TUNED.read_text())["best_params"]
+    tuned = tuned_params()
     policies = [HEURISTICS[name](**tuned.get(name, {})) for name in args.references]
     refs = evaluate_many(policies, None, DEFAULT_EVAL_SEEDS, batch_size=len(DEFAULT_EVAL_SEEDS) * len(policies))
     fig, ax = plt.subplots(figsize=(7, 4))

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation import TRAIN_SEEDS, tune_many
-from agents.heuristics import HEURISTICS
+from agents.heuristics import HEURISTICS, TUNED_PARAMS_FILE
 from trackenv.envs.config import TampingEnvConfig
 
-DEFAULT_FILE = Path(__file__).resolve().parents[1] / "agents" / "tuned_heuristics.json"
+DEFAULT_FILE = TUNED_PARAMS_FILE
 
 
 def main(argv: list[str] | None = None) -> dict:

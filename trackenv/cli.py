@@ -75,12 +75,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             if args.policy == "ppo":
                 raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
             print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
-    from pathlib import Path
-
-    import agents
+    from agents.heuristics import TUNED_PARAMS_FILE as shipped
 
     tuned = None
-    shipped = Path(agents.__file__).parent / "tuned_heuristics.json"
     if not (args.retune or args.quick) and shipped.exists():
         tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
     n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)

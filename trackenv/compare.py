@@ -54,7 +54,7 @@ def run_comparison(
         plot_comparison,
         plot_episode,
     )
-    from agents.heuristics import HEURISTICS, RandomPolicy
+    from agents.heuristics import HEURISTICS, RandomPolicy, tuned_params
 
     t0 = time.perf_counter()
     config = TampingEnvConfig.coerce(QUICK_CONFIG if quick and config is None else config)
@@ -71,7 +71,7 @@ def run_comparison(
     policies: dict[str, Any] = {name: cls for name, cls in HEURISTICS.items() if name != "random"}
     if tuned is not None:  # parameters tuned earlier: evaluate those, do not tune again
         if not isinstance(tuned, Mapping):
-            tuned = json.loads(Path(tuned).read_text())["best_params"]
+            tuned = tuned_params(tuned)
         for name, params in tuned.items():
             if name not in policies:
                 raise ValueError(f"tuned parameters for unknown heuristic {name!r}")
