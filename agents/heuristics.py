@@ -11,7 +11,7 @@ The policies are stateless: anything time-dependent is read from the observation
 copy with those set from a :class:`~trackenv.envs.config.TampingEnvConfig` (the evaluation harness calls it).
 
 Each class has a ``name``, a ``params`` dict (its constructor arguments, JSON-friendly) and a
-:meth:`param_grid` classmethod: the small grid that :func:`agents.evaluation.tune` searches.
+:meth:`param_grid` classmethod: the small grid that :func:`trackenv_agents.evaluation.tune` searches.
 """
 
 from __future__ import annotations

@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from agents.evaluation import TRAIN_SEEDS
-from agents.heuristics import Periodic
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.vector import TampingVectorEnv
+from trackenv_agents.evaluation import TRAIN_SEEDS
+from trackenv_agents.heuristics import Periodic
 
 # the whole-track intervals of the periodic rule's tuning grid, in steps of the default calendar (4 a year)
 PERIODIC_STEPS = tuple(Periodic(**p).interval_steps for p in Periodic.param_grid() if p["sections"] == "all")

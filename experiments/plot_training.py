@@ -2,7 +2,7 @@
 
     python experiments/plot_training.py runs/ppo runs/ppo_more --out docs/training_curve.png
 
-Reads each run's ``evaluations.json`` (written by the evaluation callback of :func:`agents.train.train`) and
+Reads each run's ``evaluations.json`` (written by the evaluation callback of :func:`trackenv_agents.train.train`) and
 draws mean return against env steps; the tuned heuristics of ``agents/tuned_heuristics.json`` are scored on
 the same evaluation seeds and drawn as horizontal lines, so the curve reads as "how far from the best rule".
 """
@@ -13,9 +13,9 @@ import argparse
 import json
 from pathlib import Path
 
-from agents.evaluation import evaluate_many
-from agents.heuristics import HEURISTICS, tuned_params
-from agents.train import DEFAULT_EVAL_SEEDS
+from trackenv_agents.evaluation import evaluate_many
+from trackenv_agents.heuristics import HEURISTICS, tuned_params
+from trackenv_agents.train import DEFAULT_EVAL_SEEDS
 
 
 def main(argv: list[str] | None = None) -> dict:

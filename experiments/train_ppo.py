@@ -10,8 +10,8 @@ import argparse
 import json
 import time
 
-from agents.train import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
 from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.train import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
 
 
 def main(argv=None) -> None:

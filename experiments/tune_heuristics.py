@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.evaluation import TRAIN_SEEDS, tune_many
-from agents.heuristics import HEURISTICS, TUNED_PARAMS_FILE
 from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.evaluation import TRAIN_SEEDS, tune_many
+from trackenv_agents.heuristics import HEURISTICS, TUNED_PARAMS_FILE
 
 DEFAULT_FILE = TUNED_PARAMS_FILE
 

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from trackenv.cli import main
+from trackenv_agents.cli import main
 
 
 @pytest.mark.slow
@@ -30,7 +30,7 @@ def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
 
 def test_train_seed_default_is_the_training_seed_of_agents_train():
     pytest.importorskip("stable_baselines3")
-    from agents.train import DEFAULT_TRAIN_SEED
-    from trackenv.cli import build_parser
+    from trackenv_agents.cli import build_parser
+    from trackenv_agents.train import DEFAULT_TRAIN_SEED
 
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.heuristics import Periodic
-from agents.train import evaluate_returns
 from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.heuristics import Periodic
+from trackenv_agents.train import evaluate_returns
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 

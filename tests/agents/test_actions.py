@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from agents.actions import agent_action_space, env_action_type, ranked_to_sections
 from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.actions import agent_action_space, env_action_type, ranked_to_sections
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 
@@ -38,7 +38,7 @@ def test_action_types():
 
 def test_adapter_translates_ranked_actions_on_the_last_observation():
     pytest.importorskip("stable_baselines3")
-    from agents.sb3_vec import TampingSB3VecEnv
+    from trackenv_agents.sb3_vec import TampingSB3VecEnv
 
     env = TampingSB3VecEnv(2, TINY, action_type="ranked", keep_per_sleeper=False, seed=1)
     assert env.action_space == spaces.Discrete(TINY.n_sections + 1)

@@ -7,7 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from agents.evaluation import (
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.tamping import TampingEnv
+from trackenv_agents.evaluation import (
     EvaluationResult,
     bootstrap_ci,
     compare,
@@ -19,9 +21,7 @@ from agents.evaluation import (
     tune,
     tune_many,
 )
-from agents.heuristics import NoMaintenance, Periodic, SDThreshold
-from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.tamping import TampingEnv
+from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold
 
 CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
 SEEDS = [0, 1, 2, 3]

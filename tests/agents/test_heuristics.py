@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.heuristics import (
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.tamping import observation_space
+from trackenv_agents.heuristics import (
     HEURISTICS,
     Campaign,
     DefectThreshold,
@@ -16,8 +18,6 @@ from agents.heuristics import (
     WorstFirst,
     make_policy,
 )
-from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.tamping import observation_space
 
 CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)  # 8 steps
 

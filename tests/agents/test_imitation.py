@@ -9,11 +9,11 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from agents.heuristics import Periodic  # noqa: E402
-from agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
-from agents.train import evaluate_returns, load_trained, train  # noqa: E402
 from trackenv.envs.config import TampingEnvConfig  # noqa: E402
 from trackenv.envs.vector import TampingVectorEnv  # noqa: E402
+from trackenv_agents.heuristics import Periodic  # noqa: E402
+from trackenv_agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
+from trackenv_agents.train import evaluate_returns, load_trained, train  # noqa: E402
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 

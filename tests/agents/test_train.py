@@ -9,8 +9,10 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from agents.sb3_vec import TampingSB3VecEnv  # noqa: E402
-from agents.train import (  # noqa: E402
+from trackenv.envs.config import TampingEnvConfig  # noqa: E402
+from trackenv.envs.tamping import TampingEnv  # noqa: E402
+from trackenv_agents.sb3_vec import TampingSB3VecEnv  # noqa: E402
+from trackenv_agents.train import (  # noqa: E402
     DEFAULT_PRETRAINED,
     ConstantPolicy,
     RandomPolicy,
@@ -19,8 +21,6 @@ from agents.train import (  # noqa: E402
     stats_path,
     train,
 )
-from trackenv.envs.config import TampingEnvConfig  # noqa: E402
-from trackenv.envs.tamping import TampingEnv  # noqa: E402
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
 

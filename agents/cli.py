@@ -12,7 +12,7 @@ import sys
 import time
 from typing import Any
 
-from ._json import json_default
+from trackenv._json import json_default
 
 DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
 
@@ -25,7 +25,7 @@ def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .validation import run_validation
+    from trackenv.validation import run_validation
 
     summary = run_validation(out_dir=args.out or "results/validation", make_plots=not args.no_plots)
     lines = ["trackenv validate — track model against closed forms and the paper"]
@@ -39,7 +39,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from .paper import format_summary, reproduce_paper
+    from trackenv.paper import format_summary, reproduce_paper
 
     summary = reproduce_paper(
         out_dir=args.out or "results/paper",
@@ -53,7 +53,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import format_benchmarks, run_benchmarks
+    from trackenv.bench import format_benchmarks, run_benchmarks
 
     result = run_benchmarks(quick=args.quick)
     _emit(args, result, format_benchmarks(result))
@@ -68,14 +68,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
     if args.policy in ("ppo", "all") and not args.quick:  # the shipped policy knows the default track only
         try:
-            from agents.train import load_trained
+            from .train import load_trained
 
             extra["ppo"] = load_trained(args.model)
         except Exception as exc:  # a missing or broken model must not hide the heuristics' results
             if args.policy == "ppo":
                 raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
             print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
-    from agents.heuristics import TUNED_PARAMS_FILE as shipped
+    from .heuristics import TUNED_PARAMS_FILE as shipped
 
     tuned = None
     if not (args.retune or args.quick) and shipped.exists():
@@ -93,14 +93,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     )
     result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
-    from agents.evaluation import format_table
+    from .evaluation import format_table
 
     _emit(args, result, format_table(result["results"]))
     return 0
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from agents.train import train
+    from .train import train
 
     t0 = time.perf_counter()
     path = train(
@@ -161,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default="ppo")
     sp.add_argument("--timesteps", type=int, default=None)
     sp.add_argument("--n-envs", type=int, default=8)
-    # = agents.train.DEFAULT_TRAIN_SEED, written out: importing agents.train here would load torch for every command
+    # = trackenv_agents.train.DEFAULT_TRAIN_SEED, written out: importing it here would load torch for every command
     sp.add_argument("--seed", type=int, default=20_000,
                     help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
     sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")

@@ -1,6 +1,6 @@
 """Compare maintenance policies: tune every heuristic on training seeds, score all on held-out test seeds.
 
-    from trackenv.compare import run_comparison
+    from trackenv_agents.compare import run_comparison
     out = run_comparison(quick=True)          # ~1 min: 30 m track, 3 sections, 1.5 years, few seeds
     out = run_comparison(n_test=32, n_train=16)
 
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ._json import json_default
-from .envs.config import TampingEnvConfig
+from trackenv._json import json_default
+from trackenv.envs.config import TampingEnvConfig
 
 QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
 QUICK_N_TEST, QUICK_N_TRAIN = 6, 2
@@ -37,7 +37,7 @@ def run_comparison(
     batch_size: int = 32,
     tuned: Mapping[str, dict] | str | Path | None = None,
 ) -> dict[str, Any]:
-    """Tune each heuristic of :data:`agents.heuristics.HEURISTICS` (but the random baseline) on the first
+    """Tune each heuristic of :data:`trackenv_agents.heuristics.HEURISTICS` (but the random baseline) on the first
     ``n_train`` training seeds, evaluate them, a random baseline and ``extra_policies`` on the first
     ``n_test`` test seeds; returns ``{"results": [summaries sorted by mean cost], ...}`` and writes the files
     to ``out_dir`` (``None``: write nothing).
@@ -45,7 +45,7 @@ def run_comparison(
     ``quick``: unless given, config = the 30 m / 3 section / 1.5 year track, n_test = 6, n_train = 3.
     Defaults otherwise: ``TampingEnvConfig()``, all of ``TEST_SEEDS`` (200) and ``TRAIN_SEEDS`` (100).
     """
-    from agents.evaluation import (
+    from .evaluation import (
         TEST_SEEDS,
         TRAIN_SEEDS,
         compare_results,
@@ -54,7 +54,7 @@ def run_comparison(
         plot_comparison,
         plot_episode,
     )
-    from agents.heuristics import HEURISTICS, RandomPolicy, tuned_params
+    from .heuristics import HEURISTICS, RandomPolicy, tuned_params
 
     t0 = time.perf_counter()
     config = TampingEnvConfig.coerce(QUICK_CONFIG if quick and config is None else config)

@@ -1,7 +1,0 @@
-"""``python -m trackenv`` runs the ``trackenv`` command."""
-
-import sys
-
-from .cli import main
-
-sys.exit(main())
