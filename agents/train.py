@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.tamping import action_space
@@ -162,7 +163,8 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
     """Undiscounted episode return (−total cost, k€) of ``policy`` on each seed (one episode per seed, all run
     together in one :class:`TampingVectorEnv`)."""
     config = TampingEnvConfig.coerce(config)
-    venv = TampingVectorEnv(len(seeds), config, action_type=env_action_type(action_type))
+    venv = TampingVectorEnv(len(seeds), config, action_type=env_action_type(action_type),
+                            autoreset_mode=AutoresetMode.NEXT_STEP)  # nothing starts past the horizon
     obs, _ = venv.reset(seed=[int(s) for s in seeds])
     returns = np.zeros(len(seeds))
     for _ in range(config.horizon_steps):
