@@ -81,18 +81,30 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not (args.retune or args.quick) and shipped.exists():
         tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
     n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
+    executor = None
+    if args.ray or args.ray_address:  # batches of episodes as Ray tasks (agents/distributed.py)
+        from .distributed import RayExecutor
+
+        executor = RayExecutor(address=args.ray_address)
     t0 = time.perf_counter()
-    result = run_comparison(
-        out_dir=args.out or "results/compare",
-        n_test=n_test,
-        n_train=args.n_train,
-        quick=args.quick,
-        progress=not args.json,
-        extra_policies=extra,
-        tuned=tuned,
-    )
+    try:
+        result = run_comparison(
+            out_dir=args.out or "results/compare",
+            n_test=n_test,
+            n_train=args.n_train,
+            quick=args.quick,
+            progress=not args.json,
+            extra_policies=extra,
+            tuned=tuned,
+            batch_size=args.batch_size,
+            executor=executor,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
     result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
+    result["ray"] = args.ray_address or ("local" if args.ray else None)
     from .evaluation import format_table
 
     _emit(args, result, format_table(result["results"]))
@@ -154,6 +166,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--retune", action="store_true", help="tune the heuristics again instead of using the shipped parameters"
     )
+    sp.add_argument("--batch-size", type=int, default=32, help="episodes per batch (one vector env, one task)")
+    sp.add_argument("--ray", action="store_true", help="run the batches as tasks on a local Ray (trackenv[ray])")
+    sp.add_argument("--ray-address", default=None, metavar="ADDR",
+                    help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("train", help="train a PPO agent (stable-baselines3)")
