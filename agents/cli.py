@@ -181,7 +181,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seed", type=int, default=20_000,
                     help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
     sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")
-    sp.add_argument("--hyperparams", default=None, help="JSON file overriding agents/ppo_config.json key by key")
+    sp.add_argument("--hyperparams", default=None,
+                    help="YAML (RL Zoo form) or flat JSON overriding agents/hyperparams/ppo.yml key by key")
     sp.set_defaults(func=cmd_train)
     return p
 
