@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -217,7 +217,7 @@ def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
 
 # --- callbacks ---
 def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose,
-                        evaluate_at_start: bool = False):
+                        evaluate_at_start: bool = False, on_evaluation=None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class HeldOutEvalCallback(BaseCallback):
@@ -239,6 +239,8 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
             rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
                    "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
             self.history.append(rec)
+            if on_evaluation is not None:  # e.g. a Ray Tune report (experiments/tune_ppo.py)
+                on_evaluation(rec)
             self.logger.record("eval/mean_return", rec["mean_return"])
             self.logger.record("eval/std_return", rec["std_return"])
             if verbose:
@@ -284,13 +286,15 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
           out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
-          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None) -> Path:
+          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
+          on_evaluation: Callable[[dict], None] | None = None) -> Path:
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
     ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
     overriding ``agents/hyperparams/ppo.yml`` key by key. Explicit
     arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
-    or ``eval_freq=0`` disables the periodic held-out evaluation.
+    or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
+    (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
 
     ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
     are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
@@ -369,7 +373,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     eval_cb = None
     if eval_seeds and eval_freq > 0:
         eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, action_type, raw.obs_keys,
-                                      algo, verbose, evaluate_at_start=warm is not None)
+                                      algo, verbose, evaluate_at_start=warm is not None,
+                                      on_evaluation=on_evaluation)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
             "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),
