@@ -138,3 +138,20 @@ def test_vector_ranked_env_matches_the_single_wrapped_envs() -> None:
             assert list(final) == SECTION_KEYS, t
             np.testing.assert_allclose(final["section_sd"], o["section_sd"], rtol=1e-5)
     assert venv.action_masks().shape == (2, 4)
+
+
+def test_ranked_vector_of_an_env_without_a_vector_entry_point() -> None:
+    """An env following the conventions but with no batched form (as a new env may start) gets Gymnasium's
+    SyncVectorEnv under the same wrappers."""
+    env_id = "trackenv_test/TampingNoVector-v0"
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point="trackenv.envs.tamping:TampingEnv")
+    from trackenv.envs.wrappers import make_ranked_vector
+
+    venv = make_ranked_vector(2, env_id=env_id, flat=True, config=CFG)
+    assert isinstance(venv.unwrapped, gym.vector.SyncVectorEnv)
+    assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+    obs, _ = venv.reset(seed=[0, 1])
+    assert obs.shape == (2, 13)
+    obs, rewards, *_ = venv.step(np.array([3, 0]))
+    assert venv.observation_space.contains(obs) and np.all(rewards < 0)

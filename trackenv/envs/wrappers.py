@@ -80,6 +80,8 @@ def n_sections_of(env: gym.Env | VectorEnv) -> int:
     n = getattr(base, "n_sections", None)
     if n is None:
         n = getattr(getattr(base, "config", None), "n_sections", None)
+    if n is None and getattr(base, "envs", None):  # Gymnasium's SyncVectorEnv: its first env's
+        return n_sections_of(base.envs[0])
     if n is None:
         raise TypeError(f"{type(base).__name__} has neither n_sections nor config.n_sections")
     return int(n)
@@ -281,11 +283,17 @@ class SectionVectorObservation(VectorWrapper):
 
 def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v0", flat: bool = False,
                        **kwargs: Any) -> VectorEnv:
-    """The native vector env of ``env_id`` (batched physics) in ranked actions and section-level observations;
-    the ``vector_entry_point`` of the ranked ids. ``flat=True`` adds Gymnasium's vector ``FlattenObservation``,
+    """The native vector env of ``env_id`` (batched physics; Gymnasium's SyncVectorEnv for an id without a
+    vector entry point) in ranked actions and section-level observations; the ``vector_entry_point`` of the
+    ranked ids. ``flat=True`` adds Gymnasium's vector ``FlattenObservation``,
     which works in the NEXT_STEP autoreset mode only (so that is then the default ``autoreset_mode``)."""
     if flat:
         kwargs.setdefault("autoreset_mode", AutoresetMode.NEXT_STEP)
-    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    if gym.spec(env_id).vector_entry_point is not None:
+        venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    else:  # an env without a batched form: Gymnasium's SyncVectorEnv in the same autoreset mode
+        mode = kwargs.pop("autoreset_mode", AutoresetMode.SAME_STEP)
+        venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync",
+                            vector_kwargs={"autoreset_mode": mode}, **kwargs)
     venv = SectionVectorObservation(RankedVectorActions(venv))
     return gym.wrappers.vector.FlattenObservation(venv) if flat else venv
