@@ -114,7 +114,7 @@ def main(argv=None) -> list[dict[str, Any]]:
     if a.quick:
         config = QUICK_CONFIG
         a.num_samples, a.timesteps, a.eval_freq, a.n_eval = 2, 256, 128, 2
-        extra["n_envs"] = 2
+        extra.update(n_envs=2, batch_size=64)
     rows = run(a.num_samples, a.timesteps, a.eval_freq, list(range(10_000, 10_000 + a.n_eval)), config, extra,
                a.address, a.num_cpus, a.seed)
     out = Path(a.out)

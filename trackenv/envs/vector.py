@@ -29,7 +29,11 @@ from .tamping import action_space, decode_action, observation_space
 
 
 class TampingVectorEnv(VectorEnv):
-    """``num_envs`` independent :class:`TampingEnv` episodes with batched physics (same config)."""
+    """``num_envs`` independent :class:`TampingEnv` episodes with batched physics (same config).
+
+    ``autoreset_mode``: ``AutoresetMode.SAME_STEP`` (default) or ``NEXT_STEP`` (or their values, "SameStep",
+    "NextStep"; see the module docstring); ``render_mode="rgb_array"``: :meth:`render` draws the first env.
+    Seeds: ``reset(seed=s)`` seeds env ``i`` with ``s + i``, or give a list of one seed per env."""
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.SAME_STEP}
 
@@ -106,13 +110,9 @@ class TampingVectorEnv(VectorEnv):
         self._autoreset[:] = False
         infos: dict = {}
         for i in range(self.num_envs):
-            infos = self._add_info(infos, self._info(i, self._reset_info(i)), i)
+            infos = self._add_info(infos, self._reset_info(i), i)  # Gymnasium's vector infos, with masks
+        self._first_info = self._reset_info(0)
         return self._observations(), infos
-
-    def _info(self, i: int, info: dict) -> dict:
-        if i == 0:
-            self._first_info = info
-        return info
 
     def step(self, actions):
         if not self.episodes:
@@ -153,7 +153,8 @@ class TampingVectorEnv(VectorEnv):
         for i in resetting:
             step_infos[i] = self._reset_info(i)
         for i in range(n):
-            infos = self._add_info(infos, self._info(i, step_infos[i]), i)
+            infos = self._add_info(infos, step_infos[i], i)
+        self._first_info = step_infos[0]
         return self._observations(), rewards, np.zeros(n, dtype=bool), truncated, infos
 
     def render(self):
