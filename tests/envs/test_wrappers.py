@@ -140,12 +140,22 @@ def test_vector_ranked_env_matches_the_single_wrapped_envs() -> None:
     assert venv.action_masks().shape == (2, 4)
 
 
-def test_ranked_vector_of_an_env_without_a_vector_entry_point() -> None:
-    """An env following the conventions but with no batched form (as a new env may start) gets Gymnasium's
-    SyncVectorEnv under the same wrappers."""
-    env_id = "trackenv_test/TampingNoVector-v0"
+def _same_step_only(num_envs: int, **kwargs):
+    """A batched env that knows only the SAME_STEP autoreset mode (unknown keywords raise ValueError)."""
+    from trackenv.envs.vector import TampingVectorEnv
+
+    if "autoreset_mode" in kwargs:
+        raise ValueError("unknown TampingEnvConfig key(s) ['autoreset_mode']")
+    return TampingVectorEnv(num_envs, **kwargs)
+
+
+@pytest.mark.parametrize("vector_entry_point", [None, _same_step_only])
+def test_ranked_flat_vector_falls_back_to_sync_vector_env(vector_entry_point) -> None:
+    """An env following the conventions but with no batched form, or one without the NEXT_STEP mode that the
+    flat observation needs (as a new env may start), gets Gymnasium's SyncVectorEnv under the same wrappers."""
+    env_id = f"trackenv_test/TampingVector{'None' if vector_entry_point is None else 'SameStep'}-v0"
     if env_id not in gym.registry:
-        gym.register(env_id, entry_point="trackenv.envs.tamping:TampingEnv")
+        gym.register(env_id, entry_point="trackenv.envs.tamping:TampingEnv", vector_entry_point=vector_entry_point)
     from trackenv.envs.wrappers import make_ranked_vector
 
     venv = make_ranked_vector(2, env_id=env_id, flat=True, config=CFG)

@@ -284,14 +284,20 @@ class SectionVectorObservation(VectorWrapper):
 def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v0", flat: bool = False,
                        **kwargs: Any) -> VectorEnv:
     """The native vector env of ``env_id`` (batched physics; Gymnasium's SyncVectorEnv for an id without a
-    vector entry point) in ranked actions and section-level observations; the ``vector_entry_point`` of the
-    ranked ids. ``flat=True`` adds Gymnasium's vector ``FlattenObservation``,
-    which works in the NEXT_STEP autoreset mode only (so that is then the default ``autoreset_mode``)."""
+    vector entry point, or whose vector env does not take the ``autoreset_mode`` asked for) in ranked actions
+    and section-level observations; the ``vector_entry_point`` of the ranked ids. ``flat=True`` adds
+    Gymnasium's vector ``FlattenObservation``, which works in the NEXT_STEP autoreset mode only (so that is then
+    the default ``autoreset_mode``)."""
     if flat:
         kwargs.setdefault("autoreset_mode", AutoresetMode.NEXT_STEP)
+    venv = None
     if gym.spec(env_id).vector_entry_point is not None:
-        venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
-    else:  # an env without a batched form: Gymnasium's SyncVectorEnv in the same autoreset mode
+        try:
+            venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+        except (TypeError, ValueError):
+            if "autoreset_mode" not in kwargs:
+                raise  # a bad argument, not a batched env that lacks the autoreset mode asked for
+    if venv is None:  # no batched form (in this mode): Gymnasium's SyncVectorEnv over the single envs
         mode = kwargs.pop("autoreset_mode", AutoresetMode.SAME_STEP)
         venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync",
                             vector_kwargs={"autoreset_mode": mode}, **kwargs)
