@@ -43,7 +43,8 @@ def make_env(env_config: dict[str, Any]):
 
 def build_config(env_config: dict[str, Any] | None = None, *, num_env_runners: int = 0, num_envs: int = 1,
                  train_batch: int = 512, minibatch: int = 128, epochs: int = 5, lr: float = 3e-4,
-                 gamma: float = 0.995, hidden: tuple[int, ...] = (64, 64), seed: int = 20_000):
+                 gamma: float = 0.995, hidden: tuple[int, ...] = (64, 64), seed: int = 20_000,
+                 native_vector: bool = True):
     """A PPOConfig for :func:`make_env` (registered as ``trackenv-rllib``); the CI test uses a tiny one."""
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
@@ -54,7 +55,7 @@ def build_config(env_config: dict[str, Any] | None = None, *, num_env_runners: i
         PPOConfig()
         .environment(ENV_NAME, env_config=dict(env_config or {}))
         .env_runners(num_env_runners=num_env_runners, num_envs_per_env_runner=num_envs,
-                     gym_env_vectorize_mode="vector_entry_point" if num_envs > 1 else "sync",
+                     gym_env_vectorize_mode="vector_entry_point" if native_vector and num_envs > 1 else "sync",
                      rollout_fragment_length="auto")
         .learners(num_learners=0)
         .training(train_batch_size_per_learner=train_batch, minibatch_size=minibatch, num_epochs=epochs, lr=lr,
@@ -78,6 +79,7 @@ def main(argv=None) -> dict:
     p.add_argument("--iterations", type=int, default=10)
     p.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0: sample in the driver)")
     p.add_argument("--num-envs", type=int, default=8, help="envs per runner (native vector env if > 1)")
+    p.add_argument("--sync", action="store_true", help="Gymnasium's SyncVectorEnv instead of the native one")
     p.add_argument("--train-batch", type=int, default=512)
     p.add_argument("--minibatch", type=int, default=128)
     p.add_argument("--epochs", type=int, default=5)
@@ -94,7 +96,7 @@ def main(argv=None) -> dict:
     env_config = {"env_id": a.env_id, **json.loads(a.env_config)}
     algo = build_config(env_config, num_env_runners=a.num_env_runners, num_envs=a.num_envs,
                         train_batch=a.train_batch, minibatch=a.minibatch, epochs=a.epochs, lr=a.lr, gamma=a.gamma,
-                        seed=a.seed).build_algo()
+                        seed=a.seed, native_vector=not a.sync).build_algo()
     history = []
     try:
         for i in range(a.iterations):
