@@ -51,9 +51,7 @@ def amplitude_spectrum(signal: np.ndarray, dt: float) -> tuple[np.ndarray, np.nd
 
 @functools.cache
 def smooth_pass(dt: float = 1e-4, elements_per_bay: int = 2, window_bays: int | None = 6):
-    return simulate_pass(
-        Track.seed(elements_per_bay=elements_per_bay), LOADED, V80, dt=dt, window_bays=window_bays
-    )
+    return simulate_pass(Track.seed(elements_per_bay=elements_per_bay), LOADED, V80, dt=dt, window_bays=window_bays)
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -158,9 +156,7 @@ def test_static_start_is_equilibrium():
     t = Track.seed()
     res = simulate_pass(t, LOADED, V80, x_start=10.0, x_end=12.0)
     assert res.contact_force[0, 0] == pytest.approx(LOADED.wheel_load, rel=1e-12)
-    assert res.rail_displacement[0, 0] == pytest.approx(
-        static_deflection(t, LOADED.wheel_load, 10.0), rel=1e-3
-    )
+    assert res.rail_displacement[0, 0] == pytest.approx(static_deflection(t, LOADED.wheel_load, 10.0), rel=1e-3)
     assert np.max(np.abs(res.contact_force[:, 0] / LOADED.wheel_load - 1)) < 0.02
 
 
@@ -371,9 +367,7 @@ def test_batch_of_tracks_with_different_ballast():
     c = central(batch[0].time.size)
     # the softer ballast: more deflection, as the Winkler beam says (w0 ∝ k_f^{-3/4})
     w_seed, w_soft = (b.rail_displacement[c, 0].mean() for b in (batch[0], batch[2]))
-    assert w_soft / w_seed == pytest.approx(
-        tracks[2].winkler_deflection(1.0) / seed.winkler_deflection(1.0), rel=0.03
-    )
+    assert w_soft / w_seed == pytest.approx(tracks[2].winkler_deflection(1.0) / seed.winkler_deflection(1.0), rel=0.03)
     # the stiffer ballast from sleeper 40 on takes more of the load there
     np.testing.assert_allclose(batch[1].sleeper_force[10:30], batch[0].sleeper_force[10:30], rtol=1e-9)
     assert np.all(batch[1].sleeper_force[42:48] > batch[0].sleeper_force[42:48])
@@ -394,3 +388,33 @@ def test_multi_car_train_runs():
     c = central(res.time.size)
     np.testing.assert_allclose(res.contact_force[c].mean(axis=0), res.static_wheel_load, rtol=0.02)
     assert np.all(res.contact_force >= 0.0)
+
+
+def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
+    """The kernel runs the rows of a batch in lockstep, cut into chunks over the threads: a row's result is
+    bit-identical whatever batch it runs in, however the batch is cut and on however many threads."""
+    import numba
+
+    t = Track.seed()
+    rng = np.random.default_rng(7)
+    rows = 5e-4 * rng.standard_normal((17, t.n_sleepers))
+    tracks = [t.scaled(ballast_stiffness=f) for f in rng.uniform(0.5, 2.0, 17)]
+    kw = dict(x_start=6.0, x_end=12.0, support_settlement=np.abs(rows), start="rest")
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one_thread = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    finally:
+        numba.set_num_threads(threads)
+    all_threads = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    five = simulate_passes(
+        tracks[3:8], LOADED, V80, rows[3:8], **{**kw, "support_settlement": kw["support_settlement"][3:8]}
+    )
+    for b in (0, 3, 7, 16):
+        single = simulate_pass(
+            tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": kw["support_settlement"][b]}
+        )
+        others = [one_thread[b], all_threads[b]] + ([five[b - 3]] if 3 <= b < 8 else [])
+        for other in others:
+            for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
+                np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)

@@ -217,17 +217,6 @@ def _clusters(offsets: np.ndarray, gap: float) -> np.ndarray:
     return cl
 
 
-def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Rail deflection of the displacement vector ``u`` at positions ``x`` (Hermite interpolation)."""
-    le = track.element_length
-    e = np.clip(np.floor(x / le).astype(int), 0, track.n_nodes - 2)
-    xi = x / le - e
-    lay = track.dof_layout
-    n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
-    n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
-    return n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]] + n4 * u[lay.node_theta[e + 1]]
-
-
 def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
     """Rail level at positions x from a per-sleeper or per-node profile (cubic spline) or a callable."""
     if irr is None:
@@ -265,6 +254,46 @@ def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray
     for lo, hi in windows:
         u[lo:hi] = scipy.linalg.solveh_banded(lapack_lower(k_band[lo:hi]), f[lo:hi], lower=True)
     return u
+
+
+def _chunking(n_rows: int, max_width: int = _kernel.WIDTHS[-1]) -> tuple[int, int]:
+    """How the kernel cuts a batch: (number of chunks, rows per chunk). Enough chunks for every numba thread
+    (the chunks run in parallel), no more than ``max_width`` rows per chunk (a chunk's window stays in cache),
+    the width rounded up to one the kernel is compiled for; the last rows are padded with copies of the last row.
+    A row's result does not depend on this choice."""
+    import numba
+
+    threads = numba.get_num_threads()
+    n_chunks = max(-(-n_rows // max_width), min(n_rows, threads))
+    need = -(-n_rows // n_chunks)
+    return n_chunks, min(w for w in _kernel.WIDTHS if w >= need)
+
+
+def _pack(x: np.ndarray, n_chunks: int, width: int) -> np.ndarray:
+    """(rows, ...) -> (chunks, ..., width), contiguous, the batch axis last; padded with the last row."""
+    pad = n_chunks * width - x.shape[0]
+    if pad:
+        x = np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
+    x = x.reshape((n_chunks, width) + x.shape[1:])
+    return np.ascontiguousarray(np.moveaxis(x, 1, -1))
+
+
+def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
+    """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
+    x = np.moveaxis(x, -1, 1)
+    return np.ascontiguousarray(x.reshape((-1,) + x.shape[2:])[:n_rows])
+
+
+def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
+    """Lower band storage (rows, n, B+1) of the symmetric mass matrix as its 2B+1 full diagonals:
+    out[:, i, d] = M[i, i + d - B]."""
+    nb, n, b1 = mb.shape
+    bw = b1 - 1
+    out = np.zeros((nb, n, 2 * bw + 1))
+    for k in range(b1):
+        out[:, k:, bw - k] = mb[:, k:, k]
+        out[:, : n - k, bw + k] = mb[:, k:, k]
+    return out
 
 
 def simulate_passes(
@@ -358,6 +387,7 @@ def simulate_passes(
     lay = t0.dof_layout
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
     static_total = np.zeros((n_rows, t0.n_sleepers))
+    sag = np.zeros((n_rows, t0.n_dof))  # static rail sag over settled supports (the kernel adds it to z)
     if support_settlement is not None:
         g = check_array("support_settlement", support_settlement)
         if g.ndim == 1:
@@ -368,7 +398,8 @@ def simulate_passes(
             f = np.zeros(t0.n_dof)
             f[lay.sleeper] = t.ballast_stiffness * g[b]
             u0 = scipy.linalg.solveh_banded(lapack_lower(kb[b]), f, lower=True)
-            z_axle[b] += _rail_at(t0, u0, x_axle)
+            sag[b] = u0
+            z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in map(functools.partial(_point_load_vector, t0), x_axle[0])]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
             static_ballast[b] = t.ballast_stiffness * (us - g[b])
             static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
@@ -427,49 +458,52 @@ def simulate_passes(
     peak_ballast = bal_k * u[:, ds]
     peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
 
-    run = _kernel.run_serial if nb == 1 else _kernel.run_batch
-    run(
-        (
-            mb,
-            cb,
-            keff,
-            lay.node_w,
-            lay.sleeper,
-            lay.sleeper_node,
-            pad_k,
-            pad_c,
-            bal_k,
-            bal_c,
-            t0.element_length,
-            t0.elements_per_bay,
-            t0.sleeper_spacing,
-            t0.n_sleepers,
-            np.ascontiguousarray(sys_.mass),
-            np.ascontiguousarray(sys_.damping),
-            kv_inv,
-            sys_.force.astype(float),
-            sys_.wheel_dofs.astype(np.int64),
-            cluster,
-            n_clusters,
-            margin,
-            x_axle,
-            z_axle,
-            law.code,
-            float(law.parameter),
-            consts,
-            u,
-            v,
-            a,
-            q,
-            qd,
-            qdd,
-            out_force,
-            out_rail,
-            out_wheel,
-            peak_ballast,
-            peak_total,
-        )
+    n_chunks, width = _chunking(nb)
+    pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    mesh = _kernel.Mesh(
+        lay.node_w.astype(np.int64),
+        lay.sleeper.astype(np.int64),
+        lay.sleeper_node.astype(np.int64),
+        float(t0.element_length),
+        int(t0.elements_per_bay),
+        int(t0.n_sleepers),
+        int(margin),
     )
+    drive = _kernel.Drive(
+        np.ascontiguousarray(x_axle),
+        consts,
+        int(law.code),
+        float(law.parameter),
+        np.ascontiguousarray(sys_.mass, dtype=float),
+        np.ascontiguousarray(sys_.damping, dtype=float),
+        np.ascontiguousarray(kv_inv),
+        sys_.force.astype(float),
+        sys_.wheel_dofs.astype(np.int64),
+        cluster,
+        n_clusters,
+    )
+    rows = _kernel.Rows(
+        pack(_mass_diagonals(mb)),
+        pack(keff),
+        pack(pad_k),
+        pack(pad_c),
+        pack(bal_k),
+        pack(bal_c),
+        pack(z_axle),
+        pack(sag),
+        pack(u),
+        pack(v),
+        pack(a),
+        pack(q),
+        pack(qd),
+        pack(qdd),
+    )
+    peaks = _kernel.Peaks(pack(out_force), pack(out_rail), pack(out_wheel), pack(peak_ballast), pack(peak_total))
+    run = _kernel.run_serial if n_chunks == 1 else _kernel.run_parallel
+    run(mesh, drive, rows, peaks, width)
+    unpack = functools.partial(_unpack, n_rows=nb)
+    out_force, out_rail, out_wheel = unpack(peaks.force), unpack(peaks.rail), unpack(peaks.wheel)
+    peak_ballast, peak_total, z_axle = unpack(peaks.ballast), unpack(peaks.total), unpack(rows.z)
 
     peak_ballast += static_ballast
     peak_total += static_total
