@@ -32,6 +32,7 @@ from .physics.dynamics import (
 )
 from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState
 from .physics.tamping import TampingModel, TampingResult, tamp
+from .physics.timestep import check_dt_option
 from .physics.track import Track
 
 
@@ -125,7 +126,8 @@ class TrackDegradation:
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
     self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to
-    :func:`simulate_passes` (``dt``, ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    :func:`simulate_passes` (``dt``, default "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy
+    contract; ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
@@ -165,9 +167,9 @@ class TrackDegradation:
         unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
+        pass_options.setdefault("dt", "auto")
+        check_dt_option(pass_options["dt"])
         self.pass_options = pass_options
-        if "dt" in pass_options:
-            check_scalar("dt", pass_options["dt"], low=1e-7, high=1e-3)
         if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
             raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
         wb = pass_options.get("window_bays", 6)
