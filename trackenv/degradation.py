@@ -27,6 +27,7 @@ from .physics.dynamics import (
     SLEEPER_FORCE_MEASURES,
     PassResult,
     _vehicle_system,
+    check_window_bays,
     lapack_lower,
     simulate_passes,
 )
@@ -172,9 +173,7 @@ class TrackDegradation:
         self.pass_options = pass_options
         if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
             raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
-        wb = pass_options.get("window_bays", 6)
-        if wb is not None and (isinstance(wb, bool) or not isinstance(wb, (int, np.integer)) or wb < 2):
-            raise ValueError(f"window_bays must be an integer >= 2 or None, got {wb!r}")
+        check_window_bays(pass_options.get("window_bays", "auto"))
         if feedback not in FEEDBACKS:
             raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
         self.feedback = feedback

@@ -50,7 +50,7 @@ def amplitude_spectrum(signal: np.ndarray, dt: float) -> tuple[np.ndarray, np.nd
 
 
 @functools.cache
-def smooth_pass(dt: float = 1e-4, elements_per_bay: int = 2, window_bays: int | None = 6):
+def smooth_pass(dt: float = 1e-4, elements_per_bay: int = 2, window_bays: int | str | None = "auto"):
     return simulate_pass(Track.seed(elements_per_bay=elements_per_bay), LOADED, V80, dt=dt, window_bays=window_bays)
 
 
@@ -219,6 +219,36 @@ def test_fast_path_matches_reference_for_a_car():
     ref = reference_pass(t, car, 100 / 3.6)
     assert_close_to_reference(simulate_pass(t, car, 100 / 3.6, window_bays=None), ref, 1e-8)
     assert_close_to_reference(simulate_pass(t, car, 100 / 3.6), ref, 0.01)
+
+
+SOFT_AND_STIFF = {
+    **{f"ballast_{k:.0e}": Track.seed().replace(ballast_stiffness=np.full(51, k)) for k in (1e6, 1e7, 3e7, 1e8, 1e9)},
+    **{f"pad_{k:.0e}": Track.seed().replace(pad_stiffness=np.full(51, k)) for k in (1e6, 1e7, 1e8, 1e9)},
+    "voided_sleeper": Track.seed().with_voided_sleeper(25, residual_support=0.05),
+    "transition_soft_x4": Track.seed().scaled(ballast_stiffness=0.25, from_sleeper=25),
+    "ballast_1e+07_60m": Track.realistic(60.0).replace(ballast_stiffness=np.full(101, 1e7)),
+    "ballast_1e+06_60m": Track.realistic(60.0).replace(ballast_stiffness=np.full(101, 1e6)),
+}
+
+
+@pytest.mark.parametrize("name", SOFT_AND_STIFF)
+def test_auto_window_follows_the_track_stiffness(name):
+    """The default window is sized from the track's decay length: from 1e6 to 1e9 N/m pads and ballast, with a
+    voided sleeper and a transition, it stays within the fast path's 1 % of the full model (a fixed 6-bay window
+    gave 6 850 kN instead of 281 kN peak contact force on 1e6 N/m ballast)."""
+    t = SOFT_AND_STIFF[name]
+    full = simulate_pass(t, LOADED, V80, window_bays=None)
+    assert_close_to_reference(simulate_pass(t, LOADED, V80), full, 0.01)
+
+
+def test_auto_window_sizes():
+    from trackenv.physics.dynamics import window_margin
+
+    assert window_margin(Track.seed()) == 7  # stiff track: a small window
+    assert window_margin(SOFT_AND_STIFF["ballast_1e+07_60m"]) == 13
+    assert window_margin(SOFT_AND_STIFF["ballast_1e+06_60m"]) is None  # softer: the whole track moves
+    # one voided sleeper widens the window by at most a bay, a soft transition by more
+    assert window_margin(SOFT_AND_STIFF["voided_sleeper"]) <= 8 < window_margin(SOFT_AND_STIFF["transition_soft_x4"])
 
 
 # ------------------------------------------------------------------------------------------ dips
