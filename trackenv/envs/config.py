@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -183,17 +184,23 @@ class TampingEnvConfig:
     def speed(self) -> float:
         return self.speed_kmh / 3.6
 
-    @property
+    # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
+    @cached_property
     def settlement_law(self):
         return make_law(self.law, **dict(self.law_params))
 
-    @property
+    @cached_property
     def tamping_model(self) -> TampingModel:
         return TampingModel.from_dict(dict(self.tamping))
 
-    @property
+    @cached_property
     def quality_limits(self) -> QualityLimits:
         return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+    @cached_property
+    def band_limits(self):
+        """The quality limits of the speed band of ``speed_kmh``."""
+        return self.quality_limits.for_speed(self.speed)
 
     def make_vehicle(self):
         wheel_load = self.axle_load_t * 1000.0 * GRAVITY / 2

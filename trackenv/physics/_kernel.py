@@ -31,7 +31,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import literally, njit, prange
+from numba import njit, prange
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
@@ -182,7 +182,7 @@ def _local(dof, base, epb):
     return off
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _run_chunk(mesh, drive, rows, peaks, ch, W):
     """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass."""
     node_w = mesh.node_w
@@ -520,19 +520,70 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 out_wheel[step, j, b] = q[wheel_dofs[j], b]
 
 
-@njit(parallel=True, cache=True)
-def run_parallel(mesh, drive, rows, peaks, width):
-    """Run every chunk of the batch, the chunks spread over numba's threads; arrays are filled in place.
-    ``width`` (rows per chunk, one of :data:`WIDTHS`) is compiled in as a constant, so the loops over the rows
-    have a known trip count."""
-    literally(width)
-    for ch in prange(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, width)
+# One compiled entry per (threads, width): the width is a constant in each, so that after numba inlines the
+# chunk integrator the loops over the rows have a known trip count (a width read at run time costs the single
+# pass 2.5x). Written out, not generated, so that numba's on-disk cache keeps each one.
+@njit(cache=True)
+def _serial_1(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 1)
 
 
 @njit(cache=True)
-def run_serial(mesh, drive, rows, peaks, width):
-    """:func:`run_parallel` on the calling thread (one chunk gains nothing from starting threads)."""
-    literally(width)
+def _serial_4(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, width)
+        _run_chunk(mesh, drive, rows, peaks, ch, 4)
+
+
+@njit(cache=True)
+def _serial_8(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 8)
+
+
+@njit(cache=True)
+def _serial_16(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+
+
+@njit(parallel=True, cache=True)
+def _parallel_1(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 1)
+
+
+@njit(parallel=True, cache=True)
+def _parallel_4(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 4)
+
+
+@njit(parallel=True, cache=True)
+def _parallel_8(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 8)
+
+
+@njit(parallel=True, cache=True)
+def _parallel_16(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+
+
+_RUNNERS = {
+    (False, 1): _serial_1,
+    (False, 4): _serial_4,
+    (False, 8): _serial_8,
+    (False, 16): _serial_16,
+    (True, 1): _parallel_1,
+    (True, 4): _parallel_4,
+    (True, 8): _parallel_8,
+    (True, 16): _parallel_16,
+}
+
+
+def run(mesh, drive, rows, peaks, width: int) -> None:
+    """Integrate every chunk of the batch (``width`` rows each, one of :data:`WIDTHS`), filling the arrays in
+    place: on the calling thread for one chunk, else the chunks spread over numba's threads."""
+    _RUNNERS[(rows.u.shape[0] > 1, width)](mesh, drive, rows, peaks)

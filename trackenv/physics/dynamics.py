@@ -563,8 +563,7 @@ def simulate_passes(
         pack(qdd),
     )
     peaks = _kernel.Peaks(pack(out_force), pack(out_rail), pack(out_wheel), pack(peak_ballast), pack(peak_total))
-    run = _kernel.run_serial if n_chunks == 1 else _kernel.run_parallel
-    run(mesh, drive, rows, peaks, width)
+    _kernel.run(mesh, drive, rows, peaks, width)
     unpack = functools.partial(_unpack, n_rows=nb)
     out_force, out_rail, out_wheel = unpack(peaks.force), unpack(peaks.rail), unpack(peaks.wheel)
     peak_ballast, peak_total, z_axle = unpack(peaks.ballast), unpack(peaks.total), unpack(rows.z)
