@@ -34,6 +34,9 @@ import numpy as np
 from numba import njit, prange
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
+# Floating-point freedoms that do not make a row depend on its SIMD lane: fused multiply-adds and no NaN/inf/-0
+# bookkeeping; never reassociation or approximate reciprocals (those could differ between lanes and widths).
+FASTMATH = {"contract", "nnan", "ninf", "nsz"}
 WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
 
 Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays")
@@ -59,7 +62,7 @@ Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and whe
 (n_steps+1, n_axles), peak ballast force and peak pad + ballast force per sleeper (n_sleepers,)."""
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _factor(keff, lo, m, L, inv_diag, s, W):
     """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row; L[i, k] = L(i, i-k)."""
     for i in range(m):
@@ -83,7 +86,7 @@ def _factor(keff, lo, m, L, inv_diag, s, W):
             inv_diag[i, b] = 1.0 / L[i, 0, b]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _scale(L, inv_diag, m, fw, bw, W):
     """Pre-scaled triangular factors for :func:`_solve`: fw[i, k] = L(i, i-k)/L(i, i), bw[i, k] = L(i+k, i)/L(i, i)."""
     for i in range(m):
@@ -93,7 +96,7 @@ def _scale(L, inv_diag, m, fw, bw, W):
                 bw[i, k, b] = L[i + k, k, b] * inv_diag[i, b] if i + k < m else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _solve(fw, bw, inv_diag, m, x, W):
     """Solve (L Lᵀ) y = x in place for the first m entries of x, every row (factors from :func:`_scale`)."""
     for i in range(min(m, B)):
@@ -128,7 +131,7 @@ def _solve(fw, bw, inv_diag, m, x, W):
             )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _mass_times(mfull, x, out, lo, hi, W):
     """out[:hi-lo] = M x restricted to the window [lo, hi) (the track outside it is at rest), every row."""
     for i in range(lo, hi):
@@ -155,7 +158,7 @@ def _mass_times(mfull, x, out, lo, hi, W):
                 )
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _contact(law, param, d):
     """Force and tangent stiffness of the contact law at compression d (0 when d <= 0)."""
     if d <= 0.0:
@@ -167,7 +170,7 @@ def _contact(law, param, d):
     return param * d, param
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _local(dof, base, epb):
     """Index of a rail DOF among the cached columns of its bay (w, θ per node; the sleeper DOF after the first
     node shifts the later nodes by one)."""
@@ -182,7 +185,7 @@ def _local(dof, base, epb):
     return off
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _run_chunk(mesh, drive, rows, peaks, ch, W):
     """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass."""
     node_w = mesh.node_w
@@ -523,49 +526,49 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
 # One compiled entry per (threads, width): the width is a constant in each, so that after numba inlines the
 # chunk integrator the loops over the rows have a known trip count (a width read at run time costs the single
 # pass 2.5x). Written out, not generated, so that numba's on-disk cache keeps each one.
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _serial_1(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _serial_4(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 4)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _serial_8(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 8)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _serial_16(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 16)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_1(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 1)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_4(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 4)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_8(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 8)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_16(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, ch, 16)
