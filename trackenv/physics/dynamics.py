@@ -294,6 +294,16 @@ def check_window_bays(window_bays) -> None:
         raise ValueError(f"window_bays must be 'auto', an integer >= 2 or None, got {window_bays!r}")
 
 
+def _settlement_rows(support_settlement, n_rows: int, track: Track) -> np.ndarray:
+    """``support_settlement`` validated as (n_rows, n_sleepers) [m] (one row is shared by every row)."""
+    g = check_array("support_settlement", support_settlement)
+    if g.ndim == 1:
+        g = np.broadcast_to(g, (n_rows, g.size))
+    if g.shape != (n_rows, track.n_sleepers):
+        raise ValueError(f"support_settlement must have shape ({n_rows}, {track.n_sleepers}), got {g.shape}")
+    return g
+
+
 def _chunking(n_rows: int, max_width: int = _kernel.WIDTHS[-1]) -> tuple[int, int]:
     """How the kernel cuts a batch: (number of chunks, rows per chunk). Enough chunks for every numba thread
     (the chunks run in parallel), no more than ``max_width`` rows per chunk (a chunk's window stays in cache),
@@ -416,6 +426,7 @@ def simulate_passes(
         for b, m in enumerate(margins):
             groups.setdefault(m, []).append(b)
         if len(groups) > 1:
+            g_all = None if support_settlement is None else _settlement_rows(support_settlement, n_rows, t0)
             results: list = [None] * n_rows
             for m, idx in groups.items():
                 sub = simulate_passes(
@@ -430,9 +441,7 @@ def simulate_passes(
                     x_end=x_end,
                     window_bays=m,
                     sleeper_force_measure=sleeper_force_measure,
-                    support_settlement=None
-                    if support_settlement is None
-                    else np.broadcast_to(np.asarray(support_settlement, dtype=float), (n_rows, t0.n_sleepers))[idx],
+                    support_settlement=None if g_all is None else g_all[idx],
                 )
                 for b, res in zip(idx, sub):
                     results[b] = res
@@ -452,12 +461,7 @@ def simulate_passes(
     static_total = np.zeros((n_rows, t0.n_sleepers))
     sag = np.zeros((n_rows, t0.n_dof))  # static rail sag over settled supports (the kernel adds it to z)
     if support_settlement is not None:
-        g = check_array("support_settlement", support_settlement)
-        if g.ndim == 1:
-            g = np.broadcast_to(g, (n_rows, g.size))
-        settlement_rows = g
-        if g.shape != (n_rows, t0.n_sleepers):
-            raise ValueError(f"support_settlement must have shape ({n_rows}, {t0.n_sleepers}), got {g.shape}")
+        g = settlement_rows = _settlement_rows(support_settlement, n_rows, t0)
         for b, t in enumerate(tracks):
             f = np.zeros(t0.n_dof)
             f[lay.sleeper] = t.ballast_stiffness * g[b]
