@@ -128,8 +128,8 @@ class TampingVectorEnv(VectorEnv):
         wants = {i: decode_action(actions[i], self.action_type, self.config.n_sections) for i in stepping}
         tamping = {i: E.apply_tamping(self.episodes[i], wants[i], self._rngs[i]) for i in stepping}
         results = self._new_episodes(resetting, [self.episodes[i] for i in stepping])
-        for i, res in zip(stepping, results):
-            E.traffic(self.episodes[i], res)
+        if stepping:
+            E.traffic_batch([self.episodes[i] for i in stepping], results)
         rewards = np.zeros(n)
         truncated = np.zeros(n, dtype=bool)
         step_infos: dict[int, dict] = {}
