@@ -102,7 +102,7 @@ def main(argv=None) -> list[dict[str, Any]]:
     p.add_argument("--eval-freq", type=int, default=2048, help="env steps between reports (an ASHA rung)")
     p.add_argument("--n-eval", type=int, default=16, help="evaluation seeds (10000, 10001, ...)")
     p.add_argument("--no-warm-start", action="store_true", help="train from scratch (no behaviour cloning)")
-    p.add_argument("--quick", action="store_true", help="2 trials of 256 steps on a 30 m track (a smoke run)")
+    p.add_argument("--quick", action="store_true", help="2 trials of 256 steps on a 30 m track, one env (a smoke run)")
     p.add_argument("--num-cpus", type=int, default=None, help="CPUs of the local Ray (default: all)")
     p.add_argument("--address", default=None, help="join a Ray cluster ('auto' or ray://HEAD:10001)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random search")
@@ -113,8 +113,8 @@ def main(argv=None) -> list[dict[str, Any]]:
         extra["warm_start_rule"] = None
     if a.quick:
         config = QUICK_CONFIG
-        a.num_samples, a.timesteps, a.eval_freq, a.n_eval = 2, 256, 128, 2
-        extra.update(n_envs=2, batch_size=64)
+        a.num_samples, a.timesteps, a.eval_freq, a.n_eval = 2, 256, 128, 1
+        extra.update(n_envs=1, batch_size=64)  # one env: batches of one, the kernel entry compiled first
     rows = run(a.num_samples, a.timesteps, a.eval_freq, list(range(10_000, 10_000 + a.n_eval)), config, extra,
                a.address, a.num_cpus, a.seed)
     out = Path(a.out)

@@ -14,6 +14,9 @@ from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold  # n
 
 CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)  # 4 steps
 SEEDS = [0, 1, 2, 3, 4]
+# one episode per batch: the kernel entry that tests/conftest.py compiles, also in the one-thread Ray workers
+# (a wider batch there needs an entry of its own, minutes to compile on a fresh machine)
+BATCH = 1
 
 
 @pytest.fixture(scope="module")
@@ -25,8 +28,8 @@ def executor():
 @pytest.mark.slow
 def test_ray_tasks_give_the_single_process_results(executor) -> None:
     policies = [NoMaintenance(), SDThreshold(0.8)]
-    here = evaluate_many(policies, CFG, SEEDS, batch_size=3)
-    there = evaluate_many(policies, CFG, SEEDS, batch_size=3, executor=executor)
+    here = evaluate_many(policies, CFG, SEEDS, batch_size=BATCH)
+    there = evaluate_many(policies, CFG, SEEDS, batch_size=BATCH, executor=executor)
     for a, b in zip(here, there, strict=True):
         np.testing.assert_array_equal(a.seeds, b.seeds)
         np.testing.assert_array_equal(a.cost, b.cost)
@@ -38,8 +41,8 @@ def test_ray_tasks_give_the_single_process_results(executor) -> None:
 @pytest.mark.slow
 def test_tuning_over_ray_picks_the_same_parameters(executor) -> None:
     grid = [{"interval_years": 0.5}, {"interval_years": 0.75}]
-    here = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=2)
-    there = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=2, executor=executor)
+    here = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH)
+    there = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH, executor=executor)
     assert here == there
 
 
