@@ -218,6 +218,11 @@ def test_render_mode_renders_the_first_env() -> None:
     frame = venv.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
     assert TampingVectorEnv(2, CFG).render() is None
+    made = make_vec(config=CFG, render_mode="rgb_array")
+    assert made.render_mode == "rgb_array"
+    made.reset(seed=1)
+    made.step(np.zeros((3, 3), dtype=np.int8))
+    assert made.render().shape == frame.shape
     with pytest.raises(ValueError, match="render_mode"):
         TampingVectorEnv(2, CFG, render_mode="human")
     with pytest.raises(ValueError, match="autoreset_mode"):
