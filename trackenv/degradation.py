@@ -22,7 +22,7 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
-from .physics._validation import check_array, check_scalar
+from .physics._checks import check_array, check_bool, check_choice, check_int, check_scalar
 from .physics.dynamics import (
     SLEEPER_FORCE_MEASURES,
     PassResult,
@@ -155,12 +155,11 @@ class TrackDegradation:
             raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
         self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
         self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
-        if not isinstance(approach_sleepers, (int, np.integer)) or not 2 <= approach_sleepers <= 200:
-            raise ValueError(f"approach_sleepers must be an integer in [2, 200], got {approach_sleepers!r}")
-        self.adaptive = bool(adaptive)
+        approach_sleepers = check_int("approach_sleepers", approach_sleepers, low=2, high=200)
+        self.adaptive = check_bool("adaptive", adaptive)
         self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False)
-        self.max_passes_per_iteration = int(
-            check_scalar("max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000)
+        self.max_passes_per_iteration = check_int(
+            "max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000
         )
         unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
         if unknown:
@@ -168,16 +167,13 @@ class TrackDegradation:
         self.pass_options = pass_options
         if "dt" in pass_options:
             check_scalar("dt", pass_options["dt"], low=1e-7, high=1e-3)
-        if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
-            raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
-        wb = pass_options.get("window_bays", 6)
-        if wb is not None and (isinstance(wb, bool) or not isinstance(wb, (int, np.integer)) or wb < 2):
-            raise ValueError(f"window_bays must be an integer >= 2 or None, got {wb!r}")
-        if feedback not in FEEDBACKS:
-            raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
-        self.feedback = feedback
+        measure = pass_options.get("sleeper_force_measure", "ballast")
+        check_choice("sleeper_force_measure", measure, SLEEPER_FORCE_MEASURES)
+        if pass_options.get("window_bays", 6) is not None:
+            check_int("window_bays", pass_options.get("window_bays", 6), low=2, high=100_000)
+        self.feedback = check_choice("feedback", feedback, FEEDBACKS)
         n = track.n_sleepers
-        self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
+        self.n_extra = self.zone_sleepers(track, self.system.span, approach_sleepers)
         self.model_track = track.extended(self.n_extra, self.n_extra)
         self.offset = np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
         self.base_rate = (
@@ -189,6 +185,16 @@ class TrackDegradation:
         self.tampings = np.zeros(n, dtype=np.int64)
         self.cycles = 0.0
         self.history = DegradationHistory(track.sleeper_positions.copy())
+
+    @staticmethod
+    def zone_sleepers(track: Track, span: float, approach_sleepers: int = 10) -> int:
+        """Sleepers of the approach (and of the exit) zone added to ``track`` for a vehicle of axle ``span`` [m]."""
+        return int(approach_sleepers) + math.ceil(span / track.sleeper_spacing)
+
+    @classmethod
+    def approach_length(cls, track: Track, span: float, approach_sleepers: int = 10) -> float:
+        """Length [m] of the approach (and of the exit) zone added to ``track``."""
+        return cls.zone_sleepers(track, span, approach_sleepers) * track.sleeper_spacing
 
     # ------------------------------------------------------------------ state
     @property
@@ -323,9 +329,7 @@ class TrackDegradation:
     def run(self, iterations: int, progress=None) -> DegradationHistory:
         """Run ``iterations`` iterations of ``cycles_per_iteration``; ``progress`` is called after each with
         (i, record) (e.g. to update a progress bar). Returns the whole history."""
-        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-            raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
-        for i in range(int(iterations)):
+        for i in range(check_int("iterations", iterations, low=0, high=1_000_000)):
             rec = self.advance()
             if progress is not None:
                 progress(i, rec)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .degradation import DegradationHistory, TrackDegradation
-from .physics._validation import check_scalar
+from .physics._checks import check_scalar
 from .physics.settlement import HettlerLaw
 from .physics.track import Track
 from .physics.vehicle import Wheelset

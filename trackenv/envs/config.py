@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from functools import partial
 from typing import Any
 
-import numpy as np
-
-from ..physics._validation import check_scalar
+from ..degradation import TrackDegradation
+from ..physics._checks import check_choice, check_field, check_int_field, check_time_steps
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel
+from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 
 VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
@@ -83,31 +84,26 @@ class TampingEnvConfig:
     dt: float = 1e-4
 
     def __post_init__(self) -> None:
-        c = check_scalar
-        c("track_length_m", self.track_length_m, low=30.0, high=2000.0)
-        if (isinstance(self.n_sections, bool) or not isinstance(self.n_sections, (int, np.integer))
-                or not 1 <= self.n_sections <= 64):
-            raise ValueError(f"n_sections must be an integer in [1, 64], got {self.n_sections!r}")
+        # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
+        c, ci = partial(check_field, self), partial(check_int_field, self)
+        c("track_length_m", low=30.0, high=2000.0)
+        ci("n_sections", low=1, high=64)
         if self.n_sleepers < 3 * self.n_sections:
             raise ValueError("n_sections must leave at least 3 sleepers per section")
-        c("ballast_stiffness_cv", self.ballast_stiffness_cv, low=0.0, high=1.0)
-        c("transition_probability", self.transition_probability, low=0.0, high=1.0)
-        c("transition_stiffness_ratio", self.transition_stiffness_ratio, low=0.2, high=10.0)
-        c("voided_sleepers_mean", self.voided_sleepers_mean, low=0.0, high=10.0)
-        c("settlement_rate_cv", self.settlement_rate_cv, low=0.0, high=2.0)
-        c("settlement_rate_correlation_m", self.settlement_rate_correlation_m, low=0.0, high=100.0)
-        if self.initial_quality not in ("low", "high"):
-            raise ValueError(f"initial_quality must be 'low' or 'high', got {self.initial_quality!r}")
-        if self.vehicle not in VEHICLES:
-            raise ValueError(f"vehicle must be one of {VEHICLES}, got {self.vehicle!r}")
-        c("axle_load_t", self.axle_load_t, low=1.0, high=40.0)
-        c("speed_kmh", self.speed_kmh, low=5.0, high=300.0)
-        c("axle_passes_per_year", self.axle_passes_per_year, low=1.0, high=1e8)
-        if not isinstance(self.steps_per_year, (int, np.integer)) or not 1 <= self.steps_per_year <= 52:
-            raise ValueError(f"steps_per_year must be an integer in [1, 52], got {self.steps_per_year!r}")
-        c("horizon_years", self.horizon_years, low=1.0 / self.steps_per_year, high=100.0)
-        if self.law not in LAWS:
-            raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")
+        c("ballast_stiffness_cv", low=0.0, high=1.0)
+        c("transition_probability", low=0.0, high=1.0)
+        c("transition_stiffness_ratio", low=0.2, high=10.0)
+        c("voided_sleepers_mean", low=0.0, high=10.0)
+        c("settlement_rate_cv", low=0.0, high=2.0)
+        c("settlement_rate_correlation_m", low=0.0, high=100.0)
+        check_choice("initial_quality", self.initial_quality, ("low", "high"))
+        check_choice("vehicle", self.vehicle, VEHICLES)
+        c("axle_load_t", low=1.0, high=40.0)
+        c("speed_kmh", low=5.0, high=300.0)
+        c("axle_passes_per_year", low=1.0, high=1e8)
+        ci("steps_per_year", low=1, high=52)
+        c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
+        check_choice("law", self.law, sorted(LAWS))
         object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
         object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
         object.__setattr__(self, "limits", _as_items("limits", self.limits))
@@ -122,15 +118,17 @@ class TampingEnvConfig:
             "intervention_cost",
             "immediate_action_cost",
         ):
-            c(name, getattr(self, name), low=0.0, high=1e9)
-        if not isinstance(self.min_steps_between_tampings, (int, np.integer)) or not (
-            0 <= self.min_steps_between_tampings <= 100
-        ):
-            raise ValueError(
-                "min_steps_between_tampings must be an integer in [0, 100], got "
-                f"{self.min_steps_between_tampings!r}"
-            )
-        c("dt", self.dt, low=1e-6, high=5e-4)
+            c(name, low=0.0, high=1e9)
+        ci("min_steps_between_tampings", low=0, high=100)
+        c("dt", low=1e-6, high=5e-4)
+        # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
+        # step could not simulate (the modelled track adds approach and exit zones to the evaluated one)
+        span = self.make_vehicle().system().span
+        extra = TrackDegradation.approach_length(Track.realistic(self.track_length_m), span)
+        try:
+            check_time_steps(self.track_length_m + 2 * extra, self.speed, self.dt)
+        except ValueError as e:
+            raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 
     @classmethod
     def coerce(cls, config: TampingEnvConfig | dict | None) -> TampingEnvConfig:

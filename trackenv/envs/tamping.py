@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from ..physics._checks import check_int
 from . import episode as E
 from .config import TampingEnvConfig
 
@@ -39,6 +40,21 @@ def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
     if action_type == "discrete":
         return spaces.Discrete(config.n_sections + 1)
     raise ValueError(f"action_type must be 'multibinary' or 'discrete', got {action_type!r}")
+
+
+RESET_OPTIONS: tuple[str, ...] = ()  # reset() takes no options yet; any key is refused, not ignored
+
+
+def check_reset_arguments(seed, options) -> None:
+    """Refuse a seed that is not None or a non-negative integer, and any option (none is known)."""
+    if seed is not None:
+        check_int("seed", seed, low=0)
+    if options is not None:
+        if not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
+        unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
 
 
 def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
@@ -117,6 +133,9 @@ class TampingEnv(gym.Env):
     **Randomness.** Everything random (track supports, transition zone, voided sleepers, ballast condition,
     initial level, tamping residual) draws from ``self.np_random``, seeded by ``reset(seed=...)``.
 
+    **Episode end** is enforced: ``step`` after the horizon raises RuntimeError until ``reset``; ``reset``
+    refuses a seed that is not a non-negative integer and any ``options`` key (it takes none).
+
     **Versions.** v0: first release.
     """
 
@@ -144,6 +163,7 @@ class TampingEnv(gym.Env):
         self._last_info: dict = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        check_reset_arguments(seed, options)
         super().reset(seed=seed)
         self.episode = E.new_episode(self.config, self.np_random)
         E.traffic_free_pass(self.episode)
@@ -155,8 +175,13 @@ class TampingEnv(gym.Env):
     def step(self, action):
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
-        want = decode_action(action, self.action_type, self.config.n_sections)
         ep = self.episode
+        if ep.step_count >= self.config.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({self.config.horizon_steps} steps, "
+                f"{self.config.horizon_years:g} years): call reset() before step()"
+            )
+        want = decode_action(action, self.action_type, self.config.n_sections)
         tamping_cost, tamped = E.apply_tamping(ep, want, self.np_random)
         E.traffic(ep, ep.sim.simulate())
         parts = E.costs(ep, tamping_cost)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import check_scalar
+from ._checks import check_scalar
 
 HERTZ, LINEAR = 0, 1
 

@@ -18,7 +18,7 @@ import scipy.interpolate
 import scipy.linalg
 
 from . import _kernel
-from ._validation import check_array, check_scalar
+from ._checks import check_array, check_scalar, check_time_steps
 from .contact import HertzContact, LinearContact
 from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
 from .vehicle import Car, Train, VehicleSystem, Wheelset
@@ -346,7 +346,7 @@ def simulate_passes(
     if len(tracks) != n_rows or len(irr_rows) != n_rows:
         raise ValueError(f"irregularities has {len(irr_rows)} rows but there are {len(tracks)} tracks")
 
-    n_steps = int(np.ceil((x_end - x_start) / (speed * dt) - 1e-9))
+    n_steps = check_time_steps(x_end - x_start, speed, dt, rows=n_rows, axles=sys_.n_axles)  # before allocating
     time = np.arange(n_steps + 1) * dt
     x_lead = np.minimum(x_start + speed * time, t0.length)
     x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, linalg, signal
 
-from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
+from trackenv.physics._checks import check_array, check_int, check_scalar, dataclass_from_dict
 
 __all__ = [
     "GERMAN_PSD_PARAMETERS",
@@ -381,7 +381,7 @@ def d1_filter(
     if isinstance(order, bool) or int(order) != order or not 1 <= int(order) <= 10:
         raise ValueError(f"order must be an integer in [1, 10], got {order!r}")
     pad_w = check_scalar("pad_wavelengths", pad_wavelengths, low=0.0)
-    p = _check_count("ar_order", ar_order)
+    p = check_int("ar_order", ar_order, low=1)
 
     sos, zi = _bandpass_sos(dx, b_lo, b_hi, int(order))
     shape = arr.shape
@@ -408,12 +408,6 @@ def d1_filter(
 # ---------------------------------------------------------------------------------------------------------
 
 
-def _check_count(name: str, value, low: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
 def section_edges(n_samples: int, n_sections: int) -> np.ndarray:
     """Boundaries (n_sections + 1 sample indices) splitting ``n_samples`` into near-equal sections.
 
@@ -421,8 +415,8 @@ def section_edges(n_samples: int, n_sections: int) -> np.ndarray:
     EN 13848-6 evaluates track quality over 200 m sections; our tracks are short, so the number (and hence
     the length) of sections is a parameter of the caller.
     """
-    n = _check_count("n_samples", n_samples)
-    k = _check_count("n_sections", n_sections)
+    n = check_int("n_samples", n_samples, low=1)
+    k = check_int("n_sections", n_sections, low=1)
     if k > n:
         raise ValueError(f"n_sections must lie in [1, n_samples={n}], got {k}")
     return (np.arange(k + 1, dtype=np.int64) * n) // k
@@ -438,7 +432,7 @@ def _check_sections(z, section_idx, n_sections: int) -> tuple[np.ndarray, np.nda
     arr = check_array("z", z)
     if arr.ndim != 1:
         raise ValueError(f"z must be 1-D, got shape {arr.shape}")
-    k = _check_count("n_sections", n_sections)
+    k = check_int("n_sections", n_sections, low=1)
     idx = np.asarray(section_idx)
     if idx.shape != arr.shape:
         raise ValueError(f"section_index must have shape {arr.shape}, got {idx.shape}")

@@ -58,7 +58,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
+from trackenv.physics._checks import (
+    check_array,
+    check_bool,
+    check_choice,
+    check_field,
+    check_int_field,
+    check_scalar,
+    dataclass_from_dict,
+)
 
 __all__ = ["TampingModel", "TampingResult", "tamp", "sd_after_tamping", "tamped_runs"]
 
@@ -106,16 +114,14 @@ class TampingModel:
     reference: str = "smoothing"
 
     def __post_init__(self) -> None:
-        check_scalar("residual_fraction", self.residual_fraction, low=0.0, high=1.0)
-        check_scalar("residual_sd_m", self.residual_sd_m, low=0.0)
-        check_scalar("damage_per_tamping", self.damage_per_tamping, low=0.0)
-        _check_int("max_tampings_before_renewal", self.max_tampings_before_renewal, low=1)
-        _check_int("runout_sleepers", self.runout_sleepers, low=0)
-        if not isinstance(self.renewal_resets, (bool, np.bool_)):
-            raise ValueError(f"renewal_resets must be a bool, got {self.renewal_resets!r}")
-        check_scalar("machine_speed_m_per_s", self.machine_speed_m_per_s, low=0.0, low_inclusive=False)
-        if self.reference not in ("smoothing", "design"):
-            raise ValueError(f"reference must be 'smoothing' or 'design', got {self.reference!r}")
+        check_field(self, "residual_fraction", low=0.0, high=1.0)
+        check_field(self, "residual_sd_m", low=0.0, high=0.1)
+        check_field(self, "damage_per_tamping", low=0.0, high=10.0)
+        check_int_field(self, "max_tampings_before_renewal", low=1, high=1000)
+        check_int_field(self, "runout_sleepers", low=0, high=1000)
+        object.__setattr__(self, "renewal_resets", check_bool("renewal_resets", self.renewal_resets))
+        check_field(self, "machine_speed_m_per_s", low=0.0, high=10.0, low_inclusive=False)
+        check_choice("reference", self.reference, ("smoothing", "design"))
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TampingModel:
@@ -159,12 +165,6 @@ class TampingResult:
     restarted_mask: np.ndarray
     renewed_mask: np.ndarray
     lift: np.ndarray
-
-
-def _check_int(name: str, value, low: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
 
 
 def _check_counts(name: str, value, shape) -> np.ndarray:

@@ -19,10 +19,19 @@ from functools import cached_property
 
 import numpy as np
 
-from ._validation import check_array, check_scalar
+from ._checks import check_array, check_field, check_int, check_int_field, check_scalar
 
 PER_SLEEPER_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
 HALF_BANDWIDTH = 4
+#: Upper bounds of the per-sleeper properties [N/m, N·s/m, kg]: far beyond any track (pads and ballast are
+#: 1e7-1e9 N/m) but small enough that the assembled matrices stay well conditioned.
+PER_SLEEPER_MAX = {
+    "pad_stiffness": 1e12,
+    "pad_damping": 1e9,
+    "sleeper_mass": 1e5,
+    "ballast_stiffness": 1e12,
+    "ballast_damping": 1e9,
+}
 
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
@@ -61,23 +70,15 @@ class Track:
             )
         for f in PER_SLEEPER_FIELDS:
             low_inclusive = f in ("pad_damping", "ballast_damping")
-            arr = check_array(f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, low_inclusive=low_inclusive)
+            arr = check_array(
+                f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, high=PER_SLEEPER_MAX[f], low_inclusive=low_inclusive
+            )
             object.__setattr__(self, f, _readonly(arr))
-        object.__setattr__(
-            self, "sleeper_spacing", check_scalar("sleeper_spacing", self.sleeper_spacing, low=0.05, high=5.0)
-        )
-        object.__setattr__(
-            self,
-            "rail_bending_stiffness",
-            check_scalar("rail_bending_stiffness", self.rail_bending_stiffness, low=0.0, low_inclusive=False),
-        )
-        object.__setattr__(
-            self, "rail_mass", check_scalar("rail_mass", self.rail_mass, low=0.0, low_inclusive=False)
-        )
-        epb = self.elements_per_bay
-        if not isinstance(epb, (int, np.integer)) or isinstance(epb, bool) or not 2 <= epb <= 64:
-            raise ValueError(f"elements_per_bay must be an integer in [2, 64], got {epb!r}")
-        object.__setattr__(self, "elements_per_bay", int(epb))
+        check_field(self, "sleeper_spacing", low=0.05, high=5.0)
+        # beyond 1e10 N·m² (1600 UIC60 rails) the stiffness matrix loses all precision against the supports
+        check_field(self, "rail_bending_stiffness", low=0.0, high=1e10, low_inclusive=False)
+        check_field(self, "rail_mass", low=0.0, high=1e4, low_inclusive=False)
+        check_int_field(self, "elements_per_bay", low=2, high=64)
 
     # ------------------------------------------------------------------ presets
     @classmethod
@@ -93,17 +94,16 @@ class Track:
         **scalars,
     ) -> Track:
         """A track whose supports are all alike."""
-        if not isinstance(n_sleepers, (int, np.integer)) or n_sleepers < 3:
-            raise ValueError(f"n_sleepers must be an integer >= 3, got {n_sleepers!r}")
-        ones = np.ones(int(n_sleepers))
-        return cls(
-            pad_stiffness=pad_stiffness * ones,
-            pad_damping=pad_damping * ones,
-            sleeper_mass=sleeper_mass * ones,
-            ballast_stiffness=ballast_stiffness * ones,
-            ballast_damping=ballast_damping * ones,
-            **scalars,
+        n = check_int("n_sleepers", n_sleepers, low=3, high=100_000)
+        values = dict(
+            pad_stiffness=pad_stiffness,
+            pad_damping=pad_damping,
+            sleeper_mass=sleeper_mass,
+            ballast_stiffness=ballast_stiffness,
+            ballast_damping=ballast_damping,
         )
+        per_sleeper = {k: np.full(n, check_scalar(k, v, low=0.0, high=PER_SLEEPER_MAX[k])) for k, v in values.items()}
+        return cls(**per_sleeper, **scalars)
 
     @classmethod
     def seed(cls, *, elements_per_bay: int = 2) -> Track:
@@ -172,7 +172,7 @@ class Track:
         sl = self._sleeper_slice(from_sleeper, to_sleeper)
         changes = {}
         for name, factor in factors.items():
-            f = check_scalar(name, factor, low=0.0, low_inclusive=False)
+            f = check_scalar(name, factor, low=0.0, high=1e6, low_inclusive=False)
             arr = np.array(getattr(self, name))
             arr[sl] *= f
             changes[name] = arr
@@ -195,9 +195,8 @@ class Track:
     def extended(self, n_before: int, n_after: int) -> Track:
         """A copy with ``n_before`` sleepers added before the first and ``n_after`` after the last, each a copy
         of the end sleeper it continues (approach and exit zones)."""
-        for nm, v in (("n_before", n_before), ("n_after", n_after)):
-            if not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+        n_before = check_int("n_before", n_before, low=0, high=100_000)
+        n_after = check_int("n_after", n_after, low=0, high=100_000)
         changes = {
             f: np.concatenate(
                 [
@@ -212,11 +211,10 @@ class Track:
 
     def _sleeper_slice(self, start: int, stop: int | None) -> slice:
         n = self.n_sleepers
-        if not isinstance(start, (int, np.integer)) or not 0 <= start < n:
-            raise ValueError(f"from_sleeper/index must be an integer in [0, {n - 1}], got {start!r}")
-        if stop is not None and (not isinstance(stop, (int, np.integer)) or not start < stop <= n):
-            raise ValueError(f"to_sleeper must be an integer in [{start + 1}, {n}], got {stop!r}")
-        return slice(int(start), None if stop is None else int(stop))
+        start = check_int("from_sleeper/index", start, low=0, high=n - 1)
+        if stop is not None:
+            stop = check_int("to_sleeper", stop, low=start + 1, high=n)
+        return slice(start, stop)
 
     # ------------------------------------------------------------ geometry
     @property

@@ -16,7 +16,7 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
-from ._validation import check_scalar
+from ._checks import check_int, check_scalar
 
 GRAVITY = 9.81
 
@@ -291,9 +291,7 @@ class Train:
 
     @classmethod
     def of(cls, car: Car, n_cars: int) -> Train:
-        if not isinstance(n_cars, (int, np.integer)) or not 1 <= n_cars <= 40:
-            raise ValueError(f"n_cars must be an integer in [1, 40], got {n_cars!r}")
-        return cls((car,) * int(n_cars))
+        return cls((car,) * check_int("n_cars", n_cars, low=1, high=40))
 
     def system(self) -> VehicleSystem:
         parts = [c.system() for c in self.cars]
