@@ -366,3 +366,31 @@ def test_uniform_track_with_support_feedback_settles_uniformly_to_its_ends() -> 
                               cycles_per_iteration=50_000, speed=80 / 3.6, feedback="support")
     u = sim.run(2).settlement[-1]
     assert (u.max() - u.min()) / u.mean() < 0.02, u
+
+
+# ------------------------------------------------------------------------ episode end and reset arguments
+def test_step_after_the_horizon_raises_until_reset() -> None:
+    env = TampingEnv(tiny(horizon_years=0.5))  # 2 steps
+    env.reset(seed=0)
+    assert [env.step(np.zeros(3, dtype=np.int8))[3] for _ in range(2)] == [False, True]
+    level = env.episode.sim.level.copy()
+    with pytest.raises(RuntimeError, match="horizon.*reset"):
+        env.step(np.zeros(3, dtype=np.int8))
+    np.testing.assert_array_equal(env.episode.sim.level, level)  # nothing simulated, nothing charged
+    env.reset(seed=0)
+    env.step(np.zeros(3, dtype=np.int8))
+
+
+@pytest.mark.parametrize("seed", [1.5, -1, True, "1", np.float64(2.0)])
+def test_reset_refuses_seeds_that_are_not_non_negative_integers(seed) -> None:
+    with pytest.raises(ValueError, match="^seed must be an integer"):
+        TampingEnv(tiny()).reset(seed=seed)
+
+
+def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options() -> None:
+    env = TampingEnv(tiny())
+    a, _ = env.reset(seed=np.int64(7))
+    b, _ = env.reset(seed=7, options={})
+    np.testing.assert_array_equal(a["level"], b["level"])
+    with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['initial_level'\]"):
+        env.reset(options={"initial_level": 0.0})

@@ -45,16 +45,18 @@ def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
 RESET_OPTIONS: tuple[str, ...] = ()  # reset() takes no options yet; any key is refused, not ignored
 
 
-def check_reset_arguments(seed, options) -> None:
-    """Refuse a seed that is not None or a non-negative integer, and any option (none is known)."""
+def check_reset_arguments(seed, options) -> int | None:
+    """The seed as a Python int (or None); refuse a seed that is not a non-negative integer, and any option
+    (none is known)."""
     if seed is not None:
-        check_int("seed", seed, low=0)
+        seed = check_int("seed", seed, low=0)
     if options is not None:
         if not isinstance(options, dict):
             raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
         unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+    return seed
 
 
 def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
@@ -163,8 +165,7 @@ class TampingEnv(gym.Env):
         self._last_info: dict = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        check_reset_arguments(seed, options)
-        super().reset(seed=seed)
+        super().reset(seed=check_reset_arguments(seed, options))
         self.episode = E.new_episode(self.config, self.np_random)
         E.traffic_free_pass(self.episode)
         self._last_info = E.info(

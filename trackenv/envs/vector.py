@@ -65,7 +65,7 @@ class TampingVectorEnv(VectorEnv):
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         if seed is None:
             seeds = [None] * self.num_envs
-        elif isinstance(seed, (list, tuple, np.ndarray)):
+        elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seeds)}")
@@ -83,7 +83,10 @@ class TampingVectorEnv(VectorEnv):
     def step(self, actions):
         if not self.episodes:
             raise RuntimeError("call reset() before step()")
-        arr = np.asarray(actions)
+        try:
+            arr = np.asarray(actions)
+        except ValueError:  # ragged nested sequences
+            arr = np.empty(0)
         want = (self.num_envs,) + self.single_action_space.shape
         if arr.shape != want:
             raise ValueError(
