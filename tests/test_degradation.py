@@ -232,3 +232,41 @@ def test_other_law_runs() -> None:
     sim = te.TrackDegradation(track_a(), loaded_wheelset(), law=te.make_law("selig_waters"))
     h = sim.run(2)
     assert np.all(h.settlement[1] > h.settlement[0])
+
+
+# ------------------------------------------------------------------------------------ runaway feedback
+def heavy_fast(**kwargs) -> te.TrackDegradation:
+    """Scenario B under a 200 kN wheel load at 200 km/h: the irregularity feedback diverges."""
+    return te.TrackDegradation(track_b(), te.Wheelset(mass=1800.0, static_load=200e3), speed=200 / 3.6, **kwargs)
+
+
+def test_a_diverging_loop_warns_with_what_to_change() -> None:
+    sim = heavy_fast(cycles_per_iteration=100_000)
+    with pytest.warns(te.RunawayWarning, match="grow geometrically.*cycles_per_iteration.*adaptive.*support"):
+        sim.run(4)
+    d = np.diff(np.vstack([np.zeros(sim.track.n_sleepers), sim.history.settlement]), axis=0)
+    spread = np.ptp(d, axis=1)
+    assert spread[3] > 3 * spread[2] > 9 * spread[1]  # it does grow geometrically: the warning is due
+
+
+def test_a_diverging_loop_raises_when_asked() -> None:
+    sim = heavy_fast(cycles_per_iteration=100_000, on_runaway="raise")
+    with pytest.raises(te.RunawayError, match="diverging"):
+        sim.run(4)
+
+
+def test_adaptive_stepping_that_runs_out_of_passes_is_reported() -> None:
+    sim = heavy_fast(cycles_per_iteration=1e6, adaptive=True, max_passes_per_iteration=4)
+    with pytest.warns(te.RunawayWarning, match="ran out of passes"):
+        sim.advance()
+
+
+def test_converging_loops_do_not_warn(recwarn: pytest.WarningsRecorder) -> None:
+    te.TrackDegradation(track_b(), loaded_wheelset(), cycles_per_iteration=1e6, speed=SPEED).run(6)
+    heavy_fast(cycles_per_iteration=1e6, feedback="support").run(4)
+    assert not [w for w in recwarn if issubclass(w.category, te.RunawayWarning)]
+
+
+def test_on_runaway_is_checked() -> None:
+    with pytest.raises(ValueError, match="on_runaway must be one of"):
+        heavy_fast(on_runaway="shout")

@@ -4,7 +4,7 @@ The physics (``trackenv.physics``) runs on its own; :class:`TrackDegradation` is
 settlement loop; ``trackenv/Tamping-v0`` (registered on import) is the Gymnasium environment on top of it.
 """
 
-from .degradation import DegradationHistory, IterationRecord, TrackDegradation
+from .degradation import DegradationHistory, IterationRecord, RunawayError, RunawayWarning, TrackDegradation
 from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
 from .physics.dynamics import PassResult, receptance, simulate_pass, simulate_passes, static_deflection
 from .physics.settlement import (
@@ -42,6 +42,8 @@ __all__ = [
     "ShentonLaw",
     "Track",
     "TrackDegradation",
+    "RunawayError",
+    "RunawayWarning",
     "Train",
     "VehicleSystem",
     "Wheelset",

@@ -98,6 +98,22 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
+ON_RUNAWAY = ("warn", "raise", "ignore")
+#: Growth ratio of the differential settlement increment, iteration over iteration, and the number of
+#: consecutive iterations it must persist, that mark a loop running away (a converging loop's increments
+#: shrink: ratios 0.2-0.9 in the paper's scenarios), and the increment below which growth is not yet a concern [m].
+RUNAWAY_GROWTH, RUNAWAY_ITERATIONS, RUNAWAY_FLOOR = 1.5, 2, 0.1e-3
+#: Contact force, as a multiple of the static wheel load, beyond which a pass is out of any plain track's range
+#: (dynamic factors from track geometry stay below about 2) **[assumption]**: the loop has run away.
+RUNAWAY_FORCE_FACTOR = 3.0
+
+
+class RunawayWarning(RuntimeWarning):
+    """The settlement loop is diverging (see :meth:`TrackDegradation.check_runaway`)."""
+
+
+class RunawayError(RuntimeError):
+    """The settlement loop diverged and ``on_runaway="raise"`` was asked for."""
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
@@ -124,8 +140,10 @@ class TrackDegradation:
     "irregularity" (the paper's: the per-sleeper settlement, interpolated, is the rail's level irregularity) or
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
-    self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to
-    :func:`simulate_passes` (``dt``, ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    self-limiting mechanism that keeps short-wave settlement bounded); ``on_runaway``: what to do when the loop
+    diverges ("warn": :class:`RunawayWarning`, "raise": :class:`RunawayError`, "ignore"; see
+    :meth:`check_runaway`). Remaining keywords go to :func:`simulate_passes` (``dt``, ``contact``,
+    ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
@@ -143,6 +161,7 @@ class TrackDegradation:
         initial_level=None,
         rate_factor=None,
         feedback: str = "irregularity",
+        on_runaway: str = "warn",
         **pass_options,
     ) -> None:
         if not isinstance(track, Track):
@@ -172,6 +191,8 @@ class TrackDegradation:
         if pass_options.get("window_bays", 6) is not None:
             check_int("window_bays", pass_options.get("window_bays", 6), low=2, high=100_000)
         self.feedback = check_choice("feedback", feedback, FEEDBACKS)
+        self.on_runaway = check_choice("on_runaway", on_runaway, ON_RUNAWAY)
+        self._differential: list[float] = []  # differential settlement increment per iteration [m]
         n = track.n_sleepers
         self.n_extra = self.zone_sleepers(track, self.system.span, approach_sleepers)
         self.model_track = track.extended(self.n_extra, self.n_extra)
@@ -292,6 +313,7 @@ class TrackDegradation:
     def advance(self, cycles: float | None = None) -> IterationRecord:
         """One iteration of ``cycles`` axle passes (default ``cycles_per_iteration``); returns its record."""
         total = self.cycles_per_iteration if cycles is None else check_scalar("cycles", cycles, low=0.0, high=1e10)
+        level_before = self.level.copy()
         done, passes, first = 0.0, 0, None
         while done < total * (1 - 1e-12):
             res = self.simulate()
@@ -311,7 +333,53 @@ class TrackDegradation:
             passes=passes,
         )
         self.history.records.append(rec)
+        self.check_runaway(level_before, rec)
         return rec
+
+    def check_runaway(self, level_before: np.ndarray, record: IterationRecord) -> str | None:
+        """Detect a diverging loop after an iteration; warn, raise or ignore as ``on_runaway`` says.
+
+        Three signs, any one enough: the differential settlement increment (the largest deviation of the
+        iteration's increment from its mean, what changes the next pass) grew by more than
+        :data:`RUNAWAY_GROWTH` times in each of the last :data:`RUNAWAY_ITERATIONS` iterations and exceeds
+        :data:`RUNAWAY_FLOOR`; or the pass's contact force exceeds :data:`RUNAWAY_FORCE_FACTOR` times the static
+        wheel load; or adaptive stepping ran out of passes and its last, unsplit step exceeded
+        ``max_increment``. The explicit loop overshoots when ΔN is too large for the feedback (fast, heavy traffic):
+        with ``feedback="irregularity"``, a heavy wheel at 200 km/h and 1e6 cycles per iteration the
+        settlement goes 11 mm → 55 mm → 2e5 mm, every number finite. Returns the message, or None."""
+        inc = record.settlement - level_before
+        self._differential.append(float(np.max(np.abs(inc - inc.mean()))))
+        d = self._differential[-(RUNAWAY_ITERATIONS + 1) :]
+        ratios = [b / a if a > 0 else math.inf for a, b in zip(d[:-1], d[1:])]
+        static = float(np.max(self.system.static_wheel_loads))
+        factor = record.max_contact_force / static if static > 0 else 0.0
+        why = None
+        if len(ratios) == RUNAWAY_ITERATIONS and min(ratios) > RUNAWAY_GROWTH and d[-1] > RUNAWAY_FLOOR:
+            why = (
+                "differential settlement increments grow geometrically (x"
+                + ", x".join(f"{r:.3g}" for r in ratios)
+                + f" per iteration, now {d[-1] * 1e3:.3g} mm)"
+            )
+        elif factor > RUNAWAY_FORCE_FACTOR:
+            why = f"the contact force reached {factor:.3g} times the static wheel load"
+        elif self.adaptive and record.passes >= self.max_passes_per_iteration and d[-1] > self.max_increment:
+            why = (
+                f"adaptive stepping ran out of passes (max_passes_per_iteration {self.max_passes_per_iteration}) and "
+                f"took the rest of the iteration in one step: differential increment {d[-1] * 1e3:.3g} mm"
+            )
+        if why is None or self.on_runaway == "ignore":
+            return None
+        msg = (
+            f"settlement loop diverging after {self.cycles:.4g} cycles: {why}. Reduce cycles_per_iteration "
+            f"(now {self.cycles_per_iteration:.4g}), use adaptive=True (max_increment {self.max_increment:.3g} m), "
+            "or feedback='support' (the settled supports carry less: self-limiting)"
+        )
+        if self.on_runaway == "raise":
+            raise RunawayError(msg)
+        import warnings
+
+        warnings.warn(msg, RunawayWarning, stacklevel=3)
+        return msg
 
     def tamp(self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None) -> TampingResult:
         """Tamp the sleepers where ``mask`` is True: the level is restored but for a residual, consolidation
