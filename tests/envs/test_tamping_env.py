@@ -394,3 +394,32 @@ def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options() -> None
     np.testing.assert_array_equal(a["level"], b["level"])
     with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['initial_level'\]"):
         env.reset(options={"initial_level": 0.0})
+
+
+# ------------------------------------------------------------------------ observation bounds
+def test_observation_space_and_clipping_share_one_table_of_bounds() -> None:
+    from trackenv.envs import episode as E
+
+    cfg = tiny()
+    space = TampingEnv(cfg).observation_space
+    for key, (low, high) in E.observation_bounds(cfg).items():
+        assert float(space[key].low.min()) == low and float(space[key].high.max()) == high
+
+
+def test_clipped_observations_are_reported_in_info() -> None:
+    from trackenv.envs import episode as E
+
+    env = TampingEnv(tiny())
+    _, info = env.reset(seed=0)
+    assert info["observation_clipped"] == 0
+    ep = env.episode
+    ep.sim.offset = ep.sim.offset + 0.25  # 250 mm of settlement everywhere: past the 200 mm bound of "level"
+    obs = E.observation(ep)
+    assert np.all(obs["level"] == 200.0)
+    assert E.info(ep, dict.fromkeys(E.COST_KEYS, 0.0), np.zeros(3, bool))["observation_clipped"] == cfg_sleepers(ep)
+    _, _, _, _, info = env.step(np.zeros(3, dtype=np.int8))
+    assert info["observation_clipped"] >= cfg_sleepers(ep)
+
+
+def cfg_sleepers(ep) -> int:
+    return ep.config.n_sleepers

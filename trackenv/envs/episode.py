@@ -152,20 +152,52 @@ def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     }
 
 
-def observation(ep: Episode) -> dict[str, np.ndarray]:
-    """The observation dict (see TampingEnv's table)."""
+def observation_bounds(config: TampingEnvConfig) -> dict[str, tuple[float, float]]:
+    """Bounds of each observation key (the env's observation space is built from these, and the clipping in
+    :func:`observation` uses them, so the two cannot drift apart)."""
+    return {
+        "level": (-100.0, 200.0),
+        "contact_force": (0.0, 2000.0),
+        "section_sd": (0.0, 100.0),
+        "section_peak": (0.0, 200.0),
+        "tampings": (0.0, 1000.0),
+        "years_since_tamping": (0.0, config.horizon_years + 1.0),
+        "time": (0.0, 1.0),
+    }
+
+
+def raw_observation(ep: Episode) -> dict[str, np.ndarray]:
+    """The observed quantities in the units of TampingEnv's table, before clipping to the space's bounds."""
     c = ep.config
     _, sd, peak = ep.quality()
-    years = (ep.step_count - ep.last_tamped_step) / c.steps_per_year
     return {
-        "level": np.clip(ep.sim.level * 1e3, -100.0, 200.0).astype(np.float32),
-        "contact_force": np.clip(ep.contact_force / 1e3, 0.0, 2000.0).astype(np.float32),
-        "section_sd": np.clip(sd * 1e3, 0.0, 100.0).astype(np.float32),
-        "section_peak": np.clip(peak * 1e3, 0.0, 200.0).astype(np.float32),
-        "tampings": np.clip(ep.section_tampings, 0, 1000).astype(np.float32),
-        "years_since_tamping": np.clip(years, 0.0, c.horizon_years + 1.0).astype(np.float32),
-        "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)], dtype=np.float32),
+        "level": ep.sim.level * 1e3,
+        "contact_force": ep.contact_force / 1e3,
+        "section_sd": sd * 1e3,
+        "section_peak": peak * 1e3,
+        "tampings": np.asarray(ep.section_tampings, dtype=float),
+        "years_since_tamping": (ep.step_count - ep.last_tamped_step) / c.steps_per_year,
+        "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)]),
     }
+
+
+def observation(ep: Episode) -> dict[str, np.ndarray]:
+    """The observation dict (see TampingEnv's table), clipped to its bounds (``info["observation_clipped"]``
+    counts the values that were)."""
+    bounds = observation_bounds(ep.config)
+    return {k: np.clip(v, *bounds[k]).astype(np.float32) for k, v in raw_observation(ep).items()}
+
+
+def clipped_values(ep: Episode) -> int:
+    """How many observed values lie outside their bounds (and are clipped in the observation).
+
+    ``years_since_tamping`` of a never-tamped section counts from far back and is clipped by design; it is not
+    counted."""
+    bounds = observation_bounds(ep.config)
+    raw = raw_observation(ep)
+    return int(
+        sum(np.sum((v < bounds[k][0]) | (v > bounds[k][1])) for k, v in raw.items() if k != "years_since_tamping")
+    )
 
 
 def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
@@ -182,6 +214,7 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
         "immediate_action_exceedances": int(np.sum(cls == 3)),
         "year": ep.step_count / ep.config.steps_per_year,
         "max_contact_force_N": float(ep.contact_force.max()),
+        "observation_clipped": clipped_values(ep),
     }
 
 

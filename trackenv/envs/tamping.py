@@ -20,16 +20,11 @@ from .config import TampingEnvConfig
 
 def observation_space(config: TampingEnvConfig) -> spaces.Dict:
     n, s = config.n_sleepers, config.n_sections
-    f32 = np.float32
+    size = {"level": n, "contact_force": n, "time": 1}
     return spaces.Dict(
         {
-            "level": spaces.Box(-100.0, 200.0, (n,), f32),
-            "contact_force": spaces.Box(0.0, 2000.0, (n,), f32),
-            "section_sd": spaces.Box(0.0, 100.0, (s,), f32),
-            "section_peak": spaces.Box(0.0, 200.0, (s,), f32),
-            "tampings": spaces.Box(0.0, 1000.0, (s,), f32),
-            "years_since_tamping": spaces.Box(0.0, config.horizon_years + 1.0, (s,), f32),
-            "time": spaces.Box(0.0, 1.0, (1,), f32),
+            key: spaces.Box(low, high, (size.get(key, s),), np.float32)
+            for key, (low, high) in E.observation_bounds(config).items()
         }
     )
 
@@ -119,6 +114,14 @@ class TampingEnv(gym.Env):
     time                   fraction of the horizon elapsed                       -       [0, 1]
     =====================  ====================================================  ======  ============
 
+    Values beyond a bound are clipped to it, never silently: ``info["observation_clipped"]`` counts them
+    (``years_since_tamping`` of a never-tamped section is clipped by design and not counted). With the default
+    "smoothing" tamping the level keeps its settlement (a tamper in that mode does not lift the track back to
+    the design line), so under heavy traffic or over long horizons ``level`` can reach its 200 mm bound
+    (10 years at 1e7 axle passes a year, threshold tamping: 5 of 40 steps). ``tamping={"reference": "design",
+    "max_lift_m": 0.02}`` models the lift instead (toward the design line, at most ``max_lift_m`` per pass):
+    over 30 years of the default traffic, threshold tamping then ends at a mean level of 4 mm instead of 82.
+
     **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
     (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
     ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
@@ -138,7 +141,10 @@ class TampingEnv(gym.Env):
     **Episode end** is enforced: ``step`` after the horizon raises RuntimeError until ``reset``; ``reset``
     refuses a seed that is not a non-negative integer and any ``options`` key (it takes none).
 
-    **Versions.** v0: first release.
+    **Versions.** v0: first release. Since then, without a change of dynamics or reward (same seeds and
+    actions give the same observations, rewards and costs, so v0 is kept): ``step`` after the horizon raises,
+    ``reset`` checks its seed and options, ``info["observation_clipped"]`` was added, and tamping gained the
+    opt-in ``max_lift_m``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
