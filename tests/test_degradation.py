@@ -270,3 +270,47 @@ def test_converging_loops_do_not_warn(recwarn: pytest.WarningsRecorder) -> None:
 def test_on_runaway_is_checked() -> None:
     with pytest.raises(ValueError, match="on_runaway must be one of"):
         heavy_fast(on_runaway="shout")
+
+
+# ------------------------------------------------------------------------------------ interpolation
+@pytest.fixture(scope="module")
+def step_40_39() -> dict:
+    """u40 - u39 [mm] after scenario B's 6 x 50 000 cycles, per (interpolation, elements per bay, dt)."""
+    out = {}
+    for interp, epb, dt in [("cubic", 2, 1e-4), ("cubic", 8, 1e-4), ("linear", 2, 1e-4), ("linear", 8, 1e-4),
+                            ("linear", 16, 1e-4), ("linear", 8, 5e-5)]:
+        track = te.Track.seed(elements_per_bay=epb).scaled(ballast_stiffness=1.10, from_sleeper=CHANGE_SLEEPER)
+        sim = te.TrackDegradation(track, loaded_wheelset(), cycles_per_iteration=CYCLES, speed=SPEED,
+                                  interpolation=interp, dt=dt)
+        u = sim.run(ITERATIONS).settlement[-1]
+        out[interp, epb, dt] = (u[40] - u[39]) * 1e3
+    return out
+
+
+def test_cubic_loop_is_mesh_converged_at_the_default_mesh(step_40_39: dict) -> None:
+    assert step_40_39["cubic", 2, 1e-4] == pytest.approx(step_40_39["cubic", 8, 1e-4], rel=0.05)
+
+
+def test_linear_loop_needs_eight_elements_per_bay(step_40_39: dict) -> None:
+    fine = step_40_39["linear", 16, 1e-4]
+    assert step_40_39["linear", 8, 1e-4] == pytest.approx(fine, rel=0.01)  # the paper's mesh: converged
+    assert step_40_39["linear", 8, 5e-5] == pytest.approx(step_40_39["linear", 8, 1e-4], rel=0.01)  # and in dt
+    assert step_40_39["linear", 2, 1e-4] > 1.25 * fine  # the default mesh is not, for a kinked profile
+    assert step_40_39["linear", 8, 1e-4] > 1.2 * step_40_39["cubic", 8, 1e-4]  # the reading matters
+
+
+def test_linear_interpolation_is_straight_between_sleepers() -> None:
+    level = np.zeros(51)
+    level[25] = 1e-3
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), initial_level=level, interpolation="linear")
+    res = sim.simulate()
+    x = res.wheel_position[:, 0] - sim.n_extra * sim.track.sleeper_spacing
+    between = (x > 14.4) & (x < 15.6)
+    np.testing.assert_allclose(res.irregularity[between, 0], 1e-3 * (1 - np.abs(x[between] - 15.0) / 0.6), atol=1e-12)
+    cubic = te.TrackDegradation(track_a(), loaded_wheelset(), initial_level=level).simulate()
+    assert np.min(cubic.irregularity[:, 0]) < -1e-5  # the natural spline overshoots below zero next to the dip
+
+
+def test_interpolation_is_checked() -> None:
+    with pytest.raises(ValueError, match="interpolation must be one of"):
+        te.TrackDegradation(track_a(), loaded_wheelset(), interpolation="quadratic")

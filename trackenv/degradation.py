@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import scipy.linalg
@@ -98,6 +98,7 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
+INTERPOLATIONS = ("cubic", "linear")
 ON_RUNAWAY = ("warn", "raise", "ignore")
 #: Growth ratio of the differential settlement increment, iteration over iteration, and the number of
 #: consecutive iterations it must persist, that mark a loop running away (a converging loop's increments
@@ -142,7 +143,10 @@ class TrackDegradation:
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
     self-limiting mechanism that keeps short-wave settlement bounded); ``on_runaway``: what to do when the loop
     diverges ("warn": :class:`RunawayWarning`, "raise": :class:`RunawayError`, "ignore"; see
-    :meth:`check_runaway`). Remaining keywords go to :func:`simulate_passes` (``dt``, ``contact``,
+    :meth:`check_runaway`); ``interpolation``: how the per-sleeper level becomes the rail's level between
+    sleepers with ``feedback="irregularity"``: "cubic" (natural cubic spline through the sleeper values) or
+    "linear" (straight between sleepers: the paper's reading, GENSYS takes a two-column table of position and
+    displacement); see :meth:`rail_level`. Remaining keywords go to :func:`simulate_passes` (``dt``, ``contact``,
     ``sleeper_force_measure``, ``window_bays``).
     """
 
@@ -162,6 +166,7 @@ class TrackDegradation:
         rate_factor=None,
         feedback: str = "irregularity",
         on_runaway: str = "warn",
+        interpolation: str = "cubic",
         **pass_options,
     ) -> None:
         if not isinstance(track, Track):
@@ -192,6 +197,7 @@ class TrackDegradation:
             check_int("window_bays", pass_options.get("window_bays", 6), low=2, high=100_000)
         self.feedback = check_choice("feedback", feedback, FEEDBACKS)
         self.on_runaway = check_choice("on_runaway", on_runaway, ON_RUNAWAY)
+        self.interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
         self._differential: list[float] = []  # differential settlement increment per iteration [m]
         n = track.n_sleepers
         self.n_extra = self.zone_sleepers(track, self.system.span, approach_sleepers)
@@ -228,6 +234,16 @@ class TrackDegradation:
         level of the end sleepers."""
         lv = self.level if level is None else level
         return np.concatenate([np.full(self.n_extra, lv[0]), lv, np.full(self.n_extra, lv[-1])])
+
+    def rail_level(self, level: np.ndarray | None = None):
+        """The irregularity handed to the dynamics for ``feedback="irregularity"``: the per-sleeper level of
+        the modelled track (the dynamics interpolate it with a natural cubic spline), or with
+        ``interpolation="linear"`` a function z(x) interpolating it linearly between sleepers [m]."""
+        z = self.model_irregularity(level)
+        if self.interpolation == "cubic":
+            return z
+        x = self.model_track.sleeper_positions
+        return partial(np.interp, xp=x, fp=z)
 
     def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
         """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
@@ -420,9 +436,10 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
             raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
     if any(s.feedback != s0.feedback for s in sims):
         raise ValueError("simulate_batch needs simulators with the same feedback")
-    profiles = np.stack([s.model_irregularity() for s in sims])
     if s0.feedback == "irregularity":
-        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options)
+        rails = [s.rail_level() for s in sims]
+        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, rails, **s0.pass_options)
+    profiles = np.stack([s.model_irregularity() for s in sims])
     return simulate_passes(
         [s.model_track for s in sims],
         s0.vehicle,
