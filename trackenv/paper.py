@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .degradation import DegradationHistory, TrackDegradation
-from .physics._checks import check_scalar
+from .physics._checks import check_int, check_scalar
 from .physics.settlement import HettlerLaw
 from .physics.track import Track
 from .physics.vehicle import Wheelset
@@ -210,9 +210,7 @@ def reproduce_paper(out_dir: str | Path = "results/paper", iterations: int = 6,
     iteration 1's sit, their distance from the stiffness change at 24 m, their values per iteration and
     their growth.
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
-        raise ValueError(f"iterations must be a positive integer, got {iterations!r}")
-    iterations = int(iterations)
+    iterations = check_int("iterations", iterations, low=1, high=10_000)
     cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
     speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
     vehicle = Wheelset(mass=1800.0, static_load=100e3) if vehicle is None else vehicle

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, linalg, signal
 
-from trackenv.physics._checks import check_array, check_int, check_scalar, dataclass_from_dict
+from trackenv.physics._checks import check_array, check_field, check_int, check_scalar, dataclass_from_dict
 
 __all__ = [
     "GERMAN_PSD_PARAMETERS",
@@ -378,8 +378,7 @@ def d1_filter(
     b_lo, b_hi = _check_band(b_lo, b_hi, names=("band[0]", "band[1]"))
     if not b_lo > 2.0 * dx:
         raise ValueError(f"band[0] must exceed the Nyquist wavelength 2*spacing = {2 * dx:g} m, got {b_lo:g}")
-    if isinstance(order, bool) or int(order) != order or not 1 <= int(order) <= 10:
-        raise ValueError(f"order must be an integer in [1, 10], got {order!r}")
+    order = check_int("order", order, low=1, high=10)
     pad_w = check_scalar("pad_wavelengths", pad_wavelengths, low=0.0)
     p = check_int("ar_order", ar_order, low=1)
 
@@ -501,12 +500,12 @@ class BandLimits:
     speed_high_kmh: float
 
     def __post_init__(self) -> None:
-        a = check_scalar("alert_m", self.alert_m, low=0.0, low_inclusive=False)
-        i = check_scalar("intervention_m", self.intervention_m, low=a)
-        check_scalar("immediate_action_m", self.immediate_action_m, low=i)
-        check_scalar("sd_alert_m", self.sd_alert_m, low=0.0, low_inclusive=False)
-        lo = check_scalar("speed_low_kmh", self.speed_low_kmh, low=0.0)
-        check_scalar("speed_high_kmh", self.speed_high_kmh, low=lo, low_inclusive=False)
+        a = check_field(self, "alert_m", low=0.0, low_inclusive=False)
+        i = check_field(self, "intervention_m", low=a)
+        check_field(self, "immediate_action_m", low=i)
+        check_field(self, "sd_alert_m", low=0.0, low_inclusive=False)
+        lo = check_field(self, "speed_low_kmh", low=0.0)
+        check_field(self, "speed_high_kmh", low=lo, low_inclusive=False)
 
 
 @dataclass(frozen=True)
@@ -547,7 +546,7 @@ class QualityLimits:
             raise ValueError("intervention_m must be >= alert_m in every speed band")
         if np.any(cols["immediate_action_m"] < cols["intervention_m"]):
             raise ValueError("immediate_action_m must be >= intervention_m in every speed band")
-        check_scalar("sd_reference_length_m", self.sd_reference_length_m, low=0.0, low_inclusive=False)
+        check_field(self, "sd_reference_length_m", low=0.0, low_inclusive=False)
         if not isinstance(self.source, str):
             raise ValueError(f"source must be a string, got {type(self.source).__name__}")
 

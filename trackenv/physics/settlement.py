@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import check_array, check_field, check_scalar
+from ._checks import check_array, check_field, check_int, check_scalar
 
 __all__ = [
     "LAWS",
@@ -630,9 +630,8 @@ class SettlementState:
     @classmethod
     def zeros(cls, n: int) -> SettlementState:
         """A fresh state for ``n`` sleepers: no settlement, no cycles, rate factors 1."""
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise ValueError(f"n must be a non-negative integer, got {n!r}")
-        return cls(settlement=np.zeros(int(n)), cycles=np.zeros(int(n)), rate_factor=np.ones(int(n)))
+        n = check_int("n", n, low=0)
+        return cls(settlement=np.zeros(n), cycles=np.zeros(n), rate_factor=np.ones(n))
 
     @property
     def n(self) -> int:

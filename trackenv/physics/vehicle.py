@@ -16,7 +16,7 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
-from ._checks import check_int, check_scalar
+from ._checks import check_field, check_int, check_scalar
 
 GRAVITY = 9.81
 
@@ -82,10 +82,8 @@ class Wheelset:
     static_load: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "mass", check_scalar("mass", self.mass, low=10.0, high=20_000.0))
-        object.__setattr__(
-            self, "static_load", check_scalar("static_load", self.static_load, low=0.0, high=500e3)
-        )
+        check_field(self, "mass", low=10.0, high=20_000.0)
+        check_field(self, "static_load", low=0.0, high=500e3)
 
     @classmethod
     def seed(cls) -> Wheelset:
@@ -156,7 +154,7 @@ class Car:
             "length_over_buffers": (2.0, 60.0),
         }
         for name, (lo, hi) in ranges.items():
-            object.__setattr__(self, name, check_scalar(name, getattr(self, name), low=lo, high=hi))
+            check_field(self, name, low=lo, high=hi)
         if self.bogie_centre_distance <= self.bogie_wheelbase:
             raise ValueError("bogie_centre_distance must exceed bogie_wheelbase")
         if self.length_over_buffers < self.bogie_centre_distance + self.bogie_wheelbase:
