@@ -104,6 +104,8 @@ ON_RUNAWAY = ("warn", "raise", "ignore")
 #: consecutive iterations it must persist, that mark a loop running away (a converging loop's increments
 #: shrink: ratios 0.2-0.9 in the paper's scenarios), and the increment below which growth is not yet a concern [m].
 RUNAWAY_GROWTH, RUNAWAY_ITERATIONS, RUNAWAY_FLOOR = 1.5, 2, 0.1e-3
+#: A single iteration whose differential increment jumps by more than this factor (above the floor) is enough.
+RUNAWAY_JUMP = 4.0
 #: Contact force, as a multiple of the static wheel load, beyond which a pass is out of any plain track's range
 #: (dynamic factors from track geometry stay below about 2) **[assumption]**: the loop has run away.
 RUNAWAY_FORCE_FACTOR = 3.0
@@ -356,13 +358,14 @@ class TrackDegradation:
         """Detect a diverging loop after an iteration; warn, raise or ignore as ``on_runaway`` says.
 
         Three signs, any one enough: the differential settlement increment (the largest deviation of the
-        iteration's increment from its mean, what changes the next pass) grew by more than
-        :data:`RUNAWAY_GROWTH` times in each of the last :data:`RUNAWAY_ITERATIONS` iterations and exceeds
-        :data:`RUNAWAY_FLOOR`; or the pass's contact force exceeds :data:`RUNAWAY_FORCE_FACTOR` times the static
-        wheel load; or adaptive stepping ran out of passes and its last, unsplit step exceeded
-        ``max_increment``. The explicit loop overshoots when ΔN is too large for the feedback (fast, heavy traffic):
-        with ``feedback="irregularity"``, a heavy wheel at 200 km/h and 1e6 cycles per iteration the
-        settlement goes 11 mm → 55 mm → 2e5 mm, every number finite. Returns the message, or None."""
+        iteration's increment from its mean, what changes the next pass) exceeds :data:`RUNAWAY_FLOOR` and grew
+        by more than :data:`RUNAWAY_GROWTH` times in each of the last :data:`RUNAWAY_ITERATIONS` iterations or
+        by more than :data:`RUNAWAY_JUMP` times in the last one; the pass's contact force exceeds
+        :data:`RUNAWAY_FORCE_FACTOR` times the static wheel load; adaptive stepping ran out of passes and its
+        last, unsplit step exceeded ``max_increment``. The explicit loop overshoots when ΔN is too large for
+        the feedback (fast, heavy traffic): scenario B under a 200 kN wheel load at 200 km/h goes 0.26, 0.44,
+        1.8, 8.7, 183 mm of differential increment per 100 000 cycles, every number finite (warned at the
+        third). Returns the message, or None."""
         inc = record.settlement - level_before
         self._differential.append(float(np.max(np.abs(inc - inc.mean()))))
         d = self._differential[-(RUNAWAY_ITERATIONS + 1) :]
@@ -370,7 +373,8 @@ class TrackDegradation:
         static = float(np.max(self.system.static_wheel_loads))
         factor = record.max_contact_force / static if static > 0 else 0.0
         why = None
-        if len(ratios) == RUNAWAY_ITERATIONS and min(ratios) > RUNAWAY_GROWTH and d[-1] > RUNAWAY_FLOOR:
+        growing = len(ratios) == RUNAWAY_ITERATIONS and min(ratios) > RUNAWAY_GROWTH
+        if (growing or (ratios and ratios[-1] > RUNAWAY_JUMP)) and d[-1] > RUNAWAY_FLOOR:
             why = (
                 "differential settlement increments grow geometrically (x"
                 + ", x".join(f"{r:.3g}" for r in ratios)
