@@ -93,3 +93,35 @@ def test_config_stores_numbers_in_their_canonical_type() -> None:
 def test_config_reads_the_dynamics_time_step_bound() -> None:
     with pytest.raises(ValueError, match="track_length_m, speed_kmh and dt.*MAX_TIME_STEPS"):
         TampingEnvConfig(track_length_m=2000.0, speed_kmh=5.0, dt=1e-6)
+
+
+@pytest.mark.parametrize("fn", [te.static_deflection, te.receptance])
+def test_static_and_harmonic_responses_check_their_track(fn) -> None:
+    with pytest.raises(ValueError, match="^track must be a Track"):
+        fn("not a track")
+
+
+def test_receptance_bounds_its_frequencies() -> None:
+    with pytest.raises(ValueError, match="^frequencies must be <= 100000"):
+        te.receptance(te.Track.seed(), frequencies=[10.0, 1e300])
+
+
+@pytest.mark.parametrize("index", [None, "3", 2.0, -1, 51])
+def test_voided_sleeper_index_is_checked_first(index) -> None:
+    with pytest.raises(ValueError, match=r"^index must be an integer in \[0, 50\]"):
+        te.Track.seed().with_voided_sleeper(index)
+
+
+@pytest.mark.parametrize(("kw", "name"), [({"tracks": None}, "track"), ({"tracks": 3.0}, "track"),
+                                          ({"irregularities": 0.5}, "irregularities"),
+                                          ({"irregularities": True}, "irregularities")])
+def test_simulate_passes_names_malformed_rows(kw, name) -> None:
+    args = {"tracks": te.Track.seed(), "vehicle": te.Wheelset.seed(), "speed": 20.0, **kw}
+    with pytest.raises(ValueError, match=name):
+        te.simulate_passes(**args)
+
+
+@pytest.mark.parametrize("profile", ["x", [1 + 1j] * 51, [object()] * 51])
+def test_simulate_pass_refuses_a_profile_that_is_not_numbers(profile) -> None:
+    with pytest.raises(ValueError, match="^irregularity must be an array of real numbers"):
+        te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), 20.0, profile)

@@ -95,6 +95,14 @@ def check_bool(name: str, value) -> bool:
     return bool(value)
 
 
+def check_instance(name: str, value, cls: type | tuple[type, ...]):
+    """Return ``value`` if it is an instance of ``cls``, else raise ValueError naming ``name`` and the type."""
+    if not isinstance(value, cls):
+        want = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
+        raise ValueError(f"{name} must be a {want}, got {type(value).__name__}")
+    return value
+
+
 def check_field(obj: object, name: str, **limits) -> float:
     """Check the real field ``name`` of a frozen dataclass with :func:`check_scalar` and store it as float."""
     v = check_scalar(name, getattr(obj, name), **limits)

@@ -18,7 +18,7 @@ import scipy.interpolate
 import scipy.linalg
 
 from . import _kernel
-from ._checks import check_array, check_scalar, check_time_steps
+from ._checks import check_array, check_instance, check_scalar, check_time_steps
 from .contact import HertzContact, LinearContact
 from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
 from .vehicle import Car, Train, VehicleSystem, Wheelset
@@ -83,7 +83,7 @@ def _contact_law(contact):
 def _as_tracks(tracks) -> list[Track]:
     if isinstance(tracks, Track):
         return [tracks]
-    tracks = list(tracks)
+    tracks = list(tracks) if isinstance(tracks, (list, tuple)) else []
     if not tracks or not all(isinstance(t, Track) for t in tracks):
         raise ValueError("track(s) must be a Track or a non-empty sequence of Track")
     t0 = tracks[0]
@@ -156,6 +156,7 @@ def _point_load_vector(track: Track, x: float) -> tuple[np.ndarray, np.ndarray]:
 
 def static_deflection(track: Track, load: float = 100e3, x: float | None = None) -> float:
     """Rail deflection [m] under a static point ``load`` [N] at position ``x`` [m] (default mid-track)."""
+    check_instance("track", track, Track)
     load = check_scalar("load", load, low=0.0, high=1e7)
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
     _, _, k = track.banded_matrices()
@@ -169,8 +170,10 @@ def static_deflection(track: Track, load: float = 100e3, x: float | None = None)
 def receptance(track: Track, x: float | None = None, frequencies=None) -> np.ndarray:
     """Complex rail receptance w/F [m/N] at position ``x`` [m] for ``frequencies`` [Hz]: the direct
     frequency response of the full track, (K + iωC − ω²M)⁻¹ at the load point."""
+    check_instance("track", track, Track)
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
-    f = check_array("frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies, low=0.0)
+    default = np.logspace(1, np.log10(3000), 200)
+    f = check_array("frequencies", default if frequencies is None else frequencies, low=0.0, high=1e5)
     m, c, k = track.banded_matrices()
     dofs, shp = _point_load_vector(track, x)
     rhs = np.zeros(track.n_dof, dtype=complex)
@@ -337,6 +340,8 @@ def simulate_passes(
         if isinstance(irregularities, np.ndarray) and irregularities.ndim == 1:
             irr_rows = [irregularities]
         else:
+            if not isinstance(irregularities, (list, tuple, np.ndarray)) or np.ndim(irregularities) == 0:
+                raise ValueError(f"irregularities must be None, an array, a callable or a list, got {irregularities!r}")
             irr_rows = list(irregularities)
     n_rows = max(len(tracks), len(irr_rows))
     if len(tracks) == 1:
@@ -501,7 +506,7 @@ def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularit
     if not isinstance(track, Track):
         raise ValueError(f"track must be a Track, got {type(track).__name__}")
     if irregularity is not None and not callable(irregularity):
-        arr = np.asarray(irregularity, dtype=float)
+        arr = check_array("irregularity", irregularity)
         if arr.ndim != 1:
             raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
         irregularity = [arr]

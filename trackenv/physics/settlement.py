@@ -575,8 +575,8 @@ def make_law(name: str, **params: Any) -> Any:
 
     Raises ValueError on an unknown name (listing the known ones) or an unknown parameter.
     """
-    if name not in LAWS:
-        raise ValueError(f"unknown settlement law {name!r}; known laws: {', '.join(LAWS)}")
+    if not isinstance(name, str) or name not in LAWS:
+        raise ValueError(f"unknown settlement law name {name!r}; known laws: {', '.join(LAWS)}")
     return LAWS[name].from_dict(params)
 
 

@@ -186,6 +186,7 @@ class Track:
         gap needs a contact law in the ballast, which this linear track does not have.
         """
         r = check_scalar("residual_support", residual_support, low=0.0, high=1.0, low_inclusive=False)
+        index = check_int("index", index, low=0, high=self.n_sleepers - 1)
         sl = self._sleeper_slice(index, index + 1)
         kb, cb = np.array(self.ballast_stiffness), np.array(self.ballast_damping)
         kb[sl] *= r
