@@ -323,3 +323,15 @@ def test_a_sudden_jump_of_the_increment_warns_at_once() -> None:
     sim.advance()
     with pytest.raises(te.RunawayError, match=r"grow geometrically \(x[0-9.]+ per iteration"):
         sim.advance()
+
+
+def test_tamping_starts_a_new_series_of_increments(recwarn: pytest.WarningsRecorder) -> None:
+    """The restarted consolidation after tamping makes the next increment jump: that is not a runaway."""
+    sim = te.TrackDegradation(te.Track.realistic(30.0), loaded_wheelset(), cycles_per_iteration=500_000,
+                              speed=100 / 3.6, feedback="support")
+    sim.advance()
+    mask = np.zeros(sim.track.n_sleepers, dtype=bool)
+    mask[15:36] = True
+    sim.tamp(mask)
+    sim.advance()
+    assert not [w for w in recwarn if issubclass(w.category, te.RunawayWarning)]

@@ -362,10 +362,10 @@ class TrackDegradation:
         by more than :data:`RUNAWAY_GROWTH` times in each of the last :data:`RUNAWAY_ITERATIONS` iterations or
         by more than :data:`RUNAWAY_JUMP` times in the last one; the pass's contact force exceeds
         :data:`RUNAWAY_FORCE_FACTOR` times the static wheel load; adaptive stepping ran out of passes and its
-        last, unsplit step exceeded ``max_increment``. The explicit loop overshoots when ΔN is too large for
-        the feedback (fast, heavy traffic): scenario B under a 200 kN wheel load at 200 km/h goes 0.26, 0.44,
-        1.8, 8.7, 183 mm of differential increment per 100 000 cycles, every number finite (warned at the
-        third). Returns the message, or None."""
+        last, unsplit step exceeded ``max_increment``. Tamping starts a new series of increments. The explicit
+        loop overshoots when ΔN is too large for the feedback (fast, heavy traffic): scenario B under a 200 kN
+        wheel load at 200 km/h goes 0.26, 0.44, 1.8, 8.7, 183 mm of differential increment per 100 000
+        cycles, every number finite (warned at the third). Returns the message, or None."""
         inc = record.settlement - level_before
         self._differential.append(float(np.max(np.abs(inc - inc.mean()))))
         d = self._differential[-(RUNAWAY_ITERATIONS + 1) :]
@@ -374,7 +374,8 @@ class TrackDegradation:
         factor = record.max_contact_force / static if static > 0 else 0.0
         why = None
         growing = len(ratios) == RUNAWAY_ITERATIONS and min(ratios) > RUNAWAY_GROWTH
-        if (growing or (ratios and ratios[-1] > RUNAWAY_JUMP)) and d[-1] > RUNAWAY_FLOOR:
+        jump = bool(ratios) and ratios[-1] > RUNAWAY_JUMP and d[-2] > 0.1 * RUNAWAY_FLOOR  # not from a flat start
+        if (growing or jump) and d[-1] > RUNAWAY_FLOOR:
             why = (
                 "differential settlement increments grow geometrically (x"
                 + ", x".join(f"{r:.3g}" for r in ratios)
@@ -412,6 +413,7 @@ class TrackDegradation:
         self.state = self.state.restarted(restarted, rate_factor=self.base_rate * res.rate_factor)
         self.offset = np.where(restarted, res.level, self.offset)
         self.tampings = res.tampings.astype(np.int64)
+        self._differential.clear()  # increments before and after tamping are not one series
         return res
 
     def run(self, iterations: int, progress=None) -> DegradationHistory:
