@@ -327,9 +327,11 @@ def test_a_sudden_jump_of_the_increment_warns_at_once() -> None:
 
 def test_tamping_starts_a_new_series_of_increments(recwarn: pytest.WarningsRecorder) -> None:
     """The restarted consolidation after tamping makes the next increment jump: that is not a runaway."""
+    rate = 1.0 + 0.03 * np.sin(np.arange(51) / 3.0)  # ballast condition varies a little along the track
     sim = te.TrackDegradation(te.Track.realistic(30.0), loaded_wheelset(), cycles_per_iteration=500_000,
-                              speed=100 / 3.6, feedback="support")
+                              speed=100 / 3.6, feedback="support", rate_factor=rate)
     sim.advance()
+    assert sim._differential[-1] > 0.1 * te.degradation.RUNAWAY_FLOOR  # not a flat start
     mask = np.zeros(sim.track.n_sleepers, dtype=bool)
     mask[15:36] = True
     sim.tamp(mask)
