@@ -299,7 +299,8 @@ def format_summary(d: dict) -> str:
     lines = [
         f"Paper section 4: {s['iterations']} × {s['cycles_per_iteration']:,.0f} cycles at "
         f"{s['speed_km_per_h']:.0f} km/h, {s['vehicle']} ({s['static_wheel_load_kN']:.1f} kN static), "
-        f"law {s['law']['name']}",
+        f"law {s['law']['name']}, {s.get('interpolation', 'cubic')} settlement between sleepers, "
+        f"{s.get('elements_per_bay', 2)} elements per bay",
         f"A {d['A']['description']}: final settlement {a['final_settlement_min_mm']:.4f}–"
         f"{a['final_settlement_max_mm']:.4f} mm over sleepers {a['interior_sleepers'][0]}–"
         f"{a['interior_sleepers'][1]}, spread {100 * a['final_settlement_spread']:.2g} % of the mean; "
