@@ -202,7 +202,7 @@ class TrackDegradation:
         self.interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
         self._differential: list[float] = []  # differential settlement increment per iteration [m]
         n = track.n_sleepers
-        self.n_extra = self.zone_sleepers(track, self.system.span, approach_sleepers)
+        self.n_extra = self.zone_sleepers(track.sleeper_spacing, self.system.span, approach_sleepers)
         self.model_track = track.extended(self.n_extra, self.n_extra)
         self.offset = np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
         self.base_rate = (
@@ -216,14 +216,15 @@ class TrackDegradation:
         self.history = DegradationHistory(track.sleeper_positions.copy())
 
     @staticmethod
-    def zone_sleepers(track: Track, span: float, approach_sleepers: int = 10) -> int:
-        """Sleepers of the approach (and of the exit) zone added to ``track`` for a vehicle of axle ``span`` [m]."""
-        return int(approach_sleepers) + math.ceil(span / track.sleeper_spacing)
+    def zone_sleepers(sleeper_spacing: float, span: float, approach_sleepers: int = 10) -> int:
+        """Sleepers of the approach (and of the exit) zone added to a track with ``sleeper_spacing`` [m] for a
+        vehicle of axle ``span`` [m]."""
+        return int(approach_sleepers) + math.ceil(span / sleeper_spacing)
 
     @classmethod
-    def approach_length(cls, track: Track, span: float, approach_sleepers: int = 10) -> float:
-        """Length [m] of the approach (and of the exit) zone added to ``track``."""
-        return cls.zone_sleepers(track, span, approach_sleepers) * track.sleeper_spacing
+    def zone_length(cls, sleeper_spacing: float, span: float, approach_sleepers: int = 10) -> float:
+        """Length [m] of the approach (and of the exit) zone (see :meth:`zone_sleepers`)."""
+        return cls.zone_sleepers(sleeper_spacing, span, approach_sleepers) * sleeper_spacing
 
     # ------------------------------------------------------------------ state
     @property

@@ -123,8 +123,7 @@ class TampingEnvConfig:
         c("dt", low=1e-6, high=5e-4)
         # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
         # step could not simulate (the modelled track adds approach and exit zones to the evaluated one)
-        span = self.make_vehicle().system().span
-        extra = TrackDegradation.approach_length(Track.realistic(self.track_length_m), span)
+        extra = TrackDegradation.zone_length(Track.realistic(30.0).sleeper_spacing, self.make_vehicle().system().span)
         try:
             check_time_steps(self.track_length_m + 2 * extra, self.speed, self.dt)
         except ValueError as e:
