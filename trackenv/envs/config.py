@@ -122,10 +122,12 @@ class TampingEnvConfig:
         ci("min_steps_between_tampings", low=0, high=100)
         c("dt", low=1e-6, high=5e-4)
         # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
-        # step could not simulate (the modelled track adds approach and exit zones to the evaluated one)
-        extra = TrackDegradation.zone_length(Track.realistic(30.0).sleeper_spacing, self.make_vehicle().system().span)
+        # step could not simulate: the leading axle runs from the vehicle's span to the end of the modelled
+        # track, which adds approach and exit zones to the evaluated one
+        span = self.make_vehicle().system().span
+        extra = TrackDegradation.zone_length(Track.realistic(30.0).sleeper_spacing, span)
         try:
-            check_time_steps(self.track_length_m + 2 * extra, self.speed, self.dt)
+            check_time_steps(self.track_length_m + 2 * extra - span, self.speed, self.dt)
         except ValueError as e:
             raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 
