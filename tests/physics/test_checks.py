@@ -125,3 +125,15 @@ def test_simulate_passes_names_malformed_rows(kw, name) -> None:
 def test_simulate_pass_refuses_a_profile_that_is_not_numbers(profile) -> None:
     with pytest.raises(ValueError, match="^irregularity must be an array of real numbers"):
         te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), 20.0, profile)
+
+
+@pytest.mark.parametrize("vehicle", ["wheelset", "manchester_coach"])
+def test_config_counts_the_time_steps_of_the_pass_the_env_runs(vehicle) -> None:
+    """The config's check of MAX_TIME_STEPS measures the same pass the env's dynamics integrate."""
+    from trackenv.envs.episode import new_episode
+
+    cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, vehicle=vehicle, speed_kmh=120.0, dt=2e-4)
+    sim = new_episode(cfg, np.random.default_rng(0)).sim
+    span = sim.system.span
+    expected = check_time_steps(cfg.track_length_m + 2 * sim.zone_length(0.6, span) - span, cfg.speed, cfg.dt)
+    assert sim.simulate().time.size - 1 == expected
