@@ -22,7 +22,7 @@ from functools import cached_property, partial
 import numpy as np
 import scipy.linalg
 
-from .physics._checks import check_array, check_bool, check_choice, check_int, check_scalar
+from .physics._checks import check_array, check_bool, check_choice, check_int, check_scalar, check_speed
 from .physics.dynamics import (
     SLEEPER_FORCE_MEASURES,
     PassResult,
@@ -180,7 +180,7 @@ class TrackDegradation:
         if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
             raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
         self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
-        self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+        self.speed = check_speed(speed)
         approach_sleepers = check_int("approach_sleepers", approach_sleepers, low=2, high=200)
         self.adaptive = check_bool("adaptive", adaptive)
         self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .degradation import DegradationHistory, TrackDegradation
-from .physics._checks import check_int, check_scalar
+from .physics._checks import check_int, check_scalar, check_speed
 from .physics.settlement import HettlerLaw
 from .physics.track import Track
 from .physics.vehicle import Wheelset
@@ -212,7 +212,7 @@ def reproduce_paper(out_dir: str | Path = "results/paper", iterations: int = 6,
     """
     iterations = check_int("iterations", iterations, low=1, high=10_000)
     cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
-    speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+    speed = check_speed(speed)
     vehicle = Wheelset(mass=1800.0, static_load=100e3) if vehicle is None else vehicle
     law = HettlerLaw() if law is None else law
     out = Path(out_dir)

@@ -26,6 +26,9 @@ import numpy as np
 MAX_TIME_STEPS = 2_000_000
 #: Upper bound on time steps × axles × rows of one batched pass (about 0.4 GB per stored array).
 MAX_PASS_SAMPLES = 50_000_000
+#: Upper bound of a pass's speed [m/s] (720 km/h: beyond any railway; the model has no aerodynamics or
+#: critical-velocity checks), read by the dynamics, the settlement loop and the paper's reproduction.
+MAX_SPEED_M_PER_S = 200.0
 
 
 def _describe(value) -> str:
@@ -145,6 +148,11 @@ def check_array(
     if high is not None and np.any(arr > high):
         raise ValueError(f"{name} must be <= {high:g} everywhere, got max {arr.max():g}")
     return arr
+
+
+def check_speed(speed, name: str = "speed") -> float:
+    """A vehicle's speed [m/s] in (0, :data:`MAX_SPEED_M_PER_S`]."""
+    return check_scalar(name, speed, low=0.0, high=MAX_SPEED_M_PER_S, low_inclusive=False)
 
 
 def check_time_steps(length_m: float, speed_m_per_s: float, dt_s: float, rows: int = 1, axles: int = 1) -> int:

@@ -18,7 +18,7 @@ import scipy.interpolate
 import scipy.linalg
 
 from . import _kernel
-from ._checks import check_array, check_instance, check_scalar, check_time_steps
+from ._checks import check_array, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
 from .vehicle import Car, Train, VehicleSystem, Wheelset
@@ -304,7 +304,7 @@ def simulate_passes(
     tracks = _as_tracks(tracks)
     sys_ = _vehicle_system(vehicle)
     law = _contact_law(contact)
-    speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+    speed = check_speed(speed)
     dt = check_scalar("dt", dt, low=1e-7, high=1.0)
     if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
         raise ValueError(
