@@ -63,13 +63,13 @@ class TampingVectorEnv(VectorEnv):
             self.episodes[i] = ep
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        seeds: list[int | None]
         if seed is None:
             seeds = [None] * self.num_envs
         elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seeds)}")
-            seeds = [None if s is None else check_int("seed", s, low=0) for s in seeds]
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seed)}")
+            seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
         else:
             seeds = [check_int("seed", seed, low=0) + i for i in range(self.num_envs)]
         check_reset_arguments(None, options)

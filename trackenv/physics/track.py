@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -102,7 +103,9 @@ class Track:
             ballast_stiffness=ballast_stiffness,
             ballast_damping=ballast_damping,
         )
-        per_sleeper = {k: np.full(n, check_scalar(k, v, low=0.0, high=PER_SLEEPER_MAX[k])) for k, v in values.items()}
+        per_sleeper: dict[str, Any] = {
+            k: np.full(n, check_scalar(k, v, low=0.0, high=PER_SLEEPER_MAX[k])) for k, v in values.items()
+        }
         return cls(**per_sleeper, **scalars)
 
     @classmethod
