@@ -119,9 +119,9 @@ class TampingEnv(gym.Env):
     "smoothing" tamping the level keeps its settlement (a tamper in that mode does not lift the track back to
     the design line), so under heavy traffic or over long horizons ``level`` can reach its 200 mm bound
     (seed 1, 10 years at 1e7 axle passes a year, tamping sections above 0.8 × the SD alert value: 5 of 40
-    steps). ``tamping={"reference": "design",
-    "max_lift_m": 0.02}`` models the lift instead (toward the design line, at most ``max_lift_m`` per pass):
-    over 30 years of the default traffic, threshold tamping then ends at a mean level of 4 mm instead of 82.
+    steps). ``tamping={"reference": "design", "max_lift_m": 0.02}`` models the lift instead (toward the
+    design line, at most ``max_lift_m`` per pass): over 30 years of the default traffic the same rule then
+    ends at a mean level of 4 mm instead of 82.
 
     **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
     (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
