@@ -337,3 +337,20 @@ def test_tamping_starts_a_new_series_of_increments(recwarn: pytest.WarningsRecor
     sim.tamp(mask)
     sim.advance()
     assert not [w for w in recwarn if issubclass(w.category, te.RunawayWarning)]
+
+
+def test_sleeper_forces_beyond_the_models_validity_are_reported_when_settling() -> None:
+    """The env settles without advance(): an impossible sleeper force is caught there too."""
+    import dataclasses
+
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), feedback="support")
+    res = sim.simulate()
+    assert sim.check_sleeper_forces(sim.evaluated(res.sleeper_force)) is None  # a sound pass: nothing to say
+    static = float(sim.system.static_wheel_loads.max())
+    scale = 3.5 * static / sim.evaluated(res.sleeper_force).max()
+    forced = dataclasses.replace(res, sleeper_force=res.sleeper_force * scale)
+    with pytest.warns(te.RunawayWarning, match=r"sleeper \d+ carries .* 3.5 times the static wheel load"):
+        sim.settle(forced, 1000.0)
+    strict = te.TrackDegradation(track_a(), loaded_wheelset(), feedback="support", on_runaway="raise")
+    with pytest.raises(te.RunawayError, match="outside its validity"):
+        strict.settle(forced, 1000.0)

@@ -262,6 +262,7 @@ class TrackDegradation:
         adaptive stepping (and ``split``) cuts the increment; return the cycles taken."""
         cycles = check_scalar("cycles", cycles, low=0.0)
         force = np.maximum(self.evaluated(result.sleeper_force), 0.0)
+        self.check_sleeper_forces(force)
         step = self._adaptive_step(force, cycles) if self.adaptive and split else cycles
         if self.feedback == "support":
             self.state = self._implicit_advance(force, step)
@@ -354,6 +355,32 @@ class TrackDegradation:
         self.history.records.append(rec)
         self.check_runaway(level_before, rec)
         return rec
+
+    def check_sleeper_forces(self, force: np.ndarray) -> str | None:
+        """Warn, raise or ignore (``on_runaway``) when a sleeper force exceeds :data:`RUNAWAY_FORCE_FACTOR`
+        times the static wheel load: no track geometry puts that on one sleeper (it carries about half the
+        wheel load), so the loop has run away or, with ``feedback="support"``, the differential settlement
+        between neighbours has outgrown the linear supports (a lifted sleeper next to settled ones is pressed
+        into its ballast by the bent rail instead of lifting off). Called on every settlement step: the env
+        settles without :meth:`advance`. Returns the message, or None."""
+        static = float(np.max(self.system.static_wheel_loads))
+        peak = float(np.max(force, initial=0.0))
+        if static <= 0 or peak <= RUNAWAY_FORCE_FACTOR * static or self.on_runaway == "ignore":
+            return None
+        k = int(np.argmax(force))
+        step = float(np.max(np.abs(np.diff(self.level)), initial=0.0))
+        msg = (
+            f"sleeper {k} carries {peak / 1e3:.4g} kN, {peak / static:.3g} times the static wheel load, after "
+            f"{self.cycles:.4g} cycles (largest level step between neighbouring sleepers {step * 1e3:.3g} mm): "
+            "the settlement loop is outside its validity. Reduce the cycles per step, tamp less aggressively "
+            "(a design-line lift next to settled track), or check the inputs"
+        )
+        if self.on_runaway == "raise":
+            raise RunawayError(msg)
+        import warnings
+
+        warnings.warn(msg, RunawayWarning, stacklevel=3)
+        return msg
 
     def check_runaway(self, level_before: np.ndarray, record: IterationRecord) -> str | None:
         """Detect a diverging loop after an iteration; warn, raise or ignore as ``on_runaway`` says.
