@@ -30,6 +30,7 @@ import numpy as np
 from .degradation import DegradationHistory, TrackDegradation
 from .physics._checks import check_int, check_scalar, check_speed
 from .physics.settlement import HettlerLaw
+from .physics.timestep import DT_REFERENCE_S
 from .physics.track import Track
 from .physics.vehicle import Wheelset
 
@@ -221,7 +222,8 @@ def reproduce_paper(out_dir: str | Path = "results/paper", iterations: int = 6,
     tracks = scenario_tracks(elements_per_bay)
     change_m = float(tracks["B"].sleeper_positions[STIFFNESS_CHANGE_SLEEPER])
     sims = {name: TrackDegradation(tr, vehicle, law=law, cycles_per_iteration=cycles_per_iteration,
-                                   speed=speed, interpolation=interpolation) for name, tr in tracks.items()}
+                                   speed=speed, interpolation=interpolation, dt=DT_REFERENCE_S)
+            for name, tr in tracks.items()}
     static_load = float(np.max(sims["A"].system.static_wheel_loads))
     law_params = law.to_dict() if hasattr(law, "to_dict") else {}
     settings = {

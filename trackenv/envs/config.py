@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from functools import partial
+from functools import cached_property, partial
 from typing import Any
 
 from ..degradation import TrackDegradation
 from ..physics._checks import check_choice, check_field, check_int_field, check_time_steps
+from ..physics.contact import HertzContact
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel
+from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
 from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 
@@ -53,6 +55,9 @@ class TampingEnvConfig:
     :meth:`QualityLimits.en13848`) at ``speed_kmh``; the SD alert value applies to our short sections as is.
 
     ``min_steps_between_tampings``: a section tamped in the last k steps cannot be tamped again (masked).
+
+    ``dt``: time step of the passes [s], or "auto" (default): the coarsest step that keeps peak forces within
+    0.5 % of dt = 1e-4 s (the accuracy contract of :mod:`trackenv.physics.timestep`, whose bounds apply).
     """
 
     track_length_m: float = 60.0
@@ -81,7 +86,7 @@ class TampingEnvConfig:
     immediate_action_cost: float = 50.0
     limits: tuple = ()
     min_steps_between_tampings: int = 1
-    dt: float = 1e-4
+    dt: float | str = "auto"
 
     def __post_init__(self) -> None:
         # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
@@ -120,14 +125,19 @@ class TampingEnvConfig:
         ):
             c(name, low=0.0, high=1e9)
         ci("min_steps_between_tampings", low=0, high=100)
-        c("dt", low=1e-6, high=5e-4)
+        dt = check_dt_option(self.dt)
+        object.__setattr__(self, "dt", dt)
         # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
         # step could not simulate: the leading axle runs from the vehicle's span to the end of the modelled
-        # track, which adds approach and exit zones to the evaluated one
-        span = self.make_vehicle().system().span
-        extra = TrackDegradation.zone_length(Track.realistic(30.0).sleeper_spacing, span)
+        # track, which adds approach and exit zones to the evaluated one; with dt="auto" a pass that loses
+        # contact is rerun at the reference step, so the finer of the two counts
+        system = self.make_vehicle().system()
+        track = Track.realistic(30.0)
+        if dt == "auto":
+            dt = min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+        extra = TrackDegradation.zone_length(track.sleeper_spacing, system.span)
         try:
-            check_time_steps(self.track_length_m + 2 * extra - span, self.speed, self.dt)
+            check_time_steps(self.track_length_m + 2 * extra - system.span, self.speed, dt)
         except ValueError as e:
             raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 
@@ -178,17 +188,23 @@ class TampingEnvConfig:
     def speed(self) -> float:
         return self.speed_kmh / 3.6
 
-    @property
+    # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
+    @cached_property
     def settlement_law(self):
         return make_law(self.law, **dict(self.law_params))
 
-    @property
+    @cached_property
     def tamping_model(self) -> TampingModel:
         return TampingModel.from_dict(dict(self.tamping))
 
-    @property
+    @cached_property
     def quality_limits(self) -> QualityLimits:
         return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+    @cached_property
+    def band_limits(self):
+        """The quality limits of the speed band of ``speed_kmh``."""
+        return self.quality_limits.for_speed(self.speed)
 
     def make_vehicle(self):
         wheel_load = self.axle_load_t * 1000.0 * GRAVITY / 2
