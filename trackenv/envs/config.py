@@ -133,11 +133,14 @@ class TampingEnvConfig:
         # contact is rerun at the reference step, so the finer of the two counts
         system = self.make_vehicle().system()
         track = Track.realistic(30.0)
-        if dt == "auto":
-            dt = min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+        finest = (
+            min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+            if isinstance(dt, str)
+            else dt
+        )
         extra = TrackDegradation.zone_length(track.sleeper_spacing, system.span)
         try:
-            check_time_steps(self.track_length_m + 2 * extra - system.span, self.speed, dt)
+            check_time_steps(self.track_length_m + 2 * extra - system.span, self.speed, finest)
         except ValueError as e:
             raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 
