@@ -32,7 +32,7 @@ from trackenv.envs.vector import TampingVectorEnv
 
 __all__ = [
     "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bootstrap_ci", "compare", "compare_results",
-    "evaluate_many", "evaluate_policy", "format_markdown", "format_table", "paired_difference", "tune_many",
+    "evaluate_many", "evaluate_one", "format_markdown", "format_table", "paired_difference", "tune_many",
     "plot_comparison", "plot_episode", "policy_name", "policy_params", "tune",
 ]
 
@@ -218,12 +218,23 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     return results
 
 
-def evaluate_policy(policy: Any, config: TampingEnvConfig | dict | None = None,
-                    seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
-                    progress: bool = False) -> EvaluationResult:
-    """One episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time)."""
+def evaluate_one(policy: Any, config: TampingEnvConfig | dict | None = None,
+                 seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                 progress: bool = False) -> EvaluationResult:
+    """One policy, one episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time):
+    :func:`evaluate_many` for a single policy. The episode returns are ``.sum_rewards``."""
     return evaluate_many([policy], config, seeds, action_type, batch_size, progress,
                          desc=policy_name(policy))[0]
+
+
+def evaluate_policy(*args: Any, **kwargs: Any) -> EvaluationResult:
+    """Deprecated name of :func:`evaluate_one` (it shadowed stable-baselines3's ``evaluate_policy``, which takes
+    an env and returns a mean and a standard deviation)."""
+    import warnings
+
+    warnings.warn("trackenv_agents.evaluation.evaluate_policy is now evaluate_one", DeprecationWarning,
+                  stacklevel=2)
+    return evaluate_one(*args, **kwargs)
 
 
 def paired_difference(a: EvaluationResult, b: EvaluationResult, n_resamples: int = N_BOOTSTRAP) -> dict:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.evaluation import evaluate_one
 from trackenv_agents.heuristics import Periodic
-from trackenv_agents.train import evaluate_returns
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 
@@ -32,5 +32,5 @@ def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs():
     # an open-loop schedule of whole-track campaigns costs exactly what the periodic rule costs
     costs = hs.schedule_costs(TINY, 11, [hs.periodic_schedule(3, TINY.horizon_steps), ()])
     rule = Periodic(interval_years=0.75, sections="all").bind(TINY)
-    np.testing.assert_allclose(costs[0], -evaluate_returns(rule, TINY, [11])[0])
+    np.testing.assert_allclose(costs[0], evaluate_one(rule, TINY, [11]).cost[0])
     assert costs[1] != costs[0]

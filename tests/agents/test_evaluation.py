@@ -14,7 +14,7 @@ from trackenv_agents.evaluation import (
     bootstrap_ci,
     compare,
     evaluate_many,
-    evaluate_policy,
+    evaluate_one,
     format_markdown,
     format_table,
     paired_difference,
@@ -45,7 +45,7 @@ def test_cost_is_minus_sum_of_rewards(results):
 
 @pytest.mark.slow
 def test_same_seeds_identical_results_whatever_the_batching(results):
-    again = evaluate_policy(SDThreshold(0.8), CFG, SEEDS, batch_size=4)
+    again = evaluate_one(SDThreshold(0.8), CFG, SEEDS, batch_size=4)
     first = results["sd"]
     np.testing.assert_array_equal(again.cost, first.cost)
     np.testing.assert_array_equal(again.section_tampings, first.section_tampings)
@@ -148,3 +148,11 @@ def test_compare_sorted_and_tunes(monkeypatch):
     assert {r["policy"] for r in rows} == {"no_maintenance", "periodic", "sd_threshold"}
     periodic = next(r for r in rows if r["policy"] == "periodic")
     assert periodic["params"]["interval_years"] in (1.0, 0.5)
+
+
+def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one():
+    from trackenv_agents import evaluation
+
+    with pytest.warns(DeprecationWarning, match="evaluate_one"):
+        old = evaluation.evaluate_policy(SDThreshold(0.8), CFG, SEEDS[:1])
+    np.testing.assert_array_equal(old.cost, evaluate_one(SDThreshold(0.8), CFG, SEEDS[:1]).cost)

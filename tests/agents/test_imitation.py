@@ -11,9 +11,10 @@ pytest.importorskip("stable_baselines3")
 
 from trackenv.envs.config import TampingEnvConfig  # noqa: E402
 from trackenv.envs.vector import TampingVectorEnv  # noqa: E402
+from trackenv_agents.evaluation import evaluate_one  # noqa: E402
 from trackenv_agents.heuristics import Periodic  # noqa: E402
 from trackenv_agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
-from trackenv_agents.train import evaluate_returns, load_trained, train  # noqa: E402
+from trackenv_agents.train import load_trained, train  # noqa: E402
 
 TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 
@@ -67,4 +68,4 @@ def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type):
         got, _ = clone.predict(obs)
         np.testing.assert_array_equal(got, expected)
         obs, *_ = venv.step(expected)
-    np.testing.assert_allclose(evaluate_returns(clone, TINY, [7, 8]), evaluate_returns(teacher, TINY, [7, 8]))
+    np.testing.assert_allclose(evaluate_one(clone, TINY, [7, 8]).cost, evaluate_one(teacher, TINY, [7, 8]).cost)
