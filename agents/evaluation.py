@@ -386,12 +386,10 @@ def format_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def plot_comparison(results: Sequence[EvaluationResult], out_png: str) -> str:
     """Box plot (with the episodes as dots) of the per-episode life-cycle cost of each policy."""
-    import matplotlib
+    from matplotlib.figure import Figure  # pyplot-free: no global state, the user's backend untouched
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.4 * len(results) + 2), 4.5))
+    fig = Figure(figsize=(max(5.0, 1.4 * len(results) + 2), 4.5))
+    ax = fig.subplots()
     data = [r.cost for r in results]
     ax.boxplot(data, showmeans=True, showfliers=False)
     rng = np.random.default_rng(0)
@@ -404,7 +402,6 @@ def plot_comparison(results: Sequence[EvaluationResult], out_png: str) -> str:
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
-    plt.close(fig)
     return out_png
 
 
@@ -424,16 +421,14 @@ def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, s
 
 def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int, out_png: str) -> str:
     """One episode under ``policy``: section SD over time with tamping marks (top), cost per step (bottom)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # pyplot-free: no global state, the user's backend untouched
 
     cfg = TampingEnvConfig.coerce(config)
     tr = record_episode(policy, cfg, seed)
     years = np.concatenate([[0.0], tr["year"]])
     lim = cfg.quality_limits.for_speed(cfg.speed)
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=(2, 1))
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
     for s in range(cfg.n_sections):
         color = f"C{s % 10}"
         ax1.plot(years, tr["section_sd_mm"][:, s], color=color, label=f"section {s + 1}")
@@ -453,5 +448,4 @@ def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int,
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
-    plt.close(fig)
     return out_png
