@@ -156,7 +156,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         tampings += info["tamped_sections"].sum(axis=1)
         exceed += info["immediate_action_exceedances"]
         if record:
-            traces["section_sd_mm"].append(info["section_sd_m"] * 1e3)
+            traces["section_sd_mm"].append(info["section_sd_mm"])
             traces["tamped"].append(info["tamped_sections"].copy())
             traces["cost"].append(info["cost"].copy())
             traces["year"].append(info["year"].copy())
@@ -165,7 +165,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         if t == cfg.horizon_steps - 1:
             if not trunc.all():  # pragma: no cover - guards a change of the env's horizon rule
                 raise RuntimeError("episodes did not end at the configured horizon")
-            final_sd = info["section_sd_m"].mean(axis=1) * 1e3
+            final_sd = info["section_sd_mm"].mean(axis=1)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
             "traces": traces}
 

@@ -85,9 +85,10 @@ def _threading_layer() -> str:
         return "not initialised"
 
 
-def _irregularities(rows: int, n_sleepers: int, rng: np.random.Generator) -> np.ndarray:
-    """Different smooth random rail levels per row [m]: a few sines of 2-20 m wavelength, ~0.5 mm RMS."""
-    x = np.arange(n_sleepers) * 0.6
+def _irregularities(rows: int, x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Different smooth random rail levels per row [m] at the sleeper positions ``x`` [m]: a few sines of
+    2-20 m wavelength, ~0.5 mm RMS."""
+    n_sleepers = x.size
     out = np.zeros((rows, n_sleepers))
     for _ in range(4):
         lam = rng.uniform(2.0, 20.0, size=(rows, 1))
@@ -118,7 +119,7 @@ def _bench_batches(repeats: int, sizes=BATCH_SIZES) -> dict:
         numba.set_num_threads(threads)
         try:
             for b in sizes:
-                irr = _irregularities(b, track.n_sleepers, rng)
+                irr = _irregularities(b, track.sleeper_positions, rng)
                 t = _time(lambda irr=irr: simulate_passes(track, wheel, SPEED, irr, dt=DT), repeats)
                 out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"]}
         finally:

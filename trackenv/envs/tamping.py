@@ -101,6 +101,23 @@ class TampingEnv(gym.Env):
     time                   fraction of the horizon elapsed                       -       [0, 1]
     =====================  ====================================================  ======  ============
 
+    **Info** (per step; units in the key where they are not obvious): track geometry in mm, like the
+    observation and the EN 13848-5 limits; the physics inside is SI.
+
+    ============================  ==================================================================  ====
+    key                           quantity                                                            unit
+    ============================  ==================================================================  ====
+    costs, cost                   the period's cost in named parts, and their sum (= -reward)         k€
+    tamped_sections               sections tamped this step (bool, n_sections)                        -
+    section_sd_mm                 SD of the D1 level per section (unclipped)                          mm
+    section_peak_mm               D1 mean-to-peak per section (unclipped)                             mm
+    section_sd_m, section_peak_m  the same in metres (kept for v0; prefer the mm keys)                m
+    section_class                 EN 13848-5 class per section: 0 ok, 1 alert, 2 intervention, 3 IAL  -
+    immediate_action_exceedances  sections at or above the immediate-action limit                     -
+    year                          time at the end of the step                                         year
+    max_contact_force_N           largest wheel/rail force of the step's pass                         N
+    ============================  ==================================================================  ====
+
     **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
     (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
     ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
@@ -117,7 +134,10 @@ class TampingEnv(gym.Env):
     **Randomness.** Everything random (track supports, transition zone, voided sleepers, ballast condition,
     initial level, tamping residual) draws from ``self.np_random``, seeded by ``reset(seed=...)``.
 
-    **Versions.** v0: first release.
+    **Versions.** v0: first release. Later additions that change no result of v0: ``info`` reports the
+    geometry in mm (``section_sd_mm``, ``section_peak_mm``) beside the metre keys; the numbers that draw a
+    track (sleeper spacing, ballast-stiffness correlation, where a transition may sit, a voided sleeper's
+    residual support) became config fields with the values they had.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
