@@ -23,6 +23,8 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -120,7 +122,7 @@ def _bench_batches(repeats: int, sizes=BATCH_SIZES) -> dict:
         try:
             for b in sizes:
                 irr = _irregularities(b, track.sleeper_positions, rng)
-                t = _time(lambda irr=irr: simulate_passes(track, wheel, SPEED, irr, dt=DT), repeats)
+                t = _time(partial(simulate_passes, track, wheel, SPEED, irr, dt=DT), repeats)
                 out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"]}
         finally:
             numba.set_num_threads(default_threads)
@@ -194,7 +196,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     rep = 3 if quick else 7
     rep_batch = 2 if quick else 5
     t0 = time.perf_counter()
-    out = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
+    out: dict[str, Any] = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
     out["seed_pass"] = _bench_seed_pass(rep)
     out["batch"] = _bench_batches(rep_batch)
     out["car"] = _bench_car(3 if quick else 5)

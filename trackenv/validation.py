@@ -22,13 +22,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy.signal
 import scipy.sparse.linalg
 from matplotlib.figure import Figure
 
-from trackenv.physics.dynamics import receptance, simulate_pass, static_deflection
+from trackenv.physics.dynamics import PassResult, receptance, simulate_pass, static_deflection
 from trackenv.physics.track import Track, hermite_shape
 from trackenv.physics.vehicle import Wheelset
 
@@ -86,7 +87,7 @@ def _central(n: int) -> slice:
 
 def _static_summary(track: Track) -> dict:
     w0 = track.winkler_deflection(STATIC_LOAD)
-    out = {
+    out: dict[str, Any] = {
         "load_N": STATIC_LOAD,
         "foundation_modulus_N_per_m2": track.foundation_modulus,
         "winkler_beta_per_m": track.winkler_beta,
@@ -133,10 +134,11 @@ def _receptance_summary(track: Track) -> tuple[dict, dict]:
     return summary, curves
 
 
-def _loaded_pass_summary() -> tuple[dict, dict]:
+def _loaded_pass_summary() -> tuple[dict, dict[int, tuple[PassResult, np.ndarray, np.ndarray]]]:
     wheelset = Wheelset(mass=1800.0, static_load=100e3)
     f_sleeper = SPEED / Track.seed().sleeper_spacing
-    out, curves = {"speed_m_per_s": SPEED, "speed_kmh": 80.0, "sleeper_passing_hz": f_sleeper}, {}
+    out: dict[str, Any] = {"speed_m_per_s": SPEED, "speed_kmh": 80.0, "sleeper_passing_hz": f_sleeper}
+    curves: dict[int, tuple[PassResult, np.ndarray, np.ndarray]] = {}
     for epb in (2, 4):
         res = simulate_pass(Track.seed(elements_per_bay=epb), wheelset, SPEED)
         c = _central(res.time.size)
@@ -164,7 +166,7 @@ def _loaded_pass_summary() -> tuple[dict, dict]:
     return out, curves
 
 
-def _rest_pass_summary() -> tuple[dict, tuple]:
+def _rest_pass_summary() -> tuple[dict, tuple[PassResult, np.ndarray, np.ndarray]]:
     res = simulate_pass(Track.seed(), Wheelset.seed(), SPEED, start="rest")
     force = res.contact_force[:, 0]
     freq, amp = amplitude_spectrum(force, res.dt, detrend="constant")
@@ -358,7 +360,7 @@ def run_validation(out_dir: str | Path = "results/validation", make_plots: bool 
     rest, rest_curves = _rest_pass_summary()
     bar.update()
     bar.set_postfix_str("static")
-    summary = {
+    summary: dict[str, Any] = {
         "track": {
             "name": seed.name,
             "n_sleepers": seed.n_sleepers,

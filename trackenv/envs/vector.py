@@ -53,7 +53,8 @@ class TampingVectorEnv(VectorEnv):
 
     def _observations(self) -> dict:
         out = create_empty_array(self.single_observation_space, self.num_envs)
-        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)
+        # gymnasium types concatenate's result as any space's; for a Dict space it is the dict ``out``
+        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)  # type: ignore[return-value]
 
     def _new_episodes(self, idx: list[int]) -> None:
         eps = [E.new_episode(self.config, self._rngs[i]) for i in idx]
@@ -64,7 +65,7 @@ class TampingVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         if seed is None:
-            seeds = [None] * self.num_envs
+            seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, (int, np.integer)):
             seeds = [int(seed) + i for i in range(self.num_envs)]
         else:

@@ -258,6 +258,7 @@ def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -
     r = model.runout_sleepers
     for start, stop in tamped_runs(m):
         seg = z[start:stop]
+        base: float | np.ndarray
         if model.reference == "design":
             ref, base = _line_fit(seg), 0.0
         else:
