@@ -159,16 +159,17 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive(kind: type) -> Any:
-    """An argparse type: a number of ``kind`` (int or float) that is finite and > 0; ``1e5`` is a whole number."""
+def _positive(kind: type, zero: bool = False) -> Any:
+    """An argparse type: a number of ``kind`` (int or float) that is finite and > 0 (>= 0 if ``zero``); ``1e5``
+    is a whole number."""
 
     def parse(text: str) -> Any:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not (math.isfinite(value) and value > 0):
-            raise argparse.ArgumentTypeError(f"must be a number > 0, got {text}")
+        if not (math.isfinite(value) and (value >= 0 if zero else value > 0)):
+            raise argparse.ArgumentTypeError(f"must be a number {'>=' if zero else '>'} 0, got {text}")
         if kind is int:
             if value != int(value):
                 raise argparse.ArgumentTypeError(f"must be a whole number, got {text}")
@@ -258,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
                          f"{hp.get('total_timesteps', 'n/a')})")
     sp.add_argument("--n-envs", type=_positive(int), default=None, metavar="N",
                     help=f"envs stepped together (default: the hyper-parameter file's, {hp.get('n_envs', 'n/a')})")
-    sp.add_argument("--seed", type=int, default=DEFAULT_TRAIN_SEED,
+    sp.add_argument("--seed", type=_positive(int, zero=True), default=DEFAULT_TRAIN_SEED, metavar="N",
                     help="env i starts with seed + i, apart from the test, tuning and evaluation seeds")
     sp.add_argument("--resume", default=None, metavar="DIR",
                     help="output folder of an earlier run to continue for --timesteps more steps")

@@ -104,7 +104,8 @@ def test_every_option_has_help_text(command):
 
 @pytest.mark.parametrize("argv", [["train", "--timesteps", "-5"], ["train", "--n-envs", "0"],
                                   ["train", "--timesteps", "1.5"], ["paper", "--iterations", "0"],
-                                  ["paper", "--cycles", "nan"], ["evaluate", "--n-test", "-1"]])
+                                  ["paper", "--cycles", "nan"], ["evaluate", "--n-test", "-1"],
+                                  ["train", "--seed", "-1"]])
 def test_non_positive_counts_are_refused(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
