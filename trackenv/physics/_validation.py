@@ -60,14 +60,6 @@ def check_array(
     return arr
 
 
-def readonly(arr: np.ndarray) -> np.ndarray:
-    """A read-only float64 copy of ``arr``: what a frozen parameter dataclass stores, so that nobody can change
-    a field's array behind the validation that checked it."""
-    out = np.array(arr, dtype=np.float64, copy=True)
-    out.flags.writeable = False
-    return out
-
-
 def dataclass_from_dict(cls, d):
     """``cls(**d)`` for a frozen parameter dataclass, raising ValueError naming any unknown key."""
     import dataclasses

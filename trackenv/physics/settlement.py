@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_array, check_scalar, readonly
+from ._validation import check_array, check_scalar
 
 __all__ = [
     "LAWS",
@@ -586,6 +586,12 @@ def make_law(name: str, **params: Any) -> Any:
 
 
 # ====================================================================== per-sleeper state
+def _readonly(arr: np.ndarray) -> np.ndarray:
+    out = np.array(arr, dtype=np.float64, copy=True)
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class SettlementState:
     """Settlement of each sleeper since its last consolidation restart, advanced by curve shifting (Fig. 9).
@@ -622,9 +628,9 @@ class SettlementState:
             r = np.ones(n)
         else:
             r = check_array("rate_factor", self.rate_factor, shape=(n,), low=0.0, low_inclusive=False)
-        object.__setattr__(self, "settlement", readonly(u))
-        object.__setattr__(self, "cycles", readonly(c))
-        object.__setattr__(self, "rate_factor", readonly(r))
+        object.__setattr__(self, "settlement", _readonly(u))
+        object.__setattr__(self, "cycles", _readonly(c))
+        object.__setattr__(self, "rate_factor", _readonly(r))
 
     @classmethod
     def zeros(cls, n: int) -> SettlementState:

@@ -19,10 +19,16 @@ from functools import cached_property
 
 import numpy as np
 
-from ._validation import check_array, check_scalar, readonly
+from ._validation import check_array, check_scalar
 
 PER_SLEEPER_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
 HALF_BANDWIDTH = 4
+
+
+def _readonly(arr: np.ndarray) -> np.ndarray:
+    arr = np.array(arr, dtype=np.float64, copy=True)
+    arr.flags.writeable = False
+    return arr
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +62,7 @@ class Track:
         for f in PER_SLEEPER_FIELDS:
             low_inclusive = f in ("pad_damping", "ballast_damping")
             arr = check_array(f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, low_inclusive=low_inclusive)
-            object.__setattr__(self, f, readonly(arr))
+            object.__setattr__(self, f, _readonly(arr))
         object.__setattr__(
             self, "sleeper_spacing", check_scalar("sleeper_spacing", self.sleeper_spacing, low=0.05, high=5.0)
         )
