@@ -223,7 +223,8 @@ def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
     e = np.clip(np.floor(x / le).astype(int), 0, track.n_nodes - 2)
     xi = x / le - e
     lay = track.dof_layout
-    n1, n2, n3, n4 = hermite_shape(xi, le)
+    n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
+    n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
     return n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]] + n4 * u[lay.node_theta[e + 1]]
 
 

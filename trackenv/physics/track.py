@@ -365,11 +365,8 @@ def hermite_element_matrices(length: float, bending_stiffness: float, mass_per_l
     return k, m
 
 
-def hermite_shape(xi: float | np.ndarray, length: float) -> np.ndarray:
-    """Hermite cubic shape functions at ξ ∈ [0, 1] of an element of ``length``: w(ξ) = N·(w1, θ1, w2, θ2).
-
-    ``xi`` may be an array: the result is then (4, *xi.shape). (The numba kernel writes the same four
-    polynomials inline, where it cannot call numpy code.)"""
+def hermite_shape(xi: float, length: float) -> np.ndarray:
+    """Hermite cubic shape functions at ξ ∈ [0, 1] of an element of ``length``: w(ξ) = N·(w1, θ1, w2, θ2)."""
     xi2, xi3 = xi * xi, xi * xi * xi
     return np.array(
         [1 - 3 * xi2 + 2 * xi3, length * (xi - 2 * xi2 + xi3), 3 * xi2 - 2 * xi3, length * (xi3 - xi2)]
