@@ -436,7 +436,7 @@ def _implicit_states(sims: list[TrackDegradation], force: np.ndarray, cycles: fl
         sims[0].law,
         np.stack([x.settlement for x in st]),
         np.stack([x.cycles for x in st]),
-        np.stack([x.rate_factor for x in st]),
+        np.stack([x.rate_factor for x in st]),  # type: ignore[misc]  # never None once the state is built
         force,
         np.stack([s.support_influence for s in sims]),
         cycles,

@@ -138,13 +138,8 @@ def _plot(history: DegradationHistory, path: Path, title: str, static_load_kN: f
           change_m: float | None) -> None:
     """Two panels like the paper's Fig. 10/11: (a) settlement and (b) contact force along the track, one line
     per iteration on a colour ramp; a dashed line marks the stiffness change when there is one."""
-    import sys
-
     import matplotlib
-
-    if "matplotlib.pyplot" not in sys.modules:  # headless; never switch (and close) a user's pyplot backend
-        matplotlib.use("Agg")
-    from matplotlib.figure import Figure  # drawn without pyplot: no global figure state, any backend works
+    from matplotlib.figure import Figure  # drawn without pyplot: no global state, the user's backend untouched
     from matplotlib.ticker import ScalarFormatter
 
     x = history.sleeper_positions

@@ -23,14 +23,16 @@ VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
 class TampingEnvConfig:
     """Everything that defines a tamping problem. SI units unless the name says otherwise.
 
-    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers) split into ``n_sections`` equal tamping
-    sections; supports from ``Track.realistic`` with per-sleeper ballast stiffness drawn lognormal with
-    coefficient of variation ``ballast_stiffness_cv``; with probability ``transition_probability`` a
-    transition zone (ballast ``transition_stiffness_ratio`` times stiffer from a random sleeper on, e.g. a
-    bridge approach); ``voided_sleepers_mean`` hanging sleepers on average (Poisson). Ballast condition varies
-    along the track: each sleeper's settlement rate is lognormal with CV ``settlement_rate_cv``, correlated
-    over ``settlement_rate_correlation_m``. The initial level is drawn from the German vertical PSD of
-    ``initial_quality`` ("low"/"high" disturbance).
+    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers ``sleeper_spacing_m`` = 0.6 m apart) split
+    into ``n_sections`` equal tamping sections; supports from ``Track.realistic`` with per-sleeper ballast
+    stiffness drawn lognormal with coefficient of variation ``ballast_stiffness_cv``, correlated over
+    ``ballast_stiffness_correlation_m``; with probability ``transition_probability`` a transition zone (ballast
+    ``transition_stiffness_ratio`` times stiffer from a sleeper on, e.g. a bridge approach, drawn uniformly
+    within the fractions ``transition_position`` of the track, away from its ends);
+    ``voided_sleepers_mean`` hanging sleepers on average (Poisson), each keeping ``voided_residual_support``
+    of its ballast support. Ballast condition varies along the track: each sleeper's settlement rate is
+    lognormal with CV ``settlement_rate_cv``, correlated over ``settlement_rate_correlation_m``. The initial
+    level is drawn from the German vertical PSD of ``initial_quality`` ("low"/"high" disturbance).
 
     Traffic: wheel load ``axle_load_t``·g/2 (a wheelset carrying it, or one of the car models in
     ``vehicle``), ``speed_kmh``, ``axle_passes_per_year``, ``steps_per_year`` planning periods a year (each
@@ -62,10 +64,14 @@ class TampingEnvConfig:
 
     track_length_m: float = 60.0
     n_sections: int = 6
+    sleeper_spacing_m: float = 0.6
     ballast_stiffness_cv: float = 0.15
+    ballast_stiffness_correlation_m: float = 1.2
     transition_probability: float = 0.3
     transition_stiffness_ratio: float = 2.0
+    transition_position: tuple = (0.2, 0.8)
     voided_sleepers_mean: float = 0.3
+    voided_residual_support: float = 0.05
     settlement_rate_cv: float = 0.35
     settlement_rate_correlation_m: float = 3.0
     initial_quality: str = "low"
@@ -92,13 +98,27 @@ class TampingEnvConfig:
         # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
         c, ci = partial(check_field, self), partial(check_int_field, self)
         c("track_length_m", low=30.0, high=2000.0)
+        # the sleeper spacings of ballasted track in service (the D1 filter and the sections assume one)
+        c("sleeper_spacing_m", low=0.3, high=1.0)
         ci("n_sections", low=1, high=64)
         if self.n_sleepers < 3 * self.n_sections:
             raise ValueError("n_sections must leave at least 3 sleepers per section")
         c("ballast_stiffness_cv", low=0.0, high=1.0)
+        c("ballast_stiffness_correlation_m", low=0.0, high=100.0)
         c("transition_probability", low=0.0, high=1.0)
         c("transition_stiffness_ratio", low=0.2, high=10.0)
+        try:
+            if isinstance(self.transition_position, str):
+                raise TypeError
+            lo, hi = (float(v) for v in self.transition_position)
+        except (TypeError, ValueError):
+            raise ValueError(f"transition_position must be two fractions (low, high), got "
+                             f"{self.transition_position!r}") from None
+        if not 0.0 <= lo < hi <= 1.0:
+            raise ValueError(f"transition_position must satisfy 0 <= low < high <= 1, got {self.transition_position!r}")
+        object.__setattr__(self, "transition_position", (lo, hi))
         c("voided_sleepers_mean", low=0.0, high=10.0)
+        c("voided_residual_support", low=0.0, high=1.0)
         c("settlement_rate_cv", low=0.0, high=2.0)
         c("settlement_rate_correlation_m", low=0.0, high=100.0)
         check_choice("initial_quality", self.initial_quality, ("low", "high"))
@@ -177,7 +197,7 @@ class TampingEnvConfig:
     # derived
     @property
     def n_sleepers(self) -> int:
-        return int(round(self.track_length_m / 0.6)) + 1
+        return int(round(self.track_length_m / self.sleeper_spacing_m)) + 1  # as Track.realistic counts them
 
     @property
     def horizon_steps(self) -> int:

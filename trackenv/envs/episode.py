@@ -51,7 +51,7 @@ class Episode:
         cached = self._quality_cache
         if cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset:
             return cached[2]
-        d1 = d1_filter(self.sim.level, 0.6)
+        d1 = d1_filter(self.sim.level, self.sim.track.sleeper_spacing)
         value = (d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections, self.n_sections))
         self._quality_cache = (self.sim.state, self.sim.offset, value)
         return value
@@ -79,16 +79,20 @@ def new_episode(config: TampingEnvConfig, rng: np.random.Generator) -> Episode:
     """Draw a track, its ballast condition and its initial level from ``rng``."""
     c = config
     n = c.n_sleepers
-    track = Track.realistic(c.track_length_m)
-    kb = track.ballast_stiffness * _correlated_lognormal(rng, n, c.ballast_stiffness_cv, 2.0)
+    track = Track.realistic(c.track_length_m, sleeper_spacing=c.sleeper_spacing_m)
+    spacing = track.sleeper_spacing
+    kb = track.ballast_stiffness * _correlated_lognormal(
+        rng, n, c.ballast_stiffness_cv, c.ballast_stiffness_correlation_m / spacing
+    )
     transition = -1
     if rng.random() < c.transition_probability:
-        transition = int(rng.integers(n // 5, 4 * n // 5))
+        lo, hi = (int(n * f + 1e-9) for f in c.transition_position)  # whole sleepers; 1e-9: 0.2 * 5 is 1
+        transition = int(rng.integers(lo, hi))
         kb[transition:] *= c.transition_stiffness_ratio
     track = track.replace(ballast_stiffness=kb)
-    for _ in range(int(rng.poisson(c.voided_sleepers_mean))):
-        track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=0.05)
-    rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / 0.6)
+    for _ in range(int(rng.poisson(c.voided_sleepers_mean))):  # never the two end sleepers at either end
+        track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=c.voided_residual_support)
+    rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / spacing)
     level = synthesize_profile(track.sleeper_positions, partial(german_psd, quality=c.initial_quality), rng)
     sim = TrackDegradation(
         track,
@@ -209,6 +213,8 @@ def clipped_values(ep: Episode) -> int:
 
 
 def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
+    """The step's info dict (see TampingEnv's table): track geometry in mm like the observation, each key
+    naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0."""
     _, sd, peak = ep.quality()
     lim = ep.config.band_limits
     cls = classify(peak, lim)
@@ -216,6 +222,8 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
         "costs": parts,
         "cost": float(sum(parts.values())),
         "tamped_sections": tamped.copy(),
+        "section_sd_mm": sd * 1e3,
+        "section_peak_mm": peak * 1e3,
         "section_sd_m": sd.copy(),
         "section_peak_m": peak.copy(),
         "section_class": cls,

@@ -123,6 +123,23 @@ class TampingEnv(gym.Env):
     design line, at most ``max_lift_m`` per pass): over 30 years of the default traffic the same rule then
     ends at a mean level of 4 mm instead of 82.
 
+    **Info** (per step; units in the key where they are not obvious): track geometry in mm, like the
+    observation and the EN 13848-5 limits; the physics inside is SI.
+
+    ============================  ==================================================================  ====
+    key                           quantity                                                            unit
+    ============================  ==================================================================  ====
+    costs, cost                   the period's cost in named parts, and their sum (= -reward)         k€
+    tamped_sections               sections tamped this step (bool, n_sections)                        -
+    section_sd_mm                 SD of the D1 level per section (unclipped)                          mm
+    section_peak_mm               D1 mean-to-peak per section (unclipped)                             mm
+    section_sd_m, section_peak_m  the same in metres (kept for v0; prefer the mm keys)                m
+    section_class                 EN 13848-5 class per section: 0 ok, 1 alert, 2 intervention, 3 IAL  -
+    immediate_action_exceedances  sections at or above the immediate-action limit                     -
+    year                          time at the end of the step                                         year
+    max_contact_force_N           largest wheel/rail force of the step's pass                         N
+    ============================  ==================================================================  ====
+
     **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
     (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
     ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
@@ -145,7 +162,10 @@ class TampingEnv(gym.Env):
     **Versions.** v0: first release. Since then, without a change of dynamics or reward (same seeds and
     actions give the same observations, rewards and costs, so v0 is kept): ``step`` after the horizon raises,
     ``reset`` checks its seed and options, ``info["observation_clipped"]`` was added, and tamping gained the
-    opt-in ``max_lift_m``.
+    opt-in ``max_lift_m``; ``info`` reports the
+    geometry in mm (``section_sd_mm``, ``section_peak_mm``) beside the metre keys; the numbers that draw a
+    track (sleeper spacing, ballast-stiffness correlation, where a transition may sit, a voided sleeper's
+    residual support) became config fields with the values they had.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}

@@ -53,7 +53,8 @@ class TampingVectorEnv(VectorEnv):
 
     def _observations(self) -> dict:
         out = create_empty_array(self.single_observation_space, self.num_envs)
-        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)
+        # gymnasium types concatenate's result as any space's; for a Dict space it is the dict ``out``
+        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)  # type: ignore[return-value]
 
     def _new_episodes(self, idx: list[int]) -> None:
         eps = [E.new_episode(self.config, self._rngs[i]) for i in idx]

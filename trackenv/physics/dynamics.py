@@ -407,7 +407,7 @@ def simulate_passes(
 
     # rows
     if irregularities is None:
-        irr_rows = [None] * len(tracks)
+        irr_rows: list[Irregularity] = [None] * len(tracks)
     elif callable(irregularities):
         irr_rows = [irregularities]
     else:
@@ -630,7 +630,5 @@ def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularit
         arr = check_array("irregularity", irregularity)
         if arr.ndim != 1:
             raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
-        irregularity = [arr]
-    elif irregularity is not None:
-        irregularity = [irregularity]
-    return simulate_passes(track, vehicle, speed, irregularity, **options)[0]
+        return simulate_passes(track, vehicle, speed, [arr], **options)[0]
+    return simulate_passes(track, vehicle, speed, None if irregularity is None else [irregularity], **options)[0]

@@ -25,6 +25,7 @@ import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import integrate, linalg, signal
@@ -71,7 +72,7 @@ _CM2_TO_M2 = 1.0e-4
 #: ``A_v`` [m^2*rad/m] (the published values 1.2107 ... 0.0339 cm^2*rad/m times 1e-4), ``omega_c`` [rad/m]
 #: and the factor ``k``. Source: Hamid & Yang / Fries & Coffey FRA track spectra as quoted in the dynamics
 #: literature **[unverified]**; stated validity wavelengths 1.5-305 m.
-FRA_PSD_PARAMETERS: dict[str, object] = {
+FRA_PSD_PARAMETERS: dict[str, Any] = {
     "A_v": {
         1: 1.2107 * _CM2_TO_M2,
         2: 1.0181 * _CM2_TO_M2,

@@ -268,6 +268,7 @@ def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -
     r = model.runout_sleepers
     for start, stop in tamped_runs(m):
         seg = z[start:stop]
+        base: float | np.ndarray
         if model.reference == "design":
             # the line is lifted to the design level (0), by at most max_lift_m where it lies below it
             ref = _line_fit(seg)

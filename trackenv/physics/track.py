@@ -127,8 +127,8 @@ class Track:
         )
 
     @classmethod
-    def realistic(cls, length: float = 60.0, *, elements_per_bay: int = 2) -> Track:
-        """A typical UIC60 ballasted track of ``length`` metres.
+    def realistic(cls, length: float = 60.0, *, elements_per_bay: int = 2, sleeper_spacing: float = 0.6) -> Track:
+        """A typical UIC60 ballasted track of ``length`` metres, sleepers every ``sleeper_spacing`` metres.
 
         Rail UIC60: E = 210 GPa, I = 3055 cm⁴ (EI = 6.42e6 N·m²), 60.2 kg/m (EN 13674-1 profile data).
         Pads and sleeper as in the paper's Table 3 (200 MN/m, 30 kN·s/m, 157.4 kg half sleeper). Ballast
@@ -136,7 +136,7 @@ class Track:
         paper's 500 kN·s/m (which makes the sleeper-on-ballast mode heavily overdamped, ζ ≈ 1.6).
         """
         length = check_scalar("length", length, low=3.0, high=10_000.0)
-        n = int(round(length / 0.6)) + 1
+        n = int(round(length / sleeper_spacing)) + 1
         return cls.uniform(
             n,
             pad_stiffness=200e6,
@@ -144,7 +144,7 @@ class Track:
             sleeper_mass=157.4,
             ballast_stiffness=160e6,
             ballast_damping=60e3,
-            sleeper_spacing=0.6,
+            sleeper_spacing=sleeper_spacing,
             rail_bending_stiffness=210e9 * 3055e-8,
             rail_mass=60.21,
             elements_per_bay=elements_per_bay,

@@ -293,7 +293,10 @@ class Train:
 
     def system(self) -> VehicleSystem:
         parts = [c.system() for c in self.cars]
-        offsets, wheel_dofs, names, start, dof0 = [], [], [], 0.0, 0
+        offsets: list[np.ndarray] = []
+        wheel_dofs: list[np.ndarray] = []
+        names: list[str] = []
+        start, dof0 = 0.0, 0
         for car, s in zip(self.cars, parts):
             overhang = (car.length_over_buffers - s.span) / 2
             offsets.append(start + overhang + s.axle_offsets)
@@ -301,14 +304,14 @@ class Train:
             names += [f"car{len(names) // 10 + 1}.{nm}" for nm in s.dof_names]
             start += car.length_over_buffers
             dof0 += s.n_dof
-        offsets = np.concatenate(offsets)
+        axle_offsets = np.concatenate(offsets)
         return VehicleSystem(
             scipy.linalg.block_diag(*[s.mass for s in parts]),
             scipy.linalg.block_diag(*[s.damping for s in parts]),
             scipy.linalg.block_diag(*[s.stiffness for s in parts]),
             np.concatenate([s.force for s in parts]),
             np.concatenate(wheel_dofs),
-            offsets - offsets[0],
+            axle_offsets - axle_offsets[0],
             tuple(names),
         )
 
