@@ -21,3 +21,16 @@ for _id, _kwargs in (
         )
 
 __all__ = ["TampingEnv", "TampingEnvConfig"]
+
+for _id, _scenario in (
+    ("trackenv/TampingLine-v0", "default"),
+    ("trackenv/TampingLineSmall-v0", "small"),
+    ("trackenv/TampingLineHard-v0", "hard"),
+):
+    if _id not in registry:
+        register(
+            id=_id,
+            entry_point="trackenv.envs.line:TampingLine",
+            kwargs={"scenario": _scenario},
+            vector_entry_point="trackenv.envs.line:TampingLineVectorEnv",
+        )
