@@ -81,9 +81,12 @@ class LineConfig:
     **Economics (k€).** ``possession_cost`` per campaign (a step with any tamping on the line: call-out, night
     possession; 5-20 k€ **[unverified]**), ``tamping_cost_per_m`` × section length per tamped section (10 €/m:
     a few to ~15 €/m **[unverified]**), ``renewal_cost_per_m`` (150 €/m **[assumption]**),
-    ``geometry_cost_per_section_year`` × (SD/SD_alert)² (poor ride, wear **[assumption]**),
-    ``speed_restriction_cost`` per section-step at or above the intervention limit of the D1 mean-to-peak (a
-    temporary speed restriction: delay minutes every day it stands **[assumption]**),
+    ``geometry_cost_per_section_year`` × (SD/SD_alert)² (poor ride, faster wear of track and vehicles: 4 k€
+    per section-year at the alert SD, against ÖBB's ~35 k€ per km-year, i.e. ~7 k€ per section-year, of
+    total track cost **[assumption]**), ``speed_restriction_cost`` per section-step at or above the
+    intervention limit of the D1 mean-to-peak (a temporary speed restriction: Railtrack's ~650 TSRs cost
+    ~2 000 delay-minutes a day, ~3 min a day each; at ~75 € per delay-minute **[assumption]** that is
+    ~80 k€ a year, 20 k€ a quarter),
     ``immediate_action_cost`` per section-step at the immediate-action limit (closure) **[assumption]**.
     **Constraints**: ``capacity`` sections per campaign (a possession covers ``capacity`` × 200 m: one night
     at a tamper's 0.5-2.2 km/h); ``annual_budget`` (0: none) for tamping costs per calendar year;
@@ -120,15 +123,15 @@ class LineConfig:
     rate_scale: float = 1.0
     initial_age_years: float = 3.0
     initial_max_tampings: int = 4
-    initial_scale: tuple = (0.6, 1.6)
+    initial_scale: tuple = (0.4, 1.2)
     law: str = "shenton"
     law_params: tuple = (("K1", 0.5e-4), ("force_exponent", 1.6))
     tamping: tuple = ()
     possession_cost: float = 15.0
     tamping_cost_per_m: float = 0.01
     renewal_cost_per_m: float = 0.15
-    geometry_cost_per_section_year: float = 1.0
-    speed_restriction_cost: float = 5.0
+    geometry_cost_per_section_year: float = 4.0
+    speed_restriction_cost: float = 20.0
     immediate_action_cost: float = 50.0
     capacity: int = 6
     annual_budget: float = 0.0

@@ -363,6 +363,14 @@ class LineBatch:
             "immediate_action": c.immediate_action_cost * (cls == 3).sum(1),
         }
 
+    def section_costs(self) -> np.ndarray:
+        """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
+        the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
+        c = self.config
+        cls = classify(self.peak, self.limits)
+        geo = c.geometry_cost_per_section_year / c.steps_per_year * (self.sd / self.limits.sd_alert_m) ** 2
+        return geo + c.speed_restriction_cost * (cls == 2) + c.immediate_action_cost * (cls == 3)
+
     # ------------------------------------------------------------------ observation and info
     def observation(self, b: int) -> dict[str, np.ndarray]:
         c = self.config
