@@ -114,9 +114,9 @@ class LineConfig:
     ballast_stiffness_cv: float = 0.15
     transition_probability: float = 0.12
     transition_stiffness_ratio: float = 3.0
-    transition_rate_factor: float = 2.5
+    transition_rate_factor: float = 6.0
     switch_probability: float = 0.08
-    switch_rate_factor: float = 3.0
+    switch_rate_factor: float = 4.0
     wet_spot_probability: float = 0.1
     wet_spot_rate_factor: float = 5.0
     wet_spot_length_m: float = 6.0
