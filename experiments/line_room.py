@@ -30,17 +30,24 @@ def main(argv=None) -> dict:
     ap.add_argument("--n-test", type=int, default=100)
     ap.add_argument("--n-hindsight", type=int, default=10)
     ap.add_argument("--batch-size", type=int, default=24)
+    ap.add_argument("--rounds", type=int, default=2, help="local-search rounds of the hindsight search")
+    ap.add_argument("--thresholds", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0, 4.0])
     ap.add_argument("--save-tuned", action="store_true")
+    ap.add_argument("--use-saved", action="store_true", help="skip tuning: the saved tuned parameters")
     ap.add_argument("--out", default="results/line_room.json")
     args = ap.parse_args(argv)
     cfg = scenario(args.scenario)
     t0 = time.time()
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance"]
     train = list(range(1000, 1000 + args.n_train))
-    tuned = tune_many(classes, cfg, train, args.batch_size, progress=True)
-    best = {classes[i].name: t["best_params"] for i, t in tuned.items()}
+    if args.use_saved:
+        saved = json.loads(LINE_TUNED_FILE.read_text())
+        best, train = saved["params"], saved["train_seeds"]
+    else:
+        tuned = tune_many(classes, cfg, train, args.batch_size, progress=True)
+        best = {classes[i].name: t["best_params"] for i, t in tuned.items()}
     print("tuned", json.dumps(best), f"{time.time() - t0:.0f}s", flush=True)
-    if args.save_tuned:
+    if args.save_tuned and not args.use_saved:
         LINE_TUNED_FILE.write_text(json.dumps({"scenario": args.scenario, "train_seeds": train, "params": best},
                                               indent=1) + "\n")
     pols = [LINE_HEURISTICS[n](**p) for n, p in best.items()]
@@ -61,8 +68,8 @@ def main(argv=None) -> dict:
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1, default=float))
     # hindsight on the first episodes, from the best rule's own schedule
-    from trackenv_agents.evaluation import _bound
     from trackenv.envs.line import TampingLine
+    from trackenv_agents.evaluation import _bound
 
     hs = []
     pol = _bound(LINE_HEURISTICS[best_rule.policy](**best[best_rule.policy]), cfg)
@@ -74,7 +81,7 @@ def main(argv=None) -> dict:
             a, _ = pol.predict(obs)
             obs, _, _, _, info = env.step(a)
             plan[t] = info["tamped_sections"]
-        h = hindsight_bound(cfg, seed, plan)
+        h = hindsight_bound(cfg, seed, plan, thresholds_mm=args.thresholds, rounds=args.rounds)
         rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
         hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
                    "search": h["search"]})

@@ -8,7 +8,7 @@ Figures (each from the env's *true* state, ``info``):
 * transition zone / plain and switch-or-crossing / plain: ratio of the median SD growth of each class to the
   plain median;
 * SD after against SD before tamping: the least-squares line SD_after = α + β·SD_before (Audley & Andrews'
-  form) over the threshold rule's tampings;
+  form) over the threshold rule's tampings, true SD just before and just after tamping;
 * years between tampings per class under the threshold rule: section-years / tampings.
 """
 
@@ -46,7 +46,7 @@ def run_line(config: LineConfig, seeds: Sequence[int], threshold_mm: float | Non
     obs, info = env.reset(seed=list(seeds))
     reg = obs["register"].astype(int)
     sd = [info["section_sd_m"]]
-    tamped, wet = [], []
+    tamped, wet, after = [], [], []
     for _ in range(config.horizon_steps):
         if threshold_mm is None:
             a = np.zeros((len(seeds), config.n_sections), dtype=np.int8)
@@ -57,9 +57,12 @@ def run_line(config: LineConfig, seeds: Sequence[int], threshold_mm: float | Non
         sd.append(np.stack([f["section_sd_m"] for f in last]) if last is not None else info["section_sd_m"])
         tamped.append(np.stack([f["tamped_sections"] for f in last]) if last is not None else info["tamped_sections"])
         wet.append(np.stack([f["wet_spot_active"] for f in last]) if last is not None else info["wet_spot_active"])
+        key = "section_sd_after_tamping_m"
+        after.append(np.stack([f[key] for f in last]) if last is not None else info[key])
         if progress is not None:
             progress(1)
-    return {"sd": np.array(sd), "tamped": np.array(tamped), "register": reg, "wet": np.array(wet)}
+    return {"sd": np.array(sd), "tamped": np.array(tamped), "register": reg, "wet": np.array(wet),
+            "sd_after_tamping": np.array(after)}
 
 
 def _slopes(sd: np.ndarray, years: np.ndarray) -> np.ndarray:
@@ -82,10 +85,10 @@ def calibrate(config: LineConfig | None = None, seeds: Sequence[int] = (2000, 20
     per_100mgt = med / cfg.annual_mgt * 100.0
     zone = {k: slope[(reg == k) & ~ever_wet] for k in (1, 2)}
     ratio = {k: float(np.median(v) / med) if v.size else float("nan") for k, v in zone.items()}
-    # tamping effect: SD at the end of the step before vs the end of the tamping step (one period of traffic)
+    # tamping effect: true SD just before and just after the tamping
     t_idx, line, sec = np.nonzero(rule["tamped"])
     before = rule["sd"][t_idx, line, sec] * 1e3
-    after = rule["sd"][t_idx + 1, line, sec] * 1e3
+    after = rule["sd_after_tamping"][t_idx, line, sec] * 1e3
     if before.size >= 2 and np.ptp(before) > 0:
         beta, alpha = np.polyfit(before, after, 1)
     else:
@@ -163,7 +166,7 @@ def plot_calibration(result: dict[str, Any], out_png: str) -> str:
     lim = max(tr["before_mm"] + [1.0])
     bx.plot([0, lim], [0, lim], "k--", lw=0.8)
     bx.set_xlabel("SD before tamping [mm]")
-    bx.set_ylabel("SD a period after [mm]")
+    bx.set_ylabel("SD right after tamping [mm]")
     bx.set_title("threshold rule")
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)

@@ -115,7 +115,7 @@ def test_hidden_wet_spot_appears_and_is_seen_only_through_measurement():
     assert not info["wet_spot_active"].any()
     assert np.all(obs["register"] == 0)  # wet spots are in no register
     seen_active, prev_obs = False, obs
-    for k in range(8):
+    for _ in range(8):
         obs, _, _, _, info = env.step(np.zeros(6, int))
         seen_active |= info["wet_spot_active"].any()
         assert np.all(obs["register"] == 0)

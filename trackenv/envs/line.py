@@ -134,7 +134,8 @@ class TampingLineVectorEnv(VectorEnv):
         """(num_envs, 2·S) [may-not-tamp, may-tamp] pairs per section (sb3-contrib's MultiBinary convention).
         The capacity (at most ``capacity`` sections per campaign) is a cardinality limit that per-section masks
         cannot express: see ``over_capacity``."""
-        allowed = self.batch.allowed() if self.batch is not None else np.ones((self.num_envs, self.config.n_sections), bool)
+        shape = (self.num_envs, self.config.n_sections)
+        allowed = self.batch.allowed() if self.batch is not None else np.ones(shape, bool)
         return np.stack([np.ones_like(allowed), allowed], axis=2).reshape(self.num_envs, -1)
 
 

@@ -171,7 +171,8 @@ class LineConfig:
         _int("initial_max_tampings", self.initial_max_tampings, 0, 100)
         lo_hi = tuple(float(v) for v in self.initial_scale)
         if len(lo_hi) != 2 or not 0.0 <= lo_hi[0] <= lo_hi[1] <= 10.0:
-            raise ValueError(f"initial_scale must be (low, high) with 0 <= low <= high <= 10, got {self.initial_scale!r}")
+            raise ValueError(
+                f"initial_scale must be (low, high) with 0 <= low <= high <= 10, got {self.initial_scale!r}")
         object.__setattr__(self, "initial_scale", lo_hi)
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")

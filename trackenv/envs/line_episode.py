@@ -90,6 +90,7 @@ class LineBatch:
         self.d1 = np.zeros((G, n))
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
+        self.sd_after_tamping = np.full(G, np.nan)  # true SD right after this step's tamping [m]
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -152,7 +153,8 @@ class LineBatch:
         section_rate = np.exp(c.rate_sigma * z - c.rate_sigma**2 / 2)
         # register: transition zones and switches/crossings
         u = rng.random(S)
-        reg = np.where(u < c.transition_probability, 1, np.where(u < c.transition_probability + c.switch_probability, 2, 0))
+        p_t, p_s = c.transition_probability, c.switch_probability
+        reg = np.where(u < p_t, 1, np.where(u < p_t + p_s, 2, 0))
         sleeper_rate = _lognormal(_correlated_normal(rng, (S, n), c.sleeper_rate_correlation_m / SLEEPER_SPACING_M),
                                   c.sleeper_rate_cv)
         kfield = _lognormal(_correlated_normal(rng, (S, n), 2.0), c.ballast_stiffness_cv)
@@ -180,6 +182,7 @@ class LineBatch:
         count = rng.integers(0, c.initial_max_tampings + 1, size=S)
         self.tamp_noise[:, r] = rng.standard_normal((H + 1, S, n))
         self.meas_noise[:, r] = rng.standard_normal((H + 1, S, 2))
+        self.sd_after_tamping[r] = np.nan
         self.base_rate[r] = rate
         self.register[r] = reg
         self.wet_onset[r] = np.where(wet, onset, -1)
@@ -311,6 +314,7 @@ class LineBatch:
             c.section_tamping_cost * tamped.sum(1),
             c.section_renewal_cost * renew.reshape(self.n_lines, self.S).sum(1),
         ])
+        self.sd_after_tamping[:] = np.nan
         if t.any():
             z = self.level[t]
             f = _lsq_line(z)
@@ -318,6 +322,8 @@ class LineBatch:
             seg_step = np.repeat(self.step, self.S)[t]
             e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), np.flatnonzero(t)]
             self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
+            self.sd_after_tamping[:] = np.nan
+            self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
             self.u[t] = 0.0
             self.cyc[t] = 0.0
             self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
@@ -332,8 +338,8 @@ class LineBatch:
         seg_step = np.repeat(self.step, self.S)
         start = (self.wet_onset == seg_step) & ~self.wet_active
         if start.any():
-            self.base_rate[start] = np.where(self.wet_mask[start], self.base_rate[start] * self.config.wet_spot_rate_factor,
-                                             self.base_rate[start])
+            factor = np.where(self.wet_mask[start], self.config.wet_spot_rate_factor, 1.0)
+            self.base_rate[start] = self.base_rate[start] * factor
             self.wet_active |= start
         rows = np.arange(self.offset.shape[0])
         force, contact = self._passes(rows)
@@ -405,6 +411,7 @@ class LineBatch:
             "section_sd_m": self.sd[r].copy(),
             "section_peak_m": self.peak[r].copy(),
             "section_class": cls,
+            "section_sd_after_tamping_m": self.sd_after_tamping[r].copy(),
             "wet_spot_active": self.wet_active[r].copy(),
             "rate_factor": self.rate()[r].mean(axis=1),
             "immediate_action_exceedances": int(np.sum(cls == 3)),
