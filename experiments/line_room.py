@@ -28,6 +28,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--n-train", type=int, default=4)
     ap.add_argument("--n-test", type=int, default=100)
+    ap.add_argument("--test-start", type=int, default=0, help="first held-out seed")
     ap.add_argument("--n-hindsight", type=int, default=10)
     ap.add_argument("--batch-size", type=int, default=24)
     ap.add_argument("--rounds", type=int, default=2, help="local-search rounds of the hindsight search")
@@ -51,7 +52,7 @@ def main(argv=None) -> dict:
         LINE_TUNED_FILE.write_text(json.dumps({"scenario": args.scenario, "train_seeds": train, "params": best},
                                               indent=1) + "\n")
     pols = [LINE_HEURISTICS[n](**p) for n, p in best.items()]
-    test = list(range(args.n_test))
+    test = list(range(args.test_start, args.test_start + args.n_test))
     res = evaluate_many(pols, cfg, test, batch_size=args.batch_size, progress=True, desc="test")
     by = {r.policy: r for r in res}
     uniform = by[UniformPeriodic.name]
