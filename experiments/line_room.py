@@ -65,7 +65,9 @@ def main(argv=None) -> dict:
     d1["relative"] = d1["mean_difference"] / float(uniform.cost.mean())
     print("state-aware vs uniform", json.dumps(d1), f"{time.time() - t0:.0f}s", flush=True)
     out = {"scenario": args.scenario, "train_seeds": train, "test_seeds": test, "tuned": best,
-           "results": summ, "aware_vs_uniform": d1}
+           "results": summ, "aware_vs_uniform": d1,
+           "episode_costs": {r.policy: r.cost.tolist() for r in res},
+           "best_rule": best_rule.policy, "best_aware": aware.policy}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1, default=float))
     # hindsight on the first episodes, from the best rule's own schedule
