@@ -17,7 +17,7 @@ demo: setup
 	$(BIN)/trackenv paper
 	$(BIN)/trackenv evaluate
 	$(BIN)/trackenv calibrate --seeds 2000:2002
-	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:4
+	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:2
 
 test: setup
 	$(BIN)/ruff check trackenv agents tests experiments
