@@ -53,9 +53,19 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from trackenv.bench import format_benchmarks, run_benchmarks
+    from tqdm.auto import tqdm
 
-    result = run_benchmarks(quick=args.quick)
+    from trackenv.bench import STAGES, format_benchmarks, run_benchmarks
+
+    with tqdm(total=len(STAGES), desc="bench", unit="benchmark", leave=False) as bar:
+
+        def step(name: str) -> None:
+            if bar.n or name != STAGES[0]:
+                bar.update(1)
+            bar.set_postfix_str(name)
+
+        result = run_benchmarks(quick=args.quick, progress=step)
+        bar.update(bar.total - bar.n)
     _emit(args, result, format_benchmarks(result))
     return 0
 

@@ -1,4 +1,5 @@
-"""Benchmark the physics: one pass, batched passes (all threads and one), a car, the paper loop, the env.
+"""Benchmark the physics: one pass (dt 1e-4 and auto), batched passes (all threads and one), a car, the paper loop,
+the env and the native vector env.
 
     python experiments/benchmark.py                # full run, writes results/bench.json
     python experiments/benchmark.py --quick --json

@@ -6,13 +6,19 @@ timing is the median wall time over repeats after a warm-up run (which also trig
 loads it from numba's cache), measured with :func:`time.perf_counter`.
 
 * ``seed_pass``: one pass of ``Wheelset(mass=1800, static_load=100e3)`` over ``Track.seed()`` at 80 km/h,
-  dt = 1e-4 s;
+  dt = 1e-4 s (the paper's setting); ``seed_pass_auto``: the same at ``dt="auto"``;
 * ``batch``: throughput of :func:`simulate_passes` with 1, 16 and 64 rows, a different random irregularity in
-  every row, once with numba's default thread count (the batch loop is a ``prange``) and once with one thread;
+  every row, once with numba's default thread count (chunks of rows in parallel) and once with one thread;
+  ``lockstep_gain``: passes/s of a batch of 64 over 64 single passes (one thread);
 * ``car``: the 10-DOF ``Car.manchester_coach()`` over ``Track.realistic(120.0)`` at 80 km/h;
-* ``paper_b``: the paper's scenario B, 6 iterations of 50 000 cycles (:class:`TrackDegradation`);
+* ``paper_b``: the paper's scenario B, 6 iterations of 50 000 cycles (:class:`TrackDegradation`, dt = 1e-4 s as
+  the paper's reproduction runs it);
 * ``env``: environment steps per second of ``trackenv/Tamping-v0`` with random actions, or "unavailable" and
-  the reason when the environment cannot be made.
+  the reason when the environment cannot be made; ``vector_env``: env steps per second (steps × envs) of the
+  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs.
+
+Every figure carries ``load_average_1min``, the machine's load when it was taken: other work on the machine
+slows every figure, so compare figures taken at a similar load.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ __all__ = ["run_benchmarks", "format_benchmarks"]
 SPEED = 80 / 3.6
 DT = 1e-4
 BATCH_SIZES = (1, 16, 64)
+VECTOR_ENVS = (8, 32)
 
 
 def _loaded_wheelset() -> Wheelset:
@@ -97,13 +104,14 @@ def _irregularities(rows: int, n_sleepers: int, rng: np.random.Generator) -> np.
     return out
 
 
-def _bench_seed_pass(repeats: int) -> dict:
+def _bench_seed_pass(repeats: int, dt: float | str = DT) -> dict:
     track, wheel = Track.seed(), _loaded_wheelset()
-    res = simulate_pass(track, wheel, SPEED, dt=DT)
-    t = _time(lambda: simulate_pass(track, wheel, SPEED, dt=DT), repeats)
+    res = simulate_pass(track, wheel, SPEED, dt=dt)
+    t = _time(lambda: simulate_pass(track, wheel, SPEED, dt=dt), repeats)
     steps = res.time.size - 1
-    t.update({"time_steps": steps, "simulated_s": float(res.time[-1]),
-              "steps_per_s": steps / t["median_s"], "real_time_factor": float(res.time[-1]) / t["median_s"]})
+    t.update({"dt_s": res.dt, "time_steps": steps, "simulated_s": float(res.time[-1]),
+              "steps_per_s": steps / t["median_s"], "real_time_factor": float(res.time[-1]) / t["median_s"],
+              "load_average_1min": _load_average()})
     return t
 
 
@@ -120,11 +128,15 @@ def _bench_batches(repeats: int, sizes=BATCH_SIZES) -> dict:
             for b in sizes:
                 irr = _irregularities(b, track.n_sleepers, rng)
                 t = _time(lambda irr=irr: simulate_passes(track, wheel, SPEED, irr, dt=DT), repeats)
-                out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"]}
+                out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"],
+                                                             "load_average_1min": _load_average()}
         finally:
             numba.set_num_threads(default_threads)
     for row in out["rows"].values():
         row["parallel_speedup"] = row["all_threads"]["passes_per_s"] / row["one_thread"]["passes_per_s"]
+    if "1" in out["rows"] and str(max(sizes)) in out["rows"]:
+        one, big = out["rows"]["1"]["one_thread"], out["rows"][str(max(sizes))]["one_thread"]
+        out["lockstep_gain"] = big["passes_per_s"] / one["passes_per_s"]
     return out
 
 
@@ -143,7 +155,7 @@ def _bench_paper_b(repeats: int, iterations: int = 6) -> dict:
     track = Track.seed().scaled(ballast_stiffness=1.10, from_sleeper=40)
 
     def run() -> None:
-        TrackDegradation(track, _loaded_wheelset(), cycles_per_iteration=50_000, speed=SPEED).run(iterations)
+        TrackDegradation(track, _loaded_wheelset(), cycles_per_iteration=50_000, speed=SPEED, dt=DT).run(iterations)
 
     t = _time(run, repeats)
     t.update({"iterations": iterations, "cycles_per_iteration": 50_000,
@@ -177,31 +189,82 @@ def _bench_env(steps: int, time_budget_s: float) -> dict:
                 resets += 1
         wall = time.perf_counter() - t0
         return {"status": "ok", "steps": done_steps, "wall_s": wall, "steps_per_s": done_steps / wall,
-                "episodes_ended": resets, "first_reset_s": reset_s}
+                "episodes_ended": resets, "first_reset_s": reset_s, "load_average_1min": _load_average()}
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
         env.close()
 
 
-def run_benchmarks(quick: bool = False) -> dict:
+def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float) -> dict:
+    """Env steps per second (vector steps × envs) of the native vector env with random actions."""
+    try:
+        from .envs.vector import TampingVectorEnv
+
+        venv = TampingVectorEnv(num_envs=num_envs)
+    except Exception as exc:  # optional here: report, do not fail
+        return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
+    try:
+        venv.action_space.seed(0)
+        t0 = time.perf_counter()
+        venv.reset(seed=0)
+        reset_s = time.perf_counter() - t0
+        venv.step(venv.action_space.sample())  # warm-up
+        done_steps = 0
+        t0 = time.perf_counter()
+        while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
+            venv.step(venv.action_space.sample())
+            done_steps += 1
+        wall = time.perf_counter() - t0
+        return {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
+                "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
+                "load_average_1min": _load_average()}
+    except Exception as exc:
+        return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
+    finally:
+        venv.close()
+
+
+def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
     """Run every benchmark and return the figures with the machine they ran on (JSON-ready).
 
     ``quick``: fewer repeats (3 instead of 7 for single passes; 2 instead of 5 for batches and the paper
-    loop) and fewer env steps, for a smoke test; the figures are then rougher.
+    loop) and fewer env steps, for a smoke test; the figures are then rougher. ``progress``: called with the
+    name of each benchmark as it starts (e.g. to advance a progress bar; see :data:`STAGES`).
     """
     rep = 3 if quick else 7
     rep_batch = 2 if quick else 5
+    tell = progress or (lambda name: None)
     t0 = time.perf_counter()
     out = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
+    tell("seed_pass")
     out["seed_pass"] = _bench_seed_pass(rep)
+    tell("seed_pass_auto")
+    out["seed_pass_auto"] = _bench_seed_pass(rep, dt="auto")
+    tell("batch")
     out["batch"] = _bench_batches(rep_batch)
+    tell("car")
     out["car"] = _bench_car(3 if quick else 5)
+    tell("paper_b")
     out["paper_b"] = _bench_paper_b(1 if quick else 3)
+    tell("env")
     out["env"] = _bench_env(20 if quick else 200, 10.0 if quick else 60.0)
+    out["vector_env"] = {}
+    for n in VECTOR_ENVS:
+        tell(f"vector_env_{n}")
+        out["vector_env"][str(n)] = _bench_vector_env(n, 3 if quick else 20, 10.0 if quick else 60.0)
     out["machine"]["numba_threading_layer"] = _threading_layer()
     out["total_wall_s"] = time.perf_counter() - t0
     return out
+
+
+STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32")
+"""The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
+
+
+def _load(t: dict) -> str:
+    load = t.get("load_average_1min")
+    return "" if load is None else f" [load {load:.1f}]"
 
 
 def _ms(t: dict) -> str:
@@ -220,12 +283,17 @@ def format_benchmarks(d: dict) -> str:
     rows = []
     sp = d["seed_pass"]
     rows.append(("seed pass (wheelset, 30 m, 80 km/h, dt 1e-4)", _ms(sp),
-                 f"{sp['steps_per_s'] / 1e3:.0f} k steps/s, {sp['real_time_factor']:.0f}x real time"))
+                 f"{sp['steps_per_s'] / 1e3:.0f} k steps/s, {sp['real_time_factor']:.0f}x real time" + _load(sp)))
+    sa = d["seed_pass_auto"]
+    rows.append((f"seed pass, dt auto ({sa['dt_s']:.2g} s)", _ms(sa),
+                 f"{sa['steps_per_s'] / 1e3:.0f} k steps/s, {sa['real_time_factor']:.0f}x real time" + _load(sa)))
     for b, row in d["batch"]["rows"].items():
         a, o = row["all_threads"], row["one_thread"]
         rows.append((f"simulate_passes batch {b}", _ms(a),
                      f"{a['passes_per_s']:.1f} passes/s ({d['batch']['default_threads']} threads), "
-                     f"{o['passes_per_s']:.1f} (1 thread), x{row['parallel_speedup']:.2f}"))
+                     f"{o['passes_per_s']:.1f} (1 thread), x{row['parallel_speedup']:.2f}" + _load(o)))
+    if "lockstep_gain" in d["batch"]:
+        rows.append(("lockstep gain (batch 64 / 64 single, 1 thread)", f"x{d['batch']['lockstep_gain']:.2f}", ""))
     c = d["car"]
     rows.append(("car (Manchester coach, 120 m)", _ms(c),
                  f"{c['steps_per_s'] / 1e3:.0f} k steps/s, {c['real_time_factor']:.1f}x real time"))
@@ -235,9 +303,15 @@ def format_benchmarks(d: dict) -> str:
     e = d["env"]
     if e["status"] == "ok":
         rows.append(("env trackenv/Tamping-v0 (random actions)", f"{e['steps_per_s']:.1f} steps/s",
-                     f"{e['steps']} steps, {e['episodes_ended']} episodes ended"))
+                     f"{e['steps']} steps, {e['episodes_ended']} episodes ended" + _load(e)))
     else:
         rows.append(("env trackenv/Tamping-v0", "unavailable", e["reason"][:80]))
+    for n, v in d.get("vector_env", {}).items():
+        if v["status"] == "ok":
+            rows.append((f"native vector env, {n} envs", f"{v['env_steps_per_s']:.1f} env steps/s",
+                         f"{v['vector_steps']} vector steps" + _load(v)))
+        else:
+            rows.append((f"native vector env, {n} envs", "unavailable", v["reason"][:80]))
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]

@@ -27,11 +27,13 @@ from .physics.dynamics import (
     SLEEPER_FORCE_MEASURES,
     PassResult,
     _vehicle_system,
+    check_window_bays,
     lapack_lower,
     simulate_passes,
 )
-from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState
+from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState, implicit_settlement_step
 from .physics.tamping import TampingModel, TampingResult, tamp
+from .physics.timestep import check_dt_option
 from .physics.track import Track
 
 
@@ -101,16 +103,6 @@ FEEDBACKS = ("irregularity", "support")
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
-def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
-    """Solve a x = b keeping the diagonals of ``a`` within ``band`` (the rest is negligibly small)."""
-    n = a.shape[0]
-    band = min(band, n - 1)
-    ab = np.zeros((2 * band + 1, n))
-    for k in range(-band, band + 1):
-        ab[band - k, max(k, 0) : n + min(k, 0)] = np.diagonal(a, k)
-    return scipy.linalg.solve_banded((band, band), ab, b)
-
-
 class TrackDegradation:
     """Settlement of a track under repeated passes of one vehicle (the paper's iterative method).
 
@@ -125,7 +117,8 @@ class TrackDegradation:
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
     self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to
-    :func:`simulate_passes` (``dt``, ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    :func:`simulate_passes` (``dt``, default "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy
+    contract; ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
@@ -165,14 +158,12 @@ class TrackDegradation:
         unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
         if unknown:
             raise ValueError(f"unknown option(s) {sorted(unknown)} for TrackDegradation")
+        pass_options.setdefault("dt", "auto")
+        check_dt_option(pass_options["dt"])
         self.pass_options = pass_options
-        if "dt" in pass_options:
-            check_scalar("dt", pass_options["dt"], low=1e-7, high=1e-3)
         if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
             raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
-        wb = pass_options.get("window_bays", 6)
-        if wb is not None and (isinstance(wb, bool) or not isinstance(wb, (int, np.integer)) or wb < 2):
-            raise ValueError(f"window_bays must be an integer >= 2 or None, got {wb!r}")
+        check_window_bays(pass_options.get("window_bays", "auto"))
         if feedback not in FEEDBACKS:
             raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
         self.feedback = feedback
@@ -243,27 +234,9 @@ class TrackDegradation:
         return kb[:, None] * (du[lay.sleeper[ev]] - np.eye(ev.size))
 
     def _implicit_advance(self, force: np.ndarray, cycles: float) -> SettlementState:
-        """Advance with the static load redistribution taken implicitly (backward Euler over the step).
-
-        As a sleeper settles its support force drops and its neighbours take the load (``support_influence``).
-        Over a large ΔN taken explicitly this feedback overshoots and oscillates, so the increment Δ solves
-        Δ = u(F0 + S·Δ, N + ΔN) − u_now, with F0 the forces of the pass at the start of the step (their dynamic
-        part is taken explicitly). Newton's method on the small dense system."""
-        s_mat = self.support_influence
-        u_now = self.state.settlement
-        delta = np.zeros_like(u_now)
-
-        df = 1e-3  # [N] finite-difference step of the force
-        for _ in range(30):
-            f = np.maximum(force + s_mat @ delta, 0.0)
-            u_f = self.state.advance(self.law, f, cycles).settlement
-            r = delta - (u_f - u_now)
-            if np.max(np.abs(r)) < 1e-9:
-                break
-            du_df = (self.state.advance(self.law, f + df, cycles).settlement - u_f) / df
-            jac = np.eye(delta.size) - du_df[:, None] * s_mat * (f > 0)[:, None]
-            delta = np.maximum(delta - _solve_near_banded(jac, r, INFLUENCE_BAND), 0.0)
-        return self.state.advance(self.law, np.maximum(force + s_mat @ delta, 0.0), cycles)
+        """Advance with the static load redistribution taken implicitly (backward Euler over the step): see
+        :func:`trackenv.physics.settlement.implicit_settlement_step`, here for a batch of one."""
+        return _implicit_states([self], force[None], cycles)[0]
 
     def _adaptive_step(self, force: np.ndarray, cycles: float) -> float:
         """The largest ΔN <= cycles whose differential settlement increment stays within max_increment."""
@@ -330,6 +303,43 @@ class TrackDegradation:
             if progress is not None:
                 progress(i, rec)
         return self.history
+
+
+def _implicit_states(sims: list[TrackDegradation], force: np.ndarray, cycles: float) -> list[SettlementState]:
+    """The implicit settlement step of every simulator (same law) under ``force`` (n_sims, n) in one batched
+    call; the new states, in order."""
+    st = [s.state for s in sims]
+    u, c = implicit_settlement_step(
+        sims[0].law,
+        np.stack([x.settlement for x in st]),
+        np.stack([x.cycles for x in st]),
+        np.stack([x.rate_factor for x in st]),
+        force,
+        np.stack([s.support_influence for s in sims]),
+        cycles,
+        band=INFLUENCE_BAND,
+    )
+    return [SettlementState(u[b], c[b], x.rate_factor) for b, x in enumerate(st)]
+
+
+def settle_batch(sims: list[TrackDegradation], results: list[PassResult], cycles: float) -> None:
+    """:meth:`TrackDegradation.settle` for many simulators at once: those with ``feedback="support"``, no
+    adaptive stepping and one law share one batched implicit step; the others settle one by one. Each
+    simulator ends exactly as if settled alone."""
+    cycles = check_scalar("cycles", cycles, low=0.0)
+    batched = [
+        b for b, s in enumerate(sims) if s.feedback == "support" and not s.adaptive and s.law == sims[0].law
+    ]
+    if batched and len({sims[b].track.n_sleepers for b in batched}) == 1:
+        force = np.stack([np.maximum(sims[b].evaluated(results[b].sleeper_force), 0.0) for b in batched])
+        for b, state in zip(batched, _implicit_states([sims[b] for b in batched], force, cycles)):
+            sims[b].state = state
+            sims[b].cycles += cycles
+    else:
+        batched = []
+    for b, s in enumerate(sims):
+        if b not in batched:
+            s.settle(results[b], cycles)
 
 
 def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:

@@ -30,6 +30,7 @@ import numpy as np
 from .degradation import DegradationHistory, TrackDegradation
 from .physics._validation import check_scalar
 from .physics.settlement import HettlerLaw
+from .physics.timestep import DT_REFERENCE_S
 from .physics.track import Track
 from .physics.vehicle import Wheelset
 
@@ -214,7 +215,7 @@ def reproduce_paper(out_dir: str | Path = "results/paper", iterations: int = 6,
     tracks = scenario_tracks()
     change_m = float(tracks["B"].sleeper_positions[STIFFNESS_CHANGE_SLEEPER])
     sims = {name: TrackDegradation(tr, vehicle, law=law, cycles_per_iteration=cycles_per_iteration,
-                                   speed=speed) for name, tr in tracks.items()}
+                                   speed=speed, dt=DT_REFERENCE_S) for name, tr in tracks.items()}
     static_load = float(np.max(sims["A"].system.static_wheel_loads))
     law_params = law.to_dict() if hasattr(law, "to_dict") else {}
     settings = {

@@ -50,10 +50,8 @@ def amplitude_spectrum(signal: np.ndarray, dt: float) -> tuple[np.ndarray, np.nd
 
 
 @functools.cache
-def smooth_pass(dt: float = 1e-4, elements_per_bay: int = 2, window_bays: int | None = 6):
-    return simulate_pass(
-        Track.seed(elements_per_bay=elements_per_bay), LOADED, V80, dt=dt, window_bays=window_bays
-    )
+def smooth_pass(dt: float = 1e-4, elements_per_bay: int = 2, window_bays: int | str | None = "auto"):
+    return simulate_pass(Track.seed(elements_per_bay=elements_per_bay), LOADED, V80, dt=dt, window_bays=window_bays)
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -158,9 +156,7 @@ def test_static_start_is_equilibrium():
     t = Track.seed()
     res = simulate_pass(t, LOADED, V80, x_start=10.0, x_end=12.0)
     assert res.contact_force[0, 0] == pytest.approx(LOADED.wheel_load, rel=1e-12)
-    assert res.rail_displacement[0, 0] == pytest.approx(
-        static_deflection(t, LOADED.wheel_load, 10.0), rel=1e-3
-    )
+    assert res.rail_displacement[0, 0] == pytest.approx(static_deflection(t, LOADED.wheel_load, 10.0), rel=1e-3)
     assert np.max(np.abs(res.contact_force[:, 0] / LOADED.wheel_load - 1)) < 0.02
 
 
@@ -223,6 +219,36 @@ def test_fast_path_matches_reference_for_a_car():
     ref = reference_pass(t, car, 100 / 3.6)
     assert_close_to_reference(simulate_pass(t, car, 100 / 3.6, window_bays=None), ref, 1e-8)
     assert_close_to_reference(simulate_pass(t, car, 100 / 3.6), ref, 0.01)
+
+
+SOFT_AND_STIFF = {
+    **{f"ballast_{k:.0e}": Track.seed().replace(ballast_stiffness=np.full(51, k)) for k in (1e6, 1e7, 3e7, 1e8, 1e9)},
+    **{f"pad_{k:.0e}": Track.seed().replace(pad_stiffness=np.full(51, k)) for k in (1e6, 1e7, 1e8, 1e9)},
+    "voided_sleeper": Track.seed().with_voided_sleeper(25, residual_support=0.05),
+    "transition_soft_x4": Track.seed().scaled(ballast_stiffness=0.25, from_sleeper=25),
+    "ballast_1e+07_60m": Track.realistic(60.0).replace(ballast_stiffness=np.full(101, 1e7)),
+    "ballast_1e+06_60m": Track.realistic(60.0).replace(ballast_stiffness=np.full(101, 1e6)),
+}
+
+
+@pytest.mark.parametrize("name", SOFT_AND_STIFF)
+def test_auto_window_follows_the_track_stiffness(name):
+    """The default window is sized from the track's decay length: from 1e6 to 1e9 N/m pads and ballast, with a
+    voided sleeper and a transition, it stays within the fast path's 1 % of the full model (a fixed 6-bay window
+    gave 6 850 kN instead of 281 kN peak contact force on 1e6 N/m ballast)."""
+    t = SOFT_AND_STIFF[name]
+    full = simulate_pass(t, LOADED, V80, window_bays=None)
+    assert_close_to_reference(simulate_pass(t, LOADED, V80), full, 0.01)
+
+
+def test_auto_window_sizes():
+    from trackenv.physics.dynamics import window_margin
+
+    assert window_margin(Track.seed()) == 7  # stiff track: a small window
+    assert window_margin(SOFT_AND_STIFF["ballast_1e+07_60m"]) == 13
+    assert window_margin(SOFT_AND_STIFF["ballast_1e+06_60m"]) is None  # softer: the whole track moves
+    # one voided sleeper widens the window by at most a bay, a soft transition by more
+    assert window_margin(SOFT_AND_STIFF["voided_sleeper"]) <= 8 < window_margin(SOFT_AND_STIFF["transition_soft_x4"])
 
 
 # ------------------------------------------------------------------------------------------ dips
@@ -371,9 +397,7 @@ def test_batch_of_tracks_with_different_ballast():
     c = central(batch[0].time.size)
     # the softer ballast: more deflection, as the Winkler beam says (w0 ∝ k_f^{-3/4})
     w_seed, w_soft = (b.rail_displacement[c, 0].mean() for b in (batch[0], batch[2]))
-    assert w_soft / w_seed == pytest.approx(
-        tracks[2].winkler_deflection(1.0) / seed.winkler_deflection(1.0), rel=0.03
-    )
+    assert w_soft / w_seed == pytest.approx(tracks[2].winkler_deflection(1.0) / seed.winkler_deflection(1.0), rel=0.03)
     # the stiffer ballast from sleeper 40 on takes more of the load there
     np.testing.assert_allclose(batch[1].sleeper_force[10:30], batch[0].sleeper_force[10:30], rtol=1e-9)
     assert np.all(batch[1].sleeper_force[42:48] > batch[0].sleeper_force[42:48])
@@ -394,3 +418,33 @@ def test_multi_car_train_runs():
     c = central(res.time.size)
     np.testing.assert_allclose(res.contact_force[c].mean(axis=0), res.static_wheel_load, rtol=0.02)
     assert np.all(res.contact_force >= 0.0)
+
+
+def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
+    """The kernel runs the rows of a batch in lockstep, cut into chunks over the threads: a row's result is
+    bit-identical whatever batch it runs in, however the batch is cut and on however many threads."""
+    import numba
+
+    t = Track.seed()
+    rng = np.random.default_rng(7)
+    rows = 5e-4 * rng.standard_normal((17, t.n_sleepers))
+    tracks = [t.scaled(ballast_stiffness=f) for f in rng.uniform(0.5, 2.0, 17)]
+    kw = dict(x_start=6.0, x_end=12.0, support_settlement=np.abs(rows), start="rest")
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one_thread = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    finally:
+        numba.set_num_threads(threads)
+    all_threads = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    five = simulate_passes(
+        tracks[3:8], LOADED, V80, rows[3:8], **{**kw, "support_settlement": kw["support_settlement"][3:8]}
+    )
+    for b in (0, 3, 7, 16):
+        single = simulate_pass(
+            tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": kw["support_settlement"][b]}
+        )
+        others = [one_thread[b], all_threads[b]] + ([five[b - 3]] if 3 <= b < 8 else [])
+        for other in others:
+            for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
+                np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)

@@ -281,9 +281,7 @@ def test_state_rate_factor_scales_the_curve(name: str) -> None:
     state = SettlementState(np.zeros(2), np.zeros(2), rate_factor=np.array([1.0, 1.5]))
     for _ in range(3):
         state = state.advance(law, 50e3, 10_000)
-    np.testing.assert_allclose(
-        state.settlement, np.array([1.0, 1.5]) * law.settlement(50e3, 30_000), rtol=1e-12
-    )
+    np.testing.assert_allclose(state.settlement, np.array([1.0, 1.5]) * law.settlement(50e3, 30_000), rtol=1e-12)
 
 
 @pytest.mark.parametrize("name", LAW_NAMES)
@@ -383,3 +381,47 @@ def test_state_bad_inputs() -> None:
     with pytest.raises(ValueError, match="^rate_factor"):
         SettlementState(np.zeros(2), np.zeros(2), rate_factor=np.array([1.0, -1.0]))
     assert state.advance(law, 5e4, 0.0) is state
+
+
+# ------------------------------------------------------------------------------------------ batched steps
+def test_advance_settlement_is_the_state_advance_on_arrays():
+    from trackenv.physics.settlement import SettlementState, advance_settlement, make_law
+
+    law = make_law("shenton", K1=0.5e-4, force_exponent=1.6)
+    rng = np.random.default_rng(2)
+    f = rng.uniform(0.0, 80e3, (3, 20))
+    f[0, 3] = 0.0
+    states = [SettlementState(rng.uniform(0, 1e-3, 20), rng.uniform(0, 1e5, 20), rng.uniform(0.5, 2, 20)) for _ in f]
+    u, c = advance_settlement(
+        law,
+        np.stack([s.settlement for s in states]),
+        np.stack([s.cycles for s in states]),
+        np.stack([s.rate_factor for s in states]),
+        f,
+        5e4,
+    )
+    for b, s in enumerate(states):
+        one = s.advance(law, f[b], 5e4)
+        np.testing.assert_array_equal(u[b], one.settlement)
+        np.testing.assert_array_equal(c[b], one.cycles)
+
+
+def test_implicit_step_rows_do_not_depend_on_the_batch():
+    """The batched implicit step (for many envs or sections) gives each row what it gives the row alone."""
+    from trackenv.physics.settlement import implicit_settlement_step, make_law
+
+    law = make_law("shenton", K1=0.5e-4, force_exponent=1.6)
+    rng = np.random.default_rng(3)
+    n, nb = 30, 4
+    lap = -2 * np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1)
+    s_mat = 2e7 * lap * rng.uniform(0.8, 1.2, (nb, 1, 1))  # a sleeper that settles sheds load onto its neighbours
+    u0, c0 = rng.uniform(0, 1e-3, (nb, n)), rng.uniform(0, 1e5, (nb, n))
+    rate, force = rng.uniform(0.5, 2.0, (nb, n)), rng.uniform(30e3, 80e3, (nb, n))
+    u, c = implicit_settlement_step(law, u0, c0, rate, force, s_mat, 5e5)
+    assert np.all(u >= u0)
+    for b in range(nb):
+        ub, cb = implicit_settlement_step(
+            law, u0[b : b + 1], c0[b : b + 1], rate[b : b + 1], force[b : b + 1], s_mat[b], 5e5
+        )
+        np.testing.assert_array_equal(ub[0], u[b])
+        np.testing.assert_array_equal(cb[0], c[b])

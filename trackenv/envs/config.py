@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -11,6 +12,7 @@ from ..physics._validation import check_scalar
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel
+from ..physics.timestep import check_dt_option
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 
 VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
@@ -52,6 +54,9 @@ class TampingEnvConfig:
     :meth:`QualityLimits.en13848`) at ``speed_kmh``; the SD alert value applies to our short sections as is.
 
     ``min_steps_between_tampings``: a section tamped in the last k steps cannot be tamped again (masked).
+
+    ``dt``: time step of the passes [s], or "auto" (default): the coarsest step that keeps peak forces within
+    0.5 % of dt = 1e-4 s (the accuracy contract of :mod:`trackenv.physics.timestep`, whose bounds apply).
     """
 
     track_length_m: float = 60.0
@@ -80,7 +85,7 @@ class TampingEnvConfig:
     immediate_action_cost: float = 50.0
     limits: tuple = ()
     min_steps_between_tampings: int = 1
-    dt: float = 1e-4
+    dt: float | str = "auto"
 
     def __post_init__(self) -> None:
         c = check_scalar
@@ -130,7 +135,7 @@ class TampingEnvConfig:
                 "min_steps_between_tampings must be an integer in [0, 100], got "
                 f"{self.min_steps_between_tampings!r}"
             )
-        c("dt", self.dt, low=1e-6, high=5e-4)
+        check_dt_option(self.dt)
 
     @classmethod
     def coerce(cls, config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
@@ -179,17 +184,23 @@ class TampingEnvConfig:
     def speed(self) -> float:
         return self.speed_kmh / 3.6
 
-    @property
+    # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
+    @cached_property
     def settlement_law(self):
         return make_law(self.law, **dict(self.law_params))
 
-    @property
+    @cached_property
     def tamping_model(self) -> TampingModel:
         return TampingModel.from_dict(dict(self.tamping))
 
-    @property
+    @cached_property
     def quality_limits(self) -> QualityLimits:
         return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+    @cached_property
+    def band_limits(self):
+        """The quality limits of the speed band of ``speed_kmh``."""
+        return self.quality_limits.for_speed(self.speed)
 
     def make_vehicle(self):
         wheel_load = self.axle_load_t * 1000.0 * GRAVITY / 2

@@ -9,7 +9,7 @@ from functools import partial
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from ..degradation import TrackDegradation
+from ..degradation import TrackDegradation, settle_batch
 from ..physics.dynamics import PassResult
 from ..physics.geometry import (
     classify,
@@ -131,16 +131,24 @@ def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Gene
 def traffic(ep: Episode, result: PassResult) -> None:
     """The period's traffic: settle every sleeper under the forces of ``result`` (the pass over the current
     geometry) for the step's axle passes."""
-    ep.contact_force = ep.sim.evaluated(result.contact_force_profile())
-    ep.sim.settle(result, ep.config.cycles_per_step)
-    ep.step_count += 1
+    traffic_batch([ep], [result])
+
+
+def traffic_batch(eps: list[Episode], results: list[PassResult]) -> None:
+    """:func:`traffic` for many episodes of one config, their settlement steps in one batched call (each
+    episode ends exactly as with :func:`traffic` alone)."""
+    for ep, result in zip(eps, results, strict=True):
+        ep.contact_force = ep.sim.evaluated(result.contact_force_profile())
+    settle_batch([ep.sim for ep in eps], results, eps[0].config.cycles_per_step)
+    for ep in eps:
+        ep.step_count += 1
 
 
 def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     """The period's costs in named parts (k€); the reward is minus their sum."""
     c = ep.config
     _, sd, peak = ep.quality()
-    lim = c.quality_limits.for_speed(c.speed)
+    lim = c.band_limits
     cls = classify(peak, lim)
     dt_years = 1.0 / c.steps_per_year
     return {
@@ -170,7 +178,7 @@ def observation(ep: Episode) -> dict[str, np.ndarray]:
 
 def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
     _, sd, peak = ep.quality()
-    lim = ep.config.quality_limits.for_speed(ep.config.speed)
+    lim = ep.config.band_limits
     cls = classify(peak, lim)
     return {
         "costs": parts,

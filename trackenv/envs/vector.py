@@ -88,8 +88,7 @@ class TampingVectorEnv(VectorEnv):
             )
         wants = [decode_action(a, self.action_type, self.config.n_sections) for a in actions]
         tamping = [E.apply_tamping(ep, w, rng) for ep, w, rng in zip(self.episodes, wants, self._rngs)]
-        for ep, res in zip(self.episodes, simulate_batch([ep.sim for ep in self.episodes])):
-            E.traffic(ep, res)
+        E.traffic_batch(self.episodes, simulate_batch([ep.sim for ep in self.episodes]))
         rewards = np.zeros(self.num_envs)
         truncated = np.zeros(self.num_envs, dtype=bool)
         infos = []

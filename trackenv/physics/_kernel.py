@@ -5,107 +5,160 @@ linear track and the linear vehicle, coupled by the non-linear contact law, whic
 every step. Only the contact forces couple the two, so each step is: predict both without contact, solve the
 small contact problem through the two flexibilities at the wheels, correct both.
 
-Speed comes from a window of the standing track that follows each group of axles. The supports are heavily
-damped and the rail's deflection decays like e^{-βx} (β ≈ 1.6 1/m), so beyond a few sleeper bays the track
-hardly moves: inside the window the track is integrated in full, outside it is at rest. The window is a
-contiguous block of the banded matrices (DOFs are numbered along the track) and moves by whole bays; the DOFs it
-leaves behind are set back to rest. Every quantity the caller sees (contact force, rail deflection, peak sleeper
-forces) is taken where the window is. With the window as long as the track this is the full model.
+Speed comes from a window of the standing track that follows each group of axles. The supports are damped and
+the rail's deflection decays like e^{-βx}, so beyond a few decay lengths the track hardly moves: inside the
+window the track is integrated in full, outside it is at rest. The window is a contiguous block of the banded
+matrices (DOFs are numbered along the track) and moves by whole bays; the DOFs it leaves behind are set back to
+rest. Every quantity the caller sees (contact force, rail deflection, peak sleeper forces) is taken where the
+window is. With the window as long as the track this is the full model. (The caller sizes the window from the
+track's decay length: see ``dynamics.window_margin``.)
+
+Lockstep batch. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move
+together; only the supports, the irregularity and the state differ. Every per-row array carries the batch axis
+*last* (innermost), so the hot loops (mass product, both triangular sweeps, Newmark update, sleeper peaks) are
+element-wise over the rows and compile to SIMD. The batch is cut into chunks of rows (``Chunks`` arrays have a
+leading chunk axis), and the chunks run on the cores in parallel. The kernel is compiled *without* fastmath:
+every row's arithmetic is the same IEEE sequence whatever its SIMD lane, chunk width or thread, so a row's
+result does not depend on the batch it runs in (bit-identical; tested). The single pass is a batch of one.
+
+The arguments are four typed structures (namedtuples of arrays, which numba accepts), defined once here:
+``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place) and ``Peaks``
+(per-row outputs).
 """
 
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
+# Floating-point freedoms that do not make a row depend on its SIMD lane: fused multiply-adds and no NaN/inf/-0
+# bookkeeping; never reassociation or approximate reciprocals (those could differ between lanes and widths).
+FASTMATH = {"contract", "nnan", "ninf", "nsz"}
+WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
+
+Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays")
+Mesh.__doc__ = """The rail mesh, shared by every row: DOF of each node's deflection, DOF and node of each sleeper
+(int64 arrays), element length [m], elements per bay, number of sleepers, window margin in bays."""
+
+Drive = namedtuple(
+    "Drive", "x_axle consts law param mass damping kv_inv force wheel_dofs cluster_of_axle n_clusters"
+)
+Drive.__doc__ = """What moves over the track, shared by every row: axle positions (n_steps+1, n_axles) [m],
+Newmark constants a0..a7, contact law code and parameter, the vehicle's M, C, K_eff⁻¹ (nv, nv), its constant
+forces (nv,), the DOF of each wheel, the window group of each axle and the number of groups."""
+
+Rows = namedtuple("Rows", "mfull keff pad_k pad_c bal_k bal_c z sag u v a q qd qdd")
+Rows.__doc__ = """Per-row inputs and state, chunk axis first and batch axis last: track mass as 2B+1 full
+diagonals (chunks, n_dof, 2B+1, W), effective stiffness in lower band storage (chunks, n_dof, B+1, W), pad and
+ballast stiffness and damping (chunks, n_sleepers, W), rail level under each wheel (chunks, n_steps+1, n_axles, W)
+[m] to which the kernel adds the static sag ``sag`` (chunks, n_dof, W) of settled supports, and the track and
+vehicle state u, v, a (chunks, n_dof, W), q, qd, qdd (chunks, nv, W), all updated in place."""
+
+Peaks = namedtuple("Peaks", "force rail wheel ballast total")
+Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and wheel displacement under each wheel
+(n_steps+1, n_axles), peak ballast force and peak pad + ballast force per sleeper (n_sleepers,)."""
 
 
-@njit(cache=True, fastmath=True)
-def _factor(keff, lo, m, L, inv_diag):
-    """Banded Cholesky of keff[lo:lo+m] (lower band storage); L[i, k] = L(i, i-k)."""
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _factor(keff, lo, m, L, inv_diag, s, W):
+    """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row; L[i, k] = L(i, i-k)."""
     for i in range(m):
         kmax = min(i, B)
         for k in range(kmax, 0, -1):
             j = i - k
-            s = keff[lo + i, k]
+            for b in range(W):
+                s[b] = keff[lo + i, k, b]
             for c in range(max(i - B, 0), j):
-                s -= L[i, i - c] * L[j, j - c]
-            L[i, k] = s * inv_diag[j]
-        s = keff[lo + i, 0]
+                for b in range(W):
+                    s[b] -= L[i, i - c, b] * L[j, j - c, b]
+            for b in range(W):
+                L[i, k, b] = s[b] * inv_diag[j, b]
+        for b in range(W):
+            s[b] = keff[lo + i, 0, b]
         for c in range(max(i - B, 0), i):
-            s -= L[i, i - c] * L[i, i - c]
-        L[i, 0] = np.sqrt(s)
-        inv_diag[i] = 1.0 / L[i, 0]
+            for b in range(W):
+                s[b] -= L[i, i - c, b] * L[i, i - c, b]
+        for b in range(W):
+            L[i, 0, b] = np.sqrt(s[b])
+            inv_diag[i, b] = 1.0 / L[i, 0, b]
 
 
-@njit(cache=True, fastmath=True)
-def _scale(L, inv_diag, m, fw, bw):
-    """Pre-scaled triangular factors for :func:`_solve`: fw[i, k] = L(i, i-k)/L(i, i), bw[i, k] = L(i+k, i)/L(i, i).
-
-    With them each unknown of the forward and backward sweeps hangs on its neighbour through one fused
-    multiply-add, which keeps the sequential sweeps short."""
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _scale(L, inv_diag, m, fw, bw, W):
+    """Pre-scaled triangular factors for :func:`_solve`: fw[i, k] = L(i, i-k)/L(i, i), bw[i, k] = L(i+k, i)/L(i, i)."""
     for i in range(m):
         for k in range(1, B + 1):
-            fw[i, k] = L[i, k] * inv_diag[i] if k <= i else 0.0
-            bw[i, k] = L[i + k, k] * inv_diag[i] if i + k < m else 0.0
+            for b in range(W):
+                fw[i, k, b] = L[i, k, b] * inv_diag[i, b] if k <= i else 0.0
+                bw[i, k, b] = L[i + k, k, b] * inv_diag[i, b] if i + k < m else 0.0
 
 
-@njit(cache=True, fastmath=True)
-def _solve(fw, bw, inv_diag, m, x):
-    """Solve (L Lᵀ) y = x in place for the first m entries of x (factors from :func:`_scale`)."""
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _solve(fw, bw, inv_diag, m, x, W):
+    """Solve (L Lᵀ) y = x in place for the first m entries of x, every row (factors from :func:`_scale`)."""
     for i in range(min(m, B)):
-        s = x[i] * inv_diag[i]
-        for k in range(i, 0, -1):
-            s -= fw[i, k] * x[i - k]
-        x[i] = s
+        for b in range(W):
+            s = x[i, b] * inv_diag[i, b]
+            for k in range(i, 0, -1):
+                s -= fw[i, k, b] * x[i - k, b]
+            x[i, b] = s
     for i in range(B, m):
-        x[i] = (
-            x[i] * inv_diag[i] - fw[i, 4] * x[i - 4] - fw[i, 3] * x[i - 3] - fw[i, 2] * x[i - 2] - (fw[i, 1] * x[i - 1])
-        )
+        for b in range(W):
+            x[i, b] = (
+                x[i, b] * inv_diag[i, b]
+                - fw[i, 4, b] * x[i - 4, b]
+                - fw[i, 3, b] * x[i - 3, b]
+                - fw[i, 2, b] * x[i - 2, b]
+                - fw[i, 1, b] * x[i - 1, b]
+            )
     for i in range(m - 1, max(m - 1 - B, -1), -1):
-        s = x[i] * inv_diag[i]
-        for k in range(m - 1 - i, 0, -1):
-            s -= bw[i, k] * x[i + k]
-        x[i] = s
+        for b in range(W):
+            s = x[i, b] * inv_diag[i, b]
+            for k in range(m - 1 - i, 0, -1):
+                s -= bw[i, k, b] * x[i + k, b]
+            x[i, b] = s
     for i in range(m - 1 - B, -1, -1):
-        x[i] = (
-            x[i] * inv_diag[i] - bw[i, 4] * x[i + 4] - bw[i, 3] * x[i + 3] - bw[i, 2] * x[i + 2] - (bw[i, 1] * x[i + 1])
-        )
+        for b in range(W):
+            x[i, b] = (
+                x[i, b] * inv_diag[i, b]
+                - bw[i, 4, b] * x[i + 4, b]
+                - bw[i, 3, b] * x[i + 3, b]
+                - bw[i, 2, b] * x[i + 2, b]
+                - bw[i, 1, b] * x[i + 1, b]
+            )
 
 
-@njit(cache=True, fastmath=True)
-def _mass_times(mfull, x, out, lo, hi):
-    """out[:hi-lo] = M x restricted to the window [lo, hi) (the track outside it is at rest)."""
-    for i in range(lo, min(lo + B, hi)):
-        s = 0.0
-        for d in range(2 * B + 1):
-            j = i + d - B
-            if lo <= j < hi:
-                s += mfull[i, d] * x[j]
-        out[i - lo] = s
-    for i in range(lo + B, hi - B):
-        out[i - lo] = (
-            mfull[i, 0] * x[i - 4]
-            + mfull[i, 1] * x[i - 3]
-            + mfull[i, 2] * x[i - 2]
-            + mfull[i, 3] * x[i - 1]
-            + mfull[i, 4] * x[i]
-            + mfull[i, 5] * x[i + 1]
-            + mfull[i, 6] * x[i + 2]
-            + mfull[i, 7] * x[i + 3]
-            + mfull[i, 8] * x[i + 4]
-        )
-    for i in range(max(hi - B, lo + B), hi):
-        s = 0.0
-        for d in range(2 * B + 1):
-            j = i + d - B
-            if lo <= j < hi:
-                s += mfull[i, d] * x[j]
-        out[i - lo] = s
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _mass_times(mfull, x, out, lo, hi, W):
+    """out[:hi-lo] = M x restricted to the window [lo, hi) (the track outside it is at rest), every row."""
+    for i in range(lo, hi):
+        if i < lo + B or i >= hi - B:
+            for b in range(W):
+                out[i - lo, b] = 0.0
+            for d in range(2 * B + 1):
+                j = i + d - B
+                if lo <= j < hi:
+                    for b in range(W):
+                        out[i - lo, b] += mfull[i, d, b] * x[j, b]
+        else:
+            for b in range(W):
+                out[i - lo, b] = (
+                    mfull[i, 0, b] * x[i - 4, b]
+                    + mfull[i, 1, b] * x[i - 3, b]
+                    + mfull[i, 2, b] * x[i - 2, b]
+                    + mfull[i, 3, b] * x[i - 1, b]
+                    + mfull[i, 4, b] * x[i, b]
+                    + mfull[i, 5, b] * x[i + 1, b]
+                    + mfull[i, 6, b] * x[i + 2, b]
+                    + mfull[i, 7, b] * x[i + 3, b]
+                    + mfull[i, 8, b] * x[i + 4, b]
+                )
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _contact(law, param, d):
     """Force and tangent stiffness of the contact law at compression d (0 when d <= 0)."""
     if d <= 0.0:
@@ -117,96 +170,112 @@ def _contact(law, param, d):
     return param * d, param
 
 
-@njit(cache=True, fastmath=True)
-def _run_one(
-    mb,
-    cb,
-    keff,
-    node_w,
-    sleeper_dof,
-    sleeper_node,
-    pad_k,
-    pad_c,
-    bal_k,
-    bal_c,
-    elem_len,
-    epb,
-    spacing,
-    n_sleepers,
-    mv,
-    cv,
-    kv_inv,
-    fv,
-    wheel_dofs,
-    cluster_of_axle,
-    n_clusters,
-    margin_bays,
-    x_axle,
-    z_axle,
-    law,
-    param,
-    consts,
-    u,
-    v,
-    a,
-    q,
-    qd,
-    qdd,
-    out_force,
-    out_rail,
-    out_wheel,
-    peak_ballast,
-    peak_total,
-):
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _local(dof, base, epb):
+    """Index of a rail DOF among the cached columns of its bay (w, θ per node; the sleeper DOF after the first
+    node shifts the later nodes by one)."""
+    off = dof - base
+    if off < 2:
+        return off
+    if off == 2:
+        return -1
+    off -= 1  # skip the sleeper DOF that follows the bay's first node
+    if off >= 2 * (epb + 1):
+        return -1
+    return off
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _run_chunk(mesh, drive, rows, peaks, ch, W):
+    """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass."""
+    node_w = mesh.node_w
+    sleeper_dof = mesh.sleeper_dof
+    sleeper_node = mesh.sleeper_node
+    elem_len = mesh.elem_len
+    epb = mesh.epb
+    n_sleepers = mesh.n_sleepers
+    margin_bays = mesh.margin_bays
+    x_axle = drive.x_axle
+    law = drive.law
+    param = drive.param
+    mv = drive.mass
+    cv = drive.damping
+    kv_inv = drive.kv_inv
+    fv = drive.force
+    wheel_dofs = drive.wheel_dofs
+    cluster_of_axle = drive.cluster_of_axle
+    n_clusters = drive.n_clusters
+    a0, a1, a2, a3, a4, a5, a6, a7 = (
+        drive.consts[0], drive.consts[1], drive.consts[2], drive.consts[3],
+        drive.consts[4], drive.consts[5], drive.consts[6], drive.consts[7],
+    )  # fmt: skip
+    mfull = rows.mfull[ch]
+    keff = rows.keff[ch]
+    pad_k = rows.pad_k[ch]
+    pad_c = rows.pad_c[ch]
+    bal_k = rows.bal_k[ch]
+    bal_c = rows.bal_c[ch]
+    z_axle = rows.z[ch]
+    sag = rows.sag[ch]
+    u = rows.u[ch]
+    v = rows.v[ch]
+    a = rows.a[ch]
+    q = rows.q[ch]
+    qd = rows.qd[ch]
+    qdd = rows.qdd[ch]
+    out_force = peaks.force[ch]
+    out_rail = peaks.rail[ch]
+    out_wheel = peaks.wheel[ch]
+    peak_ballast = peaks.ballast[ch]
+    peak_total = peaks.total[ch]
+
     n_steps = x_axle.shape[0] - 1
     n_axles = x_axle.shape[1]
     n = u.shape[0]
     nv = q.shape[0]
-    a0, a1, a2, a3, a4, a5, a6, a7 = consts
     m_max = n
-    Ls = np.zeros((n_clusters, m_max, B + 1))
-    Fw = np.zeros((n_clusters, m_max, B + 1))
-    Bw = np.zeros((n_clusters, m_max, B + 1))
-    invd = np.zeros((n_clusters, m_max))
+    Ls = np.zeros((n_clusters, m_max, B + 1, W))
+    Fw = np.zeros((n_clusters, m_max, B + 1, W))
+    Bw = np.zeros((n_clusters, m_max, B + 1, W))
+    invd = np.zeros((n_clusters, m_max, W))
     lo_c = np.full(n_clusters, -1, dtype=np.int64)
     hi_c = np.full(n_clusters, -1, dtype=np.int64)
     s_lo_c = np.zeros(n_clusters, dtype=np.int64)
     s_hi_c = np.zeros(n_clusters, dtype=np.int64)
-    # the mass matrix as 2B+1 full diagonals: mfull[i, d] = M[i, i + d - B]
-    mfull = np.zeros((n, 2 * B + 1))
-    for i in range(n):
-        for k in range(B + 1):
-            if i - k >= 0:
-                mfull[i, B - k] = mb[i, k]
-                mfull[i - k, B + k] = mb[i, k]
     bay_cache = np.full(n_axles, -1, dtype=np.int64)
     ncol = 2 * (epb + 1)
-    cols = np.zeros((n_axles, ncol, m_max))
-    rhs = np.zeros(n)
-    pred = np.zeros(n)
-    qdamp = np.zeros(n)
-    rv = np.zeros(nv)
-    qpred = np.zeros(nv)
-    tmp = np.zeros(m_max)
+    cols = np.zeros((n_axles, ncol, m_max, W))
+    rhs = np.zeros((n, W))
+    pred = np.zeros((n, W))
+    qdamp = np.zeros((n, W))
+    rv = np.zeros((nv, W))
+    qpred = np.zeros((nv, W))
+    tmp = np.zeros((m_max, W))
+    scratch = np.zeros(W)
     shape = np.zeros((n_axles, 4))
     edofs = np.zeros((n_axles, 4), dtype=np.int64)
     elem_of = np.zeros(n_axles, dtype=np.int64)
-    wpred = np.zeros(n_axles)
-    ypred = np.zeros(n_axles)
-    H = np.zeros((n_axles, n_axles))
+    loc = np.zeros((n_axles, 4), dtype=np.int64)
+    wpred = np.zeros((n_axles, W))
+    ypred = np.zeros((n_axles, W))
+    H = np.zeros((n_axles, n_axles, W))
     J = np.zeros((n_axles, n_axles))
-    delta = np.zeros(n_axles)
-    force = out_force[0].copy()
-    res = np.zeros(n_axles)
+    rj = np.zeros(n_axles)
+    delta = np.zeros((n_axles, W))
+    force = np.zeros((n_axles, W))
     fprime = np.zeros(n_axles)
+    res = np.zeros(n_axles)
+    fsh = np.zeros((n_axles, 4, W))
     for j in range(n_axles):  # compression that carries the initial force
-        if law == 0:
-            delta[j] = param * force[j] ** (2.0 / 3.0)
-        else:
-            delta[j] = force[j] / param
+        for b in range(W):
+            force[j, b] = out_force[0, j, b]
+            if law == 0:
+                delta[j, b] = param * force[j, b] ** (2.0 / 3.0)
+            else:
+                delta[j, b] = force[j, b] / param
 
     for step in range(1, n_steps + 1):
-        # ---- element, shape functions and window of every axle at t_{n+1}
+        # ---- element, shape functions and window of every axle at t_{n+1} (shared by the rows)
         for j in range(n_axles):
             x = x_axle[step, j]
             e = int(x / elem_len)
@@ -226,6 +295,14 @@ def _run_one(
             edofs[j, 1] = node_w[e] + 1
             edofs[j, 2] = node_w[e + 1]
             edofs[j, 3] = node_w[e + 1] + 1
+            # the static sag of settled supports is part of the rail level under the wheel
+            for b in range(W):
+                z_axle[step, j, b] += (
+                    shape[j, 0] * sag[edofs[j, 0], b]
+                    + shape[j, 1] * sag[edofs[j, 1], b]
+                    + shape[j, 2] * sag[edofs[j, 2], b]
+                    + shape[j, 3] * sag[edofs[j, 3], b]
+                )
         for c in range(n_clusters):
             changed = False
             bay_min = n_sleepers
@@ -247,31 +324,39 @@ def _run_one(
             # DOFs left behind come to rest
             if lo_c[c] >= 0:
                 for i in range(lo_c[c], min(lo, hi_c[c])):
-                    u[i] = 0.0
-                    v[i] = 0.0
-                    a[i] = 0.0
+                    for b in range(W):
+                        u[i, b] = 0.0
+                        v[i, b] = 0.0
+                        a[i, b] = 0.0
             lo_c[c] = lo
             hi_c[c] = hi
             s_lo_c[c] = s_lo
             s_hi_c[c] = s_hi
             m = hi - lo
-            _factor(keff, lo, m, Ls[c], invd[c])
-            _scale(Ls[c], invd[c], m, Fw[c], Bw[c])
+            _factor(keff, lo, m, Ls[c], invd[c], scratch, W)
+            _scale(Ls[c], invd[c], m, Fw[c], Bw[c], W)
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
-                bay = elem_of[j] // epb  # the bay of the axle's element, so element and bay always agree
+                bay = elem_of[j] // epb
                 bay_cache[j] = bay
                 for k in range(ncol):
                     # the bay's rail DOFs: (w, θ) of its epb+1 nodes; the sleeper DOF after node 0 is skipped
                     node = k // 2
                     dof = node_w[sleeper_node[bay] + node] + (k % 2)
                     for i in range(m):
-                        tmp[i] = 0.0
-                    tmp[dof - lo] = 1.0
-                    _solve(Fw[c], Bw[c], invd[c], m, tmp)
+                        for b in range(W):
+                            tmp[i, b] = 0.0
+                    for b in range(W):
+                        tmp[dof - lo, b] = 1.0
+                    _solve(Fw[c], Bw[c], invd[c], m, tmp, W)
                     for i in range(m):
-                        cols[j, k, i] = tmp[i]
+                        for b in range(W):
+                            cols[j, k, i, b] = tmp[i, b]
+        for j in range(n_axles):
+            basej = node_w[sleeper_node[bay_cache[j]]]
+            for k in range(4):
+                loc[j, k] = _local(edofs[j, k], basej, epb)
 
         # ---- track predictor (no contact force) in every window: K_eff u = M p + C q
         for c in range(n_clusters):
@@ -279,280 +364,229 @@ def _run_one(
             hi = hi_c[c]
             m = hi - lo
             for i in range(lo, hi):
-                rhs[i] = a0 * u[i] + a2 * v[i] + a3 * a[i]
-                qdamp[i] = a1 * u[i] + a4 * v[i] + a5 * a[i]
+                for b in range(W):
+                    rhs[i, b] = a0 * u[i, b] + a2 * v[i, b] + a3 * a[i, b]
+                    qdamp[i, b] = a1 * u[i, b] + a4 * v[i, b] + a5 * a[i, b]
             window = pred[lo:hi]
-            _mass_times(mfull, rhs, window, lo, hi)
+            _mass_times(mfull, rhs, window, lo, hi, W)
             # damping sits only in the pads and the ballast
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
                 d = sleeper_dof[s_]
                 w = node_w[sleeper_node[s_]]
-                fp = pad_c[s_] * (qdamp[w] - qdamp[d])
-                pred[w] += fp
-                pred[d] += bal_c[s_] * qdamp[d] - fp
-            _solve(Fw[c], Bw[c], invd[c], m, window)
+                for b in range(W):
+                    fp = pad_c[s_, b] * (qdamp[w, b] - qdamp[d, b])
+                    pred[w, b] += fp
+                    pred[d, b] += bal_c[s_, b] * qdamp[d, b] - fp
+            _solve(Fw[c], Bw[c], invd[c], m, window, W)
 
         # ---- vehicle predictor
         for i in range(nv):
-            rv[i] = 0.0
-        for i in range(nv):
-            s = fv[i]
+            for b in range(W):
+                rv[i, b] = fv[i]
             for k in range(nv):
-                s += mv[i, k] * (a0 * q[k] + a2 * qd[k] + a3 * qdd[k]) + cv[i, k] * (
-                    a1 * q[k] + a4 * qd[k] + a5 * qdd[k]
-                )
-            rv[i] = s
+                mik = mv[i, k]
+                cik = cv[i, k]
+                for b in range(W):
+                    rv[i, b] += mik * (a0 * q[k, b] + a2 * qd[k, b] + a3 * qdd[k, b]) + cik * (
+                        a1 * q[k, b] + a4 * qd[k, b] + a5 * qdd[k, b]
+                    )
         for i in range(nv):
-            s = 0.0
+            for b in range(W):
+                qpred[i, b] = 0.0
             for k in range(nv):
-                s += kv_inv[i, k] * rv[k]
-            qpred[i] = s
+                kik = kv_inv[i, k]
+                for b in range(W):
+                    qpred[i, b] += kik * rv[k, b]
 
         # ---- flexibilities at the wheels and contact predictor
         for j in range(n_axles):
             c = cluster_of_axle[j]
             lo = lo_c[c]
-            s = 0.0
-            for k in range(4):
-                s += shape[j, k] * pred[edofs[j, k]]
-            wpred[j] = s
-            ypred[j] = qpred[wheel_dofs[j]]
+            for b in range(W):
+                wpred[j, b] = (
+                    shape[j, 0] * pred[edofs[j, 0], b]
+                    + shape[j, 1] * pred[edofs[j, 1], b]
+                    + shape[j, 2] * pred[edofs[j, 2], b]
+                    + shape[j, 3] * pred[edofs[j, 3], b]
+                )
+                ypred[j, b] = qpred[wheel_dofs[j], b]
             for i in range(n_axles):
                 hv = kv_inv[wheel_dofs[j], wheel_dofs[i]]
-                ht = 0.0
-                if cluster_of_axle[i] == c:
-                    basei = node_w[sleeper_node[bay_cache[i]]]
-                    for k in range(4):
-                        # column of axle i's DOF k evaluated at axle j's DOFs
-                        lk = _local(edofs[i, k], basei, epb)
-                        if lk < 0:
-                            continue
-                        acc = 0.0
-                        for kk in range(4):
-                            acc += shape[j, kk] * cols[i, lk, edofs[j, kk] - lo]
-                        ht += shape[i, k] * acc
-                H[j, i] = hv + ht
-        # ---- Newton on the compressions: d = d_pred - H f(d)
-        for j in range(n_axles):
-            dp = ypred[j] - wpred[j] - z_axle[step, j]
-            res[j] = dp
-        for j in range(n_axles):
-            delta[j] = res[j] if force[j] <= 0.0 else delta[j]
-        for _it in range(60):
-            for j in range(n_axles):
-                force[j], fprime[j] = _contact(law, param, delta[j])
-            err = 0.0
-            for j in range(n_axles):
-                r = delta[j] - res[j]
-                for i in range(n_axles):
-                    r += H[j, i] * force[i]
-                tmp[j] = -r
-                for i in range(n_axles):
-                    J[j, i] = H[j, i] * fprime[i] + (1.0 if i == j else 0.0)
-                err = max(err, abs(r))
-            if err < 1e-15:
-                break
-            if n_axles == 1:
-                delta[0] += tmp[0] / J[0, 0]
-            else:
-                dx = np.linalg.solve(J, tmp[:n_axles])
-                for j in range(n_axles):
-                    delta[j] += dx[j]
-        for j in range(n_axles):
-            force[j], fprime[j] = _contact(law, param, delta[j])
+                for b in range(W):
+                    H[j, i, b] = hv
+                if cluster_of_axle[i] != c:
+                    continue
+                for k in range(4):
+                    # column of axle i's DOF k evaluated at axle j's DOFs
+                    lk = loc[i, k]
+                    if lk < 0:
+                        continue
+                    for b in range(W):
+                        acc = (
+                            shape[j, 0] * cols[i, lk, edofs[j, 0] - lo, b]
+                            + shape[j, 1] * cols[i, lk, edofs[j, 1] - lo, b]
+                            + shape[j, 2] * cols[i, lk, edofs[j, 2] - lo, b]
+                            + shape[j, 3] * cols[i, lk, edofs[j, 3] - lo, b]
+                        )
+                        H[j, i, b] += shape[i, k] * acc
 
-        # ---- correct the track: u = pred + Σ F_j K⁻¹ N_j
+        # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
+        for b in range(W):
+            for j in range(n_axles):
+                res[j] = ypred[j, b] - wpred[j, b] - z_axle[step, j, b]
+                if force[j, b] <= 0.0:
+                    delta[j, b] = res[j]
+            for _it in range(60):
+                for j in range(n_axles):
+                    force[j, b], fprime[j] = _contact(law, param, delta[j, b])
+                err = 0.0
+                for j in range(n_axles):
+                    r = delta[j, b] - res[j]
+                    for i in range(n_axles):
+                        r += H[j, i, b] * force[i, b]
+                    rj[j] = -r
+                    for i in range(n_axles):
+                        J[j, i] = H[j, i, b] * fprime[i] + (1.0 if i == j else 0.0)
+                    err = max(err, abs(r))
+                if err < 1e-15:
+                    break
+                if n_axles == 1:
+                    delta[0, b] += rj[0] / J[0, 0]
+                else:
+                    dx = np.linalg.solve(J, rj)
+                    for j in range(n_axles):
+                        delta[j, b] += dx[j]
+            for j in range(n_axles):
+                force[j, b], fprime[j] = _contact(law, param, delta[j, b])
+            for j in range(n_axles):
+                for k in range(4):
+                    fsh[j, k, b] = force[j, b] * shape[j, k]
+
+        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, and its Newmark update in one sweep
         for c in range(n_clusters):
             lo = lo_c[c]
             hi = hi_c[c]
-            loaded = 0
-            last = -1
-            for j in range(n_axles):
-                if cluster_of_axle[j] == c and force[j] != 0.0:
-                    loaded += 1
-                    last = j
-            if loaded == 1:  # one loaded wheel in this window (a wheelset): correction and update in one sweep
-                j = last
-                basej = node_w[sleeper_node[bay_cache[j]]]
-                c0 = cols[j, _local(edofs[j, 0], basej, epb)]
-                c1 = cols[j, _local(edofs[j, 1], basej, epb)]
-                c2 = cols[j, _local(edofs[j, 2], basej, epb)]
-                c3 = cols[j, _local(edofs[j, 3], basej, epb)]
-                f0 = force[j] * shape[j, 0]
-                f1 = force[j] * shape[j, 1]
-                f2 = force[j] * shape[j, 2]
-                f3 = force[j] * shape[j, 3]
-                for i in range(hi - lo):
-                    k = lo + i
-                    un = pred[k] + f0 * c0[i] + f1 * c1[i] + f2 * c2[i] + f3 * c3[i]
-                    an = a0 * (un - u[k]) - a2 * v[k] - a3 * a[k]
-                    v[k] += a6 * a[k] + a7 * an
-                    a[k] = an
-                    u[k] = un
-                loaded = -1  # done
-            for j in range(n_axles):
-                if loaded < 0 or cluster_of_axle[j] != c or force[j] == 0.0:
-                    continue
-                basej = node_w[sleeper_node[bay_cache[j]]]
-                l0 = _local(edofs[j, 0], basej, epb)
-                l1 = _local(edofs[j, 1], basej, epb)
-                l2 = _local(edofs[j, 2], basej, epb)
-                l3 = _local(edofs[j, 3], basej, epb)
-                f0 = force[j] * shape[j, 0]
-                f1 = force[j] * shape[j, 1]
-                f2 = force[j] * shape[j, 2]
-                f3 = force[j] * shape[j, 3]
-                for i in range(hi - lo):
-                    pred[lo + i] += (
-                        f0 * cols[j, l0, i] + f1 * cols[j, l1, i] + f2 * cols[j, l2, i] + f3 * cols[j, l3, i]
-                    )
-            for i in range(lo, hi):
-                if loaded < 0:
-                    break
-                an = a0 * (pred[i] - u[i]) - a2 * v[i] - a3 * a[i]
-                v[i] += a6 * a[i] + a7 * an
-                a[i] = an
-                u[i] = pred[i]
+            for i in range(hi - lo):
+                kk = lo + i
+                for j in range(n_axles):
+                    if cluster_of_axle[j] != c:
+                        continue
+                    l0 = loc[j, 0]
+                    l1 = loc[j, 1]
+                    l2 = loc[j, 2]
+                    l3 = loc[j, 3]
+                    for b in range(W):
+                        pred[kk, b] += (
+                            fsh[j, 0, b] * cols[j, l0, i, b]
+                            + fsh[j, 1, b] * cols[j, l1, i, b]
+                            + fsh[j, 2, b] * cols[j, l2, i, b]
+                            + fsh[j, 3, b] * cols[j, l3, i, b]
+                        )
+                for b in range(W):
+                    an = a0 * (pred[kk, b] - u[kk, b]) - a2 * v[kk, b] - a3 * a[kk, b]
+                    v[kk, b] += a6 * a[kk, b] + a7 * an
+                    a[kk, b] = an
+                    u[kk, b] = pred[kk, b]
             # peak sleeper forces in the window
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
                 d = sleeper_dof[s_]
                 w = node_w[sleeper_node[s_]]
-                fb = bal_k[s_] * u[d] + bal_c[s_] * v[d]
-                fp = pad_k[s_] * (u[w] - u[d]) + pad_c[s_] * (v[w] - v[d])
-                if fb > peak_ballast[s_]:
-                    peak_ballast[s_] = fb
-                if fb + fp > peak_total[s_]:
-                    peak_total[s_] = fb + fp
+                for b in range(W):
+                    fb = bal_k[s_, b] * u[d, b] + bal_c[s_, b] * v[d, b]
+                    fp = pad_k[s_, b] * (u[w, b] - u[d, b]) + pad_c[s_, b] * (v[w, b] - v[d, b])
+                    peak_ballast[s_, b] = max(peak_ballast[s_, b], fb)
+                    peak_total[s_, b] = max(peak_total[s_, b], fb + fp)
 
         # ---- correct the vehicle
         for i in range(nv):
-            s = qpred[i]
+            for b in range(W):
+                rv[i, b] = qpred[i, b]
             for j in range(n_axles):
-                s -= kv_inv[i, wheel_dofs[j]] * force[j]
-            an = a0 * (s - q[i]) - a2 * qd[i] - a3 * qdd[i]
-            qd[i] += a6 * qdd[i] + a7 * an
-            qdd[i] = an
-            q[i] = s
+                kij = kv_inv[i, wheel_dofs[j]]
+                for b in range(W):
+                    rv[i, b] -= kij * force[j, b]
+            for b in range(W):
+                an = a0 * (rv[i, b] - q[i, b]) - a2 * qd[i, b] - a3 * qdd[i, b]
+                qd[i, b] += a6 * qdd[i, b] + a7 * an
+                qdd[i, b] = an
+                q[i, b] = rv[i, b]
 
         for j in range(n_axles):
-            out_force[step, j] = force[j]
-            w = 0.0
-            for k in range(4):
-                w += shape[j, k] * u[edofs[j, k]]
-            out_rail[step, j] = w
-            out_wheel[step, j] = q[wheel_dofs[j]]
+            for b in range(W):
+                out_force[step, j, b] = force[j, b]
+                out_rail[step, j, b] = (
+                    shape[j, 0] * u[edofs[j, 0], b]
+                    + shape[j, 1] * u[edofs[j, 1], b]
+                    + shape[j, 2] * u[edofs[j, 2], b]
+                    + shape[j, 3] * u[edofs[j, 3], b]
+                )
+                out_wheel[step, j, b] = q[wheel_dofs[j], b]
 
 
-@njit(cache=True, inline="always")
-def _local(dof, base, epb):
-    """Index of a rail DOF among the cached columns of its bay (w, θ per node; the sleeper DOF after the first
-    node shifts the later nodes by one)."""
-    off = dof - base
-    if off < 2:
-        return off
-    if off == 2:
-        return -1
-    off -= 1  # skip the sleeper DOF that follows the bay's first node
-    if off >= 2 * (epb + 1):
-        return -1
-    return off
+# One compiled entry per (threads, width): the width is a constant in each, so that after numba inlines the
+# chunk integrator the loops over the rows have a known trip count (a width read at run time costs the single
+# pass 2.5x). Written out, not generated, so that numba's on-disk cache keeps each one.
+@njit(cache=True, fastmath=FASTMATH)
+def _serial_1(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 1)
 
 
-@njit(cache=True)
-def _run_row(args, b):
-    """Row ``b`` of a batch packed as in :func:`run_batch`: per-row arrays are indexed, shared ones passed on."""
-    (
-        mb,
-        cb,
-        keff,
-        node_w,
-        sleeper_dof,
-        sleeper_node,
-        pad_k,
-        pad_c,
-        bal_k,
-        bal_c,
-        elem_len,
-        epb,
-        spacing,
-        n_sleepers,
-        mv,
-        cv,
-        kv_inv,
-        fv,
-        wheel_dofs,
-        cluster_of_axle,
-        n_clusters,
-        margin_bays,
-        x_axle,
-        z_axle,
-        law,
-        param,
-        consts,
-        u,
-        v,
-        a,
-        q,
-        qd,
-        qdd,
-        out_force,
-        out_rail,
-        out_wheel,
-        peak_ballast,
-        peak_total,
-    ) = args
-    _run_one(
-        mb[b],
-        cb[b],
-        keff[b],
-        node_w,
-        sleeper_dof,
-        sleeper_node,
-        pad_k[b],
-        pad_c[b],
-        bal_k[b],
-        bal_c[b],
-        elem_len,
-        epb,
-        spacing,
-        n_sleepers,
-        mv,
-        cv,
-        kv_inv,
-        fv,
-        wheel_dofs,
-        cluster_of_axle,
-        n_clusters,
-        margin_bays,
-        x_axle,
-        z_axle[b],
-        law,
-        param,
-        consts,
-        u[b],
-        v[b],
-        a[b],
-        q[b],
-        qd[b],
-        qdd[b],
-        out_force[b],
-        out_rail[b],
-        out_wheel[b],
-        peak_ballast[b],
-        peak_total[b],
-    )
+@njit(cache=True, fastmath=FASTMATH)
+def _serial_4(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 4)
 
 
-@njit(parallel=True, cache=True)
-def run_batch(args):
-    """Run every row of the batch (leading axis of the per-row arrays in ``args``, the argument list of
-    :func:`_run_one`) in parallel; arrays are filled in place."""
-    for b in prange(args[0].shape[0]):
-        _run_row(args, b)
+@njit(cache=True, fastmath=FASTMATH)
+def _serial_8(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 8)
 
 
-@njit(cache=True)
-def run_serial(args):
-    """:func:`run_batch` on one thread (a batch of one gains nothing from starting threads)."""
-    for b in range(args[0].shape[0]):
-        _run_row(args, b)
+@njit(cache=True, fastmath=FASTMATH)
+def _serial_16(mesh, drive, rows, peaks):
+    for ch in range(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _parallel_1(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 1)
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _parallel_4(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 4)
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _parallel_8(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 8)
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _parallel_16(mesh, drive, rows, peaks):
+    for ch in prange(rows.u.shape[0]):
+        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+
+
+_RUNNERS = {
+    (False, 1): _serial_1,
+    (False, 4): _serial_4,
+    (False, 8): _serial_8,
+    (False, 16): _serial_16,
+    (True, 1): _parallel_1,
+    (True, 4): _parallel_4,
+    (True, 8): _parallel_8,
+    (True, 16): _parallel_16,
+}
+
+
+def run(mesh, drive, rows, peaks, width: int) -> None:
+    """Integrate every chunk of the batch (``width`` rows each, one of :data:`WIDTHS`), filling the arrays in
+    place: on the calling thread for one chunk, else the chunks spread over numba's threads."""
+    _RUNNERS[(rows.u.shape[0] > 1, width)](mesh, drive, rows, peaks)

@@ -10,6 +10,7 @@ whole track.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -20,6 +21,7 @@ import scipy.linalg
 from . import _kernel
 from ._validation import check_array, check_scalar
 from .contact import HertzContact, LinearContact
+from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
 from .vehicle import Car, Train, VehicleSystem, Wheelset
 
@@ -217,17 +219,6 @@ def _clusters(offsets: np.ndarray, gap: float) -> np.ndarray:
     return cl
 
 
-def _rail_at(track: Track, u: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Rail deflection of the displacement vector ``u`` at positions ``x`` (Hermite interpolation)."""
-    le = track.element_length
-    e = np.clip(np.floor(x / le).astype(int), 0, track.n_nodes - 2)
-    xi = x / le - e
-    lay = track.dof_layout
-    n1, n2 = 1 - 3 * xi**2 + 2 * xi**3, le * (xi - 2 * xi**2 + xi**3)
-    n3, n4 = 3 * xi**2 - 2 * xi**3, le * (xi**3 - xi**2)
-    return n1 * u[lay.node_w[e]] + n2 * u[lay.node_theta[e]] + n3 * u[lay.node_w[e + 1]] + n4 * u[lay.node_theta[e + 1]]
-
-
 def _irregularity_at(irr, track: Track, x: np.ndarray, name: str) -> np.ndarray:
     """Rail level at positions x from a per-sleeper or per-node profile (cubic spline) or a callable."""
     if irr is None:
@@ -267,18 +258,104 @@ def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray
     return u
 
 
+WINDOW_DECAY_LENGTHS = 6.5  # window margin in decay lengths 1/β (calibrated: tests/physics/test_dynamics.py)
+WINDOW_AVERAGING_SLEEPERS = 5  # β from the softest stretch of this many supports
+WINDOW_MIN_BETA_SPACING = 0.4  # softer than this (decay length > 2.5 bays): the whole track moves, no window
+
+
+def window_margin(track: Track) -> int | None:
+    """Sleeper bays of track the kernel integrates on each side of an axle group, from the track's decay length.
+
+    The rail's deflection decays like e^{-βx}, β = (k_f / 4EI)^¼, with k_f the pad and ballast in series per
+    spacing. β is taken on the softest stretch of WINDOW_AVERAGING_SLEEPERS supports (a transition's soft side,
+    a run of voided sleepers; one voided sleeper barely widens the window) and the margin spans
+    WINDOW_DECAY_LENGTHS decay lengths: on a sweep of pad and ballast stiffness 1e6-1e9 N/m, a voided sleeper
+    and a transition zone this keeps the fast path within 1 % of the full model. Soft track needs more decay
+    lengths than stiff (its dynamic response reaches further than the static one): below β·s =
+    WINDOW_MIN_BETA_SPACING (1e6 N/m ballast: 2.6 % off with a 22-bay window on 60 m) the whole track is
+    integrated. None (the whole track) there and where the window would cover half the track anyway."""
+    k = track.support_stiffness
+    n = min(WINDOW_AVERAGING_SLEEPERS, k.size)
+    k_f = np.convolve(k, np.ones(n) / n, mode="valid").min() / track.sleeper_spacing
+    beta = (k_f / (4.0 * track.rail_bending_stiffness)) ** 0.25
+    if beta * track.sleeper_spacing < WINDOW_MIN_BETA_SPACING:
+        return None
+    margin = max(2, math.ceil(WINDOW_DECAY_LENGTHS / (beta * track.sleeper_spacing) - 1e-9))
+    if 2 * margin + 2 >= track.n_sleepers / 2:
+        return None
+    return margin
+
+
+def check_window_bays(window_bays) -> None:
+    """``window_bays`` as every layer takes it: "auto", None or an integer >= 2."""
+    if window_bays is None or (isinstance(window_bays, str) and window_bays == "auto"):
+        return
+    if isinstance(window_bays, bool) or not isinstance(window_bays, (int, np.integer)) or window_bays < 2:
+        raise ValueError(f"window_bays must be 'auto', an integer >= 2 or None, got {window_bays!r}")
+
+
+def _settlement_rows(support_settlement, n_rows: int, track: Track) -> np.ndarray:
+    """``support_settlement`` validated as (n_rows, n_sleepers) [m] (one row is shared by every row)."""
+    g = check_array("support_settlement", support_settlement)
+    if g.ndim == 1:
+        g = np.broadcast_to(g, (n_rows, g.size))
+    if g.shape != (n_rows, track.n_sleepers):
+        raise ValueError(f"support_settlement must have shape ({n_rows}, {track.n_sleepers}), got {g.shape}")
+    return g
+
+
+def _chunking(n_rows: int, max_width: int = _kernel.WIDTHS[-1]) -> tuple[int, int]:
+    """How the kernel cuts a batch: (number of chunks, rows per chunk). Enough chunks for every numba thread
+    (the chunks run in parallel), no more than ``max_width`` rows per chunk (a chunk's window stays in cache),
+    the width rounded up to one the kernel is compiled for; the last rows are padded with copies of the last row.
+    A row's result does not depend on this choice."""
+    import numba
+
+    threads = numba.get_num_threads()
+    n_chunks = max(-(-n_rows // max_width), min(n_rows, threads))
+    need = -(-n_rows // n_chunks)
+    return n_chunks, min(w for w in _kernel.WIDTHS if w >= need)
+
+
+def _pack(x: np.ndarray, n_chunks: int, width: int) -> np.ndarray:
+    """(rows, ...) -> (chunks, ..., width), contiguous, the batch axis last; padded with the last row."""
+    pad = n_chunks * width - x.shape[0]
+    if pad:
+        x = np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
+    x = x.reshape((n_chunks, width) + x.shape[1:])
+    return np.ascontiguousarray(np.moveaxis(x, 1, -1))
+
+
+def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
+    """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
+    x = np.moveaxis(x, -1, 1)
+    return np.ascontiguousarray(x.reshape((-1,) + x.shape[2:])[:n_rows])
+
+
+def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
+    """Lower band storage (rows, n, B+1) of the symmetric mass matrix as its 2B+1 full diagonals:
+    out[:, i, d] = M[i, i + d - B]."""
+    nb, n, b1 = mb.shape
+    bw = b1 - 1
+    out = np.zeros((nb, n, 2 * bw + 1))
+    for k in range(b1):
+        out[:, k:, bw - k] = mb[:, k:, k]
+        out[:, : n - k, bw + k] = mb[:, k:, k]
+    return out
+
+
 def simulate_passes(
     tracks: Track | Sequence[Track],
     vehicle,
     speed: float,
     irregularities=None,
     *,
-    dt: float = 1e-4,
+    dt: float | str = DT_REFERENCE_S,
     contact=None,
     start: str = "static",
     x_start: float | None = None,
     x_end: float | None = None,
-    window_bays: int | None = 6,
+    window_bays: int | str | None = "auto",
     sleeper_force_measure: str = "ballast",
     support_settlement=None,
 ) -> list[PassResult]:
@@ -286,11 +363,16 @@ def simulate_passes(
 
     ``tracks``: one Track (shared by every row) or one per row; ``irregularities``: None, an array (n_rows,
     n_sleepers or n_nodes) of rail level [m] (downward positive), or a list of such rows or callables z(x).
-    ``speed`` [m/s] > 0; ``dt`` [s]; ``start``: "static" (vehicle and track in static equilibrium at the start)
+    ``speed`` [m/s] > 0; ``dt`` [s] within the bounds of :mod:`trackenv.physics.timestep`, or "auto": the
+    coarsest step that keeps peak forces within 0.5 % of the reference step (that module's contract; a row whose
+    wheel loses contact is rerun at the reference step, so rows of one batch may differ in dt);
+    ``start``: "static" (vehicle and track in static equilibrium at the start)
     or "rest" (the paper's transient: the vehicle is set on the unloaded track and drops in).
     ``x_start``/``x_end``: leading-axle positions [m] where the pass starts/ends (default: the whole vehicle
     on the rail from the first to the last sleeper). ``window_bays``: sleeper bays of track integrated ahead of
-    the leading and behind the trailing axle of each axle group (None: the whole track).
+    the leading and behind the trailing axle of each axle group; "auto" (default): sized per row from the
+    track's decay length (:func:`window_margin`; rows that need different windows run as separate groups, so a
+    row's result does not depend on its batch); None: the whole track.
     ``support_settlement``: None or (n_rows, n_sleepers) permanent settlement of the ballast under each sleeper
     [m]: the base of each ballast spring is lowered by it and the rail bends over the settled supports. By
     superposition (the track is linear) the rail's static sag becomes the wheel's irregularity and the
@@ -302,7 +384,8 @@ def simulate_passes(
     sys_ = _vehicle_system(vehicle)
     law = _contact_law(contact)
     speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
-    dt = check_scalar("dt", dt, low=1e-7, high=1.0)
+    auto = isinstance(dt, str)
+    check_dt_option(dt)
     if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
         raise ValueError(
             f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}, got {sleeper_force_measure!r}"
@@ -310,23 +393,14 @@ def simulate_passes(
     if start not in ("static", "rest"):
         raise ValueError(f"start must be 'static' or 'rest', got {start!r}")
     t0 = tracks[0]
-    # The contact must be resolved in time: its period with the unsprung mass must span >= 20 steps.
-    k_contact = float(np.max(law.stiffness(max(sys_.static_wheel_loads.max(), 1.0) * 3.0)))
-    m_wheel = float(np.min(np.diag(sys_.mass)[sys_.wheel_dofs]))
-    period = 2 * np.pi * np.sqrt(m_wheel / k_contact)
-    if dt > period / 20:
-        raise ValueError(
-            f"dt must be <= {period / 20:.3g} s to resolve the wheel-on-contact-spring vibration "
-            f"(period {period:.3g} s), got {dt:g}"
-        )
+    dt = auto_time_step(t0, sys_, speed, law) if auto else check_time_step(dt, contact_period(sys_, law))
     if sys_.span >= t0.length:
         raise ValueError(f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)")
     x_start = sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
     x_end = (
         t0.length if x_end is None else check_scalar("x_end", x_end, low=x_start, high=t0.length, low_inclusive=False)
     )
-    if window_bays is not None and (not isinstance(window_bays, (int, np.integer)) or window_bays < 2):
-        raise ValueError(f"window_bays must be an integer >= 2 or None, got {window_bays!r}")
+    check_window_bays(window_bays)
 
     # rows
     if irregularities is None:
@@ -346,6 +420,33 @@ def simulate_passes(
     if len(tracks) != n_rows or len(irr_rows) != n_rows:
         raise ValueError(f"irregularities has {len(irr_rows)} rows but there are {len(tracks)} tracks")
 
+    if isinstance(window_bays, str):  # "auto": each row's window from its own track
+        margins = [window_margin(t) for t in tracks]
+        groups: dict = {}
+        for b, m in enumerate(margins):
+            groups.setdefault(m, []).append(b)
+        if len(groups) > 1:
+            g_all = None if support_settlement is None else _settlement_rows(support_settlement, n_rows, t0)
+            results: list = [None] * n_rows
+            for m, idx in groups.items():
+                sub = simulate_passes(
+                    [tracks[b] for b in idx],
+                    vehicle,
+                    speed,
+                    [irr_rows[b] for b in idx],
+                    dt="auto" if auto else dt,
+                    contact=contact,
+                    start=start,
+                    x_start=x_start,
+                    x_end=x_end,
+                    window_bays=m,
+                    sleeper_force_measure=sleeper_force_measure,
+                    support_settlement=None if g_all is None else g_all[idx],
+                )
+                for b, res in zip(idx, sub):
+                    results[b] = res
+            return results
+        window_bays = margins[0]
     n_steps = int(np.ceil((x_end - x_start) / (speed * dt) - 1e-9))
     time = np.arange(n_steps + 1) * dt
     x_lead = np.minimum(x_start + speed * time, t0.length)
@@ -358,17 +459,15 @@ def simulate_passes(
     lay = t0.dof_layout
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
     static_total = np.zeros((n_rows, t0.n_sleepers))
+    sag = np.zeros((n_rows, t0.n_dof))  # static rail sag over settled supports (the kernel adds it to z)
     if support_settlement is not None:
-        g = check_array("support_settlement", support_settlement)
-        if g.ndim == 1:
-            g = np.broadcast_to(g, (n_rows, g.size))
-        if g.shape != (n_rows, t0.n_sleepers):
-            raise ValueError(f"support_settlement must have shape ({n_rows}, {t0.n_sleepers}), got {g.shape}")
+        g = settlement_rows = _settlement_rows(support_settlement, n_rows, t0)
         for b, t in enumerate(tracks):
             f = np.zeros(t0.n_dof)
             f[lay.sleeper] = t.ballast_stiffness * g[b]
             u0 = scipy.linalg.solveh_banded(lapack_lower(kb[b]), f, lower=True)
-            z_axle[b] += _rail_at(t0, u0, x_axle)
+            sag[b] = u0
+            z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in map(functools.partial(_point_load_vector, t0), x_axle[0])]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
             static_ballast[b] = t.ballast_stiffness * (us - g[b])
             static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
@@ -427,49 +526,51 @@ def simulate_passes(
     peak_ballast = bal_k * u[:, ds]
     peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
 
-    run = _kernel.run_serial if nb == 1 else _kernel.run_batch
-    run(
-        (
-            mb,
-            cb,
-            keff,
-            lay.node_w,
-            lay.sleeper,
-            lay.sleeper_node,
-            pad_k,
-            pad_c,
-            bal_k,
-            bal_c,
-            t0.element_length,
-            t0.elements_per_bay,
-            t0.sleeper_spacing,
-            t0.n_sleepers,
-            np.ascontiguousarray(sys_.mass),
-            np.ascontiguousarray(sys_.damping),
-            kv_inv,
-            sys_.force.astype(float),
-            sys_.wheel_dofs.astype(np.int64),
-            cluster,
-            n_clusters,
-            margin,
-            x_axle,
-            z_axle,
-            law.code,
-            float(law.parameter),
-            consts,
-            u,
-            v,
-            a,
-            q,
-            qd,
-            qdd,
-            out_force,
-            out_rail,
-            out_wheel,
-            peak_ballast,
-            peak_total,
-        )
+    n_chunks, width = _chunking(nb)
+    pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    mesh = _kernel.Mesh(
+        lay.node_w.astype(np.int64),
+        lay.sleeper.astype(np.int64),
+        lay.sleeper_node.astype(np.int64),
+        float(t0.element_length),
+        int(t0.elements_per_bay),
+        int(t0.n_sleepers),
+        int(margin),
     )
+    drive = _kernel.Drive(
+        np.ascontiguousarray(x_axle),
+        consts,
+        int(law.code),
+        float(law.parameter),
+        np.ascontiguousarray(sys_.mass, dtype=float),
+        np.ascontiguousarray(sys_.damping, dtype=float),
+        np.ascontiguousarray(kv_inv),
+        sys_.force.astype(float),
+        sys_.wheel_dofs.astype(np.int64),
+        cluster,
+        n_clusters,
+    )
+    rows = _kernel.Rows(
+        pack(_mass_diagonals(mb)),
+        pack(keff),
+        pack(pad_k),
+        pack(pad_c),
+        pack(bal_k),
+        pack(bal_c),
+        pack(z_axle),
+        pack(sag),
+        pack(u),
+        pack(v),
+        pack(a),
+        pack(q),
+        pack(qd),
+        pack(qdd),
+    )
+    peaks = _kernel.Peaks(pack(out_force), pack(out_rail), pack(out_wheel), pack(peak_ballast), pack(peak_total))
+    _kernel.run(mesh, drive, rows, peaks, width)
+    unpack = functools.partial(_unpack, n_rows=nb)
+    out_force, out_rail, out_wheel = unpack(peaks.force), unpack(peaks.rail), unpack(peaks.wheel)
+    peak_ballast, peak_total, z_axle = unpack(peaks.ballast), unpack(peaks.total), unpack(rows.z)
 
     peak_ballast += static_ballast
     peak_total += static_total
@@ -493,6 +594,26 @@ def simulate_passes(
                 dt=dt,
             )
         )
+    if auto and dt > DT_REFERENCE_S:
+        # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
+        lost = [b for b in range(nb) if np.any(out_force[b, 1:] <= 0.0)]
+        if lost:
+            again = simulate_passes(
+                [tracks[b] for b in lost],
+                vehicle,
+                speed,
+                [irr_rows[b] for b in lost],
+                dt=DT_REFERENCE_S,
+                contact=contact,
+                start=start,
+                x_start=x_start,
+                x_end=x_end,
+                window_bays=window_bays,
+                sleeper_force_measure=sleeper_force_measure,
+                support_settlement=None if support_settlement is None else settlement_rows[lost],
+            )
+            for b, res in zip(lost, again):
+                results[b] = res
     return results
 
 

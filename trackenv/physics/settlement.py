@@ -669,21 +669,8 @@ class SettlementState:
             )
         if dn == 0.0:
             return self
-        u = np.array(self.settlement)
-        c = np.array(self.cycles)
-        loaded = f > 0.0
-        if loaded.any():
-            assert self.rate_factor is not None  # set in __post_init__
-            r = self.rate_factor[loaded]
-            u_l = u[loaded]
-            n_eq = np.asarray(law.equivalent_cycles(f[loaded], u_l / r), dtype=np.float64)
-            fin = np.isfinite(n_eq)
-            u_new = u_l.copy()
-            u_new[fin] = np.maximum(
-                r[fin] * np.asarray(law.settlement(f[loaded][fin], n_eq[fin] + dn)), u_l[fin]
-            )
-            u[loaded] = u_new
-            c[loaded] = np.where(fin, n_eq + dn, np.inf)
+        assert self.rate_factor is not None  # set in __post_init__
+        u, c = advance_settlement(law, self.settlement, self.cycles, self.rate_factor, f, dn)
         return SettlementState(settlement=u, cycles=c, rate_factor=self.rate_factor)
 
     def restarted(self, mask: ArrayLike, rate_factor: ArrayLike | None = None) -> SettlementState:
@@ -709,3 +696,120 @@ class SettlementState:
                 raise ValueError(f"rate_factor must have shape {(self.n,)} or be a scalar, got {new_r.shape}")
             r = np.where(m, np.broadcast_to(new_r, (self.n,)), r)
         return SettlementState(settlement=u, cycles=c, rate_factor=r)
+
+
+# ====================================================================== batched steps (functions of arrays)
+def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
+    """Solve a x = b keeping the diagonals of ``a`` within ``band`` (LAPACK's banded LU; the rest is negligible)."""
+    import scipy.linalg
+
+    n = a.shape[0]
+    band = min(band, n - 1)
+    ab = np.zeros((2 * band + 1, n))
+    for k in range(-band, band + 1):
+        ab[band - k, max(k, 0) : n + min(k, 0)] = np.diagonal(a, k)
+    return scipy.linalg.solve_banded((band, band), ab, b)
+
+
+def advance_settlement(
+    law: SettlementLaw,
+    settlement: np.ndarray,
+    cycles: np.ndarray,
+    rate_factor: np.ndarray,
+    force: np.ndarray,
+    delta_cycles: ArrayLike,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Curve shifting (see :meth:`SettlementState.advance`) on arrays of any shape, element by element.
+
+    ``settlement`` [m], ``cycles``, ``rate_factor`` and ``force`` [N] have one shape, e.g. (batch, sleepers)
+    with the batch axis leading (many envs, many sections); ``delta_cycles`` broadcasts against them (a scalar,
+    or (batch, 1)). Returns the new (settlement, cycles); nothing changes where force or ΔN is 0. No
+    validation: the caller owns the arrays (the state object validates once). Each element's result depends on
+    that element only, so a row gives the same numbers in any batch.
+    """
+    u = np.array(settlement, dtype=np.float64)
+    c = np.array(cycles, dtype=np.float64)
+    f = np.broadcast_to(force, u.shape)
+    dn = np.broadcast_to(np.asarray(delta_cycles, dtype=np.float64), u.shape)
+    loaded = (f > 0.0) & (dn > 0.0)
+    if loaded.any():
+        r = np.broadcast_to(rate_factor, u.shape)[loaded]
+        u_l, f_l, dn_l = u[loaded], f[loaded], dn[loaded]
+        n_eq = np.asarray(law.equivalent_cycles(f_l, u_l / r), dtype=np.float64)
+        fin = np.isfinite(n_eq)
+        u_new = u_l.copy()
+        u_new[fin] = np.maximum(r[fin] * np.asarray(law.settlement(f_l[fin], n_eq[fin] + dn_l[fin])), u_l[fin])
+        u[loaded] = u_new
+        c[loaded] = np.where(fin, n_eq + dn_l, np.inf)
+    return u, c
+
+
+def implicit_settlement_step(
+    law: SettlementLaw,
+    settlement: np.ndarray,
+    cycles: np.ndarray,
+    rate_factor: np.ndarray,
+    force: np.ndarray,
+    influence: np.ndarray,
+    delta_cycles: ArrayLike,
+    *,
+    band: int = 10,
+    tol: float = 1e-9,
+    max_iter: int = 30,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One settlement step with the static load redistribution taken implicitly (backward Euler), batched.
+
+    As a sleeper settles its support force drops and its neighbours take the load: ``influence`` S[i, j] [N/m]
+    is the change of sleeper i's support force per metre of settlement of sleeper j (negative diagonal). Over a
+    large ΔN taken explicitly this feedback overshoots and oscillates, so the increment Δ solves
+
+        Δ = u(F0 + S·Δ, N + ΔN) − u_now,
+
+    with F0 = ``force``, the peak forces of the pass at the start of the step (their dynamic part explicit).
+    Newton's method, row by row (a converged row stops, so a row's numbers do not depend on its batch), on the
+    Jacobian I − diag(∂u/∂F)·S with ∂u/∂F by a 1 mN forward difference and S kept within ``band`` diagonals
+    (a support's influence is negligible beyond ~6 m).
+
+    Shapes: ``settlement``, ``cycles``, ``rate_factor``, ``force`` (batch, n); ``influence`` (batch, n, n) or
+    (n, n); ``delta_cycles`` a scalar or (batch,). Returns the new (settlement, cycles), each (batch, n).
+    """
+    u_now = np.asarray(settlement, dtype=np.float64)
+    nb, n = u_now.shape
+    c_now = np.asarray(cycles, dtype=np.float64)
+    rate = np.asarray(rate_factor, dtype=np.float64)
+    f0 = np.asarray(force, dtype=np.float64)
+    s_mat = np.broadcast_to(np.asarray(influence, dtype=np.float64), (nb, n, n))
+    dn = np.broadcast_to(np.asarray(delta_cycles, dtype=np.float64).reshape(-1, 1), (nb, 1))
+    eye = np.eye(n)
+    df = 1e-3  # [N] finite-difference step of the force
+    delta = np.zeros_like(u_now)
+    active = np.ones(nb, dtype=bool)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        k = idx.size
+        s_a = s_mat[idx]
+        f = np.maximum(f0[idx] + np.matmul(s_a, delta[idx][..., None])[..., 0], 0.0)
+        # the forces and their forward differences in one call of the law
+        u2, _ = advance_settlement(
+            law,
+            np.concatenate([u_now[idx]] * 2),
+            np.concatenate([c_now[idx]] * 2),
+            np.concatenate([rate[idx]] * 2),
+            np.concatenate([f, f + df]),
+            np.concatenate([dn[idx]] * 2),
+        )
+        u_f, u_fd = u2[:k], u2[k:]
+        r = delta[idx] - (u_f - u_now[idx])
+        done = np.max(np.abs(r), axis=1) < tol
+        active[idx[done]] = False
+        go = ~done
+        if not go.any():
+            break
+        du_df = (u_fd[go] - u_f[go]) / df
+        jac = eye - du_df[:, :, None] * s_a[go] * (f[go] > 0)[:, :, None]
+        step = np.stack([_solve_near_banded(j_, r_, band) for j_, r_ in zip(jac, r[go])])
+        delta[idx[go]] = np.maximum(delta[idx[go]] - step, 0.0)
+    f = np.maximum(f0 + np.matmul(s_mat, delta[..., None])[..., 0], 0.0)
+    return advance_settlement(law, u_now, c_now, rate, f, dn)

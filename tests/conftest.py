@@ -1,0 +1,22 @@
+"""Shared test fixtures."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="session", autouse=True)
+def warm_dynamics_kernel():
+    """Load (or, on a fresh machine, compile) the dynamics kernel once per session, before the first test, so
+    its compile cost lands here once instead of inside whichever test happens to run first. Each batch width is
+    its own compiled entry (see trackenv.physics._kernel), so a batch of one and a batch of two (one row per
+    thread) are warmed; wider batches load their entries from numba's on-disk cache when first used."""
+    import numpy as np
+
+    from trackenv.physics.dynamics import simulate_passes
+    from trackenv.physics.track import Track
+    from trackenv.physics.vehicle import Wheelset
+
+    track, wheel = Track.seed(), Wheelset.seed()
+    for rows in (1, 2):
+        simulate_passes(track, wheel, 20.0, np.zeros((rows, track.n_sleepers)), x_start=10.0, x_end=10.5)
