@@ -90,7 +90,7 @@ class LineBatch:
         self.d1 = np.zeros((G, n))
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
-        self.sd_after_tamping = np.full(G, np.nan)  # true SD right after this step's tamping [m]
+        self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -182,7 +182,7 @@ class LineBatch:
         count = rng.integers(0, c.initial_max_tampings + 1, size=S)
         self.tamp_noise[:, r] = rng.standard_normal((H + 1, S, n))
         self.meas_noise[:, r] = rng.standard_normal((H + 1, S, 2))
-        self.sd_after_tamping[r] = np.nan
+        self.sd_after_tamping[r] = 0.0
         self.base_rate[r] = rate
         self.register[r] = reg
         self.wet_onset[r] = np.where(wet, onset, -1)
@@ -314,7 +314,7 @@ class LineBatch:
             c.section_tamping_cost * tamped.sum(1),
             c.section_renewal_cost * renew.reshape(self.n_lines, self.S).sum(1),
         ])
-        self.sd_after_tamping[:] = np.nan
+        self.sd_after_tamping[:] = 0.0
         if t.any():
             z = self.level[t]
             f = _lsq_line(z)
@@ -322,7 +322,7 @@ class LineBatch:
             seg_step = np.repeat(self.step, self.S)[t]
             e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), np.flatnonzero(t)]
             self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
-            self.sd_after_tamping[:] = np.nan
+            self.sd_after_tamping[:] = 0.0
             self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
             self.u[t] = 0.0
             self.cyc[t] = 0.0
