@@ -241,7 +241,8 @@ def _shifted(plan: np.ndarray, delta: int, gap: int) -> np.ndarray:
 
 
 def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray,
-                    thresholds_mm: tuple[float, ...] = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0), rounds: int = 2) -> dict:
+                    thresholds_mm: tuple[float, ...] = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0), rounds: int = 2,
+                    extra_schedules: tuple = ()) -> dict:
     """A per-section schedule for one episode found with its future known: an upper bound on the best cost.
 
     The search: (1) candidate schedules per section from per-section thresholds on the *true* SD
@@ -255,7 +256,8 @@ def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray,
     from trackenv.envs.line import TampingLine
 
     gap = config.min_steps_between_tampings
-    cands: list = [base_schedule.astype(bool), np.zeros_like(base_schedule, dtype=bool), *thresholds_mm]
+    cands: list = [base_schedule.astype(bool), np.zeros_like(base_schedule, dtype=bool),
+                   *(np.asarray(x, dtype=bool) for x in extra_schedules), *thresholds_mm]
     cost, sched = _run_schedules(config, seed, cands)
     choice, best = _greedy(np.zeros(config.n_sections, dtype=int), cost, sched, config)
     record = [best]

@@ -23,21 +23,29 @@ def main(argv=None) -> list:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--thresholds", type=float, nargs="+", default=[1.0, 1.75, 2.5, 3.5])
+    ap.add_argument("--extra-rules", nargs="*", default=[], help="other tuned rules whose schedules are candidates")
     ap.add_argument("--out", default="results/line_hindsight.json")
     args = ap.parse_args(argv)
     cfg = scenario(args.scenario)
-    pol = _bound(LINE_HEURISTICS[args.rule](**line_tuned_params().get(args.rule, {})), cfg)
     t0, out = time.time(), []
-    for seed in args.seeds:
+
+    def rollout(name, seed):
+        pol = _bound(LINE_HEURISTICS[name](**line_tuned_params().get(name, {})), cfg)
         env = TampingLine(cfg)
         obs, _ = env.reset(seed=seed)
         plan = np.zeros((cfg.horizon_steps, cfg.n_sections), dtype=bool)
-        rule_cost = 0.0
+        cost = 0.0
         for t in range(cfg.horizon_steps):
             obs, r, _, _, info = env.step(pol.predict(obs)[0])
             plan[t] = info["tamped_sections"]
-            rule_cost -= r
-        h = hindsight_bound(cfg, seed, plan, thresholds_mm=tuple(args.thresholds), rounds=args.rounds)
+            cost -= r
+        return plan, cost
+
+    for seed in args.seeds:
+        plan, rule_cost = rollout(args.rule, seed)
+        extra = tuple(rollout(n, seed)[0] for n in args.extra_rules)
+        h = hindsight_bound(cfg, seed, plan, thresholds_mm=tuple(args.thresholds), rounds=args.rounds,
+                            extra_schedules=extra)
         out.append({"seed": seed, "rule": args.rule, "rule_cost": rule_cost, "hindsight": h["cost"],
                     "replayed": h["replayed_cost"], "search": h["search"],
                     "tampings_rule": int(plan.sum()), "tampings_hindsight": int(h["schedule"].sum())})
