@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..physics._validation import check_scalar
+from ..physics._checks import check_scalar
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel

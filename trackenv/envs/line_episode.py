@@ -409,6 +409,7 @@ class LineBatch:
             "tamped_sections": tamped.copy(),
             "clipped": bool(clipped),
             "section_sd_m": self.sd[r].copy(),
+            "section_sd_mm": self.sd[r] * 1e3,
             "section_peak_m": self.peak[r].copy(),
             "section_class": cls,
             "section_sd_after_tamping_m": self.sd_after_tamping[r].copy(),
