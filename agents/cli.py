@@ -1,4 +1,4 @@
-"""The ``trackenv`` command: validate, paper, bench, evaluate, train.
+"""The ``trackenv`` command: validate, paper, bench, evaluate, train, calibrate.
 
 Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
 to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
@@ -104,7 +104,34 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate_line(args: argparse.Namespace) -> int:
+    from .line_compare import format_line_table, line_comparison, parse_seeds
+
+    t0 = time.perf_counter()
+    seeds = parse_seeds(args.seeds) if args.seeds else None
+    result = line_comparison(args.env, seeds=seeds, n_train=args.n_train or 2, retune=args.retune,
+                             progress=not args.json, out_dir=args.out or "results/line_compare")
+    result["wall_time_s"] = time.perf_counter() - t0
+    _emit(args, result, format_line_table(result))
+    return 0
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from trackenv.line_calibration import format_calibration
+
+    from .line_compare import parse_seeds, run_calibration
+
+    overrides = {"horizon_years": args.horizon_years} if args.horizon_years else {}
+    result = run_calibration(args.scenario, parse_seeds(args.seeds), args.threshold,
+                             out_dir=args.out or "results/line_calibration", progress=not args.json, **overrides)
+    result.pop("trajectories", None)
+    _emit(args, result, format_calibration(result) + f"\nplot: {result['plot']}")
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.env is not None and args.env != "trackenv/Tamping-v0":
+        return cmd_evaluate_line(args)
     if args.quick and args.policy == "ppo":
         raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
     _existing(args.model, "--model")
@@ -279,7 +306,19 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--ray", action="store_true", help="run the batches as tasks on a local Ray (trackenv[ray])")
     sp.add_argument("--ray-address", default=None, metavar="ADDR",
                     help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
+    sp.add_argument("--env", default=None, metavar="ID",
+                    help="a TampingLine id (trackenv/TampingLine-v0, ...Small-v0, ...Hard-v0): score the line rules")
+    sp.add_argument("--seeds", default=None, metavar="A:B",
+                    help="held-out episodes of the line: A:B (seeds A..B-1) or a,b,c")
     sp.set_defaults(func=cmd_evaluate)
+
+    sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")
+    out(sp, "results/line_calibration")
+    sp.add_argument("--scenario", default="default", choices=("small", "default", "hard"), help="line scenario")
+    sp.add_argument("--seeds", default="2000:2002", metavar="A:B", help="episodes: A:B or a,b,c")
+    sp.add_argument("--threshold", type=float, default=2.0, help="SD [mm] at which the rule tamps a section")
+    sp.add_argument("--horizon-years", type=float, default=None, help="shorter or longer episodes")
+    sp.set_defaults(func=cmd_calibrate)
 
     hp = _hyperparam_defaults()
     sp = command("train", "train a PPO agent (stable-baselines3), hyper-parameters from agents/hyperparams/ppo.yml")

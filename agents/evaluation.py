@@ -30,8 +30,11 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from trackenv.envs import line_episode
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.episode import COST_KEYS
+from trackenv.envs.line import TampingLineVectorEnv
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.vector import TampingVectorEnv
 
 __all__ = [
@@ -114,6 +117,25 @@ class EvaluationResult:
 
 
 
+def _coerce(config: Any) -> TampingEnvConfig | LineConfig:
+    """A Tamping config, or a TampingLine one (a LineConfig or a scenario name such as "default")."""
+    if isinstance(config, (LineConfig, str)):
+        return LineConfig.coerce(config)
+    return TampingEnvConfig.coerce(config)
+
+
+def _cost_keys(cfg: Any) -> tuple[str, ...]:
+    return line_episode.COST_KEYS if isinstance(cfg, LineConfig) else COST_KEYS
+
+
+def _vector_env(n: int, cfg: Any, action_type: str) -> Any:
+    """The native vector env of ``cfg``'s problem. Tamping: NEXT_STEP autoreset, so no episode is started past
+    the horizon and the last step's info stays in place; the line env's last info also stays in place."""
+    if isinstance(cfg, LineConfig):
+        return TampingLineVectorEnv(n, cfg)
+    return TampingVectorEnv(n, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+
+
 def _bound(policy: Any, config: TampingEnvConfig) -> Any:
     bind = getattr(policy, "bind", None)
     return bind(config) if callable(bind) else policy
@@ -136,7 +158,8 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         reset = getattr(policies[p], "reset", None)
         if callable(reset):
             reset()
-    parts = {k: np.zeros(n) for k in COST_KEYS}
+    keys = _cost_keys(cfg)
+    parts = {k: np.zeros(n) for k in keys}
     rewards = np.zeros(n)
     tampings = np.zeros(n)
     exceed = np.zeros(n)
@@ -155,7 +178,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             actions[idx] = np.asarray(a).reshape(actions[idx].shape)
         obs, r, _, trunc, info = env.step(actions)
         rewards += r
-        for k in COST_KEYS:
+        for k in keys:
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
         exceed += info["immediate_action_exceedances"]
@@ -180,7 +203,7 @@ def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], pol
     (NEXT_STEP autoreset: no episode is started past the horizon); per-episode totals as arrays in slot order
     (``parts`` by cost key, ``rewards``, ``tampings``, ``exceed``, ``final_sd``). The unit of work that
     :func:`evaluate_many` runs in turn, or an executor runs in parallel."""
-    env = TampingVectorEnv(len(slots), config, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+    env = _vector_env(len(slots), config, action_type)
     out = _run_chunk(env, list(slots), policies, action_type)
     out.pop("traces")
     return out
@@ -194,7 +217,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     Results are independent of the batching: each env draws only from its own seed's generator. ``executor``:
     runs the batches (:func:`run_episodes`) through its ``map`` (e.g. on Ray workers); None: here, in turn.
     """
-    cfg = TampingEnvConfig.coerce(config)
+    cfg = _coerce(config)
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must not be empty")
@@ -212,8 +235,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     try:
         if executor is None:
             for chunk in chunks:
-                env = TampingVectorEnv(len(chunk), cfg, action_type=action_type,
-                                       autoreset_mode=AutoresetMode.NEXT_STEP)
+                env = _vector_env(len(chunk), cfg, action_type)
                 outs.append(_run_chunk(env, chunk, bound, action_type, pbar=pbar))
         else:
             for out in executor.map(functools.partial(run_episodes, cfg, policies=bound, action_type=action_type),
@@ -230,7 +252,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
 
     pol_of = np.array([p for p, _ in slots])
     seed_arr = np.array([s for _, s in slots])
-    parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in COST_KEYS}
+    parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in _cost_keys(cfg)}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     results = []
     for p, pol in enumerate(bound):
@@ -284,7 +306,7 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
     grid = list(policy_cls.param_grid() if grid is None else grid)
     if not grid:
         raise ValueError("empty parameter grid")
-    return tune_many([policy_cls], TampingEnvConfig.coerce(config), list(train_seeds), batch_size, progress,
+    return tune_many([policy_cls], _coerce(config), list(train_seeds), batch_size, progress,
                      grids=[grid], executor=executor)[0]
 
 
@@ -323,8 +345,11 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
     tables by policy name.
     """
     from .heuristics import HEURISTICS
+    from .line_heuristics import LINE_HEURISTICS
 
-    cfg = TampingEnvConfig.coerce(config)
+    cfg = _coerce(config)
+    if isinstance(cfg, LineConfig):
+        HEURISTICS = LINE_HEURISTICS  # noqa: N806
     items = list(policies.items()) if isinstance(policies, Mapping) else [(None, p) for p in policies]
     items = [(label, HEURISTICS[p] if isinstance(p, str) else p) for label, p in items]
     tunable = [i for i, (_, p) in enumerate(items) if isinstance(p, type) and hasattr(p, "param_grid")]

@@ -18,7 +18,8 @@ from trackenv.envs import TampingEnv, TampingEnvConfig
 from trackenv.physics.tamping import TampingModel
 
 IDS = ("trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0")
-ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/")))  # the learners' wrapped ids too
+# the Tamping family with the learners' wrapped ids (the TampingLine ids are checked in test_line_env.py)
+ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping") and "TampingLine" not in i))
 TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0}  # 51 sleepers, 8 steps
 COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
 

@@ -8,6 +8,8 @@ Ids: ``trackenv/Tamping-v0`` (MultiBinary actions, the full Dict observation), `
 (``Discrete(n_sections + 1)`` ranked actions, section-level Dict observation) and
 ``trackenv/TampingRankedFlat-v0`` (the same with one flat ``Box`` observation: RLlib's and CleanRL's default
 encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``).
+The line problem (:mod:`trackenv.envs.line`): ``trackenv/TampingLine-v0`` (the default line),
+``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``.
 """
 
 from gymnasium.envs.registration import register, registry
@@ -30,3 +32,16 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
 __all__ = ["TampingEnv", "TampingEnvConfig"]
+
+for _id, _scenario in (
+    ("trackenv/TampingLine-v0", "default"),
+    ("trackenv/TampingLineSmall-v0", "small"),
+    ("trackenv/TampingLineHard-v0", "hard"),
+):
+    if _id not in registry:
+        register(
+            id=_id,
+            entry_point="trackenv.envs.line:TampingLine",
+            kwargs={"scenario": _scenario},
+            vector_entry_point="trackenv.envs.line:TampingLineVectorEnv",
+        )

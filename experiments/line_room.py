@@ -1,0 +1,105 @@
+"""Room to learn on TampingLine: tuned rules vs the best uniform periodic rule vs a per-section hindsight bound.
+
+1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
+2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
+3. For ``--n-hindsight`` of those episodes, the per-section hindsight search from the best rule's schedule
+   (:func:`trackenv_agents.line_heuristics.hindsight_bound`).
+
+Writes results/line_room.json (and the tuned parameters to agents/line_tuned_heuristics.json with
+``--save-tuned``); progress goes to stdout (run it with a log file in the background).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation import bootstrap_ci, evaluate_many, paired_difference, tune_many
+from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic, hindsight_bound
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenario", default="default")
+    ap.add_argument("--n-train", type=int, default=4)
+    ap.add_argument("--n-test", type=int, default=100)
+    ap.add_argument("--test-start", type=int, default=0, help="first held-out seed")
+    ap.add_argument("--n-hindsight", type=int, default=10)
+    ap.add_argument("--batch-size", type=int, default=24)
+    ap.add_argument("--rounds", type=int, default=2, help="local-search rounds of the hindsight search")
+    ap.add_argument("--thresholds", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0, 4.0])
+    ap.add_argument("--save-tuned", action="store_true")
+    ap.add_argument("--use-saved", action="store_true", help="skip tuning: the saved tuned parameters")
+    ap.add_argument("--out", default="results/line_room.json")
+    args = ap.parse_args(argv)
+    cfg = scenario(args.scenario)
+    t0 = time.time()
+    classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance"]
+    train = list(range(1000, 1000 + args.n_train))
+    if args.use_saved:
+        saved = json.loads(LINE_TUNED_FILE.read_text())
+        best, train = saved["params"], saved["train_seeds"]
+    else:
+        tuned = tune_many(classes, cfg, train, args.batch_size, progress=True)
+        best = {classes[i].name: t["best_params"] for i, t in tuned.items()}
+    print("tuned", json.dumps(best), f"{time.time() - t0:.0f}s", flush=True)
+    if args.save_tuned and not args.use_saved:
+        LINE_TUNED_FILE.write_text(json.dumps({"scenario": args.scenario, "train_seeds": train, "params": best},
+                                              indent=1) + "\n")
+    pols = [LINE_HEURISTICS[n](**p) for n, p in best.items()]
+    test = list(range(args.test_start, args.test_start + args.n_test))
+    res = evaluate_many(pols, cfg, test, batch_size=args.batch_size, progress=True, desc="test")
+    by = {r.policy: r for r in res}
+    uniform = by[UniformPeriodic.name]
+    aware = min((r for r in res if r.policy != UniformPeriodic.name), key=lambda r: r.cost.mean())
+    best_rule = min(res, key=lambda r: r.cost.mean())
+    summ = [r.summary() for r in sorted(res, key=lambda r: r.cost.mean())]
+    for s in summ:
+        print(f"{s['policy']:24s} {s['mean_cost']:8.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]", flush=True)
+    d1 = paired_difference(aware, uniform)
+    d1["relative"] = d1["mean_difference"] / float(uniform.cost.mean())
+    print("state-aware vs uniform", json.dumps(d1), f"{time.time() - t0:.0f}s", flush=True)
+    out = {"scenario": args.scenario, "train_seeds": train, "test_seeds": test, "tuned": best,
+           "results": summ, "aware_vs_uniform": d1,
+           "episode_costs": {r.policy: r.cost.tolist() for r in res},
+           "best_rule": best_rule.policy, "best_aware": aware.policy}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1, default=float))
+    # hindsight on the first episodes, from the best rule's own schedule
+    from trackenv.envs.line import TampingLine
+    from trackenv_agents.evaluation import _bound
+
+    hs = []
+    pol = _bound(LINE_HEURISTICS[best_rule.policy](**best[best_rule.policy]), cfg)
+    for seed in test[: args.n_hindsight]:
+        env = TampingLine(cfg)
+        obs, _ = env.reset(seed=seed)
+        plan = np.zeros((cfg.horizon_steps, cfg.n_sections), dtype=bool)
+        for t in range(cfg.horizon_steps):
+            a, _ = pol.predict(obs)
+            obs, _, _, _, info = env.step(a)
+            plan[t] = info["tamped_sections"]
+        h = hindsight_bound(cfg, seed, plan, thresholds_mm=args.thresholds, rounds=args.rounds)
+        rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
+        hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
+                   "search": h["search"]})
+        print("hindsight", json.dumps(hs[-1]), f"{time.time() - t0:.0f}s", flush=True)
+        gap = np.array([(x["rule"] - x["hindsight"]) / x["rule"] for x in hs])
+        diff = np.array([x["hindsight"] - x["rule"] for x in hs])
+        lo, hi = bootstrap_ci(diff)
+        out["hindsight"] = {"episodes": hs, "best_rule": best_rule.policy, "mean_relative_gap": float(gap.mean()),
+                            "mean_difference": float(diff.mean()), "ci_low": lo, "ci_high": hi,
+                            "relative_ci": [lo / float(np.mean([x["rule"] for x in hs])),
+                                            hi / float(np.mean([x["rule"] for x in hs]))]}
+        Path(args.out).write_text(json.dumps(out, indent=1, default=float))
+    print("done", f"{time.time() - t0:.0f}s", flush=True)
+    return out
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""Line heuristics: valid actions within capacity, their calendars, the harness on the line, the hindsight search."""
+
+import numpy as np
+import pytest
+
+from trackenv.envs.line import TampingLine
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation import _bound, evaluate_many
+from trackenv_agents.line_compare import parse_seeds, scenario_of
+from trackenv_agents.line_heuristics import (
+    LINE_HEURISTICS,
+    RegisterPeriodic,
+    UniformPeriodic,
+    hindsight_bound,
+)
+
+CFG = scenario("small", horizon_years=1.0)
+
+
+def _obs(n_envs=3, S=6, seed=0):
+    rng = np.random.default_rng(seed)
+    return {"section_sd": rng.uniform(0.5, 4.0, (n_envs, S)).astype(np.float32),
+            "register": rng.integers(0, 3, (n_envs, S)).astype(np.float32),
+            "time": np.full((n_envs, 1), 0.25, np.float32),
+            "years_since_tamping": np.ones((n_envs, S), np.float32)}
+
+
+@pytest.mark.parametrize("name", sorted(LINE_HEURISTICS))
+def test_actions_are_binary_and_within_capacity(name):
+    cls = LINE_HEURISTICS[name]
+    for params in cls.param_grid():
+        pol = _bound(cls(**params), CFG)
+        a, state = pol.predict(_obs())
+        assert a.shape == (3, 6) and set(np.unique(a)) <= {0, 1} and state is None
+        assert (a.sum(axis=1) <= CFG.capacity).all()
+        single, _ = pol.predict({k: v[0] for k, v in _obs().items()})
+        assert single.shape == (6,)
+
+
+def test_uniform_periodic_covers_the_line_once_per_interval():
+    cfg = scenario("small", horizon_years=4.0)
+    pol = _bound(UniformPeriodic(interval_years=2.0), cfg)
+    obs = _obs(1)
+    counts = np.zeros(6, int)
+    for t in range(cfg.horizon_steps):
+        obs["time"][:] = t / cfg.horizon_steps
+        counts += pol.predict(obs)[0][0]
+    assert (counts == 2).all()
+
+
+def test_register_periodic_tamps_zones_more_often():
+    cfg = scenario("small", horizon_years=6.0)
+    pol = _bound(RegisterPeriodic(plain_years=6.0, zone_years=1.5), cfg)
+    obs = _obs(1)
+    obs["register"][:] = [[0, 1, 0, 2, 0, 0]]
+    counts = np.zeros(6, int)
+    for t in range(cfg.horizon_steps):
+        obs["time"][:] = t / cfg.horizon_steps
+        counts += pol.predict(obs)[0][0]
+    assert counts[[1, 3]].min() > counts[[0, 2, 4, 5]].max()
+
+
+def test_harness_scores_line_heuristics_with_cost_parts():
+    cfg = scenario("small", horizon_years=0.5)
+    res = evaluate_many([LINE_HEURISTICS["no-maintenance"](), UniformPeriodic(interval_years=2.0)], cfg,
+                        seeds=[0, 1], batch_size=4)
+    assert [r.policy for r in res] == ["no-maintenance", "uniform-periodic"]
+    for r in res:
+        assert np.allclose(r.cost, -r.sum_rewards)
+        assert set(r.cost_parts) >= {"possession", "speed_restriction"}
+    assert res[1].cost_parts["possession"].min() > 0
+
+
+def test_hindsight_search_is_exact_and_no_worse_than_its_start():
+    cfg = scenario("small", horizon_years=1.0)
+    plan = np.zeros((cfg.horizon_steps, 6), bool)
+    plan[0, :3] = True
+    env = TampingLine(cfg)
+    env.reset(seed=4)
+    start = -sum(env.step(plan[t].astype(np.int8))[1] for t in range(cfg.horizon_steps))
+    h = hindsight_bound(cfg, 4, plan, thresholds_mm=(1.5,), rounds=1)
+    assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9)
+    assert h["cost"] <= start + 1e-9
+    assert (h["schedule"].sum(axis=1) <= cfg.capacity).all()
+
+
+def test_cli_helpers():
+    assert parse_seeds("3:6") == [3, 4, 5] and parse_seeds("1,4") == [1, 4]
+    assert scenario_of("trackenv/TampingLineSmall-v0") == "small"
+    with pytest.raises(ValueError):
+        scenario_of("trackenv/Tamping-v0")

@@ -1,0 +1,292 @@
+"""The configuration of the TampingLine environment and its scenario suite (small, default, hard).
+
+Every default carries its source, or says **[assumption]**. Sources are those of ``PHYSICS-NOTES.md``
+(planning a line): EN 13848-5/-6 (200 m SD sections, limits), Andrade & Teixeira 2011 (J. Transp. Eng.
+137:193; lognormal rates between sections, spatially correlated), Wang & Markine 2018 (Proc. IMechE F,
+doi 10.1177/0954409717748789; transition zones need 4-8x the maintenance of open track), GB figures for
+switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 times a year), tamper output
+0.5-2.2 km per working hour (Railway Gazette), cost orders of magnitude (5-20 k€ per call-out, a few to
+~15 €/m of tamping) **[unverified]**.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from ..physics._checks import check_scalar
+from ..physics.geometry import QualityLimits
+from ..physics.settlement import LAWS, make_law
+from ..physics.tamping import TampingModel
+from ..physics.vehicle import GRAVITY, Car, Wheelset
+from .config import _as_items
+
+SLEEPER_SPACING_M = 0.6
+REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
+
+
+def _int(name: str, value, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
+        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class LineConfig:
+    """Everything that defines a TampingLine problem. SI units unless the name says otherwise; costs in k€.
+
+    **Line.** ``n_sections`` sections of ``section_length_m`` (200 m: the EN 13848-6 / Trafikverket / Network
+    Rail decision unit), each represented in the physics by a *segment* of ``segment_length_m`` of standing
+    track (UIC60 on concrete sleepers at 0.6 m, ``Track.realistic``) that carries the section's properties.
+    Why 30 m: see ``experiments/segment_error.py`` and the README (segment vs full 200 m SD growth).
+
+    **Traffic.** ``annual_mgt`` million gross tonnes a year at ``speed_kmh``; ``freight_share`` of the tonnage
+    is freight at ``freight_axle_load_t`` (22.5 t: EN 15528 line category D), the rest passenger coaches
+    (the Manchester benchmark coach of :class:`~trackenv.physics.vehicle.Car`, 11.1 t per axle). Each
+    vehicle type is one loaded wheelset (its static wheel load and unsprung mass) per pass **[assumption:
+    the car bodies' own dynamics are left out for speed; the sleeper forces come from the wheel loads]**.
+    The settlement of a step is advanced over the mix by the equivalent force of the law's force exponent p,
+    ``F_eq = (Σ_v n_v F_v^p / Σ_v n_v)^(1/p)`` per sleeper for ``Σ_v n_v`` axle passes (exact for a law
+    linear in N, Miner's rule for load spectra otherwise).
+
+    **Time.** ``steps_per_year`` planning periods (default quarters), ``horizon_years`` (truncation).
+    A recording car measures every ``measurement_interval`` steps (default 2 = twice a year, ÖBB's 2-4 a
+    year) with Gaussian noise ``sd_noise_mm`` on the SD and ``peak_noise_mm`` on the mean-to-peak
+    **[assumption: repeatability of a recording car]**.
+
+    **Heterogeneity.** Plain-track settlement-rate factor per section lognormal with log-SD ``rate_sigma``,
+    AR(1) correlated along the line with correlation length ``rate_correlation_m`` (Andrade & Teixeira
+    2011: lognormal; the figures are **[assumption]**); inside a segment per-sleeper factors with CV
+    ``sleeper_rate_cv`` correlated over ``sleeper_rate_correlation_m`` and ballast stiffness CV
+    ``ballast_stiffness_cv``. Known zones, in the register: a **transition** (probability
+    ``transition_probability`` per section; ballast ``transition_stiffness_ratio`` times stiffer from the
+    middle of the segment on, as at a bridge, plus ``transition_rate_factor`` on the soft side: the physics
+    alone gives too little, see the calibration) and a **switch or level crossing** (``switch_probability``;
+    ``switch_rate_factor`` on the segment and a stiff 3 m patch). **Hidden wet spots**: with probability
+    ``wet_spot_probability`` per section and episode a ``wet_spot_length_m`` patch starts to settle
+    ``wet_spot_rate_factor`` times faster at a step drawn uniformly in the horizon; it is in no register.
+    ``rate_scale`` multiplies all settlement (calibrated to the published SD growth, see ``trackenv
+    calibrate``). ``initial_age_years``: each section was last tamped up to this long before the start
+    (uniform), with up to ``initial_max_tampings`` tampings since renewal; its initial level is the German
+    low-disturbance PSD scaled by a factor uniform in ``initial_scale``.
+
+    **Tamping** (``tamping``: :class:`TampingModel` fields). A tamped section is lifted to the least-squares
+    line of its segment keeping ``residual_fraction`` of its old shape plus a random residual (so the SD after
+    rises with the SD before, Audley & Andrews' form), consolidation restarts, and the settlement rate grows
+    by ``damage_per_tamping`` per tamping until, at ``max_tampings_before_renewal``, the intervention is a
+    ballast renewal (rate and count reset, no memory; cost ``renewal_cost_per_m``).
+
+    **Economics (k€).** ``possession_cost`` per campaign (a step with any tamping on the line: call-out, night
+    possession; 5-20 k€ **[unverified]**), ``tamping_cost_per_m`` × section length per tamped section (10 €/m:
+    a few to ~15 €/m **[unverified]**), ``renewal_cost_per_m`` (150 €/m **[assumption]**),
+    ``geometry_cost_per_section_year`` × (SD/SD_alert)² (poor ride, faster wear of track and vehicles: 4 k€
+    per section-year at the alert SD, against ÖBB's ~35 k€ per km-year, i.e. ~7 k€ per section-year, of
+    total track cost **[assumption]**), ``speed_restriction_cost`` per section-step at or above the
+    intervention limit of the D1 mean-to-peak (a temporary speed restriction: Railtrack's ~650 TSRs cost
+    ~2 000 delay-minutes a day, ~3 min a day each; at ~75 € per delay-minute **[assumption]** that is
+    ~80 k€ a year, 20 k€ a quarter),
+    ``immediate_action_cost`` per section-step at the immediate-action limit (closure) **[assumption]**.
+    **Constraints**: ``capacity`` sections per campaign (a possession covers ``capacity`` × 200 m: one night
+    at a tamper's 0.5-2.2 km/h); ``annual_budget`` (0: none) for tamping costs per calendar year;
+    ``over_capacity``: "clip" (keep the allowed sections with the worst measured SD, documented in the env)
+    or "raise" (ValueError). ``min_steps_between_tampings``: a section tamped in the last k steps is masked.
+    ``profiles``: also observe the measured per-sleeper level of every segment.
+    """
+
+    n_sections: int = 12
+    section_length_m: float = 200.0
+    segment_length_m: float = 30.0
+    speed_kmh: float = 100.0
+    annual_mgt: float = 15.0
+    freight_share: float = 0.4
+    freight_axle_load_t: float = 22.5
+    steps_per_year: int = 4
+    horizon_years: float = 10.0
+    measurement_interval: int = 2
+    sd_noise_mm: float = 0.1
+    peak_noise_mm: float = 0.5
+    rate_sigma: float = 0.5
+    rate_correlation_m: float = 600.0
+    sleeper_rate_cv: float = 0.35
+    sleeper_rate_correlation_m: float = 3.0
+    ballast_stiffness_cv: float = 0.15
+    transition_probability: float = 0.12
+    transition_stiffness_ratio: float = 3.0
+    transition_rate_factor: float = 6.0
+    switch_probability: float = 0.08
+    switch_rate_factor: float = 4.0
+    wet_spot_probability: float = 0.1
+    wet_spot_rate_factor: float = 5.0
+    wet_spot_length_m: float = 6.0
+    rate_scale: float = 1.0
+    initial_age_years: float = 3.0
+    initial_max_tampings: int = 4
+    initial_scale: tuple = (0.4, 1.2)
+    law: str = "shenton"
+    law_params: tuple = (("K1", 0.5e-4), ("force_exponent", 1.6))
+    tamping: tuple = ()
+    possession_cost: float = 15.0
+    tamping_cost_per_m: float = 0.01
+    renewal_cost_per_m: float = 0.15
+    geometry_cost_per_section_year: float = 4.0
+    speed_restriction_cost: float = 20.0
+    immediate_action_cost: float = 50.0
+    capacity: int = 6
+    annual_budget: float = 0.0
+    over_capacity: str = "clip"
+    min_steps_between_tampings: int = 1
+    profiles: bool = False
+    limits: tuple = ()
+    dt: float = 1.8e-4
+
+    def __post_init__(self) -> None:
+        c = check_scalar
+        _int("n_sections", self.n_sections, 1, 256)
+        c("section_length_m", self.section_length_m, low=30.0, high=1000.0)
+        c("segment_length_m", self.segment_length_m, low=12.0, high=self.section_length_m)
+        c("speed_kmh", self.speed_kmh, low=5.0, high=300.0)
+        c("annual_mgt", self.annual_mgt, low=0.1, high=200.0)
+        c("freight_share", self.freight_share, low=0.0, high=1.0)
+        c("freight_axle_load_t", self.freight_axle_load_t, low=5.0, high=40.0)
+        _int("steps_per_year", self.steps_per_year, 1, 52)
+        c("horizon_years", self.horizon_years, low=1.0 / self.steps_per_year, high=100.0)
+        _int("measurement_interval", self.measurement_interval, 1, 1000)
+        c("sd_noise_mm", self.sd_noise_mm, low=0.0, high=10.0)
+        c("peak_noise_mm", self.peak_noise_mm, low=0.0, high=50.0)
+        c("rate_sigma", self.rate_sigma, low=0.0, high=3.0)
+        c("rate_correlation_m", self.rate_correlation_m, low=0.0, high=1e5)
+        c("sleeper_rate_cv", self.sleeper_rate_cv, low=0.0, high=2.0)
+        c("sleeper_rate_correlation_m", self.sleeper_rate_correlation_m, low=0.0, high=100.0)
+        c("ballast_stiffness_cv", self.ballast_stiffness_cv, low=0.0, high=1.0)
+        for name in ("transition_probability", "switch_probability", "wet_spot_probability"):
+            c(name, getattr(self, name), low=0.0, high=1.0)
+        c("transition_stiffness_ratio", self.transition_stiffness_ratio, low=0.2, high=10.0)
+        for name in ("transition_rate_factor", "switch_rate_factor", "wet_spot_rate_factor"):
+            c(name, getattr(self, name), low=0.1, high=100.0)
+        c("wet_spot_length_m", self.wet_spot_length_m, low=0.6, high=self.segment_length_m)
+        c("rate_scale", self.rate_scale, low=1e-3, high=1e3)
+        c("initial_age_years", self.initial_age_years, low=0.0, high=50.0)
+        _int("initial_max_tampings", self.initial_max_tampings, 0, 100)
+        lo_hi = tuple(float(v) for v in self.initial_scale)
+        if len(lo_hi) != 2 or not 0.0 <= lo_hi[0] <= lo_hi[1] <= 10.0:
+            raise ValueError(
+                f"initial_scale must be (low, high) with 0 <= low <= high <= 10, got {self.initial_scale!r}")
+        object.__setattr__(self, "initial_scale", lo_hi)
+        if self.law not in LAWS:
+            raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")
+        object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
+        object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
+        object.__setattr__(self, "limits", _as_items("limits", self.limits))
+        _ = self.settlement_law
+        _ = self.tamping_model
+        self.quality_limits.for_speed(self.speed)
+        for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
+                     "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
+            c(name, getattr(self, name), low=0.0, high=1e9)
+        _int("capacity", self.capacity, 1, self.n_sections)
+        if self.over_capacity not in ("clip", "raise"):
+            raise ValueError(f"over_capacity must be 'clip' or 'raise', got {self.over_capacity!r}")
+        _int("min_steps_between_tampings", self.min_steps_between_tampings, 0, 100)
+        if not isinstance(self.profiles, (bool, np.bool_)):
+            raise ValueError(f"profiles must be a bool, got {self.profiles!r}")
+        c("dt", self.dt, low=1e-6, high=2.5e-4)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def coerce(cls, config: LineConfig | dict | str | None) -> LineConfig:
+        """A config from None (defaults), a scenario name, a dict (validated) or a config."""
+        if config is None:
+            return cls()
+        if isinstance(config, str):
+            return scenario(config)
+        if isinstance(config, dict):
+            return cls.from_dict(config)
+        if not isinstance(config, cls):
+            raise ValueError(f"config must be a LineConfig, dict or scenario name, got {type(config).__name__}")
+        return config
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LineConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown LineConfig key(s) {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**d)
+
+    def replace(self, **changes) -> LineConfig:
+        return self.from_dict({**self.to_dict(), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        for k in ("law_params", "tamping", "limits"):
+            d[k] = dict(getattr(self, k))
+        d["initial_scale"] = tuple(self.initial_scale)
+        return d
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def n_sleepers(self) -> int:
+        """Sleepers per segment."""
+        return int(round(self.segment_length_m / SLEEPER_SPACING_M)) + 1
+
+    @property
+    def horizon_steps(self) -> int:
+        return int(round(self.horizon_years * self.steps_per_year))
+
+    @property
+    def speed(self) -> float:
+        return self.speed_kmh / 3.6
+
+    @property
+    def settlement_law(self):
+        return make_law(self.law, **dict(self.law_params))
+
+    @property
+    def tamping_model(self) -> TampingModel:
+        return TampingModel.from_dict(dict(self.tamping))
+
+    @property
+    def quality_limits(self) -> QualityLimits:
+        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+    @property
+    def section_tamping_cost(self) -> float:
+        return self.tamping_cost_per_m * self.section_length_m
+
+    @property
+    def section_renewal_cost(self) -> float:
+        return self.renewal_cost_per_m * self.section_length_m
+
+    def vehicles(self) -> tuple[Wheelset, Wheelset]:
+        """(passenger, freight) loaded wheelsets (static wheel load on the modelled rail)."""
+        coach = Car.manchester_coach()
+        passenger = Wheelset(mass=coach.wheelset_mass, static_load=coach.wheel_load - coach.wheelset_mass / 2 * GRAVITY)
+        wheel = self.freight_axle_load_t * 1000.0 * GRAVITY / 2
+        freight = Wheelset(mass=1400.0, static_load=wheel - 700.0 * GRAVITY)
+        return passenger, freight
+
+    def axle_passes_per_step(self) -> np.ndarray:
+        """(passenger, freight) axle passes per step."""
+        p, f = self.vehicles()
+        tonnes = self.annual_mgt * 1e6 / self.steps_per_year
+        axle_t = np.array([p.wheel_load, f.wheel_load]) * 2 / GRAVITY / 1000.0
+        share = np.array([1.0 - self.freight_share, self.freight_share])
+        return tonnes * share / axle_t
+
+
+#: The scenario suite (documented like IMP-act's levels in the TampingLine docstring and the README).
+SCENARIOS: dict[str, dict[str, Any]] = {
+    "small": {"n_sections": 6, "capacity": 3},
+    "default": {},
+    "hard": {"n_sections": 24, "capacity": 4, "wet_spot_probability": 0.25, "transition_probability": 0.2,
+             "switch_probability": 0.12, "annual_budget": 60.0},
+}
+
+
+def scenario(name: str, **overrides: Any) -> LineConfig:
+    """The named scenario's config, with ``overrides``."""
+    if name not in SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r}; known: {sorted(SCENARIOS)}")
+    return LineConfig(**{**SCENARIOS[name], **overrides})

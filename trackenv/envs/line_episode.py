@@ -1,0 +1,431 @@
+"""The state and the rules of TampingLine episodes, batched over lines: plain arrays with a leading axis of
+segments (``n_lines × n_sections`` rows), so a step is array code and one batched pass per vehicle type.
+
+Everything random in an episode is drawn at its reset from the line's own generator (track, rates, register,
+wet spots with their onset step, every tamping residual and every measurement error, indexed by step and
+section): an episode is a deterministic function of its seed and its actions, so policies meet common random
+numbers and a hindsight search can replay the future of any schedule.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from ..degradation import TrackDegradation
+from ..physics.dynamics import simulate_passes
+from ..physics.geometry import classify, d1_filter, german_psd, synthesize_profile
+from ..physics.settlement import SettlementState
+from ..physics.track import Track
+from .line_config import SLEEPER_SPACING_M, LineConfig
+
+COST_KEYS = ("possession", "tamping", "renewal", "geometry", "speed_restriction", "immediate_action")
+APPROACH_SLEEPERS = 10
+
+
+def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
+    """Standard normal fields along the last axis, Gaussian-correlated over ``corr`` samples, unit SD."""
+    n = shape[-1]
+    pad = int(3 * corr) + 2
+    z = rng.standard_normal(shape[:-1] + (n + 2 * pad,))
+    if corr > 0:
+        z = gaussian_filter1d(z, corr, axis=-1, mode="wrap")
+    z = z[..., pad : pad + n]
+    return (z - z.mean(axis=-1, keepdims=True)) / (z.std(axis=-1, keepdims=True) + 1e-12)
+
+
+def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
+    sigma = np.sqrt(np.log1p(cv * cv))
+    return np.exp(sigma * z - sigma * sigma / 2)
+
+
+def _lsq_line(z: np.ndarray) -> np.ndarray:
+    """Least-squares straight line of each row of z."""
+    n = z.shape[-1]
+    t = np.arange(n) - 0.5 * (n - 1)
+    slope = z @ t / float(t @ t)
+    return z.mean(axis=-1, keepdims=True) + slope[..., None] * t
+
+
+class LineBatch:
+    """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
+    of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched."""
+
+    def __init__(self, config: LineConfig, n_lines: int) -> None:
+        self.config = c = config
+        self.n_lines = int(n_lines)
+        S, n, H = c.n_sections, c.n_sleepers, c.horizon_steps
+        G = self.n_lines * S
+        self.law = c.settlement_law
+        self.tm = c.tamping_model
+        self.limits = c.quality_limits.for_speed(c.speed)
+        self.vehicles = c.vehicles()
+        self.passes = c.axle_passes_per_step()
+        self.p_exp = float(dict(c.law_params).get("force_exponent", 1.0))
+        self.model_tracks: list[Track | None] = [None] * G
+        self.n_extra = APPROACH_SLEEPERS
+        self.influence = np.zeros((G, n, n))
+        self.offset = np.zeros((G, n))
+        self.u = np.zeros((G, n))
+        self.cyc = np.zeros((G, n))
+        self.base_rate = np.ones((G, n))
+        self.count = np.zeros(G, dtype=np.int64)  # tampings since renewal
+        self.tampings = np.zeros(G, dtype=np.int64)  # tampings this episode
+        self.register = np.zeros(G, dtype=np.int64)
+        self.wet_onset = np.full(G, -1, dtype=np.int64)
+        self.wet_mask = np.zeros((G, n), dtype=bool)
+        self.wet_active = np.zeros(G, dtype=bool)
+        self.last_tamped = np.zeros(G)  # step of the last tamping (negative: before the episode)
+        self.tamp_noise = np.zeros((H + 1, G, n))
+        self.meas_noise = np.zeros((H + 1, G, 2))
+        self.step = np.zeros(self.n_lines, dtype=np.int64)
+        self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
+        self.measured_sd = np.zeros(G)
+        self.measured_peak = np.zeros(G)
+        self.measured_level = np.zeros((G, n))
+        self.budget_left = np.zeros(self.n_lines)
+        self.contact_force = np.zeros(G)
+        self.d1 = np.zeros((G, n))
+        self.sd = np.zeros(G)
+        self.peak = np.zeros(G)
+        self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def S(self) -> int:
+        return self.config.n_sections
+
+    def rows(self, line: int) -> slice:
+        return slice(line * self.S, (line + 1) * self.S)
+
+    @property
+    def level(self) -> np.ndarray:
+        return self.offset + self.u
+
+    def rate(self) -> np.ndarray:
+        """Current settlement-rate factor per sleeper: base (section, zone, wet spot) × ballast damage."""
+        return self.base_rate * (1.0 + self.tm.damage_per_tamping) ** self.count[:, None]
+
+    def _quality(self, rows=slice(None)) -> None:
+        self.d1[rows] = d1_filter(self.level[rows], SLEEPER_SPACING_M)
+        self.sd[rows] = self.d1[rows].std(axis=1)
+        self.peak[rows] = np.abs(self.d1[rows]).max(axis=1)
+
+    def _measure(self, lines: np.ndarray) -> None:
+        """A recording-car run on ``lines`` (bool over lines), with the pre-drawn errors of this step."""
+        c = self.config
+        seg = np.repeat(lines, self.S)
+        step = np.repeat(self.step, self.S)
+        e = self.meas_noise[np.minimum(step, c.horizon_steps), np.arange(seg.size)]
+        sd = np.maximum(self.sd + c.sd_noise_mm * 1e-3 * e[:, 0], 0.0)
+        pk = np.maximum(self.peak + c.peak_noise_mm * 1e-3 * e[:, 1], 0.0)
+        self.measured_sd = np.where(seg, sd, self.measured_sd)
+        self.measured_peak = np.where(seg, pk, self.measured_peak)
+        self.measured_level[seg] = self.level[seg]
+        self.last_measured = np.where(lines, self.step, self.last_measured)
+
+    # ------------------------------------------------------------------ reset
+    def reset_lines(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
+        """Draw new episodes for ``lines`` from their generators and run their traffic-free first pass."""
+        for b in lines:
+            self._draw(b, rngs[b])
+        rows = np.concatenate([np.arange(self.rows(b).start, self.rows(b).stop) for b in lines])
+        self._quality(rows)
+        mask = np.zeros(self.n_lines, dtype=bool)
+        mask[lines] = True
+        self._measure(mask)
+        forces = self._passes(rows)[1]
+        self.contact_force[rows] = forces
+
+    def _draw(self, b: int, rng: np.random.Generator) -> None:
+        c = self.config
+        S, n, H = c.n_sections, c.n_sleepers, c.horizon_steps
+        r = self.rows(b)
+        # section rate factors: lognormal, AR(1) along the line
+        rho = np.exp(-c.section_length_m / c.rate_correlation_m) if c.rate_correlation_m > 0 else 0.0
+        e = rng.standard_normal(S)
+        z = np.empty(S)
+        z[0] = e[0]
+        for j in range(1, S):  # the AR(1) recursion (drawn once per episode, at reset)
+            z[j] = rho * z[j - 1] + np.sqrt(1 - rho * rho) * e[j]
+        section_rate = np.exp(c.rate_sigma * z - c.rate_sigma**2 / 2)
+        # register: transition zones and switches/crossings
+        u = rng.random(S)
+        p_t, p_s = c.transition_probability, c.switch_probability
+        reg = np.where(u < p_t, 1, np.where(u < p_t + p_s, 2, 0))
+        sleeper_rate = _lognormal(_correlated_normal(rng, (S, n), c.sleeper_rate_correlation_m / SLEEPER_SPACING_M),
+                                  c.sleeper_rate_cv)
+        kfield = _lognormal(_correlated_normal(rng, (S, n), 2.0), c.ballast_stiffness_cv)
+        rate = c.rate_scale * section_rate[:, None] * sleeper_rate
+        mid = n // 2
+        soft = np.arange(n) < mid
+        rate[reg == 1] *= np.where(soft, c.transition_rate_factor, 1.0)
+        kfield[reg == 1] *= np.where(soft, 1.0, c.transition_stiffness_ratio)
+        patch = np.abs(np.arange(n) - mid) <= 2  # a stiff 3 m patch (crossing nose, level-crossing slab)
+        rate[reg == 2] *= c.switch_rate_factor
+        kfield[reg == 2] *= np.where(patch, 2.0, 1.0)
+        # hidden wet spots
+        wet = rng.random(S) < c.wet_spot_probability
+        onset = rng.integers(1, max(H, 2), size=S)
+        wl = max(int(round(c.wet_spot_length_m / SLEEPER_SPACING_M)), 1)
+        start = rng.integers(0, n - wl + 1, size=S)
+        wmask = (np.arange(n)[None, :] >= start[:, None]) & (np.arange(n)[None, :] < (start + wl)[:, None])
+        # initial state: level from the PSD, scaled; age and tampings since renewal
+        scale = rng.uniform(*c.initial_scale, size=S)
+        base = Track.realistic(c.segment_length_m)
+        x = base.sleeper_positions
+        level = np.stack([synthesize_profile(x, partial(german_psd, quality="low"), rng) for _ in range(S)])
+        level *= scale[:, None]
+        age = rng.uniform(0.0, c.initial_age_years, size=S)
+        count = rng.integers(0, c.initial_max_tampings + 1, size=S)
+        self.tamp_noise[:, r] = rng.standard_normal((H + 1, S, n))
+        self.meas_noise[:, r] = rng.standard_normal((H + 1, S, 2))
+        self.sd_after_tamping[r] = 0.0
+        self.base_rate[r] = rate
+        self.register[r] = reg
+        self.wet_onset[r] = np.where(wet, onset, -1)
+        self.wet_mask[r] = wmask
+        self.wet_active[r] = False
+        self.offset[r] = level
+        self.u[r] = 0.0
+        self.cyc[r] = 0.0
+        self.count[r] = count
+        self.tampings[r] = 0
+        self.last_tamped[r] = -np.round(age * c.steps_per_year)
+        self.step[b] = 0
+        self.budget_left[b] = c.annual_budget
+        p_vehicle = self.vehicles[0]
+        for j in range(S):  # per-segment track statics, once per episode
+            track = base.replace(ballast_stiffness=base.ballast_stiffness * kfield[j])
+            sim = TrackDegradation(track, p_vehicle, law=self.law, feedback="support",
+                                   approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
+            self.model_tracks[r.start + j] = sim.model_track
+            self.influence[r.start + j] = sim.support_influence
+        # the settlement since the last tamping: advance the fresh state over its age at the mean load
+        cycles = age * c.steps_per_year * self.passes.sum()
+        f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # static, Winkler
+        u0 = self.rate()[r] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
+        self.u[r] = u0
+        self.cyc[r] = np.broadcast_to(cycles[:, None], (S, n))
+
+    def _equivalent(self, forces: np.ndarray) -> np.ndarray:
+        """Equivalent force of the traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, ...)."""
+        w = (self.passes / self.passes.sum()).reshape((2,) + (1,) * (forces.ndim - 1))
+        return (np.sum(w * np.maximum(forces, 0.0) ** self.p_exp, axis=0)) ** (1.0 / self.p_exp)
+
+    # ------------------------------------------------------------------ physics
+    def _passes(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One batched pass per vehicle type over the segments ``rows``: the equivalent sleeper force (rows, n)
+        and the largest contact force per segment [N]."""
+        c = self.config
+        n, ne = c.n_sleepers, self.n_extra
+        lv = self.level[rows]
+        prof = np.concatenate([np.repeat(lv[:, :1], ne, 1), lv, np.repeat(lv[:, -1:], ne, 1)], axis=1)
+        tracks = [self.model_tracks[i] for i in rows]
+        forces, contact = [], np.zeros(len(rows))
+        for v in self.vehicles:
+            res = simulate_passes(tracks, v, c.speed, None, support_settlement=prof, dt=c.dt)
+            forces.append(np.stack([r.sleeper_force[ne : ne + n] for r in res]))
+            contact = np.maximum(contact, [r.contact_force.max() for r in res])
+        return self._equivalent(np.stack(forces)), contact
+
+    def _advance(self, force: np.ndarray, cycles: float) -> None:
+        """Advance all segments by ``cycles`` axle passes under the equivalent forces, with the static load
+        redistribution taken implicitly (backward Euler, as TrackDegradation's support feedback), batched:
+        Δ = u(F0 + S·Δ, N + ΔN) − u_now, solved by Newton on the (segments, n, n) systems."""
+        G, n = force.shape
+        u_now = self.u.copy()
+
+        def adv(f):
+            st = SettlementState(u_now.ravel(), self.cyc.ravel(), self.rate().ravel())
+            new = st.advance(self.law, np.maximum(f, 0.0).ravel(), cycles)
+            return np.array(new.settlement).reshape(G, n), np.array(new.cycles).reshape(G, n)
+
+        delta = np.zeros_like(u_now)
+        eye = np.eye(n)
+        df = 1e-3
+        for _ in range(30):
+            f = np.maximum(force + np.einsum("gij,gj->gi", self.influence, delta), 0.0)
+            u_f, _ = adv(f)
+            res = delta - (u_f - u_now)
+            if np.max(np.abs(res)) < 1e-9:
+                break
+            du_df = (adv(f + df)[0] - u_f) / df
+            jac = eye - du_df[:, :, None] * self.influence * (f > 0)[:, :, None]
+            delta = np.maximum(delta - np.linalg.solve(jac, res[..., None])[..., 0], 0.0)
+        f = np.maximum(force + np.einsum("gij,gj->gi", self.influence, delta), 0.0)
+        self.u, self.cyc = adv(f)
+
+    # ------------------------------------------------------------------ a step
+    def allowed(self) -> np.ndarray:
+        """(n_lines, S) sections that may be tamped now (not within min_steps_between_tampings)."""
+        seg_step = np.repeat(self.step, self.S)
+        ok = (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
+        return ok.reshape(self.n_lines, self.S)
+
+    def campaign_cost(self, want: np.ndarray) -> np.ndarray:
+        """(n_lines,) tamping + possession + renewal cost of tamping ``want`` (n_lines, S)."""
+        c = self.config
+        renew = (self.count >= self.tm.max_tampings_before_renewal).reshape(self.n_lines, self.S) & bool(
+            self.tm.renewal_resets)
+        k = want.sum(axis=1)
+        return (k > 0) * c.possession_cost + c.section_tamping_cost * k + c.section_renewal_cost * (want & renew).sum(1)
+
+    def resolve(self, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sections actually tamped from requested ``want`` (n_lines, S) bool: masked sections dropped;
+        over capacity (or over the remaining annual budget) the allowed sections with the worst measured SD are
+        kept ("clip") or ValueError ("raise"). Returns (tamped, clipped-per-line)."""
+        c = self.config
+        want = want & self.allowed()
+        clipped = np.zeros(self.n_lines, dtype=bool)
+        over = want.sum(axis=1) > c.capacity
+        if over.any():
+            if c.over_capacity == "raise":
+                b = int(np.flatnonzero(over)[0])
+                raise ValueError(
+                    f"line {b}: {int(want[b].sum())} sections requested in one campaign, capacity is {c.capacity} "
+                    "(over_capacity='raise')")
+            want = _keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), c.capacity)
+            clipped |= over
+        if c.annual_budget > 0:
+            for _ in range(self.S):  # drop the mildest section until each line fits its remaining budget
+                too = self.campaign_cost(want) > self.budget_left + 1e-9
+                if not too.any():
+                    break
+                if c.over_capacity == "raise":
+                    b = int(np.flatnonzero(too)[0])
+                    raise ValueError(f"line {b}: campaign costs more than the remaining annual budget "
+                                     f"{self.budget_left[b]:.1f} k€ (over_capacity='raise')")
+                keep = want.sum(axis=1) - too.astype(int)
+                want = _keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), keep)
+                clipped |= too
+        return want, clipped
+
+    def apply(self, tamped: np.ndarray) -> np.ndarray:
+        """Tamp the sections ``tamped`` (n_lines, S) at the start of the step; returns the cost parts of the
+        campaign per line (possession, tamping, renewal)."""
+        c = self.config
+        t = tamped.ravel()
+        renew = t & (self.count >= self.tm.max_tampings_before_renewal) & bool(self.tm.renewal_resets)
+        parts = np.stack([
+            (tamped.sum(1) > 0) * c.possession_cost,
+            c.section_tamping_cost * tamped.sum(1),
+            c.section_renewal_cost * renew.reshape(self.n_lines, self.S).sum(1),
+        ])
+        self.sd_after_tamping[:] = 0.0
+        if t.any():
+            z = self.level[t]
+            f = _lsq_line(z)
+            beta = np.where(renew[t], 0.0, self.tm.residual_fraction)[:, None]
+            seg_step = np.repeat(self.step, self.S)[t]
+            e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), np.flatnonzero(t)]
+            self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
+            self.sd_after_tamping[:] = 0.0
+            self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
+            self.u[t] = 0.0
+            self.cyc[t] = 0.0
+            self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
+            self.tampings[t] += 1
+            self.last_tamped[t] = seg_step
+            if c.annual_budget > 0:
+                self.budget_left -= parts.sum(axis=0)
+        return parts
+
+    def traffic(self) -> None:
+        """The period's traffic on every line: wet spots that start now, the passes, the settlement."""
+        seg_step = np.repeat(self.step, self.S)
+        start = (self.wet_onset == seg_step) & ~self.wet_active
+        if start.any():
+            factor = np.where(self.wet_mask[start], self.config.wet_spot_rate_factor, 1.0)
+            self.base_rate[start] = self.base_rate[start] * factor
+            self.wet_active |= start
+        rows = np.arange(self.offset.shape[0])
+        force, contact = self._passes(rows)
+        self.contact_force = contact
+        self._advance(force, float(self.passes.sum()))
+        self.step += 1
+        self._quality()
+        c = self.config
+        year_start = self.step % c.steps_per_year == 0
+        if c.annual_budget > 0:
+            self.budget_left = np.where(year_start, c.annual_budget, self.budget_left)
+        self._measure(self.step % c.measurement_interval == 0)
+
+    def costs(self, campaign: np.ndarray) -> dict[str, np.ndarray]:
+        """The period's costs per line (k€) in named parts; reward = −Σ parts."""
+        c = self.config
+        L, S = self.n_lines, self.S
+        cls = classify(self.peak, self.limits).reshape(L, S)
+        dt_years = 1.0 / c.steps_per_year
+        geo = c.geometry_cost_per_section_year * dt_years * ((self.sd / self.limits.sd_alert_m) ** 2).reshape(L, S)
+        return {
+            "possession": campaign[0],
+            "tamping": campaign[1],
+            "renewal": campaign[2],
+            "geometry": geo.sum(1),
+            "speed_restriction": c.speed_restriction_cost * (cls == 2).sum(1),
+            "immediate_action": c.immediate_action_cost * (cls == 3).sum(1),
+        }
+
+    def section_costs(self) -> np.ndarray:
+        """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
+        the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
+        c = self.config
+        cls = classify(self.peak, self.limits)
+        geo = c.geometry_cost_per_section_year / c.steps_per_year * (self.sd / self.limits.sd_alert_m) ** 2
+        return geo + c.speed_restriction_cost * (cls == 2) + c.immediate_action_cost * (cls == 3)
+
+    # ------------------------------------------------------------------ observation and info
+    def observation(self, b: int) -> dict[str, np.ndarray]:
+        c = self.config
+        r = self.rows(b)
+        f32 = np.float32
+        years = (self.step[b] - self.last_tamped[r]) / c.steps_per_year
+        obs = {
+            "section_sd": np.clip(self.measured_sd[r] * 1e3, 0.0, 100.0).astype(f32),
+            "section_peak": np.clip(self.measured_peak[r] * 1e3, 0.0, 200.0).astype(f32),
+            "measurement_age": np.array([min((self.step[b] - self.last_measured[b]) / c.steps_per_year,
+                                             c.horizon_years + 1.0)], dtype=f32),
+            "register": self.register[r].astype(f32),
+            "tampings": np.clip(self.tampings[r], 0, 1000).astype(f32),
+            "tampings_since_renewal": np.clip(self.count[r], 0, 1000).astype(f32),
+            "years_since_tamping": np.clip(years, 0.0, 100.0).astype(f32),
+            "time": np.array([min(self.step[b] / c.horizon_steps, 1.0)], dtype=f32),
+            "budget_left": np.array([np.clip(self.budget_left[b] / c.annual_budget, 0.0, 1.0)
+                                     if c.annual_budget > 0 else 1.0], dtype=f32),
+        }
+        if c.profiles:
+            obs["level"] = np.clip(self.measured_level[r] * 1e3, -100.0, 200.0).astype(f32)
+        return obs
+
+    def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool) -> dict:
+        r = self.rows(b)
+        cls = classify(self.peak[r], self.limits)
+        return {
+            "costs": parts,
+            "cost": float(sum(parts.values())),
+            "tamped_sections": tamped.copy(),
+            "clipped": bool(clipped),
+            "section_sd_m": self.sd[r].copy(),
+            "section_sd_mm": self.sd[r] * 1e3,
+            "section_peak_m": self.peak[r].copy(),
+            "section_class": cls,
+            "section_sd_after_tamping_m": self.sd_after_tamping[r].copy(),
+            "wet_spot_active": self.wet_active[r].copy(),
+            "rate_factor": self.rate()[r].mean(axis=1),
+            "immediate_action_exceedances": int(np.sum(cls == 3)),
+            "year": float(self.step[b] / self.config.steps_per_year),
+            "max_contact_force_N": float(self.contact_force[r].max()),
+        }
+
+
+def _keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:
+    """Per row, keep at most k (scalar or per row) of the True entries of ``want``, highest ``score`` first."""
+    k = np.broadcast_to(np.asarray(k), (want.shape[0],))
+    s = np.where(want, score, -np.inf)
+    order = np.argsort(-s, axis=1, kind="stable")
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(want.shape[1])[None, :].repeat(want.shape[0], 0), axis=1)
+    return want & (rank < k[:, None])
