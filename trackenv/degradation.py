@@ -10,7 +10,9 @@ the next pass hits harder, and the loop runs away within a few iterations. So th
 the evaluated track: approach and exit zones of ``approach_sleepers`` sleepers (plus the vehicle's axle span) are
 added at both ends, each a copy of the end sleeper it continues. Their level is not computed but held at the
 level of the nearest evaluated sleeper — they stand for more of the same track — so no ramp forms and the
-forces in the evaluated zone are those of a track that goes on.
+forces in the evaluated zone are those of a track that goes on. The pass itself ends ``EXIT_RUN_OUT_BAYS`` bays
+after the last axle has left the evaluated zone (:attr:`TrackDegradation.pass_end`): the exit zone's track stays
+in the model, only the time steps that can no longer change an evaluated sleeper's peak force are not taken.
 """
 
 from __future__ import annotations
@@ -100,6 +102,7 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
+EXIT_RUN_OUT_BAYS = 3  # bays the last axle runs past the evaluated zone (the peaks are reached within 1: tests)
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
@@ -196,6 +199,16 @@ class TrackDegradation:
     def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
         """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
         return per_model_sleeper[..., self.n_extra : self.n_extra + self.track.n_sleepers]
+
+    @property
+    def pass_end(self) -> float:
+        """Leading-axle position where a pass ends [m]: the trailing axle ``EXIT_RUN_OUT_BAYS`` bays past the
+        last evaluated sleeper (or the end of the modelled track). The evaluated peak forces are those of a pass
+        to the end of the track, bit for bit (tests/test_degradation.py); the rest of the exit zone would only
+        cost time steps."""
+        t = self.model_track
+        last = t.sleeper_positions[self.n_extra + self.track.n_sleepers - 1]
+        return float(min(t.length, last + self.system.span + EXIT_RUN_OUT_BAYS * t.sleeper_spacing))
 
     # ------------------------------------------------------------------ loop
     def simulate(self) -> PassResult:
@@ -360,12 +373,15 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
         raise ValueError("simulate_batch needs simulators with the same feedback")
     profiles = np.stack([s.model_irregularity() for s in sims])
     if s0.feedback == "irregularity":
-        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, profiles, **s0.pass_options)
+        return simulate_passes(
+            [s.model_track for s in sims], s0.vehicle, s0.speed, profiles, x_end=s0.pass_end, **s0.pass_options
+        )
     return simulate_passes(
         [s.model_track for s in sims],
         s0.vehicle,
         s0.speed,
         None,
         support_settlement=profiles,
+        x_end=s0.pass_end,
         **s0.pass_options,
     )
