@@ -102,7 +102,7 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
-EXIT_RUN_OUT_BAYS = 3  # bays the last axle runs past the evaluated zone (the peaks are reached within 1: tests)
+EXIT_RUN_OUT_BAYS = 3  # bays the last axle runs past the evaluated zone (1 already gave identical peaks on env tracks)
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
