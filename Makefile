@@ -9,7 +9,7 @@ $(BIN)/trackenv: pyproject.toml constraints.txt
 	$(BIN)/pip install -q -c constraints.txt -e ".[dev]"
 	touch $@
 
-.PHONY: setup demo test lint bench validate clean
+.PHONY: setup demo test typecheck lint bench validate clean
 setup: $(BIN)/trackenv
 
 demo: setup
@@ -19,7 +19,11 @@ demo: setup
 
 test: setup
 	$(BIN)/ruff check trackenv agents tests experiments
+	$(BIN)/mypy  # the library's types, as configured in pyproject.toml ([tool.mypy])
 	$(BIN)/python -m pytest -q
+
+typecheck: setup
+	$(BIN)/mypy
 
 bench: setup
 	$(BIN)/trackenv bench
@@ -28,4 +32,4 @@ validate: setup
 	$(BIN)/trackenv validate
 
 clean:
-	rm -rf $(VENV) results runs .pytest_cache
+	rm -rf $(VENV) results runs .pytest_cache .mypy_cache

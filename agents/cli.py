@@ -2,40 +2,74 @@
 
 Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
 to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
+
+This module imports nothing heavy at the top: ``trackenv --help`` and ``--version`` must answer at once, so
+each subcommand imports the physics, numba or torch only when it runs. Bad input (a missing file, a
+negative count) ends in one line on stderr and exit status 2, never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
-from trackenv._json import json_default
-
 DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
+# = trackenv_agents.train.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
+# load torch for every command (a test keeps them equal)
+DEFAULT_TRAIN_SEED = 20_000
+HYPERPARAMS_FILE = Path(__file__).resolve().parent / "ppo_config.json"
+
+
+class UsageError(Exception):
+    """Bad input found before any work starts: one line on stderr and exit status 2."""
+
+
+def installed_version() -> str:
+    """The version of the installed ``trackenv`` distribution (its one source: pyproject.toml)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("trackenv")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+        return "unknown (not installed)"
 
 
 def _emit(args: argparse.Namespace, payload: dict[str, Any], human: str) -> None:
     if args.json:
+        from trackenv._json import json_default
+
         print(json.dumps(payload, default=json_default))
     else:
         print(human)
 
 
-def cmd_validate(args: argparse.Namespace) -> int:
-    from trackenv.validation import run_validation
+def _existing(path: str | None, what: str, *, folder: bool = False) -> None:
+    """Refuse a missing file (or folder) up front, before anything slow is imported."""
+    if path is None:
+        return
+    p = Path(path)
+    if not (p.is_dir() if folder else p.is_file()):
+        raise UsageError(f"{what}: no such {'folder' if folder else 'file'}: {path}")
 
-    summary = run_validation(out_dir=args.out or "results/validation", make_plots=not args.no_plots)
-    lines = ["trackenv validate — track model against closed forms and the paper"]
-    lines += [f"  {k}: {v}" for k, v in summary.items() if not isinstance(v, (list, dict))]
-    for k, v in summary.items():
-        if isinstance(v, dict):
-            lines.append(f"  {k}:")
-            lines += [f"    {kk}: {vv}" for kk, vv in v.items() if not isinstance(vv, (list, dict))]
-    _emit(args, summary, "\n".join(lines))
-    return 0
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from trackenv.validation import format_checks, run_validation
+
+    out = args.out or "results/validation"
+    summary = run_validation(out_dir=out, make_plots=not args.no_plots, progress=not args.json)
+    files = ["summary.json", *summary["plots"]]
+    human = "\n".join([
+        "trackenv validate — track model against closed forms and the paper",
+        format_checks(summary["checks"]),
+        f"wrote {', '.join(files)} to {out}",
+    ])
+    _emit(args, summary, human)
+    return 0 if all(c["passed"] for c in summary["checks"]) else 1
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
@@ -71,11 +105,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.quick and args.policy == "ppo":
+        raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
+    _existing(args.model, "--model")
     from .compare import run_comparison
 
     extra = {}
-    if args.quick and args.policy == "ppo":
-        raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
     if args.policy in ("ppo", "all") and not args.quick:  # the shipped policy knows the default track only
         try:
             from .train import load_trained
@@ -92,8 +127,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
     n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
     t0 = time.perf_counter()
+    out = args.out or "results/compare"
     result = run_comparison(
-        out_dir=args.out or "results/compare",
+        out_dir=out,
         n_test=n_test,
         n_train=args.n_train,
         quick=args.quick,
@@ -105,11 +141,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result["wall_time_s"] = time.perf_counter() - t0
     from .evaluation import format_table
 
-    _emit(args, result, format_table(result["results"]))
+    names = [Path(f).name for f in result.get("files", {}).values()]
+    human = f"{format_table(result['results'])}\nwrote {', '.join(names)} to {out}"
+    _emit(args, result, human)
     return 0
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    _existing(args.hyperparams, "--hyperparams")
+    _existing(args.resume, "--resume", folder=True)
     from .train import train
 
     t0 = time.perf_counter()
@@ -125,57 +165,116 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
-    _emit(args, payload, f"trained {args.algo} -> {path} in {wall:.0f} s")
+    _emit(args, payload, f"trained -> {path} in {wall:.0f} s")
     return 0
 
 
+def _positive(kind: type, zero: bool = False) -> Any:
+    """An argparse type: a number of ``kind`` (int or float) that is finite and > 0 (>= 0 if ``zero``); ``1e5``
+    is a whole number."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not (math.isfinite(value) and (value >= 0 if zero else value > 0)):
+            raise argparse.ArgumentTypeError(f"must be a number {'>=' if zero else '>'} 0, got {text}")
+        if kind is int:
+            if value != int(value):
+                raise argparse.ArgumentTypeError(f"must be a whole number, got {text}")
+            return int(value)
+        return value
+
+    parse.__name__ = f"positive {kind.__name__}"
+    return parse
+
+
+class _HelpFormatter(argparse.HelpFormatter):
+    """Appends ``(default: X)`` to an option's help unless the default is None or False or already shown."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "%(default)" in text or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def _hyperparam_defaults() -> dict[str, Any]:
+    """The shipped hyper-parameters (read for the help text only; a plain JSON read, no torch)."""
+    try:
+        return json.loads(HYPERPARAMS_FILE.read_text())
+    except (OSError, ValueError):  # pragma: no cover - a broken install; the help still answers
+        return {}
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="trackenv", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="command", required=True)
+    p = argparse.ArgumentParser(
+        prog="trackenv", formatter_class=_HelpFormatter,
+        description="Railway track tamping on vehicle-track dynamics and ballast settlement: check the model, "
+                    "reproduce the paper, time it, score and train maintenance policies.",
+        epilog="`trackenv COMMAND --help` lists a command's options. Results go under results/ (runs/ for "
+               "training); --json prints one JSON object instead of the summary.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def common(sp: argparse.ArgumentParser) -> None:
+    def command(name: str, help: str) -> argparse.ArgumentParser:
+        sp = sub.add_parser(name, help=help, description=help, formatter_class=_HelpFormatter)
         sp.add_argument("--json", action="store_true", help="print one JSON object instead of a summary")
-        sp.add_argument("--out", default=None, help="output folder for JSON and PNG")
+        return sp
 
-    sp = sub.add_parser("validate", help="static, receptance and moving-wheelset checks with plots")
-    common(sp)
-    sp.add_argument("--no-plots", action="store_true")
+    def out(sp: argparse.ArgumentParser, default: str) -> None:
+        sp.add_argument("--out", default=None, metavar="DIR", help=f"output folder (default: {default})")
+
+    sp = command("validate", "static, receptance and moving-wheelset checks against closed forms, with plots")
+    out(sp, "results/validation")
+    sp.add_argument("--no-plots", action="store_true", help="write summary.json only, no PNG figures")
     sp.set_defaults(func=cmd_validate)
 
-    sp = sub.add_parser("paper", help="reproduce the paper's settlement scenarios (Fig. 10 and 11)")
-    common(sp)
-    sp.add_argument("--iterations", type=int, default=6)
-    sp.add_argument("--cycles", type=float, default=50_000)
-    sp.add_argument("--no-plots", action="store_true")
+    sp = command("paper", "reproduce the paper's settlement scenarios (Fig. 10 and 11)")
+    out(sp, "results/paper")
+    sp.add_argument("--iterations", type=_positive(int), default=6, metavar="N",
+                    help="settlement iterations (one dynamic pass each)")
+    sp.add_argument("--cycles", type=_positive(float), default=50_000, metavar="N",
+                    help="axle passes (load cycles) per iteration")
+    sp.add_argument("--no-plots", action="store_true", help="write paper.json only, no PNG figures")
     sp.set_defaults(func=cmd_paper)
 
-    sp = sub.add_parser("bench", help="speed of the dynamics, the loop and the env")
-    common(sp)
-    sp.add_argument("--quick", action="store_true")
+    sp = command("bench", "speed of the dynamics, the settlement loop and the env")
+    sp.add_argument("--quick", action="store_true", help="fewer repeats: rougher figures in a few seconds")
     sp.set_defaults(func=cmd_bench)
 
-    sp = sub.add_parser("evaluate", help="score the trained policy and the tuned heuristics on held-out seeds")
-    common(sp)
-    sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all")
-    sp.add_argument("--model", default=None, help="path of a trained model (default: the shipped one)")
-    sp.add_argument("--n-test", type=int, default=None, help="held-out episodes (default 24 of the 200 test seeds)")
-    sp.add_argument("--n-train", type=int, default=None, help="episodes for tuning the heuristics")
+    sp = command("evaluate", "score the trained policy and the tuned heuristics on held-out seeds")
+    out(sp, "results/compare")
+    sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all", help="which policies to score")
+    sp.add_argument("--model", default=None, metavar="ZIP",
+                    help="a trained model (default: the shipped agents/pretrained/ppo_tamping.zip)")
+    sp.add_argument("--n-test", type=_positive(int), default=None, metavar="N",
+                    help=f"held-out episodes (default: {DEFAULT_N_TEST} of the 200 test seeds; 6 with --quick)")
+    sp.add_argument("--n-train", type=_positive(int), default=None, metavar="N",
+                    help="episodes for tuning the heuristics, with --retune or --quick (default: all 100; 2 with "
+                         "--quick)")
     sp.add_argument("--quick", action="store_true", help="a small, fast configuration (about a minute)")
-    sp.add_argument(
-        "--retune", action="store_true", help="tune the heuristics again instead of using the shipped parameters"
-    )
+    sp.add_argument("--retune", action="store_true",
+                    help="tune the heuristics again instead of using the shipped parameters")
     sp.set_defaults(func=cmd_evaluate)
 
-    sp = sub.add_parser("train", help="train a PPO agent (stable-baselines3)")
-    common(sp)
-    sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default="ppo")
-    sp.add_argument("--timesteps", type=int, default=None)
-    sp.add_argument("--n-envs", type=int, default=8)
-    # = trackenv_agents.train.DEFAULT_TRAIN_SEED, written out: importing it here would load torch for every command
-    sp.add_argument("--seed", type=int, default=20_000,
-                    help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
-    sp.add_argument("--resume", default=None, help="output folder of an earlier run to continue for --timesteps")
-    sp.add_argument("--hyperparams", default=None, help="JSON file overriding agents/ppo_config.json key by key")
+    hp = _hyperparam_defaults()
+    sp = command("train", "train a PPO agent (stable-baselines3), hyper-parameters from agents/ppo_config.json")
+    out(sp, "runs/ppo")
+    sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default=None,
+                    help=f"algorithm (default: the hyper-parameter file's, {hp.get('algo', 'ppo')})")
+    sp.add_argument("--timesteps", type=_positive(int), default=None, metavar="N",
+                    help=f"env steps to train for (default: the hyper-parameter file's, "
+                         f"{hp.get('total_timesteps', 'n/a')})")
+    sp.add_argument("--n-envs", type=_positive(int), default=None, metavar="N",
+                    help=f"envs stepped together (default: the hyper-parameter file's, {hp.get('n_envs', 'n/a')})")
+    sp.add_argument("--seed", type=_positive(int, zero=True), default=DEFAULT_TRAIN_SEED, metavar="N",
+                    help="env i starts with seed + i, apart from the test, tuning and evaluation seeds")
+    sp.add_argument("--resume", default=None, metavar="DIR",
+                    help="output folder of an earlier run to continue for --timesteps more steps")
+    sp.add_argument("--hyperparams", default=None, metavar="JSON",
+                    help="JSON file overriding agents/ppo_config.json key by key")
     sp.set_defaults(func=cmd_train)
     return p
 
@@ -184,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except ValueError as exc:
+    except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f"trackenv {args.command}: {exc}", file=sys.stderr)
         return 2
 

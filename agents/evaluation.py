@@ -32,7 +32,7 @@ from trackenv.envs.vector import TampingVectorEnv
 
 __all__ = [
     "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bootstrap_ci", "compare", "compare_results",
-    "evaluate_many", "evaluate_policy", "format_markdown", "format_table", "paired_difference", "tune_many",
+    "evaluate_many", "evaluate_one", "format_markdown", "format_table", "paired_difference", "tune_many",
     "plot_comparison", "plot_episode", "policy_name", "policy_params", "tune",
 ]
 
@@ -156,7 +156,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         tampings += info["tamped_sections"].sum(axis=1)
         exceed += info["immediate_action_exceedances"]
         if record:
-            traces["section_sd_mm"].append(info["section_sd_m"] * 1e3)
+            traces["section_sd_mm"].append(info["section_sd_mm"])
             traces["tamped"].append(info["tamped_sections"].copy())
             traces["cost"].append(info["cost"].copy())
             traces["year"].append(info["year"].copy())
@@ -165,7 +165,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         if t == cfg.horizon_steps - 1:
             if not trunc.all():  # pragma: no cover - guards a change of the env's horizon rule
                 raise RuntimeError("episodes did not end at the configured horizon")
-            final_sd = info["section_sd_m"].mean(axis=1) * 1e3
+            final_sd = info["section_sd_mm"].mean(axis=1)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
             "traces": traces}
 
@@ -218,12 +218,23 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     return results
 
 
-def evaluate_policy(policy: Any, config: TampingEnvConfig | dict | None = None,
-                    seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
-                    progress: bool = False) -> EvaluationResult:
-    """One episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time)."""
+def evaluate_one(policy: Any, config: TampingEnvConfig | dict | None = None,
+                 seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                 progress: bool = False) -> EvaluationResult:
+    """One policy, one episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time):
+    :func:`evaluate_many` for a single policy. The episode returns are ``.sum_rewards``."""
     return evaluate_many([policy], config, seeds, action_type, batch_size, progress,
                          desc=policy_name(policy))[0]
+
+
+def evaluate_policy(*args: Any, **kwargs: Any) -> EvaluationResult:
+    """Deprecated name of :func:`evaluate_one` (it shadowed stable-baselines3's ``evaluate_policy``, which takes
+    an env and returns a mean and a standard deviation)."""
+    import warnings
+
+    warnings.warn("trackenv_agents.evaluation.evaluate_policy is now evaluate_one", DeprecationWarning,
+                  stacklevel=2)
+    return evaluate_one(*args, **kwargs)
 
 
 def paired_difference(a: EvaluationResult, b: EvaluationResult, n_resamples: int = N_BOOTSTRAP) -> dict:
@@ -375,12 +386,10 @@ def format_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def plot_comparison(results: Sequence[EvaluationResult], out_png: str) -> str:
     """Box plot (with the episodes as dots) of the per-episode life-cycle cost of each policy."""
-    import matplotlib
+    from matplotlib.figure import Figure  # pyplot-free: no global state, the user's backend untouched
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.4 * len(results) + 2), 4.5))
+    fig = Figure(figsize=(max(5.0, 1.4 * len(results) + 2), 4.5))
+    ax = fig.subplots()
     data = [r.cost for r in results]
     ax.boxplot(data, showmeans=True, showfliers=False)
     rng = np.random.default_rng(0)
@@ -393,7 +402,6 @@ def plot_comparison(results: Sequence[EvaluationResult], out_png: str) -> str:
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
-    plt.close(fig)
     return out_png
 
 
@@ -413,16 +421,14 @@ def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, s
 
 def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int, out_png: str) -> str:
     """One episode under ``policy``: section SD over time with tamping marks (top), cost per step (bottom)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # pyplot-free: no global state, the user's backend untouched
 
     cfg = TampingEnvConfig.coerce(config)
     tr = record_episode(policy, cfg, seed)
     years = np.concatenate([[0.0], tr["year"]])
     lim = cfg.quality_limits.for_speed(cfg.speed)
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=(2, 1))
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
     for s in range(cfg.n_sections):
         color = f"C{s % 10}"
         ax1.plot(years, tr["section_sd_mm"][:, s], color=color, label=f"section {s + 1}")
@@ -442,5 +448,4 @@ def plot_episode(policy: Any, config: TampingEnvConfig | dict | None, seed: int,
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
-    plt.close(fig)
     return out_png

@@ -121,7 +121,8 @@ class NoMaintenance(Heuristic):
 class Periodic(_Calendar):
     """Tamp every ``interval_years`` years (at the steps k·interval, k >= 1; never at the start).
 
-    ``sections="all"`` tamps every section; ``"worst"`` the ``n_worst`` sections with the highest SD.
+    ``sections="all"`` tamps every section; ``"worst"`` the ``n_worst`` sections with the highest SD
+    (``n_worst`` is in ``params`` only then).
     """
 
     name = "periodic"
@@ -134,8 +135,11 @@ class Periodic(_Calendar):
             raise ValueError(f"sections must be 'all' or 'worst', got {sections!r}")
         if int(n_worst) < 1:
             raise ValueError(f"n_worst must be >= 1, got {n_worst!r}")
+        # n_worst only where it applies, so that a policy's params (and the tables that show them) never list
+        # a parameter that does nothing (sections="all" tamps every section)
+        worst = {"n_worst": int(n_worst)} if sections == "worst" else {}
         super().__init__(horizon_years, steps_per_year, interval_years=float(interval_years),
-                         sections=sections, n_worst=int(n_worst))
+                         sections=sections, **worst)
 
     @property
     def interval_steps(self) -> int:

@@ -6,7 +6,10 @@
 * :func:`load_trained` — the shipped policy (``agents/pretrained/ppo_tamping.zip`` + its observation
   statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env
   observations.
-* :func:`evaluate_returns` — episode returns of a policy on given seeds with the batched vector env.
+
+Policies are scored by :func:`trackenv_agents.evaluation.evaluate_one` (the held-out evaluation during
+training too); the baselines are the heuristics (:class:`~trackenv_agents.heuristics.NoMaintenance`,
+:class:`~trackenv_agents.heuristics.RandomPolicy`).
 """
 
 from __future__ import annotations
@@ -21,10 +24,9 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.tamping import action_space
-from trackenv.envs.vector import TampingVectorEnv
 
 from .actions import RANKED, env_action_type, ranked_to_sections
+from .evaluation import evaluate_one
 from .sb3_vec import TampingSB3VecEnv, filter_observation
 
 HERE = Path(__file__).resolve().parent
@@ -118,61 +120,6 @@ class NormalizedPolicy:
                 "epsilon": self.epsilon, "algo": self.algo, "action_type": self.action_type}
 
 
-class ConstantPolicy:
-    """Always the same action per env: ``ConstantPolicy.no_maintenance(config)`` never tamps."""
-
-    def __init__(self, action: np.ndarray, name: str = "constant") -> None:
-        self.action = np.asarray(action)
-        self.name = name
-
-    @classmethod
-    def no_maintenance(cls, config: TampingEnvConfig | None = None, action_type: str = "multibinary"):
-        n = TampingEnvConfig.coerce(config).n_sections
-        action = np.zeros(n, dtype=np.int8) if action_type == "multibinary" else np.int64(0)
-        return cls(action, "no_maintenance")
-
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
-        batched = np.asarray(observation["time"]).ndim == 2
-        if not batched:
-            return self.action.copy(), state
-        n = np.asarray(observation["time"]).shape[0]
-        return np.repeat(self.action[None], n, axis=0), state
-
-
-class RandomPolicy:
-    """Uniformly random actions from the action space (seeded)."""
-
-    name = "random"
-
-    def __init__(self, config: TampingEnvConfig | None = None, action_type: str = "multibinary",
-                 seed: int = 0) -> None:
-        self.space = action_space(TampingEnvConfig.coerce(config), action_type)
-        self.space.seed(seed)
-
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
-        t = np.asarray(observation["time"])
-        if t.ndim == 1:
-            return self.space.sample(), state
-        return np.stack([self.space.sample() for _ in range(t.shape[0])]), state
-
-
-def evaluate_returns(policy, config: TampingEnvConfig | dict | None = None,
-                     seeds: Sequence[int] = DEFAULT_EVAL_SEEDS, action_type: str = "multibinary",
-                     deterministic: bool = True) -> np.ndarray:
-    """Undiscounted episode return (−total cost, k€) of ``policy`` on each seed (one episode per seed, all run
-    together in one :class:`TampingVectorEnv`)."""
-    config = TampingEnvConfig.coerce(config)
-    venv = TampingVectorEnv(len(seeds), config, action_type=env_action_type(action_type))
-    obs, _ = venv.reset(seed=[int(s) for s in seeds])
-    returns = np.zeros(len(seeds))
-    for _ in range(config.horizon_steps):
-        actions, _ = policy.predict(obs, deterministic=deterministic)
-        obs, rewards, _, _, _ = venv.step(np.asarray(actions))
-        returns += rewards
-    venv.close()
-    return returns
-
-
 # --- callbacks ---
 def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose,
                         evaluate_at_start: bool = False):
@@ -193,7 +140,8 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
             policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(),
                                                         obs_keys, algo=algo, action_type=action_type)
             t0 = time.time()
-            ret = evaluate_returns(policy, config, eval_seeds, action_type)
+            ret = evaluate_one(policy, config, eval_seeds, env_action_type(action_type),
+                               batch_size=len(eval_seeds)).sum_rewards
             rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
                    "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
             self.history.append(rec)

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from trackenv.envs.config import TampingEnvConfig
 
+
+# --- numba: compile (or load) the kernel once, before the first test ---
 @pytest.fixture(scope="session", autouse=True)
 def warm_dynamics_kernel():
     """Load (or, on a fresh machine, compile) the dynamics kernel once per session, before the first test, so
@@ -24,3 +27,17 @@ def warm_dynamics_kernel():
     from trackenv.physics.settlement import SatoLaw
 
     SatoLaw().equivalent_cycles(5e4, 1e-3)
+
+
+# --- the small problem most tests of the env and the agents run on ---
+@pytest.fixture(scope="session")
+def small_config() -> TampingEnvConfig:
+    """30 m of track (51 sleepers) in 3 sections over 2 years of quarters (8 steps), default physics."""
+    return TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
+
+
+@pytest.fixture(scope="session")
+def small_coarse_config(small_config: TampingEnvConfig) -> TampingEnvConfig:
+    """:func:`small_config` with a time step of 2e-4 s (twice the default): half the cost of each pass, for
+    tests of the agents rather than of the physics."""
+    return small_config.replace(dt=2e-4)

@@ -1,8 +1,11 @@
-"""The command line as a user runs it: ``trackenv evaluate --quick --json`` end to end."""
+"""The command line as a person meets it: help, version, refused input, what each command prints."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -23,6 +26,24 @@ def test_evaluate_quick_prints_one_json_object(tmp_path, capsys):
     assert (tmp_path / "comparison.json").exists() and (tmp_path / "costs.png").exists()
 
 
+def test_evaluate_says_where_it_wrote(tmp_path, capsys, monkeypatch):
+    """The comparison itself is stubbed (it runs end to end in the test above): the printing is under test."""
+    import trackenv_agents.compare as compare
+
+    row = {"policy": "periodic", "params": {"interval_years": 3.5, "sections": "all"}, "n_episodes": 2,
+           "mean_cost": 10.0, "ci_low": 9.0, "ci_high": 11.0, "tampings_per_km_year": 0.3,
+           "immediate_action_exceedances": 0, "mean_final_sd_mm": 1.5}
+
+    def fake(out_dir, **kw):
+        return {"results": [row], "files": {"json": f"{out_dir}/comparison.json", "costs": f"{out_dir}/costs.png"}}
+
+    monkeypatch.setattr(compare, "run_comparison", fake)
+    assert main(["evaluate", "--quick", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == f"wrote comparison.json, costs.png to {tmp_path}"
+    assert "n_worst" not in out[2]  # the periodic row shows only the parameters that apply
+
+
 def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
     with pytest.raises(SystemExit, match="default one"):
         main(["evaluate", "--quick", "--policy", "ppo"])
@@ -34,3 +55,116 @@ def test_train_seed_default_is_the_training_seed_of_agents_train():
     from trackenv_agents.train import DEFAULT_TRAIN_SEED
 
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED
+
+
+def test_hyperparams_file_is_the_one_agents_train_reads():
+    pytest.importorskip("stable_baselines3")
+    from trackenv_agents.cli import HYPERPARAMS_FILE
+    from trackenv_agents.train import DEFAULT_HYPERPARAMS
+
+    assert HYPERPARAMS_FILE == DEFAULT_HYPERPARAMS
+
+
+def test_help_imports_neither_the_physics_nor_torch():
+    """`trackenv --help` must answer at once: the parser is built without importing numba, trackenv or torch."""
+    code = ("import sys; from trackenv_agents.cli import build_parser; build_parser(); "
+            "heavy = [m for m in ('trackenv', 'numba', 'torch', 'gymnasium', 'scipy') if m in sys.modules]; "
+            "print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_version_is_the_installed_distribution_version(capsys):
+    import importlib.metadata
+
+    import trackenv
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    expected = importlib.metadata.version("trackenv")
+    assert capsys.readouterr().out.strip() == f"trackenv {expected}"
+    assert trackenv.__version__ == expected
+
+
+@pytest.mark.parametrize("command", ["validate", "paper", "bench", "evaluate", "train"])
+def test_every_option_has_help_text(command):
+    from trackenv_agents.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+    for action in sub._actions:
+        assert action.help, f"{command} {action.option_strings} has no help text"
+    text = " ".join(sub.format_help().split())
+    if command == "train":
+        assert "(default: 20000)" in text and "hyper-parameter file's, 8" in text
+    if command == "paper":
+        assert "(default: 6)" in text and "(default: 50000)" in text
+
+
+@pytest.mark.parametrize("argv", [["train", "--timesteps", "-5"], ["train", "--n-envs", "0"],
+                                  ["train", "--timesteps", "1.5"], ["paper", "--iterations", "0"],
+                                  ["paper", "--cycles", "nan"], ["evaluate", "--n-test", "-1"],
+                                  ["train", "--seed", "-1"]])
+def test_non_positive_counts_are_refused(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "error: argument" in err and "Traceback" not in err
+
+
+def test_large_counts_may_be_written_in_exponent_form():
+    from trackenv_agents.cli import build_parser
+
+    assert build_parser().parse_args(["train", "--timesteps", "1e5"]).timesteps == 100_000
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["train", "--hyperparams", "/missing.json"], "trackenv train: --hyperparams: no such file: /missing.json"),
+    (["train", "--resume", "/missing"], "trackenv train: --resume: no such folder: /missing"),
+    (["evaluate", "--model", "/missing.zip"], "trackenv evaluate: --model: no such file: /missing.zip"),
+])
+def test_missing_paths_give_one_line_not_a_traceback(argv, message, capsys):
+    assert main(argv) == 2
+    assert capsys.readouterr().err == message + "\n"
+
+
+def test_broken_hyperparams_file_gives_one_line(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")
+    bad = tmp_path / "hp.json"
+    bad.write_text('{"n_steps": 8, "no_such_key": 1}')
+    assert main(["train", "--hyperparams", str(bad), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no_such_key" in err
+
+
+def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys, monkeypatch):
+    """The heavy passes are stubbed: the command's printing is under test, not the physics."""
+    import trackenv.validation as val
+
+    monkeypatch.setattr(val, "_receptance_summary", lambda track: ({
+        "static_limit_max_abs_rel_error": 1e-4, "pinned_pinned_rel_error": 0.25}, {}))
+    monkeypatch.setattr(val, "_loaded_pass_summary", lambda: ({"sleeper_passing_hz": 37.037}, {}))
+    monkeypatch.setattr(val, "_rest_pass_summary", lambda: ({}, ()))
+    assert main(["validate", "--no-plots", "--out", str(tmp_path)]) == 1  # one check fails: exit status 1
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert any(line.strip().startswith("PASS  static deflection at x = 15.0 m") for line in lines)
+    fail = next(line for line in lines if line.strip().startswith("FAIL"))
+    assert "pinned-pinned" in fail and "+25.00 %" in fail
+    assert "3 of 4 checks pass" in out
+    assert f"wrote summary.json to {tmp_path}" in out
+    assert "148148148.148" not in out  # numbers are rounded
+
+
+def test_periodic_all_sections_shows_no_n_worst():
+    from trackenv_agents.evaluation import format_table
+    from trackenv_agents.heuristics import Periodic
+
+    assert Periodic(3.5, sections="all").params == {"interval_years": 3.5, "sections": "all"}
+    assert Periodic(2.0, sections="worst", n_worst=2).params["n_worst"] == 2
+    row = {"policy": "periodic", "params": Periodic(3.5).params, "n_episodes": 1, "mean_cost": 1.0,
+           "ci_low": 1.0, "ci_high": 1.0, "tampings_per_km_year": 0.1, "immediate_action_exceedances": 0,
+           "mean_final_sd_mm": 1.0}
+    assert "n_worst" not in format_table([row])

@@ -280,9 +280,131 @@ def test_pass_ending_after_the_evaluated_zone_gives_the_full_pass_forces(vehicle
         if feedback == "support":
             full = simulate_passes(sim.model_track, veh, sim.speed, None, support_settlement=z[None], dt="auto")[0]
         else:
-            full = simulate_passes(sim.model_track, veh, sim.speed, z[None], dt="auto")[0]
+            full = simulate_passes(sim.model_track, veh, sim.speed, [sim.rail_level()], dt="auto")[0]
         assert full.time.size > short.time.size
         np.testing.assert_array_equal(sim.evaluated(short.sleeper_force), sim.evaluated(full.sleeper_force))
         np.testing.assert_array_equal(
             sim.evaluated(short.contact_force_profile()), sim.evaluated(full.contact_force_profile())
         )
+
+
+# ------------------------------------------------------------------------------------ runaway feedback
+def heavy_fast(**kwargs) -> te.TrackDegradation:
+    """Scenario B under a 200 kN wheel load at 200 km/h: the irregularity feedback diverges."""
+    return te.TrackDegradation(track_b(), te.Wheelset(mass=1800.0, static_load=200e3), speed=200 / 3.6, **kwargs)
+
+
+def test_a_diverging_loop_warns_with_what_to_change() -> None:
+    sim = heavy_fast(cycles_per_iteration=100_000)
+    with pytest.warns(te.RunawayWarning, match="grow geometrically.*cycles_per_iteration.*adaptive.*support"):
+        sim.run(4)
+    d = np.diff(np.vstack([np.zeros(sim.track.n_sleepers), sim.history.settlement]), axis=0)
+    spread = np.ptp(d, axis=1)
+    assert spread[3] > 3 * spread[2] > 9 * spread[1]  # it does grow geometrically: the warning is due
+
+
+def test_a_diverging_loop_raises_when_asked() -> None:
+    sim = heavy_fast(cycles_per_iteration=100_000, on_runaway="raise")
+    with pytest.raises(te.RunawayError, match="diverging"):
+        sim.run(4)
+
+
+def test_adaptive_stepping_that_runs_out_of_passes_is_reported() -> None:
+    sim = heavy_fast(cycles_per_iteration=1e6, adaptive=True, max_passes_per_iteration=4)
+    with pytest.warns(te.RunawayWarning, match="ran out of passes"):
+        sim.advance()
+
+
+def test_converging_loops_do_not_warn(recwarn: pytest.WarningsRecorder) -> None:
+    te.TrackDegradation(track_b(), loaded_wheelset(), cycles_per_iteration=1e6, speed=SPEED).run(6)
+    heavy_fast(cycles_per_iteration=1e6, feedback="support").run(4)
+    assert not [w for w in recwarn if issubclass(w.category, te.RunawayWarning)]
+
+
+def test_on_runaway_is_checked() -> None:
+    with pytest.raises(ValueError, match="on_runaway must be one of"):
+        heavy_fast(on_runaway="shout")
+
+
+# ------------------------------------------------------------------------------------ interpolation
+@pytest.fixture(scope="module")
+def step_40_39() -> dict:
+    """u40 - u39 [mm] after scenario B's 6 x 50 000 cycles, per (interpolation, elements per bay, dt)."""
+    out = {}
+    for interp, epb, dt in [("cubic", 2, 1e-4), ("cubic", 8, 1e-4), ("linear", 2, 1e-4), ("linear", 8, 1e-4),
+                            ("linear", 16, 1e-4), ("linear", 8, 5e-5)]:
+        track = te.Track.seed(elements_per_bay=epb).scaled(ballast_stiffness=1.10, from_sleeper=CHANGE_SLEEPER)
+        sim = te.TrackDegradation(track, loaded_wheelset(), cycles_per_iteration=CYCLES, speed=SPEED,
+                                  interpolation=interp, dt=dt)
+        u = sim.run(ITERATIONS).settlement[-1]
+        out[interp, epb, dt] = (u[40] - u[39]) * 1e3
+    return out
+
+
+def test_cubic_loop_is_mesh_converged_at_the_default_mesh(step_40_39: dict) -> None:
+    assert step_40_39["cubic", 2, 1e-4] == pytest.approx(step_40_39["cubic", 8, 1e-4], rel=0.05)
+
+
+def test_linear_loop_needs_eight_elements_per_bay(step_40_39: dict) -> None:
+    fine = step_40_39["linear", 16, 1e-4]
+    assert step_40_39["linear", 8, 1e-4] == pytest.approx(fine, rel=0.01)  # the paper's mesh: converged
+    assert step_40_39["linear", 8, 5e-5] == pytest.approx(step_40_39["linear", 8, 1e-4], rel=0.01)  # and in dt
+    assert step_40_39["linear", 2, 1e-4] > 1.25 * fine  # the default mesh is not, for a kinked profile
+    assert step_40_39["linear", 8, 1e-4] > 1.2 * step_40_39["cubic", 8, 1e-4]  # the reading matters
+
+
+def test_linear_interpolation_is_straight_between_sleepers() -> None:
+    level = np.zeros(51)
+    level[25] = 1e-3
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), initial_level=level, interpolation="linear")
+    res = sim.simulate()
+    x = res.wheel_position[:, 0] - sim.n_extra * sim.track.sleeper_spacing
+    between = (x > 14.4) & (x < 15.6)
+    np.testing.assert_allclose(res.irregularity[between, 0], 1e-3 * (1 - np.abs(x[between] - 15.0) / 0.6), atol=1e-12)
+    cubic = te.TrackDegradation(track_a(), loaded_wheelset(), initial_level=level).simulate()
+    assert np.min(cubic.irregularity[:, 0]) < -1e-5  # the natural spline overshoots below zero next to the dip
+
+
+def test_interpolation_is_checked() -> None:
+    with pytest.raises(ValueError, match="interpolation must be one of"):
+        te.TrackDegradation(track_a(), loaded_wheelset(), interpolation="quadratic")
+
+
+def test_a_sudden_jump_of_the_increment_warns_at_once() -> None:
+    """Realistic track, 250 kN at 200 km/h, 1e6 cycles per iteration: 15.7 → 22.0 → 107 mm; warned at the 2nd."""
+    sim = te.TrackDegradation(te.Track.realistic(30.0), te.Wheelset(mass=1800.0, static_load=250e3),
+                              cycles_per_iteration=1e6, speed=200 / 3.6, on_runaway="raise")
+    sim.advance()
+    with pytest.raises(te.RunawayError, match=r"grow geometrically \(x[0-9.]+ per iteration"):
+        sim.advance()
+
+
+def test_tamping_starts_a_new_series_of_increments(recwarn: pytest.WarningsRecorder) -> None:
+    """The restarted consolidation after tamping makes the next increment jump: that is not a runaway."""
+    rate = 1.0 + 0.03 * np.sin(np.arange(51) / 3.0)  # ballast condition varies a little along the track
+    sim = te.TrackDegradation(te.Track.realistic(30.0), loaded_wheelset(), cycles_per_iteration=500_000,
+                              speed=100 / 3.6, feedback="support", rate_factor=rate)
+    sim.advance()
+    assert sim._differential[-1] > 0.1 * te.degradation.RUNAWAY_FLOOR  # not a flat start
+    mask = np.zeros(sim.track.n_sleepers, dtype=bool)
+    mask[15:36] = True
+    sim.tamp(mask)
+    sim.advance()
+    assert not [w for w in recwarn if issubclass(w.category, te.RunawayWarning)]
+
+
+def test_sleeper_forces_beyond_the_models_validity_are_reported_when_settling() -> None:
+    """The env settles without advance(): an impossible sleeper force is caught there too."""
+    import dataclasses
+
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), feedback="support")
+    res = sim.simulate()
+    assert sim.check_sleeper_forces(sim.evaluated(res.sleeper_force)) is None  # a sound pass: nothing to say
+    static = float(sim.system.static_wheel_loads.max())
+    scale = 3.5 * static / sim.evaluated(res.sleeper_force).max()
+    forced = dataclasses.replace(res, sleeper_force=res.sleeper_force * scale)
+    with pytest.warns(te.RunawayWarning, match=r"sleeper \d+ carries .* 3.5 times the static wheel load"):
+        sim.settle(forced, 1000.0)
+    strict = te.TrackDegradation(track_a(), loaded_wheelset(), feedback="support", on_runaway="raise")
+    with pytest.raises(te.RunawayError, match="outside its validity"):
+        strict.settle(forced, 1000.0)

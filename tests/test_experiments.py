@@ -7,11 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trackenv.envs.config import TampingEnvConfig
+from trackenv_agents.evaluation import evaluate_one
 from trackenv_agents.heuristics import Periodic
-from trackenv_agents.train import evaluate_returns
-
-TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 
 
 def _script(name: str):
@@ -22,7 +19,7 @@ def _script(name: str):
     return mod
 
 
-def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs():
+def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs(small_coarse_config):
     hs = _script("hindsight_schedules")
     assert hs.periodic_schedule(14, 40) == (14, 28)
     moves = hs.neighbours((14, 28), 40)
@@ -30,7 +27,7 @@ def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs():
     for m in moves:
         assert all(1 <= s < 40 for s in m) and all(b - a >= 2 for a, b in zip(m[:-1], m[1:], strict=False))
     # an open-loop schedule of whole-track campaigns costs exactly what the periodic rule costs
-    costs = hs.schedule_costs(TINY, 11, [hs.periodic_schedule(3, TINY.horizon_steps), ()])
-    rule = Periodic(interval_years=0.75, sections="all").bind(TINY)
-    np.testing.assert_allclose(costs[0], -evaluate_returns(rule, TINY, [11])[0])
+    costs = hs.schedule_costs(small_coarse_config, 11, [hs.periodic_schedule(3, small_coarse_config.horizon_steps), ()])
+    rule = Periodic(interval_years=0.75, sections="all").bind(small_coarse_config)
+    np.testing.assert_allclose(costs[0], evaluate_one(rule, small_coarse_config, [11]).cost[0])
     assert costs[1] != costs[0]

@@ -8,9 +8,7 @@ import pytest
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs import TampingEnv, TampingEnvConfig
-
-CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
+from trackenv.envs import TampingEnv
 
 
 def _check_frame(frame) -> None:
@@ -22,8 +20,8 @@ def _check_frame(frame) -> None:
 
 
 @pytest.mark.parametrize("env_id", ["trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0"])
-def test_rgb_array_after_reset_and_after_steps(env_id: str) -> None:
-    env = gym.make(env_id, config=CFG, render_mode="rgb_array")
+def test_rgb_array_after_reset_and_after_steps(env_id: str, small_config) -> None:
+    env = gym.make(env_id, config=small_config, render_mode="rgb_array")
     assert "rgb_array" in env.metadata["render_modes"]
     assert env.render_mode == "rgb_array"
     env.reset(seed=0)
@@ -42,16 +40,16 @@ def test_rgb_array_after_reset_and_after_steps(env_id: str) -> None:
     env.close()
 
 
-def test_render_passes_gymnasiums_passive_checker() -> None:
-    env = TampingEnv(CFG, render_mode="rgb_array")
+def test_render_passes_gymnasiums_passive_checker(small_config) -> None:
+    env = TampingEnv(small_config, render_mode="rgb_array")
     env.reset(seed=1)
     env_render_passive_checker(env)
 
 
-def test_no_render_mode_or_no_episode_renders_nothing() -> None:
-    assert TampingEnv(CFG, render_mode="rgb_array").render() is None  # before reset
-    env = TampingEnv(CFG)
+def test_no_render_mode_or_no_episode_renders_nothing(small_config) -> None:
+    assert TampingEnv(small_config, render_mode="rgb_array").render() is None  # before reset
+    env = TampingEnv(small_config)
     env.reset(seed=0)
     assert env.render() is None
     with pytest.raises(ValueError, match="render_mode"):
-        TampingEnv(CFG, render_mode="human")
+        TampingEnv(small_config, render_mode="human")

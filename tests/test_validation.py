@@ -61,6 +61,9 @@ def test_run_validation(tmp_path):
     assert rest["mean_central_force_N"] == pytest.approx(rest["static_wheel_load_N"], rel=0.01)
     for f_paper, found in rest["nearest_to_paper_peaks"].items():
         assert abs(found["found_hz"] - float(f_paper)) < 3.0
+    # the pass/fail lines `trackenv validate` prints: one per tolerance above, all passing
+    assert len(summary["checks"]) == 2 + 2 + 2 * 3 + 1 + 3
+    assert all(c["passed"] for c in summary["checks"]), [c for c in summary["checks"] if not c["passed"]]
 
 
 def test_run_validation_without_plots(tmp_path, monkeypatch):

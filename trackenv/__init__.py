@@ -4,7 +4,9 @@ The physics (``trackenv.physics``) runs on its own; :class:`TrackDegradation` is
 settlement loop; ``trackenv/Tamping-v0`` (registered on import) is the Gymnasium environment on top of it.
 """
 
-from .degradation import DegradationHistory, IterationRecord, TrackDegradation
+from importlib import metadata as _metadata
+
+from .degradation import DegradationHistory, IterationRecord, RunawayError, RunawayWarning, TrackDegradation
 from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
 from .physics.dynamics import PassResult, receptance, simulate_pass, simulate_passes, static_deflection
 from .physics.settlement import (
@@ -22,7 +24,10 @@ from .physics.settlement import (
 from .physics.track import Track
 from .physics.vehicle import Car, Train, VehicleSystem, Wheelset
 
-__version__ = "0.1.0"
+try:  # one source for the version: pyproject.toml, read back from the installed distribution's metadata
+    __version__ = _metadata.version("trackenv")
+except _metadata.PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "LAWS",
@@ -42,6 +47,8 @@ __all__ = [
     "ShentonLaw",
     "Track",
     "TrackDegradation",
+    "RunawayError",
+    "RunawayWarning",
     "Train",
     "VehicleSystem",
     "Wheelset",

@@ -29,6 +29,8 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -92,9 +94,10 @@ def _threading_layer() -> str:
         return "not initialised"
 
 
-def _irregularities(rows: int, n_sleepers: int, rng: np.random.Generator) -> np.ndarray:
-    """Different smooth random rail levels per row [m]: a few sines of 2-20 m wavelength, ~0.5 mm RMS."""
-    x = np.arange(n_sleepers) * 0.6
+def _irregularities(rows: int, x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Different smooth random rail levels per row [m] at the sleeper positions ``x`` [m]: a few sines of
+    2-20 m wavelength, ~0.5 mm RMS."""
+    n_sleepers = x.size
     out = np.zeros((rows, n_sleepers))
     for _ in range(4):
         lam = rng.uniform(2.0, 20.0, size=(rows, 1))
@@ -126,8 +129,8 @@ def _bench_batches(repeats: int, sizes=BATCH_SIZES) -> dict:
         numba.set_num_threads(threads)
         try:
             for b in sizes:
-                irr = _irregularities(b, track.n_sleepers, rng)
-                t = _time(lambda irr=irr: simulate_passes(track, wheel, SPEED, irr, dt=DT), repeats)
+                irr = _irregularities(b, track.sleeper_positions, rng)
+                t = _time(partial(simulate_passes, track, wheel, SPEED, irr, dt=DT), repeats)
                 out["rows"].setdefault(str(b), {})[label] = {**t, "passes_per_s": b / t["median_s"],
                                                              "load_average_1min": _load_average()}
         finally:
@@ -236,7 +239,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
     rep_batch = 2 if quick else 5
     tell = progress or (lambda name: None)
     t0 = time.perf_counter()
-    out = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
+    out: dict[str, Any] = {"quick": bool(quick), "machine": _machine(), "dt_s": DT, "speed_m_per_s": SPEED}
     tell("seed_pass")
     out["seed_pass"] = _bench_seed_pass(rep)
     tell("seed_pass_auto")

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import scipy.linalg
 
-from .physics._validation import check_array, check_scalar
+from .physics._checks import check_array, check_bool, check_choice, check_int, check_scalar, check_speed
 from .physics.dynamics import (
     SLEEPER_FORCE_MEASURES,
     PassResult,
@@ -103,6 +103,27 @@ class DegradationHistory:
 
 FEEDBACKS = ("irregularity", "support")
 EXIT_RUN_OUT_BAYS = 3  # bays the last axle runs past the evaluated zone (1 already gave identical peaks on env tracks)
+INTERPOLATIONS = ("cubic", "linear")
+ON_RUNAWAY = ("warn", "raise", "ignore")
+#: Growth ratio of the differential settlement increment, iteration over iteration, and the number of
+#: consecutive iterations it must persist, that mark a loop running away (a converging loop's increments
+#: shrink: ratios 0.2-0.9 in the paper's scenarios), and the increment below which growth is not yet a concern [m].
+RUNAWAY_GROWTH, RUNAWAY_ITERATIONS, RUNAWAY_FLOOR = 1.5, 2, 0.1e-3
+#: A single iteration whose differential increment jumps by more than this factor (above the floor) is enough.
+RUNAWAY_JUMP = 4.0
+#: Contact force, as a multiple of the static wheel load, beyond which a pass is out of any plain track's range
+#: (dynamic factors from track geometry stay below about 2) **[assumption]**: the loop has run away.
+RUNAWAY_FORCE_FACTOR = 3.0
+
+
+class RunawayWarning(RuntimeWarning):
+    """The settlement loop is diverging (see :meth:`TrackDegradation.check_runaway`)."""
+
+
+class RunawayError(RuntimeError):
+    """The settlement loop diverged and ``on_runaway="raise"`` was asked for."""
+
+
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
@@ -119,9 +140,14 @@ class TrackDegradation:
     "irregularity" (the paper's: the per-sleeper settlement, interpolated, is the rail's level irregularity) or
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
     settled supports, so a sleeper that settled more than its neighbours partly hangs and carries less — the
-    self-limiting mechanism that keeps short-wave settlement bounded). Remaining keywords go to
-    :func:`simulate_passes` (``dt``, default "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy
-    contract; ``contact``, ``sleeper_force_measure``, ``window_bays``).
+    self-limiting mechanism that keeps short-wave settlement bounded); ``on_runaway``: what to do when the loop
+    diverges ("warn": :class:`RunawayWarning`, "raise": :class:`RunawayError`, "ignore"; see
+    :meth:`check_runaway`); ``interpolation``: how the per-sleeper level becomes the rail's level between
+    sleepers with ``feedback="irregularity"``: "cubic" (natural cubic spline through the sleeper values) or
+    "linear" (straight between sleepers: the paper's reading, GENSYS takes a two-column table of position and
+    displacement); see :meth:`rail_level`. Remaining keywords go to :func:`simulate_passes` (``dt``, default
+    "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy contract; ``contact``,
+    ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
@@ -139,6 +165,8 @@ class TrackDegradation:
         initial_level=None,
         rate_factor=None,
         feedback: str = "irregularity",
+        on_runaway: str = "warn",
+        interpolation: str = "cubic",
         **pass_options,
     ) -> None:
         if not isinstance(track, Track):
@@ -150,13 +178,12 @@ class TrackDegradation:
         if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
             raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
         self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
-        self.speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
-        if not isinstance(approach_sleepers, (int, np.integer)) or not 2 <= approach_sleepers <= 200:
-            raise ValueError(f"approach_sleepers must be an integer in [2, 200], got {approach_sleepers!r}")
-        self.adaptive = bool(adaptive)
+        self.speed = check_speed(speed)
+        approach_sleepers = check_int("approach_sleepers", approach_sleepers, low=2, high=200)
+        self.adaptive = check_bool("adaptive", adaptive)
         self.max_increment = check_scalar("max_increment", max_increment, low=0.0, high=0.1, low_inclusive=False)
-        self.max_passes_per_iteration = int(
-            check_scalar("max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000)
+        self.max_passes_per_iteration = check_int(
+            "max_passes_per_iteration", max_passes_per_iteration, low=1, high=10_000
         )
         unknown = set(pass_options) - {"dt", "contact", "sleeper_force_measure", "window_bays"}
         if unknown:
@@ -164,14 +191,15 @@ class TrackDegradation:
         pass_options.setdefault("dt", "auto")
         check_dt_option(pass_options["dt"])
         self.pass_options = pass_options
-        if pass_options.get("sleeper_force_measure", "ballast") not in SLEEPER_FORCE_MEASURES:
-            raise ValueError(f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}")
+        measure = pass_options.get("sleeper_force_measure", "ballast")
+        check_choice("sleeper_force_measure", measure, SLEEPER_FORCE_MEASURES)
         check_window_bays(pass_options.get("window_bays", "auto"))
-        if feedback not in FEEDBACKS:
-            raise ValueError(f"feedback must be one of {FEEDBACKS}, got {feedback!r}")
-        self.feedback = feedback
+        self.feedback = check_choice("feedback", feedback, FEEDBACKS)
+        self.on_runaway = check_choice("on_runaway", on_runaway, ON_RUNAWAY)
+        self.interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
+        self._differential: list[float] = []  # differential settlement increment per iteration [m]
         n = track.n_sleepers
-        self.n_extra = int(approach_sleepers) + math.ceil(self.system.span / track.sleeper_spacing)
+        self.n_extra = self.zone_sleepers(track.sleeper_spacing, self.system.span, approach_sleepers)
         self.model_track = track.extended(self.n_extra, self.n_extra)
         self.offset = np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
         self.base_rate = (
@@ -183,6 +211,17 @@ class TrackDegradation:
         self.tampings = np.zeros(n, dtype=np.int64)
         self.cycles = 0.0
         self.history = DegradationHistory(track.sleeper_positions.copy())
+
+    @staticmethod
+    def zone_sleepers(sleeper_spacing: float, span: float, approach_sleepers: int = 10) -> int:
+        """Sleepers of the approach (and of the exit) zone added to a track with ``sleeper_spacing`` [m] for a
+        vehicle of axle ``span`` [m]."""
+        return int(approach_sleepers) + math.ceil(span / sleeper_spacing)
+
+    @classmethod
+    def zone_length(cls, sleeper_spacing: float, span: float, approach_sleepers: int = 10) -> float:
+        """Length [m] of the approach (and of the exit) zone (see :meth:`zone_sleepers`)."""
+        return cls.zone_sleepers(sleeper_spacing, span, approach_sleepers) * sleeper_spacing
 
     # ------------------------------------------------------------------ state
     @property
@@ -196,6 +235,16 @@ class TrackDegradation:
         lv = self.level if level is None else level
         return np.concatenate([np.full(self.n_extra, lv[0]), lv, np.full(self.n_extra, lv[-1])])
 
+    def rail_level(self, level: np.ndarray | None = None):
+        """The irregularity handed to the dynamics for ``feedback="irregularity"``: the per-sleeper level of
+        the modelled track (the dynamics interpolate it with a natural cubic spline), or with
+        ``interpolation="linear"`` a function z(x) interpolating it linearly between sleepers [m]."""
+        z = self.model_irregularity(level)
+        if self.interpolation == "cubic":
+            return z
+        x = self.model_track.sleeper_positions
+        return partial(np.interp, xp=x, fp=z)
+
     def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
         """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
         return per_model_sleeper[..., self.n_extra : self.n_extra + self.track.n_sleepers]
@@ -206,9 +255,21 @@ class TrackDegradation:
         last evaluated sleeper (or the end of the modelled track). The evaluated peak forces are those of a pass
         to the end of the track, bit for bit (tests/test_degradation.py); the rest of the exit zone would only
         cost time steps."""
-        t = self.model_track
-        last = t.sleeper_positions[self.n_extra + self.track.n_sleepers - 1]
-        return float(min(t.length, last + self.system.span + EXIT_RUN_OUT_BAYS * t.sleeper_spacing))
+        return self.pass_end_position(
+            self.track.length, self.track.sleeper_spacing, self.system.span, self.n_extra - self._span_sleepers()
+        )
+
+    def _span_sleepers(self) -> int:
+        return self.zone_sleepers(self.track.sleeper_spacing, self.system.span, 0)
+
+    @classmethod
+    def pass_end_position(
+        cls, track_length: float, sleeper_spacing: float, span: float, approach_sleepers: int = 10
+    ) -> float:
+        """:attr:`pass_end` for an evaluated track of ``track_length`` [m] (the leading axle starts at ``span``):
+        the pass covers the approach zone, the evaluated track and ``EXIT_RUN_OUT_BAYS`` bays more."""
+        zone = cls.zone_length(sleeper_spacing, span, approach_sleepers)
+        return float(min(track_length + 2 * zone, zone + track_length + span + EXIT_RUN_OUT_BAYS * sleeper_spacing))
 
     # ------------------------------------------------------------------ loop
     def simulate(self) -> PassResult:
@@ -220,6 +281,7 @@ class TrackDegradation:
         adaptive stepping (and ``split``) cuts the increment; return the cycles taken."""
         cycles = check_scalar("cycles", cycles, low=0.0)
         force = np.maximum(self.evaluated(result.sleeper_force), 0.0)
+        self.check_sleeper_forces(force)
         step = self._adaptive_step(force, cycles) if self.adaptive and split else cycles
         if self.feedback == "support":
             self.state = self._implicit_advance(force, step)
@@ -272,6 +334,7 @@ class TrackDegradation:
     def advance(self, cycles: float | None = None) -> IterationRecord:
         """One iteration of ``cycles`` axle passes (default ``cycles_per_iteration``); returns its record."""
         total = self.cycles_per_iteration if cycles is None else check_scalar("cycles", cycles, low=0.0, high=1e10)
+        level_before = self.level.copy()
         done, passes, first = 0.0, 0, None
         while done < total * (1 - 1e-12):
             res = self.simulate()
@@ -291,7 +354,82 @@ class TrackDegradation:
             passes=passes,
         )
         self.history.records.append(rec)
+        self.check_runaway(level_before, rec)
         return rec
+
+    def check_sleeper_forces(self, force: np.ndarray) -> str | None:
+        """Warn, raise or ignore (``on_runaway``) when a sleeper force exceeds :data:`RUNAWAY_FORCE_FACTOR`
+        times the static wheel load: no track geometry puts that on one sleeper (it carries about half the
+        wheel load), so the loop has run away or, with ``feedback="support"``, the differential settlement
+        between neighbours has outgrown the linear supports (a lifted sleeper next to settled ones is pressed
+        into its ballast by the bent rail instead of lifting off). Called on every settlement step: the env
+        settles without :meth:`advance`. Returns the message, or None."""
+        static = float(np.max(self.system.static_wheel_loads))
+        peak = float(np.max(force, initial=0.0))
+        if static <= 0 or peak <= RUNAWAY_FORCE_FACTOR * static or self.on_runaway == "ignore":
+            return None
+        k = int(np.argmax(force))
+        step = float(np.max(np.abs(np.diff(self.level)), initial=0.0))
+        msg = (
+            f"sleeper {k} carries {peak / 1e3:.4g} kN, {peak / static:.3g} times the static wheel load, after "
+            f"{self.cycles:.4g} cycles (largest level step between neighbouring sleepers {step * 1e3:.3g} mm): "
+            "the settlement loop is outside its validity. Reduce the cycles per step, tamp less aggressively "
+            "(a design-line lift next to settled track), or check the inputs"
+        )
+        if self.on_runaway == "raise":
+            raise RunawayError(msg)
+        import warnings
+
+        warnings.warn(msg, RunawayWarning, stacklevel=3)
+        return msg
+
+    def check_runaway(self, level_before: np.ndarray, record: IterationRecord) -> str | None:
+        """Detect a diverging loop after an iteration; warn, raise or ignore as ``on_runaway`` says.
+
+        Three signs, any one enough: the differential settlement increment (the largest deviation of the
+        iteration's increment from its mean, what changes the next pass) exceeds :data:`RUNAWAY_FLOOR` and grew
+        by more than :data:`RUNAWAY_GROWTH` times in each of the last :data:`RUNAWAY_ITERATIONS` iterations or
+        by more than :data:`RUNAWAY_JUMP` times in the last one; the pass's contact force exceeds
+        :data:`RUNAWAY_FORCE_FACTOR` times the static wheel load; adaptive stepping ran out of passes and its
+        last, unsplit step exceeded ``max_increment``. Tamping starts a new series of increments. The explicit
+        loop overshoots when ΔN is too large for the feedback (fast, heavy traffic): scenario B under a 200 kN
+        wheel load at 200 km/h goes 0.26, 0.44, 1.8, 8.9, 186 mm of differential increment per 100 000
+        cycles, every number finite (warned at the third). Returns the message, or None."""
+        inc = record.settlement - level_before
+        self._differential.append(float(np.max(np.abs(inc - inc.mean()))))
+        d = self._differential[-(RUNAWAY_ITERATIONS + 1) :]
+        ratios = [b / a if a > 0 else math.inf for a, b in zip(d[:-1], d[1:])]
+        static = float(np.max(self.system.static_wheel_loads))
+        factor = record.max_contact_force / static if static > 0 else 0.0
+        why = None
+        growing = len(ratios) == RUNAWAY_ITERATIONS and min(ratios) > RUNAWAY_GROWTH
+        jump = bool(ratios) and ratios[-1] > RUNAWAY_JUMP and d[-2] > 0.1 * RUNAWAY_FLOOR  # not from a flat start
+        if (growing or jump) and d[-1] > RUNAWAY_FLOOR:
+            why = (
+                "differential settlement increments grow geometrically (x"
+                + ", x".join(f"{r:.3g}" for r in ratios)
+                + f" per iteration, now {d[-1] * 1e3:.3g} mm)"
+            )
+        elif factor > RUNAWAY_FORCE_FACTOR:
+            why = f"the contact force reached {factor:.3g} times the static wheel load"
+        elif self.adaptive and record.passes >= self.max_passes_per_iteration and d[-1] > self.max_increment:
+            why = (
+                f"adaptive stepping ran out of passes (max_passes_per_iteration {self.max_passes_per_iteration}) and "
+                f"took the rest of the iteration in one step: differential increment {d[-1] * 1e3:.3g} mm"
+            )
+        if why is None or self.on_runaway == "ignore":
+            return None
+        msg = (
+            f"settlement loop diverging after {self.cycles:.4g} cycles: {why}. Reduce cycles_per_iteration "
+            f"(now {self.cycles_per_iteration:.4g}), use adaptive=True (max_increment {self.max_increment:.3g} m), "
+            "or feedback='support' (the settled supports carry less: self-limiting)"
+        )
+        if self.on_runaway == "raise":
+            raise RunawayError(msg)
+        import warnings
+
+        warnings.warn(msg, RunawayWarning, stacklevel=3)
+        return msg
 
     def tamp(self, mask, model: TampingModel | None = None, rng: np.random.Generator | None = None) -> TampingResult:
         """Tamp the sleepers where ``mask`` is True: the level is restored but for a residual, consolidation
@@ -304,14 +442,13 @@ class TrackDegradation:
         self.state = self.state.restarted(restarted, rate_factor=self.base_rate * res.rate_factor)
         self.offset = np.where(restarted, res.level, self.offset)
         self.tampings = res.tampings.astype(np.int64)
+        self._differential.clear()  # increments before and after tamping are not one series
         return res
 
     def run(self, iterations: int, progress=None) -> DegradationHistory:
         """Run ``iterations`` iterations of ``cycles_per_iteration``; ``progress`` is called after each with
         (i, record) (e.g. to update a progress bar). Returns the whole history."""
-        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-            raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
-        for i in range(int(iterations)):
+        for i in range(check_int("iterations", iterations, low=0, high=1_000_000)):
             rec = self.advance()
             if progress is not None:
                 progress(i, rec)
@@ -326,7 +463,7 @@ def _implicit_states(sims: list[TrackDegradation], force: np.ndarray, cycles: fl
         sims[0].law,
         np.stack([x.settlement for x in st]),
         np.stack([x.cycles for x in st]),
-        np.stack([x.rate_factor for x in st]),
+        np.stack([x.rate_factor for x in st]),  # type: ignore[misc]  # never None once the state is built
         force,
         np.stack([s.support_influence for s in sims]),
         cycles,
@@ -345,6 +482,8 @@ def settle_batch(sims: list[TrackDegradation], results: list[PassResult], cycles
     ]
     if batched and len({sims[b].track.n_sleepers for b in batched}) == 1:
         force = np.stack([np.maximum(sims[b].evaluated(results[b].sleeper_force), 0.0) for b in batched])
+        for b, f in zip(batched, force):
+            sims[b].check_sleeper_forces(f)
         for b, state in zip(batched, _implicit_states([sims[b] for b in batched], force, cycles)):
             sims[b].state = state
             sims[b].cycles += cycles
@@ -371,11 +510,12 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
             raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
     if any(s.feedback != s0.feedback for s in sims):
         raise ValueError("simulate_batch needs simulators with the same feedback")
-    profiles = np.stack([s.model_irregularity() for s in sims])
     if s0.feedback == "irregularity":
+        rails = [s.rail_level() for s in sims]
         return simulate_passes(
-            [s.model_track for s in sims], s0.vehicle, s0.speed, profiles, x_end=s0.pass_end, **s0.pass_options
+            [s.model_track for s in sims], s0.vehicle, s0.speed, rails, x_end=s0.pass_end, **s0.pass_options
         )
+    profiles = np.stack([s.model_irregularity() for s in sims])
     return simulate_passes(
         [s.model_track for s in sims],
         s0.vehicle,

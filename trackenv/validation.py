@@ -12,7 +12,8 @@
 * the paper's bare wheelset (Table 4) set on the unloaded track from rest at 80 km/h, with its contact-force
   spectrum (the paper saw peaks at 36, 67 and 74 Hz);
 
-and writes the plots ``fig4_static_deflection.png``, ``fig4_receptance.png``,
+each with pass/fail against a stated tolerance (:func:`validation_checks`, ``summary["checks"]``), and writes
+the plots ``fig4_static_deflection.png``, ``fig4_receptance.png``,
 ``fig6a_contact_force_rest.png``, ``fig6a_contact_force_loaded.png`` and ``summary.json`` to ``out_dir``.
 """
 
@@ -21,12 +22,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy.signal
 import scipy.sparse.linalg
+from matplotlib.figure import Figure
 
-from trackenv.physics.dynamics import receptance, simulate_pass, static_deflection
+from trackenv.physics.dynamics import PassResult, receptance, simulate_pass, static_deflection
 from trackenv.physics.track import Track, hermite_shape
 from trackenv.physics.vehicle import Wheelset
 
@@ -84,7 +87,7 @@ def _central(n: int) -> slice:
 
 def _static_summary(track: Track) -> dict:
     w0 = track.winkler_deflection(STATIC_LOAD)
-    out = {
+    out: dict[str, Any] = {
         "load_N": STATIC_LOAD,
         "foundation_modulus_N_per_m2": track.foundation_modulus,
         "winkler_beta_per_m": track.winkler_beta,
@@ -131,10 +134,11 @@ def _receptance_summary(track: Track) -> tuple[dict, dict]:
     return summary, curves
 
 
-def _loaded_pass_summary() -> tuple[dict, dict]:
+def _loaded_pass_summary() -> tuple[dict, dict[int, tuple[PassResult, np.ndarray, np.ndarray]]]:
     wheelset = Wheelset(mass=1800.0, static_load=100e3)
-    f_sleeper = SPEED / 0.6
-    out, curves = {"speed_m_per_s": SPEED, "speed_kmh": 80.0, "sleeper_passing_hz": f_sleeper}, {}
+    f_sleeper = SPEED / Track.seed().sleeper_spacing
+    out: dict[str, Any] = {"speed_m_per_s": SPEED, "speed_kmh": 80.0, "sleeper_passing_hz": f_sleeper}
+    curves: dict[int, tuple[PassResult, np.ndarray, np.ndarray]] = {}
     for epb in (2, 4):
         res = simulate_pass(Track.seed(elements_per_bay=epb), wheelset, SPEED)
         c = _central(res.time.size)
@@ -162,7 +166,7 @@ def _loaded_pass_summary() -> tuple[dict, dict]:
     return out, curves
 
 
-def _rest_pass_summary() -> tuple[dict, tuple]:
+def _rest_pass_summary() -> tuple[dict, tuple[PassResult, np.ndarray, np.ndarray]]:
     res = simulate_pass(Track.seed(), Wheelset.seed(), SPEED, start="rest")
     force = res.contact_force[:, 0]
     freq, amp = amplitude_spectrum(force, res.dt, detrend="constant")
@@ -184,8 +188,9 @@ def _rest_pass_summary() -> tuple[dict, tuple]:
     return summary, (res, freq, amp)
 
 
-def _plot_static(plt, track: Track, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 4))
+def _plot_static(track: Track, path: Path) -> None:
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     for x_load, style in zip(STATIC_POSITIONS, ("-", "--"), strict=True):
         x, w = _deflection_line(track, STATIC_LOAD, x_load)
         ax.plot(x, w * 1e3, style, label=f"FE rail, load at x = {x_load:.1f} m")
@@ -205,11 +210,11 @@ def _plot_static(plt, track: Track, path: Path) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
-def _plot_receptance(plt, track: Track, curves: dict, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 4))
+def _plot_receptance(track: Track, curves: dict, path: Path) -> None:
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     ax.loglog(curves["freq"], np.abs(curves["sleeper"]), label="over a sleeper (x = 15.0 m)")
     ax.loglog(curves["freq"], np.abs(curves["mid"]), label="mid-span (x = 15.3 m)")
     ax.axvline(
@@ -226,11 +231,11 @@ def _plot_receptance(plt, track: Track, curves: dict, path: Path) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
-def _plot_force(plt, res, freq, amp, title: str, spectrum_of: str, path: Path) -> None:
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6))
+def _plot_force(res, freq, amp, title: str, spectrum_of: str, path: Path) -> None:
+    fig = Figure(figsize=(7, 6))
+    a1, a2 = fig.subplots(2, 1)
     a1.plot(res.wheel_position[:, 0], res.contact_force[:, 0] / 1e3, lw=0.8)
     a1.set_xlabel("wheel position [m]")
     a1.set_ylabel("contact force [kN]")
@@ -238,9 +243,10 @@ def _plot_force(plt, res, freq, amp, title: str, spectrum_of: str, path: Path) -
     a1.grid(True, alpha=0.3)
     band = freq <= 200.0
     a2.plot(freq[band], amp[band], lw=0.8)
-    f_s = res.speed / 0.6
+    spacing = Track.seed().sleeper_spacing  # both passes run on the seed track (or its finer mesh)
+    f_s = res.speed / spacing
     for h in range(1, int(200.0 // f_s) + 1):
-        a2.axvline(h * f_s, color="r", ls=":", lw=0.8, label="v/0.6 and harmonics" if h == 1 else None)
+        a2.axvline(h * f_s, color="r", ls=":", lw=0.8, label=f"v/{spacing:g} m and harmonics" if h == 1 else None)
     a2.set_xlim(0, 200)
     a2.set_xlabel("frequency [Hz]")
     a2.set_ylabel("amplitude [N]")
@@ -249,7 +255,6 @@ def _plot_force(plt, res, freq, amp, title: str, spectrum_of: str, path: Path) -
     a2.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def _jsonable(obj):
@@ -266,17 +271,96 @@ def _jsonable(obj):
     return obj
 
 
-def run_validation(out_dir: str | Path = "results/validation", make_plots: bool = True) -> dict:
-    """Compute the validation summary (see the module docstring), write ``summary.json`` and, if
-    ``make_plots``, the PNG figures to ``out_dir``; return the summary."""
+def _check(name: str, value: float | None, relation: str, limit: float, unit: str) -> dict:
+    """One pass/fail line: ``value`` (in ``unit``) must be ``relation`` ("<" or ">") ``limit``."""
+    passed = value is not None and (abs(value) < limit if relation == "<" else value > limit)
+    return {"check": name, "value": value, "relation": relation, "limit": limit, "unit": unit,
+            "passed": bool(passed)}
+
+
+def validation_checks(summary: dict) -> list[dict]:
+    """The tolerances the model must meet, each as ``{"check", "value", "relation", "limit", "unit",
+    "passed"}`` (``|value| < limit`` or ``value > limit``); parts missing from ``summary`` are skipped.
+
+    The tolerances are those of ``tests/test_validation.py``: static deflection within 5 % of the Winkler beam
+    (the beam is continuously supported, the track on discrete sleepers), receptance within 1 % of the static
+    solution at 1 Hz, pinned-pinned peak within 10 % of its closed form, mean contact force within 1 % of the
+    static wheel load, the sleeper-passing peak within 1.5 Hz of v/s and standing out of the spectrum (more than
+    5x its median), and the paper's peaks (36, 67, 74 Hz) within 3 Hz.
+    """
+    out = []
+    static = summary.get("static", {})
+    for x, p in static.get("positions", {}).items():
+        out.append(_check(f"static deflection at x = {x} m vs Winkler beam", 100 * p["rel_error"], "<", 5.0, "%"))
+    rec = summary.get("receptance", {})
+    if "static_limit_max_abs_rel_error" in rec:
+        out.append(_check("receptance at 1 Hz vs static deflection", 100 * rec["static_limit_max_abs_rel_error"],
+                          "<", 1.0, "%"))
+        out.append(_check("pinned-pinned frequency vs closed form", 100 * rec["pinned_pinned_rel_error"], "<",
+                          10.0, "%"))
+    loaded = summary.get("loaded_pass", {})
+    f_sleeper = loaded.get("sleeper_passing_hz")
+    for mesh, run in loaded.items():
+        if not isinstance(run, dict):
+            continue
+        epb = mesh.rsplit("_", 1)[-1]
+        out.append(_check(f"loaded pass ({epb} elements/bay): mean contact force vs static load",
+                          100 * run["mean_force_rel_error"], "<", 1.0, "%"))
+        found = run["sleeper_passing_peak_hz"]
+        out.append(_check(f"loaded pass ({epb} elements/bay): sleeper-passing peak vs v/s",
+                          None if found is None else found - f_sleeper, "<", 1.5, "Hz"))
+        out.append(_check(f"loaded pass ({epb} elements/bay): sleeper-passing peak over spectrum median",
+                          run["sleeper_passing_amplitude_over_median"], ">", 5.0, "x"))
+    rest = summary.get("bare_wheelset_from_rest", {})
+    if "mean_central_force_N" in rest:
+        out.append(_check("bare wheelset from rest: mean contact force vs static load",
+                          100 * (rest["mean_central_force_N"] / rest["static_wheel_load_N"] - 1), "<", 1.0, "%"))
+    for f_paper, found in rest.get("nearest_to_paper_peaks", {}).items():
+        out.append(_check(f"bare wheelset from rest: spectral peak near the paper's {f_paper} Hz",
+                          found["found_hz"] - float(f_paper), "<", 3.0, "Hz"))
+    return out
+
+
+def format_checks(checks: list[dict]) -> str:
+    """The checks as aligned ``PASS``/``FAIL`` lines with rounded values, and a count."""
+    width = max((len(c["check"]) for c in checks), default=0)
+    lines = []
+    for c in checks:
+        fmt = "{:+.2f}" if c["relation"] == "<" else "{:,.0f}"  # signed errors to 0.01; ratios whole
+        value = "n/a" if c["value"] is None else fmt.format(c["value"])
+        limit = f"|value| < {c['limit']:g}" if c["relation"] == "<" else f"> {c['limit']:g}"
+        lines.append(f"  {'PASS' if c['passed'] else 'FAIL'}  {c['check']:<{width}}  {value:>8} {c['unit']:<2}  "
+                     f"({limit} {c['unit']})")
+    n_pass = sum(c["passed"] for c in checks)
+    lines.append(f"  {n_pass} of {len(checks)} checks pass")
+    return "\n".join(lines)
+
+
+def run_validation(out_dir: str | Path = "results/validation", make_plots: bool = True,
+                   progress: bool = False) -> dict:
+    """Compute the validation summary (see the module docstring) with its pass/fail ``checks``, write
+    ``summary.json`` and, if ``make_plots``, the PNG figures to ``out_dir``; return the summary.
+
+    ``progress``: a bar over the five stages on stderr (the two moving-wheelset passes take most of the time,
+    more on a first run while numba compiles the kernel)."""
+    from tqdm.auto import tqdm
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    bar = tqdm(total=5 if make_plots else 4, desc="validate", unit="stage", disable=not progress)
     seed = Track.seed()
     fine = Track.seed(elements_per_bay=4)
+    bar.set_postfix_str("receptance")
     rec_summary, rec_curves = _receptance_summary(fine)
+    bar.update()
+    bar.set_postfix_str("loaded passes")
     loaded, loaded_curves = _loaded_pass_summary()
+    bar.update()
+    bar.set_postfix_str("pass from rest")
     rest, rest_curves = _rest_pass_summary()
-    summary = {
+    bar.update()
+    bar.set_postfix_str("static")
+    summary: dict[str, Any] = {
         "track": {
             "name": seed.name,
             "n_sleepers": seed.n_sleepers,
@@ -291,20 +375,17 @@ def run_validation(out_dir: str | Path = "results/validation", make_plots: bool 
         "bare_wheelset_from_rest": rest,
         "plots": [],
     }
+    bar.update()
+    summary["checks"] = validation_checks(summary)
     if make_plots:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
+        bar.set_postfix_str("plots")
         files = {
-            "fig4_static_deflection.png": lambda p: _plot_static(plt, seed, p),
-            "fig4_receptance.png": lambda p: _plot_receptance(plt, fine, rec_curves, p),
+            "fig4_static_deflection.png": lambda p: _plot_static(seed, p),
+            "fig4_receptance.png": lambda p: _plot_receptance(fine, rec_curves, p),
             "fig6a_contact_force_rest.png": lambda p: _plot_force(
-                plt, *rest_curves, "Bare wheelset (Table 4) from rest, 80 km/h, seed track", "whole pass", p
+                *rest_curves, "Bare wheelset (Table 4) from rest, 80 km/h, seed track", "whole pass", p
             ),
             "fig6a_contact_force_loaded.png": lambda p: _plot_force(
-                plt,
                 *loaded_curves[2],
                 "Wheelset + 100 kN, 80 km/h, seed track (static start)",
                 "middle half of the pass",
@@ -314,6 +395,8 @@ def run_validation(out_dir: str | Path = "results/validation", make_plots: bool 
         for name, draw in files.items():
             draw(out / name)
             summary["plots"].append(name)
+        bar.update()
+    bar.close()
     summary = _jsonable(summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary

@@ -6,10 +6,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from trackenv.envs.config import TampingEnvConfig
 from trackenv_agents.actions import agent_action_space, env_action_type, ranked_to_sections
-
-TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
 
 
 def test_ranked_tamps_the_k_worst_sections():
@@ -28,25 +25,25 @@ def test_ranked_rejects_counts_out_of_range(k):
         ranked_to_sections(np.array([k]), np.ones((1, 4)))
 
 
-def test_action_types():
+def test_action_types(small_coarse_config):
     assert env_action_type("ranked") == "multibinary"
     assert env_action_type("discrete") == "discrete"
-    assert agent_action_space(TINY, "ranked") == spaces.Discrete(TINY.n_sections + 1)
+    assert agent_action_space(small_coarse_config, "ranked") == spaces.Discrete(small_coarse_config.n_sections + 1)
     with pytest.raises(ValueError, match="action_type"):
         env_action_type("campaign")
 
 
-def test_adapter_translates_ranked_actions_on_the_last_observation():
+def test_adapter_translates_ranked_actions_on_the_last_observation(small_coarse_config):
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.sb3_vec import TampingSB3VecEnv
 
-    env = TampingSB3VecEnv(2, TINY, action_type="ranked", keep_per_sleeper=False, seed=1)
-    assert env.action_space == spaces.Discrete(TINY.n_sections + 1)
+    env = TampingSB3VecEnv(2, small_coarse_config, action_type="ranked", keep_per_sleeper=False, seed=1)
+    assert env.action_space == spaces.Discrete(small_coarse_config.n_sections + 1)
     obs = env.reset()
-    assert env.action_masks().shape == (2, TINY.n_sections + 1)
+    assert env.action_masks().shape == (2, small_coarse_config.n_sections + 1)
     worst = np.argmax(obs["section_sd"][0])
-    _, _, _, infos = env.step(np.array([1, TINY.n_sections]))
-    expected = np.zeros(TINY.n_sections, dtype=bool)
+    _, _, _, infos = env.step(np.array([1, small_coarse_config.n_sections]))
+    expected = np.zeros(small_coarse_config.n_sections, dtype=bool)
     expected[worst] = True
     np.testing.assert_array_equal(infos[0]["tamped_sections"], expected)
     assert infos[1]["tamped_sections"].all()

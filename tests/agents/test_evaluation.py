@@ -7,14 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.tamping import TampingEnv
 from trackenv_agents.evaluation import (
     EvaluationResult,
     bootstrap_ci,
     compare,
     evaluate_many,
-    evaluate_policy,
+    evaluate_one,
     format_markdown,
     format_table,
     paired_difference,
@@ -23,14 +22,13 @@ from trackenv_agents.evaluation import (
 )
 from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold
 
-CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)
 SEEDS = [0, 1, 2, 3]
 
 
 @pytest.fixture(scope="module")
-def results() -> dict[str, EvaluationResult]:
+def results(small_config) -> dict[str, EvaluationResult]:
     """NoMaintenance and SDThreshold on SEEDS, in one batched run (chunks of 3 to exercise the chunking)."""
-    no, sd = evaluate_many([NoMaintenance(), SDThreshold(0.8)], CFG, SEEDS, batch_size=3)
+    no, sd = evaluate_many([NoMaintenance(), SDThreshold(0.8)], small_config, SEEDS, batch_size=3)
     return {"no": no, "sd": sd}
 
 
@@ -44,8 +42,8 @@ def test_cost_is_minus_sum_of_rewards(results):
 
 
 @pytest.mark.slow
-def test_same_seeds_identical_results_whatever_the_batching(results):
-    again = evaluate_policy(SDThreshold(0.8), CFG, SEEDS, batch_size=4)
+def test_same_seeds_identical_results_whatever_the_batching(results, small_config):
+    again = evaluate_one(SDThreshold(0.8), small_config, SEEDS, batch_size=4)
     first = results["sd"]
     np.testing.assert_array_equal(again.cost, first.cost)
     np.testing.assert_array_equal(again.section_tampings, first.section_tampings)
@@ -54,13 +52,13 @@ def test_same_seeds_identical_results_whatever_the_batching(results):
 
 
 @pytest.mark.slow
-def test_matches_single_env_rollout(results):
+def test_matches_single_env_rollout(results, small_config):
     """The harness's episode for seed 2 is the one TampingEnv.reset(seed=2) plays."""
-    env = TampingEnv(CFG)
+    env = TampingEnv(small_config)
     policy = SDThreshold(0.8)
     obs, _ = env.reset(seed=2)
     total, tamped = 0.0, 0
-    for _ in range(CFG.horizon_steps):
+    for _ in range(small_config.horizon_steps):
         obs, r, term, trunc, info = env.step(policy.predict(obs)[0])
         total -= r
         tamped += int(info["tamped_sections"].sum())
@@ -79,7 +77,7 @@ def test_no_maintenance_has_zero_tampings(results):
 
 
 @pytest.mark.slow  # uses the 5 s fixture
-def test_summary_fields_and_ci(results):
+def test_summary_fields_and_ci(results, small_config):
     s = results["sd"].summary()
     for key in ("policy", "params", "n_episodes", "mean_cost", "ci_low", "ci_high", "tampings_per_km_year",
                 "immediate_action_exceedances", "immediate_action_exceedances_mean", "mean_final_sd_mm"):
@@ -87,7 +85,7 @@ def test_summary_fields_and_ci(results):
     assert s["policy"] == "sd_threshold" and s["params"] == {"threshold_mm": 0.8}
     assert s["ci_low"] <= s["mean_cost"] <= s["ci_high"]
     r = results["sd"]
-    expected = r.section_tampings.mean() / (CFG.n_sections * CFG.horizon_years)
+    expected = r.section_tampings.mean() / (small_config.n_sections * small_config.horizon_years)
     assert s["tampings_per_km_year"] == pytest.approx(expected)
     json.dumps(s)  # JSON-friendly
 
@@ -120,17 +118,17 @@ def test_tables(results):
 
 
 @pytest.mark.slow
-def test_tune_returns_grid_member():
+def test_tune_returns_grid_member(small_config):
     grid = [{"threshold_mm": 0.8}, {"threshold_mm": 50.0}]
-    out = tune(SDThreshold, CFG, train_seeds=[10, 11], grid=grid)
+    out = tune(SDThreshold, small_config, train_seeds=[10, 11], grid=grid)
     assert out["best_params"] in grid
     assert [row["mean_cost"] for row in out["table"]] == sorted(row["mean_cost"] for row in out["table"])
     assert out["best_mean_cost"] == out["table"][0]["mean_cost"]
 
 
 @pytest.mark.slow
-def test_tune_many_keeps_per_episode_costs():
-    out = tune_many([SDThreshold], CFG, [10, 11], batch_size=4, progress=False)
+def test_tune_many_keeps_per_episode_costs(small_config):
+    out = tune_many([SDThreshold], small_config, [10, 11], batch_size=4, progress=False)
     table = out[0]["table"]
     assert len(table) == len(SDThreshold.param_grid())
     for row in table:
@@ -139,12 +137,20 @@ def test_tune_many_keeps_per_episode_costs():
 
 
 @pytest.mark.slow
-def test_compare_sorted_and_tunes(monkeypatch):
+def test_compare_sorted_and_tunes(monkeypatch, small_config):
     monkeypatch.setattr(Periodic, "param_grid", classmethod(lambda cls: [{"interval_years": 1.0},
                                                                          {"interval_years": 0.5}]))
-    rows = compare([NoMaintenance, Periodic, SDThreshold(0.8)], CFG, test_seeds=[0, 1], train_seeds=[10])
+    rows = compare([NoMaintenance, Periodic, SDThreshold(0.8)], small_config, test_seeds=[0, 1], train_seeds=[10])
     costs = [r["mean_cost"] for r in rows]
     assert costs == sorted(costs)
     assert {r["policy"] for r in rows} == {"no_maintenance", "periodic", "sd_threshold"}
     periodic = next(r for r in rows if r["policy"] == "periodic")
     assert periodic["params"]["interval_years"] in (1.0, 0.5)
+
+
+def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
+    from trackenv_agents import evaluation
+
+    with pytest.warns(DeprecationWarning, match="evaluate_one"):
+        old = evaluation.evaluate_policy(SDThreshold(0.8), small_config, SEEDS[:1])
+    np.testing.assert_array_equal(old.cost, evaluate_one(SDThreshold(0.8), small_config, SEEDS[:1]).cost)

@@ -9,13 +9,11 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from trackenv.envs.config import TampingEnvConfig  # noqa: E402
 from trackenv.envs.vector import TampingVectorEnv  # noqa: E402
+from trackenv_agents.evaluation import evaluate_one  # noqa: E402
 from trackenv_agents.heuristics import Periodic  # noqa: E402
 from trackenv_agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
-from trackenv_agents.train import evaluate_returns, load_trained, train  # noqa: E402
-
-TINY = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0, dt=2e-4)
+from trackenv_agents.train import load_trained, train  # noqa: E402
 
 
 def test_teacher_actions_in_agent_terms():
@@ -26,32 +24,33 @@ def test_teacher_actions_in_agent_terms():
         teacher_to_agent_actions(sections, "discrete")
 
 
-def test_teacher_policy_defaults_to_tuned_parameters_and_rejects_unknown_rules():
+def test_teacher_policy_defaults_to_tuned_parameters_and_rejects_unknown_rules(small_coarse_config):
     tuned = json.loads(open("agents/tuned_heuristics.json").read())["best_params"]["periodic"]
-    teacher = teacher_policy("periodic", TINY)
+    teacher = teacher_policy("periodic", small_coarse_config)
     assert isinstance(teacher, Periodic) and teacher.params["interval_years"] == tuned["interval_years"]
-    assert teacher.horizon_years == TINY.horizon_years
+    assert teacher.horizon_years == small_coarse_config.horizon_years
     with pytest.raises(ValueError, match="warm_start_rule"):
-        teacher_policy("oracle", TINY)
+        teacher_policy("oracle", small_coarse_config)
 
 
 @pytest.mark.parametrize("key, value", [("warm_start_episodes", 0), ("warm_start_epochs", 0),
                                         ("warm_start_label_smoothing", 1.0)])
-def test_warm_start_rejects_bad_settings(tmp_path, key, value):
+def test_warm_start_rejects_bad_settings(tmp_path, key, value, small_coarse_config):
     hp = {"action_type": "ranked", "keep_per_sleeper": False, "warm_start_rule": "periodic", key: value}
     with pytest.raises(ValueError, match=key):
-        train("ppo", TINY, total_timesteps=8, n_envs=2, out_dir=tmp_path, hyperparams=hp, progress=False,
+        train("ppo", small_coarse_config, total_timesteps=8, n_envs=2, out_dir=tmp_path, hyperparams=hp, progress=False,
               eval_seeds=None, verbose=0)
 
 
 @pytest.mark.parametrize("action_type", ["ranked", "multibinary"])
-def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type):
+def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type, small_coarse_config):
     params = {"interval_years": 0.75, "sections": "all"}  # tamps at steps 3 and 6 of the 8
     hp = {"action_type": action_type, "keep_per_sleeper": False, "n_steps": 8, "batch_size": 16, "n_epochs": 1,
           "learning_rate": 0.0, "warm_start_rule": "periodic", "warm_start_params": params,
           "warm_start_episodes": 8, "warm_start_epochs": 200,
           "warm_start_label_smoothing": 0.1}
-    path = train("ppo", TINY, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
+    path = train("ppo", small_coarse_config, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run",
+                 hyperparams=hp,
                  progress=False, eval_seeds=[5, 6], eval_freq=1000, checkpoint_every=0, verbose=0)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     warm = summary["warm_start"]
@@ -59,12 +58,13 @@ def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type):
     assert 0.5 < warm["teacher_probability"] < 0.99  # label smoothing leaves room to explore
     assert summary["evaluations"][0]["timesteps"] == 0  # the clone itself is evaluated before PPO starts
     # on unseen seeds the clone's deterministic actions are the teacher's, step by step
-    clone, teacher = load_trained(path), Periodic(**params).bind(TINY)
-    venv = TampingVectorEnv(3, TINY)
+    clone, teacher = load_trained(path), Periodic(**params).bind(small_coarse_config)
+    venv = TampingVectorEnv(3, small_coarse_config)
     obs, _ = venv.reset(seed=[101, 102, 103])
-    for _ in range(TINY.horizon_steps):
+    for _ in range(small_coarse_config.horizon_steps):
         expected, _ = teacher.predict(obs)
         got, _ = clone.predict(obs)
         np.testing.assert_array_equal(got, expected)
         obs, *_ = venv.step(expected)
-    np.testing.assert_allclose(evaluate_returns(clone, TINY, [7, 8]), evaluate_returns(teacher, TINY, [7, 8]))
+    np.testing.assert_allclose(evaluate_one(clone, small_coarse_config, [7, 8]).cost,
+                               evaluate_one(teacher, small_coarse_config, [7, 8]).cost)

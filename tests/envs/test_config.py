@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import trackenv.envs  # noqa: F401  (registers the ids)
@@ -120,3 +121,32 @@ def test_bad_env_arguments() -> None:
         TampingEnv(TampingEnvConfig(**TINY), action_type="continuous")
     with pytest.raises(ValueError, match="render_mode"):
         TampingEnv(TampingEnvConfig(**TINY), render_mode="human")
+
+
+def test_the_numbers_that_draw_a_track_are_fields() -> None:
+    """Sleeper spacing, ballast correlation, transition placement and voided support are config fields that
+    reach the track (defaults: the values the episode used to hard-code)."""
+    from trackenv.envs.episode import new_episode
+    from trackenv.physics.track import Track
+
+    c = TampingEnvConfig(**TINY)
+    assert (c.sleeper_spacing_m, c.ballast_stiffness_correlation_m) == (0.6, 1.2)
+    assert (c.transition_position, c.voided_residual_support) == ((0.2, 0.8), 0.05)
+    wide = TampingEnvConfig(**TINY, sleeper_spacing_m=0.75, transition_probability=1.0,
+                            transition_position=[0.5, 0.6])
+    assert wide.transition_position == (0.5, 0.6)
+    assert wide.n_sleepers == Track.realistic(30.0, sleeper_spacing=0.75).n_sleepers == 41
+    for seed in range(5):
+        ep = new_episode(wide, np.random.default_rng(seed))
+        assert ep.sim.track.sleeper_spacing == 0.75
+        assert int(0.5 * 41) <= ep.transition_sleeper < int(0.6 * 41)
+    assert TampingEnvConfig.from_dict(wide.to_dict()) == wide
+
+
+@pytest.mark.parametrize("field, value", [
+    ("sleeper_spacing_m", 0.1), ("ballast_stiffness_correlation_m", -1.0), ("voided_residual_support", 1.5),
+    ("transition_position", (0.8, 0.2)), ("transition_position", (0.1,)), ("transition_position", "middle"),
+])
+def test_track_drawing_fields_are_checked(field: str, value) -> None:
+    with pytest.raises(ValueError, match=field):
+        TampingEnvConfig(**TINY, **{field: value})

@@ -366,3 +366,60 @@ def test_uniform_track_with_support_feedback_settles_uniformly_to_its_ends() -> 
                               cycles_per_iteration=50_000, speed=80 / 3.6, feedback="support")
     u = sim.run(2).settlement[-1]
     assert (u.max() - u.min()) / u.mean() < 0.02, u
+
+
+# ------------------------------------------------------------------------ episode end and reset arguments
+def test_step_after_the_horizon_raises_until_reset() -> None:
+    env = TampingEnv(tiny(horizon_years=0.5))  # 2 steps
+    env.reset(seed=0)
+    assert [env.step(np.zeros(3, dtype=np.int8))[3] for _ in range(2)] == [False, True]
+    level = env.episode.sim.level.copy()
+    with pytest.raises(RuntimeError, match="horizon.*reset"):
+        env.step(np.zeros(3, dtype=np.int8))
+    np.testing.assert_array_equal(env.episode.sim.level, level)  # nothing simulated, nothing charged
+    env.reset(seed=0)
+    env.step(np.zeros(3, dtype=np.int8))
+
+
+@pytest.mark.parametrize("seed", [1.5, -1, True, "1", np.float64(2.0)])
+def test_reset_refuses_seeds_that_are_not_non_negative_integers(seed) -> None:
+    with pytest.raises(ValueError, match="^seed must be an integer"):
+        TampingEnv(tiny()).reset(seed=seed)
+
+
+def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options() -> None:
+    env = TampingEnv(tiny())
+    a, _ = env.reset(seed=np.int64(7))
+    b, _ = env.reset(seed=7, options={})
+    np.testing.assert_array_equal(a["level"], b["level"])
+    with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['initial_level'\]"):
+        env.reset(options={"initial_level": 0.0})
+
+
+# ------------------------------------------------------------------------ observation bounds
+def test_observation_space_and_clipping_share_one_table_of_bounds() -> None:
+    from trackenv.envs import episode as E
+
+    cfg = tiny()
+    space = TampingEnv(cfg).observation_space
+    for key, (low, high) in E.observation_bounds(cfg).items():
+        assert float(space[key].low.min()) == low and float(space[key].high.max()) == high
+
+
+def test_clipped_observations_are_reported_in_info() -> None:
+    from trackenv.envs import episode as E
+
+    env = TampingEnv(tiny())
+    _, info = env.reset(seed=0)
+    assert info["observation_clipped"] == 0
+    ep = env.episode
+    ep.sim.offset = ep.sim.offset + 0.25  # 250 mm of settlement everywhere: past the 200 mm bound of "level"
+    obs = E.observation(ep)
+    assert np.all(obs["level"] == 200.0)
+    assert E.info(ep, dict.fromkeys(E.COST_KEYS, 0.0), np.zeros(3, bool))["observation_clipped"] == cfg_sleepers(ep)
+    _, _, _, _, info = env.step(np.zeros(3, dtype=np.int8))
+    assert info["observation_clipped"] >= cfg_sleepers(ep)
+
+
+def cfg_sleepers(ep) -> int:
+    return ep.config.n_sleepers

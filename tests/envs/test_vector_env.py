@@ -165,3 +165,22 @@ def test_discrete_vector_env() -> None:
     np.testing.assert_allclose(rewards[1], single.step(2)[1], rtol=1e-9)
     with pytest.raises(ValueError):
         venv.step(np.array([0, 4]))
+
+
+@pytest.mark.parametrize("actions", [None, 5, np.zeros(3), np.zeros((2, 2)), [[0, 1, 0], [0, 1]]])
+def test_malformed_vector_actions_name_the_expected_shape(actions) -> None:
+    venv = TampingVectorEnv(num_envs=2, config=CFG)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"^actions must have shape \(2, 3\)"):
+        venv.step(actions)
+
+
+@pytest.mark.parametrize("seed", [1.5, -1, True, [0, -1], [0, 1.5], np.array(2.5)])
+def test_vector_reset_refuses_bad_seeds(seed) -> None:
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        TampingVectorEnv(num_envs=2, config=CFG).reset(seed=seed)
+
+
+def test_vector_reset_refuses_unknown_options() -> None:
+    with pytest.raises(ValueError, match="unknown reset option"):
+        TampingVectorEnv(num_envs=2, config=CFG).reset(seed=0, options={"x": 1})

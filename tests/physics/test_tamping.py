@@ -263,3 +263,27 @@ def test_property_untamped_unchanged_and_finite(mask, seed, runout, reference):
     np.testing.assert_allclose(res.lift, z - res.level)
     assert np.all(res.rate_factor >= 1.0)
     assert np.all(res.tampings[m & ~res.renewed_mask] == t0[m & ~res.renewed_mask] + 1)
+
+
+@pytest.mark.parametrize(("max_lift", "expected"), [(np.inf, 0.0), (0.05, 0.03), (0.02, 0.06), (0.1, 0.0)])
+def test_design_lift_is_limited_per_pass(max_lift, expected):
+    """A uniformly settled track (80 mm) tamped all along: lifted to the design line, by at most max_lift_m."""
+    z = np.full(50, 0.08)
+    model = TampingModel(reference="design", residual_sd_m=0.0, max_lift_m=max_lift)
+    res = tamp(z, np.ones(50, bool), model, np.random.default_rng(0), np.zeros(50, int))
+    np.testing.assert_allclose(res.level, expected, atol=1e-12)
+    np.testing.assert_allclose(res.lift, 0.08 - expected, atol=1e-12)
+
+
+def test_repeated_limited_lifts_reach_the_design_line():
+    model = TampingModel(reference="design", residual_sd_m=0.0, residual_fraction=0.0, max_lift_m=0.03)
+    z, n = np.full(30, 0.08), np.zeros(30, int)
+    for expected in (0.05, 0.02, 0.0, 0.0):
+        z = tamp(z, np.ones(30, bool), model, np.random.default_rng(0), n).level
+        np.testing.assert_allclose(z, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.01, 2.0, "0.05", np.nan])
+def test_max_lift_is_checked(bad):
+    with pytest.raises(ValueError, match="^max_lift_m must"):
+        TampingModel(max_lift_m=bad)

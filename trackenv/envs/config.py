@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Any
 
-import numpy as np
-
-from ..physics._validation import check_scalar
+from ..degradation import TrackDegradation
+from ..physics._checks import check_choice, check_field, check_int_field, check_time_steps
+from ..physics.contact import HertzContact
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel
-from ..physics.timestep import check_dt_option
+from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
+from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 
 VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
@@ -22,14 +23,16 @@ VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
 class TampingEnvConfig:
     """Everything that defines a tamping problem. SI units unless the name says otherwise.
 
-    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers) split into ``n_sections`` equal tamping
-    sections; supports from ``Track.realistic`` with per-sleeper ballast stiffness drawn lognormal with
-    coefficient of variation ``ballast_stiffness_cv``; with probability ``transition_probability`` a
-    transition zone (ballast ``transition_stiffness_ratio`` times stiffer from a random sleeper on, e.g. a
-    bridge approach); ``voided_sleepers_mean`` hanging sleepers on average (Poisson). Ballast condition varies
-    along the track: each sleeper's settlement rate is lognormal with CV ``settlement_rate_cv``, correlated
-    over ``settlement_rate_correlation_m``. The initial level is drawn from the German vertical PSD of
-    ``initial_quality`` ("low"/"high" disturbance).
+    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers ``sleeper_spacing_m`` = 0.6 m apart) split
+    into ``n_sections`` equal tamping sections; supports from ``Track.realistic`` with per-sleeper ballast
+    stiffness drawn lognormal with coefficient of variation ``ballast_stiffness_cv``, correlated over
+    ``ballast_stiffness_correlation_m``; with probability ``transition_probability`` a transition zone (ballast
+    ``transition_stiffness_ratio`` times stiffer from a sleeper on, e.g. a bridge approach, drawn uniformly
+    within the fractions ``transition_position`` of the track, away from its ends);
+    ``voided_sleepers_mean`` hanging sleepers on average (Poisson), each keeping ``voided_residual_support``
+    of its ballast support. Ballast condition varies along the track: each sleeper's settlement rate is
+    lognormal with CV ``settlement_rate_cv``, correlated over ``settlement_rate_correlation_m``. The initial
+    level is drawn from the German vertical PSD of ``initial_quality`` ("low"/"high" disturbance).
 
     Traffic: wheel load ``axle_load_t``·g/2 (a wheelset carrying it, or one of the car models in
     ``vehicle``), ``speed_kmh``, ``axle_passes_per_year``, ``steps_per_year`` planning periods a year (each
@@ -61,10 +64,14 @@ class TampingEnvConfig:
 
     track_length_m: float = 60.0
     n_sections: int = 6
+    sleeper_spacing_m: float = 0.6
     ballast_stiffness_cv: float = 0.15
+    ballast_stiffness_correlation_m: float = 1.2
     transition_probability: float = 0.3
     transition_stiffness_ratio: float = 2.0
+    transition_position: tuple = (0.2, 0.8)
     voided_sleepers_mean: float = 0.3
+    voided_residual_support: float = 0.05
     settlement_rate_cv: float = 0.35
     settlement_rate_correlation_m: float = 3.0
     initial_quality: str = "low"
@@ -88,31 +95,40 @@ class TampingEnvConfig:
     dt: float | str = "auto"
 
     def __post_init__(self) -> None:
-        c = check_scalar
-        c("track_length_m", self.track_length_m, low=30.0, high=2000.0)
-        if (isinstance(self.n_sections, bool) or not isinstance(self.n_sections, (int, np.integer))
-                or not 1 <= self.n_sections <= 64):
-            raise ValueError(f"n_sections must be an integer in [1, 64], got {self.n_sections!r}")
+        # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
+        c, ci = partial(check_field, self), partial(check_int_field, self)
+        c("track_length_m", low=30.0, high=2000.0)
+        # the sleeper spacings of ballasted track in service (the D1 filter and the sections assume one)
+        c("sleeper_spacing_m", low=0.3, high=1.0)
+        ci("n_sections", low=1, high=64)
         if self.n_sleepers < 3 * self.n_sections:
             raise ValueError("n_sections must leave at least 3 sleepers per section")
-        c("ballast_stiffness_cv", self.ballast_stiffness_cv, low=0.0, high=1.0)
-        c("transition_probability", self.transition_probability, low=0.0, high=1.0)
-        c("transition_stiffness_ratio", self.transition_stiffness_ratio, low=0.2, high=10.0)
-        c("voided_sleepers_mean", self.voided_sleepers_mean, low=0.0, high=10.0)
-        c("settlement_rate_cv", self.settlement_rate_cv, low=0.0, high=2.0)
-        c("settlement_rate_correlation_m", self.settlement_rate_correlation_m, low=0.0, high=100.0)
-        if self.initial_quality not in ("low", "high"):
-            raise ValueError(f"initial_quality must be 'low' or 'high', got {self.initial_quality!r}")
-        if self.vehicle not in VEHICLES:
-            raise ValueError(f"vehicle must be one of {VEHICLES}, got {self.vehicle!r}")
-        c("axle_load_t", self.axle_load_t, low=1.0, high=40.0)
-        c("speed_kmh", self.speed_kmh, low=5.0, high=300.0)
-        c("axle_passes_per_year", self.axle_passes_per_year, low=1.0, high=1e8)
-        if not isinstance(self.steps_per_year, (int, np.integer)) or not 1 <= self.steps_per_year <= 52:
-            raise ValueError(f"steps_per_year must be an integer in [1, 52], got {self.steps_per_year!r}")
-        c("horizon_years", self.horizon_years, low=1.0 / self.steps_per_year, high=100.0)
-        if self.law not in LAWS:
-            raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")
+        c("ballast_stiffness_cv", low=0.0, high=1.0)
+        c("ballast_stiffness_correlation_m", low=0.0, high=100.0)
+        c("transition_probability", low=0.0, high=1.0)
+        c("transition_stiffness_ratio", low=0.2, high=10.0)
+        try:
+            if isinstance(self.transition_position, str):
+                raise TypeError
+            lo, hi = (float(v) for v in self.transition_position)
+        except (TypeError, ValueError):
+            raise ValueError(f"transition_position must be two fractions (low, high), got "
+                             f"{self.transition_position!r}") from None
+        if not 0.0 <= lo < hi <= 1.0:
+            raise ValueError(f"transition_position must satisfy 0 <= low < high <= 1, got {self.transition_position!r}")
+        object.__setattr__(self, "transition_position", (lo, hi))
+        c("voided_sleepers_mean", low=0.0, high=10.0)
+        c("voided_residual_support", low=0.0, high=1.0)
+        c("settlement_rate_cv", low=0.0, high=2.0)
+        c("settlement_rate_correlation_m", low=0.0, high=100.0)
+        check_choice("initial_quality", self.initial_quality, ("low", "high"))
+        check_choice("vehicle", self.vehicle, VEHICLES)
+        c("axle_load_t", low=1.0, high=40.0)
+        c("speed_kmh", low=5.0, high=300.0)
+        c("axle_passes_per_year", low=1.0, high=1e8)
+        ci("steps_per_year", low=1, high=52)
+        c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
+        check_choice("law", self.law, sorted(LAWS))
         object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
         object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
         object.__setattr__(self, "limits", _as_items("limits", self.limits))
@@ -127,15 +143,26 @@ class TampingEnvConfig:
             "intervention_cost",
             "immediate_action_cost",
         ):
-            c(name, getattr(self, name), low=0.0, high=1e9)
-        if not isinstance(self.min_steps_between_tampings, (int, np.integer)) or not (
-            0 <= self.min_steps_between_tampings <= 100
-        ):
-            raise ValueError(
-                "min_steps_between_tampings must be an integer in [0, 100], got "
-                f"{self.min_steps_between_tampings!r}"
-            )
-        check_dt_option(self.dt)
+            c(name, low=0.0, high=1e9)
+        ci("min_steps_between_tampings", low=0, high=100)
+        dt = check_dt_option(self.dt)
+        object.__setattr__(self, "dt", dt)
+        # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
+        # step could not simulate: the leading axle runs from the vehicle's span through the approach zone
+        # and the evaluated track to TrackDegradation.pass_end_position; with dt="auto" a pass that loses
+        # contact is rerun at the reference step, so the finer of the two counts
+        system = self.make_vehicle().system()
+        track = Track.realistic(30.0)
+        finest = (
+            min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+            if isinstance(dt, str)
+            else dt
+        )
+        end = TrackDegradation.pass_end_position(self.track_length_m, track.sleeper_spacing, system.span)
+        try:
+            check_time_steps(end - system.span, self.speed, finest)
+        except ValueError as e:
+            raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 
     @classmethod
     def coerce(cls, config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
@@ -170,7 +197,7 @@ class TampingEnvConfig:
     # derived
     @property
     def n_sleepers(self) -> int:
-        return int(round(self.track_length_m / 0.6)) + 1
+        return int(round(self.track_length_m / self.sleeper_spacing_m)) + 1  # as Track.realistic counts them
 
     @property
     def horizon_steps(self) -> int:

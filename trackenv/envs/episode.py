@@ -51,7 +51,7 @@ class Episode:
         cached = self._quality_cache
         if cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset:
             return cached[2]
-        d1 = d1_filter(self.sim.level, 0.6)
+        d1 = d1_filter(self.sim.level, self.sim.track.sleeper_spacing)
         value = (d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections, self.n_sections))
         self._quality_cache = (self.sim.state, self.sim.offset, value)
         return value
@@ -79,16 +79,20 @@ def new_episode(config: TampingEnvConfig, rng: np.random.Generator) -> Episode:
     """Draw a track, its ballast condition and its initial level from ``rng``."""
     c = config
     n = c.n_sleepers
-    track = Track.realistic(c.track_length_m)
-    kb = track.ballast_stiffness * _correlated_lognormal(rng, n, c.ballast_stiffness_cv, 2.0)
+    track = Track.realistic(c.track_length_m, sleeper_spacing=c.sleeper_spacing_m)
+    spacing = track.sleeper_spacing
+    kb = track.ballast_stiffness * _correlated_lognormal(
+        rng, n, c.ballast_stiffness_cv, c.ballast_stiffness_correlation_m / spacing
+    )
     transition = -1
     if rng.random() < c.transition_probability:
-        transition = int(rng.integers(n // 5, 4 * n // 5))
+        lo, hi = (int(n * f + 1e-9) for f in c.transition_position)  # whole sleepers; 1e-9: 0.2 * 5 is 1
+        transition = int(rng.integers(lo, hi))
         kb[transition:] *= c.transition_stiffness_ratio
     track = track.replace(ballast_stiffness=kb)
-    for _ in range(int(rng.poisson(c.voided_sleepers_mean))):
-        track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=0.05)
-    rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / 0.6)
+    for _ in range(int(rng.poisson(c.voided_sleepers_mean))):  # never the two end sleepers at either end
+        track = track.with_voided_sleeper(int(rng.integers(2, n - 2)), residual_support=c.voided_residual_support)
+    rate = _correlated_lognormal(rng, n, c.settlement_rate_cv, c.settlement_rate_correlation_m / spacing)
     level = synthesize_profile(track.sleeper_positions, partial(german_psd, quality=c.initial_quality), rng)
     sim = TrackDegradation(
         track,
@@ -160,23 +164,57 @@ def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     }
 
 
-def observation(ep: Episode) -> dict[str, np.ndarray]:
-    """The observation dict (see TampingEnv's table)."""
-    c = ep.config
-    _, sd, peak = ep.quality()
-    years = (ep.step_count - ep.last_tamped_step) / c.steps_per_year
+def observation_bounds(config: TampingEnvConfig) -> dict[str, tuple[float, float]]:
+    """Bounds of each observation key (the env's observation space is built from these, and the clipping in
+    :func:`observation` uses them, so the two cannot drift apart)."""
     return {
-        "level": np.clip(ep.sim.level * 1e3, -100.0, 200.0).astype(np.float32),
-        "contact_force": np.clip(ep.contact_force / 1e3, 0.0, 2000.0).astype(np.float32),
-        "section_sd": np.clip(sd * 1e3, 0.0, 100.0).astype(np.float32),
-        "section_peak": np.clip(peak * 1e3, 0.0, 200.0).astype(np.float32),
-        "tampings": np.clip(ep.section_tampings, 0, 1000).astype(np.float32),
-        "years_since_tamping": np.clip(years, 0.0, c.horizon_years + 1.0).astype(np.float32),
-        "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)], dtype=np.float32),
+        "level": (-100.0, 200.0),
+        "contact_force": (0.0, 2000.0),
+        "section_sd": (0.0, 100.0),
+        "section_peak": (0.0, 200.0),
+        "tampings": (0.0, 1000.0),
+        "years_since_tamping": (0.0, config.horizon_years + 1.0),
+        "time": (0.0, 1.0),
     }
 
 
+def raw_observation(ep: Episode) -> dict[str, np.ndarray]:
+    """The observed quantities in the units of TampingEnv's table, before clipping to the space's bounds."""
+    c = ep.config
+    _, sd, peak = ep.quality()
+    return {
+        "level": ep.sim.level * 1e3,
+        "contact_force": ep.contact_force / 1e3,
+        "section_sd": sd * 1e3,
+        "section_peak": peak * 1e3,
+        "tampings": np.asarray(ep.section_tampings, dtype=float),
+        "years_since_tamping": (ep.step_count - ep.last_tamped_step) / c.steps_per_year,
+        "time": np.array([min(ep.step_count / c.horizon_steps, 1.0)]),
+    }
+
+
+def observation(ep: Episode) -> dict[str, np.ndarray]:
+    """The observation dict (see TampingEnv's table), clipped to its bounds (``info["observation_clipped"]``
+    counts the values that were)."""
+    bounds = observation_bounds(ep.config)
+    return {k: np.clip(v, *bounds[k]).astype(np.float32) for k, v in raw_observation(ep).items()}
+
+
+def clipped_values(ep: Episode) -> int:
+    """How many observed values lie outside their bounds (and are clipped in the observation).
+
+    ``years_since_tamping`` of a never-tamped section counts from far back and is clipped by design; it is not
+    counted."""
+    bounds = observation_bounds(ep.config)
+    raw = raw_observation(ep)
+    return int(
+        sum(np.sum((v < bounds[k][0]) | (v > bounds[k][1])) for k, v in raw.items() if k != "years_since_tamping")
+    )
+
+
 def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
+    """The step's info dict (see TampingEnv's table): track geometry in mm like the observation, each key
+    naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0."""
     _, sd, peak = ep.quality()
     lim = ep.config.band_limits
     cls = classify(peak, lim)
@@ -184,12 +222,15 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
         "costs": parts,
         "cost": float(sum(parts.values())),
         "tamped_sections": tamped.copy(),
+        "section_sd_mm": sd * 1e3,
+        "section_peak_mm": peak * 1e3,
         "section_sd_m": sd.copy(),
         "section_peak_m": peak.copy(),
         "section_class": cls,
         "immediate_action_exceedances": int(np.sum(cls == 3)),
         "year": ep.step_count / ep.config.steps_per_year,
         "max_contact_force_N": float(ep.contact_force.max()),
+        "observation_clipped": clipped_values(ep),
     }
 
 

@@ -13,22 +13,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from ..physics._checks import check_int
 from . import episode as E
 from .config import TampingEnvConfig
 
 
 def observation_space(config: TampingEnvConfig) -> spaces.Dict:
     n, s = config.n_sleepers, config.n_sections
-    f32 = np.float32
+    size = {"level": n, "contact_force": n, "time": 1}
     return spaces.Dict(
         {
-            "level": spaces.Box(-100.0, 200.0, (n,), f32),
-            "contact_force": spaces.Box(0.0, 2000.0, (n,), f32),
-            "section_sd": spaces.Box(0.0, 100.0, (s,), f32),
-            "section_peak": spaces.Box(0.0, 200.0, (s,), f32),
-            "tampings": spaces.Box(0.0, 1000.0, (s,), f32),
-            "years_since_tamping": spaces.Box(0.0, config.horizon_years + 1.0, (s,), f32),
-            "time": spaces.Box(0.0, 1.0, (1,), f32),
+            key: spaces.Box(low, high, (size.get(key, s),), np.float32)
+            for key, (low, high) in E.observation_bounds(config).items()
         }
     )
 
@@ -39,6 +35,23 @@ def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
     if action_type == "discrete":
         return spaces.Discrete(config.n_sections + 1)
     raise ValueError(f"action_type must be 'multibinary' or 'discrete', got {action_type!r}")
+
+
+RESET_OPTIONS: tuple[str, ...] = ()  # reset() takes no options yet; any key is refused, not ignored
+
+
+def check_reset_arguments(seed, options) -> int | None:
+    """The seed as a Python int (or None); refuse a seed that is not a non-negative integer, and any option
+    (none is known)."""
+    if seed is not None:
+        seed = check_int("seed", seed, low=0)
+    if options is not None:
+        if not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
+        unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+    return seed
 
 
 def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
@@ -101,6 +114,32 @@ class TampingEnv(gym.Env):
     time                   fraction of the horizon elapsed                       -       [0, 1]
     =====================  ====================================================  ======  ============
 
+    Values beyond a bound are clipped to it, never silently: ``info["observation_clipped"]`` counts them
+    (``years_since_tamping`` of a never-tamped section is clipped by design and not counted). With the default
+    "smoothing" tamping the level keeps its settlement (a tamper in that mode does not lift the track back to
+    the design line), so under heavy traffic or over long horizons ``level`` can reach its 200 mm bound
+    (seed 1, 10 years at 1e7 axle passes a year, tamping sections above 0.8 × the SD alert value: 5 of 40
+    steps). ``tamping={"reference": "design", "max_lift_m": 0.02}`` models the lift instead (toward the
+    design line, at most ``max_lift_m`` per pass): over 30 years of the default traffic the same rule then
+    ends at a mean level of 4 mm instead of 82.
+
+    **Info** (per step; units in the key where they are not obvious): track geometry in mm, like the
+    observation and the EN 13848-5 limits; the physics inside is SI.
+
+    ============================  ==================================================================  ====
+    key                           quantity                                                            unit
+    ============================  ==================================================================  ====
+    costs, cost                   the period's cost in named parts, and their sum (= -reward)         k€
+    tamped_sections               sections tamped this step (bool, n_sections)                        -
+    section_sd_mm                 SD of the D1 level per section (unclipped)                          mm
+    section_peak_mm               D1 mean-to-peak per section (unclipped)                             mm
+    section_sd_m, section_peak_m  the same in metres (kept for v0; prefer the mm keys)                m
+    section_class                 EN 13848-5 class per section: 0 ok, 1 alert, 2 intervention, 3 IAL  -
+    immediate_action_exceedances  sections at or above the immediate-action limit                     -
+    year                          time at the end of the step                                         year
+    max_contact_force_N           largest wheel/rail force of the step's pass                         N
+    ============================  ==================================================================  ====
+
     **Reward.** Minus the period's cost (k€), returned in named parts in ``info["costs"]``: ``tamping``
     (mobilisation per campaign + per section), ``geometry`` (per section-year, ∝ (SD/SD_alert)²),
     ``alert``, ``intervention``, ``immediate_action`` (per section at or above the EN 13848-5 style limit of
@@ -117,7 +156,16 @@ class TampingEnv(gym.Env):
     **Randomness.** Everything random (track supports, transition zone, voided sleepers, ballast condition,
     initial level, tamping residual) draws from ``self.np_random``, seeded by ``reset(seed=...)``.
 
-    **Versions.** v0: first release.
+    **Episode end** is enforced: ``step`` after the horizon raises RuntimeError until ``reset``; ``reset``
+    refuses a seed that is not a non-negative integer and any ``options`` key (it takes none).
+
+    **Versions.** v0: first release. Since then, without a change of dynamics or reward (same seeds and
+    actions give the same observations, rewards and costs, so v0 is kept): ``step`` after the horizon raises,
+    ``reset`` checks its seed and options, ``info["observation_clipped"]`` was added, and tamping gained the
+    opt-in ``max_lift_m``; ``info`` reports the
+    geometry in mm (``section_sd_mm``, ``section_peak_mm``) beside the metre keys; the numbers that draw a
+    track (sleeper spacing, ballast-stiffness correlation, where a transition may sit, a voided sleeper's
+    residual support) became config fields with the values they had.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -144,7 +192,7 @@ class TampingEnv(gym.Env):
         self._last_info: dict = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=check_reset_arguments(seed, options))
         self.episode = E.new_episode(self.config, self.np_random)
         E.traffic_free_pass(self.episode)
         self._last_info = E.info(
@@ -155,8 +203,13 @@ class TampingEnv(gym.Env):
     def step(self, action):
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
-        want = decode_action(action, self.action_type, self.config.n_sections)
         ep = self.episode
+        if ep.step_count >= self.config.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({self.config.horizon_steps} steps, "
+                f"{self.config.horizon_years:g} years): call reset() before step()"
+            )
+        want = decode_action(action, self.action_type, self.config.n_sections)
         tamping_cost, tamped = E.apply_tamping(ep, want, self.np_random)
         E.traffic(ep, ep.sim.simulate())
         parts = E.costs(ep, tamping_cost)

@@ -16,9 +16,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from ..degradation import simulate_batch
+from ..physics._checks import check_int
 from . import episode as E
 from .config import TampingEnvConfig
-from .tamping import action_space, decode_action, observation_space
+from .tamping import action_space, check_reset_arguments, decode_action, observation_space
 
 
 class TampingVectorEnv(VectorEnv):
@@ -34,8 +35,7 @@ class TampingVectorEnv(VectorEnv):
         action_type: str = "multibinary",
         **overrides: Any,
     ) -> None:
-        if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 4096:
-            raise ValueError(f"num_envs must be an integer in [1, 4096], got {num_envs!r}")
+        num_envs = check_int("num_envs", num_envs, low=1, high=4096)
         overrides.pop("render_mode", None)
         overrides.pop("max_episode_steps", None)
         config = TampingEnvConfig.coerce(config)
@@ -53,7 +53,8 @@ class TampingVectorEnv(VectorEnv):
 
     def _observations(self) -> dict:
         out = create_empty_array(self.single_observation_space, self.num_envs)
-        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)
+        # gymnasium types concatenate's result as any space's; for a Dict space it is the dict ``out``
+        return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)  # type: ignore[return-value]
 
     def _new_episodes(self, idx: list[int]) -> None:
         eps = [E.new_episode(self.config, self._rngs[i]) for i in idx]
@@ -63,14 +64,16 @@ class TampingVectorEnv(VectorEnv):
             self.episodes[i] = ep
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        seeds: list[int | None]
         if seed is None:
             seeds = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
+        elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seed)}")
+            seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
         else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
+            seeds = [check_int("seed", seed, low=0) + i for i in range(self.num_envs)]
+        check_reset_arguments(None, options)
         self._rngs = [np.random.default_rng(s) for s in seeds]
         self.episodes = [None] * self.num_envs  # type: ignore[list-item]
         self._new_episodes(list(range(self.num_envs)))
@@ -81,11 +84,16 @@ class TampingVectorEnv(VectorEnv):
     def step(self, actions):
         if not self.episodes:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions)
-        if actions.shape[0] != self.num_envs:
+        try:
+            arr = np.asarray(actions)
+        except ValueError:  # ragged nested sequences
+            arr = np.empty(0)
+        want = (self.num_envs,) + self.single_action_space.shape
+        if arr.shape != want:
             raise ValueError(
-                f"actions must have a leading axis of {self.num_envs}, got shape {actions.shape}"
+                f"actions must have shape {want} (one action per env), got shape {arr.shape} ({actions!r:.60})"
             )
+        actions = arr
         wants = [decode_action(a, self.action_type, self.config.n_sections) for a in actions]
         tamping = [E.apply_tamping(ep, w, rng) for ep, w, rng in zip(self.episodes, wants, self._rngs)]
         E.traffic_batch(self.episodes, simulate_batch([ep.sim for ep in self.episodes]))

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import check_scalar
+from ._checks import check_field, check_scalar
 
 HERTZ, LINEAR = 0, 1
 
@@ -38,7 +38,7 @@ class HertzContact:
     G: float = 1.5 * 117e3 ** (1 / 3) / 1.43e9
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "G", check_scalar("G", self.G, low=1e-10, high=1e-5))
+        check_field(self, "G", low=1e-10, high=1e-5)
 
     @classmethod
     def from_linear_stiffness(cls, stiffness: float = 1.43e9, reference_load: float = 117e3) -> HertzContact:
@@ -75,7 +75,7 @@ class LinearContact:
     k: float = 1.43e9
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "k", check_scalar("k", self.k, low=1e6, high=1e12))
+        check_field(self, "k", low=1e6, high=1e12)
 
     @property
     def code(self) -> int:

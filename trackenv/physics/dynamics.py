@@ -19,7 +19,7 @@ import scipy.interpolate
 import scipy.linalg
 
 from . import _kernel
-from ._validation import check_array, check_scalar
+from ._checks import check_array, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
@@ -85,7 +85,7 @@ def _contact_law(contact):
 def _as_tracks(tracks) -> list[Track]:
     if isinstance(tracks, Track):
         return [tracks]
-    tracks = list(tracks)
+    tracks = list(tracks) if isinstance(tracks, (list, tuple)) else []
     if not tracks or not all(isinstance(t, Track) for t in tracks):
         raise ValueError("track(s) must be a Track or a non-empty sequence of Track")
     t0 = tracks[0]
@@ -158,6 +158,7 @@ def _point_load_vector(track: Track, x: float) -> tuple[np.ndarray, np.ndarray]:
 
 def static_deflection(track: Track, load: float = 100e3, x: float | None = None) -> float:
     """Rail deflection [m] under a static point ``load`` [N] at position ``x`` [m] (default mid-track)."""
+    check_instance("track", track, Track)
     load = check_scalar("load", load, low=0.0, high=1e7)
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
     _, _, k = track.banded_matrices()
@@ -171,8 +172,10 @@ def static_deflection(track: Track, load: float = 100e3, x: float | None = None)
 def receptance(track: Track, x: float | None = None, frequencies=None) -> np.ndarray:
     """Complex rail receptance w/F [m/N] at position ``x`` [m] for ``frequencies`` [Hz]: the direct
     frequency response of the full track, (K + iωC − ω²M)⁻¹ at the load point."""
+    check_instance("track", track, Track)
     x = track.length / 2 if x is None else check_scalar("x", x, low=0.0, high=track.length)
-    f = check_array("frequencies", np.logspace(1, np.log10(3000), 200) if frequencies is None else frequencies, low=0.0)
+    default = np.logspace(1, np.log10(3000), 200)
+    f = check_array("frequencies", default if frequencies is None else frequencies, low=0.0, high=1e5)
     m, c, k = track.banded_matrices()
     dofs, shp = _point_load_vector(track, x)
     rhs = np.zeros(track.n_dof, dtype=complex)
@@ -383,7 +386,7 @@ def simulate_passes(
     tracks = _as_tracks(tracks)
     sys_ = _vehicle_system(vehicle)
     law = _contact_law(contact)
-    speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+    speed = check_speed(speed)
     auto = isinstance(dt, str)
     check_dt_option(dt)
     if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
@@ -404,13 +407,15 @@ def simulate_passes(
 
     # rows
     if irregularities is None:
-        irr_rows = [None] * len(tracks)
+        irr_rows: list[Irregularity] = [None] * len(tracks)
     elif callable(irregularities):
         irr_rows = [irregularities]
     else:
         if isinstance(irregularities, np.ndarray) and irregularities.ndim == 1:
             irr_rows = [irregularities]
         else:
+            if not (isinstance(irregularities, (list, tuple)) or getattr(irregularities, "ndim", 0) >= 1):
+                raise ValueError(f"irregularities must be None, an array, a callable or a list, got {irregularities!r}")
             irr_rows = list(irregularities)
     n_rows = max(len(tracks), len(irr_rows))
     if len(tracks) == 1:
@@ -447,7 +452,7 @@ def simulate_passes(
                     results[b] = res
             return results
         window_bays = margins[0]
-    n_steps = int(np.ceil((x_end - x_start) / (speed * dt) - 1e-9))
+    n_steps = check_time_steps(x_end - x_start, speed, dt, rows=n_rows, axles=sys_.n_axles)  # before allocating
     time = np.arange(n_steps + 1) * dt
     x_lead = np.minimum(x_start + speed * time, t0.length)
     x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
@@ -622,10 +627,8 @@ def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularit
     if not isinstance(track, Track):
         raise ValueError(f"track must be a Track, got {type(track).__name__}")
     if irregularity is not None and not callable(irregularity):
-        arr = np.asarray(irregularity, dtype=float)
+        arr = check_array("irregularity", irregularity)
         if arr.ndim != 1:
             raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
-        irregularity = [arr]
-    elif irregularity is not None:
-        irregularity = [irregularity]
-    return simulate_passes(track, vehicle, speed, irregularity, **options)[0]
+        return simulate_passes(track, vehicle, speed, [arr], **options)[0]
+    return simulate_passes(track, vehicle, speed, None if irregularity is None else [irregularity], **options)[0]

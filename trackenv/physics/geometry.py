@@ -25,11 +25,12 @@ import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import integrate, linalg, signal
 
-from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
+from trackenv.physics._checks import check_array, check_field, check_int, check_scalar, dataclass_from_dict
 
 __all__ = [
     "GERMAN_PSD_PARAMETERS",
@@ -71,7 +72,7 @@ _CM2_TO_M2 = 1.0e-4
 #: ``A_v`` [m^2*rad/m] (the published values 1.2107 ... 0.0339 cm^2*rad/m times 1e-4), ``omega_c`` [rad/m]
 #: and the factor ``k``. Source: Hamid & Yang / Fries & Coffey FRA track spectra as quoted in the dynamics
 #: literature **[unverified]**; stated validity wavelengths 1.5-305 m.
-FRA_PSD_PARAMETERS: dict[str, object] = {
+FRA_PSD_PARAMETERS: dict[str, Any] = {
     "A_v": {
         1: 1.2107 * _CM2_TO_M2,
         2: 1.0181 * _CM2_TO_M2,
@@ -378,10 +379,9 @@ def d1_filter(
     b_lo, b_hi = _check_band(b_lo, b_hi, names=("band[0]", "band[1]"))
     if not b_lo > 2.0 * dx:
         raise ValueError(f"band[0] must exceed the Nyquist wavelength 2*spacing = {2 * dx:g} m, got {b_lo:g}")
-    if isinstance(order, bool) or int(order) != order or not 1 <= int(order) <= 10:
-        raise ValueError(f"order must be an integer in [1, 10], got {order!r}")
+    order = check_int("order", order, low=1, high=10)
     pad_w = check_scalar("pad_wavelengths", pad_wavelengths, low=0.0)
-    p = _check_count("ar_order", ar_order)
+    p = check_int("ar_order", ar_order, low=1)
 
     sos, zi = _bandpass_sos(dx, b_lo, b_hi, int(order))
     shape = arr.shape
@@ -408,12 +408,6 @@ def d1_filter(
 # ---------------------------------------------------------------------------------------------------------
 
 
-def _check_count(name: str, value, low: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
 def section_edges(n_samples: int, n_sections: int) -> np.ndarray:
     """Boundaries (n_sections + 1 sample indices) splitting ``n_samples`` into near-equal sections.
 
@@ -421,8 +415,8 @@ def section_edges(n_samples: int, n_sections: int) -> np.ndarray:
     EN 13848-6 evaluates track quality over 200 m sections; our tracks are short, so the number (and hence
     the length) of sections is a parameter of the caller.
     """
-    n = _check_count("n_samples", n_samples)
-    k = _check_count("n_sections", n_sections)
+    n = check_int("n_samples", n_samples, low=1)
+    k = check_int("n_sections", n_sections, low=1)
     if k > n:
         raise ValueError(f"n_sections must lie in [1, n_samples={n}], got {k}")
     return (np.arange(k + 1, dtype=np.int64) * n) // k
@@ -438,7 +432,7 @@ def _check_sections(z, section_idx, n_sections: int) -> tuple[np.ndarray, np.nda
     arr = check_array("z", z)
     if arr.ndim != 1:
         raise ValueError(f"z must be 1-D, got shape {arr.shape}")
-    k = _check_count("n_sections", n_sections)
+    k = check_int("n_sections", n_sections, low=1)
     idx = np.asarray(section_idx)
     if idx.shape != arr.shape:
         raise ValueError(f"section_index must have shape {arr.shape}, got {idx.shape}")
@@ -507,12 +501,12 @@ class BandLimits:
     speed_high_kmh: float
 
     def __post_init__(self) -> None:
-        a = check_scalar("alert_m", self.alert_m, low=0.0, low_inclusive=False)
-        i = check_scalar("intervention_m", self.intervention_m, low=a)
-        check_scalar("immediate_action_m", self.immediate_action_m, low=i)
-        check_scalar("sd_alert_m", self.sd_alert_m, low=0.0, low_inclusive=False)
-        lo = check_scalar("speed_low_kmh", self.speed_low_kmh, low=0.0)
-        check_scalar("speed_high_kmh", self.speed_high_kmh, low=lo, low_inclusive=False)
+        a = check_field(self, "alert_m", low=0.0, low_inclusive=False)
+        i = check_field(self, "intervention_m", low=a)
+        check_field(self, "immediate_action_m", low=i)
+        check_field(self, "sd_alert_m", low=0.0, low_inclusive=False)
+        lo = check_field(self, "speed_low_kmh", low=0.0)
+        check_field(self, "speed_high_kmh", low=lo, low_inclusive=False)
 
 
 @dataclass(frozen=True)
@@ -553,7 +547,7 @@ class QualityLimits:
             raise ValueError("intervention_m must be >= alert_m in every speed band")
         if np.any(cols["immediate_action_m"] < cols["intervention_m"]):
             raise ValueError("immediate_action_m must be >= intervention_m in every speed band")
-        check_scalar("sd_reference_length_m", self.sd_reference_length_m, low=0.0, low_inclusive=False)
+        check_field(self, "sd_reference_length_m", low=0.0, low_inclusive=False)
         if not isinstance(self.source, str):
             raise ValueError(f"source must be a string, got {type(self.source).__name__}")
 

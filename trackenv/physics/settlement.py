@@ -38,8 +38,8 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._checks import check_array, check_field, check_int, check_scalar
 from ._newton import SATO, SHENTON, growth_inverse
-from ._validation import check_array, check_scalar
 
 __all__ = [
     "LAWS",
@@ -105,11 +105,6 @@ def _solve_bracketed(kind: int, params: tuple[float, ...], y: np.ndarray, hi: np
         200,
     )
     return out.reshape(shape)
-
-
-def _validate(obj: object, name: str, **limits: Any) -> None:
-    """Check field ``name`` of a frozen dataclass with :func:`check_scalar` and store it back as a float."""
-    object.__setattr__(obj, name, check_scalar(name, getattr(obj, name), **limits))
 
 
 _POSITIVE: dict[str, Any] = {"low": 0.0, "low_inclusive": False}
@@ -225,9 +220,9 @@ class HettlerLaw(_SeparableLaw):
     name: ClassVar[str] = "hettler"
 
     def __post_init__(self) -> None:
-        _validate(self, "s", **_POSITIVE)
-        _validate(self, "a", low=0.0, high=4.0, low_inclusive=False)
-        _validate(self, "C", low=0.0, high=5.0)
+        check_field(self, "s", **_POSITIVE)
+        check_field(self, "a", low=0.0, high=4.0, low_inclusive=False)
+        check_field(self, "C", low=0.0, high=5.0)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         """s·(F/kN)^a mm, returned in m: the unit boundary of this law."""
@@ -280,12 +275,12 @@ class SeligWatersLaw(_SeparableLaw):
     name: ClassVar[str] = "selig_waters"
 
     def __post_init__(self) -> None:
-        _validate(self, "epsilon_1", low=0.0, high=0.1, low_inclusive=False)
-        _validate(self, "beta", low=0.0, high=1.0, low_inclusive=False)
-        _validate(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
-        _validate(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
-        _validate(self, "reference_stress", **_POSITIVE)
-        _validate(self, "stress_exponent", low=0.0, high=4.0, low_inclusive=False)
+        check_field(self, "epsilon_1", low=0.0, high=0.1, low_inclusive=False)
+        check_field(self, "beta", low=0.0, high=1.0, low_inclusive=False)
+        check_field(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
+        check_field(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
+        check_field(self, "reference_stress", **_POSITIVE)
+        check_field(self, "stress_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         """ε_1(σ)·h [m] with σ = F / loaded_area (SI throughout)."""
@@ -342,11 +337,11 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
     name: ClassVar[str] = "alva_hurtado_selig"
 
     def __post_init__(self) -> None:
-        _validate(self, "porosity", low=0.382, high=0.6, low_inclusive=False, high_inclusive=False)
-        _validate(self, "C", low=0.0, high=5.0)
-        _validate(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
-        _validate(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
-        _validate(self, "stress_unit", **_POSITIVE)
+        check_field(self, "porosity", low=0.382, high=0.6, low_inclusive=False, high_inclusive=False)
+        check_field(self, "C", low=0.0, high=5.0)
+        check_field(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
+        check_field(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
+        check_field(self, "stress_unit", **_POSITIVE)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         """ε_1·h [m], the unit boundary of this law.
@@ -396,13 +391,13 @@ class SatoLaw(_SeparableLaw):
     name: ClassVar[str] = "sato"
 
     def __post_init__(self) -> None:
-        _validate(self, "alpha", **_POSITIVE)
-        _validate(self, "beta", low=0.0)
-        _validate(self, "gamma", low=0.0)
+        check_field(self, "alpha", **_POSITIVE)
+        check_field(self, "beta", low=0.0)
+        check_field(self, "gamma", low=0.0)
         if self.beta == 0.0 and self.gamma == 0.0:
             raise ValueError("beta and gamma must not both be 0 (need beta + gamma > 0)")
-        _validate(self, "reference_force", **_POSITIVE)
-        _validate(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
+        check_field(self, "reference_force", **_POSITIVE)
+        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         return _power_scale(force, self.reference_force, self.force_exponent)
@@ -454,12 +449,12 @@ class ShentonLaw(_SeparableLaw):
     _POWER: ClassVar[float] = 0.2
 
     def __post_init__(self) -> None:
-        _validate(self, "K1", low=0.0)
-        _validate(self, "K2", low=0.0)
+        check_field(self, "K1", low=0.0)
+        check_field(self, "K2", low=0.0)
         if self.K1 == 0.0 and self.K2 == 0.0:
             raise ValueError("K1 and K2 must not both be 0 (need K1 + K2 > 0)")
-        _validate(self, "reference_force", **_POSITIVE)
-        _validate(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
+        check_field(self, "reference_force", **_POSITIVE)
+        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         return _power_scale(force, self.reference_force, self.force_exponent)
@@ -508,10 +503,10 @@ class IndraratnaLaw(_SeparableLaw):
     name: ClassVar[str] = "indraratna"
 
     def __post_init__(self) -> None:
-        _validate(self, "a", **_POSITIVE)
-        _validate(self, "b", low=0.0)
-        _validate(self, "reference_force", **_POSITIVE)
-        _validate(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
+        check_field(self, "a", **_POSITIVE)
+        check_field(self, "b", low=0.0)
+        check_field(self, "reference_force", **_POSITIVE)
+        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         return _power_scale(force, self.reference_force, self.force_exponent)
@@ -541,8 +536,8 @@ def make_law(name: str, **params: Any) -> Any:
 
     Raises ValueError on an unknown name (listing the known ones) or an unknown parameter.
     """
-    if name not in LAWS:
-        raise ValueError(f"unknown settlement law {name!r}; known laws: {', '.join(LAWS)}")
+    if not isinstance(name, str) or name not in LAWS:
+        raise ValueError(f"unknown settlement law name {name!r}; known laws: {', '.join(LAWS)}")
     return LAWS[name].from_dict(params)
 
 
@@ -596,9 +591,8 @@ class SettlementState:
     @classmethod
     def zeros(cls, n: int) -> SettlementState:
         """A fresh state for ``n`` sleepers: no settlement, no cycles, rate factors 1."""
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise ValueError(f"n must be a non-negative integer, got {n!r}")
-        return cls(settlement=np.zeros(int(n)), cycles=np.zeros(int(n)), rate_factor=np.ones(int(n)))
+        n = check_int("n", n, low=0)
+        return cls(settlement=np.zeros(n), cycles=np.zeros(n), rate_factor=np.ones(n))
 
     @property
     def n(self) -> int:

@@ -19,7 +19,8 @@ Model (all coefficients are parameters of :class:`TampingModel`; defaults are as
   least-squares line if the whole array is tamped) and the run stays at that line: the irregularity is
   reduced, but a uniformly settled track is not lifted back to the design level, and no lift step appears
   at the ends of the run. In ``"design"`` mode ``f`` is the least-squares straight line through ``z`` over
-  each contiguous tamped run, and the run is lifted back to the design line (level 0) in mean and slope;
+  each contiguous tamped run, and the run is lifted back to the design line (level 0) in mean and slope, by
+  at most ``max_lift_m`` per pass (``target_i = f_i - min(f_i, max_lift_m) + ...``);
   where the neighbours have settled by ``s`` this leaves a lift step of ``s`` at each end of the run,
   spread over the run-out (a 10 mm step over 3 run-out sleepers reads as about 4 mm in the D1 signal).
   Why smoothing is the default: in the env (30 m track, three 10 m sections, 2 years untamped, SD of the
@@ -58,7 +59,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackenv.physics._validation import check_array, check_scalar, dataclass_from_dict
+from trackenv.physics._checks import (
+    check_array,
+    check_bool,
+    check_choice,
+    check_field,
+    check_int_field,
+    check_scalar,
+    dataclass_from_dict,
+)
 
 __all__ = ["TampingModel", "TampingResult", "tamp", "sd_after_tamping", "tamped_runs"]
 
@@ -94,6 +103,12 @@ class TampingModel:
         Line the machine restores (module docstring). Default "smoothing": the chord through the untamped
         neighbours (no lift step against settled neighbours); "design": lift to the design line (level 0),
         leaving a ramped lift step where the neighbours have settled.
+    max_lift_m : float
+        > 0 [m]: largest lift of the reference line toward the design line in one pass ("design" reference).
+        Ballast packed under a sleeper lifted by more than a few centimetres at once is unstable and settles
+        back quickly, so machines lift large settlements in several passes. Default ``inf`` (no limit: the
+        line is lifted to the design level in one pass, as before this field existed); 0.05 m is a typical
+        working maximum per pass **[assumption]**.
     """
 
     residual_fraction: float = 0.3
@@ -104,18 +119,19 @@ class TampingModel:
     runout_sleepers: int = 3
     machine_speed_m_per_s: float = 1.0 / 3.6
     reference: str = "smoothing"
+    max_lift_m: float = math.inf
 
     def __post_init__(self) -> None:
-        check_scalar("residual_fraction", self.residual_fraction, low=0.0, high=1.0)
-        check_scalar("residual_sd_m", self.residual_sd_m, low=0.0)
-        check_scalar("damage_per_tamping", self.damage_per_tamping, low=0.0)
-        _check_int("max_tampings_before_renewal", self.max_tampings_before_renewal, low=1)
-        _check_int("runout_sleepers", self.runout_sleepers, low=0)
-        if not isinstance(self.renewal_resets, (bool, np.bool_)):
-            raise ValueError(f"renewal_resets must be a bool, got {self.renewal_resets!r}")
-        check_scalar("machine_speed_m_per_s", self.machine_speed_m_per_s, low=0.0, low_inclusive=False)
-        if self.reference not in ("smoothing", "design"):
-            raise ValueError(f"reference must be 'smoothing' or 'design', got {self.reference!r}")
+        check_field(self, "residual_fraction", low=0.0, high=1.0)
+        check_field(self, "residual_sd_m", low=0.0, high=0.1)
+        check_field(self, "damage_per_tamping", low=0.0, high=10.0)
+        check_int_field(self, "max_tampings_before_renewal", low=1, high=1000)
+        check_int_field(self, "runout_sleepers", low=0, high=1000)
+        object.__setattr__(self, "renewal_resets", check_bool("renewal_resets", self.renewal_resets))
+        check_field(self, "machine_speed_m_per_s", low=0.0, high=10.0, low_inclusive=False)
+        check_choice("reference", self.reference, ("smoothing", "design"))
+        if self.max_lift_m != math.inf:
+            check_field(self, "max_lift_m", low=0.0, high=1.0, low_inclusive=False)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TampingModel:
@@ -159,12 +175,6 @@ class TampingResult:
     restarted_mask: np.ndarray
     renewed_mask: np.ndarray
     lift: np.ndarray
-
-
-def _check_int(name: str, value, low: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
 
 
 def _check_counts(name: str, value, shape) -> np.ndarray:
@@ -258,8 +268,11 @@ def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -
     r = model.runout_sleepers
     for start, stop in tamped_runs(m):
         seg = z[start:stop]
+        base: float | np.ndarray
         if model.reference == "design":
-            ref, base = _line_fit(seg), 0.0
+            # the line is lifted to the design level (0), by at most max_lift_m where it lies below it
+            ref = _line_fit(seg)
+            base = ref - np.minimum(ref, model.max_lift_m)
         else:
             ref = _anchored_line(z, start, stop)
             base = ref

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validation import check_scalar
+from ._checks import check_scalar, check_speed
 
 DT_REFERENCE_S = 1e-4  # [s] the reference step: validation, the paper, and the auto step's yardstick
 DT_MIN_S = 1e-6  # [s] smallest step any layer accepts
@@ -74,7 +74,7 @@ def auto_time_step(track, system, speed: float, law) -> float:
     """The step ``dt="auto"`` uses for a pass of ``system`` (a VehicleSystem) at ``speed`` [m/s] over ``track``
     with contact ``law``: the largest ladder step within both bounds of the module docstring (or the bound
     itself where it is below the reference step)."""
-    speed = check_scalar("speed", speed, low=0.0, high=200.0, low_inclusive=False)
+    speed = check_speed(speed)
     bound = min(
         DT_MAX_S,
         track.sleeper_spacing / speed / STEPS_PER_SLEEPER_PASSING,

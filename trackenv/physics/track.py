@@ -16,13 +16,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
-from ._validation import check_array, check_scalar
+from ._checks import check_array, check_field, check_int, check_int_field, check_scalar
 
 PER_SLEEPER_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
 HALF_BANDWIDTH = 4
+#: Upper bounds of the per-sleeper properties [N/m, N·s/m, kg]: far beyond any track (pads and ballast are
+#: 1e7-1e9 N/m) but small enough that the assembled matrices stay well conditioned.
+PER_SLEEPER_MAX = {
+    "pad_stiffness": 1e12,
+    "pad_damping": 1e9,
+    "sleeper_mass": 1e5,
+    "ballast_stiffness": 1e12,
+    "ballast_damping": 1e9,
+}
 
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
@@ -61,23 +71,15 @@ class Track:
             )
         for f in PER_SLEEPER_FIELDS:
             low_inclusive = f in ("pad_damping", "ballast_damping")
-            arr = check_array(f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, low_inclusive=low_inclusive)
+            arr = check_array(
+                f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, high=PER_SLEEPER_MAX[f], low_inclusive=low_inclusive
+            )
             object.__setattr__(self, f, _readonly(arr))
-        object.__setattr__(
-            self, "sleeper_spacing", check_scalar("sleeper_spacing", self.sleeper_spacing, low=0.05, high=5.0)
-        )
-        object.__setattr__(
-            self,
-            "rail_bending_stiffness",
-            check_scalar("rail_bending_stiffness", self.rail_bending_stiffness, low=0.0, low_inclusive=False),
-        )
-        object.__setattr__(
-            self, "rail_mass", check_scalar("rail_mass", self.rail_mass, low=0.0, low_inclusive=False)
-        )
-        epb = self.elements_per_bay
-        if not isinstance(epb, (int, np.integer)) or isinstance(epb, bool) or not 2 <= epb <= 64:
-            raise ValueError(f"elements_per_bay must be an integer in [2, 64], got {epb!r}")
-        object.__setattr__(self, "elements_per_bay", int(epb))
+        check_field(self, "sleeper_spacing", low=0.05, high=5.0)
+        # beyond 1e10 N·m² (1600 UIC60 rails) the stiffness matrix loses all precision against the supports
+        check_field(self, "rail_bending_stiffness", low=0.0, high=1e10, low_inclusive=False)
+        check_field(self, "rail_mass", low=0.0, high=1e4, low_inclusive=False)
+        check_int_field(self, "elements_per_bay", low=2, high=64)
 
     # ------------------------------------------------------------------ presets
     @classmethod
@@ -93,17 +95,18 @@ class Track:
         **scalars,
     ) -> Track:
         """A track whose supports are all alike."""
-        if not isinstance(n_sleepers, (int, np.integer)) or n_sleepers < 3:
-            raise ValueError(f"n_sleepers must be an integer >= 3, got {n_sleepers!r}")
-        ones = np.ones(int(n_sleepers))
-        return cls(
-            pad_stiffness=pad_stiffness * ones,
-            pad_damping=pad_damping * ones,
-            sleeper_mass=sleeper_mass * ones,
-            ballast_stiffness=ballast_stiffness * ones,
-            ballast_damping=ballast_damping * ones,
-            **scalars,
+        n = check_int("n_sleepers", n_sleepers, low=3, high=100_000)
+        values = dict(
+            pad_stiffness=pad_stiffness,
+            pad_damping=pad_damping,
+            sleeper_mass=sleeper_mass,
+            ballast_stiffness=ballast_stiffness,
+            ballast_damping=ballast_damping,
         )
+        per_sleeper: dict[str, Any] = {
+            k: np.full(n, check_scalar(k, v, low=0.0, high=PER_SLEEPER_MAX[k])) for k, v in values.items()
+        }
+        return cls(**per_sleeper, **scalars)
 
     @classmethod
     def seed(cls, *, elements_per_bay: int = 2) -> Track:
@@ -124,8 +127,8 @@ class Track:
         )
 
     @classmethod
-    def realistic(cls, length: float = 60.0, *, elements_per_bay: int = 2) -> Track:
-        """A typical UIC60 ballasted track of ``length`` metres.
+    def realistic(cls, length: float = 60.0, *, elements_per_bay: int = 2, sleeper_spacing: float = 0.6) -> Track:
+        """A typical UIC60 ballasted track of ``length`` metres, sleepers every ``sleeper_spacing`` metres.
 
         Rail UIC60: E = 210 GPa, I = 3055 cm⁴ (EI = 6.42e6 N·m²), 60.2 kg/m (EN 13674-1 profile data).
         Pads and sleeper as in the paper's Table 3 (200 MN/m, 30 kN·s/m, 157.4 kg half sleeper). Ballast
@@ -133,7 +136,7 @@ class Track:
         paper's 500 kN·s/m (which makes the sleeper-on-ballast mode heavily overdamped, ζ ≈ 1.6).
         """
         length = check_scalar("length", length, low=3.0, high=10_000.0)
-        n = int(round(length / 0.6)) + 1
+        n = int(round(length / sleeper_spacing)) + 1
         return cls.uniform(
             n,
             pad_stiffness=200e6,
@@ -141,7 +144,7 @@ class Track:
             sleeper_mass=157.4,
             ballast_stiffness=160e6,
             ballast_damping=60e3,
-            sleeper_spacing=0.6,
+            sleeper_spacing=sleeper_spacing,
             rail_bending_stiffness=210e9 * 3055e-8,
             rail_mass=60.21,
             elements_per_bay=elements_per_bay,
@@ -172,7 +175,7 @@ class Track:
         sl = self._sleeper_slice(from_sleeper, to_sleeper)
         changes = {}
         for name, factor in factors.items():
-            f = check_scalar(name, factor, low=0.0, low_inclusive=False)
+            f = check_scalar(name, factor, low=0.0, high=1e6, low_inclusive=False)
             arr = np.array(getattr(self, name))
             arr[sl] *= f
             changes[name] = arr
@@ -186,6 +189,7 @@ class Track:
         gap needs a contact law in the ballast, which this linear track does not have.
         """
         r = check_scalar("residual_support", residual_support, low=0.0, high=1.0, low_inclusive=False)
+        index = check_int("index", index, low=0, high=self.n_sleepers - 1)
         sl = self._sleeper_slice(index, index + 1)
         kb, cb = np.array(self.ballast_stiffness), np.array(self.ballast_damping)
         kb[sl] *= r
@@ -195,9 +199,8 @@ class Track:
     def extended(self, n_before: int, n_after: int) -> Track:
         """A copy with ``n_before`` sleepers added before the first and ``n_after`` after the last, each a copy
         of the end sleeper it continues (approach and exit zones)."""
-        for nm, v in (("n_before", n_before), ("n_after", n_after)):
-            if not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+        n_before = check_int("n_before", n_before, low=0, high=100_000)
+        n_after = check_int("n_after", n_after, low=0, high=100_000)
         changes = {
             f: np.concatenate(
                 [
@@ -212,11 +215,10 @@ class Track:
 
     def _sleeper_slice(self, start: int, stop: int | None) -> slice:
         n = self.n_sleepers
-        if not isinstance(start, (int, np.integer)) or not 0 <= start < n:
-            raise ValueError(f"from_sleeper/index must be an integer in [0, {n - 1}], got {start!r}")
-        if stop is not None and (not isinstance(stop, (int, np.integer)) or not start < stop <= n):
-            raise ValueError(f"to_sleeper must be an integer in [{start + 1}, {n}], got {stop!r}")
-        return slice(int(start), None if stop is None else int(stop))
+        start = check_int("from_sleeper/index", start, low=0, high=n - 1)
+        if stop is not None:
+            stop = check_int("to_sleeper", stop, low=start + 1, high=n)
+        return slice(start, stop)
 
     # ------------------------------------------------------------ geometry
     @property

@@ -16,7 +16,7 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
-from ._validation import check_scalar
+from ._checks import check_field, check_int, check_scalar
 
 GRAVITY = 9.81
 
@@ -82,10 +82,8 @@ class Wheelset:
     static_load: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "mass", check_scalar("mass", self.mass, low=10.0, high=20_000.0))
-        object.__setattr__(
-            self, "static_load", check_scalar("static_load", self.static_load, low=0.0, high=500e3)
-        )
+        check_field(self, "mass", low=10.0, high=20_000.0)
+        check_field(self, "static_load", low=0.0, high=500e3)
 
     @classmethod
     def seed(cls) -> Wheelset:
@@ -156,7 +154,7 @@ class Car:
             "length_over_buffers": (2.0, 60.0),
         }
         for name, (lo, hi) in ranges.items():
-            object.__setattr__(self, name, check_scalar(name, getattr(self, name), low=lo, high=hi))
+            check_field(self, name, low=lo, high=hi)
         if self.bogie_centre_distance <= self.bogie_wheelbase:
             raise ValueError("bogie_centre_distance must exceed bogie_wheelbase")
         if self.length_over_buffers < self.bogie_centre_distance + self.bogie_wheelbase:
@@ -291,13 +289,14 @@ class Train:
 
     @classmethod
     def of(cls, car: Car, n_cars: int) -> Train:
-        if not isinstance(n_cars, (int, np.integer)) or not 1 <= n_cars <= 40:
-            raise ValueError(f"n_cars must be an integer in [1, 40], got {n_cars!r}")
-        return cls((car,) * int(n_cars))
+        return cls((car,) * check_int("n_cars", n_cars, low=1, high=40))
 
     def system(self) -> VehicleSystem:
         parts = [c.system() for c in self.cars]
-        offsets, wheel_dofs, names, start, dof0 = [], [], [], 0.0, 0
+        offsets: list[np.ndarray] = []
+        wheel_dofs: list[np.ndarray] = []
+        names: list[str] = []
+        start, dof0 = 0.0, 0
         for car, s in zip(self.cars, parts):
             overhang = (car.length_over_buffers - s.span) / 2
             offsets.append(start + overhang + s.axle_offsets)
@@ -305,14 +304,14 @@ class Train:
             names += [f"car{len(names) // 10 + 1}.{nm}" for nm in s.dof_names]
             start += car.length_over_buffers
             dof0 += s.n_dof
-        offsets = np.concatenate(offsets)
+        axle_offsets = np.concatenate(offsets)
         return VehicleSystem(
             scipy.linalg.block_diag(*[s.mass for s in parts]),
             scipy.linalg.block_diag(*[s.damping for s in parts]),
             scipy.linalg.block_diag(*[s.stiffness for s in parts]),
             np.concatenate([s.force for s in parts]),
             np.concatenate(wheel_dofs),
-            offsets - offsets[0],
+            axle_offsets - axle_offsets[0],
             tuple(names),
         )
 

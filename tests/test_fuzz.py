@@ -1,0 +1,290 @@
+"""Property-based fuzzing of what a user can pass in: configs, actions, seeds and the physics API.
+
+Every input either works (finite results, fields stored in their canonical type) or raises ValueError/TypeError
+whose message names the parameter, quickly: each example has a deadline, so an input that makes the code
+allocate gigabytes or loop for minutes fails the test instead of hanging it. Example counts are bounded so the
+module runs in well under a minute; ``TRACKENV_FUZZ_EXAMPLES=1000`` runs more (and random) examples per test.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+import trackenv as te
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.tamping import TampingEnv
+from trackenv.envs.vector import TampingVectorEnv
+from trackenv.physics.settlement import LAWS, make_law
+from trackenv.physics.tamping import TampingModel
+
+EXAMPLES = int(os.environ.get("TRACKENV_FUZZ_EXAMPLES", "0"))
+FUZZ = settings(
+    max_examples=EXAMPLES or 40,
+    deadline=10_000,  # ms per example (examples take < 0.2 s): a hang or a huge allocation fails here
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+    derandomize=not EXAMPLES,  # in CI the same examples every run: a failure reproduces
+)
+
+# Anything a user might type: numbers of every size and sign, non-finite values, bools, numeric and other
+# strings, None, containers.
+junk = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=-1e3, max_value=1e3),
+    st.integers(min_value=-(10**12), max_value=10**12),
+    st.integers(min_value=-3, max_value=70),
+    st.booleans(),
+    st.sampled_from(["1.5", "100", "x", "", "nan", "low", "wheelset", "shenton"]),
+    st.none(),
+    st.lists(st.floats(allow_nan=False, allow_infinity=False), max_size=3),
+    st.sampled_from([np.float32(1.5), np.int64(3), np.array(2.0), np.nan, complex(1, 1)]),
+)
+
+
+
+def mostly(valid: st.SearchStrategy, junk_share: int = 4) -> st.SearchStrategy:
+    """``valid`` but one draw in ``junk_share`` from :data:`junk` (``st.one_of`` would flatten junk's many
+    branches and draw almost only junk)."""
+    return st.integers(0, junk_share - 1).flatmap(lambda k: junk if k == 0 else valid)
+
+
+CONFIG_FIELDS = [f.name for f in dataclasses.fields(TampingEnvConfig)]
+TYPED = {f.name: type(f.default) for f in dataclasses.fields(TampingEnvConfig)}
+
+
+def _assert_names(err: Exception, names) -> None:
+    msg = str(err)
+    event("refused")
+    assert any(n in msg for n in names), f"error does not name any of {sorted(names)}: {msg!r}"
+
+
+def _fast(t0: float, what: str) -> None:
+    assert time.perf_counter() - t0 < 1.0, f"{what} took more than a second to refuse"
+
+
+@FUZZ
+@given(st.dictionaries(st.sampled_from(CONFIG_FIELDS), mostly(st.one_of(st.floats(0, 100), st.integers(0, 60)), 2),
+                       min_size=1, max_size=3))
+def test_config_refuses_or_stores_canonical_values(kw: dict) -> None:
+    t0 = time.perf_counter()
+    try:
+        cfg = TampingEnvConfig(**kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "TampingEnvConfig")
+        _assert_names(e, kw)
+        return
+    for name in kw:
+        value = getattr(cfg, name)
+        if TYPED[name] in (float, int):
+            assert type(value) is TYPED[name], (name, value)
+            assert math.isfinite(value)
+
+
+ENV_CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=0.5)  # 2 steps
+valid_action = st.lists(st.integers(0, 1), min_size=3, max_size=3)
+actions = st.one_of(
+    mostly(st.one_of(valid_action, valid_action.map(np.array)), 3),
+    st.lists(st.integers(-1, 2), min_size=0, max_size=4),
+    st.lists(st.sampled_from([0, 1, 0.5, np.nan, True]), min_size=3, max_size=3),
+    st.integers(0, 1).map(lambda b: np.full(3, b, dtype=np.int8)),
+)
+
+
+@pytest.fixture(scope="module")
+def env() -> TampingEnv:
+    return TampingEnv(ENV_CFG)
+
+
+@FUZZ
+@given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=actions)
+def test_env_seed_and_action(env: TampingEnv, seed, action) -> None:
+    try:
+        env.reset(seed=seed)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["seed"])
+        env.reset(seed=0)
+    t0 = time.perf_counter()
+    try:
+        obs, reward, _, _, _ = env.step(action)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "TampingEnv.step")
+        _assert_names(e, ["action"])
+        return
+    assert math.isfinite(reward)
+    assert all(np.all(np.isfinite(v)) for v in obs.values())
+
+
+@pytest.fixture(scope="module")
+def venv() -> TampingVectorEnv:
+    return TampingVectorEnv(2, ENV_CFG)
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 25)
+@given(
+    seed=mostly(st.one_of(st.integers(0, 2**32), st.lists(st.integers(0, 99), min_size=2, max_size=2))),
+    action=st.one_of(st.lists(valid_action, min_size=2, max_size=2), st.lists(actions, max_size=3), actions),
+)
+def test_vector_env_seed_and_actions(venv: TampingVectorEnv, seed, action) -> None:
+    try:
+        venv.reset(seed=seed)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["seed"])
+        venv.reset(seed=0)
+    t0 = time.perf_counter()
+    try:
+        obs, rewards, _, _, _ = venv.step(action)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "TampingVectorEnv.step")
+        _assert_names(e, ["action"])
+        return
+    assert np.all(np.isfinite(rewards))
+    assert all(np.all(np.isfinite(v)) for v in obs.values())
+
+
+TRACK_KEYS = ["pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping"]
+SCALAR_KEYS = ["sleeper_spacing", "rail_bending_stiffness", "rail_mass", "elements_per_bay"]
+positive = mostly(st.one_of(st.floats(min_value=1e2, max_value=1e9), st.floats(min_value=1e-3, max_value=1e13)), 10)
+
+
+@FUZZ
+@given(
+    n=mostly(st.integers(-2, 30)),
+    supports=st.fixed_dictionaries({k: positive for k in TRACK_KEYS}),
+    scalars=st.dictionaries(
+        st.sampled_from(SCALAR_KEYS), mostly(st.one_of(st.floats(1e-3, 1e11), st.integers(0, 80))), max_size=1
+    ),
+)
+def test_track_refuses_or_builds_a_solvable_track(n, supports, scalars) -> None:
+    t0 = time.perf_counter()
+    try:
+        track = te.Track.uniform(n, **supports, **scalars)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "Track.uniform")
+        _assert_names(e, ["n_sleepers", *TRACK_KEYS, *SCALAR_KEYS])
+        return
+    w = te.static_deflection(track, load=100e3)
+    assert math.isfinite(w)
+
+
+@FUZZ
+@given(
+    speed=mostly(
+        st.one_of(
+            st.floats(min_value=1e-12, max_value=0.1),  # far too slow: must be refused at once, not allocated
+            st.floats(min_value=10.0, max_value=120.0),  # valid: at most 60 000 time steps below
+        )
+    ),
+    dt=mostly(st.one_of(st.floats(min_value=1e-9, max_value=1e-3), st.floats(min_value=5e-5, max_value=1e-4))),
+    mass=mostly(st.floats(min_value=100.0, max_value=5000.0), 8),
+    load=mostly(st.floats(min_value=0.0, max_value=200e3), 8),
+)
+def test_simulate_pass_refuses_or_is_finite(speed, dt, mass, load) -> None:
+    track = te.Track.seed()
+    t0 = time.perf_counter()
+    try:
+        wheel = te.Wheelset(mass=mass, static_load=load)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["mass", "static_load"])
+        return
+    try:
+        res = te.simulate_pass(track, wheel, speed=speed, dt=dt)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "simulate_pass")
+        _assert_names(e, ["speed", "dt"])
+        return
+    assert np.all(np.isfinite(res.contact_force))
+    assert np.all(np.isfinite(res.sleeper_force))
+
+
+@FUZZ
+@given(
+    law=st.sampled_from(sorted(LAWS)),
+    params=st.dictionaries(st.sampled_from(["K1", "K2", "C", "s", "a", "alpha", "beta", "gamma", "force_exponent",
+                                            "reference_force", "epsilon_1", "porosity", "b"]),
+                           mostly(st.floats(0.0, 10.0)), max_size=2),
+    force=mostly(st.floats(min_value=0.0, max_value=500e3)),
+    cycles=mostly(st.floats(min_value=0.0, max_value=1e8)),
+)
+def test_settlement_law_refuses_or_is_finite(law, params, force, cycles) -> None:
+    t0 = time.perf_counter()
+    try:
+        m = make_law(law, **params)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "make_law")
+        _assert_names(e, list(params) or [law])
+        return
+    try:
+        u = m.settlement(force, cycles)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["force", "cycles"])
+        return
+    assert np.all(np.isfinite(u))
+
+
+@FUZZ
+@given(
+    st.dictionaries(
+        st.sampled_from([f.name for f in dataclasses.fields(TampingModel)]),
+        mostly(st.one_of(st.floats(0, 2), st.integers(0, 10), st.booleans(), st.sampled_from(["design", "smoothing"]))),
+        max_size=3,
+    )
+)
+def test_tamping_model_refuses_or_stores_canonical_values(kw) -> None:
+    t0 = time.perf_counter()
+    try:
+        m = TampingModel(**kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "TampingModel")
+        _assert_names(e, kw)
+        return
+    for name in kw:
+        stored = getattr(m, name)
+        assert not isinstance(stored, str) or name == "reference"
+        if isinstance(stored, float):
+            assert math.isfinite(stored)
+
+
+DEGRADATION_KEYS = ["cycles_per_iteration", "speed", "approach_sleepers", "adaptive", "max_increment",
+                    "max_passes_per_iteration", "initial_level", "rate_factor", "feedback", "on_runaway",
+                    "interpolation", "dt", "sleeper_force_measure", "window_bays", "contact", "law"]
+degradation_values = mostly(
+    st.one_of(
+        st.floats(min_value=1.0, max_value=1e5),
+        st.integers(2, 20),
+        st.booleans(),
+        st.sampled_from(["irregularity", "support", "warn", "ignore", "linear", "cubic", "ballast", 1e-4]),
+        st.lists(st.floats(min_value=0.0, max_value=1e-2), min_size=51, max_size=51),
+    ),
+    3,
+)
+
+
+@FUZZ
+@given(
+    kw=st.dictionaries(st.sampled_from(DEGRADATION_KEYS), degradation_values, max_size=3),
+    cycles=mostly(st.floats(min_value=0.0, max_value=1e5)),
+)
+def test_track_degradation_refuses_or_advances_finitely(kw: dict, cycles) -> None:
+    t0 = time.perf_counter()
+    try:
+        sim = te.TrackDegradation(te.Track.seed(), te.Wheelset.seed(), **kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "TrackDegradation")
+        _assert_names(e, [*kw, "option"])
+        return
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", te.RunawayWarning)
+            rec = sim.advance(cycles)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["cycles", "dt", *kw])
+        return
+    assert np.all(np.isfinite(rec.settlement)) and math.isfinite(rec.max_contact_force)
