@@ -22,7 +22,7 @@ DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (
 # = trackenv_agents.train.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
-HYPERPARAMS_FILE = Path(__file__).resolve().parent / "ppo_config.json"
+HYPERPARAMS_FILE = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
 
 
 class UsageError(Exception):
@@ -126,19 +126,31 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not (args.retune or args.quick) and shipped.exists():
         tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
     n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
+    executor = None
+    if args.ray or args.ray_address:  # batches of episodes as Ray tasks (agents/distributed.py)
+        from .distributed import RayExecutor
+
+        executor = RayExecutor(address=args.ray_address)
     t0 = time.perf_counter()
     out = args.out or "results/compare"
-    result = run_comparison(
-        out_dir=out,
-        n_test=n_test,
-        n_train=args.n_train,
-        quick=args.quick,
-        progress=not args.json,
-        extra_policies=extra,
-        tuned=tuned,
-    )
+    try:
+        result = run_comparison(
+            out_dir=out,
+            n_test=n_test,
+            n_train=args.n_train,
+            quick=args.quick,
+            progress=not args.json,
+            extra_policies=extra,
+            tuned=tuned,
+            batch_size=args.batch_size,
+            executor=executor,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
     result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
+    result["ray"] = args.ray_address or ("local" if args.ray else None)
     from .evaluation import format_table
 
     names = [Path(f).name for f in result.get("files", {}).values()]
@@ -201,10 +213,15 @@ class _HelpFormatter(argparse.HelpFormatter):
 
 
 def _hyperparam_defaults() -> dict[str, Any]:
-    """The shipped hyper-parameters (read for the help text only; a plain JSON read, no torch)."""
+    """The shipped hyper-parameters' algo, total_timesteps and n_envs (for the help text only; a plain YAML
+    read of the RL Zoo entry, no torch)."""
     try:
-        return json.loads(HYPERPARAMS_FILE.read_text())
-    except (OSError, ValueError):  # pragma: no cover - a broken install; the help still answers
+        import yaml
+
+        entry = yaml.safe_load(HYPERPARAMS_FILE.read_text())["trackenv/Tamping-v0"]
+        return {"algo": (entry.get("trackenv") or {}).get("algo", "ppo"),
+                "total_timesteps": entry.get("n_timesteps", "n/a"), "n_envs": entry.get("n_envs", "n/a")}
+    except Exception:  # pragma: no cover - a broken install; the help still answers
         return {}
 
 
@@ -257,10 +274,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quick", action="store_true", help="a small, fast configuration (about a minute)")
     sp.add_argument("--retune", action="store_true",
                     help="tune the heuristics again instead of using the shipped parameters")
+    sp.add_argument("--batch-size", type=_positive(int), default=32, metavar="N",
+                    help="episodes per batch (one vector env, one task)")
+    sp.add_argument("--ray", action="store_true", help="run the batches as tasks on a local Ray (trackenv[ray])")
+    sp.add_argument("--ray-address", default=None, metavar="ADDR",
+                    help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_evaluate)
 
     hp = _hyperparam_defaults()
-    sp = command("train", "train a PPO agent (stable-baselines3), hyper-parameters from agents/ppo_config.json")
+    sp = command("train", "train a PPO agent (stable-baselines3), hyper-parameters from agents/hyperparams/ppo.yml")
     out(sp, "runs/ppo")
     sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default=None,
                     help=f"algorithm (default: the hyper-parameter file's, {hp.get('algo', 'ppo')})")
@@ -273,8 +295,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="env i starts with seed + i, apart from the test, tuning and evaluation seeds")
     sp.add_argument("--resume", default=None, metavar="DIR",
                     help="output folder of an earlier run to continue for --timesteps more steps")
-    sp.add_argument("--hyperparams", default=None, metavar="JSON",
-                    help="JSON file overriding agents/ppo_config.json key by key")
+    sp.add_argument("--hyperparams", default=None, metavar="FILE",
+                    help="YAML (RL Zoo form) or flat JSON overriding agents/hyperparams/ppo.yml key by key")
     sp.set_defaults(func=cmd_train)
     return p
 

@@ -36,6 +36,7 @@ def run_comparison(
     extra_policies: Mapping[str, Any] | None = None,
     batch_size: int = 32,
     tuned: Mapping[str, dict] | str | Path | None = None,
+    executor: Any = None,
 ) -> dict[str, Any]:
     """Tune each heuristic of :data:`trackenv_agents.heuristics.HEURISTICS` (but the random baseline) on the first
     ``n_train`` training seeds, evaluate them, a random baseline and ``extra_policies`` on the first
@@ -44,6 +45,7 @@ def run_comparison(
 
     ``quick``: unless given, config = the 30 m / 3 section / 1.5 year track, n_test = 6, n_train = 3.
     Defaults otherwise: ``TampingEnvConfig()``, all of ``TEST_SEEDS`` (200) and ``TRAIN_SEEDS`` (100).
+    ``executor``: runs the episode batches (e.g. :class:`trackenv_agents.distributed.RayExecutor`).
     """
     from .evaluation import (
         TEST_SEEDS,
@@ -82,7 +84,8 @@ def run_comparison(
             raise ValueError(f"extra policy name {name!r} clashes with a heuristic")
         policies[name] = pol
     results, tuning = compare_results(
-        policies, config, test_seeds, train_seeds, tune_heuristics=True, batch_size=batch_size, progress=progress
+        policies, config, test_seeds, train_seeds, tune_heuristics=True, batch_size=batch_size, progress=progress,
+        executor=executor,
     )
     summaries = [r.summary() for r in results]
     episode_costs = {r.policy: np.asarray(r.cost).tolist() for r in results}

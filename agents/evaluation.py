@@ -13,18 +13,22 @@ the mean section SD at the end. **Tampings per km-year** is the tamped length pe
 (n_sections · horizon_years)``; 1.0 means the whole track is tamped once a year.
 
 Many (policy, seed) pairs run in one vector env (``batch_size`` envs at a time), so the physics of a batch is
-one call per step whatever mix of policies it holds; :func:`tune` uses that to search grids.
+one call per step whatever mix of policies it holds; :func:`tune` uses that to search grids. Each batch is one
+call of :func:`run_episodes`; an ``executor`` (anything with ``map(fn, items)`` in order, e.g.
+:class:`trackenv_agents.distributed.RayExecutor`) runs the batches elsewhere, with the same results.
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.episode import COST_KEYS
@@ -33,7 +37,7 @@ from trackenv.envs.vector import TampingVectorEnv
 __all__ = [
     "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bootstrap_ci", "compare", "compare_results",
     "evaluate_many", "evaluate_one", "format_markdown", "format_table", "paired_difference", "tune_many",
-    "plot_comparison", "plot_episode", "policy_name", "policy_params", "tune",
+    "plot_comparison", "plot_episode", "policy_name", "policy_params", "run_episodes", "tune",
 ]
 
 TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
@@ -170,12 +174,25 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             "traces": traces}
 
 
+def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
+                 action_type: str = "multibinary") -> dict[str, Any]:
+    """One batch: an episode per slot ``(policy index, seed)`` to the horizon in one native vector env
+    (NEXT_STEP autoreset: no episode is started past the horizon); per-episode totals as arrays in slot order
+    (``parts`` by cost key, ``rewards``, ``tampings``, ``exceed``, ``final_sd``). The unit of work that
+    :func:`evaluate_many` runs in turn, or an executor runs in parallel."""
+    env = TampingVectorEnv(len(slots), config, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+    out = _run_chunk(env, list(slots), policies, action_type)
+    out.pop("traces")
+    return out
+
+
 def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | None = None,
                   seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
-                  progress: bool = False, desc: str = "evaluate") -> list[EvaluationResult]:
+                  progress: bool = False, desc: str = "evaluate", executor: Any = None) -> list[EvaluationResult]:
     """Evaluate every policy on every seed, all (policy, seed) pairs batched ``batch_size`` at a time.
 
-    Results are independent of the batching: each env draws only from its own seed's generator.
+    Results are independent of the batching: each env draws only from its own seed's generator. ``executor``:
+    runs the batches (:func:`run_episodes`) through its ``map`` (e.g. on Ray workers); None: here, in turn.
     """
     cfg = TampingEnvConfig.coerce(config)
     seeds = [int(s) for s in seeds]
@@ -193,9 +210,17 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
         pbar = tqdm(total=len(chunks) * cfg.horizon_steps, desc=desc, unit="step")
     outs = []
     try:
-        for chunk in chunks:
-            env = TampingVectorEnv(len(chunk), cfg, action_type=action_type)
-            outs.append(_run_chunk(env, chunk, bound, action_type, pbar=pbar))
+        if executor is None:
+            for chunk in chunks:
+                env = TampingVectorEnv(len(chunk), cfg, action_type=action_type,
+                                       autoreset_mode=AutoresetMode.NEXT_STEP)
+                outs.append(_run_chunk(env, chunk, bound, action_type, pbar=pbar))
+        else:
+            for out in executor.map(functools.partial(run_episodes, cfg, policies=bound, action_type=action_type),
+                                    chunks):
+                outs.append(out)
+                if pbar is not None:
+                    pbar.update(cfg.horizon_steps)
     finally:
         if pbar is not None:
             pbar.close()
@@ -250,7 +275,7 @@ def paired_difference(a: EvaluationResult, b: EvaluationResult, n_resamples: int
 
 def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
          train_seeds: Iterable[int] = TRAIN_SEEDS, grid: Sequence[dict] | None = None, batch_size: int = 32,
-         progress: bool = False) -> dict[str, Any]:
+         progress: bool = False, executor: Any = None) -> dict[str, Any]:
     """Grid search of ``policy_cls`` over ``grid`` (default ``policy_cls.param_grid()``) on ``train_seeds``.
 
     Returns ``{"policy", "best_params", "best_mean_cost", "table"}``; ``table`` lists every candidate's
@@ -260,11 +285,11 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
     if not grid:
         raise ValueError("empty parameter grid")
     return tune_many([policy_cls], TampingEnvConfig.coerce(config), list(train_seeds), batch_size, progress,
-                     grids=[grid])[0]
+                     grids=[grid], executor=executor)[0]
 
 
 def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Sequence[int], batch_size: int,
-              progress: bool, grids: Sequence[Sequence[dict]] | None = None) -> dict[int, dict]:
+              progress: bool, grids: Sequence[Sequence[dict]] | None = None, executor: Any = None) -> dict[int, dict]:
     """:func:`tune` for several classes in one batched run, each over its grid (default its
     ``param_grid()``); table rows also hold the per-episode costs, in ``train_seeds`` order."""
     if grids is None:
@@ -272,7 +297,7 @@ def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Seque
     cands = [(i, g) for i, grid in enumerate(grids) for g in grid]
     desc = f"tune {getattr(classes[0], 'name', classes[0].__name__)}" if len(classes) == 1 else "tune"
     results = evaluate_many([classes[i](**g) for i, g in cands], cfg, train_seeds, batch_size=batch_size,
-                            progress=progress, desc=desc)
+                            progress=progress, desc=desc, executor=executor)
     out: dict[int, dict] = {}
     for i, cls in enumerate(classes):
         rows = sorted(({"params": dict(g), "mean_cost": float(r.cost.mean()),
@@ -288,8 +313,8 @@ def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Seque
 def compare_results(policies: Sequence[Any] | Mapping[str, Any],
                     config: TampingEnvConfig | dict | None = None,
                     test_seeds: Iterable[int] = TEST_SEEDS, train_seeds: Iterable[int] | None = None,
-                    tune_heuristics: bool = True, batch_size: int = 32,
-                    progress: bool = False) -> tuple[list[EvaluationResult], dict[str, dict]]:
+                    tune_heuristics: bool = True, batch_size: int = 32, progress: bool = False,
+                    executor: Any = None) -> tuple[list[EvaluationResult], dict[str, dict]]:
     """Tune (classes with a ``param_grid``, on ``train_seeds``) and evaluate on ``test_seeds``.
 
     ``policies``: heuristic classes (tuned if ``tune_heuristics`` and ``train_seeds`` are given, else default
@@ -307,7 +332,8 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
     chosen: list[Any] = []
     tuned = {}
     if tune_heuristics and train_seeds is not None and tunable:
-        tuned = tune_many([items[i][1] for i in tunable], cfg, list(train_seeds), batch_size, progress)
+        tuned = tune_many([items[i][1] for i in tunable], cfg, list(train_seeds), batch_size, progress,
+                          executor=executor)
     for i, (label, p) in enumerate(items):
         if isinstance(p, type):
             if i in tunable and tunable.index(i) in tuned:
@@ -319,7 +345,8 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
         else:
             obj = p
         chosen.append(obj)
-    results = evaluate_many(chosen, cfg, test_seeds, batch_size=batch_size, progress=progress, desc="test")
+    results = evaluate_many(chosen, cfg, test_seeds, batch_size=batch_size, progress=progress, desc="test",
+                            executor=executor)
     for (label, _), r in zip(items, results, strict=True):
         if label is not None:
             r.policy = label
@@ -329,10 +356,11 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
 
 def compare(policies: Sequence[Any] | Mapping[str, Any], config: TampingEnvConfig | dict | None = None,
             test_seeds: Iterable[int] = TEST_SEEDS, train_seeds: Iterable[int] | None = None,
-            tune_heuristics: bool = True, batch_size: int = 32, progress: bool = False) -> list[dict]:
+            tune_heuristics: bool = True, batch_size: int = 32, progress: bool = False,
+            executor: Any = None) -> list[dict]:
     """Summaries (:meth:`EvaluationResult.summary`) of :func:`compare_results`, sorted by mean cost."""
     results, _ = compare_results(policies, config, test_seeds, train_seeds, tune_heuristics, batch_size,
-                                 progress)
+                                 progress, executor)
     return [r.summary() for r in results]
 
 
@@ -411,7 +439,7 @@ def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, s
     per step."""
     cfg = TampingEnvConfig.coerce(config)
     pol = _bound(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
-    env = TampingVectorEnv(1, cfg, action_type=action_type)
+    env = TampingVectorEnv(1, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
     out = _run_chunk(env, [(0, int(seed))], [pol], action_type, record=True)
     tr = out["traces"]
     return {"section_sd_mm": np.array([x[0] for x in tr["section_sd_mm"]]),

@@ -23,6 +23,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from trackenv.envs.wrappers import rank_mask
+
 __all__ = [
     "HEURISTICS", "Campaign", "DefectThreshold", "Heuristic", "NoMaintenance", "Periodic", "RandomPolicy",
     "SDThreshold", "TUNED_PARAMS_FILE", "WorstFirst", "make_policy", "tuned_params",
@@ -41,15 +43,6 @@ def _as_batch(obs: dict[str, Any]) -> tuple[dict[str, np.ndarray], bool]:
     if batched:
         return {k: np.asarray(v) for k, v in obs.items()}, True
     return {k: np.asarray(v)[None] for k, v in obs.items()}, False
-
-
-def _rank_mask(score: np.ndarray, eligible: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Per row, True for the ``k[row]`` highest-``score`` entries among ``eligible`` (ties: lower index)."""
-    s = np.where(eligible, score, -np.inf)
-    order = np.argsort(-s, axis=1, kind="stable")
-    ranks = np.empty_like(order)
-    np.put_along_axis(ranks, order, np.arange(s.shape[1])[None, :].repeat(s.shape[0], 0), axis=1)
-    return eligible & (ranks < np.asarray(k).reshape(-1, 1))
 
 
 class Heuristic:
@@ -152,7 +145,7 @@ class Periodic(_Calendar):
         if self.params["sections"] == "all":
             return np.repeat(due[:, None], sd.shape[1], axis=1)
         n = np.where(due, self.params["n_worst"], 0)
-        return _rank_mask(sd, np.ones(sd.shape, dtype=bool), n)
+        return rank_mask(sd, np.ones(sd.shape, dtype=bool), n)
 
     @classmethod
     def param_grid(cls):
@@ -220,7 +213,7 @@ class WorstFirst(_Calendar):
         per_step = max(1, math.ceil(budget / self.steps_per_year - 1e-9))
         n = np.clip(allowed_total - used, 0, per_step).astype(int)
         sd = obs["section_sd"]
-        return _rank_mask(sd, sd >= self.params["threshold_mm"], n)
+        return rank_mask(sd, sd >= self.params["threshold_mm"], n)
 
     @classmethod
     def param_grid(cls):

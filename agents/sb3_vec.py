@@ -3,20 +3,22 @@
 One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this
 adapter only translates conventions:
 
-* Gymnasium's SAME_STEP autoreset (``infos["final_obs"]`` at done envs, infos as a dict of arrays) becomes
-  SB3's (a list of per-env info dicts, ``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` at done
-  envs, the returned observation already the next episode's first);
+* Gymnasium's SAME_STEP autoreset (``infos["final_obs"]`` and ``infos["final_info"]`` at done envs, infos as
+  a dict of arrays) becomes SB3's (a list of per-env info dicts, the episode's last info with
+  ``info["terminal_observation"]`` and ``info["TimeLimit.truncated"]`` at done envs, the returned observation
+  already the next episode's first);
 * ``env_method("action_masks")`` / :meth:`action_masks` give the masks sb3-contrib's MaskablePPO asks for;
 * seeds set by :meth:`seed` (SB3's convention: ``seed + i`` for env ``i``) are used at the next :meth:`reset`;
-* ``action_type="ranked"`` (see :mod:`agents.actions`): the agent picks how many of the worst sections to tamp
-  (``Discrete(n_sections + 1)``), translated here to the MultiBinary env's action with the SD of the
-  observation it was chosen on;
+* ``action_type="ranked"``: the agent picks how many of the worst sections to tamp (``Discrete(n_sections +
+  1)``), through the same vector wrapper any library gets
+  (:class:`trackenv.envs.wrappers.RankedVectorActions`);
 * the planning horizon ends the problem: the life-cycle cost is summed over the horizon only and the
   observation carries the time, so by default done envs are reported as terminal and SB3 does not bootstrap
   past the horizon (``bootstrap_at_horizon=True`` marks them ``TimeLimit.truncated`` instead, as a Gymnasium
   time limit; a learner then values tamping in the last year for benefits that no evaluation counts);
 * ``keep_per_sleeper=False`` drops the large per-sleeper arrays (``level``, ``contact_force``) from the
-  observation, keeping only the per-section summaries and time.
+  observation, keeping only the per-section summaries and time
+  (:class:`trackenv.envs.wrappers.SectionVectorObservation`).
 """
 
 from __future__ import annotations
@@ -30,15 +32,19 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.vector import TampingVectorEnv
+from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
-from .actions import RANKED, agent_action_space, env_action_type, ranked_to_sections
-
-PER_SLEEPER_KEYS = ("level", "contact_force")
+from .actions import RANKED, env_action_type
 
 
-def observation_keys(space: spaces.Dict, keep_per_sleeper: bool = True) -> list[str]:
-    """The observation keys kept by the adapter, in the env's order."""
-    return [k for k in space.spaces if keep_per_sleeper or k not in PER_SLEEPER_KEYS]
+def observation_keys(space: spaces.Dict, keep_per_sleeper: bool = True, n_sections: int | None = None) -> list[str]:
+    """The observation keys kept by the adapter, in the env's order (the section-level ones of
+    :func:`trackenv.envs.wrappers.section_keys` unless ``keep_per_sleeper``)."""
+    if keep_per_sleeper:
+        return list(space.spaces)
+    if n_sections is None:
+        n_sections = space.spaces["section_sd"].shape[0]
+    return section_keys(space, n_sections)
 
 
 def filter_observation(obs: dict, keys: Sequence[str]) -> dict:
@@ -56,18 +62,21 @@ class TampingSB3VecEnv(VecEnv):
     def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  bootstrap_at_horizon: bool = False, seed: int | None = None) -> None:
-        self.venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
-        self.config = self.venv.config
+        venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
+        self.config = venv.config
+        if action_type == RANKED:
+            venv = RankedVectorActions(venv)
+        if not keep_per_sleeper:
+            venv = SectionVectorObservation(venv)
+        self.venv = venv
         self.action_type = action_type
         self.keep_per_sleeper = bool(keep_per_sleeper)
         self.bootstrap_at_horizon = bool(bootstrap_at_horizon)
-        full = self.venv.single_observation_space
-        self.obs_keys = observation_keys(full, self.keep_per_sleeper)
-        obs_space = spaces.Dict({k: full.spaces[k] for k in self.obs_keys})
+        obs_space = venv.single_observation_space
+        self.obs_keys = list(obs_space.spaces)
         self.render_mode = None
-        super().__init__(num_envs, obs_space, agent_action_space(self.config, action_type))
+        super().__init__(num_envs, obs_space, venv.single_action_space)
         self._actions: np.ndarray | None = None
-        self._section_sd = np.zeros((num_envs, self.config.n_sections))  # of the observation last returned
         if seed is not None:
             self.seed(seed)
 
@@ -81,8 +90,7 @@ class TampingSB3VecEnv(VecEnv):
         self.reset_infos = _unstack_infos(infos, self.num_envs)
         self._reset_seeds()
         self._reset_options()
-        self._section_sd = obs["section_sd"].copy()
-        return filter_observation(obs, self.obs_keys)
+        return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions)
@@ -91,21 +99,19 @@ class TampingSB3VecEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_async() must be called before step_wait()")
         actions, self._actions = self._actions, None
-        if self.action_type == "discrete":
+        if self.action_type in ("discrete", RANKED):
             actions = actions.reshape(self.num_envs)
-        elif self.action_type == RANKED:
-            actions = ranked_to_sections(actions.reshape(self.num_envs), self._section_sd)
         obs, rewards, terminated, truncated, infos = self.venv.step(actions)
-        self._section_sd = obs["section_sd"].copy()
         dones = np.logical_or(terminated, truncated)
         info_list = _unstack_infos(infos, self.num_envs)
         if dones.any():
-            final_obs = infos["final_obs"]
+            last = _unstack_infos(infos["final_info"], self.num_envs)
             for i in np.flatnonzero(dones):
-                info_list[i]["terminal_observation"] = filter_observation(final_obs[i], self.obs_keys)
+                info_list[i] = last[i]  # the episode's last info, not the next one's first
+                info_list[i]["terminal_observation"] = infos["final_obs"][i]
                 info_list[i]["TimeLimit.truncated"] = bool(self.bootstrap_at_horizon and truncated[i]
                                                            and not terminated[i])
-        return (filter_observation(obs, self.obs_keys), rewards.astype(np.float32), dones, info_list)
+        return obs, rewards.astype(np.float32), dones, info_list
 
     def close(self) -> None:
         self.venv.close()
@@ -113,8 +119,6 @@ class TampingSB3VecEnv(VecEnv):
     def action_masks(self) -> np.ndarray:
         """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env (ranked:
         every count is valid; a masked section among the worst is simply not tamped by the env)."""
-        if self.action_type == RANKED:
-            return np.ones((self.num_envs, self.config.n_sections + 1), dtype=bool)
         return self.venv.action_masks()
 
     # --- attribute / method access (all envs share this one object) ---
@@ -168,7 +172,7 @@ def _unstack_infos(infos: dict, n: int) -> list[dict]:
             continue
         if isinstance(val, dict):
             for i in range(n):
-                out[i][key] = {k: _item(v[i]) for k, v in val.items()}
+                out[i][key] = {k: _item(v[i]) for k, v in val.items() if not k.startswith("_")}
         else:
             for i in range(n):
                 out[i][key] = _item(val[i])
@@ -186,5 +190,4 @@ def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | dict | None = Non
                             seed=seed)
 
 
-__all__ = ["TampingSB3VecEnv", "make_vec_env", "observation_keys", "filter_observation",
-                          "PER_SLEEPER_KEYS"]
+__all__ = ["TampingSB3VecEnv", "make_vec_env", "observation_keys", "filter_observation"]

@@ -2,7 +2,8 @@
 
 * :func:`train` — SB3 PPO (or sb3-contrib MaskablePPO) on :class:`agents.sb3_vec.TampingSB3VecEnv` with
   VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
-  evaluation callback and reproducible seeding. Hyper-parameters default to ``agents/ppo_config.json``.
+  evaluation callback and reproducible seeding. Hyper-parameters: ``agents/hyperparams/ppo.yml`` (RL Zoo's
+  form, one entry per env id), read by :func:`load_hyperparams`.
 * :func:`load_trained` — the shipped policy (``agents/pretrained/ppo_tamping.zip`` + its observation
   statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env
   observations.
@@ -17,7 +18,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,8 @@ from .evaluation import evaluate_one
 from .sb3_vec import TampingSB3VecEnv, filter_observation
 
 HERE = Path(__file__).resolve().parent
-DEFAULT_HYPERPARAMS = HERE / "ppo_config.json"
+DEFAULT_HYPERPARAMS = HERE / "hyperparams" / "ppo.yml"
+DEFAULT_ENV_ID = "trackenv/Tamping-v0"
 DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
 DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
 # training env i starts with seed DEFAULT_TRAIN_SEED + i: apart from the test (0-199), tuning (1000-1099) and
@@ -38,7 +40,7 @@ DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
 DEFAULT_TRAIN_SEED = 20_000
 STATS_SUFFIX = "_obs_stats.json"
 
-# keys of ppo_config.json that go to the algorithm's constructor (the rest configure train() itself)
+# keys of the flat hyper-parameters that go to the algorithm's constructor (the rest configure train() itself)
 _ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
               "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
 _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
@@ -47,16 +49,54 @@ _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_times
                "bootstrap_at_horizon")
 
 
-def load_hyperparams(path: str | Path | None = None) -> dict[str, Any]:
-    """The hyper-parameters in ``path`` (default ``agents/ppo_config.json``); unknown keys raise
-    ValueError."""
-    with open(path or DEFAULT_HYPERPARAMS) as f:
-        hp = json.load(f)
+def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
+    """The flat hyper-parameters that :func:`train` reads, from ``path`` (default
+    ``agents/hyperparams/ppo.yml``): a YAML file in RL Zoo's form (its entry for ``env_id``, see
+    :func:`from_zoo`) or a flat JSON object of the same keys. Unknown keys raise ValueError."""
+    path = Path(path) if path is not None else DEFAULT_HYPERPARAMS
+    if path.suffix in (".yml", ".yaml"):
+        import yaml
+
+        table = yaml.safe_load(path.read_text()) or {}
+        if env_id not in table:
+            raise ValueError(f"{path} has no entry for env id {env_id!r} (it has {sorted(table)})")
+        hp = from_zoo(table[env_id])
+    else:
+        hp = json.loads(path.read_text())
     unknown = set(hp) - set(_ALGO_KEYS) - set(_TRAIN_KEYS)
     if unknown:
         raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
     return hp
 
+
+def from_zoo(entry: dict[str, Any]) -> dict[str, Any]:
+    """One RL Zoo entry as flat hyper-parameters: the algorithm's arguments as they are; Zoo's ``n_timesteps``
+    → ``total_timesteps``, ``policy_kwargs.net_arch`` → ``net_arch``, ``normalize.clip_obs`` → ``clip_obs``,
+    ``n_envs`` as is; the ``trackenv`` block's training options merged in. What train() cannot honour
+    (another policy class, other policy_kwargs, training without normalisation) raises ValueError."""
+    e = dict(entry)
+    hp = dict(e.pop("trackenv", None) or {})
+    policy = e.pop("policy", "MultiInputPolicy")
+    if policy != "MultiInputPolicy":
+        raise ValueError(f"policy must be MultiInputPolicy (the observation is a Dict), got {policy!r}")
+    kwargs = dict(e.pop("policy_kwargs", None) or {})
+    if "net_arch" in kwargs:
+        hp["net_arch"] = list(kwargs.pop("net_arch"))
+    if kwargs:
+        raise ValueError(f"unsupported policy_kwargs {sorted(kwargs)} (only net_arch)")
+    if "n_timesteps" in e:
+        hp["total_timesteps"] = int(e.pop("n_timesteps"))
+    norm = e.pop("normalize", None)
+    if norm is not None:
+        norm = dict(norm) if isinstance(norm, dict) else {"norm_obs": bool(norm), "norm_reward": bool(norm)}
+        if not (norm.pop("norm_obs", True) and norm.pop("norm_reward", True)):
+            raise ValueError("train() always normalises observations and rewards (VecNormalize)")
+        if "clip_obs" in norm:
+            hp["clip_obs"] = float(norm.pop("clip_obs"))
+        if norm:
+            raise ValueError(f"unsupported normalize keys {sorted(norm)}")
+    hp.update(e)
+    return hp
 
 
 def _algo_class(algo: str):
@@ -122,7 +162,7 @@ class NormalizedPolicy:
 
 # --- callbacks ---
 def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose,
-                        evaluate_at_start: bool = False):
+                        evaluate_at_start: bool = False, on_evaluation=None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class HeldOutEvalCallback(BaseCallback):
@@ -145,6 +185,8 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
             rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
                    "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
             self.history.append(rec)
+            if on_evaluation is not None:  # e.g. a Ray Tune report (experiments/tune_ppo.py)
+                on_evaluation(rec)
             self.logger.record("eval/mean_return", rec["mean_return"])
             self.logger.record("eval/std_return", rec["std_return"])
             if verbose:
@@ -190,12 +232,15 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
           out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
-          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None) -> Path:
+          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
+          on_evaluation: Callable[[dict], None] | None = None) -> Path:
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
-    ``hyperparams``: a dict or a JSON path overriding ``agents/ppo_config.json`` key by key. Explicit
+    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
+    overriding ``agents/hyperparams/ppo.yml`` key by key. Explicit
     arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
-    or ``eval_freq=0`` disables the periodic held-out evaluation.
+    or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
+    (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
 
     ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
     are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
@@ -274,7 +319,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     eval_cb = None
     if eval_seeds and eval_freq > 0:
         eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, action_type, raw.obs_keys,
-                                      algo, verbose, evaluate_at_start=warm is not None)
+                                      algo, verbose, evaluate_at_start=warm is not None,
+                                      on_evaluation=on_evaluation)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
             "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),

@@ -1,6 +1,7 @@
 """Grid-tune some heuristics on the training seeds and merge their best parameters into the shipped file.
 
     python experiments/tune_heuristics.py --policies periodic campaign --n-train 32
+    python experiments/tune_heuristics.py --policies periodic campaign --n-train 100 --ray-address auto
 
 Each named heuristic is searched over its ``param_grid()`` on the first ``--n-train`` training seeds (all
 candidates batched in one run); the best parameters replace that heuristic's entry in ``--file`` (default
@@ -34,12 +35,24 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", default="results/tuning.json", help="full tuning tables and hindsight bound")
     parser.add_argument("--batch-size", type=int, default=64, help="envs stepped together")
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--ray", action="store_true", help="run the batches as tasks on a local Ray")
+    parser.add_argument("--ray-address", default=None, help="run them on a Ray cluster ('auto', ray://HEAD:10001)")
     args = parser.parse_args(argv)
     if not 1 <= args.n_train <= len(TRAIN_SEEDS):
         parser.error(f"--n-train must be in [1, {len(TRAIN_SEEDS)}], got {args.n_train}")
     seeds = list(TRAIN_SEEDS[: args.n_train])
     classes = [HEURISTICS[name] for name in args.policies]
-    tuned = tune_many(classes, TampingEnvConfig(), seeds, args.batch_size, not args.no_progress)
+    executor = None
+    if args.ray or args.ray_address:
+        from trackenv_agents.distributed import RayExecutor
+
+        executor = RayExecutor(address=args.ray_address)
+    try:
+        tuned = tune_many(classes, TampingEnvConfig(), seeds, args.batch_size, not args.no_progress,
+                          executor=executor)
+    finally:
+        if executor is not None:
+            executor.close()
     path = Path(args.file)
     data = json.loads(path.read_text()) if path.exists() else {"best_params": {}}
     data.setdefault("tuned_on", {})

@@ -57,6 +57,14 @@ def test_train_seed_default_is_the_training_seed_of_agents_train():
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED
 
 
+def test_evaluate_ray_options_parse():
+    from trackenv_agents.cli import build_parser
+
+    args = build_parser().parse_args(["evaluate", "--ray-address", "ray://head:10001", "--batch-size", "8"])
+    assert args.ray_address == "ray://head:10001" and args.batch_size == 8 and not args.ray
+    assert build_parser().parse_args(["evaluate", "--ray"]).ray
+
+
 def test_hyperparams_file_is_the_one_agents_train_reads():
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.cli import HYPERPARAMS_FILE

@@ -1,4 +1,5 @@
-"""The ranked action parameterisation and its use through the SB3 adapter."""
+"""The agent's action types and the ranked parameterisation through the SB3 adapter (the decoding itself is
+tested with the wrappers, tests/envs/test_wrappers.py)."""
 
 from __future__ import annotations
 
@@ -6,23 +7,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from trackenv_agents.actions import agent_action_space, env_action_type, ranked_to_sections
-
-
-def test_ranked_tamps_the_k_worst_sections():
-    sd = np.array([[1.0, 3.0, 2.0, 0.5], [2.0, 2.0, 1.0, 4.0]])
-    out = ranked_to_sections(np.array([2, 1]), sd)
-    assert out.dtype == np.int8
-    np.testing.assert_array_equal(out, [[0, 1, 1, 0], [0, 0, 0, 1]])
-    np.testing.assert_array_equal(ranked_to_sections(np.array([0, 4]), sd), [[0, 0, 0, 0], [1, 1, 1, 1]])
-    # ties go to the lower index; an unbatched observation gives an unbatched action
-    np.testing.assert_array_equal(ranked_to_sections(1, np.array([2.0, 2.0, 1.0])), [1, 0, 0])
-
-
-@pytest.mark.parametrize("k", [-1, 5])
-def test_ranked_rejects_counts_out_of_range(k):
-    with pytest.raises(ValueError, match=r"\[0, 4\]"):
-        ranked_to_sections(np.array([k]), np.ones((1, 4)))
+from trackenv_agents.actions import agent_action_space, env_action_type
 
 
 def test_action_types(small_coarse_config):

@@ -144,3 +144,30 @@ def test_shipped_policy_predicts_valid_actions():
     assert actions.shape == (2, env.config.n_sections)
     np.testing.assert_array_equal(actions[0], action)
     assert DEFAULT_PRETRAINED.stat().st_size < 5 * 2**20
+
+
+def test_hyperparams_in_rl_zoo_form(tmp_path):
+    """agents/hyperparams/ppo.yml holds the algorithm's arguments apart from train()'s own options; a user's
+    YAML (Zoo form, keyed by env id) or flat JSON overrides it key by key."""
+    from trackenv_agents.train import _ALGO_KEYS, DEFAULT_HYPERPARAMS, from_zoo, load_hyperparams
+
+    hp = load_hyperparams()
+    assert DEFAULT_HYPERPARAMS.suffix == ".yml"
+    assert hp["action_type"] == "ranked" and hp["total_timesteps"] == 40960 and hp["net_arch"] == [64, 64]
+    assert {k for k in hp if k in _ALGO_KEYS} >= {"n_steps", "batch_size", "learning_rate", "gamma"}
+    mine = tmp_path / "mine.yml"
+    mine.write_text("trackenv/Tamping-v0:\n  learning_rate: 1.0e-4\n  n_timesteps: 512\n"
+                    "  trackenv: {warm_start_rule: null}\n")
+    assert load_hyperparams(mine) == {"learning_rate": 1e-4, "total_timesteps": 512, "warm_start_rule": None}
+    with pytest.raises(ValueError, match="no entry"):
+        load_hyperparams(mine, env_id="trackenv/TampingLine-v0")
+    flat = tmp_path / "mine.json"
+    flat.write_text(json.dumps({"learning_rate": 1e-4}))
+    assert load_hyperparams(flat) == {"learning_rate": 1e-4}
+    flat.write_text(json.dumps({"learning_rat": 1e-4}))
+    with pytest.raises(ValueError, match="learning_rat"):
+        load_hyperparams(flat)
+    with pytest.raises(ValueError, match="normalis"):
+        from_zoo({"normalize": False})
+    with pytest.raises(ValueError, match="policy"):
+        from_zoo({"policy": "MlpPolicy"})

@@ -1,5 +1,5 @@
 """TampingVectorEnv: built by gym.make_vec through the registered vector_entry_point; the same episodes as
-TampingEnv for the same seeds and actions; SAME_STEP autoreset at the horizon."""
+TampingEnv for the same seeds and actions; both autoreset modes, each against Gymnasium's SyncVectorEnv."""
 
 from __future__ import annotations
 
@@ -82,10 +82,11 @@ def test_steps_match_single_envs(runs: dict) -> None:
         for i, (o, r, te, tr, info) in enumerate(ssteps):
             np.testing.assert_allclose(rewards[i], r, rtol=1e-9, err_msg=f"step {t} env {i}")
             assert truncated[i] == tr and terminated[i] == te
-            np.testing.assert_array_equal(infos["tamped_sections"][i], info["tamped_sections"])
+            src = infos["final_info"] if tr else infos  # SAME_STEP: at the horizon, the new episode's info
+            np.testing.assert_array_equal(src["tamped_sections"][i], info["tamped_sections"])
             for k in info["costs"]:
-                np.testing.assert_allclose(infos["costs"][k][i], info["costs"][k], rtol=1e-9, atol=1e-12)
-            total = sum(infos["costs"][k][i] for k in infos["costs"])
+                np.testing.assert_allclose(src["costs"][k][i], info["costs"][k], rtol=1e-9, atol=1e-12)
+            total = sum(src["costs"][k][i] for k in info["costs"])
             np.testing.assert_allclose(rewards[i], -total, rtol=1e-12)
             if not tr:  # at the horizon the vector env returns the next episode's first observation
                 for k in o:
@@ -116,7 +117,8 @@ def test_autoreset_at_the_horizon(runs: dict) -> None:
         final = infos["final_obs"][i]
         for k in o:
             np.testing.assert_allclose(final[k], o[k], rtol=1e-6, atol=1e-5, err_msg=k)
-        assert infos["final_info"][i]["year"] == pytest.approx(info["year"])
+        assert infos["final_info"]["year"][i] == pytest.approx(info["year"])
+    assert infos["year"].tolist() == [0.0] * 3  # the new episodes' first info
     # new episodes: time 0, nothing tamped yet, a fresh track
     np.testing.assert_array_equal(obs["time"], 0.0)
     np.testing.assert_array_equal(obs["tampings"], 0.0)
@@ -165,6 +167,66 @@ def test_discrete_vector_env() -> None:
     np.testing.assert_allclose(rewards[1], single.step(2)[1], rtol=1e-9)
     with pytest.raises(ValueError):
         venv.step(np.array([0, 4]))
+
+
+def _assert_same(a, b, path: str = "") -> None:
+    """Equal structure (keys, masks, dtypes, shapes) and values, bit for bit (a row of the batched kernel does
+    not depend on the batch)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and set(a) == set(b), (path, sorted(a), sorted(b))
+        for k in a:
+            _assert_same(a[k], b[k], f"{path}/{k}")
+    elif isinstance(a, tuple):
+        assert isinstance(b, tuple) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _assert_same(x, y, f"{path}[{i}]")
+    elif isinstance(a, np.ndarray) and a.dtype == object:
+        assert b.dtype == object and a.shape == b.shape, path
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert (x is None) == (y is None), (path, i)
+            if x is not None:
+                _assert_same(x, y, f"{path}[{i}]")
+    else:
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape == b.shape, (path, a.dtype, b.dtype, a.shape, b.shape)
+        np.testing.assert_array_equal(a, b, err_msg=path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", [gym.vector.AutoresetMode.SAME_STEP, gym.vector.AutoresetMode.NEXT_STEP])
+def test_autoreset_modes_match_sync_vector_env(mode) -> None:
+    """Over one episode and into the next, the native vector env gives what Gymnasium's SyncVectorEnv over
+    TampingEnv gives in the same autoreset mode: observations, rewards, flags, infos with their masks."""
+    cfg = CFG.replace(horizon_years=1.0)  # 4 steps
+    h = cfg.horizon_steps
+    native = make_vec(config=cfg, autoreset_mode=mode)
+    assert native.metadata["autoreset_mode"] == mode
+    sync = gym.vector.SyncVectorEnv([lambda: TampingEnv(cfg) for _ in SEEDS], autoreset_mode=mode)
+    _assert_same(native.reset(seed=SEEDS), sync.reset(seed=SEEDS), "reset")
+    for t in range(h + 2):
+        actions = ACTIONS[t % ACTIONS.shape[0]]
+        got, want = native.step(actions), sync.step(actions)
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), got, want):
+            _assert_same(a, b, f"step {t} {name}")
+        assert got[3].all() == (t == h - 1)  # NEXT_STEP: step h resets, step h + 1 is the new episodes' first
+
+
+def test_render_mode_renders_the_first_env() -> None:
+    venv = TampingVectorEnv(2, CFG, render_mode="rgb_array")
+    assert venv.render() is None  # nothing to draw before reset
+    venv.reset(seed=0)
+    frame = venv.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    assert TampingVectorEnv(2, CFG).render() is None
+    made = make_vec(config=CFG, render_mode="rgb_array")
+    assert made.render_mode == "rgb_array"
+    made.reset(seed=1)
+    made.step(np.zeros((3, 3), dtype=np.int8))
+    assert made.render().shape == frame.shape
+    with pytest.raises(ValueError, match="render_mode"):
+        TampingVectorEnv(2, CFG, render_mode="human")
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        TampingVectorEnv(2, CFG, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
 
 
 @pytest.mark.parametrize("actions", [None, 5, np.zeros(3), np.zeros((2, 2)), [[0, 1, 0], [0, 1]]])

@@ -1,23 +1,32 @@
 """Gymnasium environments of trackenv, registered on import (safe to import twice).
 
 No ``max_episode_steps``: the env truncates itself at its configured horizon, so a registered TimeLimit could
-only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` runs its 80 steps)."""
+only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` runs its 80 steps).
+
+Ids: ``trackenv/Tamping-v0`` (MultiBinary actions, the full Dict observation), ``trackenv/TampingDiscrete-v0``
+(one section or none per step), and for learners (:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v0``
+(``Discrete(n_sections + 1)`` ranked actions, section-level Dict observation) and
+``trackenv/TampingRankedFlat-v0`` (the same with one flat ``Box`` observation: RLlib's and CleanRL's default
+encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``).
+"""
 
 from gymnasium.envs.registration import register, registry
 
 from .config import TampingEnvConfig
 from .tamping import TampingEnv
 
-for _id, _kwargs in (
-    ("trackenv/Tamping-v0", {"action_type": "multibinary"}),
-    ("trackenv/TampingDiscrete-v0", {"action_type": "discrete"}),
-):
+_ENVS = (
+    ("trackenv/Tamping-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.vector:TampingVectorEnv",
+     {"action_type": "multibinary"}),
+    ("trackenv/TampingDiscrete-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.vector:TampingVectorEnv",
+     {"action_type": "discrete"}),
+    ("trackenv/TampingRanked-v0", "trackenv.envs.wrappers:make_ranked", "trackenv.envs.wrappers:make_ranked_vector",
+     {"env_id": "trackenv/Tamping-v0"}),
+    ("trackenv/TampingRankedFlat-v0", "trackenv.envs.wrappers:make_ranked",
+     "trackenv.envs.wrappers:make_ranked_vector", {"env_id": "trackenv/Tamping-v0", "flat": True}),
+)
+for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
-        register(
-            id=_id,
-            entry_point="trackenv.envs.tamping:TampingEnv",
-            kwargs=_kwargs,
-            vector_entry_point="trackenv.envs.vector:TampingVectorEnv",
-        )
+        register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
 __all__ = ["TampingEnv", "TampingEnvConfig"]
