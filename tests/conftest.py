@@ -23,6 +23,10 @@ def warm_dynamics_kernel():
     track, wheel = Track.seed(), Wheelset.seed()
     for rows in (1, 2):
         simulate_passes(track, wheel, 20.0, np.zeros((rows, track.n_sleepers)), x_start=10.0, x_end=10.5)
+    # the compiled inverse of the root-solved settlement laws (trackenv.physics._newton), one entry
+    from trackenv.physics.settlement import SatoLaw
+
+    SatoLaw().equivalent_cycles(5e4, 1e-3)
 
 
 # --- the small problem most tests of the env and the agents run on ---

@@ -261,6 +261,33 @@ def test_settle_batch_equals_settling_one_by_one():
         assert s.cycles == b.cycles
 
 
+@pytest.mark.parametrize("vehicle", ["wheelset", "car"])
+def test_pass_ending_after_the_evaluated_zone_gives_the_full_pass_forces(vehicle: str) -> None:
+    """A pass ends EXIT_RUN_OUT_BAYS bays after the last axle left the evaluated zone: every evaluated
+    sleeper's peak force and the contact-force profile are those of a pass to the end of the track, bit for
+    bit (rough, settled track with support feedback at the auto dt, and the paper's irregularity feedback)."""
+    from trackenv.physics.dynamics import simulate_passes
+
+    rng = np.random.default_rng(2)
+    track = te.Track.realistic(30.0)
+    veh = loaded_wheelset() if vehicle == "wheelset" else te.Car.manchester_coach()
+    for feedback in ("support", "irregularity"):
+        level = np.abs(2e-3 * rng.standard_normal(track.n_sleepers))
+        sim = te.TrackDegradation(track, veh, initial_level=level, feedback=feedback)
+        assert sim.pass_end < sim.model_track.length
+        short = sim.simulate()
+        z = sim.model_irregularity()
+        if feedback == "support":
+            full = simulate_passes(sim.model_track, veh, sim.speed, None, support_settlement=z[None], dt="auto")[0]
+        else:
+            full = simulate_passes(sim.model_track, veh, sim.speed, [sim.rail_level()], dt="auto")[0]
+        assert full.time.size > short.time.size
+        np.testing.assert_array_equal(sim.evaluated(short.sleeper_force), sim.evaluated(full.sleeper_force))
+        np.testing.assert_array_equal(
+            sim.evaluated(short.contact_force_profile()), sim.evaluated(full.contact_force_profile())
+        )
+
+
 # ------------------------------------------------------------------------------------ runaway feedback
 def heavy_fast(**kwargs) -> te.TrackDegradation:
     """Scenario B under a 200 kN wheel load at 200 km/h: the irregularity feedback diverges."""

@@ -10,7 +10,9 @@ the next pass hits harder, and the loop runs away within a few iterations. So th
 the evaluated track: approach and exit zones of ``approach_sleepers`` sleepers (plus the vehicle's axle span) are
 added at both ends, each a copy of the end sleeper it continues. Their level is not computed but held at the
 level of the nearest evaluated sleeper — they stand for more of the same track — so no ramp forms and the
-forces in the evaluated zone are those of a track that goes on.
+forces in the evaluated zone are those of a track that goes on. The pass itself ends ``EXIT_RUN_OUT_BAYS`` bays
+after the last axle has left the evaluated zone (:attr:`TrackDegradation.pass_end`): the exit zone's track stays
+in the model, only the time steps that can no longer change an evaluated sleeper's peak force are not taken.
 """
 
 from __future__ import annotations
@@ -100,6 +102,7 @@ class DegradationHistory:
 
 
 FEEDBACKS = ("irregularity", "support")
+EXIT_RUN_OUT_BAYS = 3  # bays the last axle runs past the evaluated zone (1 already gave identical peaks on env tracks)
 INTERPOLATIONS = ("cubic", "linear")
 ON_RUNAWAY = ("warn", "raise", "ignore")
 #: Growth ratio of the differential settlement increment, iteration over iteration, and the number of
@@ -119,6 +122,8 @@ class RunawayWarning(RuntimeWarning):
 
 class RunawayError(RuntimeError):
     """The settlement loop diverged and ``on_runaway="raise"`` was asked for."""
+
+
 INFLUENCE_BAND = 10  # sleepers: a support's settlement moves the load of sleepers within ~6 m (e^{-βx} < 1e-4)
 
 
@@ -243,6 +248,28 @@ class TrackDegradation:
     def evaluated(self, per_model_sleeper: np.ndarray) -> np.ndarray:
         """The part of a per-sleeper array of the modelled track that belongs to the evaluated track."""
         return per_model_sleeper[..., self.n_extra : self.n_extra + self.track.n_sleepers]
+
+    @property
+    def pass_end(self) -> float:
+        """Leading-axle position where a pass ends [m]: the trailing axle ``EXIT_RUN_OUT_BAYS`` bays past the
+        last evaluated sleeper (or the end of the modelled track). The evaluated peak forces are those of a pass
+        to the end of the track, bit for bit (tests/test_degradation.py); the rest of the exit zone would only
+        cost time steps."""
+        return self.pass_end_position(
+            self.track.length, self.track.sleeper_spacing, self.system.span, self.n_extra - self._span_sleepers()
+        )
+
+    def _span_sleepers(self) -> int:
+        return self.zone_sleepers(self.track.sleeper_spacing, self.system.span, 0)
+
+    @classmethod
+    def pass_end_position(
+        cls, track_length: float, sleeper_spacing: float, span: float, approach_sleepers: int = 10
+    ) -> float:
+        """:attr:`pass_end` for an evaluated track of ``track_length`` [m] (the leading axle starts at ``span``):
+        the pass covers the approach zone, the evaluated track and ``EXIT_RUN_OUT_BAYS`` bays more."""
+        zone = cls.zone_length(sleeper_spacing, span, approach_sleepers)
+        return float(min(track_length + 2 * zone, zone + track_length + span + EXIT_RUN_OUT_BAYS * sleeper_spacing))
 
     # ------------------------------------------------------------------ loop
     def simulate(self) -> PassResult:
@@ -485,7 +512,9 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
         raise ValueError("simulate_batch needs simulators with the same feedback")
     if s0.feedback == "irregularity":
         rails = [s.rail_level() for s in sims]
-        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, rails, **s0.pass_options)
+        return simulate_passes(
+            [s.model_track for s in sims], s0.vehicle, s0.speed, rails, x_end=s0.pass_end, **s0.pass_options
+        )
     profiles = np.stack([s.model_irregularity() for s in sims])
     return simulate_passes(
         [s.model_track for s in sims],
@@ -493,5 +522,6 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
         s0.speed,
         None,
         support_settlement=profiles,
+        x_end=s0.pass_end,
         **s0.pass_options,
     )

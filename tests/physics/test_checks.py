@@ -135,5 +135,5 @@ def test_config_counts_the_time_steps_of_the_pass_the_env_runs(vehicle) -> None:
     cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, vehicle=vehicle, speed_kmh=120.0, dt=2e-4)
     sim = new_episode(cfg, np.random.default_rng(0)).sim
     span = sim.system.span
-    expected = check_time_steps(cfg.track_length_m + 2 * sim.zone_length(0.6, span) - span, cfg.speed, cfg.dt)
+    expected = check_time_steps(sim.pass_end_position(cfg.track_length_m, 0.6, span) - span, cfg.speed, cfg.dt)
     assert sim.simulate().time.size - 1 == expected

@@ -148,8 +148,8 @@ class TampingEnvConfig:
         dt = check_dt_option(self.dt)
         object.__setattr__(self, "dt", dt)
         # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
-        # step could not simulate: the leading axle runs from the vehicle's span to the end of the modelled
-        # track, which adds approach and exit zones to the evaluated one; with dt="auto" a pass that loses
+        # step could not simulate: the leading axle runs from the vehicle's span through the approach zone
+        # and the evaluated track to TrackDegradation.pass_end_position; with dt="auto" a pass that loses
         # contact is rerun at the reference step, so the finer of the two counts
         system = self.make_vehicle().system()
         track = Track.realistic(30.0)
@@ -158,9 +158,9 @@ class TampingEnvConfig:
             if isinstance(dt, str)
             else dt
         )
-        extra = TrackDegradation.zone_length(track.sleeper_spacing, system.span)
+        end = TrackDegradation.pass_end_position(self.track_length_m, track.sleeper_spacing, system.span)
         try:
-            check_time_steps(self.track_length_m + 2 * extra - system.span, self.speed, finest)
+            check_time_steps(end - system.span, self.speed, finest)
         except ValueError as e:
             raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
 

@@ -31,7 +31,7 @@ the source paper of this project (its Eqs. 4-8 and Fig. 9; reference numbers [11
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._checks import check_array, check_field, check_int, check_scalar
+from ._newton import SATO, SHENTON, growth_inverse
 
 __all__ = [
     "LAWS",
@@ -58,8 +59,6 @@ N_PER_KN = 1.0e3  # newtons per kilonewton
 M_PER_MM = 1.0e-3  # metres per millimetre
 PA_PER_PSI = 6894.757293168361  # pascals per pound-force per square inch (exact by definition of lbf and in)
 PA_PER_KGF_PER_CM2 = 98066.5  # pascals per kilogram-force per square centimetre (exact)
-
-_EPS = np.finfo(np.float64).eps
 
 
 # ====================================================================== protocol
@@ -88,62 +87,24 @@ class SettlementLaw(Protocol):
 
 
 # ====================================================================== shared machinery
-def _solve_increasing(
-    func: Callable[[np.ndarray], np.ndarray],
-    deriv: Callable[[np.ndarray], np.ndarray],
-    target: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    max_iter: int = 200,
-) -> np.ndarray:
-    """Solve ``func(x) = target`` elementwise, ``func`` increasing, ``func(lo) <= target <= func(hi)``.
+def _solve_bracketed(kind: int, params: tuple[float, ...], y: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """N >= 1 with g(N) = y, for y > g(1); +inf where no finite upper bracket ``hi`` exists.
 
-    Vectorised safeguarded Newton: each iteration updates the bracket [lo, hi] from the sign of the residual,
-    takes the Newton step where it stays inside the bracket and otherwise the geometric midpoint sqrt(lo·hi)
-    (lo >= 1 > 0 here, and the brackets may span many decades of N). Stops once the residual is at the
-    rounding level of the target (the best the conditioning allows) or the step or bracket is a few ulps.
+    g is the growth function ``kind`` of :mod:`._newton` (Sato or Shenton) with ``params``; the solve is a
+    compiled safeguarded Newton iteration on the bracket [1, hi], element by element: g is increasing, and
+    the brackets may span many decades of N, so a step that leaves the bracket is replaced by the geometric
+    midpoint sqrt(lo·hi). It stops once the residual is at the rounding level of y (the best the
+    conditioning allows) or the step or bracket is a few ulps.
     """
-    lo = np.array(lo, dtype=np.float64, copy=True)
-    hi = np.array(hi, dtype=np.float64, copy=True)
-    x = np.sqrt(lo * hi)
-    active = np.ones(x.shape, dtype=bool)
-    for _ in range(max_iter):
-        xa = x[active]
-        f = func(xa) - target[active]
-        below = f < 0.0
-        lo_a = np.where(below, xa, lo[active])
-        hi_a = np.where(below, hi[active], xa)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step = xa - f / deriv(xa)
-        inside = np.isfinite(step) & (step >= lo_a) & (step <= hi_a)
-        new = np.where(inside, step, np.sqrt(lo_a * hi_a))
-        # converged: residual at the rounding level of the target (keep x), or step or bracket a few ulps
-        at_root = np.abs(f) <= 4.0 * _EPS * np.abs(target[active])
-        new = np.where(at_root, xa, new)
-        done = at_root | (np.abs(new - xa) <= 8.0 * _EPS * xa) | (hi_a - lo_a <= 8.0 * _EPS * hi_a)
-        x[active] = new
-        lo[active] = lo_a
-        hi[active] = hi_a
-        idx = np.flatnonzero(active)
-        active[idx[done]] = False
-        if not active.any():
-            break
-    return x
-
-
-def _solve_bracketed(
-    func: Callable[[np.ndarray], np.ndarray],
-    deriv: Callable[[np.ndarray], np.ndarray],
-    y: np.ndarray,
-    hi: np.ndarray,
-) -> np.ndarray:
-    """N >= 1 with func(N) = y, for y > func(1); +inf where no finite upper bracket ``hi`` exists."""
-    out = np.full(y.shape, np.inf)
-    ok = np.isfinite(hi)
-    if ok.any():
-        hi_ok = np.maximum(hi[ok], 1.0)
-        out[ok] = _solve_increasing(func, deriv, y[ok], np.ones_like(hi_ok), hi_ok)
-    return out
+    shape = y.shape
+    out = growth_inverse(
+        kind,
+        np.asarray(params, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64).ravel(),
+        np.ascontiguousarray(np.broadcast_to(hi, shape), dtype=np.float64).ravel(),
+        200,
+    )
+    return out.reshape(shape)
 
 
 _POSITIVE: dict[str, Any] = {"low": 0.0, "low_inclusive": False}
@@ -458,7 +419,7 @@ class SatoLaw(_SeparableLaw):
                     y < self.gamma, -np.log1p(-np.minimum(y / self.gamma, 1.0)) / self.alpha, np.inf
                 )
             hi = np.minimum(hi, h2)
-        return _solve_bracketed(self._growth, self._growth_slope, y, hi)
+        return _solve_bracketed(SATO, (self.alpha, self.beta, self.gamma), y, hi)
 
 
 @dataclass(frozen=True)
@@ -512,7 +473,7 @@ class ShentonLaw(_SeparableLaw):
                 hi = y / self.K2
             if self.K1 > 0.0:
                 hi = np.minimum(hi, (y / self.K1) ** (1.0 / self._POWER))
-        return _solve_bracketed(self._growth, self._growth_slope, y, hi)
+        return _solve_bracketed(SHENTON, (self.K1, self.K2), y, hi)
 
 
 @dataclass(frozen=True)
@@ -693,16 +654,41 @@ class SettlementState:
 
 
 # ====================================================================== batched steps (functions of arrays)
-def _solve_near_banded(a: np.ndarray, b: np.ndarray, band: int) -> np.ndarray:
-    """Solve a x = b keeping the diagonals of ``a`` within ``band`` (LAPACK's banded LU; the rest is negligible)."""
+def _band_rows(a: np.ndarray, band: int) -> np.ndarray:
+    """The diagonals of ``a`` (..., n, n) within ``band`` in LAPACK's banded layout (..., 2·band + 1, n):
+    out[..., band + i − j, j] = a[..., i, j]; the rest is negligible (a support's influence is local)."""
+    n = a.shape[-1]
+    out = np.zeros((*a.shape[:-2], 2 * band + 1, n))
+    for k in range(-band, band + 1):
+        out[..., band - k, max(k, 0) : n + min(k, 0)] = np.diagonal(a, k, axis1=-2, axis2=-1)
+    return out
+
+
+def _row_of_band(v: np.ndarray, band: int) -> np.ndarray:
+    """v[..., i] laid out like :func:`_band_rows`: out[..., band + i − j, j] = v[..., i] (0 outside)."""
+    n = v.shape[-1]
+    out = np.zeros((*v.shape[:-1], 2 * band + 1, n))
+    for k in range(-band, band + 1):
+        out[..., band - k, max(k, 0) : n + min(k, 0)] = v[..., max(-k, 0) : n - max(k, 0)]
+    return out
+
+
+def _solve_banded_rows(ab: np.ndarray, rhs: np.ndarray, band: int) -> np.ndarray:
+    """Solve each row's banded system (ab (k, 2·band + 1, n) in :func:`_band_rows`'s layout, rhs (k, n)) by
+    LAPACK's banded LU with partial pivoting (gbsv, what scipy.linalg.solve_banded calls, minus its checks)."""
     import scipy.linalg
 
-    n = a.shape[0]
-    band = min(band, n - 1)
-    ab = np.zeros((2 * band + 1, n))
-    for k in range(-band, band + 1):
-        ab[band - k, max(k, 0) : n + min(k, 0)] = np.diagonal(a, k)
-    return scipy.linalg.solve_banded((band, band), ab, b)
+    (gbsv,) = scipy.linalg.get_lapack_funcs(("gbsv",), (ab,))
+    out = np.empty_like(rhs)
+    work = np.zeros((3 * band + 1, ab.shape[-1]))
+    for b in range(ab.shape[0]):
+        work[:band] = 0.0
+        work[band:] = ab[b]
+        _, _, x, info = gbsv(band, band, work, rhs[b], overwrite_ab=True, overwrite_b=False)
+        if info != 0:
+            raise np.linalg.LinAlgError("singular Jacobian in the implicit settlement step")
+        out[b] = x
+    return out
 
 
 def advance_settlement(
@@ -774,7 +760,9 @@ def implicit_settlement_step(
     f0 = np.asarray(force, dtype=np.float64)
     s_mat = np.broadcast_to(np.asarray(influence, dtype=np.float64), (nb, n, n))
     dn = np.broadcast_to(np.asarray(delta_cycles, dtype=np.float64).reshape(-1, 1), (nb, 1))
-    eye = np.eye(n)
+    band = min(band, n - 1)
+    s_band = _band_rows(s_mat, band)  # S within the band, once per call
+    eye_band = _band_rows(np.eye(n), band)
     df = 1e-3  # [N] finite-difference step of the force
     delta = np.zeros_like(u_now)
     active = np.ones(nb, dtype=bool)
@@ -802,8 +790,11 @@ def implicit_settlement_step(
         if not go.any():
             break
         du_df = (u_fd[go] - u_f[go]) / df
-        jac = eye - du_df[:, :, None] * s_a[go] * (f[go] > 0)[:, :, None]
-        step = np.stack([_solve_near_banded(j_, r_, band) for j_, r_ in zip(jac, r[go])])
+        # the Jacobian I − diag(∂u/∂F)·S (rows with F > 0) built in the banded layout, element for element
+        jac = eye_band - (
+            _row_of_band(du_df, band) * s_band[idx[go]] * _row_of_band((f[go] > 0).astype(np.float64), band)
+        )
+        step = _solve_banded_rows(jac, r[go], band)
         delta[idx[go]] = np.maximum(delta[idx[go]] - step, 0.0)
     f = np.maximum(f0 + np.matmul(s_mat, delta[..., None])[..., 0], 0.0)
     return advance_settlement(law, u_now, c_now, rate, f, dn)
