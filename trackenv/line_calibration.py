@@ -115,7 +115,7 @@ def calibrate(config: LineConfig | None = None, seeds: Sequence[int] = (2000, 20
     }
     table = []
     for key, (lo, hi, src) in PUBLISHED.items():
-        v = figures[key]
+        v = float(figures[key])  # type: ignore[arg-type]
         table.append({"figure": key, "value": v, "low": lo, "high": hi, "inside": bool(lo <= v <= hi),
                       "source": src})
     return {"config": cfg.to_dict(), "seeds": list(seeds), "threshold_mm": threshold_mm, "figures": figures,

@@ -16,6 +16,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
+from ..physics._checks import check_int
 from .line_config import LineConfig
 from .line_episode import COST_KEYS, LineBatch
 
@@ -37,7 +38,7 @@ def line_observation_space(config: LineConfig) -> spaces.Dict:
     }
     if config.profiles:
         d["level"] = spaces.Box(-100.0, 200.0, (S, config.n_sleepers), f32)
-    return spaces.Dict(d)
+    return spaces.Dict(dict(d))
 
 
 def decode_line_action(action, n_sections: int) -> np.ndarray:
@@ -80,18 +81,20 @@ class TampingLineVectorEnv(VectorEnv):
 
     def _observations(self) -> dict:
         out = create_empty_array(self.single_observation_space, self.num_envs)
+        assert self.batch is not None, "reset() first"
         obs = [self.batch.observation(b) for b in range(self.num_envs)]
-        return concatenate(self.single_observation_space, obs, out)
+        return concatenate(self.single_observation_space, obs, out)  # type: ignore[return-value]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        seeds: list[int | None]
         if seed is None:
             seeds = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
+        elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seed)}")
+            seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
         else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
+            seeds = [check_int("seed", seed, low=0) + i for i in range(self.num_envs)]
         self._rngs = [np.random.default_rng(s) for s in seeds]
         self.batch = LineBatch(self.config, self.num_envs)
         self.batch.reset_lines(list(range(self.num_envs)), self._rngs)

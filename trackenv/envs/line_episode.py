@@ -173,7 +173,7 @@ class LineBatch:
         start = rng.integers(0, n - wl + 1, size=S)
         wmask = (np.arange(n)[None, :] >= start[:, None]) & (np.arange(n)[None, :] < (start + wl)[:, None])
         # initial state: level from the PSD, scaled; age and tampings since renewal
-        scale = rng.uniform(*c.initial_scale, size=S)
+        scale = rng.uniform(c.initial_scale[0], c.initial_scale[1], size=S)
         base = Track.realistic(c.segment_length_m)
         x = base.sleeper_positions
         level = np.stack([synthesize_profile(x, partial(german_psd, quality="low"), rng) for _ in range(S)])

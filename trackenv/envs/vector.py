@@ -16,6 +16,7 @@ Both of Gymnasium's autoreset modes, with the results of ``gymnasium.vector.Sync
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -82,7 +83,7 @@ class TampingVectorEnv(VectorEnv):
         # gymnasium types concatenate's result as any space's; for a Dict space it is the dict ``out``
         return concatenate(self.single_observation_space, [E.observation(ep) for ep in self.episodes], out)  # type: ignore[return-value]
 
-    def _new_episodes(self, idx: list[int], others: list[E.Episode] = ()) -> list:
+    def _new_episodes(self, idx: list[int], others: Sequence[E.Episode] = ()) -> list:
         """Start new episodes in envs ``idx`` (a traffic-free pass each); the passes of ``others`` (episodes
         about to take their traffic step) run in the same batched call, and their results are returned."""
         eps = [E.new_episode(self.config, self._rngs[i]) for i in idx]

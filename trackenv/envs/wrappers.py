@@ -81,13 +81,13 @@ def n_sections_of(env: gym.Env | VectorEnv) -> int:
     if n is None:
         n = getattr(getattr(base, "config", None), "n_sections", None)
     if n is None and getattr(base, "envs", None):  # Gymnasium's SyncVectorEnv: its first env's
-        return n_sections_of(base.envs[0])
+        return n_sections_of(base.envs[0])  # type: ignore[union-attr]
     if n is None:
         raise TypeError(f"{type(base).__name__} has neither n_sections nor config.n_sections")
     return int(n)
 
 
-def section_keys(space: spaces.Dict, n_sections: int) -> list[str]:
+def section_keys(space: spaces.Space, n_sections: int) -> list[str]:
     """The keys of a Dict observation space that describe sections (shape ``(n_sections, ...)``) or the whole
     problem (shape ``(1,)``, e.g. ``time``), in the space's order; per-sleeper arrays are left out."""
     if not isinstance(space, spaces.Dict):
@@ -155,7 +155,7 @@ class SectionObservation(gym.ObservationWrapper):
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         self.keys = section_keys(env.observation_space, n_sections_of(env))
-        self.observation_space = spaces.Dict({k: env.observation_space.spaces[k] for k in self.keys})
+        self.observation_space = spaces.Dict({k: env.observation_space[k] for k in self.keys})  # type: ignore[index]
 
     def observation(self, observation: dict) -> dict:
         return {k: observation[k] for k in self.keys}
@@ -244,7 +244,7 @@ class RankedVectorActions(VectorActionWrapper):
         self._sd = np.asarray(obs[SD_KEY], dtype=float).copy()
         return obs, rewards, terminated, truncated, info
 
-    def actions(self, actions) -> np.ndarray:
+    def actions(self, actions) -> np.ndarray:  # type: ignore[override]
         return ranked_to_sections(np.asarray(actions).reshape(self.num_envs), self._sd)
 
     def action_masks(self) -> np.ndarray:
@@ -258,7 +258,7 @@ class SectionVectorObservation(VectorWrapper):
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
         self.keys = section_keys(env.single_observation_space, n_sections_of(env))
-        self.single_observation_space = spaces.Dict({k: env.single_observation_space.spaces[k]
+        self.single_observation_space = spaces.Dict({k: env.single_observation_space[k]  # type: ignore[index]
                                                      for k in self.keys})
         self.observation_space = batch_space(self.single_observation_space, env.num_envs)
 
