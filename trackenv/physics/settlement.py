@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import check_array, check_field, check_int, check_scalar
+from ._checks import check_array, check_field, check_int, check_scalar, readonly_array
 from ._newton import SATO, SHENTON, growth_inverse
 
 __all__ = [
@@ -542,12 +542,6 @@ def make_law(name: str, **params: Any) -> Any:
 
 
 # ====================================================================== per-sleeper state
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    out = np.array(arr, dtype=np.float64, copy=True)
-    out.flags.writeable = False
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class SettlementState:
     """Settlement of each sleeper since its last consolidation restart, advanced by curve shifting (Fig. 9).
@@ -584,9 +578,9 @@ class SettlementState:
             r = np.ones(n)
         else:
             r = check_array("rate_factor", self.rate_factor, shape=(n,), low=0.0, low_inclusive=False)
-        object.__setattr__(self, "settlement", _readonly(u))
-        object.__setattr__(self, "cycles", _readonly(c))
-        object.__setattr__(self, "rate_factor", _readonly(r))
+        object.__setattr__(self, "settlement", readonly_array(u))
+        object.__setattr__(self, "cycles", readonly_array(c))
+        object.__setattr__(self, "rate_factor", readonly_array(r))
 
     @classmethod
     def zeros(cls, n: int) -> SettlementState:
