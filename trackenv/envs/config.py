@@ -19,15 +19,22 @@ from ..physics.vehicle import GRAVITY, Car, Wheelset
 VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
 
 
-_C = TypeVar("_C", bound="DictConfig")
+_C = TypeVar("_C", bound="ConfigBase")
 
 
-class DictConfig:
-    """The dict round trip of the frozen env configs (:class:`TampingEnvConfig`, ``LineConfig``): ``from_dict``
-    refuses unknown keys by name, ``replace`` validates the changed copy, ``to_dict`` writes the mapping fields
-    (stored as sorted item tuples so the config stays hashable) back as dicts."""
+class ConfigBase:
+    """What the frozen env configs (:class:`TampingEnvConfig`, ``LineConfig``) share: the dict round trip
+    (``from_dict`` refuses unknown keys by name, ``replace`` validates the changed copy, ``to_dict`` writes the
+    mapping fields, stored as sorted item tuples so the config stays hashable, back as dicts) and the physics
+    objects built from the fields both have (the settlement law, the tamping model, the quality limits). The
+    derived objects are built once per config (it is frozen, so they cannot go stale), not once per step."""
 
     _MAPPING_FIELDS: tuple[str, ...] = ("law_params", "tamping", "limits")
+    speed_kmh: float
+    law: str
+    law_params: tuple
+    tamping: tuple
+    limits: tuple
 
     @classmethod
     def from_dict(cls: type[_C], d: dict[str, Any]) -> _C:
@@ -48,9 +55,26 @@ class DictConfig:
             d[k] = dict(getattr(self, k))
         return d
 
+    @property
+    def speed(self) -> float:
+        """``speed_kmh`` in m/s."""
+        return self.speed_kmh / 3.6
+
+    @cached_property
+    def settlement_law(self):
+        return make_law(self.law, **dict(self.law_params))
+
+    @cached_property
+    def tamping_model(self) -> TampingModel:
+        return TampingModel.from_dict(dict(self.tamping))
+
+    @cached_property
+    def quality_limits(self) -> QualityLimits:
+        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
 
 @dataclass(frozen=True)
-class TampingEnvConfig(DictConfig):
+class TampingEnvConfig(ConfigBase):
     """Everything that defines a tamping problem. SI units unless the name says otherwise.
 
     Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers ``sleeper_spacing_m`` = 0.6 m apart) split
@@ -218,23 +242,7 @@ class TampingEnvConfig(DictConfig):
     def cycles_per_step(self) -> float:
         return self.axle_passes_per_year / self.steps_per_year
 
-    @property
-    def speed(self) -> float:
-        return self.speed_kmh / 3.6
-
     # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
-    @cached_property
-    def settlement_law(self):
-        return make_law(self.law, **dict(self.law_params))
-
-    @cached_property
-    def tamping_model(self) -> TampingModel:
-        return TampingModel.from_dict(dict(self.tamping))
-
-    @cached_property
-    def quality_limits(self) -> QualityLimits:
-        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
-
     @cached_property
     def band_limits(self):
         """The quality limits of the speed band of ``speed_kmh``."""

@@ -17,11 +17,9 @@ from typing import Any
 import numpy as np
 
 from ..physics._checks import check_scalar
-from ..physics.geometry import QualityLimits
-from ..physics.settlement import LAWS, make_law
-from ..physics.tamping import TampingModel
+from ..physics.settlement import LAWS
 from ..physics.vehicle import GRAVITY, Car, Wheelset
-from .config import DictConfig, _as_items
+from .config import ConfigBase, _as_items
 
 SLEEPER_SPACING_M = 0.6
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
@@ -34,7 +32,7 @@ def _int(name: str, value, low: int, high: int) -> int:
 
 
 @dataclass(frozen=True)
-class LineConfig(DictConfig):
+class LineConfig(ConfigBase):
     """Everything that defines a TampingLine problem. SI units unless the name says otherwise; costs in k€.
 
     **Line.** ``n_sections`` sections of ``section_length_m`` (200 m: the EN 13848-6 / Trafikverket / Network
@@ -221,22 +219,6 @@ class LineConfig(DictConfig):
     @property
     def horizon_steps(self) -> int:
         return int(round(self.horizon_years * self.steps_per_year))
-
-    @property
-    def speed(self) -> float:
-        return self.speed_kmh / 3.6
-
-    @property
-    def settlement_law(self):
-        return make_law(self.law, **dict(self.law_params))
-
-    @property
-    def tamping_model(self) -> TampingModel:
-        return TampingModel.from_dict(dict(self.tamping))
-
-    @property
-    def quality_limits(self) -> QualityLimits:
-        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
 
     @property
     def section_tamping_cost(self) -> float:
