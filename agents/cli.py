@@ -178,7 +178,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
     result["ray"] = args.ray_address or ("local" if args.ray else None)
-    from .evaluation import format_table
+    from .reporting import format_table
 
     names = [Path(f).name for f in result.get("files", {}).values()]
     human = f"{format_table(result['results'])}\nwrote {', '.join(names)} to {out}"

@@ -1,6 +1,7 @@
 """Compare maintenance policies: tune every heuristic on training seeds, score all on held-out test seeds.
 
-    from trackenv_agents.compare import run_comparison
+    from trackenv_agents.compare import compare, run_comparison
+    rows = compare(["periodic", "sd_threshold"], train_seeds=range(1000, 1010))  # summaries, best first
     out = run_comparison(quick=True)          # ~1 min: 30 m track, 3 sections, 1.5 years, few seeds
     out = run_comparison(n_test=32, n_train=16)
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -21,9 +22,72 @@ import numpy as np
 
 from trackenv._json import json_default
 from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
+
+from .evaluation import TEST_SEEDS, TRAIN_SEEDS, EvaluationResult, _coerce, evaluate_many
+from .reporting import format_table, plot_comparison, plot_episode
+from .statistics import paired_difference
+from .tuning import tune_many
 
 QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.5}
 QUICK_N_TEST, QUICK_N_TRAIN = 6, 2
+
+
+def compare_results(policies: Sequence[Any] | Mapping[str, Any],
+                    config: TampingEnvConfig | dict | None = None,
+                    test_seeds: Iterable[int] = TEST_SEEDS, train_seeds: Iterable[int] | None = None,
+                    tune_heuristics: bool = True, batch_size: int = 32, progress: bool = False,
+                    executor: Any = None) -> tuple[list[EvaluationResult], dict[str, dict]]:
+    """Tune (classes with a ``param_grid``, on ``train_seeds``) and evaluate on ``test_seeds``.
+
+    ``policies``: heuristic classes (tuned if ``tune_heuristics`` and ``train_seeds`` are given, else default
+    parameters), registry names (as classes), or ready policy objects (used as they are); or a mapping
+    name -> any of these (the name labels the result). Returns the results sorted by mean cost and the tuning
+    tables by policy name.
+    """
+    from .heuristics import HEURISTICS
+    from .line_heuristics import LINE_HEURISTICS
+
+    cfg = _coerce(config)
+    if isinstance(cfg, LineConfig):
+        HEURISTICS = LINE_HEURISTICS  # noqa: N806
+    items = list(policies.items()) if isinstance(policies, Mapping) else [(None, p) for p in policies]
+    items = [(label, HEURISTICS[p] if isinstance(p, str) else p) for label, p in items]
+    tunable = [i for i, (_, p) in enumerate(items) if isinstance(p, type) and hasattr(p, "param_grid")]
+    tuning: dict[str, dict] = {}
+    chosen: list[Any] = []
+    tuned = {}
+    if tune_heuristics and train_seeds is not None and tunable:
+        tuned = tune_many([items[i][1] for i in tunable], cfg, list(train_seeds), batch_size, progress,
+                          executor=executor)
+    for i, (label, p) in enumerate(items):
+        if isinstance(p, type):
+            if i in tunable and tunable.index(i) in tuned:
+                t = tuned[tunable.index(i)]
+                tuning[label or t["policy"]] = t
+                obj = p(**t["best_params"])
+            else:
+                obj = p()
+        else:
+            obj = p
+        chosen.append(obj)
+    results = evaluate_many(chosen, cfg, test_seeds, batch_size=batch_size, progress=progress, desc="test",
+                            executor=executor)
+    for (label, _), r in zip(items, results, strict=True):
+        if label is not None:
+            r.policy = label
+    results.sort(key=lambda r: float(r.cost.mean()))
+    return results, tuning
+
+
+def compare(policies: Sequence[Any] | Mapping[str, Any], config: TampingEnvConfig | dict | None = None,
+            test_seeds: Iterable[int] = TEST_SEEDS, train_seeds: Iterable[int] | None = None,
+            tune_heuristics: bool = True, batch_size: int = 32, progress: bool = False,
+            executor: Any = None) -> list[dict]:
+    """Summaries (:meth:`EvaluationResult.summary`) of :func:`compare_results`, sorted by mean cost."""
+    results, _ = compare_results(policies, config, test_seeds, train_seeds, tune_heuristics, batch_size,
+                                 progress, executor)
+    return [r.summary() for r in results]
 
 
 def run_comparison(
@@ -47,15 +111,6 @@ def run_comparison(
     Defaults otherwise: ``TampingEnvConfig()``, all of ``TEST_SEEDS`` (200) and ``TRAIN_SEEDS`` (100).
     ``executor``: runs the episode batches (e.g. :class:`trackenv_agents.distributed.RayExecutor`).
     """
-    from .evaluation import (
-        TEST_SEEDS,
-        TRAIN_SEEDS,
-        compare_results,
-        format_table,
-        paired_difference,
-        plot_comparison,
-        plot_episode,
-    )
     from .heuristics import HEURISTICS, RandomPolicy, tuned_params
 
     t0 = time.perf_counter()

@@ -11,8 +11,10 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig, scenario
 
-from .evaluation import EvaluationResult, _bound, evaluate_many, paired_difference, tune_many
+from .evaluation import EvaluationResult, _bound, evaluate_many
 from .line_heuristics import LINE_HEURISTICS, line_tuned_params
+from .statistics import paired_difference
+from .tuning import tune_many
 
 
 def scenario_of(env_id: str) -> str:
@@ -67,7 +69,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     payload = {"env": env_id, "scenario": name, "config": cfg.to_dict(), "seeds": seeds, "tuned_from": tuned_from,
                "results": rows}
     (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
-    from .evaluation import plot_comparison
+    from .reporting import plot_comparison
 
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
     payload["episode_plot"] = plot_line_episode(best, cfg, seeds[0], str(out / "line_episode.png"), params)

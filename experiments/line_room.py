@@ -19,8 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation import bootstrap_ci, evaluate_many, paired_difference, tune_many
+from trackenv_agents.evaluation import evaluate_many
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic, hindsight_bound
+from trackenv_agents.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.tuning import tune_many
 
 
 def main(argv=None) -> dict:

@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv_agents.evaluation import TRAIN_SEEDS, tune_many
+from trackenv_agents.evaluation import TRAIN_SEEDS
 from trackenv_agents.heuristics import HEURISTICS, TUNED_PARAMS_FILE
+from trackenv_agents.tuning import tune_many
 
 DEFAULT_FILE = TUNED_PARAMS_FILE
 

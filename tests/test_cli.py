@@ -167,8 +167,8 @@ def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys
 
 
 def test_periodic_all_sections_shows_no_n_worst():
-    from trackenv_agents.evaluation import format_table
     from trackenv_agents.heuristics import Periodic
+    from trackenv_agents.reporting import format_table
 
     assert Periodic(3.5, sections="all").params == {"interval_years": 3.5, "sections": "all"}
     assert Periodic(2.0, sections="worst", n_worst=2).params["n_worst"] == 2

@@ -9,8 +9,9 @@ pytest.importorskip("ray")
 
 from trackenv.envs.config import TampingEnvConfig  # noqa: E402
 from trackenv_agents.distributed import RayExecutor  # noqa: E402
-from trackenv_agents.evaluation import evaluate_many, tune  # noqa: E402
+from trackenv_agents.evaluation import evaluate_many  # noqa: E402
 from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold  # noqa: E402
+from trackenv_agents.tuning import tune  # noqa: E402
 
 CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)  # 4 steps
 SEEDS = [0, 1, 2, 3, 4]

@@ -8,19 +8,12 @@ import numpy as np
 import pytest
 
 from trackenv.envs.tamping import TampingEnv
-from trackenv_agents.evaluation import (
-    EvaluationResult,
-    bootstrap_ci,
-    compare,
-    evaluate_many,
-    evaluate_one,
-    format_markdown,
-    format_table,
-    paired_difference,
-    tune,
-    tune_many,
-)
+from trackenv_agents.compare import compare
+from trackenv_agents.evaluation import EvaluationResult, evaluate_many, evaluate_one
 from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold
+from trackenv_agents.reporting import format_markdown, format_table
+from trackenv_agents.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.tuning import tune, tune_many
 
 SEEDS = [0, 1, 2, 3]
 

@@ -14,15 +14,14 @@ from trackenv.envs import TampingEnv, TampingEnvConfig
 TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0}
 
 
-def test_defaults_and_derived_quantities() -> None:
+def test_defaults_and_derived_quantities(small_config) -> None:
     c = TampingEnvConfig()
     assert c.n_sleepers == 101  # 60 m at 0.6 m
     assert c.horizon_steps == 40  # 10 years of quarters
     assert c.cycles_per_step == pytest.approx(500_000)
     assert c.speed == pytest.approx(100 / 3.6)
-    tiny = TampingEnvConfig(**TINY)
-    assert tiny.n_sleepers == 51
-    assert tiny.horizon_steps == 8
+    assert small_config.n_sleepers == 51
+    assert small_config.horizon_steps == 8
 
 
 def test_frozen_hashable_and_round_trip() -> None:
@@ -41,7 +40,7 @@ def test_frozen_hashable_and_round_trip() -> None:
 
 
 def test_config_reaches_the_env_by_object_dict_or_keywords() -> None:
-    cfg = TampingEnvConfig(**TINY)
+    cfg = TampingEnvConfig(**TINY)  # the keywords of small_config, to reach the env as a dict and as keywords
     assert TampingEnv(cfg).config == cfg
     assert TampingEnv(dict(TINY)).config == cfg
     assert TampingEnv(**TINY).config == cfg
@@ -116,20 +115,20 @@ def test_nested_mappings_are_validated(field: str, value, match: str) -> None:
         TampingEnvConfig(**{**TINY, field: value})
 
 
-def test_bad_env_arguments() -> None:
+def test_bad_env_arguments(small_config) -> None:
     with pytest.raises(ValueError, match="action_type"):
-        TampingEnv(TampingEnvConfig(**TINY), action_type="continuous")
+        TampingEnv(small_config, action_type="continuous")
     with pytest.raises(ValueError, match="render_mode"):
-        TampingEnv(TampingEnvConfig(**TINY), render_mode="human")
+        TampingEnv(small_config, render_mode="human")
 
 
-def test_the_numbers_that_draw_a_track_are_fields() -> None:
+def test_the_numbers_that_draw_a_track_are_fields(small_config) -> None:
     """Sleeper spacing, ballast correlation, transition placement and voided support are config fields that
     reach the track (defaults: the values the episode used to hard-code)."""
     from trackenv.envs.episode import new_episode
     from trackenv.physics.track import Track
 
-    c = TampingEnvConfig(**TINY)
+    c = small_config
     assert (c.sleeper_spacing_m, c.ballast_stiffness_correlation_m) == (0.6, 1.2)
     assert (c.transition_position, c.voided_residual_support) == ((0.2, 0.8), 0.05)
     wide = TampingEnvConfig(**TINY, sleeper_spacing_m=0.75, transition_probability=1.0,

@@ -20,12 +20,7 @@ from trackenv.physics.tamping import TampingModel
 IDS = ("trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0")
 # the Tamping family with the learners' wrapped ids (the TampingLine ids are checked in test_line_env.py)
 ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping") and "TampingLine" not in i))
-TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0}  # 51 sleepers, 8 steps
 COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
-
-
-def tiny(**changes) -> TampingEnvConfig:
-    return TampingEnvConfig(**TINY).replace(**changes)
 
 
 def one_hot(k: int | None, n: int = 3) -> np.ndarray:
@@ -41,7 +36,7 @@ def rollout(env: gym.Env, seed: int, actions) -> tuple:
     return obs0, info0, steps
 
 
-# Actions that tamp something now and then (MultiBinary, tiny config).
+# Actions that tamp something now and then (MultiBinary, small_config).
 ACTIONS_MB = [one_hot(None), one_hot(1), np.array([1, 0, 1], dtype=np.int8), one_hot(None), one_hot(0)]
 
 
@@ -60,14 +55,14 @@ def _significant(caught: list[warnings.WarningMessage]) -> list[str]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", ALL_IDS)
-def test_gymnasium_env_checker(env_id: str) -> None:
+def test_gymnasium_env_checker(small_config, env_id: str) -> None:
     """Gymnasium's checker: spaces, reset/step signatures, obs in space with the right dtype, seeding
     determinism of reset and step. No warning is tolerated (bar unrelated deprecation notices). An id made of
     wrappers is checked with its wrappers (the checker's advice to check ``env.unwrapped`` instead is the one
     warning let through there: the wrappers are what is under test)."""
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make(env_id, config=tiny())
+    env = gym.make(env_id, config=small_config)
     wrapped = env_id not in IDS
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -107,8 +102,8 @@ def test_registration(env_id: str) -> None:
                for s in obs_space.values())
 
 
-def test_registered_env_runs_a_longer_configured_horizon_to_its_end() -> None:
-    env = gym.make("trackenv/Tamping-v0", **{**TINY, "horizon_years": 12.0, "dt": 2e-4})
+def test_registered_env_runs_a_longer_configured_horizon_to_its_end(small_config) -> None:
+    env = gym.make("trackenv/Tamping-v0", config=small_config.replace(horizon_years=12.0, dt=2e-4))
     horizon = env.unwrapped.config.horizon_steps
     assert horizon == 48 > TampingEnvConfig().horizon_steps
     env.reset(seed=0)
@@ -117,8 +112,8 @@ def test_registered_env_runs_a_longer_configured_horizon_to_its_end() -> None:
 
 
 # ------------------------------------------------------------------------------ determinism
-def test_same_seed_same_rollout_different_seed_differs() -> None:
-    cfg = tiny()
+def test_same_seed_same_rollout_different_seed_differs(small_config) -> None:
+    cfg = small_config
     a = rollout(TampingEnv(cfg), 7, ACTIONS_MB)
     b = rollout(gym.make("trackenv/Tamping-v0", config=cfg), 7, ACTIONS_MB)  # fresh env, via the registry
     np.testing.assert_equal(a, b)  # observations, infos, rewards, flags: all identical
@@ -127,16 +122,16 @@ def test_same_seed_same_rollout_different_seed_differs() -> None:
     assert a[2][1][1] != c[2][1][1]  # rewards differ too
 
 
-def test_reset_reseeds_the_same_env() -> None:
-    env = TampingEnv(tiny())
+def test_reset_reseeds_the_same_env(small_config) -> None:
+    env = TampingEnv(small_config)
     first = rollout(env, 3, ACTIONS_MB[:3])
     rollout(env, 4, ACTIONS_MB[:1])
     again = rollout(env, 3, ACTIONS_MB[:3])
     np.testing.assert_equal(first, again)
 
 
-def test_env_pickles_mid_episode_and_both_copies_continue_identically() -> None:
-    env = TampingEnv(tiny())
+def test_env_pickles_mid_episode_and_both_copies_continue_identically(small_config) -> None:
+    env = TampingEnv(small_config)
     env.reset(seed=11)
     for a in ACTIONS_MB[:3]:
         env.step(a)
@@ -144,7 +139,7 @@ def test_env_pickles_mid_episode_and_both_copies_continue_identically() -> None:
     rest = [one_hot(None), one_hot(2), one_hot(0)]  # also draws the tamping residual from np_random
     np.testing.assert_equal([env.step(a) for a in rest], [clone.step(a) for a in rest])
     # the registered, wrapped env pickles too
-    wrapped = gym.make("trackenv/Tamping-v0", config=tiny())
+    wrapped = gym.make("trackenv/Tamping-v0", config=small_config)
     wrapped.reset(seed=1)
     wrapped.step(one_hot(1))
     wclone = pickle.loads(pickle.dumps(wrapped))
@@ -157,8 +152,8 @@ def test_env_pickles_mid_episode_and_both_copies_continue_identically() -> None:
                              np.array([1, 1, 1]), one_hot(None), one_hot(None)]),
     ("trackenv/TampingDiscrete-v0", [0, 1, 3, 0, 0, 2, 0, 0]),
 ])
-def test_reward_costs_and_truncation_over_a_whole_episode(env_id: str, actions) -> None:
-    cfg = tiny()
+def test_reward_costs_and_truncation_over_a_whole_episode(small_config, env_id: str, actions) -> None:
+    cfg = small_config
     env = gym.make(env_id, config=cfg)
     obs, info = env.reset(seed=5)
     assert env.observation_space.contains(obs)
@@ -184,8 +179,8 @@ def test_reward_costs_and_truncation_over_a_whole_episode(env_id: str, actions) 
 
 
 # ------------------------------------------------------------------------ actions and masks
-def test_invalid_multibinary_actions_raise_and_change_nothing() -> None:
-    env = TampingEnv(tiny())
+def test_invalid_multibinary_actions_raise_and_change_nothing(small_config) -> None:
+    env = TampingEnv(small_config)
     with pytest.raises(RuntimeError, match="reset"):
         env.step(one_hot(None))
     env.reset(seed=0)
@@ -202,8 +197,8 @@ def test_invalid_multibinary_actions_raise_and_change_nothing() -> None:
     assert env.episode.step_count == 3
 
 
-def test_invalid_discrete_actions_raise() -> None:
-    env = TampingEnv(tiny(), action_type="discrete")
+def test_invalid_discrete_actions_raise(small_config) -> None:
+    env = TampingEnv(small_config, action_type="discrete")
     env.reset(seed=0)
     for a in (-1, 4, 100, np.nan, 1.5, np.array([1, 2]), np.inf):
         with pytest.raises(ValueError):
@@ -215,8 +210,8 @@ def test_invalid_discrete_actions_raise() -> None:
 
 
 @pytest.mark.parametrize("action_type", ["multibinary", "discrete"])
-def test_action_masks_block_a_section_tamped_last_step(action_type: str) -> None:
-    env = TampingEnv(tiny(min_steps_between_tampings=1), action_type=action_type)
+def test_action_masks_block_a_section_tamped_last_step(small_config, action_type: str) -> None:
+    env = TampingEnv(small_config.replace(min_steps_between_tampings=1), action_type=action_type)
     discrete = action_type == "discrete"
     env.reset(seed=2)
     mask = env.action_masks()
@@ -243,8 +238,8 @@ def test_action_masks_block_a_section_tamped_last_step(action_type: str) -> None
     assert info["tamped_sections"].tolist() == [False, True, False]
 
 
-def test_masked_section_is_ignored_but_others_in_the_same_action_are_tamped() -> None:
-    env = TampingEnv(tiny(min_steps_between_tampings=1))
+def test_masked_section_is_ignored_but_others_in_the_same_action_are_tamped(small_config) -> None:
+    env = TampingEnv(small_config.replace(min_steps_between_tampings=1))
     env.reset(seed=2)
     env.step(one_hot(0))
     _, _, _, _, info = env.step(np.array([1, 0, 1]))
@@ -258,10 +253,10 @@ SEEDS = (0, 1, 2)
 
 
 @pytest.fixture(scope="module")
-def neglect() -> dict:
+def neglect(small_config) -> dict:
     """Episodes of 4 years (16 steps) without any tamping on the tiny track, for three seeds; the state after
     8 steps is kept (deep copies) to branch from."""
-    cfg = tiny(horizon_years=4.0)
+    cfg = small_config.replace(horizon_years=4.0)
     out = {"sd": [], "cost": [], "obs": [], "branch": []}
     for seed in SEEDS:
         env = TampingEnv(cfg)
@@ -293,8 +288,8 @@ def branches(neglect: dict) -> list:
 
 
 @pytest.mark.slow
-def test_tamping_a_section_is_recorded_in_the_step(branches: list) -> None:
-    cfg = tiny()
+def test_tamping_a_section_is_recorded_in_the_step(small_config, branches: list) -> None:
+    cfg = small_config
     for _, tamped in branches:
         for s, (o, r, _, _, info) in enumerate(tamped):
             assert info["tamped_sections"].tolist() == one_hot(s).astype(bool).tolist()
@@ -375,8 +370,8 @@ def test_uniform_track_with_support_feedback_settles_uniformly_to_its_ends() -> 
 
 
 # ------------------------------------------------------------------------ episode end and reset arguments
-def test_step_after_the_horizon_raises_until_reset() -> None:
-    env = TampingEnv(tiny(horizon_years=0.5))  # 2 steps
+def test_step_after_the_horizon_raises_until_reset(small_config) -> None:
+    env = TampingEnv(small_config.replace(horizon_years=0.5))  # 2 steps
     env.reset(seed=0)
     assert [env.step(np.zeros(3, dtype=np.int8))[3] for _ in range(2)] == [False, True]
     level = env.episode.sim.level.copy()
@@ -388,13 +383,13 @@ def test_step_after_the_horizon_raises_until_reset() -> None:
 
 
 @pytest.mark.parametrize("seed", [1.5, -1, True, "1", np.float64(2.0)])
-def test_reset_refuses_seeds_that_are_not_non_negative_integers(seed) -> None:
+def test_reset_refuses_seeds_that_are_not_non_negative_integers(small_config, seed) -> None:
     with pytest.raises(ValueError, match="^seed must be an integer"):
-        TampingEnv(tiny()).reset(seed=seed)
+        TampingEnv(small_config).reset(seed=seed)
 
 
-def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options() -> None:
-    env = TampingEnv(tiny())
+def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options(small_config) -> None:
+    env = TampingEnv(small_config)
     a, _ = env.reset(seed=np.int64(7))
     b, _ = env.reset(seed=7, options={})
     np.testing.assert_array_equal(a["level"], b["level"])
@@ -403,19 +398,19 @@ def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options() -> None
 
 
 # ------------------------------------------------------------------------ observation bounds
-def test_observation_space_and_clipping_share_one_table_of_bounds() -> None:
+def test_observation_space_and_clipping_share_one_table_of_bounds(small_config) -> None:
     from trackenv.envs import episode as E
 
-    cfg = tiny()
+    cfg = small_config
     space = TampingEnv(cfg).observation_space
     for key, (low, high) in E.observation_bounds(cfg).items():
         assert float(space[key].low.min()) == low and float(space[key].high.max()) == high
 
 
-def test_clipped_observations_are_reported_in_info() -> None:
+def test_clipped_observations_are_reported_in_info(small_config) -> None:
     from trackenv.envs import episode as E
 
-    env = TampingEnv(tiny())
+    env = TampingEnv(small_config)
     _, info = env.reset(seed=0)
     assert info["observation_clipped"] == 0
     ep = env.episode

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 from functools import cached_property, partial
-from typing import Any
+from typing import Any, TypeVar
 
 from ..degradation import TrackDegradation
 from ..physics._checks import check_choice, check_field, check_int_field, check_time_steps
@@ -19,8 +19,62 @@ from ..physics.vehicle import GRAVITY, Car, Wheelset
 VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
 
 
+_C = TypeVar("_C", bound="ConfigBase")
+
+
+class ConfigBase:
+    """What the frozen env configs (:class:`TampingEnvConfig`, ``LineConfig``) share: the dict round trip
+    (``from_dict`` refuses unknown keys by name, ``replace`` validates the changed copy, ``to_dict`` writes the
+    mapping fields, stored as sorted item tuples so the config stays hashable, back as dicts) and the physics
+    objects built from the fields both have (the settlement law, the tamping model, the quality limits). The
+    derived objects are built once per config (it is frozen, so they cannot go stale), not once per step."""
+
+    _MAPPING_FIELDS: tuple[str, ...] = ("law_params", "tamping", "limits")
+    speed_kmh: float
+    law: str
+    law_params: tuple
+    tamping: tuple
+    limits: tuple
+
+    @classmethod
+    def from_dict(cls: type[_C], d: dict[str, Any]) -> _C:
+        """Build from a dict; an unknown key raises ValueError naming it."""
+        known = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown {cls.__name__} key(s) {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**d)
+
+    def replace(self: _C, **changes: Any) -> _C:
+        """A copy with some fields changed (validated; unknown keys raise ValueError)."""
+        return self.from_dict({**self.to_dict(), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)  # type: ignore[call-overload]
+        for k in self._MAPPING_FIELDS:
+            d[k] = dict(getattr(self, k))
+        return d
+
+    @property
+    def speed(self) -> float:
+        """``speed_kmh`` in m/s."""
+        return self.speed_kmh / 3.6
+
+    @cached_property
+    def settlement_law(self):
+        return make_law(self.law, **dict(self.law_params))
+
+    @cached_property
+    def tamping_model(self) -> TampingModel:
+        return TampingModel.from_dict(dict(self.tamping))
+
+    @cached_property
+    def quality_limits(self) -> QualityLimits:
+        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
+
+
 @dataclass(frozen=True)
-class TampingEnvConfig:
+class TampingEnvConfig(ConfigBase):
     """Everything that defines a tamping problem. SI units unless the name says otherwise.
 
     Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers ``sleeper_spacing_m`` = 0.6 m apart) split
@@ -175,25 +229,6 @@ class TampingEnvConfig:
             raise ValueError(f"config must be a TampingEnvConfig or dict, got {type(config).__name__}")
         return config
 
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TampingEnvConfig:
-        """Build from a dict; an unknown key raises ValueError naming it."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown TampingEnvConfig key(s) {sorted(unknown)}; known: {sorted(known)}")
-        return cls(**d)
-
-    def replace(self, **changes) -> TampingEnvConfig:
-        """A copy with some fields changed (validated; unknown keys raise ValueError)."""
-        return self.from_dict({**self.to_dict(), **changes})
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        for k in ("law_params", "tamping", "limits"):
-            d[k] = dict(getattr(self, k))
-        return d
-
     # derived
     @property
     def n_sleepers(self) -> int:
@@ -207,23 +242,7 @@ class TampingEnvConfig:
     def cycles_per_step(self) -> float:
         return self.axle_passes_per_year / self.steps_per_year
 
-    @property
-    def speed(self) -> float:
-        return self.speed_kmh / 3.6
-
     # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
-    @cached_property
-    def settlement_law(self):
-        return make_law(self.law, **dict(self.law_params))
-
-    @cached_property
-    def tamping_model(self) -> TampingModel:
-        return TampingModel.from_dict(dict(self.tamping))
-
-    @cached_property
-    def quality_limits(self) -> QualityLimits:
-        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
-
     @cached_property
     def band_limits(self):
         """The quality limits of the speed band of ``speed_kmh``."""

@@ -16,7 +16,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
-from ..physics._checks import check_int
+from ._seeding import vector_rngs
 from .line_config import LineConfig
 from .line_episode import COST_KEYS, LineBatch
 
@@ -86,16 +86,7 @@ class TampingLineVectorEnv(VectorEnv):
         return concatenate(self.single_observation_space, obs, out)  # type: ignore[return-value]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        seeds: list[int | None]
-        if seed is None:
-            seeds = [None] * self.num_envs
-        elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
-            if len(seed) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seed)}")
-            seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
-        else:
-            seeds = [check_int("seed", seed, low=0) + i for i in range(self.num_envs)]
-        self._rngs = [np.random.default_rng(s) for s in seeds]
+        self._rngs = vector_rngs(seed, self.num_envs)
         self.batch = LineBatch(self.config, self.num_envs)
         self.batch.reset_lines(list(range(self.num_envs)), self._rngs)
         zero = dict.fromkeys(COST_KEYS, 0.0)

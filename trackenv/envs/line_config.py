@@ -11,17 +11,15 @@ switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 time
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..physics._checks import check_scalar
-from ..physics.geometry import QualityLimits
-from ..physics.settlement import LAWS, make_law
-from ..physics.tamping import TampingModel
+from ..physics.settlement import LAWS
 from ..physics.vehicle import GRAVITY, Car, Wheelset
-from .config import _as_items
+from .config import ConfigBase, _as_items
 
 SLEEPER_SPACING_M = 0.6
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
@@ -34,7 +32,7 @@ def _int(name: str, value, low: int, high: int) -> int:
 
 
 @dataclass(frozen=True)
-class LineConfig:
+class LineConfig(ConfigBase):
     """Everything that defines a TampingLine problem. SI units unless the name says otherwise; costs in k€.
 
     **Line.** ``n_sections`` sections of ``section_length_m`` (200 m: the EN 13848-6 / Trafikverket / Network
@@ -207,21 +205,8 @@ class LineConfig:
             raise ValueError(f"config must be a LineConfig, dict or scenario name, got {type(config).__name__}")
         return config
 
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> LineConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown LineConfig key(s) {sorted(unknown)}; known: {sorted(known)}")
-        return cls(**d)
-
-    def replace(self, **changes) -> LineConfig:
-        return self.from_dict({**self.to_dict(), **changes})
-
     def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        for k in ("law_params", "tamping", "limits"):
-            d[k] = dict(getattr(self, k))
+        d = super().to_dict()
         d["initial_scale"] = tuple(self.initial_scale)
         return d
 
@@ -234,22 +219,6 @@ class LineConfig:
     @property
     def horizon_steps(self) -> int:
         return int(round(self.horizon_years * self.steps_per_year))
-
-    @property
-    def speed(self) -> float:
-        return self.speed_kmh / 3.6
-
-    @property
-    def settlement_law(self):
-        return make_law(self.law, **dict(self.law_params))
-
-    @property
-    def tamping_model(self) -> TampingModel:
-        return TampingModel.from_dict(dict(self.tamping))
-
-    @property
-    def quality_limits(self) -> QualityLimits:
-        return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
 
     @property
     def section_tamping_cost(self) -> float:

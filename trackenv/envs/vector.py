@@ -26,6 +26,7 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 from ..degradation import simulate_batch
 from ..physics._checks import check_int
 from . import episode as E
+from ._seeding import vector_rngs
 from .config import TampingEnvConfig
 from .tamping import action_space, check_reset_arguments, decode_action, observation_space
 
@@ -98,17 +99,8 @@ class TampingVectorEnv(VectorEnv):
         return E.info(self.episodes[i], zero, np.zeros(self.config.n_sections, dtype=bool))
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        seeds: list[int | None]
-        if seed is None:
-            seeds = [None] * self.num_envs
-        elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
-            if len(seed) != self.num_envs:
-                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds, got {len(seed)}")
-            seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
-        else:
-            seeds = [check_int("seed", seed, low=0) + i for i in range(self.num_envs)]
         check_reset_arguments(None, options)
-        self._rngs = [np.random.default_rng(s) for s in seeds]
+        self._rngs = vector_rngs(seed, self.num_envs)
         self.episodes = [None] * self.num_envs  # type: ignore[list-item]
         self._new_episodes(list(range(self.num_envs)))
         self._autoreset[:] = False

@@ -186,3 +186,11 @@ def dataclass_from_dict(cls, d):
     if unknown:
         raise ValueError(f"unknown {cls.__name__} key(s) {unknown}; allowed: {known}")
     return cls(**dict(d))
+
+
+def readonly_array(arr) -> np.ndarray:
+    """A float64 copy of ``arr`` that cannot be written to: what a frozen dataclass stores, so neither the
+    caller's array nor a later in-place write can change a frozen value."""
+    out = np.array(arr, dtype=np.float64, copy=True)
+    out.flags.writeable = False
+    return out

@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import check_array, check_field, check_int, check_scalar
+from ._checks import check_array, check_field, check_int, check_scalar, readonly_array
 from ._newton import SATO, SHENTON, growth_inverse
 
 __all__ = [
@@ -186,9 +186,19 @@ class _SeparableLaw:
         return out
 
 
-def _power_scale(force: np.ndarray, reference_force: float, exponent: float) -> np.ndarray:
-    """(F / F_ref)^p, the force scaling used to make the cycle-only laws force dependent."""
-    return (force / reference_force) ** exponent
+class _PowerScaledLaw(_SeparableLaw):
+    """Base of the cycle-only laws made force dependent by A(F) = (F / reference_force)^force_exponent, with
+    reference_force > 0 and force_exponent in (0, 4] (checked by :meth:`_check_force_scaling`)."""
+
+    reference_force: float
+    force_exponent: float
+
+    def _check_force_scaling(self) -> None:
+        check_field(self, "reference_force", **_POSITIVE)
+        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
+
+    def _amplitude(self, force: np.ndarray) -> np.ndarray:
+        return (force / self.reference_force) ** self.force_exponent
 
 
 # ====================================================================== the laws
@@ -362,7 +372,7 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
 
 
 @dataclass(frozen=True)
-class SatoLaw(_SeparableLaw):
+class SatoLaw(_PowerScaledLaw):
     """Sato's law, initial consolidation plus linear growth: y = γ·(1 − e^(−α·N)) + β·N, force scaled.
 
     Source: Sato (1995), Japanese studies on deterioration of ballasted track, Vehicle System Dynamics 24
@@ -396,11 +406,7 @@ class SatoLaw(_SeparableLaw):
         check_field(self, "gamma", low=0.0)
         if self.beta == 0.0 and self.gamma == 0.0:
             raise ValueError("beta and gamma must not both be 0 (need beta + gamma > 0)")
-        check_field(self, "reference_force", **_POSITIVE)
-        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
-
-    def _amplitude(self, force: np.ndarray) -> np.ndarray:
-        return _power_scale(force, self.reference_force, self.force_exponent)
+        self._check_force_scaling()
 
     def _growth(self, cycles: np.ndarray) -> np.ndarray:
         return -self.gamma * np.expm1(-self.alpha * cycles) + self.beta * cycles
@@ -423,7 +429,7 @@ class SatoLaw(_SeparableLaw):
 
 
 @dataclass(frozen=True)
-class ShentonLaw(_SeparableLaw):
+class ShentonLaw(_PowerScaledLaw):
     """Shenton's law, a power law plus a linear term: S = K1·N^0.2 + K2·N, force scaled.
 
     Source: Shenton (1985), Ballast deformation and track deterioration, in Track Technology, Thomas Telford,
@@ -453,11 +459,7 @@ class ShentonLaw(_SeparableLaw):
         check_field(self, "K2", low=0.0)
         if self.K1 == 0.0 and self.K2 == 0.0:
             raise ValueError("K1 and K2 must not both be 0 (need K1 + K2 > 0)")
-        check_field(self, "reference_force", **_POSITIVE)
-        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
-
-    def _amplitude(self, force: np.ndarray) -> np.ndarray:
-        return _power_scale(force, self.reference_force, self.force_exponent)
+        self._check_force_scaling()
 
     def _growth(self, cycles: np.ndarray) -> np.ndarray:
         return self.K1 * cycles**self._POWER + self.K2 * cycles
@@ -477,7 +479,7 @@ class ShentonLaw(_SeparableLaw):
 
 
 @dataclass(frozen=True)
-class IndraratnaLaw(_SeparableLaw):
+class IndraratnaLaw(_PowerScaledLaw):
     """Logarithmic settlement law of Indraratna and co-workers: S = a + b·ln N, force scaled.
 
     Source: the semi-logarithmic settlement fit S = a + b·ln N reported by Indraratna and co-workers for
@@ -505,11 +507,7 @@ class IndraratnaLaw(_SeparableLaw):
     def __post_init__(self) -> None:
         check_field(self, "a", **_POSITIVE)
         check_field(self, "b", low=0.0)
-        check_field(self, "reference_force", **_POSITIVE)
-        check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
-
-    def _amplitude(self, force: np.ndarray) -> np.ndarray:
-        return _power_scale(force, self.reference_force, self.force_exponent)
+        self._check_force_scaling()
 
     def _growth(self, cycles: np.ndarray) -> np.ndarray:
         return self.a + self.b * np.log(cycles)
@@ -542,12 +540,6 @@ def make_law(name: str, **params: Any) -> Any:
 
 
 # ====================================================================== per-sleeper state
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    out = np.array(arr, dtype=np.float64, copy=True)
-    out.flags.writeable = False
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class SettlementState:
     """Settlement of each sleeper since its last consolidation restart, advanced by curve shifting (Fig. 9).
@@ -584,9 +576,9 @@ class SettlementState:
             r = np.ones(n)
         else:
             r = check_array("rate_factor", self.rate_factor, shape=(n,), low=0.0, low_inclusive=False)
-        object.__setattr__(self, "settlement", _readonly(u))
-        object.__setattr__(self, "cycles", _readonly(c))
-        object.__setattr__(self, "rate_factor", _readonly(r))
+        object.__setattr__(self, "settlement", readonly_array(u))
+        object.__setattr__(self, "cycles", readonly_array(c))
+        object.__setattr__(self, "rate_factor", readonly_array(r))
 
     @classmethod
     def zeros(cls, n: int) -> SettlementState:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ._checks import check_array, check_field, check_int, check_int_field, check_scalar
+from ._checks import check_array, check_field, check_int, check_int_field, check_scalar, readonly_array
 
 PER_SLEEPER_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
 HALF_BANDWIDTH = 4
@@ -33,12 +33,6 @@ PER_SLEEPER_MAX = {
     "ballast_stiffness": 1e12,
     "ballast_damping": 1e9,
 }
-
-
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    arr = np.array(arr, dtype=np.float64, copy=True)
-    arr.flags.writeable = False
-    return arr
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,7 +68,7 @@ class Track:
             arr = check_array(
                 f, np.ravel(getattr(self, f)), shape=(n,), low=0.0, high=PER_SLEEPER_MAX[f], low_inclusive=low_inclusive
             )
-            object.__setattr__(self, f, _readonly(arr))
+            object.__setattr__(self, f, readonly_array(arr))
         check_field(self, "sleeper_spacing", low=0.05, high=5.0)
         # beyond 1e10 N·m² (1600 UIC60 rails) the stiffness matrix loses all precision against the supports
         check_field(self, "rail_bending_stiffness", low=0.0, high=1e10, low_inclusive=False)
