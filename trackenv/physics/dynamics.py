@@ -434,22 +434,9 @@ def simulate_passes(
             g_all = None if support_settlement is None else _settlement_rows(support_settlement, n_rows, t0)
             results: list = [None] * n_rows
             for m, idx in groups.items():
-                sub = simulate_passes(
-                    [tracks[b] for b in idx],
-                    vehicle,
-                    speed,
-                    [irr_rows[b] for b in idx],
-                    dt="auto" if auto else dt,
-                    contact=contact,
-                    start=start,
-                    x_start=x_start,
-                    x_end=x_end,
-                    window_bays=m,
-                    sleeper_force_measure=sleeper_force_measure,
-                    support_settlement=None if g_all is None else g_all[idx],
-                )
-                for b, res in zip(idx, sub):
-                    results[b] = res
+                _rerun_rows(results, idx, tracks, irr_rows, g_all, vehicle, speed, dt="auto" if auto else dt,
+                            contact=contact, start=start, x_start=x_start, x_end=x_end, window_bays=m,
+                            sleeper_force_measure=sleeper_force_measure)
             return results
         window_bays = margins[0]
     n_steps = check_time_steps(x_end - x_start, speed, dt, rows=n_rows, axles=sys_.n_axles)  # before allocating
@@ -603,23 +590,20 @@ def simulate_passes(
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
         lost = [b for b in range(nb) if np.any(out_force[b, 1:] <= 0.0)]
         if lost:
-            again = simulate_passes(
-                [tracks[b] for b in lost],
-                vehicle,
-                speed,
-                [irr_rows[b] for b in lost],
-                dt=DT_REFERENCE_S,
-                contact=contact,
-                start=start,
-                x_start=x_start,
-                x_end=x_end,
-                window_bays=window_bays,
-                sleeper_force_measure=sleeper_force_measure,
-                support_settlement=None if support_settlement is None else settlement_rows[lost],
-            )
-            for b, res in zip(lost, again):
-                results[b] = res
+            _rerun_rows(results, lost, tracks, irr_rows, None if support_settlement is None else settlement_rows,
+                        vehicle, speed, dt=DT_REFERENCE_S, contact=contact, start=start, x_start=x_start,
+                        x_end=x_end, window_bays=window_bays, sleeper_force_measure=sleeper_force_measure)
     return results
+
+
+def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: list, settlement_rows, vehicle,
+                speed: float, **options) -> None:
+    """Simulate ``rows`` of a batch again as a batch of their own (other window or time step in ``options``)
+    and put their results in place in ``results``; ``settlement_rows``: the batch's settled supports or None."""
+    again = simulate_passes([tracks[b] for b in rows], vehicle, speed, [irr_rows[b] for b in rows],
+                            support_settlement=None if settlement_rows is None else settlement_rows[rows], **options)
+    for b, res in zip(rows, again):
+        results[b] = res
 
 
 def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
