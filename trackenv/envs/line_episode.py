@@ -257,7 +257,7 @@ class LineBatch:
             f = np.maximum(force[live] + np.einsum("gij,gj->gi", influence[live], delta[live]), 0.0)
             u_f, _ = adv(live, f)
             res = delta[live] - (u_f - u_now[live])
-            still = ~(np.max(np.abs(res), axis=1) < 1e-9)  # NaN keeps iterating, as a converged test would
+            still = ~(np.max(np.abs(res), axis=1) < 1e-9)  # written so that a NaN residual counts as not converged
             if not still.any():
                 break
             live, f, u_f, res = live[still], f[still], u_f[still], res[still]
