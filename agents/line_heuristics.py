@@ -89,7 +89,7 @@ class UniformPeriodic(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"interval_years": i, "offset_years": 0.0} for i in (2.0, 3.0, 4.0, 5.0, 6.0)]
+        return [{"interval_years": i, "offset_years": 0.0} for i in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0)]
 
 
 class SectionThreshold(LineHeuristic):
@@ -119,7 +119,9 @@ class GroupedThreshold(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"trigger_mm": t, "include_mm": i} for t in (2.5, 3.0, 3.5) for i in (1.25, 1.5, 2.0)]
+        first = [(t, i) for t in (2.5, 3.0, 3.5) for i in (1.25, 1.5, 2.0)]
+        refined = [(t, i) for t in (3.5, 4.0, 5.0) for i in (2.0, 2.5, 3.0) if (t, i) not in first]
+        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined]
 
 
 class RegisterPeriodic(LineHeuristic):
@@ -144,7 +146,8 @@ class RegisterPeriodic(LineHeuristic):
     @classmethod
     def param_grid(cls):
         return [{"plain_years": p, "zone_years": z}
-                for p, z in ((4.0, 1.5), (6.0, 1.0), (6.0, 1.5), (6.0, 2.5), (8.0, 1.5), (10.0, 1.5))]
+                for p, z in ((4.0, 1.5), (6.0, 1.0), (6.0, 1.5), (6.0, 2.5), (8.0, 1.5), (10.0, 1.5), (4.0, 1.0),
+                             (8.0, 1.0), (6.0, 0.5), (6.0, 0.75))]
 
 
 class BudgetedWorstFirst(LineHeuristic):
@@ -163,7 +166,8 @@ class BudgetedWorstFirst(LineHeuristic):
     def param_grid(cls):
         return [{"every_years": e, "n_worst": k, "min_sd_mm": m}
                 for e, k, m in ((1.0, 2, 1.5), (1.0, 3, 2.0), (1.0, 4, 2.0), (1.0, 3, 2.5), (0.5, 2, 2.0),
-                                (0.5, 3, 2.5))]
+                                (0.5, 3, 2.5), (0.25, 3, 2.5), (0.5, 3, 3.0), (0.5, 4, 2.5), (0.25, 2, 3.0),
+                                (0.5, 2, 2.5))]
 
 
 LINE_HEURISTICS: dict[str, type[LineHeuristic]] = {
