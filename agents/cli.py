@@ -123,15 +123,32 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
     return {"ppo": load_line_trained(path)}
 
 
+def _executor(args: argparse.Namespace) -> Any:
+    """Where `evaluate` runs its batches of episodes: None (here, in turn), or a RayExecutor for ``--ray`` (a
+    local Ray) or ``--ray-address`` (agents/distributed.py); the caller closes it."""
+    if not (args.ray or args.ray_address):
+        return None
+    from .distributed import RayExecutor
+
+    return RayExecutor(address=args.ray_address)
+
+
 def cmd_evaluate_line(args: argparse.Namespace) -> int:
     from .line_compare import format_line_table, line_comparison, parse_seeds
 
     t0 = time.perf_counter()
     seeds = parse_seeds(args.seeds) if args.seeds else None
     extra = _line_policies(args)
-    result = line_comparison(args.env, seeds=seeds, n_train=args.n_train or 2, retune=args.retune,
-                             progress=not args.json, out_dir=args.out or "results/line_compare", extra=extra)
+    executor = _executor(args)
+    try:
+        result = line_comparison(args.env, seeds=seeds, n_train=args.n_train or 2, retune=args.retune,
+                                 batch_size=args.batch_size, progress=not args.json,
+                                 out_dir=args.out or "results/line_compare", extra=extra, executor=executor)
+    finally:
+        if executor is not None:
+            executor.close()
     result["wall_time_s"] = time.perf_counter() - t0
+    result["ray"] = args.ray_address or ("local" if args.ray else None)
     _emit(args, result, format_line_table(result))
     return 0
 
@@ -173,11 +190,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not (args.retune or args.quick) and shipped.exists():
         tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
     n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
-    executor = None
-    if args.ray or args.ray_address:  # batches of episodes as Ray tasks (agents/distributed.py)
-        from .distributed import RayExecutor
-
-        executor = RayExecutor(address=args.ray_address)
+    executor = _executor(args)
     t0 = time.perf_counter()
     out = args.out or "results/compare"
     try:

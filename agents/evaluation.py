@@ -119,10 +119,10 @@ def _cost_keys(cfg: Any) -> tuple[str, ...]:
 
 
 def _vector_env(n: int, cfg: Any, action_type: str) -> Any:
-    """The native vector env of ``cfg``'s problem. Tamping: NEXT_STEP autoreset, so no episode is started past
-    the horizon and the last step's info stays in place; the line env's last info also stays in place."""
+    """The native vector env of ``cfg``'s problem (Tamping or TampingLine), in NEXT_STEP autoreset: no episode
+    is started past the horizon and the last step's info stays in place (both follow the same conventions)."""
     if isinstance(cfg, LineConfig):
-        return TampingLineVectorEnv(n, cfg)
+        return TampingLineVectorEnv(n, cfg, autoreset_mode=AutoresetMode.NEXT_STEP)
     return TampingVectorEnv(n, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
 
 

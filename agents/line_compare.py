@@ -42,22 +42,23 @@ def parse_seeds(text: str) -> list[int]:
 def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | None = None,
                     n_train: int = 2, retune: bool = False, batch_size: int = 24, progress: bool = True,
                     out_dir: str = "results/line_compare", extra: dict[str, Any] | None = None,
-                    **overrides: Any) -> dict[str, Any]:
+                    executor: Any = None, **overrides: Any) -> dict[str, Any]:
     """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
     ``extra`` policies (by name, e.g. the trained line policy) scored on ``seeds`` with 95 % CIs, and the paired
-    difference of each against the best."""
+    difference of each against the best. ``executor``: runs the batches of episodes (e.g.
+    :class:`~trackenv_agents.distributed.RayExecutor`), with the same results as here."""
     name = scenario_of(env_id)
     cfg = scenario(name, **overrides)
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance"]
     params = {} if retune else line_tuned_params()
     tuned_from = "shipped (agents/line_tuned_heuristics.json)" if params else f"tuned now on {n_train} seeds"
     if not params:
-        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress)
+        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor)
         params = {classes[i].name: v["best_params"] for i, v in t.items()}
     pols = [LINE_HEURISTICS["no-maintenance"]()] + [LINE_HEURISTICS[n](**p) for n, p in params.items()]
     pols += list((extra or {}).values())
     seeds = seeds or list(range(8))
-    res = evaluate_many(pols, cfg, seeds, batch_size=batch_size, progress=progress, desc="test")
+    res = evaluate_many(pols, cfg, seeds, batch_size=batch_size, progress=progress, desc="test", executor=executor)
     res.sort(key=lambda r: float(r.cost.mean()))
     best = res[0]
     rows = []

@@ -12,7 +12,7 @@ possession capacity themselves, worst measured SD first, so the env never has to
 * :class:`BudgetedWorstFirst` — every ``every_years`` a campaign of the ``n_worst`` worst sections above
   ``min_sd_mm``.
 
-:func:`hindsight_bound` is the per-section hindsight search (see there).
+The per-section hindsight bound is :mod:`trackenv_agents.line_hindsight`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 from .heuristics import Heuristic, _as_batch
 
 __all__ = ["BudgetedWorstFirst", "GroupedThreshold", "LINE_HEURISTICS", "RegisterPeriodic", "SectionThreshold",
-           "UniformPeriodic", "LineNoMaintenance", "hindsight_bound", "LINE_TUNED_FILE", "line_tuned_params"]
+           "UniformPeriodic", "LineNoMaintenance", "LINE_TUNED_FILE", "line_tuned_params"]
 
 
 def _keep_worst(want: np.ndarray, score: np.ndarray, k: int) -> np.ndarray:
@@ -89,7 +89,7 @@ class UniformPeriodic(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"interval_years": i, "offset_years": 0.0} for i in (2.0, 3.0, 4.0, 6.0)]
+        return [{"interval_years": i, "offset_years": 0.0} for i in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0)]
 
 
 class SectionThreshold(LineHeuristic):
@@ -103,7 +103,7 @@ class SectionThreshold(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"threshold_mm": v} for v in (1.5, 2.0, 2.5, 3.0)]
+        return [{"threshold_mm": v} for v in (1.5, 2.0, 2.5, 3.0, 3.5)]
 
 
 class GroupedThreshold(LineHeuristic):
@@ -119,7 +119,9 @@ class GroupedThreshold(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"trigger_mm": t, "include_mm": i} for t, i in ((2.0, 1.25), (2.5, 1.5), (3.0, 1.5), (2.5, 1.0))]
+        first = [(t, i) for t in (2.5, 3.0, 3.5) for i in (1.25, 1.5, 2.0)]
+        refined = [(t, i) for t in (3.5, 4.0, 5.0) for i in (2.0, 2.5, 3.0) if (t, i) not in first]
+        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined]
 
 
 class RegisterPeriodic(LineHeuristic):
@@ -143,7 +145,9 @@ class RegisterPeriodic(LineHeuristic):
 
     @classmethod
     def param_grid(cls):
-        return [{"plain_years": p, "zone_years": z} for p, z in ((6.0, 1.5), (6.0, 2.5), (10.0, 1.5), (10.0, 2.5))]
+        return [{"plain_years": p, "zone_years": z}
+                for p, z in ((4.0, 1.5), (6.0, 1.0), (6.0, 1.5), (6.0, 2.5), (8.0, 1.5), (10.0, 1.5), (4.0, 1.0),
+                             (8.0, 1.0), (6.0, 0.5), (6.0, 0.75))]
 
 
 class BudgetedWorstFirst(LineHeuristic):
@@ -161,122 +165,15 @@ class BudgetedWorstFirst(LineHeuristic):
     @classmethod
     def param_grid(cls):
         return [{"every_years": e, "n_worst": k, "min_sd_mm": m}
-                for e, k, m in ((1.0, 2, 1.5), (1.0, 4, 1.5), (0.5, 2, 1.5), (1.0, 3, 2.0))]
+                for e, k, m in ((1.0, 2, 1.5), (1.0, 3, 2.0), (1.0, 4, 2.0), (1.0, 3, 2.5), (0.5, 2, 2.0),
+                                (0.5, 3, 2.5), (0.25, 3, 2.5), (0.5, 3, 3.0), (0.5, 4, 2.5), (0.25, 2, 3.0),
+                                (0.5, 2, 2.5))]
 
 
 LINE_HEURISTICS: dict[str, type[LineHeuristic]] = {
     c.name: c for c in (LineNoMaintenance, UniformPeriodic, SectionThreshold, GroupedThreshold, RegisterPeriodic,
                         BudgetedWorstFirst)
 }
-
-
-# ---------------------------------------------------------------------------------------------------------
-# Per-section hindsight bound
-# ---------------------------------------------------------------------------------------------------------
-def _run_schedules(config: Any, seed: int, policies: list) -> tuple[np.ndarray, np.ndarray]:
-    """Replay one episode (``seed``) once per policy, all in one batch. A policy is an (H, S) bool schedule
-    (open loop) or a float threshold on the *true* SD [mm] (closed loop, hindsight). Returns per line and
-    section the cost without possession (M, S) and the tamping schedule (M, H, S). Sections are physically
-    independent, so a section's cost depends only on its own schedule."""
-    from trackenv.envs.line_episode import LineBatch
-
-    M, S, H = len(policies), config.n_sections, config.horizon_steps
-    bt = LineBatch(config, M)
-    bt.reset_lines(list(range(M)), [np.random.default_rng(seed) for _ in range(M)])
-    cost = np.zeros((M, S))
-    sched = np.zeros((M, H, S), dtype=bool)
-    for t in range(H):
-        want = np.zeros((M, S), dtype=bool)
-        for m, p in enumerate(policies):
-            want[m] = p[t] if isinstance(p, np.ndarray) else bt.sd[bt.rows(m)] * 1e3 >= p
-        want &= bt.allowed()
-        renew = (bt.count >= bt.tm.max_tampings_before_renewal).reshape(M, S) & want
-        cost += want * config.section_tamping_cost + renew * config.section_renewal_cost
-        bt.apply(want)
-        bt.traffic()
-        cost += bt.section_costs().reshape(M, S)
-        sched[:, t] = want
-    return cost, sched
-
-
-def _total(choice: np.ndarray, cost: np.ndarray, sched: np.ndarray, config: Any) -> float:
-    S = cost.shape[1]
-    plan = sched[choice, :, np.arange(S)].T  # (H, S)
-    per_step = plan.sum(axis=1)
-    if (per_step > config.capacity).any():
-        return np.inf
-    return float(cost[choice, np.arange(S)].sum() + config.possession_cost * np.count_nonzero(per_step))
-
-
-def _greedy(choice: np.ndarray, cost: np.ndarray, sched: np.ndarray, config: Any) -> tuple[np.ndarray, float]:
-    """Coordinate descent over the sections' choices (exact totals: possession and capacity included)."""
-    best = _total(choice, cost, sched, config)
-    improved = True
-    while improved:
-        improved = False
-        for j in range(cost.shape[1]):
-            for m in range(cost.shape[0]):
-                if m == choice[j]:
-                    continue
-                trial = choice.copy()
-                trial[j] = m
-                v = _total(trial, cost, sched, config)
-                if v < best - 1e-9:
-                    best, choice, improved = v, trial, True
-    return choice, best
-
-
-def _shifted(plan: np.ndarray, delta: int, gap: int) -> np.ndarray:
-    """Each section's tampings moved by ``delta`` steps (clipped to the horizon; too-close repeats dropped)."""
-    H = plan.shape[0]
-    out = np.zeros_like(plan)
-    for j in range(plan.shape[1]):
-        last = -(10**6)
-        for t in np.flatnonzero(plan[:, j]):
-            u = min(max(t + delta, 0), H - 1)
-            if u - last > gap:
-                out[u, j] = True
-                last = u
-    return out
-
-
-def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray,
-                    thresholds_mm: tuple[float, ...] = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0), rounds: int = 2,
-                    extra_schedules: tuple = ()) -> dict:
-    """A per-section schedule for one episode found with its future known: an upper bound on the best cost.
-
-    The search: (1) candidate schedules per section from per-section thresholds on the *true* SD
-    (``thresholds_mm``), the best rule's own schedule (``base_schedule``, (H, S) bool, feasible) and no
-    tamping, all replayed on the same episode in one batch; coordinate descent picks one candidate per
-    section with the exact total (per-section costs + possession per campaign step; schedules over the
-    capacity rejected). (2) ``rounds`` of local search: each section's chosen tampings shifted by -2..+2
-    steps (open loop, replayed in one batch), coordinate descent again. Sections are physically independent
-    (each is its own segment), so the per-section costs are exact for any combination; the final schedule is
-    replayed in the env as a check. Returns its cost, the schedule and the search's record."""
-    from trackenv.envs.line import TampingLine
-
-    gap = config.min_steps_between_tampings
-    cands: list = [base_schedule.astype(bool), np.zeros_like(base_schedule, dtype=bool),
-                   *(np.asarray(x, dtype=bool) for x in extra_schedules), *thresholds_mm]
-    cost, sched = _run_schedules(config, seed, cands)
-    choice, best = _greedy(np.zeros(config.n_sections, dtype=int), cost, sched, config)
-    record = [best]
-    for _ in range(rounds):
-        plan = sched[choice, :, np.arange(config.n_sections)].T
-        shifts = [_shifted(plan, d, gap) for d in (-2, -1, 1, 2)]
-        c2, s2 = _run_schedules(config, seed, shifts)
-        cost = np.concatenate([cost[choice, np.arange(config.n_sections)][None], c2])
-        sched = np.concatenate([plan[None], s2])
-        choice, best = _greedy(np.zeros(config.n_sections, dtype=int), cost, sched, config)
-        record.append(best)
-    plan = sched[choice, :, np.arange(config.n_sections)].T
-    env = TampingLine(config)
-    env.reset(seed=seed)
-    replay = 0.0
-    for t in range(config.horizon_steps):
-        _, r, _, _, _ = env.step(plan[t].astype(np.int8))
-        replay -= r
-    return {"cost": best, "replayed_cost": replay, "schedule": plan, "search": record}
 
 
 #: the line heuristics' parameters tuned on training seeds by experiments/line_room.py --save-tuned

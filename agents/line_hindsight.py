@@ -88,7 +88,8 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     return float(section_cost.sum() + config.possession_cost * np.count_nonzero(per_step))
 
 
-def _descend(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray, config: Any) -> tuple[np.ndarray, float]:
+def _descend(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray,
+             config: Any) -> tuple[np.ndarray, float]:
     """Coordinate descent: per section j, ``options[j]`` is a list of (schedule (H,), cost) of which
     ``choice[j]`` is chosen; change one section at a time while the exact total falls."""
     S = len(options)

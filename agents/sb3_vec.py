@@ -120,7 +120,7 @@ class TampingSB3VecEnv(VecEnv):
         dones = np.logical_or(terminated, truncated)
         info_list = _unstack_infos(infos, self.num_envs)
         if dones.any():
-            last = _final_infos(infos["final_info"], self.num_envs)
+            last = _unstack_infos(infos["final_info"], self.num_envs)
             for i in np.flatnonzero(dones):
                 info_list[i] = last[i]  # the episode's last info, not the next one's first
                 info_list[i]["terminal_observation"] = infos["final_obs"][i]
@@ -215,14 +215,6 @@ def _unstack_infos(infos: dict, n: int) -> list[dict]:
             for i in range(n):
                 out[i][key] = _item(val[i])
     return out
-
-
-def _final_infos(final: Any, n: int) -> list[dict]:
-    """The episodes' last infos as per-env dicts: Gymnasium's dict of arrays (TampingVectorEnv), or an array
-    of per-env dicts (None where no episode ended; TampingLineVectorEnv)."""
-    if isinstance(final, dict):
-        return _unstack_infos(final, n)
-    return [{} if f is None else dict(f) for f in final]
 
 
 def _item(x):

@@ -1,5 +1,5 @@
 """The per-section hindsight search on a few held-out episodes of TampingLine, from a tuned rule's schedule
-(:func:`trackenv_agents.line_heuristics.hindsight_bound`). Writes results/line_hindsight.json as it goes."""
+(:func:`trackenv_agents.line_hindsight.hindsight_bound`). Writes results/line_hindsight.json as it goes."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import numpy as np
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import _bound
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, hindsight_bound, line_tuned_params
+from trackenv_agents.line_heuristics import LINE_HEURISTICS, line_tuned_params
+from trackenv_agents.line_hindsight import hindsight_bound
 
 
 def main(argv=None) -> list:
@@ -21,8 +22,8 @@ def main(argv=None) -> list:
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--rule", default="grouped-threshold")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
-    ap.add_argument("--rounds", type=int, default=1)
-    ap.add_argument("--thresholds", type=float, nargs="+", default=[1.0, 1.75, 2.5, 3.5])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--thresholds", type=float, nargs="+", default=[2.0, 3.0])
     ap.add_argument("--extra-rules", nargs="*", default=[], help="other tuned rules whose schedules are candidates")
     ap.add_argument("--out", default="results/line_hindsight.json")
     args = ap.parse_args(argv)
@@ -44,7 +45,7 @@ def main(argv=None) -> list:
     for seed in args.seeds:
         plan, rule_cost = rollout(args.rule, seed)
         extra = tuple(rollout(n, seed)[0] for n in args.extra_rules)
-        h = hindsight_bound(cfg, seed, plan, thresholds_mm=tuple(args.thresholds), rounds=args.rounds,
+        h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds),
                             extra_schedules=extra)
         out.append({"seed": seed, "rule": args.rule, "rule_cost": rule_cost, "hindsight": h["cost"],
                     "replayed": h["replayed_cost"], "search": h["search"],

@@ -3,7 +3,7 @@
 1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
 2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
 3. For ``--n-hindsight`` of those episodes, the per-section hindsight search from the best rule's schedule
-   (:func:`trackenv_agents.line_heuristics.hindsight_bound`).
+   (:func:`trackenv_agents.line_hindsight.hindsight_bound`).
 
 Writes results/line_room.json (and the tuned parameters to agents/line_tuned_heuristics.json with
 ``--save-tuned``); progress goes to stdout (run it with a log file in the background).
@@ -20,7 +20,8 @@ import numpy as np
 
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import evaluate_many
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic, hindsight_bound
+from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
+from trackenv_agents.line_hindsight import hindsight_bound
 from trackenv_agents.statistics import bootstrap_ci, paired_difference
 from trackenv_agents.tuning import tune_many
 
@@ -28,13 +29,14 @@ from trackenv_agents.tuning import tune_many
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenario", default="default")
-    ap.add_argument("--n-train", type=int, default=4)
+    ap.add_argument("--n-train", type=int, default=8)
     ap.add_argument("--n-test", type=int, default=100)
     ap.add_argument("--test-start", type=int, default=0, help="first held-out seed")
-    ap.add_argument("--n-hindsight", type=int, default=10)
+    ap.add_argument("--n-hindsight", type=int, default=20)
     ap.add_argument("--batch-size", type=int, default=24)
-    ap.add_argument("--rounds", type=int, default=2, help="local-search rounds of the hindsight search")
-    ap.add_argument("--thresholds", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0, 4.0])
+    ap.add_argument("--rounds", type=int, default=3, help="local-search rounds of the hindsight search")
+    ap.add_argument("--thresholds", type=float, nargs="+", default=[2.0, 3.0],
+                    help="true-SD thresholds [mm] of the hindsight search's closed-loop candidates")
     ap.add_argument("--save-tuned", action="store_true")
     ap.add_argument("--use-saved", action="store_true", help="skip tuning: the saved tuned parameters")
     ap.add_argument("--out", default="results/line_room.json")
@@ -86,7 +88,7 @@ def main(argv=None) -> dict:
             a, _ = pol.predict(obs)
             obs, _, _, _, info = env.step(a)
             plan[t] = info["tamped_sections"]
-        h = hindsight_bound(cfg, seed, plan, thresholds_mm=args.thresholds, rounds=args.rounds)
+        h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds))
         rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
         hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
                    "search": h["search"]})

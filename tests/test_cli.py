@@ -65,6 +65,28 @@ def test_evaluate_ray_options_parse():
     assert build_parser().parse_args(["evaluate", "--ray"]).ray
 
 
+def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
+    """`--ray` hands the line's comparison (not only the tamping one) a Ray executor, closed after; Ray itself is
+    not started (the stub runs nothing): the same results over Ray are tested in tests/agents/test_distributed.py."""
+    import trackenv_agents.line_compare as lc
+    from trackenv_agents.distributed import RayExecutor
+
+    seen = {}
+
+    def fake(env_id, **kw):
+        seen.update(kw)
+        return {"env": env_id, "scenario": "small", "seeds": [0, 1], "tuned_from": "-", "results": []}
+
+    monkeypatch.setattr(lc, "line_comparison", fake)
+    closed = []
+    monkeypatch.setattr(RayExecutor, "close", lambda self: closed.append(self))
+    assert main(["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--ray", "--json"]) == 0
+    assert isinstance(seen["executor"], RayExecutor) and closed == [seen["executor"]]
+    assert json.loads(capsys.readouterr().out)["ray"] == "local"
+    assert main(["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--json"]) == 0
+    assert seen["executor"] is None and json.loads(capsys.readouterr().out)["ray"] is None
+
+
 def test_hyperparams_file_is_the_one_agents_train_reads():
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.cli import HYPERPARAMS_FILE

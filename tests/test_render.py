@@ -1,14 +1,16 @@
-"""Rendering: render_mode="rgb_array" gives an (H, W, 3) uint8 picture of the episode."""
+"""Rendering: render_mode="rgb_array" gives an (H, W, 3) uint8 picture of the episode (Tamping and TampingLine)."""
 
 from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
 import trackenv.envs  # noqa: F401  (registers the ids)
 from trackenv.envs import TampingEnv
+from trackenv.envs.line import TampingLine, TampingLineVectorEnv
 
 
 def _check_frame(frame) -> None:
@@ -53,3 +55,44 @@ def test_no_render_mode_or_no_episode_renders_nothing(small_config) -> None:
     assert env.render() is None
     with pytest.raises(ValueError, match="render_mode"):
         TampingEnv(small_config, render_mode="human")
+
+
+LINE_SHORT = {"horizon_years": 0.75}  # 3 steps
+
+
+def test_line_rgb_array_shows_the_step() -> None:
+    env = gym.make("trackenv/TampingLineSmall-v0", render_mode="rgb_array", **LINE_SHORT)
+    assert "rgb_array" in env.metadata["render_modes"] and env.render_mode == "rgb_array"
+    env.reset(seed=0)
+    first = env.render()
+    _check_frame(first)
+    env.step(np.array([1, 0, 1, 0, 0, 0], dtype=np.int8))
+    second = env.render()
+    _check_frame(second)
+    assert second.shape == first.shape
+    assert not np.array_equal(first, second)  # the year, the true SD and the tamped sections moved on
+    assert TampingLine(scenario="small", render_mode="rgb_array", **LINE_SHORT).render() is None  # before reset
+    plain = TampingLine(scenario="small", **LINE_SHORT)
+    plain.reset(seed=0)
+    assert plain.render() is None
+    with pytest.raises(ValueError, match="render_mode"):
+        TampingLine(scenario="small", render_mode="human")
+
+
+def test_line_render_passes_gymnasiums_checkers() -> None:
+    """check_env without skip_render_check: the passive render check, and each declared render mode made from
+    the spec, reset and rendered."""
+    env = gym.make("trackenv/TampingLineSmall-v0", render_mode="rgb_array", **LINE_SHORT)
+    check_env(env.unwrapped)
+
+
+def test_line_vector_env_renders_the_first_line() -> None:
+    venv = TampingLineVectorEnv(2, scenario="small", render_mode="rgb_array", **LINE_SHORT)
+    assert venv.render() is None  # nothing to draw before reset
+    venv.reset(seed=[0, 5])
+    frame = venv.render()
+    _check_frame(frame)
+    single = TampingLine(scenario="small", render_mode="rgb_array", **LINE_SHORT)
+    single.reset(seed=0)
+    np.testing.assert_array_equal(frame, single.render())  # line 0 of the vector env is the single env's line
+    assert TampingLineVectorEnv(2, scenario="small", **LINE_SHORT).render() is None

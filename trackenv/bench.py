@@ -15,7 +15,10 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   the paper's reproduction runs it);
 * ``env``: environment steps per second of ``trackenv/Tamping-v0`` with random actions, or "unavailable" and
   the reason when the environment cannot be made; ``vector_env``: env steps per second (steps × envs) of the
-  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs.
+  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs;
+* ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
+  30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
+  ``pass_share``: the share of the step's wall time spent in the batched passes (the physics).
 
 Every figure carries ``load_average_1min``, the machine's load when it was taken: other work on the machine
 slows every figure, so compare figures taken at a similar load.
@@ -45,6 +48,7 @@ SPEED = 80 / 3.6
 DT = 1e-4
 BATCH_SIZES = (1, 16, 64)
 VECTOR_ENVS = (8, 32)
+LINE_VECTOR_ENVS = (8,)
 
 
 def _loaded_wheelset() -> Wheelset:
@@ -166,14 +170,34 @@ def _bench_paper_b(repeats: int, iterations: int = 6) -> dict:
     return t
 
 
-def _bench_env(steps: int, time_budget_s: float) -> dict:
-    """Random-action steps per second of trackenv/Tamping-v0, or why it is unavailable."""
+class _PassTimer:
+    """Wall time spent in a LineBatch's batched passes (wraps the instance's ``_passes``)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+    def attach(self, batch: Any) -> None:
+        inner = batch._passes
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        batch._passes = timed
+
+
+def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v0") -> dict:
+    """Random-action steps per second of the env ``env_id``, or why it is unavailable (line envs: with the share
+    of the time spent in the passes)."""
     try:
         import gymnasium
 
         import trackenv.envs  # noqa: F401  (registers the environment)
 
-        env = gymnasium.make("trackenv/Tamping-v0")
+        env = gymnasium.make(env_id)
     except Exception as exc:  # the environment is optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     try:
@@ -182,6 +206,10 @@ def _bench_env(steps: int, time_budget_s: float) -> dict:
         env.reset(seed=0)
         reset_s = time.perf_counter() - t0
         env.step(env.action_space.sample())  # warm-up
+        timer = _PassTimer()
+        batch = getattr(env.unwrapped, "batch", None)
+        if batch is not None:
+            timer.attach(batch)
         done_steps, resets = 0, 0
         t0 = time.perf_counter()
         while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
@@ -190,21 +218,32 @@ def _bench_env(steps: int, time_budget_s: float) -> dict:
             if terminated or truncated:
                 env.reset()
                 resets += 1
+                if batch is not None:  # a reset makes a new batch: time its passes too
+                    batch = getattr(env.unwrapped, "batch", None)
+                    timer.attach(batch)
         wall = time.perf_counter() - t0
-        return {"status": "ok", "steps": done_steps, "wall_s": wall, "steps_per_s": done_steps / wall,
-                "episodes_ended": resets, "first_reset_s": reset_s, "load_average_1min": _load_average()}
+        out = {"status": "ok", "env_id": env_id, "steps": done_steps, "wall_s": wall,
+               "steps_per_s": done_steps / wall, "episodes_ended": resets, "first_reset_s": reset_s,
+               "load_average_1min": _load_average()}
+        if batch is not None:
+            out["pass_share"] = timer.seconds / wall
+        return out
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
         env.close()
 
 
-def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float) -> dict:
-    """Env steps per second (vector steps × envs) of the native vector env with random actions."""
+def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: bool = False) -> dict:
+    """Env steps per second (vector steps × envs) of the native vector env (``line``: of TampingLine) with
+    random actions."""
     try:
-        from .envs.vector import TampingVectorEnv
+        if line:
+            from .envs.line import TampingLineVectorEnv as Vec
+        else:
+            from .envs.vector import TampingVectorEnv as Vec  # type: ignore[assignment]
 
-        venv = TampingVectorEnv(num_envs=num_envs)
+        venv = Vec(num_envs=num_envs)
     except Exception as exc:  # optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     try:
@@ -213,15 +252,21 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float) -> dict:
         venv.reset(seed=0)
         reset_s = time.perf_counter() - t0
         venv.step(venv.action_space.sample())  # warm-up
+        timer = _PassTimer()
+        if line:
+            timer.attach(venv.batch)
         done_steps = 0
         t0 = time.perf_counter()
         while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
             venv.step(venv.action_space.sample())
             done_steps += 1
         wall = time.perf_counter() - t0
-        return {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
-                "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
-                "load_average_1min": _load_average()}
+        out = {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
+               "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
+               "load_average_1min": _load_average()}
+        if line:
+            out["pass_share"] = timer.seconds / wall
+        return out
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
@@ -256,12 +301,20 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
     for n in VECTOR_ENVS:
         tell(f"vector_env_{n}")
         out["vector_env"][str(n)] = _bench_vector_env(n, 3 if quick else 20, 10.0 if quick else 60.0)
+    tell("line_env")
+    out["line_env"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0")
+    out["line_vector_env"] = {}
+    for n in LINE_VECTOR_ENVS:
+        tell(f"line_vector_env_{n}")
+        out["line_vector_env"][str(n)] = _bench_vector_env(n, 2 if quick else 10, 10.0 if quick else 60.0,
+                                                           line=True)
     out["machine"]["numba_threading_layer"] = _threading_layer()
     out["total_wall_s"] = time.perf_counter() - t0
     return out
 
 
-STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32")
+STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
+          "line_env", "line_vector_env_8")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -315,6 +368,19 @@ def format_benchmarks(d: dict) -> str:
                          f"{v['vector_steps']} vector steps" + _load(v)))
         else:
             rows.append((f"native vector env, {n} envs", "unavailable", v["reason"][:80]))
+    le = d.get("line_env")
+    if le is not None and le["status"] == "ok":
+        rows.append(("env trackenv/TampingLine-v0 (random actions)", f"{le['steps_per_s']:.1f} steps/s",
+                     f"{le['steps']} steps, {100 * le.get('pass_share', float('nan')):.0f} % in the passes"
+                     + _load(le)))
+    elif le is not None:
+        rows.append(("env trackenv/TampingLine-v0", "unavailable", le["reason"][:80]))
+    for n, v in d.get("line_vector_env", {}).items():
+        if v["status"] == "ok":
+            rows.append((f"native line vector env, {n} lines", f"{v['env_steps_per_s']:.1f} env steps/s",
+                         f"{v['vector_steps']} vector steps, {100 * v['pass_share']:.0f} % in the passes" + _load(v)))
+        else:
+            rows.append((f"native line vector env, {n} lines", "unavailable", v["reason"][:80]))
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]

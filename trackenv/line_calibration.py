@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 from .envs.line import TampingLineVectorEnv
 from .envs.line_config import LineConfig
@@ -42,7 +43,7 @@ def run_line(config: LineConfig, seeds: Sequence[int], threshold_mm: float | Non
     """Run ``len(seeds)`` episodes of ``config`` in one vector env, no tamping (``threshold_mm`` None) or
     tamping every section whose *measured* SD reaches ``threshold_mm`` (worst first within the capacity).
     Returns per step (H+1, lines, S) true SD [m], tamped flags, register (lines, S) and wet-spot flags."""
-    env = TampingLineVectorEnv(len(seeds), config)
+    env = TampingLineVectorEnv(len(seeds), config, autoreset_mode=AutoresetMode.NEXT_STEP)  # last info in place
     obs, info = env.reset(seed=list(seeds))
     reg = obs["register"].astype(int)
     sd = [info["section_sd_m"]]
@@ -52,13 +53,11 @@ def run_line(config: LineConfig, seeds: Sequence[int], threshold_mm: float | Non
             a = np.zeros((len(seeds), config.n_sections), dtype=np.int8)
         else:
             a = (obs["section_sd"] >= threshold_mm).astype(np.int8)
-        obs, _, _, trunc, info = env.step(a)
-        last = info["final_info"] if trunc.any() else None
-        sd.append(np.stack([f["section_sd_m"] for f in last]) if last is not None else info["section_sd_m"])
-        tamped.append(np.stack([f["tamped_sections"] for f in last]) if last is not None else info["tamped_sections"])
-        wet.append(np.stack([f["wet_spot_active"] for f in last]) if last is not None else info["wet_spot_active"])
-        key = "section_sd_after_tamping_m"
-        after.append(np.stack([f[key] for f in last]) if last is not None else info[key])
+        obs, _, _, _, info = env.step(a)
+        sd.append(info["section_sd_m"])
+        tamped.append(info["tamped_sections"])
+        wet.append(info["wet_spot_active"])
+        after.append(info["section_sd_after_tamping_m"])
         if progress is not None:
             progress(1)
     return {"sd": np.array(sd), "tamped": np.array(tamped), "register": reg, "wet": np.array(wet),

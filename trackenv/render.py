@@ -1,4 +1,5 @@
-"""Pictures: the level and contact-force profiles of an episode, its sections, limits and tampings.
+"""Pictures: the level and contact-force profiles of a tamping episode (:func:`episode_frame`), and the sections
+of a TampingLine with their measured and true geometry (:func:`line_frame`), each with its limits and tampings.
 
 Drawn with matplotlib's pyplot-free API (a :class:`~matplotlib.figure.Figure` on its own Agg canvas): no global
 figure registry and no ``matplotlib.use``, so rendering never changes the backend of the user's process.
@@ -44,6 +45,47 @@ def episode_frame(ep, info: dict) -> np.ndarray:
     ax2.plot(x, ep.contact_force / 1e3, color="C3")
     ax2.set_ylabel("contact force [kN]")
     ax2.set_xlabel("position along the track [m]")
+    fig.tight_layout()
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def line_frame(batch, line: int, info: dict) -> np.ndarray:
+    """An RGB array (H, W, 3) of line ``line`` of a :class:`~trackenv.envs.line_episode.LineBatch`: per section
+    the true SD and D1 mean-to-peak (bars, from the physics) and the last measured ones (dots, what the planner
+    sees), against the SD alert limit and the mean-to-peak alert, intervention and immediate-action limits;
+    sections tamped this step (``info["tamped_sections"]``) shaded, known zones of the register labelled."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    c = batch.config
+    r = batch.rows(line)
+    x = np.arange(c.n_sections)
+    lim = batch.limits
+    tamped = info.get("tamped_sections", np.zeros(c.n_sections, dtype=bool))
+    fig = Figure(figsize=(8, 5), dpi=80)
+    canvas = FigureCanvasAgg(fig)
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    panels = (
+        (ax1, batch.sd[r], batch.measured_sd[r], "SD of D1 [mm]", ((lim.sd_alert_m, "orange", "SD alert"),)),
+        (ax2, batch.peak[r], batch.measured_peak[r], "D1 mean-to-peak [mm]",
+         ((lim.alert_m, "orange", "alert"), (lim.intervention_m, "C1", "intervention"),
+          (lim.immediate_action_m, "red", "immediate action"))),
+    )
+    for ax, true_m, measured_m, label, limits in panels:
+        for s in np.flatnonzero(tamped):
+            ax.axvspan(s - 0.5, s + 0.5, color="green", alpha=0.15)
+        ax.bar(x, true_m * 1e3, width=0.6, color="0.6", label="true")
+        ax.plot(x, measured_m * 1e3, "o", color="C0", ms=5, label="measured")
+        for value_m, color, name in limits:
+            ax.axhline(value_m * 1e3, color=color, ls="--", lw=0.8, label=name)
+        ax.set_ylabel(label)
+        ax.legend(loc="upper left", fontsize=7, ncol=3)
+    zone = {1: "transition", 2: "switch"}
+    ax2.set_xticks(x, [f"{s}\n{zone.get(int(batch.register[r][s]), '')}" for s in x], fontsize=7)
+    ax2.set_xlabel("section (shaded: tamped this step)")
+    step = int(batch.step[line])
+    ax1.set_title(f"year {step / c.steps_per_year:.2f}   step cost {info.get('cost', 0.0):.1f} k€")
     fig.tight_layout()
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()

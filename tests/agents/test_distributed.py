@@ -1,4 +1,5 @@
-"""Ray tasks for the evaluation harness: the same results as the single-process path (a local Ray, 2 CPUs)."""
+"""Ray tasks for the evaluation harness: the same results as the single-process path (a local Ray, 2 CPUs), for
+the tamping problem and for the line's comparison (what `trackenv evaluate --env ... --ray` runs)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from trackenv.envs.config import TampingEnvConfig  # noqa: E402
 from trackenv_agents.distributed import RayExecutor  # noqa: E402
 from trackenv_agents.evaluation import evaluate_many  # noqa: E402
 from trackenv_agents.heuristics import NoMaintenance, Periodic, SDThreshold  # noqa: E402
+from trackenv_agents.line_compare import line_comparison  # noqa: E402
 from trackenv_agents.tuning import tune  # noqa: E402
 
 CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)  # 4 steps
@@ -45,6 +47,20 @@ def test_tuning_over_ray_picks_the_same_parameters(executor) -> None:
     here = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH)
     there = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH, executor=executor)
     assert here == there
+
+
+@pytest.mark.slow
+def test_line_comparison_over_ray_gives_the_single_process_table(executor, tmp_path) -> None:
+    """The line's comparison (`trackenv evaluate --env trackenv/TampingLineSmall-v0 --ray`) on a short horizon and
+    two seeds: every policy's costs, CIs and paired differences as in one process. Batches of two episodes, so
+    the six policies' twelve episodes make six Ray tasks."""
+    kw = {"seeds": [0, 1], "batch_size": 2, "progress": False, "horizon_years": 1.0}
+    here = line_comparison("trackenv/TampingLineSmall-v0", out_dir=str(tmp_path / "here"), **kw)
+    there = line_comparison("trackenv/TampingLineSmall-v0", out_dir=str(tmp_path / "there"), executor=executor,
+                            **kw)
+    assert [r["policy"] for r in here["results"]] == [r["policy"] for r in there["results"]]
+    assert len(here["results"]) == 6 and here["results"][-1]["mean_cost"] > 0
+    assert here["results"] == there["results"]
 
 
 def test_executor_checks_its_arguments() -> None:

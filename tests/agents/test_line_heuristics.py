@@ -11,8 +11,8 @@ from trackenv_agents.line_heuristics import (
     LINE_HEURISTICS,
     RegisterPeriodic,
     UniformPeriodic,
-    hindsight_bound,
 )
+from trackenv_agents.line_hindsight import _variants, hindsight_bound
 
 CFG = scenario("small", horizon_years=1.0)
 
@@ -78,10 +78,23 @@ def test_hindsight_search_is_exact_and_no_worse_than_its_start():
     env = TampingLine(cfg)
     env.reset(seed=4)
     start = -sum(env.step(plan[t].astype(np.int8))[1] for t in range(cfg.horizon_steps))
-    h = hindsight_bound(cfg, 4, plan, thresholds_mm=(1.5,), rounds=1)
-    assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9)
-    assert h["cost"] <= start + 1e-9
+    h = hindsight_bound(cfg, 4, plan, rounds=1, sd_thresholds_mm=(1.5,), peak_fractions=(np.inf,),
+                        stop_steps=(0,))
+    assert h["start_cost"] == pytest.approx(start, rel=1e-9)  # the per-section pricing of the start is exact
+    assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9)  # ... and of the result
+    assert h["cost"] <= start + 1e-9 and h["search"] == sorted(h["search"], reverse=True)
     assert (h["schedule"].sum(axis=1) <= cfg.capacity).all()
+
+
+def test_hindsight_variants_move_drop_and_add_one_tamping():
+    col = np.zeros(10, bool)
+    col[[2, 6]] = True
+    restricted = np.zeros(10, bool)
+    restricted[8:] = True
+    var = _variants(col, restricted)
+    assert all(v.sum() in (1, 2, 3) for v in var)
+    keys = {tuple(np.flatnonzero(v)) for v in var}
+    assert {(0, 6), (3, 6), (6,), (2,), (2, 4), (2, 8), (2, 6, 7)} <= keys and (2, 6) not in keys
 
 
 def test_cli_helpers():

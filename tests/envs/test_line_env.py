@@ -1,4 +1,5 @@
-"""TampingLine: the API checks, determinism, pickling, reward parts, and one cost/limit test per class."""
+"""TampingLine: the API checks, determinism, pickling, reward parts, the vector env against Gymnasium's
+SyncVectorEnv in both autoreset modes, rendering, and one cost/limit test per class."""
 
 import pickle
 
@@ -6,10 +7,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode
+from same_results import assert_same
 
 import trackenv  # noqa: F401  (registers the ids)
 from trackenv.envs.line import TampingLine, TampingLineVectorEnv
 from trackenv.envs.line_config import SCENARIOS, LineConfig, scenario
+from trackenv.envs.line_episode import COST_KEYS
 
 SHORT = {"horizon_years": 0.75}  # 3 steps
 
@@ -84,10 +88,72 @@ def test_reward_is_minus_sum_of_parts_and_vector_autoreset():
     vec.reset(seed=0)
     for a in ([np.ones(6, int)] * 2, [np.zeros(6, int)] * 2):
         obs, r, term, trunc, info = vec.step(np.stack(a))
-        parts = sum(info["costs"].values())
-        assert np.allclose(r, -parts)
-    assert trunc.all() and "final_info" in info
+    assert trunc.all() and info["_final_info"].all() and info["_final_obs"].all()
+    last = info["final_info"]  # SAME_STEP (default): the ended step's info, as a dict of arrays with masks
+    assert np.allclose(r, -sum(last["costs"][k] for k in COST_KEYS), rtol=1e-12, atol=0)
+    assert np.array_equal(last["cost"], -r)
     assert obs["time"].max() == 0.0  # reset in the same step
+    assert info["year"].tolist() == [0.0, 0.0] and info["cost"].tolist() == [0.0, 0.0]  # the new episodes' first
+
+
+SEEDS = [7, 8]
+H = 4  # steps of the episodes compared with SyncVectorEnv (horizon_years=1.0)
+# (steps, lines, sections): a different pattern per line, over capacity (clipped to 3) and masked repeats
+# included, into the next episode
+ACTIONS = np.zeros((H + 2, 2, 6), dtype=np.int8)
+ACTIONS[0, 0] = [1, 1, 1, 1, 0, 0]  # over capacity: clipped
+ACTIONS[1, 0] = [1, 0, 0, 0, 0, 0]  # tamped last step: masked
+ACTIONS[1, 1] = [0, 1, 0, 0, 1, 0]
+ACTIONS[3, 1] = [1, 1, 1, 1, 1, 1]
+ACTIONS[4] = [[0, 0, 1, 0, 0, 0], [1, 0, 0, 0, 0, 1]]  # SAME_STEP: new episodes; NEXT_STEP: ignored (reset)
+ACTIONS[5, 0] = [0, 0, 0, 0, 0, 1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", [AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP])
+def test_autoreset_modes_match_sync_vector_env(mode):
+    """gym.make_vec reaches the native vector env through the registered vector entry point; over one episode
+    and into the next it gives, bit for bit, what SyncVectorEnv over gym.make gives in the same autoreset mode:
+    observations, rewards, flags, infos with their masks (final_obs and final_info in SAME_STEP)."""
+    kw = {"horizon_years": 1.0}
+    native = gym.make_vec("trackenv/TampingLineSmall-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                          autoreset_mode=mode, **kw)
+    assert isinstance(native.unwrapped, TampingLineVectorEnv)
+    assert native.metadata["autoreset_mode"] == mode and native.unwrapped.config == scenario("small", **kw)
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make("trackenv/TampingLineSmall-v0", **kw) for _ in SEEDS],
+                                    autoreset_mode=mode)
+    assert_same(native.reset(seed=SEEDS), sync.reset(seed=SEEDS), "reset")
+    ended = []
+    for t in range(H + 2):
+        got, want = native.step(ACTIONS[t]), sync.step(ACTIONS[t])
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), got, want):
+            assert_same(a, b, f"step {t} {name}")
+        ended.append(bool(got[3].all()))
+        if t == 0:
+            assert got[4]["clipped"].tolist() == [True, False]
+        if t == 1:
+            assert not got[4]["tamped_sections"][0].any()  # the masked repeat was dropped
+    assert ended == [t == H - 1 for t in range(H + 2)]
+    years = got[4]["year"].tolist()  # SAME_STEP: two steps into the new episodes; NEXT_STEP: one (a reset between)
+    assert years == [0.5 if mode == AutoresetMode.SAME_STEP else 0.25] * 2
+
+
+def test_vector_env_arguments():
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        TampingLineVectorEnv(2, scenario="small", autoreset_mode=AutoresetMode.DISABLED)
+    with pytest.raises(ValueError, match="render_mode"):
+        TampingLineVectorEnv(2, scenario="small", render_mode="human")
+    with pytest.raises(ValueError, match="num_envs"):
+        TampingLineVectorEnv(0, scenario="small")
+    vec = TampingLineVectorEnv(2, scenario="small", autoreset_mode="NextStep", **SHORT)
+    assert vec.autoreset_mode == AutoresetMode.NEXT_STEP
+    with pytest.raises(RuntimeError, match="reset"):
+        vec.step(np.zeros((2, 6), dtype=np.int8))
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match=r"^actions must have shape \(2, 6\)"):
+        vec.step(np.zeros((3, 6), dtype=np.int8))
+    with pytest.raises(ValueError, match="0 or 1"):
+        vec.step(np.full((2, 6), 2, dtype=np.int8))
 
 
 def test_transition_zone_degrades_faster_than_plain_track():
@@ -99,8 +165,7 @@ def test_transition_zone_degrades_faster_than_plain_track():
     reg = obs0["register"].astype(int)
     for _ in range(4):
         _, _, _, _, info = vec.step(np.zeros((3, 6), int))
-    d = info["final_info"] if "final_info" in info else None
-    sd1 = np.stack([f["section_sd_m"] for f in d])
+    sd1 = info["final_info"]["section_sd_m"]
     g = sd1 - info0["section_sd_m"]
     for k in (0, 1):
         growth[k] = g[reg == k]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from same_results import assert_same
 
 import trackenv.envs  # noqa: F401  (registers the ids)
 from trackenv.envs import TampingEnv, TampingEnvConfig
@@ -169,29 +170,6 @@ def test_discrete_vector_env() -> None:
         venv.step(np.array([0, 4]))
 
 
-def _assert_same(a, b, path: str = "") -> None:
-    """Equal structure (keys, masks, dtypes, shapes) and values, bit for bit (a row of the batched kernel does
-    not depend on the batch)."""
-    if isinstance(a, dict):
-        assert isinstance(b, dict) and set(a) == set(b), (path, sorted(a), sorted(b))
-        for k in a:
-            _assert_same(a[k], b[k], f"{path}/{k}")
-    elif isinstance(a, tuple):
-        assert isinstance(b, tuple) and len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b)):
-            _assert_same(x, y, f"{path}[{i}]")
-    elif isinstance(a, np.ndarray) and a.dtype == object:
-        assert b.dtype == object and a.shape == b.shape, path
-        for i, (x, y) in enumerate(zip(a, b)):
-            assert (x is None) == (y is None), (path, i)
-            if x is not None:
-                _assert_same(x, y, f"{path}[{i}]")
-    else:
-        a, b = np.asarray(a), np.asarray(b)
-        assert a.dtype == b.dtype and a.shape == b.shape, (path, a.dtype, b.dtype, a.shape, b.shape)
-        np.testing.assert_array_equal(a, b, err_msg=path)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", [gym.vector.AutoresetMode.SAME_STEP, gym.vector.AutoresetMode.NEXT_STEP])
 def test_autoreset_modes_match_sync_vector_env(mode) -> None:
@@ -202,12 +180,12 @@ def test_autoreset_modes_match_sync_vector_env(mode) -> None:
     native = make_vec(config=cfg, autoreset_mode=mode)
     assert native.metadata["autoreset_mode"] == mode
     sync = gym.vector.SyncVectorEnv([lambda: TampingEnv(cfg) for _ in SEEDS], autoreset_mode=mode)
-    _assert_same(native.reset(seed=SEEDS), sync.reset(seed=SEEDS), "reset")
+    assert_same(native.reset(seed=SEEDS), sync.reset(seed=SEEDS), "reset")
     for t in range(h + 2):
         actions = ACTIONS[t % ACTIONS.shape[0]]
         got, want = native.step(actions), sync.step(actions)
         for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), got, want):
-            _assert_same(a, b, f"step {t} {name}")
+            assert_same(a, b, f"step {t} {name}")
         assert got[3].all() == (t == h - 1)  # NEXT_STEP: step h resets, step h + 1 is the new episodes' first
 
 

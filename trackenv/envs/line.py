@@ -13,12 +13,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
+from gymnasium.vector import AutoresetMode
 
-from ._seeding import vector_rngs
+from .batched import BatchedVectorEnv
 from .line_config import LineConfig
 from .line_episode import COST_KEYS, LineBatch
+from .tamping import decode_action
 
 __all__ = ["TampingLine", "TampingLineVectorEnv", "line_observation_space"]
 
@@ -41,88 +41,80 @@ def line_observation_space(config: LineConfig) -> spaces.Dict:
     return spaces.Dict(dict(d))
 
 
-def decode_line_action(action, n_sections: int) -> np.ndarray:
-    """(n_sections,) bool from a MultiBinary action; a malformed action raises ValueError."""
-    try:
-        a = np.asarray(action, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}") from None
-    if a.shape != (n_sections,):
-        raise ValueError(f"action must have shape ({n_sections},) (one 0/1 per section), got {a.shape}")
-    if not np.all(np.isfinite(a)) or not np.all((a == 0) | (a == 1)):
-        raise ValueError(f"action values must be 0 or 1 (no NaN), got {a.tolist()}")
-    return a.astype(bool)
+class TampingLineVectorEnv(BatchedVectorEnv):
+    """``num_envs`` TampingLine episodes (same config), stepped together: every segment of every line in one
+    batched pass per vehicle type. See :class:`TampingLine` for the spec.
 
-
-class TampingLineVectorEnv(VectorEnv):
-    """``num_envs`` TampingLine episodes (same config), stepped together; see :class:`TampingLine` for the
-    spec. Episodes reset in the step they end (SAME_STEP autoreset): ``infos["final_obs"]`` and
-    ``infos["final_info"]`` hold the last of the old one. ``reset(seed=s)`` seeds line i with s + i."""
-
-    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
+    The Gymnasium conventions are those of every native vector env of trackenv (:mod:`trackenv.envs.batched`):
+    ``autoreset_mode`` ``AutoresetMode.SAME_STEP`` (default: a line resets in the step it ends, the last
+    observation and info of the old episode in ``infos["final_obs"]`` and ``infos["final_info"]``) or
+    ``NEXT_STEP`` (the ending step keeps them in place; the next step resets the line and ignores its action),
+    each giving what ``gymnasium.vector.SyncVectorEnv`` over :class:`TampingLine` gives in that mode, infos with
+    their ``_key`` masks; ``reset(seed=s)`` seeds line ``i`` with ``s + i`` (or a list of one seed per line);
+    ``render_mode="rgb_array"``: :meth:`render` draws the first line."""
 
     def __init__(self, num_envs: int = 4, config: LineConfig | dict | str | None = None, *,
-                 scenario: str | None = None, **overrides: Any) -> None:
-        if not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= 4096:
-            raise ValueError(f"num_envs must be an integer in [1, 4096], got {num_envs!r}")
-        overrides.pop("render_mode", None)
+                 scenario: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+                 render_mode: str | None = None, **overrides: Any) -> None:
         overrides.pop("max_episode_steps", None)
         config = LineConfig.coerce(scenario if config is None and scenario is not None else config)
         if overrides:
             config = config.replace(**overrides)
         self.config = config
-        self.num_envs = int(num_envs)
-        self.single_observation_space = line_observation_space(config)
-        self.single_action_space = spaces.MultiBinary(config.n_sections)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        super().__init__(num_envs, line_observation_space(config), spaces.MultiBinary(config.n_sections),
+                         autoreset_mode=autoreset_mode, render_mode=render_mode)
         self.batch: LineBatch | None = None
-        self._rngs: list[np.random.Generator] = []
-
-    def _observations(self) -> dict:
-        out = create_empty_array(self.single_observation_space, self.num_envs)
-        assert self.batch is not None, "reset() first"
-        obs = [self.batch.observation(b) for b in range(self.num_envs)]
-        return concatenate(self.single_observation_space, obs, out)  # type: ignore[return-value]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        self._rngs = vector_rngs(seed, self.num_envs)
         self.batch = LineBatch(self.config, self.num_envs)
-        self.batch.reset_lines(list(range(self.num_envs)), self._rngs)
-        zero = dict.fromkeys(COST_KEYS, 0.0)
-        S = self.config.n_sections
-        infos = [self.batch.info(b, zero, np.zeros(S, dtype=bool), False) for b in range(self.num_envs)]
-        return self._observations(), _stack_infos(infos)
+        return super().reset(seed=seed, options=options)
 
-    def step(self, actions):
+    def _lines(self) -> LineBatch:
         if self.batch is None:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions)
-        if actions.ndim == 0 or actions.shape[0] != self.num_envs:
-            raise ValueError(f"actions must have a leading axis of {self.num_envs}, got shape {actions.shape}")
+        return self.batch
+
+    def _start(self, idx: list[int]) -> None:
+        self._lines().reset_lines(idx, self._rngs)
+
+    def _observation(self, i: int) -> dict[str, np.ndarray]:
+        return self._lines().observation(i)
+
+    def _reset_info(self, i: int) -> dict:
         S = self.config.n_sections
-        want = np.stack([decode_line_action(a, S) for a in actions])
-        bt = self.batch
-        tamped, clipped = bt.resolve(want)
+        return self._lines().info(i, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False)
+
+    def _step_lines(self, want: np.ndarray, lines: list[int]) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
+        """One step of ``lines``, which ask to tamp ``want`` (num_envs, S) bool (rows of other lines: False):
+        rewards and truncation flags (num_envs,; 0 and False elsewhere) and the info of each stepped line. The
+        other lines are not stepped. :class:`TampingLine` steps through here too."""
+        bt = self._lines()
+        stepped = np.zeros(self.num_envs, dtype=bool)
+        stepped[lines] = True
+        tamped, clipped = bt.resolve(want & stepped[:, None])
         campaign = bt.apply(tamped)
-        bt.traffic()
+        bt.traffic(stepped)
         parts = bt.costs(campaign)
-        total = sum(parts.values())
-        rewards = -np.asarray(total, dtype=float)
-        truncated = bt.step >= self.config.horizon_steps
-        infos = [bt.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b])
-                 for b in range(self.num_envs)]
-        info = _stack_infos(infos)
-        done = np.flatnonzero(truncated).tolist()
-        if done:
-            final_obs = [bt.observation(b) if b in done else None for b in range(self.num_envs)]
-            bt.reset_lines(done, self._rngs)
-            info["final_obs"] = np.array(final_obs, dtype=object)
-            info["final_info"] = np.array([infos[b] if b in done else None for b in range(self.num_envs)],
-                                          dtype=object)
-            info["_final_obs"] = truncated.copy()
-            info["_final_info"] = truncated.copy()
-        return self._observations(), rewards, np.zeros(self.num_envs, dtype=bool), truncated, info
+        rewards = np.where(stepped, -np.asarray(sum(parts.values()), dtype=float), 0.0)
+        truncated = stepped & (bt.step >= self.config.horizon_steps)
+        infos = {b: bt.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b]) for b in lines}
+        return rewards, truncated, infos
+
+    def _step_envs(self, actions: np.ndarray, stepping: list[int],
+                   resetting: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, dict]]:
+        S = self.config.n_sections
+        want = np.zeros((self.num_envs, S), dtype=bool)
+        for b in stepping:
+            want[b] = decode_action(actions[b], "multibinary", S)
+        rewards, truncated, infos = self._step_lines(want, stepping)
+        if resetting:
+            self._start(resetting)
+        return rewards, np.zeros(self.num_envs, dtype=bool), truncated, infos
+
+    def _frame(self, info: dict) -> np.ndarray:
+        from ..render import line_frame
+
+        return line_frame(self._lines(), 0, info)
 
     def action_masks(self) -> np.ndarray:
         """(num_envs, 2·S) [may-not-tamp, may-tamp] pairs per section (sb3-contrib's MultiBinary convention).
@@ -194,18 +186,35 @@ class TampingLine(gym.Env):
 
     **Episode end.** No terminal state; truncation at the horizon (default 10 years = 40 steps).
 
+    **Vector env.** ``gym.make_vec(id, num_envs=n, vectorization_mode="vector_entry_point")`` builds
+    :class:`TampingLineVectorEnv` (every segment of every line in one batched pass per vehicle type), with the
+    conventions of every native vector env of trackenv (:mod:`trackenv.envs.batched`): ``autoreset_mode``
+    ``AutoresetMode.SAME_STEP`` (default; the ended episode's last observation and info in
+    ``infos["final_obs"]`` and ``infos["final_info"]``) or ``NEXT_STEP`` (Gymnasium's default: the ending step
+    keeps them in place, the next step resets the line), infos as a dict of arrays with ``_key`` masks. Line
+    ``i`` gives bit for bit what this env gives for the same seed and actions (``SyncVectorEnv`` over it in the
+    same mode gives the same results).
+
+    **Rendering.** ``render_mode="rgb_array"``: :meth:`render` returns an (H, W, 3) uint8 picture of the line
+    (:func:`trackenv.render.line_frame`): per section the true and the last measured SD and D1 mean-to-peak
+    against their limits, the sections tamped this step shaded (the vector env draws its first line).
+
     **Arguments.** ``config`` (:class:`LineConfig`, dict or scenario name), ``scenario``, or fields as
-    keywords. **Randomness**: everything is drawn at reset from ``self.np_random`` (see
-    :mod:`~trackenv.envs.line_episode`). **Versions**: v0, first release.
+    keywords; ``render_mode`` (None or "rgb_array"). **Randomness**: everything is drawn at reset from
+    ``self.np_random`` (see :mod:`~trackenv.envs.line_episode`).
+
+    **Versions.** v0: first release. Since then, without a change of dynamics or reward: ``render_mode=
+    "rgb_array"``; the vector env's two autoreset modes and Gymnasium's info layout (``final_info`` a dict of
+    arrays, as ``SyncVectorEnv`` gives it, where it was an object array of per-line dicts); the settlement's
+    Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
+    no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance).
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode must be None (episode plots: trackenv_agents), got {render_mode!r}")
-        self._vec = TampingLineVectorEnv(1, config, scenario=scenario, **overrides)
+        self._vec = TampingLineVectorEnv(1, config, scenario=scenario, render_mode=render_mode, **overrides)
         self.config = self._vec.config
         self.render_mode = render_mode
         self.observation_space = self._vec.single_observation_space
@@ -218,37 +227,28 @@ class TampingLine(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        self._vec._rngs = [self.np_random]
-        self._vec.batch = LineBatch(self.config, 1)
-        self._vec.batch.reset_lines([0], self._vec._rngs)
-        S = self.config.n_sections
-        self._last_info = self._vec.batch.info(0, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False)
-        return self._vec.batch.observation(0), self._last_info
+        vec = self._vec
+        vec._rngs = [self.np_random]  # a line of its own, drawn from this env's generator (reset() continues it)
+        vec.batch = LineBatch(self.config, 1)
+        vec._start([0])
+        self._last_info = vec._reset_info(0)
+        return vec._observation(0), self._last_info
 
     def step(self, action):
-        bt = self._vec.batch
-        if bt is None:
+        vec = self._vec
+        if vec.batch is None:
             raise RuntimeError("call reset() before step()")
-        want = decode_line_action(action, self.config.n_sections)[None, :]
-        tamped, clipped = bt.resolve(want)
-        campaign = bt.apply(tamped)
-        bt.traffic()
-        parts = {k: float(v[0]) for k, v in bt.costs(campaign).items()}
-        reward = -float(sum(parts.values()))
-        truncated = bool(bt.step[0] >= self.config.horizon_steps)
-        self._last_info = bt.info(0, parts, tamped[0], clipped[0])
-        return bt.observation(0), reward, False, truncated, self._last_info
+        want = decode_action(action, "multibinary", self.config.n_sections)[None, :]
+        rewards, truncated, infos = vec._step_lines(want, [0])
+        self._last_info = infos[0]
+        return vec._observation(0), float(rewards[0]), False, bool(truncated[0]), self._last_info
 
     def action_masks(self) -> np.ndarray:
         return self._vec.action_masks()[0]
 
-def _stack_infos(infos: list[dict]) -> dict:
-    out: dict[str, Any] = {}
-    for key in infos[0]:
-        vals = [inf[key] for inf in infos]
-        if key == "costs":
-            out[key] = {k: np.array([v[k] for v in vals]) for k in vals[0]}
-        else:
-            out[key] = np.array(vals)
-        out["_" + key] = np.ones(len(infos), dtype=bool)
-    return out
+    def render(self):
+        """The line's state as an RGB array (``render_mode="rgb_array"``; :func:`trackenv.render.line_frame`),
+        else None."""
+        if self.render_mode != "rgb_array" or self.batch is None:
+            return None
+        return self._vec._frame(self._last_info)

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from ..physics._checks import check_scalar
-from ..physics.timestep import check_dt_option
 from ..physics.settlement import LAWS
+from ..physics.timestep import check_dt_option
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 from .config import ConfigBase, _as_items
 

@@ -42,10 +42,11 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
 
 
 def _lsq_line(z: np.ndarray) -> np.ndarray:
-    """Least-squares straight line of each row of z."""
+    """Least-squares straight line of each row of z (row by row: a matrix product's rounding depends on the
+    number of rows, and a line's numbers must not depend on its batch)."""
     n = z.shape[-1]
     t = np.arange(n) - 0.5 * (n - 1)
-    slope = z @ t / float(t @ t)
+    slope = (z * t).sum(axis=-1) / float(t @ t)
     return z.mean(axis=-1, keepdims=True) + slope[..., None] * t
 
 
@@ -231,32 +232,40 @@ class LineBatch:
             contact = np.maximum(contact, [r.contact_force.max() for r in res])
         return self._equivalent(np.stack(forces)), contact
 
-    def _advance(self, force: np.ndarray, cycles: float) -> None:
-        """Advance all segments by ``cycles`` axle passes under the equivalent forces, with the static load
-        redistribution taken implicitly (backward Euler, as TrackDegradation's support feedback), batched:
-        Δ = u(F0 + S·Δ, N + ΔN) − u_now, solved by Newton on the (segments, n, n) systems."""
-        G, n = force.shape
-        u_now = self.u.copy()
+    def _advance(self, rows: np.ndarray, force: np.ndarray, cycles: float) -> None:
+        """Advance the segments ``rows`` by ``cycles`` axle passes under the equivalent forces ``force`` (rows, n),
+        with the static load redistribution taken implicitly (backward Euler, as TrackDegradation's support
+        feedback), batched: Δ = u(F0 + S·Δ, N + ΔN) − u_now, solved by Newton on the (rows, n, n) systems.
 
-        def adv(f):
-            st = SettlementState(u_now.ravel(), self.cyc.ravel(), self.rate().ravel())
+        Each segment iterates until its own residual is below 1e-9 m and then stops, so its settlement does not
+        depend on the other segments of the batch: a line gives the same numbers alone (``TampingLine``) and
+        among others (:class:`~trackenv.envs.line.TampingLineVectorEnv`), and a section's cost depends only on
+        its own schedule (the hindsight search relies on that)."""
+        n = force.shape[1]
+        u_now, cyc, rate, influence = self.u[rows], self.cyc[rows], self.rate()[rows], self.influence[rows]
+
+        def adv(live: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            st = SettlementState(u_now[live].ravel(), cyc[live].ravel(), rate[live].ravel())
             new = st.advance(self.law, np.maximum(f, 0.0).ravel(), cycles)
-            return np.array(new.settlement).reshape(G, n), np.array(new.cycles).reshape(G, n)
+            return np.array(new.settlement).reshape(-1, n), np.array(new.cycles).reshape(-1, n)
 
         delta = np.zeros_like(u_now)
         eye = np.eye(n)
         df = 1e-3
+        live = np.arange(len(rows))  # segments still iterating
         for _ in range(30):
-            f = np.maximum(force + np.einsum("gij,gj->gi", self.influence, delta), 0.0)
-            u_f, _ = adv(f)
-            res = delta - (u_f - u_now)
-            if np.max(np.abs(res)) < 1e-9:
+            f = np.maximum(force[live] + np.einsum("gij,gj->gi", influence[live], delta[live]), 0.0)
+            u_f, _ = adv(live, f)
+            res = delta[live] - (u_f - u_now[live])
+            still = ~(np.max(np.abs(res), axis=1) < 1e-9)  # written so that a NaN residual counts as not converged
+            if not still.any():
                 break
-            du_df = (adv(f + df)[0] - u_f) / df
-            jac = eye - du_df[:, :, None] * self.influence * (f > 0)[:, :, None]
-            delta = np.maximum(delta - np.linalg.solve(jac, res[..., None])[..., 0], 0.0)
-        f = np.maximum(force + np.einsum("gij,gj->gi", self.influence, delta), 0.0)
-        self.u, self.cyc = adv(f)
+            live, f, u_f, res = live[still], f[still], u_f[still], res[still]
+            du_df = (adv(live, f + df)[0] - u_f) / df
+            jac = eye - du_df[:, :, None] * influence[live] * (f > 0)[:, :, None]
+            delta[live] = np.maximum(delta[live] - np.linalg.solve(jac, res[..., None])[..., 0], 0.0)
+        f = np.maximum(force + np.einsum("gij,gj->gi", influence, delta), 0.0)
+        self.u[rows], self.cyc[rows] = adv(np.arange(len(rows)), f)
 
     # ------------------------------------------------------------------ a step
     def allowed(self) -> np.ndarray:
@@ -333,25 +342,31 @@ class LineBatch:
                 self.budget_left -= parts.sum(axis=0)
         return parts
 
-    def traffic(self) -> None:
-        """The period's traffic on every line: wet spots that start now, the passes, the settlement."""
+    def traffic(self, lines: np.ndarray | None = None) -> None:
+        """The period's traffic on ``lines`` (bool over lines; None: every line): wet spots that start now, the
+        passes, the settlement. Other lines are left as they are (a vector env in NEXT_STEP autoreset does not
+        step the lines it is about to reset)."""
+        c = self.config
+        lines = np.ones(self.n_lines, dtype=bool) if lines is None else np.asarray(lines, dtype=bool)
+        if not lines.any():
+            return
+        seg = np.repeat(lines, self.S)
         seg_step = np.repeat(self.step, self.S)
-        start = (self.wet_onset == seg_step) & ~self.wet_active
+        start = seg & (self.wet_onset == seg_step) & ~self.wet_active
         if start.any():
-            factor = np.where(self.wet_mask[start], self.config.wet_spot_rate_factor, 1.0)
+            factor = np.where(self.wet_mask[start], c.wet_spot_rate_factor, 1.0)
             self.base_rate[start] = self.base_rate[start] * factor
             self.wet_active |= start
-        rows = np.arange(self.offset.shape[0])
+        rows = np.flatnonzero(seg)
         force, contact = self._passes(rows)
-        self.contact_force = contact
-        self._advance(force, float(self.passes.sum()))
-        self.step += 1
-        self._quality()
-        c = self.config
+        self.contact_force[rows] = contact
+        self._advance(rows, force, float(self.passes.sum()))
+        self.step[lines] += 1
+        self._quality(rows)
         year_start = self.step % c.steps_per_year == 0
         if c.annual_budget > 0:
-            self.budget_left = np.where(year_start, c.annual_budget, self.budget_left)
-        self._measure(self.step % c.measurement_interval == 0)
+            self.budget_left = np.where(lines & year_start, c.annual_budget, self.budget_left)
+        self._measure(lines & (self.step % c.measurement_interval == 0))
 
     def costs(self, campaign: np.ndarray) -> dict[str, np.ndarray]:
         """The period's costs per line (k€) in named parts; reward = −Σ parts."""

@@ -388,7 +388,7 @@ def d1_filter(
     n = shape[-1]
     rows = arr.reshape(-1, n)
     t = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
-    slope = rows @ t / float(t @ t)
+    slope = (rows * t).sum(axis=1) / float(t @ t)  # row by row: a matrix product's rounding depends on the rows
     resid = rows - rows.mean(axis=1, keepdims=True) - slope[:, None] * t
     pad = math.ceil(pad_w * b_hi / dx)
     if pad > 0:
