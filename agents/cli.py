@@ -23,6 +23,8 @@ DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
+# = trackenv_agents.train_line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
+LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "pretrained" / "ppo_tamping_line.zip"
 
 
 class UsageError(Exception):
@@ -104,6 +106,23 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
+    """The trained line policy scored next to the line rules: ``--model``, else the shipped one if there is one
+    (the same policy on every scenario: its network is shared over sections)."""
+    if args.policy == "heuristics":
+        return {}
+    _existing(args.model, "--model")
+    path = Path(args.model) if args.model else LINE_PRETRAINED_FILE
+    if not path.exists():
+        if args.policy == "ppo":
+            raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass "
+                             "--model")
+        return {}
+    from .train_line import load_line_trained
+
+    return {"ppo": load_line_trained(path)}
+
+
 def _executor(args: argparse.Namespace) -> Any:
     """Where `evaluate` runs its batches of episodes: None (here, in turn), or a RayExecutor for ``--ray`` (a
     local Ray) or ``--ray-address`` (agents/distributed.py); the caller closes it."""
@@ -119,11 +138,12 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     seeds = parse_seeds(args.seeds) if args.seeds else None
+    extra = _line_policies(args)
     executor = _executor(args)
     try:
         result = line_comparison(args.env, seeds=seeds, n_train=args.n_train or 2, retune=args.retune,
                                  batch_size=args.batch_size, progress=not args.json,
-                                 out_dir=args.out or "results/line_compare", executor=executor)
+                                 out_dir=args.out or "results/line_compare", extra=extra, executor=executor)
     finally:
         if executor is not None:
             executor.close()
@@ -305,7 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
     out(sp, "results/compare")
     sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all", help="which policies to score")
     sp.add_argument("--model", default=None, metavar="ZIP",
-                    help="a trained model (default: the shipped agents/pretrained/ppo_tamping.zip)")
+                    help="a trained model (default: the shipped agents/pretrained/ppo_tamping.zip; with a line --env, "
+                         "agents/pretrained/ppo_tamping_line.zip if it exists)")
     sp.add_argument("--n-test", type=_positive(int), default=None, metavar="N",
                     help=f"held-out episodes (default: {DEFAULT_N_TEST} of the 200 test seeds; 6 with --quick)")
     sp.add_argument("--n-train", type=_positive(int), default=None, metavar="N",
@@ -320,7 +341,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--ray-address", default=None, metavar="ADDR",
                     help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.add_argument("--env", default=None, metavar="ID",
-                    help="a TampingLine id (trackenv/TampingLine-v0, ...Small-v0, ...Hard-v0): score the line rules")
+                    help="a TampingLine id (trackenv/TampingLine-v0, ...Small-v0, ...Hard-v0): score the line rules "
+                         "and the trained line policy")
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes of the line: A:B (seeds A..B-1) or a,b,c")
     sp.set_defaults(func=cmd_evaluate)

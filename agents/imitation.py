@@ -6,32 +6,41 @@ the rules are, and its own updates then only have to find the *improvements* (wh
 should come early). The cloned rule is only a starting point: the trained policy is judged on held-out seeds
 like any other, against the same rule.
 
-:func:`warm_start` rolls the teacher out on the (VecNormalize-wrapped) training env, which also warms the
-observation and reward statistics, and then fits the policy head to the teacher's actions (cross-entropy) and
-the value head to the normalised discounted returns of those episodes (squared error).
+:func:`warm_start` rolls the teacher out on the training env and then fits the policy head to the teacher's
+actions (cross-entropy; for MultiBinary actions the binary cross-entropy of each section) and the value head
+to the discounted returns of those episodes in the learner's reward units (squared error). Two kinds of
+training env: Tamping-v0's, under VecNormalize (the roll-out also warms its observation and reward statistics;
+the fit sees normalised observations and returns), and TampingLine's, whose policy scales its own features and
+whose rewards are divided by a fixed scale (:class:`~trackenv_agents.sb3_vec.VecScaleReward`).
+:func:`agreement` checks a clone against its teacher on held-out episodes.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 
 from .actions import RANKED
 from .heuristics import HEURISTICS, make_policy, tuned_params
+from .line_heuristics import LINE_HEURISTICS, line_tuned_params
 
 
-def teacher_policy(rule: str, config: TampingEnvConfig, params: dict[str, Any] | None = None):
-    """The heuristic ``rule`` with ``params`` (default: its tuned parameters in ``agents/tuned_heuristics.json``),
-    bound to ``config``'s planning calendar."""
-    if rule not in HEURISTICS:
-        raise ValueError(f"warm_start_rule must be one of {sorted(HEURISTICS)}, got {rule!r}")
+def teacher_policy(rule: str, config: TampingEnvConfig | LineConfig, params: dict[str, Any] | None = None):
+    """The heuristic ``rule`` with ``params`` (default: its tuned parameters in ``agents/tuned_heuristics.json``,
+    or ``agents/line_tuned_heuristics.json`` for a TampingLine config), bound to ``config``'s planning calendar."""
+    line = isinstance(config, LineConfig)
+    rules = LINE_HEURISTICS if line else HEURISTICS
+    if rule not in rules:
+        raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
     if params is None:
-        params = tuned_params().get(rule, {})
-    return make_policy(rule, **params).bind(config)
+        params = (line_tuned_params() if line else tuned_params()).get(rule, {})
+    return (rules[rule](**params) if line else make_policy(rule, **params)).bind(config)
 
 
 def teacher_to_agent_actions(sections: np.ndarray, action_type: str) -> np.ndarray:
@@ -48,15 +57,21 @@ def teacher_to_agent_actions(sections: np.ndarray, action_type: str) -> np.ndarr
                      "(set warm_start_rule to null to train without a warm start)")
 
 
-def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamma: float) -> dict[str, Any]:
-    """Roll ``teacher`` out on ``env`` (VecNormalize over :class:`~agents.sb3_vec.TampingSB3VecEnv`) for at
-    least ``n_episodes`` whole episodes; return raw observations, agent actions and discounted raw returns.
+def _raw_obs(env, obs: dict) -> dict:
+    """The env's last observation before any normalisation (VecNormalize keeps it; other envs return it)."""
+    original = getattr(env, "get_original_obs", None)
+    return original() if callable(original) else obs
 
-    The env's statistics update as it steps (it should be in training mode), which is the point: PPO starts
-    with observation and reward scales measured on sensible behaviour."""
+
+def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamma: float) -> dict[str, Any]:
+    """Roll ``teacher`` out on ``env`` (an SB3 VecEnv over :class:`~agents.sb3_vec.TampingSB3VecEnv` whose top
+    layer has ``get_original_reward``: VecNormalize or VecScaleReward) for at least ``n_episodes`` whole
+    episodes; return raw observations, agent actions and discounted raw returns.
+
+    Under VecNormalize the statistics update as it steps (it should be in training mode), which is the point:
+    PPO starts with observation and reward scales measured on sensible behaviour."""
     n_envs = env.num_envs
-    env.reset()
-    obs_raw = env.get_original_obs()
+    obs_raw = _raw_obs(env, env.reset())
     rounds = -(-int(n_episodes) // n_envs)
     observations: list[dict[str, np.ndarray]] = []
     actions, rewards, dones = [], [], []
@@ -66,11 +81,11 @@ def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamm
         act = teacher_to_agent_actions(sections, action_type)
         observations.append({k: np.array(v, copy=True) for k, v in obs_raw.items()})
         actions.append(act)
-        _, _, done, _ = env.step(act)
+        obs, _, done, _ = env.step(act)
         rewards.append(env.get_original_reward().astype(np.float64))
         dones.append(done.copy())
         completed += int(done.sum())
-        obs_raw = env.get_original_obs()
+        obs_raw = _raw_obs(env, obs)
     rew = np.stack(rewards)  # (T, n_envs)
     done = np.stack(dones)
     returns = np.zeros_like(rew)
@@ -98,6 +113,10 @@ def _smoothed_nll(distribution, actions, label_smoothing: float):
     nll = -distribution.log_prob(actions)
     if label_smoothing <= 0.0:
         return nll.mean()
+    heads = getattr(distribution, "distributions", None)  # sb3-contrib's masked MultiCategorical/MultiBinary
+    if heads is not None:
+        uniform = sum(-torch.log_softmax(h.logits, dim=-1).mean(dim=-1) for h in heads)
+        return ((1.0 - label_smoothing) * nll + label_smoothing * uniform).mean()
     inner = distribution.distribution
     if isinstance(inner, torch.distributions.Categorical):
         uniform = -torch.log_softmax(inner.logits, dim=-1).mean(dim=-1)
@@ -108,19 +127,31 @@ def _smoothed_nll(distribution, actions, label_smoothing: float):
     return ((1.0 - label_smoothing) * nll + label_smoothing * uniform).mean()
 
 
+def return_scale(env) -> float:
+    """What the learner's rewards are the raw ones divided by: VecNormalize's running return scale (if it
+    normalises rewards), :class:`~trackenv_agents.sb3_vec.VecScaleReward`'s fixed scale, else 1."""
+    if getattr(env, "norm_reward", False):
+        return float(np.sqrt(env.ret_rms.var + env.epsilon))
+    return float(getattr(env, "reward_scale", 1.0))
+
+
 def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size: int = 256,
                learning_rate: float = 1e-3, vf_coef: float = 0.5, label_smoothing: float = 0.02,
                seed: int = 0) -> dict[str, float]:
     """Fit ``model.policy`` to the demonstrations: cross-entropy on the actions (with ``label_smoothing``),
-    squared error of the value on the returns (normalised by the env's reward scale). Returns the final losses,
-    the training accuracy of the deterministic action and the mean probability of the teacher's action."""
+    squared error of the value on the returns (divided by :func:`return_scale`). The observations are
+    normalised as the env does for the learner (VecNormalize), or passed raw. Returns the final losses, the
+    training accuracy of the deterministic action (the whole action; ``section_accuracy``: per section for
+    MultiBinary) and the mean probability of the teacher's action."""
     import torch
     from stable_baselines3.common.utils import obs_as_tensor
 
     policy = model.policy
-    obs = env.normalize_obs({k: v.copy() for k, v in demos["obs"].items()})
-    ret_scale = float(np.sqrt(env.ret_rms.var + env.epsilon)) if env.norm_reward else 1.0
-    target = torch.as_tensor(demos["returns"] / ret_scale, dtype=torch.float32)
+    obs = {k: v.copy() for k, v in demos["obs"].items()}
+    normalize = getattr(env, "normalize_obs", None)
+    if callable(normalize):
+        obs = normalize(obs)
+    target = torch.as_tensor(demos["returns"] / return_scale(env), dtype=torch.float32)
     obs_t = obs_as_tensor(obs, policy.device)
     act_t = torch.as_tensor(demos["actions"], device=policy.device)
     if isinstance(policy.action_space, spaces.MultiBinary):
@@ -146,26 +177,90 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
         values, log_prob, _ = policy.evaluate_actions(obs_t, act_t)
         chosen = policy.get_distribution(obs_t).mode()
     match = (chosen == act_t)
+    section_accuracy = float(match.float().mean())
     if match.ndim > 1:
         match = match.all(dim=1)
     return {"nll": float(-log_prob.mean()), "teacher_probability": float(log_prob.exp().mean()),
             "value_mse": float(((values.flatten() - target) ** 2).mean()),
-            "accuracy": float(match.float().mean()), "samples": int(n)}
+            "accuracy": float(match.float().mean()), "section_accuracy": section_accuracy, "samples": int(n)}
 
 
-def warm_start(model, env, config: TampingEnvConfig, action_type: str, rule: str, n_episodes: int = 64,
+def relabel(demos: dict[str, Any], teacher, action_type: str, copies: int, sd_jitter_mm: float,
+            rng: np.random.Generator) -> dict[str, Any]:
+    """The demonstrations plus ``copies`` copies of their states with Gaussian noise of ``sd_jitter_mm`` on the
+    measured SD (``section_sd``, clipped at 0), each labelled by the teacher itself.
+
+    Why: the rules are thresholds on measured quantities, and a clone learns a threshold only as precisely as
+    its data lies near it (the first line clone's disagreements with the rule all sat within ~0.1 mm of the
+    trigger or inclusion SD). The teacher is a function of the observation, so labels near its thresholds cost
+    no env steps. A copy keeps the return of the state it came from (the jitter is of the order of the
+    recording car's noise), so the value head sees the same targets more often."""
+    if copies == 0:
+        return demos
+    obs, actions, returns = [demos["obs"]], [demos["actions"]], [demos["returns"]]
+    for _ in range(int(copies)):
+        o = {k: v.copy() for k, v in demos["obs"].items()}
+        sd = o["section_sd"]
+        o["section_sd"] = np.clip(sd + rng.normal(0.0, sd_jitter_mm, sd.shape), 0.0, None).astype(sd.dtype)
+        obs.append(o)
+        actions.append(teacher_to_agent_actions(teacher.predict(o)[0], action_type))
+        returns.append(demos["returns"])
+    return {**demos, "obs": {k: np.concatenate([o[k] for o in obs]) for k in obs[0]},
+            "actions": np.concatenate(actions), "returns": np.concatenate(returns)}
+
+
+def warm_start(model, env, config: TampingEnvConfig | LineConfig, action_type: str, rule: str, n_episodes: int = 64,
                epochs: int = 300, gamma: float = 0.99, label_smoothing: float = 0.02,
-               params: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
-    """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring);
-    return a summary of the fit."""
+               params: dict[str, Any] | None = None, seed: int = 0, relabel_copies: int = 0,
+               relabel_sd_mm: float = 0.15) -> dict[str, Any]:
+    """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring), with
+    ``relabel_copies`` teacher-labelled noisy copies of the demonstrated states (:func:`relabel`); return a
+    summary of the fit."""
     if int(n_episodes) < 1:
         raise ValueError(f"warm_start_episodes must be >= 1, got {n_episodes!r}")
     if int(epochs) < 1:
         raise ValueError(f"warm_start_epochs must be >= 1, got {epochs!r}")
     if not 0.0 <= label_smoothing < 1.0:
         raise ValueError(f"warm_start_label_smoothing must be in [0, 1), got {label_smoothing!r}")
+    if isinstance(relabel_copies, bool) or not isinstance(relabel_copies, (int, np.integer)) or \
+            not 0 <= relabel_copies <= 100:
+        raise ValueError(f"warm_start_relabel_copies must be an integer in [0, 100], got {relabel_copies!r}")
+    if not (np.isfinite(relabel_sd_mm) and 0.0 <= relabel_sd_mm <= 10.0):
+        raise ValueError(f"warm_start_relabel_sd_mm must be in [0, 10] mm, got {relabel_sd_mm!r}")
     teacher = teacher_policy(rule, config, params)
     demos = collect_demonstrations(env, teacher, action_type, n_episodes, gamma)
-    fit = fit_policy(model, env, demos, epochs=epochs, label_smoothing=label_smoothing, seed=seed)
+    data = relabel(demos, teacher, action_type, relabel_copies, relabel_sd_mm, np.random.default_rng(seed))
+    fit = fit_policy(model, env, data, epochs=epochs, label_smoothing=label_smoothing, seed=seed)
     return {"rule": rule, "params": teacher.params, "episodes": demos["episodes"],
-            "teacher_mean_return": demos["mean_episode_return"], **fit}
+            "teacher_mean_return": demos["mean_episode_return"], "relabel_copies": int(relabel_copies), **fit}
+
+
+def agreement(clone, teacher, config: TampingEnvConfig | LineConfig, seeds: Sequence[int]) -> dict[str, Any]:
+    """How often ``clone``'s deterministic actions are ``teacher``'s on the states the teacher visits in the
+    episodes ``seeds`` (held out from the demonstrations), counted on the sections the env lets be tamped (a
+    masked section is dropped whatever is asked). Returns the share of states with the whole action equal
+    (``state``), of sections (``section``), and of the teacher's tampings the clone also asks for
+    (``tamping_recall``), with the counts. MultiBinary actions; both policies with SB3's ``predict``."""
+    from .evaluation import _bound, _vector_env
+
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must not be empty")
+    teacher = _bound(teacher, config)
+    env = _vector_env(len(seeds), config, "multibinary")
+    obs, _ = env.reset(seed=seeds)
+    equal_states = equal_sections = sections = tampings = recalled = 0
+    for _ in range(config.horizon_steps):
+        allowed = np.asarray(env.action_masks()).reshape(len(seeds), -1, 2)[:, :, 1]
+        want = np.asarray(teacher.predict(obs)[0]).astype(bool) & allowed
+        got = np.asarray(clone.predict(obs, deterministic=True)[0]).astype(bool) & allowed
+        equal_states += int((want == got).all(axis=1).sum())
+        equal_sections += int(((want == got) & allowed).sum())
+        sections += int(allowed.sum())
+        tampings += int(want.sum())
+        recalled += int((want & got).sum())
+        obs, *_ = env.step(want.astype(np.int8))
+    states = len(seeds) * config.horizon_steps
+    return {"state": equal_states / states, "section": equal_sections / max(sections, 1),
+            "tamping_recall": recalled / max(tampings, 1), "states": states, "sections": sections,
+            "teacher_tampings": tampings}

@@ -11,7 +11,7 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig, scenario
 
-from .evaluation import EvaluationResult, _bound, evaluate_many
+from .evaluation import _bound, evaluate_many, policy_name
 from .line_heuristics import LINE_HEURISTICS, line_tuned_params
 from .statistics import paired_difference
 from .tuning import tune_many
@@ -43,9 +43,10 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
                     n_train: int = 2, retune: bool = False, batch_size: int = 24, progress: bool = True,
                     out_dir: str = "results/line_compare", extra: dict[str, Any] | None = None,
                     executor: Any = None, **overrides: Any) -> dict[str, Any]:
-    """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) scored on
-    ``seeds`` with 95 % CIs, and the paired difference of each against the best. ``executor``: runs the batches
-    of episodes (e.g. :class:`~trackenv_agents.distributed.RayExecutor`), with the same results as here."""
+    """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
+    ``extra`` policies (by name, e.g. the trained line policy) scored on ``seeds`` with 95 % CIs, and the paired
+    difference of each against the best. ``executor``: runs the batches of episodes (e.g.
+    :class:`~trackenv_agents.distributed.RayExecutor`), with the same results as here."""
     name = scenario_of(env_id)
     cfg = scenario(name, **overrides)
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance"]
@@ -73,7 +74,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     from .reporting import plot_comparison
 
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
-    payload["episode_plot"] = plot_line_episode(best, cfg, seeds[0], str(out / "line_episode.png"), params)
+    by_name = {policy_name(p): p for p in pols}
+    payload["episode_plot"] = plot_line_episode(by_name[best.policy], cfg, seeds[0], str(out / "line_episode.png"))
     return payload
 
 
@@ -91,20 +93,18 @@ def format_line_table(payload: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot_line_episode(result: EvaluationResult, cfg: LineConfig, seed: int, out_png: str,
-                      params: dict[str, dict]) -> str:
-    """One episode of the best policy: true SD of every section over time, tampings marked."""
+def plot_line_episode(policy: Any, cfg: LineConfig, seed: int, out_png: str) -> str:
+    """One episode of ``policy`` (SB3-style ``predict``): true SD of every section over time, tampings marked."""
     from matplotlib.figure import Figure
 
     from trackenv.envs.line import TampingLine
 
-    pol = _bound(LINE_HEURISTICS[result.policy](**params.get(result.policy, {})), cfg) \
-        if result.policy in LINE_HEURISTICS else None
+    pol = _bound(policy, cfg)
     env = TampingLine(cfg)
     obs, info = env.reset(seed=seed)
     sd, tam, meas = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()]
     for _ in range(cfg.horizon_steps):
-        a = pol.predict(obs)[0] if pol is not None else np.zeros(cfg.n_sections, np.int8)
+        a = pol.predict(obs)[0]
         obs, _, _, _, info = env.step(a)
         sd.append(info["section_sd_m"] * 1e3)
         meas.append(obs["section_sd"].copy())
@@ -124,7 +124,7 @@ def plot_line_episode(result: EvaluationResult, cfg: LineConfig, seed: int, out_
     ax.axhline(env.batch.limits.sd_alert_m * 1e3, color="k", ls="--", lw=0.8, label="SD alert")
     ax.set_xlabel("year")
     ax.set_ylabel("SD of D1 level [mm] (solid true, dotted measured; ▼ tamping)")
-    ax.set_title(f"{result.policy} on {cfg.n_sections} sections, seed {seed}")
+    ax.set_title(f"{policy_name(pol)} on {cfg.n_sections} sections, seed {seed}")
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)

@@ -1,4 +1,6 @@
-"""An SB3 ``VecEnv`` over :class:`trackenv.envs.vector.TampingVectorEnv`.
+"""An SB3 ``VecEnv`` over the native vector envs: :class:`trackenv.envs.vector.TampingVectorEnv` (Tamping-v0)
+and :class:`trackenv.envs.line.TampingLineVectorEnv` (TampingLine; chosen by a
+:class:`~trackenv.envs.line_config.LineConfig` or a scenario name as ``config``).
 
 One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this
 adapter only translates conventions:
@@ -19,6 +21,9 @@ adapter only translates conventions:
 * ``keep_per_sleeper=False`` drops the large per-sleeper arrays (``level``, ``contact_force``) from the
   observation, keeping only the per-section summaries and time
   (:class:`trackenv.envs.wrappers.SectionVectorObservation`).
+
+:class:`VecScaleReward` divides the rewards by a fixed scale (the line's learner: values O(1) without running
+statistics, so that a policy does not depend on the line it was trained on).
 """
 
 from __future__ import annotations
@@ -28,9 +33,11 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line import TampingLineVectorEnv
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
@@ -55,14 +62,22 @@ def filter_observation(obs: dict, keys: Sequence[str]) -> dict:
 class TampingSB3VecEnv(VecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
-    ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults); ``action_type`` is
-    "multibinary", "discrete" or "ranked"; ``seed`` (optional) seeds the first reset (env ``i`` gets ``seed + i``).
+    ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults), or a TampingLine
+    :class:`LineConfig` or scenario name ("small", "default", "hard"); ``action_type`` is "multibinary",
+    "discrete" or "ranked" (the line: "multibinary" only); ``seed`` (optional) seeds the first reset (env ``i``
+    gets ``seed + i``).
     """
 
-    def __init__(self, num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *,
+    def __init__(self, num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict | str | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  bootstrap_at_horizon: bool = False, seed: int | None = None) -> None:
-        venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
+        venv: Any
+        if isinstance(config, (LineConfig, str)):
+            if action_type != "multibinary":
+                raise ValueError(f"action_type must be 'multibinary' on TampingLine, got {action_type!r}")
+            venv = TampingLineVectorEnv(num_envs, LineConfig.coerce(config))
+        else:
+            venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
         self.config = venv.config
         if action_type == RANKED:
             venv = RankedVectorActions(venv)
@@ -164,6 +179,29 @@ class TampingSB3VecEnv(VecEnv):
         return [None for _ in range(self.num_envs)]
 
 
+class VecScaleReward(VecEnvWrapper):
+    """Rewards divided by a fixed ``scale`` (> 0) for the learner; :meth:`get_original_reward` gives the last
+    raw ones (as VecNormalize does). A monitor below this wrapper records the raw returns."""
+
+    def __init__(self, venv: VecEnv, scale: float) -> None:
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"reward scale must be finite and > 0, got {scale!r}")
+        super().__init__(venv)
+        self.reward_scale = float(scale)
+        self._raw = np.zeros(self.num_envs)
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self._raw = np.asarray(rewards, dtype=np.float64).copy()
+        return obs, (self._raw / self.reward_scale).astype(np.float32), dones, infos
+
+    def get_original_reward(self) -> np.ndarray:
+        return self._raw.copy()
+
+
 def _unstack_infos(infos: dict, n: int) -> list[dict]:
     """Gymnasium's dict-of-arrays infos as a list of per-env dicts (``_`` masks and final_* dropped)."""
     out: list[dict] = [{} for _ in range(n)]
@@ -183,11 +221,12 @@ def _item(x):
     return x.item() if isinstance(x, np.generic) else x
 
 
-def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | dict | None = None, *, seed: int | None = None,
-                 action_type: str = "multibinary", keep_per_sleeper: bool = True) -> TampingSB3VecEnv:
+def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict | str | None = None, *,
+                 seed: int | None = None, action_type: str = "multibinary",
+                 keep_per_sleeper: bool = True) -> TampingSB3VecEnv:
     """Convenience constructor (same arguments as :class:`TampingSB3VecEnv`)."""
     return TampingSB3VecEnv(num_envs, config, action_type=action_type, keep_per_sleeper=keep_per_sleeper,
                             seed=seed)
 
 
-__all__ = ["TampingSB3VecEnv", "make_vec_env", "observation_keys", "filter_observation"]
+__all__ = ["TampingSB3VecEnv", "VecScaleReward", "make_vec_env", "observation_keys", "filter_observation"]

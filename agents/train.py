@@ -19,6 +19,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,10 +50,28 @@ _TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_times
                "bootstrap_at_horizon")
 
 
-def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
-    """The flat hyper-parameters that :func:`train` reads, from ``path`` (default
-    ``agents/hyperparams/ppo.yml``): a YAML file in RL Zoo's form (its entry for ``env_id``, see
-    :func:`from_zoo`) or a flat JSON object of the same keys. Unknown keys raise ValueError."""
+@dataclass(frozen=True)
+class ZooSchema:
+    """What one trainer reads from an RL Zoo entry: the ``policy`` it builds (and why that one), the
+    ``policy_kwargs`` it honours (flattened into the hyper-parameters), whether it trains under VecNormalize
+    (``normalize``) and every flat key it reads (``keys``; others raise ValueError)."""
+
+    policy: str
+    policy_note: str
+    policy_keys: tuple[str, ...]
+    normalize: bool
+    keys: tuple[str, ...]
+
+
+#: the schema of :func:`train` (Tamping-v0); TampingLine's is ``trackenv_agents.train_line.LINE_ZOO``
+TAMPING_ZOO = ZooSchema("MultiInputPolicy", "the observation is a Dict", ("net_arch",), True, _ALGO_KEYS + _TRAIN_KEYS)
+
+
+def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID,
+                     schema: ZooSchema = TAMPING_ZOO) -> dict[str, Any]:
+    """The flat hyper-parameters that a trainer (:func:`train`, or the line's with its ``schema``) reads, from
+    ``path`` (default ``agents/hyperparams/ppo.yml``): a YAML file in RL Zoo's form (its entry for ``env_id``,
+    see :func:`from_zoo`) or a flat JSON object of the same keys. Unknown keys raise ValueError."""
     path = Path(path) if path is not None else DEFAULT_HYPERPARAMS
     if path.suffix in (".yml", ".yaml"):
         import yaml
@@ -60,34 +79,35 @@ def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_I
         table = yaml.safe_load(path.read_text()) or {}
         if env_id not in table:
             raise ValueError(f"{path} has no entry for env id {env_id!r} (it has {sorted(table)})")
-        hp = from_zoo(table[env_id])
+        hp = from_zoo(table[env_id], schema)
     else:
         hp = json.loads(path.read_text())
-    unknown = set(hp) - set(_ALGO_KEYS) - set(_TRAIN_KEYS)
+    unknown = set(hp) - set(schema.keys)
     if unknown:
         raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
     return hp
 
 
-def from_zoo(entry: dict[str, Any]) -> dict[str, Any]:
+def from_zoo(entry: dict[str, Any], schema: ZooSchema = TAMPING_ZOO) -> dict[str, Any]:
     """One RL Zoo entry as flat hyper-parameters: the algorithm's arguments as they are; Zoo's ``n_timesteps``
-    → ``total_timesteps``, ``policy_kwargs.net_arch`` → ``net_arch``, ``normalize.clip_obs`` → ``clip_obs``,
-    ``n_envs`` as is; the ``trackenv`` block's training options merged in. What train() cannot honour
-    (another policy class, other policy_kwargs, training without normalisation) raises ValueError."""
+    → ``total_timesteps``, ``policy_kwargs`` (those of ``schema.policy_keys``, e.g. ``net_arch``) as they are,
+    ``normalize.clip_obs`` → ``clip_obs``, ``n_envs`` as is; the ``trackenv`` block's training options merged
+    in. What the trainer cannot honour (another policy class, other policy_kwargs, training without
+    normalisation under VecNormalize's schema, with it under the line's) raises ValueError."""
     e = dict(entry)
     hp = dict(e.pop("trackenv", None) or {})
-    policy = e.pop("policy", "MultiInputPolicy")
-    if policy != "MultiInputPolicy":
-        raise ValueError(f"policy must be MultiInputPolicy (the observation is a Dict), got {policy!r}")
+    policy = e.pop("policy", schema.policy)
+    if policy != schema.policy:
+        raise ValueError(f"policy must be {schema.policy} ({schema.policy_note}), got {policy!r}")
     kwargs = dict(e.pop("policy_kwargs", None) or {})
-    if "net_arch" in kwargs:
-        hp["net_arch"] = list(kwargs.pop("net_arch"))
-    if kwargs:
-        raise ValueError(f"unsupported policy_kwargs {sorted(kwargs)} (only net_arch)")
+    unsupported = sorted(set(kwargs) - set(schema.policy_keys))
+    if unsupported:
+        raise ValueError(f"unsupported policy_kwargs {unsupported} (only {', '.join(schema.policy_keys)})")
+    hp.update({k: list(v) if k == "net_arch" else v for k, v in kwargs.items()})
     if "n_timesteps" in e:
         hp["total_timesteps"] = int(e.pop("n_timesteps"))
     norm = e.pop("normalize", None)
-    if norm is not None:
+    if norm is not None and schema.normalize:
         norm = dict(norm) if isinstance(norm, dict) else {"norm_obs": bool(norm), "norm_reward": bool(norm)}
         if not (norm.pop("norm_obs", True) and norm.pop("norm_reward", True)):
             raise ValueError("train() always normalises observations and rewards (VecNormalize)")
@@ -95,8 +115,23 @@ def from_zoo(entry: dict[str, Any]) -> dict[str, Any]:
             hp["clip_obs"] = float(norm.pop("clip_obs"))
         if norm:
             raise ValueError(f"unsupported normalize keys {sorted(norm)}")
+    elif norm is not None and (any(dict(norm).values()) if isinstance(norm, dict) else bool(norm)):
+        raise ValueError(f"normalize must be false for {schema.policy}: it normalises with fixed scales of its own")
     hp.update(e)
     return hp
+
+
+def single_torch_thread() -> None:
+    """One thread for torch, the cores for the physics. Numba's OpenMP threading layer sets the process's
+    OpenMP thread count when it starts (at the first parallel physics call), and torch reads that same count:
+    so numba's threads are started first, then torch's count is set. The other order left torch on 2 threads
+    competing with numba's, and every small torch op ~50x slower after the first env step (measured: a
+    behaviour-cloning fit took 630 s instead of 15 s)."""
+    import numba
+    import torch
+
+    numba.get_num_threads()  # starts numba's threading layer
+    torch.set_num_threads(1)
 
 
 def _algo_class(algo: str):
@@ -161,13 +196,21 @@ class NormalizedPolicy:
 
 
 # --- callbacks ---
-def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_type, obs_keys, algo, verbose,
-                        evaluate_at_start: bool = False, on_evaluation=None):
+def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_policy: Callable, save_policy: Callable,
+                        action_type: str, verbose: int, evaluate_at_start: bool = False, on_evaluation=None,
+                        baseline: Any = None):
+    """The held-out evaluation during training. ``make_policy(model)``: the policy to score, with ``predict``
+    on raw observations; ``save_policy(model, policy, path)`` keeps the best one. ``baseline``: an
+    :class:`~trackenv_agents.evaluation.EvaluationResult` on the same seeds (e.g. the rule the learner was
+    cloned from): each evaluation then records the paired difference of the costs (common random numbers)."""
     from stable_baselines3.common.callbacks import BaseCallback
+
+    from .statistics import paired_difference
 
     class HeldOutEvalCallback(BaseCallback):
         """Every ``eval_freq`` timesteps (and at the end): deterministic returns on held-out seeds with the
-        current VecNormalize statistics; logs ``eval/mean_return``, keeps ``best_model.zip``."""
+        current policy (and, Tamping-v0, its VecNormalize statistics); logs ``eval/mean_return`` (and
+        ``eval/vs_baseline`` with a baseline), keeps ``best_model.zip``."""
 
         def __init__(self):
             super().__init__(verbose)
@@ -177,24 +220,28 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, action_typ
 
         def _evaluate(self) -> None:
             self.last_eval = self.num_timesteps
-            policy = NormalizedPolicy.from_vecnormalize(self.model, self.model.get_vec_normalize_env(),
-                                                        obs_keys, algo=algo, action_type=action_type)
+            policy = make_policy(self.model)
             t0 = time.time()
-            ret = evaluate_one(policy, config, eval_seeds, env_action_type(action_type),
-                               batch_size=len(eval_seeds)).sum_rewards
-            rec = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
-                   "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
+            result = evaluate_one(policy, config, eval_seeds, env_action_type(action_type),
+                                  batch_size=len(eval_seeds))
+            ret = result.sum_rewards
+            rec: dict[str, Any] = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
+                                   "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
+            if baseline is not None:
+                rec["vs_baseline"] = paired_difference(result, baseline)
             self.history.append(rec)
             if on_evaluation is not None:  # e.g. a Ray Tune report (experiments/tune_ppo.py)
                 on_evaluation(rec)
             self.logger.record("eval/mean_return", rec["mean_return"])
             self.logger.record("eval/std_return", rec["std_return"])
+            if baseline is not None:  # < 0: cheaper than the baseline on the same episodes
+                self.logger.record("eval/vs_baseline", rec["vs_baseline"]["mean_difference"])
             if verbose:
                 print(f"[eval] {rec}", flush=True)
             (out_dir / "evaluations.json").write_text(json.dumps(self.history, indent=1))
             if rec["mean_return"] > self.best:
                 self.best = rec["mean_return"]
-                _save_policy(self.model, policy, out_dir / "best_model.zip")
+                save_policy(self.model, policy, out_dir / "best_model.zip")
 
         def _on_training_start(self) -> None:
             if evaluate_at_start:  # the warm-started policy is a candidate like every later one
@@ -247,7 +294,6 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     ``seed`` so that the continued run sees new episodes. The algorithm's own hyper-parameters (learning rate,
     n_steps, ...) are those saved with the model; ``hyperparams`` then only changes train()'s keys.
     """
-    import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -278,7 +324,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     out_dir.mkdir(parents=True, exist_ok=True)
     AlgoClass = _algo_class(algo)
 
-    torch.set_num_threads(1)  # the physics (numba) wants the cores; the small MLP does not
+    single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
     raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
                            bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)))
@@ -318,8 +364,12 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
                                             save_vecnormalize=True))
     eval_cb = None
     if eval_seeds and eval_freq > 0:
-        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, action_type, raw.obs_keys,
-                                      algo, verbose, evaluate_at_start=warm is not None,
+        def make_policy(model) -> NormalizedPolicy:
+            return NormalizedPolicy.from_vecnormalize(model, model.get_vec_normalize_env(), raw.obs_keys,
+                                                      algo=algo, action_type=action_type)
+
+        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, make_policy, _save_policy,
+                                      action_type, verbose, evaluate_at_start=warm is not None,
                                       on_evaluation=on_evaluation)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,

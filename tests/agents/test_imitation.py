@@ -12,7 +12,13 @@ pytest.importorskip("stable_baselines3")
 from trackenv.envs.vector import TampingVectorEnv  # noqa: E402
 from trackenv_agents.evaluation import evaluate_one  # noqa: E402
 from trackenv_agents.heuristics import Periodic  # noqa: E402
-from trackenv_agents.imitation import teacher_policy, teacher_to_agent_actions  # noqa: E402
+from trackenv_agents.imitation import (  # noqa: E402
+    agreement,
+    relabel,
+    teacher_policy,
+    teacher_to_agent_actions,
+    warm_start,
+)
 from trackenv_agents.train import load_trained, train  # noqa: E402
 
 
@@ -68,3 +74,51 @@ def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type, small_
         obs, *_ = venv.step(expected)
     np.testing.assert_allclose(evaluate_one(clone, small_coarse_config, [7, 8]).cost,
                                evaluate_one(teacher, small_coarse_config, [7, 8]).cost)
+
+
+def test_line_teacher_is_the_tuned_line_rule_and_agrees_with_itself():
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.line_heuristics import GroupedThreshold, line_tuned_params
+
+    cfg = scenario("small", horizon_years=1.0, segment_length_m=12.0)
+    teacher = teacher_policy("grouped-threshold", cfg)
+    assert isinstance(teacher, GroupedThreshold) and teacher.capacity == cfg.capacity
+    assert teacher.params == line_tuned_params()["grouped-threshold"]
+    with pytest.raises(ValueError, match="warm_start_rule"):
+        teacher_policy("periodic", cfg)  # a Tamping-v0 rule, not a line rule
+    same = agreement(teacher, teacher, cfg, [5, 6])
+    assert same["state"] == same["section"] == 1.0 and same["states"] == 2 * cfg.horizon_steps
+    never = agreement(teacher_policy("no-maintenance", cfg), teacher, cfg, [5, 6])
+    assert never["state"] <= 1.0 and never["sections"] == same["sections"]
+
+
+def test_relabelled_copies_carry_the_teachers_labels():
+    from trackenv.envs.line import line_observation_space
+    from trackenv.envs.line_config import scenario
+
+    cfg = scenario("small")
+    space = line_observation_space(cfg)
+    space.seed(0)
+    obs = [space.sample() for _ in range(20)]
+    demo_obs = {k: np.stack([o[k] for o in obs]) for k in obs[0]}
+    demo_obs["section_sd"] = demo_obs["section_sd"] / 25.0  # 0-4 mm: around the rule's thresholds
+    teacher = teacher_policy("grouped-threshold", cfg)
+    demos = {"obs": demo_obs, "actions": teacher.predict(demo_obs)[0], "returns": np.arange(20.0), "episodes": 1}
+    assert relabel(demos, teacher, "multibinary", 0, 0.2, np.random.default_rng(0)) is demos
+    out = relabel(demos, teacher, "multibinary", 3, 0.2, np.random.default_rng(0))
+    assert out["actions"].shape == (80, 6) and out["returns"].shape == (80,) and out["episodes"] == 1
+    np.testing.assert_array_equal(out["obs"]["section_sd"][:20], demo_obs["section_sd"])  # the originals stay
+    np.testing.assert_array_equal(out["returns"][20:40], demos["returns"])
+    jitter = out["obs"]["section_sd"][20:] - np.tile(demo_obs["section_sd"], (3, 1))
+    assert 0.1 < jitter.std() < 0.3 and np.all(out["obs"]["section_sd"] >= 0)
+    np.testing.assert_array_equal(out["actions"], teacher.predict(out["obs"])[0])
+    assert not np.array_equal(out["actions"][20:40], demos["actions"])  # some labels moved with the SD
+    np.testing.assert_array_equal(out["obs"]["register"][40:60], demo_obs["register"])
+
+
+@pytest.mark.parametrize("key, value", [("relabel_copies", -1), ("relabel_copies", 1.5), ("relabel_sd_mm", -0.1)])
+def test_warm_start_rejects_bad_relabel_settings(key, value):
+    from trackenv.envs.line_config import scenario
+
+    with pytest.raises(ValueError, match=f"warm_start_{key}"):
+        warm_start(None, None, scenario("small"), "multibinary", "grouped-threshold", **{key: value})

@@ -55,6 +55,36 @@ def test_adapter_reset_step_and_terminal_observation(bootstrap_at_horizon, small
     env.close()
 
 
+def test_adapter_over_the_line_env_and_fixed_reward_scale():
+    """TampingLine through the same adapter: its final infos (an array of per-line dicts) become SB3's, masks
+    are the line's [may-not, may] pairs, and VecScaleReward divides the rewards by a fixed scale."""
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.sb3_vec import VecScaleReward
+
+    cfg = scenario("small", horizon_years=0.5, segment_length_m=12.0)  # 2 steps
+    raw = TampingSB3VecEnv(2, cfg, seed=4)
+    env = VecScaleReward(raw, 10.0)
+    obs = env.reset()
+    assert obs["section_sd"].shape == (2, 6) and obs["time"].shape == (2, 1)
+    assert env.env_method("action_masks")[0].shape == (12,) and env.action_masks().shape == (2, 12)
+    action = np.zeros((2, 6), dtype=np.int8)
+    action[1, :2] = 1
+    obs, rewards, dones, infos = env.step(action)
+    raw_rewards = env.get_original_reward()
+    np.testing.assert_allclose(rewards, raw_rewards / 10.0, rtol=1e-6)
+    assert raw_rewards[1] <= -15.0 and not dones.any()  # a campaign: possession + two sections
+    assert raw.action_masks().reshape(2, 6, 2)[1, :2, 1].tolist() == [False, False]  # just tamped: masked
+    obs, rewards, dones, infos = env.step(np.zeros((2, 6), dtype=np.int8))
+    assert dones.all() and np.all(obs["time"] == 0.0)
+    for info in infos:
+        assert info["terminal_observation"]["time"][0] == pytest.approx(1.0)
+        assert info["TimeLimit.truncated"] is False and "costs" in info
+    with pytest.raises(ValueError, match="multibinary"):
+        TampingSB3VecEnv(2, cfg, action_type="ranked")
+    with pytest.raises(ValueError, match="scale"):
+        VecScaleReward(raw, 0.0)
+
+
 def test_adapter_seeding_and_dropping_per_sleeper_keys(small_config):
     a = TampingSB3VecEnv(2, small_config, seed=7, keep_per_sleeper=False)
     b = TampingSB3VecEnv(2, small_config, keep_per_sleeper=False)
