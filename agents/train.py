@@ -410,12 +410,15 @@ def _set_initial_tamp_logit(model, logit: float, action_type: str) -> None:
             bias.fill_(logit)
 
 
-def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED) -> Path:
-    """Copy a trained ``model.zip`` and its observation statistics to ``dest`` (default the shipped path)."""
+def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED,
+                  sidecar: Callable[[str | Path], Path] | None = None) -> Path:
+    """Copy a trained ``model.zip`` and the file beside it that it needs (``sidecar(path)``; default its
+    observation statistics, :func:`stats_path`) to ``dest`` (default the shipped path)."""
+    side = sidecar or stats_path
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(model_zip, dest)
-    shutil.copyfile(stats_path(model_zip), stats_path(dest))
+    shutil.copyfile(side(model_zip), side(dest))
     return dest
 
 

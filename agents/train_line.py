@@ -40,6 +40,7 @@ from .train import (
     _algo_class,
     _make_eval_callback,
     _set_initial_tamp_logit,
+    export_policy,
     load_hyperparams,
     single_torch_thread,
 )
@@ -194,13 +195,7 @@ def train_line(config: LineConfig | dict | str | None = None, algo: str | None =
 
 def export_line_policy(model_zip: str | Path, dest: str | Path = DEFAULT_LINE_PRETRAINED) -> Path:
     """Copy a saved line policy and its JSON to ``dest`` (default the shipped path)."""
-    import shutil
-
-    dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(model_zip, dest)
-    shutil.copyfile(line_meta_path(model_zip), line_meta_path(dest))
-    return dest
+    return export_policy(model_zip, dest, sidecar=line_meta_path)
 
 
 def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> LineAgent:
