@@ -220,3 +220,18 @@ def test_config_validation_and_scenarios():
         env = TampingLine(scenario="small", **SHORT)
         env.reset(seed=0)
         env.step(np.ones(5, int))
+
+
+def test_episode_end_and_reset_arguments_are_enforced():
+    env = TampingLine(scenario="small", horizon_years=0.25)  # one step
+    env.reset(seed=3)
+    _, _, _, truncated, _ = env.step(np.zeros(6, dtype=np.int8))
+    assert truncated
+    with pytest.raises(RuntimeError, match="horizon"):
+        env.step(np.zeros(6, dtype=np.int8))
+    with pytest.raises(ValueError, match="unknown reset option"):
+        env.reset(seed=3, options={"level": 1})
+    with pytest.raises(ValueError, match="seed"):
+        env.reset(seed=-1)
+    env.reset(seed=3)  # a valid reset starts a new episode
+    env.step(np.zeros(6, dtype=np.int8))

@@ -18,7 +18,7 @@ from gymnasium.vector import AutoresetMode
 from .batched import BatchedVectorEnv
 from .line_config import LineConfig
 from .line_episode import COST_KEYS, LineBatch
-from .tamping import decode_action
+from .tamping import check_reset_arguments, decode_action
 
 __all__ = ["TampingLine", "TampingLineVectorEnv", "line_observation_space"]
 
@@ -184,7 +184,9 @@ class TampingLine(gym.Env):
     ``immediate_action`` (per section-step at the immediate-action limit). Defaults and sources:
     :class:`~trackenv.envs.line_config.LineConfig`.
 
-    **Episode end.** No terminal state; truncation at the horizon (default 10 years = 40 steps).
+    **Episode end.** No terminal state; truncation at the horizon (default 10 years = 40 steps), enforced:
+    ``step`` after the horizon raises RuntimeError until ``reset``; ``reset`` refuses a seed that is not a
+    non-negative integer and any ``options`` key (it takes none), as ``Tamping-v0`` does.
 
     **Vector env.** ``gym.make_vec(id, num_envs=n, vectorization_mode="vector_entry_point")`` builds
     :class:`TampingLineVectorEnv` (every segment of every line in one batched pass per vehicle type), with the
@@ -226,7 +228,7 @@ class TampingLine(gym.Env):
         return self._vec.batch
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=check_reset_arguments(seed, options))
         vec = self._vec
         vec._rngs = [self.np_random]  # a line of its own, drawn from this env's generator (reset() continues it)
         vec.batch = LineBatch(self.config, 1)
@@ -238,6 +240,11 @@ class TampingLine(gym.Env):
         vec = self._vec
         if vec.batch is None:
             raise RuntimeError("call reset() before step()")
+        if vec.batch.step[0] >= self.config.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({self.config.horizon_steps} steps, "
+                f"{self.config.horizon_years:g} years): call reset() before step()"
+            )
         want = decode_action(action, "multibinary", self.config.n_sections)[None, :]
         rewards, truncated, infos = vec._step_lines(want, [0])
         self._last_info = infos[0]
