@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TrueStateRule", "hindsight_bound", "section_costs"]
+__all__ = ["TrueStateRule", "hindsight_bound", "replay", "section_costs"]
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ def section_costs(config: Any, seed: int, policies: list) -> tuple[np.ndarray, n
             else:
                 want[m] = p[t]
         want &= bt.allowed()
-        renew = (bt.count >= bt.tm.max_tampings_before_renewal).reshape(M, S) & want
+        renew = bt.renewing().reshape(M, S) & want
         cost += want * config.section_tamping_cost + renew * config.section_renewal_cost
         bt.apply(want)
         bt.traffic()
@@ -78,6 +78,24 @@ def section_costs(config: Any, seed: int, policies: list) -> tuple[np.ndarray, n
         sched[:, t] = want
         restricted[:, t] = (classify(bt.peak, bt.limits) >= 2).reshape(M, S)
     return cost, sched, restricted
+
+
+def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
+    """Run episode ``seed`` of ``config`` in the env under ``policy``: an (H, S) bool schedule, or a policy with
+    SB3's ``predict`` bound to ``config``. Returns the schedule the env applied (H, S) and the episode's cost
+    (−Σ rewards, k€)."""
+    from trackenv.envs.line import TampingLine
+
+    env = TampingLine(config)
+    obs, _ = env.reset(seed=seed)
+    plan = np.zeros((config.horizon_steps, config.n_sections), dtype=bool)
+    cost = 0.0
+    for t in range(config.horizon_steps):
+        action = policy[t].astype(np.int8) if isinstance(policy, np.ndarray) else policy.predict(obs)[0]
+        obs, r, _, _, info = env.step(action)
+        plan[t] = info["tamped_sections"]
+        cost -= r
+    return plan, cost
 
 
 def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
@@ -151,8 +169,6 @@ def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: i
     """The hindsight search of the module docstring on episode ``seed``, from ``base_schedule`` ((H, S) bool,
     a feasible schedule, e.g. the best rule's). Returns {"cost", "replayed_cost", "schedule", "search" (the
     best total after each stage), "start_cost" (the base schedule's total)}."""
-    from trackenv.envs.line import TampingLine
-
     S, H = config.n_sections, config.horizon_steps
     rules = [TrueStateRule(s, p, k) for s in (*sd_thresholds_mm, np.inf) for p in peak_fractions for k in stop_steps
              if not (s == np.inf and p == np.inf)]
@@ -182,10 +198,5 @@ def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: i
         choice, best = _descend(options, np.zeros(S, dtype=int), config)
         record.append(best)
     plan = np.stack([options[j][choice[j]][0] for j in range(S)], axis=1)
-    env = TampingLine(config)
-    env.reset(seed=seed)
-    replay = 0.0
-    for t in range(H):
-        _, r, _, _, _ = env.step(plan[t].astype(np.int8))
-        replay -= r
-    return {"cost": best, "replayed_cost": replay, "schedule": plan, "search": record, "start_cost": start}
+    return {"cost": best, "replayed_cost": replay(config, seed, plan)[1], "schedule": plan, "search": record,
+            "start_cost": start}

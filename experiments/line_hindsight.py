@@ -8,13 +8,10 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
-from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import _bound
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, line_tuned_params
-from trackenv_agents.line_hindsight import hindsight_bound
+from trackenv_agents.line_hindsight import hindsight_bound, replay
 
 
 def main(argv=None) -> list:
@@ -31,16 +28,7 @@ def main(argv=None) -> list:
     t0, out = time.time(), []
 
     def rollout(name, seed):
-        pol = _bound(LINE_HEURISTICS[name](**line_tuned_params().get(name, {})), cfg)
-        env = TampingLine(cfg)
-        obs, _ = env.reset(seed=seed)
-        plan = np.zeros((cfg.horizon_steps, cfg.n_sections), dtype=bool)
-        cost = 0.0
-        for t in range(cfg.horizon_steps):
-            obs, r, _, _, info = env.step(pol.predict(obs)[0])
-            plan[t] = info["tamped_sections"]
-            cost -= r
-        return plan, cost
+        return replay(cfg, seed, _bound(LINE_HEURISTICS[name](**line_tuned_params().get(name, {})), cfg))
 
     for seed in args.seeds:
         plan, rule_cost = rollout(args.rule, seed)

@@ -21,7 +21,7 @@ import numpy as np
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import evaluate_many
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
-from trackenv_agents.line_hindsight import hindsight_bound
+from trackenv_agents.line_hindsight import hindsight_bound, replay
 from trackenv_agents.statistics import bootstrap_ci, paired_difference
 from trackenv_agents.tuning import tune_many
 
@@ -75,19 +75,12 @@ def main(argv=None) -> dict:
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1, default=float))
     # hindsight on the first episodes, from the best rule's own schedule
-    from trackenv.envs.line import TampingLine
     from trackenv_agents.evaluation import _bound
 
     hs = []
     pol = _bound(LINE_HEURISTICS[best_rule.policy](**best[best_rule.policy]), cfg)
     for seed in test[: args.n_hindsight]:
-        env = TampingLine(cfg)
-        obs, _ = env.reset(seed=seed)
-        plan = np.zeros((cfg.horizon_steps, cfg.n_sections), dtype=bool)
-        for t in range(cfg.horizon_steps):
-            a, _ = pol.predict(obs)
-            obs, _, _, _, info = env.step(a)
-            plan[t] = info["tamped_sections"]
+        plan, _ = replay(cfg, seed, pol)
         h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds))
         rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
         hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],

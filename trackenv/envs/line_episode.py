@@ -274,11 +274,15 @@ class LineBatch:
         ok = (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
         return ok.reshape(self.n_lines, self.S)
 
+    def renewing(self) -> np.ndarray:
+        """(segments,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
+        has had ``max_tampings_before_renewal`` tampings and the model renews)."""
+        return (self.count >= self.tm.max_tampings_before_renewal) & bool(self.tm.renewal_resets)
+
     def campaign_cost(self, want: np.ndarray) -> np.ndarray:
         """(n_lines,) tamping + possession + renewal cost of tamping ``want`` (n_lines, S)."""
         c = self.config
-        renew = (self.count >= self.tm.max_tampings_before_renewal).reshape(self.n_lines, self.S) & bool(
-            self.tm.renewal_resets)
+        renew = self.renewing().reshape(self.n_lines, self.S)
         k = want.sum(axis=1)
         return (k > 0) * c.possession_cost + c.section_tamping_cost * k + c.section_renewal_cost * (want & renew).sum(1)
 
@@ -317,7 +321,7 @@ class LineBatch:
         campaign per line (possession, tamping, renewal)."""
         c = self.config
         t = tamped.ravel()
-        renew = t & (self.count >= self.tm.max_tampings_before_renewal) & bool(self.tm.renewal_resets)
+        renew = t & self.renewing()
         parts = np.stack([
             (tamped.sum(1) > 0) * c.possession_cost,
             c.section_tamping_cost * tamped.sum(1),
