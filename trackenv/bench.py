@@ -327,6 +327,25 @@ def _ms(t: dict) -> str:
     return f"{t['median_s'] * 1e3:.1f} ms (min {t['min_s'] * 1e3:.1f})"
 
 
+def _in_passes(t: dict) -> str:
+    share = t.get("pass_share")
+    return "" if share is None else f", {100 * share:.0f} % in the passes"
+
+
+def _env_row(env_id: str, e: dict) -> tuple[str, str, str]:
+    if e["status"] != "ok":
+        return (f"env {env_id}", "unavailable", e["reason"][:80])
+    return (f"env {env_id} (random actions)", f"{e['steps_per_s']:.1f} steps/s",
+            f"{e['steps']} steps, {e['episodes_ended']} episodes ended" + _in_passes(e) + _load(e))
+
+
+def _vector_row(label: str, v: dict) -> tuple[str, str, str]:
+    if v["status"] != "ok":
+        return (label, "unavailable", v["reason"][:80])
+    return (label, f"{v['env_steps_per_s']:.1f} env steps/s", f"{v['vector_steps']} vector steps" + _in_passes(v)
+            + _load(v))
+
+
 def format_benchmarks(d: dict) -> str:
     """The figures of :func:`run_benchmarks` as a small human-readable table (median wall times, with the
     fastest repeat, which is less sensitive to other work on the machine)."""
@@ -356,31 +375,13 @@ def format_benchmarks(d: dict) -> str:
     p = d["paper_b"]
     rows.append((f"paper scenario B ({p['iterations']} iterations)", _ms(p),
                  f"{p['per_iteration_s'] * 1e3:.0f} ms per iteration"))
-    e = d["env"]
-    if e["status"] == "ok":
-        rows.append(("env trackenv/Tamping-v0 (random actions)", f"{e['steps_per_s']:.1f} steps/s",
-                     f"{e['steps']} steps, {e['episodes_ended']} episodes ended" + _load(e)))
-    else:
-        rows.append(("env trackenv/Tamping-v0", "unavailable", e["reason"][:80]))
-    for n, v in d.get("vector_env", {}).items():
-        if v["status"] == "ok":
-            rows.append((f"native vector env, {n} envs", f"{v['env_steps_per_s']:.1f} env steps/s",
-                         f"{v['vector_steps']} vector steps" + _load(v)))
-        else:
-            rows.append((f"native vector env, {n} envs", "unavailable", v["reason"][:80]))
-    le = d.get("line_env")
-    if le is not None and le["status"] == "ok":
-        rows.append(("env trackenv/TampingLine-v0 (random actions)", f"{le['steps_per_s']:.1f} steps/s",
-                     f"{le['steps']} steps, {100 * le.get('pass_share', float('nan')):.0f} % in the passes"
-                     + _load(le)))
-    elif le is not None:
-        rows.append(("env trackenv/TampingLine-v0", "unavailable", le["reason"][:80]))
-    for n, v in d.get("line_vector_env", {}).items():
-        if v["status"] == "ok":
-            rows.append((f"native line vector env, {n} lines", f"{v['env_steps_per_s']:.1f} env steps/s",
-                         f"{v['vector_steps']} vector steps, {100 * v['pass_share']:.0f} % in the passes" + _load(v)))
-        else:
-            rows.append((f"native line vector env, {n} lines", "unavailable", v["reason"][:80]))
+    envs = (("trackenv/Tamping-v0", d["env"], d.get("vector_env", {}), "native vector env, {} envs"),
+            ("trackenv/TampingLine-v0", d.get("line_env"), d.get("line_vector_env", {}),
+             "native line vector env, {} lines"))
+    for env_id, e, vectors, vector_label in envs:
+        if e is not None:
+            rows.append(_env_row(env_id, e))
+        rows += [_vector_row(vector_label.format(n), v) for n, v in vectors.items()]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]
