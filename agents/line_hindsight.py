@@ -14,7 +14,11 @@ The search (:func:`hindsight_bound`):
    reaches a threshold, or its true D1 mean-to-peak a fraction of the intervention limit (a guard against speed
    restrictions), and not in the last ``stop_steps`` steps (the horizon truncates the episode, so a tamping
    whose benefit falls after it is wasted); plus the given rule's own schedule and no tamping. All are replayed in
-   one batch; coordinate descent picks one per section.
+   one batch; coordinate descent picks one per section. Optionally (``extra_schedules``) the schedules the
+   tuned rules apply when the same episode is *recorded more often or without error*
+   (:func:`recorded_rule_schedules`): a planner who knows the true state can act as any rule that measured it.
+   The recording design changes nothing the physics or the costs see, so such a schedule is feasible on the
+   episode and priced exactly like any other.
 2. **Local search**, ``rounds`` times: each section's incumbent schedule varied one tamping at a time (the k-th
    tamping moved by ±1 or ±2 steps or dropped; a tamping added one or two steps before the section's first
    speed restriction); the distinct variants of all sections packed
@@ -32,7 +36,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TrueStateRule", "hindsight_bound", "replay", "section_costs"]
+__all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "recorded_rule_schedules", "replay",
+           "section_costs"]
+
+#: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
+#: step without error, and twice and once a year with the config's errors.
+RECORDING_DESIGNS: tuple[dict[str, Any], ...] = (
+    {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0},
+    {"measurement_interval": 2},
+    {"measurement_interval": 4},
+)
+_RECORDING_FIELDS = frozenset({"measurement_interval", "sd_noise_mm", "peak_noise_mm"})
 
 
 @dataclass(frozen=True)
@@ -96,6 +110,31 @@ def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
         plan[t] = info["tamped_sections"]
         cost -= r
     return plan, cost
+
+
+def recorded_rule_schedules(config: Any, seed: int, policies: list,
+                            designs: tuple[dict[str, Any], ...] = RECORDING_DESIGNS) -> list[np.ndarray]:
+    """The (H, S) schedules that ``policies`` (SB3 ``predict``; line heuristics are bound to each config) apply
+    on episode ``seed`` of ``config`` recorded as each of ``designs`` (changes of ``measurement_interval``,
+    ``sd_noise_mm``, ``peak_noise_mm`` only: what the planner sees, never the physics or the costs; the
+    measurement errors are drawn as standard normals at reset whatever their size, so every design sees the same
+    episode). One batched run per design; designs equal to ``config``'s own recording are skipped."""
+    from .evaluation import _bound, _run_chunk, _vector_env
+
+    out = []
+    for design in designs:
+        unknown = set(design) - _RECORDING_FIELDS
+        if unknown:
+            raise ValueError(f"designs may change only {sorted(_RECORDING_FIELDS)}, got {sorted(unknown)}")
+        cfg = config.replace(**design)
+        if cfg == config:
+            continue
+        env = _vector_env(len(policies), cfg, "multibinary")
+        bound = [_bound(p, cfg) for p in policies]
+        run = _run_chunk(env, [(i, seed) for i in range(len(policies))], bound, "multibinary", record=True)
+        tamped = np.stack(run["traces"]["tamped"], axis=1).astype(bool)  # (P, H, S)
+        out.extend(tamped)
+    return out
 
 
 def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:

@@ -3,7 +3,8 @@
 1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
 2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
 3. For ``--n-hindsight`` of those episodes, the per-section hindsight search from the best rule's schedule
-   (:func:`trackenv_agents.line_hindsight.hindsight_bound`).
+   (:func:`trackenv_agents.line_hindsight.hindsight_bound`), with every tuned rule's schedule under the other
+   recording designs as candidates (:func:`trackenv_agents.line_hindsight.recorded_rule_schedules`).
 
 Writes results/line_room.json (and the tuned parameters to agents/line_tuned_heuristics.json with
 ``--save-tuned``); progress goes to stdout (run it with a log file in the background).
@@ -21,7 +22,7 @@ import numpy as np
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import evaluate_many
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
-from trackenv_agents.line_hindsight import hindsight_bound, replay
+from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
 from trackenv_agents.statistics import bootstrap_ci, paired_difference
 from trackenv_agents.tuning import tune_many
 
@@ -37,6 +38,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--rounds", type=int, default=3, help="local-search rounds of the hindsight search")
     ap.add_argument("--thresholds", type=float, nargs="+", default=[2.0, 3.0],
                     help="true-SD thresholds [mm] of the hindsight search's closed-loop candidates")
+    ap.add_argument("--no-recorded", action="store_true",
+                    help="leave out the rules' schedules under other recording designs as hindsight candidates")
     ap.add_argument("--save-tuned", action="store_true")
     ap.add_argument("--use-saved", action="store_true", help="skip tuning: the saved tuned parameters")
     ap.add_argument("--out", default="results/line_room.json")
@@ -81,10 +84,13 @@ def main(argv=None) -> dict:
     pol = _bound(LINE_HEURISTICS[best_rule.policy](**best[best_rule.policy]), cfg)
     for seed in test[: args.n_hindsight]:
         plan, _ = replay(cfg, seed, pol)
-        h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds))
+        extra = () if args.no_recorded else tuple(recorded_rule_schedules(cfg, seed, pols))
+        h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds),
+                            extra_schedules=extra)
         rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
         hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
-                   "search": h["search"]})
+                   "search": h["search"],
+                   "schedule": ["".join("1" if x else "0" for x in row) for row in h["schedule"]]})
         print("hindsight", json.dumps(hs[-1]), f"{time.time() - t0:.0f}s", flush=True)
         gap = np.array([(x["rule"] - x["hindsight"]) / x["rule"] for x in hs])
         diff = np.array([x["hindsight"] - x["rule"] for x in hs])

@@ -31,3 +31,16 @@ def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs(small
     rule = Periodic(interval_years=0.75, sections="all").bind(small_coarse_config)
     np.testing.assert_allclose(costs[0], evaluate_one(rule, small_coarse_config, [11]).cost[0])
     assert costs[1] != costs[0]
+
+
+def test_room_summary_takes_each_episodes_cheapest_search_and_never_more_than_the_rule():
+    summ = _script("line_room_summary")
+    room = {"test_seeds": [0, 1, 2], "best_rule": "r", "episode_costs": {"r": [100.0, 200.0, 50.0]},
+            "hindsight": {"episodes": [{"seed": 0, "hindsight": 90.0}]}}
+    searches = summ._searches(room) + [{"seed": 0, "hindsight": 80.0}, {"seed": 1, "hindsight": 210.0},
+                                       {"seed": 7, "hindsight": 1.0}]  # seed 7 is not a room episode
+    out = summ.summarise(room, searches)
+    assert out["seeds"] == [0, 1] and out["n_episodes"] == 2
+    np.testing.assert_allclose(out["per_episode_relative"], [-0.2, 0.0])
+    np.testing.assert_allclose(out["relative"], -10.0 / 150.0)
+    assert out["ci_low"] <= out["mean_difference"] <= out["ci_high"]

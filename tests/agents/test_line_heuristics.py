@@ -10,9 +10,10 @@ from trackenv_agents.line_compare import parse_seeds, scenario_of
 from trackenv_agents.line_heuristics import (
     LINE_HEURISTICS,
     RegisterPeriodic,
+    SectionThreshold,
     UniformPeriodic,
 )
-from trackenv_agents.line_hindsight import _variants, hindsight_bound
+from trackenv_agents.line_hindsight import _variants, hindsight_bound, recorded_rule_schedules, replay
 
 CFG = scenario("small", horizon_years=1.0)
 
@@ -84,6 +85,33 @@ def test_hindsight_search_is_exact_and_no_worse_than_its_start():
     assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9)  # ... and of the result
     assert h["cost"] <= start + 1e-9 and h["search"] == sorted(h["search"], reverse=True)
     assert (h["schedule"].sum(axis=1) <= cfg.capacity).all()
+
+
+def test_recorded_rule_schedules_are_the_rules_own_under_another_recording_and_candidates():
+    cfg = scenario("small", horizon_years=1.5, measurement_interval=4)
+    exact = {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0}
+    rule = SectionThreshold(threshold_mm=1.0)
+    (sched,) = recorded_rule_schedules(cfg, 3, [rule], designs=(exact, {"measurement_interval": 4}))
+    own, _ = replay(cfg.replace(**exact), 3, _bound(rule, cfg.replace(**exact)))
+    assert sched.shape == (cfg.horizon_steps, 6) and sched.any() and np.array_equal(sched, own)  # cfg's design skipped
+    _, sched_cost = replay(cfg, 3, sched.astype(bool))  # the same schedule is feasible on the episode as cfg records it
+    h = hindsight_bound(cfg, 3, np.zeros_like(sched, bool), rounds=0, sd_thresholds_mm=(), peak_fractions=(np.inf,),
+                        stop_steps=(0,), extra_schedules=(sched,))
+    assert h["cost"] <= sched_cost + 1e-9
+    with pytest.raises(ValueError, match="designs may change only"):
+        recorded_rule_schedules(cfg, 3, [rule], designs=({"possession_cost": 1.0},))
+
+
+def test_a_schedules_cost_does_not_depend_on_the_recording_design():
+    # why a hindsight schedule found under one recording design bounds every other: the costs see the true state
+    cfg = scenario("small", horizon_years=1.5)
+    plan = np.zeros((cfg.horizon_steps, 6), bool)
+    plan[[1, 3], :3] = True
+    plan[4, 3:] = True
+    costs = {replay(cfg.replace(**d), 5, plan)[1]
+             for d in ({}, {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0},
+                       {"measurement_interval": 2}, {"measurement_interval": 3, "sd_noise_mm": 0.5})}
+    assert len(costs) == 1
 
 
 def test_hindsight_variants_move_drop_and_add_one_tamping():
