@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "recorded_rule_schedules", "replay",
-           "section_costs"]
+           "room_summary", "schedule_rows", "section_costs"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -239,3 +239,35 @@ def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: i
     plan = np.stack([options[j][choice[j]][0] for j in range(S)], axis=1)
     return {"cost": best, "replayed_cost": replay(config, seed, plan)[1], "schedule": plan, "search": record,
             "start_cost": start}
+
+
+def schedule_rows(plan: np.ndarray) -> list[str]:
+    """An (H, S) bool schedule as H strings of S '0'/'1' (JSON for the results files; a later search can start
+    from it)."""
+    return ["".join("1" if x else "0" for x in row) for row in np.asarray(plan, dtype=bool)]
+
+
+def room_summary(rule_costs: dict[int, float], searches: list[dict]) -> dict:
+    """Room to learn from hindsight searches: per episode of ``rule_costs`` (seed -> the best rule's cost) that
+    any of ``searches`` ({"seed", "hindsight"} each) covers, the cheapest cost found (never above the rule's: its
+    own schedule is always a candidate); the mean difference with its paired bootstrap CI, absolute and
+    relative to the rule's mean."""
+    from .statistics import bootstrap_ci
+
+    best: dict[int, float] = {}
+    for s in searches:
+        seed = int(s["seed"])
+        if seed in rule_costs:
+            best[seed] = min(best.get(seed, np.inf), float(s["hindsight"]))
+    if not best:
+        raise ValueError("no search covers an episode of the rule's costs")
+    seeds = sorted(best)
+    r = np.array([rule_costs[s] for s in seeds], dtype=float)
+    h = np.minimum([best[s] for s in seeds], r)
+    diff = h - r
+    lo, hi = bootstrap_ci(diff)
+    mean_rule = float(r.mean())
+    return {"n_episodes": len(seeds), "seeds": seeds, "rule_mean": mean_rule, "hindsight_mean": float(h.mean()),
+            "mean_difference": float(diff.mean()), "ci_low": lo, "ci_high": hi,
+            "relative": float(diff.mean()) / mean_rule, "relative_ci": [lo / mean_rule, hi / mean_rule],
+            "per_episode_relative": [float(v) for v in diff / r]}

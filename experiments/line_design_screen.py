@@ -25,7 +25,7 @@ import numpy as np
 
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import _bound
-from trackenv_agents.line_heuristics import GroupedThreshold, SectionThreshold, UniformPeriodic
+from trackenv_agents.line_heuristics import LINE_HEURISTICS, GroupedThreshold, SectionThreshold, UniformPeriodic
 from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
 from trackenv_agents.tuning import tune_many
 
@@ -62,13 +62,11 @@ def main(argv=None) -> dict:
                                                              for n, t in best.items()},
            "aware_vs_uniform": 1.0 - aware["best_mean_cost"] / uniform["best_mean_cost"], "episodes": []}
     print(f"aware vs uniform: -{100 * out['aware_vs_uniform']:.1f} %  ({time.time() - t0:.0f} s)", flush=True)
-    from trackenv_agents.line_heuristics import LINE_HEURISTICS
-
     pol = _bound(LINE_HEURISTICS[aware["policy"]](**aware["best_params"]), cfg)
+    rules = [cls(**best[cls.name]["best_params"]) for cls in classes]
     rule_costs = aware["table"][0]["episode_costs"]
     for seed, rule_cost in zip(seeds, rule_costs, strict=True):
         plan, _ = replay(cfg, seed, pol)
-        rules = [cls(**best[cls.name]["best_params"]) for cls in classes]
         extra = () if args.no_recorded else tuple(recorded_rule_schedules(cfg, seed, rules))
         h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=(2.0, 3.0), extra_schedules=extra)
         out["episodes"].append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "search": h["search"]})

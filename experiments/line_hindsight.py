@@ -13,7 +13,7 @@ from pathlib import Path
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import _bound
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, line_tuned_params
-from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
+from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay, schedule_rows
 
 
 def main(argv=None) -> list:
@@ -30,21 +30,23 @@ def main(argv=None) -> list:
     cfg = scenario(args.scenario)
     t0, out = time.time(), []
 
+    params = line_tuned_params()
+    tuned = [LINE_HEURISTICS[n](**p) for n, p in params.items()]
+
     def rollout(name, seed):
-        return replay(cfg, seed, _bound(LINE_HEURISTICS[name](**line_tuned_params().get(name, {})), cfg))
+        return replay(cfg, seed, _bound(LINE_HEURISTICS[name](**params.get(name, {})), cfg))
 
     for seed in args.seeds:
         plan, rule_cost = rollout(args.rule, seed)
         extra = tuple(rollout(n, seed)[0] for n in args.extra_rules)
         if not args.no_recorded:
-            tuned = [LINE_HEURISTICS[n](**p) for n, p in line_tuned_params().items()]
             extra += tuple(recorded_rule_schedules(cfg, seed, tuned))
         h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds),
                             extra_schedules=extra)
         out.append({"seed": seed, "rule": args.rule, "rule_cost": rule_cost, "hindsight": h["cost"],
                     "replayed": h["replayed_cost"], "search": h["search"],
                     "tampings_rule": int(plan.sum()), "tampings_hindsight": int(h["schedule"].sum()),
-                    "schedule": ["".join("1" if x else "0" for x in row) for row in h["schedule"]]})
+                    "schedule": schedule_rows(h["schedule"])})
         print(json.dumps(out[-1]), f"{time.time() - t0:.0f}s", flush=True)
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(out, indent=1))

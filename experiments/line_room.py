@@ -17,13 +17,17 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import evaluate_many
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
-from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
-from trackenv_agents.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.line_hindsight import (
+    hindsight_bound,
+    recorded_rule_schedules,
+    replay,
+    room_summary,
+    schedule_rows,
+)
+from trackenv_agents.statistics import paired_difference
 from trackenv_agents.tuning import tune_many
 
 
@@ -89,16 +93,10 @@ def main(argv=None) -> dict:
                             extra_schedules=extra)
         rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
         hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
-                   "search": h["search"],
-                   "schedule": ["".join("1" if x else "0" for x in row) for row in h["schedule"]]})
+                   "search": h["search"], "schedule": schedule_rows(h["schedule"])})
         print("hindsight", json.dumps(hs[-1]), f"{time.time() - t0:.0f}s", flush=True)
-        gap = np.array([(x["rule"] - x["hindsight"]) / x["rule"] for x in hs])
-        diff = np.array([x["hindsight"] - x["rule"] for x in hs])
-        lo, hi = bootstrap_ci(diff)
-        out["hindsight"] = {"episodes": hs, "best_rule": best_rule.policy, "mean_relative_gap": float(gap.mean()),
-                            "mean_difference": float(diff.mean()), "ci_low": lo, "ci_high": hi,
-                            "relative_ci": [lo / float(np.mean([x["rule"] for x in hs])),
-                                            hi / float(np.mean([x["rule"] for x in hs]))]}
+        rule_costs = {x["seed"]: x["rule"] for x in hs}
+        out["hindsight"] = {"episodes": hs, "best_rule": best_rule.policy, **room_summary(rule_costs, hs)}
         Path(args.out).write_text(json.dumps(out, indent=1, default=float))
     print("done", f"{time.time() - t0:.0f}s", flush=True)
     return out

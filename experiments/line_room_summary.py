@@ -16,9 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from trackenv_agents.statistics import bootstrap_ci
+from trackenv_agents.line_hindsight import room_summary
 
 
 def _searches(payload) -> list[dict]:
@@ -28,27 +26,10 @@ def _searches(payload) -> list[dict]:
 
 
 def summarise(room: dict, searches: list[dict]) -> dict:
-    """Per episode of ``room`` (a ``line_room.py`` result) that any of ``searches`` covers: the best rule's cost,
-    the cheapest hindsight cost found; the mean difference with its bootstrap CI, absolute and relative."""
+    """:func:`~trackenv_agents.line_hindsight.room_summary` of ``searches`` against the best rule of ``room`` (a
+    ``line_room.py`` result)."""
     rule = dict(zip(room["test_seeds"], room["episode_costs"][room["best_rule"]], strict=True))
-    best: dict[int, float] = {}
-    for s in searches:
-        seed = int(s["seed"])
-        if seed in rule:
-            best[seed] = min(best.get(seed, np.inf), float(s["hindsight"]))
-    if not best:
-        raise ValueError("no search covers an episode of the room result")
-    seeds = sorted(best)
-    r = np.array([rule[s] for s in seeds])
-    h = np.array([min(best[s], rule[s]) for s in seeds])  # the rule's own schedule is always a candidate
-    diff = h - r
-    lo, hi = bootstrap_ci(diff)
-    mean_rule = float(r.mean())
-    return {"best_rule": room["best_rule"], "n_episodes": len(seeds), "seeds": seeds,
-            "rule_mean": mean_rule, "hindsight_mean": float(h.mean()), "mean_difference": float(diff.mean()),
-            "ci_low": lo, "ci_high": hi, "relative": float(diff.mean()) / mean_rule,
-            "relative_ci": [lo / mean_rule, hi / mean_rule],
-            "per_episode_relative": [float(v) for v in diff / r]}
+    return {"best_rule": room["best_rule"], **room_summary(rule, searches)}
 
 
 def main(argv=None) -> dict:
