@@ -422,13 +422,17 @@ def test_multi_car_train_runs():
 
 def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
     """The kernel runs the rows of a batch in lockstep, cut into chunks over the threads: a row's result is
-    bit-identical whatever batch it runs in, however the batch is cut and on however many threads."""
+    bit-identical whatever batch it runs in, however the batch is cut and on however many threads. The rows'
+    ballast and sleeper masses differ (the rail's mass band is shared by the rows, the mass diagonal is not)."""
     import numba
 
     t = Track.seed()
     rng = np.random.default_rng(7)
     rows = 5e-4 * rng.standard_normal((17, t.n_sleepers))
-    tracks = [t.scaled(ballast_stiffness=f) for f in rng.uniform(0.5, 2.0, 17)]
+    tracks = [
+        t.scaled(ballast_stiffness=f, sleeper_mass=g, from_sleeper=int(k))
+        for f, g, k in zip(rng.uniform(0.5, 2.0, 17), rng.uniform(0.7, 1.5, 17), rng.integers(0, 20, 17))
+    ]
     kw = dict(x_start=6.0, x_end=12.0, support_settlement=np.abs(rows), start="rest")
     threads = numba.get_num_threads()
     try:
@@ -448,3 +452,18 @@ def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
         for other in others:
             for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
                 np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
+
+
+def test_sleeper_mass_of_a_row_enters_its_pass():
+    """The mass diagonal is per row: heavier sleepers in one row of a batch change that row's pass and no other,
+    and the row equals the same track run alone."""
+    t = Track.seed()
+    heavy = t.scaled(sleeper_mass=3.0, from_sleeper=20, to_sleeper=30)
+    kw = dict(x_start=6.0, x_end=24.0, dt=1e-4)
+    plain, loaded, plain_again = simulate_passes([t, heavy, t], LOADED, V80, **kw)
+    alone = simulate_pass(heavy, LOADED, V80, **kw)
+    np.testing.assert_array_equal(plain.contact_force, plain_again.contact_force)
+    np.testing.assert_array_equal(loaded.contact_force, alone.contact_force)
+    np.testing.assert_array_equal(loaded.sleeper_force, alone.sleeper_force)
+    changed = np.abs(loaded.sleeper_force - plain.sleeper_force) / plain.sleeper_force.max()
+    assert changed[20:30].max() > 1e-3  # the heavier sleepers move their own peak forces

@@ -15,11 +15,17 @@ track's decay length: see ``dynamics.window_margin``.)
 
 Lockstep batch. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move
 together; only the supports, the irregularity and the state differ. Every per-row array carries the batch axis
-*last* (innermost), so the hot loops (mass product, both triangular sweeps, Newmark update, sleeper peaks) are
-element-wise over the rows and compile to SIMD. The batch is cut into chunks of rows (``Chunks`` arrays have a
-leading chunk axis), and the chunks run on the cores in parallel. The kernel is compiled *without* fastmath:
-every row's arithmetic is the same IEEE sequence whatever its SIMD lane, chunk width or thread, so a row's
-result does not depend on the batch it runs in (bit-identical; tested). The single pass is a batch of one.
+*last* (innermost), and the track's state vectors are used flat, DOF i of row b at i*W + b, with the chunk width
+W a compile-time constant: the hot loops (mass product, Newmark update, correction) are then unit-stride loops
+that compile to SIMD at any width, across the rows of a chunk and, for the single pass (W = 1), along the track.
+The triangular sweeps are chains along the track: one row keeps the chain in registers, several rows run it with
+the rows as SIMD lanes. Loops index views from 0 wherever they can: numba wraps negative indices, and the check
+it emits where it cannot prove an index non-negative blocks vectorisation (it cost the single pass half its
+time). The rail's mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of
+rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is
+compiled without reassociating fast-math: every row's arithmetic is the same IEEE sequence whatever its SIMD
+lane, chunk width or thread, so a row's result does not depend on the batch it runs in (bit-identical; tested).
+The single pass is a batch of one.
 
 The arguments are four typed structures (namedtuples of arrays, which numba accepts), defined once here:
 ``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place) and ``Peaks``
@@ -39,9 +45,12 @@ B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 FASTMATH = {"contract", "nnan", "ninf", "nsz"}
 WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
 
-Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays")
+Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays rail_mass")
 Mesh.__doc__ = """The rail mesh, shared by every row: DOF of each node's deflection, DOF and node of each sleeper
-(int64 arrays), element length [m], elements per bay, number of sleepers, window margin in bays."""
+(int64 arrays), element length [m], elements per bay, number of sleepers, window margin in bays, and the bare
+rail's consistent mass matrix as its 2B+1 full diagonals, rail_mass[d, i] = M_rail[i, i + d - B] (2B+1, n_dof)
+[kg]: the rail is the same in every row, so its mass is stored once; the kernel reads its off-diagonals (the
+diagonal, with the sleepers' masses, is per row)."""
 
 Drive = namedtuple(
     "Drive", "x_axle consts law param mass damping kv_inv force wheel_dofs cluster_of_axle n_clusters"
@@ -50,12 +59,13 @@ Drive.__doc__ = """What moves over the track, shared by every row: axle position
 Newmark constants a0..a7, contact law code and parameter, the vehicle's M, C, K_eff⁻¹ (nv, nv), its constant
 forces (nv,), the DOF of each wheel, the window group of each axle and the number of groups."""
 
-Rows = namedtuple("Rows", "mfull keff pad_k pad_c bal_k bal_c z sag u v a q qd qdd")
-Rows.__doc__ = """Per-row inputs and state, chunk axis first and batch axis last: track mass as 2B+1 full
-diagonals (chunks, n_dof, 2B+1, W), effective stiffness in lower band storage (chunks, n_dof, B+1, W), pad and
-ballast stiffness and damping (chunks, n_sleepers, W), rail level under each wheel (chunks, n_steps+1, n_axles, W)
-[m] to which the kernel adds the static sag ``sag`` (chunks, n_dof, W) of settled supports, and the track and
-vehicle state u, v, a (chunks, n_dof, W), q, qd, qdd (chunks, nv, W), all updated in place."""
+Rows = namedtuple("Rows", "mass_diag keff pad_k pad_c bal_k bal_c z sag u v a q qd qdd")
+Rows.__doc__ = """Per-row inputs and state, chunk axis first and batch axis last: the diagonal of the track's
+mass matrix (chunks, n_dof, W) [kg] (rail and sleepers; ``Mesh.rail_mass`` holds the rest), effective stiffness
+in lower band storage (chunks, n_dof, B+1, W), pad and ballast stiffness and damping (chunks, n_sleepers, W), rail
+level under each wheel (chunks, n_steps+1, n_axles, W) [m] to which the kernel adds the static sag ``sag``
+(chunks, n_dof, W) of settled supports, and the track and vehicle state u, v, a (chunks, n_dof, W), q, qd, qdd
+(chunks, nv, W), all updated in place."""
 
 Peaks = namedtuple("Peaks", "force rail wheel ballast total")
 Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and wheel displacement under each wheel
@@ -64,7 +74,8 @@ Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and whe
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _factor(keff, lo, m, L, inv_diag, s, W):
-    """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row; L[i, k] = L(i, i-k)."""
+    """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row; L[i, k] = L(i, i-k) and
+    inv_diag[i*W + b] = 1 / L(i, i) (flat)."""
     for i in range(m):
         kmax = min(i, B)
         for k in range(kmax, 0, -1):
@@ -75,7 +86,7 @@ def _factor(keff, lo, m, L, inv_diag, s, W):
                 for b in range(W):
                     s[b] -= L[i, i - c, b] * L[j, j - c, b]
             for b in range(W):
-                L[i, k, b] = s[b] * inv_diag[j, b]
+                L[i, k, b] = s[b] * inv_diag[j * W + b]
         for b in range(W):
             s[b] = keff[lo + i, 0, b]
         for c in range(max(i - B, 0), i):
@@ -83,78 +94,127 @@ def _factor(keff, lo, m, L, inv_diag, s, W):
                 s[b] -= L[i, i - c, b] * L[i, i - c, b]
         for b in range(W):
             L[i, 0, b] = np.sqrt(s[b])
-            inv_diag[i, b] = 1.0 / L[i, 0, b]
+            inv_diag[i * W + b] = 1.0 / L[i, 0, b]
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _scale(L, inv_diag, m, fw, bw, W):
-    """Pre-scaled triangular factors for :func:`_solve`: fw[i, k] = L(i, i-k)/L(i, i), bw[i, k] = L(i+k, i)/L(i, i)."""
+    """Pre-scaled triangular factors for :func:`_solve`, flat: fw[k, i*W + b] = L(i, i-k)/L(i, i),
+    bw[k, i*W + b] = L(i+k, i)/L(i, i)."""
     for i in range(m):
         for k in range(1, B + 1):
             for b in range(W):
-                fw[i, k, b] = L[i, k, b] * inv_diag[i, b] if k <= i else 0.0
-                bw[i, k, b] = L[i + k, k, b] * inv_diag[i, b] if i + k < m else 0.0
+                f = i * W + b
+                fw[k, f] = L[i, k, b] * inv_diag[f] if k <= i else 0.0
+                bw[k, f] = L[i + k, k, b] * inv_diag[f] if i + k < m else 0.0
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _solve(fw, bw, inv_diag, m, x, W):
-    """Solve (L Lᵀ) y = x in place for the first m entries of x, every row (factors from :func:`_scale`)."""
+    """Solve (L Lᵀ) y = x in place for the m DOFs of the flat vector x, every row (factors from :func:`_scale`;
+    DOF i of row b at x[i*W + b]). Every index is written so that the compiler sees it is >= 0: numba wraps
+    negative indices, and the check it would emit otherwise costs more than the arithmetic."""
+    fw1, fw2, fw3, fw4 = fw[1], fw[2], fw[3], fw[4]
+    bw1, bw2, bw3, bw4 = bw[1], bw[2], bw[3], bw[4]
     for i in range(min(m, B)):
         for b in range(W):
-            s = x[i, b] * inv_diag[i, b]
+            f = i * W + b
+            s = x[f] * inv_diag[f]
             for k in range(i, 0, -1):
-                s -= fw[i, k, b] * x[i - k, b]
-            x[i, b] = s
-    for i in range(B, m):
+                s -= fw[k, f] * x[f - k * W]
+            x[f] = s
+    if W == 1:  # one row: the sweep is a chain of dependent steps; keep its last four values in registers
+        x4, x3, x2, x1 = x[0], x[1], x[2], x[3]
+        for i in range(B, m):
+            x0 = x[i] * inv_diag[i] - fw4[i] * x4 - fw3[i] * x3 - fw2[i] * x2 - fw1[i] * x1
+            x[i] = x0
+            x4, x3, x2, x1 = x3, x2, x1, x0
+    else:  # several rows, the SIMD lanes: a view of the five DOFs the step reads per DOF, indices from 0
+        for i in range(B, m):
+            xr, dr = x[(i - B) * W : (i + 1) * W], inv_diag[i * W :]
+            f1, f2, f3, f4 = fw[1, i * W :], fw[2, i * W :], fw[3, i * W :], fw[4, i * W :]
+            for b in range(W):
+                xr[4 * W + b] = (
+                    xr[4 * W + b] * dr[b]
+                    - f4[b] * xr[b]
+                    - f3[b] * xr[W + b]
+                    - f2[b] * xr[2 * W + b]
+                    - f1[b] * xr[3 * W + b]
+                )
+    for r in range(min(m, B)):
+        i = m - 1 - r
         for b in range(W):
-            x[i, b] = (
-                x[i, b] * inv_diag[i, b]
-                - fw[i, 4, b] * x[i - 4, b]
-                - fw[i, 3, b] * x[i - 3, b]
-                - fw[i, 2, b] * x[i - 2, b]
-                - fw[i, 1, b] * x[i - 1, b]
-            )
-    for i in range(m - 1, max(m - 1 - B, -1), -1):
-        for b in range(W):
-            s = x[i, b] * inv_diag[i, b]
-            for k in range(m - 1 - i, 0, -1):
-                s -= bw[i, k, b] * x[i + k, b]
-            x[i, b] = s
-    for i in range(m - 1 - B, -1, -1):
-        for b in range(W):
-            x[i, b] = (
-                x[i, b] * inv_diag[i, b]
-                - bw[i, 4, b] * x[i + 4, b]
-                - bw[i, 3, b] * x[i + 3, b]
-                - bw[i, 2, b] * x[i + 2, b]
-                - bw[i, 1, b] * x[i + 1, b]
-            )
+            f = i * W + b
+            s = x[f] * inv_diag[f]
+            for k in range(r, 0, -1):
+                s -= bw[k, f] * x[f + k * W]
+            x[f] = s
+    if W == 1:
+        x4, x3, x2, x1 = x[m - 1], x[m - 2], x[m - 3], x[m - 4]
+        for r in range(m - B):
+            i = m - 1 - B - r
+            x0 = x[i] * inv_diag[i] - bw4[i] * x4 - bw3[i] * x3 - bw2[i] * x2 - bw1[i] * x1
+            x[i] = x0
+            x4, x3, x2, x1 = x3, x2, x1, x0
+    else:
+        for i in range(m - 1 - B, -1, -1):
+            xr, dr = x[i * W : (i + B + 1) * W], inv_diag[i * W :]
+            g1, g2, g3, g4 = bw[1, i * W :], bw[2, i * W :], bw[3, i * W :], bw[4, i * W :]
+            for b in range(W):
+                xr[b] = (
+                    xr[b] * dr[b]
+                    - g4[b] * xr[4 * W + b]
+                    - g3[b] * xr[3 * W + b]
+                    - g2[b] * xr[2 * W + b]
+                    - g1[b] * xr[W + b]
+                )
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
-def _mass_times(mfull, x, out, lo, hi, W):
-    """out[:hi-lo] = M x restricted to the window [lo, hi) (the track outside it is at rest), every row."""
-    for i in range(lo, hi):
-        if i < lo + B or i >= hi - B:
+def _mass_times(rail_mass, mass_diag, xpad, out, lo, hi, W):
+    """out = M x on the DOFs of the window [lo, hi) (the track outside it is at rest), every row: flat vectors
+    (DOF i of row b at i*W + b), x padded by B DOFs on each side (DOF i at xpad[(i + B)*W + b]) whose B DOFs
+    either side of the window the caller has set to zero, so that the whole window is one band loop (a zero term
+    adds exactly nothing). M's off-diagonals are the rail's (``Mesh.rail_mass``, shared by the rows), its
+    diagonal ``mass_diag`` is per row (the sleepers' masses differ).
+    The loops index views from 0, which the compiler vectorises (numba wraps negative indices, and a check it
+    cannot drop blocks SIMD): along the track for one row, across the rows for several."""
+    if W == 1:
+        o = out[lo:hi]
+        x0, x1, x2 = xpad[lo:], xpad[lo + 1 :], xpad[lo + 2 :]
+        x3, x4, x5 = xpad[lo + 3 :], xpad[lo + 4 :], xpad[lo + 5 :]
+        x6, x7, x8 = xpad[lo + 6 :], xpad[lo + 7 :], xpad[lo + 8 :]
+        m0, m1, m2 = rail_mass[0, lo:], rail_mass[1, lo:], rail_mass[2, lo:]
+        m3, m4, m5 = rail_mass[3, lo:], mass_diag[lo:], rail_mass[5, lo:]
+        m6, m7, m8 = rail_mass[6, lo:], rail_mass[7, lo:], rail_mass[8, lo:]
+        for g in range(hi - lo):
+            o[g] = (
+                m0[g] * x0[g]
+                + m1[g] * x1[g]
+                + m2[g] * x2[g]
+                + m3[g] * x3[g]
+                + m4[g] * x4[g]
+                + m5[g] * x5[g]
+                + m6[g] * x6[g]
+                + m7[g] * x7[g]
+                + m8[g] * x8[g]
+            )
+    else:
+        for i in range(lo, hi):
+            xr, o, md = xpad[i * W : (i + 2 * B + 1) * W], out[i * W : (i + 1) * W], mass_diag[i * W : (i + 1) * W]
+            r0, r1, r2, r3 = rail_mass[0, i], rail_mass[1, i], rail_mass[2, i], rail_mass[3, i]
+            r5, r6, r7, r8 = rail_mass[5, i], rail_mass[6, i], rail_mass[7, i], rail_mass[8, i]
             for b in range(W):
-                out[i - lo, b] = 0.0
-            for d in range(2 * B + 1):
-                j = i + d - B
-                if lo <= j < hi:
-                    for b in range(W):
-                        out[i - lo, b] += mfull[i, d, b] * x[j, b]
-        else:
-            for b in range(W):
-                out[i - lo, b] = (
-                    mfull[i, 0, b] * x[i - 4, b]
-                    + mfull[i, 1, b] * x[i - 3, b]
-                    + mfull[i, 2, b] * x[i - 2, b]
-                    + mfull[i, 3, b] * x[i - 1, b]
-                    + mfull[i, 4, b] * x[i, b]
-                    + mfull[i, 5, b] * x[i + 1, b]
-                    + mfull[i, 6, b] * x[i + 2, b]
-                    + mfull[i, 7, b] * x[i + 3, b]
-                    + mfull[i, 8, b] * x[i + 4, b]
+                o[b] = (
+                    r0 * xr[b]
+                    + r1 * xr[W + b]
+                    + r2 * xr[2 * W + b]
+                    + r3 * xr[3 * W + b]
+                    + md[b] * xr[4 * W + b]
+                    + r5 * xr[5 * W + b]
+                    + r6 * xr[6 * W + b]
+                    + r7 * xr[7 * W + b]
+                    + r8 * xr[8 * W + b]
                 )
 
 
@@ -187,7 +247,11 @@ def _local(dof, base, epb):
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _run_chunk(mesh, drive, rows, peaks, ch, W):
-    """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass."""
+    """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass.
+
+    The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): the loops
+    over a window's DOFs and rows are then one unit-stride loop, which vectorises at any width, also for the
+    single pass (W = 1) where the SIMD lanes run along the track."""
     node_w = mesh.node_w
     sleeper_dof = mesh.sleeper_dof
     sleeper_node = mesh.sleeper_node
@@ -209,7 +273,9 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
         drive.consts[0], drive.consts[1], drive.consts[2], drive.consts[3],
         drive.consts[4], drive.consts[5], drive.consts[6], drive.consts[7],
     )  # fmt: skip
-    mfull = rows.mfull[ch]
+    n = rows.u.shape[1]
+    rail_mass = mesh.rail_mass
+    mass_diag = rows.mass_diag[ch].reshape(n * W)
     keff = rows.keff[ch]
     pad_k = rows.pad_k[ch]
     pad_c = rows.pad_c[ch]
@@ -217,9 +283,9 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     bal_c = rows.bal_c[ch]
     z_axle = rows.z[ch]
     sag = rows.sag[ch]
-    u = rows.u[ch]
-    v = rows.v[ch]
-    a = rows.a[ch]
+    u = rows.u[ch].reshape(n * W)
+    v = rows.v[ch].reshape(n * W)
+    a = rows.a[ch].reshape(n * W)
     q = rows.q[ch]
     qd = rows.qd[ch]
     qdd = rows.qdd[ch]
@@ -231,26 +297,25 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
 
     n_steps = x_axle.shape[0] - 1
     n_axles = x_axle.shape[1]
-    n = u.shape[0]
     nv = q.shape[0]
     m_max = n
-    Ls = np.zeros((n_clusters, m_max, B + 1, W))
-    Fw = np.zeros((n_clusters, m_max, B + 1, W))
-    Bw = np.zeros((n_clusters, m_max, B + 1, W))
-    invd = np.zeros((n_clusters, m_max, W))
+    Ls = np.zeros((m_max, B + 1, W))
+    Fw = np.zeros((n_clusters, B + 1, m_max * W))
+    Bw = np.zeros((n_clusters, B + 1, m_max * W))
+    invd = np.zeros((n_clusters, m_max * W))
     lo_c = np.full(n_clusters, -1, dtype=np.int64)
     hi_c = np.full(n_clusters, -1, dtype=np.int64)
     s_lo_c = np.zeros(n_clusters, dtype=np.int64)
     s_hi_c = np.zeros(n_clusters, dtype=np.int64)
     bay_cache = np.full(n_axles, -1, dtype=np.int64)
     ncol = 2 * (epb + 1)
-    cols = np.zeros((n_axles, ncol, m_max, W))
-    rhs = np.zeros((n, W))
-    pred = np.zeros((n, W))
-    qdamp = np.zeros((n, W))
+    cols = np.zeros((n_axles, ncol, m_max * W))
+    rhs = np.zeros((n + 2 * B) * W)  # padded by B DOFs each side (see _mass_times)
+    pred = np.zeros(n * W)
+    qdamp = np.zeros(n * W)
     rv = np.zeros((nv, W))
     qpred = np.zeros((nv, W))
-    tmp = np.zeros((m_max, W))
+    tmp = np.zeros(m_max * W)
     scratch = np.zeros(W)
     shape = np.zeros((n_axles, 4))
     edofs = np.zeros((n_axles, 4), dtype=np.int64)
@@ -323,18 +388,17 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             hi = sleeper_dof[s_hi] + 1
             # DOFs left behind come to rest
             if lo_c[c] >= 0:
-                for i in range(lo_c[c], min(lo, hi_c[c])):
-                    for b in range(W):
-                        u[i, b] = 0.0
-                        v[i, b] = 0.0
-                        a[i, b] = 0.0
+                for f in range(lo_c[c] * W, min(lo, hi_c[c]) * W):
+                    u[f] = 0.0
+                    v[f] = 0.0
+                    a[f] = 0.0
             lo_c[c] = lo
             hi_c[c] = hi
             s_lo_c[c] = s_lo
             s_hi_c[c] = s_hi
             m = hi - lo
-            _factor(keff, lo, m, Ls[c], invd[c], scratch, W)
-            _scale(Ls[c], invd[c], m, Fw[c], Bw[c], W)
+            _factor(keff, lo, m, Ls, invd[c], scratch, W)
+            _scale(Ls, invd[c], m, Fw[c], Bw[c], W)
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
@@ -344,15 +408,14 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     # the bay's rail DOFs: (w, θ) of its epb+1 nodes; the sleeper DOF after node 0 is skipped
                     node = k // 2
                     dof = node_w[sleeper_node[bay] + node] + (k % 2)
-                    for i in range(m):
-                        for b in range(W):
-                            tmp[i, b] = 0.0
+                    for f in range(m * W):
+                        tmp[f] = 0.0
                     for b in range(W):
-                        tmp[dof - lo, b] = 1.0
+                        tmp[(dof - lo) * W + b] = 1.0
                     _solve(Fw[c], Bw[c], invd[c], m, tmp, W)
-                    for i in range(m):
-                        for b in range(W):
-                            cols[j, k, i, b] = tmp[i, b]
+                    colk = cols[j, k]
+                    for f in range(m * W):
+                        colk[f] = tmp[f]
         for j in range(n_axles):
             basej = node_w[sleeper_node[bay_cache[j]]]
             for k in range(4):
@@ -363,21 +426,27 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             lo = lo_c[c]
             hi = hi_c[c]
             m = hi - lo
-            for i in range(lo, hi):
-                for b in range(W):
-                    rhs[i, b] = a0 * u[i, b] + a2 * v[i, b] + a3 * a[i, b]
-                    qdamp[i, b] = a1 * u[i, b] + a4 * v[i, b] + a5 * a[i, b]
-            window = pred[lo:hi]
-            _mass_times(mfull, rhs, window, lo, hi, W)
+            uw, vw, aw = u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
+            rw, qw = rhs[(lo + B) * W : (hi + B) * W], qdamp[lo * W : hi * W]
+            for g in range(m * W):
+                rw[g] = a0 * uw[g] + a2 * vw[g] + a3 * aw[g]
+                qw[g] = a1 * uw[g] + a4 * vw[g] + a5 * aw[g]
+            before, after = rhs[lo * W : (lo + B) * W], rhs[(hi + B) * W : (hi + 2 * B) * W]
+            for g in range(B * W):
+                before[g] = 0.0
+                after[g] = 0.0
+            _mass_times(rail_mass, mass_diag, rhs, pred, lo, hi, W)
             # damping sits only in the pads and the ballast
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
-                d = sleeper_dof[s_]
-                w = node_w[sleeper_node[s_]]
+                d = sleeper_dof[s_] * W
+                w = node_w[sleeper_node[s_]] * W
+                qw, qs, pw, ps = qdamp[w : w + W], qdamp[d : d + W], pred[w : w + W], pred[d : d + W]
+                cp, cb = pad_c[s_], bal_c[s_]
                 for b in range(W):
-                    fp = pad_c[s_, b] * (qdamp[w, b] - qdamp[d, b])
-                    pred[w, b] += fp
-                    pred[d, b] += bal_c[s_, b] * qdamp[d, b] - fp
-            _solve(Fw[c], Bw[c], invd[c], m, window, W)
+                    fp = cp[b] * (qw[b] - qs[b])
+                    pw[b] += fp
+                    ps[b] += cb[b] * qs[b] - fp
+            _solve(Fw[c], Bw[c], invd[c], m, pred[lo * W : hi * W], W)
 
         # ---- vehicle predictor
         for i in range(nv):
@@ -404,10 +473,10 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             lo = lo_c[c]
             for b in range(W):
                 wpred[j, b] = (
-                    shape[j, 0] * pred[edofs[j, 0], b]
-                    + shape[j, 1] * pred[edofs[j, 1], b]
-                    + shape[j, 2] * pred[edofs[j, 2], b]
-                    + shape[j, 3] * pred[edofs[j, 3], b]
+                    shape[j, 0] * pred[edofs[j, 0] * W + b]
+                    + shape[j, 1] * pred[edofs[j, 1] * W + b]
+                    + shape[j, 2] * pred[edofs[j, 2] * W + b]
+                    + shape[j, 3] * pred[edofs[j, 3] * W + b]
                 )
                 ypred[j, b] = qpred[wheel_dofs[j], b]
             for i in range(n_axles):
@@ -421,12 +490,13 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     lk = loc[i, k]
                     if lk < 0:
                         continue
+                    col = cols[i, lk]
                     for b in range(W):
                         acc = (
-                            shape[j, 0] * cols[i, lk, edofs[j, 0] - lo, b]
-                            + shape[j, 1] * cols[i, lk, edofs[j, 1] - lo, b]
-                            + shape[j, 2] * cols[i, lk, edofs[j, 2] - lo, b]
-                            + shape[j, 3] * cols[i, lk, edofs[j, 3] - lo, b]
+                            shape[j, 0] * col[(edofs[j, 0] - lo) * W + b]
+                            + shape[j, 1] * col[(edofs[j, 1] - lo) * W + b]
+                            + shape[j, 2] * col[(edofs[j, 2] - lo) * W + b]
+                            + shape[j, 3] * col[(edofs[j, 3] - lo) * W + b]
                         )
                         H[j, i, b] += shape[i, k] * acc
 
@@ -462,40 +532,45 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 for k in range(4):
                     fsh[j, k, b] = force[j, b] * shape[j, k]
 
-        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, and its Newmark update in one sweep
+        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, then its Newmark update
         for c in range(n_clusters):
             lo = lo_c[c]
             hi = hi_c[c]
-            for i in range(hi - lo):
-                kk = lo + i
-                for j in range(n_axles):
-                    if cluster_of_axle[j] != c:
-                        continue
-                    l0 = loc[j, 0]
-                    l1 = loc[j, 1]
-                    l2 = loc[j, 2]
-                    l3 = loc[j, 3]
+            m = hi - lo
+            for j in range(n_axles):
+                if cluster_of_axle[j] != c:
+                    continue
+                c0 = cols[j, loc[j, 0]]
+                c1 = cols[j, loc[j, 1]]
+                c2 = cols[j, loc[j, 2]]
+                c3 = cols[j, loc[j, 3]]
+                f0 = fsh[j, 0]
+                f1 = fsh[j, 1]
+                f2 = fsh[j, 2]
+                f3 = fsh[j, 3]
+                pw = pred[lo * W : hi * W]
+                for i in range(m):
                     for b in range(W):
-                        pred[kk, b] += (
-                            fsh[j, 0, b] * cols[j, l0, i, b]
-                            + fsh[j, 1, b] * cols[j, l1, i, b]
-                            + fsh[j, 2, b] * cols[j, l2, i, b]
-                            + fsh[j, 3, b] * cols[j, l3, i, b]
-                        )
-                for b in range(W):
-                    an = a0 * (pred[kk, b] - u[kk, b]) - a2 * v[kk, b] - a3 * a[kk, b]
-                    v[kk, b] += a6 * a[kk, b] + a7 * an
-                    a[kk, b] = an
-                    u[kk, b] = pred[kk, b]
+                        f = i * W + b
+                        pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
+            pw, uw, vw, aw = pred[lo * W : hi * W], u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
+            for g in range(m * W):
+                an = a0 * (pw[g] - uw[g]) - a2 * vw[g] - a3 * aw[g]
+                vw[g] += a6 * aw[g] + a7 * an
+                aw[g] = an
+                uw[g] = pw[g]
             # peak sleeper forces in the window
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
-                d = sleeper_dof[s_]
-                w = node_w[sleeper_node[s_]]
+                d = sleeper_dof[s_] * W
+                w = node_w[sleeper_node[s_]] * W
+                uw, us, vw, vs = u[w : w + W], u[d : d + W], v[w : w + W], v[d : d + W]
+                kp, cp, kb, cb = pad_k[s_], pad_c[s_], bal_k[s_], bal_c[s_]
+                pb, pt = peak_ballast[s_], peak_total[s_]
                 for b in range(W):
-                    fb = bal_k[s_, b] * u[d, b] + bal_c[s_, b] * v[d, b]
-                    fp = pad_k[s_, b] * (u[w, b] - u[d, b]) + pad_c[s_, b] * (v[w, b] - v[d, b])
-                    peak_ballast[s_, b] = max(peak_ballast[s_, b], fb)
-                    peak_total[s_, b] = max(peak_total[s_, b], fb + fp)
+                    fb = kb[b] * us[b] + cb[b] * vs[b]
+                    fp = kp[b] * (uw[b] - us[b]) + cp[b] * (vw[b] - vs[b])
+                    pb[b] = max(pb[b], fb)
+                    pt[b] = max(pt[b], fb + fp)
 
         # ---- correct the vehicle
         for i in range(nv):
@@ -515,10 +590,10 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             for b in range(W):
                 out_force[step, j, b] = force[j, b]
                 out_rail[step, j, b] = (
-                    shape[j, 0] * u[edofs[j, 0], b]
-                    + shape[j, 1] * u[edofs[j, 1], b]
-                    + shape[j, 2] * u[edofs[j, 2], b]
-                    + shape[j, 3] * u[edofs[j, 3], b]
+                    shape[j, 0] * u[edofs[j, 0] * W + b]
+                    + shape[j, 1] * u[edofs[j, 1] * W + b]
+                    + shape[j, 2] * u[edofs[j, 2] * W + b]
+                    + shape[j, 3] * u[edofs[j, 3] * W + b]
                 )
                 out_wheel[step, j, b] = q[wheel_dofs[j], b]
 

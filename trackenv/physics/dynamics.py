@@ -336,14 +336,14 @@ def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
 
 
 def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
-    """Lower band storage (rows, n, B+1) of the symmetric mass matrix as its 2B+1 full diagonals:
-    out[:, i, d] = M[i, i + d - B]."""
+    """Lower band storage (rows, n, B+1) of the symmetric mass matrix as its 2B+1 full diagonals, diagonal first
+    (the kernel runs along the DOFs of one diagonal): out[:, d, i] = M[i, i + d - B]."""
     nb, n, b1 = mb.shape
     bw = b1 - 1
-    out = np.zeros((nb, n, 2 * bw + 1))
+    out = np.zeros((nb, 2 * bw + 1, n))
     for k in range(b1):
-        out[:, k:, bw - k] = mb[:, k:, k]
-        out[:, : n - k, bw + k] = mb[:, k:, k]
+        out[:, bw - k, k:] = mb[:, k:, k]
+        out[:, bw + k, : n - k] = mb[:, k:, k]
     return out
 
 
@@ -447,6 +447,7 @@ def simulate_passes(
     # matrices
     consts = newmark_constants(dt)
     mb, cb, kb = batched_bands(tracks)
+    rail_mass = _rail_bands(t0.dof_layout, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]
     keff = kb + consts[0] * mb + consts[1] * cb
     lay = t0.dof_layout
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
@@ -528,6 +529,7 @@ def simulate_passes(
         int(t0.elements_per_bay),
         int(t0.n_sleepers),
         int(margin),
+        np.ascontiguousarray(_mass_diagonals(rail_mass[None])[0]),
     )
     drive = _kernel.Drive(
         np.ascontiguousarray(x_axle),
@@ -543,7 +545,7 @@ def simulate_passes(
         n_clusters,
     )
     rows = _kernel.Rows(
-        pack(_mass_diagonals(mb)),
+        pack(mb[:, :, 0]),  # the diagonal of each row's mass matrix (Mesh holds the rail's off-diagonals)
         pack(keff),
         pack(pad_k),
         pack(pad_c),
