@@ -537,6 +537,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             lo = lo_c[c]
             hi = hi_c[c]
             m = hi - lo
+            pw, uw, vw, aw = pred[lo * W : hi * W], u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
@@ -548,12 +549,10 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 f1 = fsh[j, 1]
                 f2 = fsh[j, 2]
                 f3 = fsh[j, 3]
-                pw = pred[lo * W : hi * W]
                 for i in range(m):
                     for b in range(W):
                         f = i * W + b
                         pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
-            pw, uw, vw, aw = pred[lo * W : hi * W], u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
             for g in range(m * W):
                 an = a0 * (pw[g] - uw[g]) - a2 * vw[g] - a3 * aw[g]
                 vw[g] += a6 * aw[g] + a7 * an

@@ -336,14 +336,14 @@ def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
 
 
 def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
-    """Lower band storage (rows, n, B+1) of the symmetric mass matrix as its 2B+1 full diagonals, diagonal first
-    (the kernel runs along the DOFs of one diagonal): out[:, d, i] = M[i, i + d - B]."""
-    nb, n, b1 = mb.shape
+    """A symmetric matrix in lower band storage (n, B+1) as its 2B+1 full diagonals, diagonal first (the kernel
+    runs along the DOFs of one diagonal): out[d, i] = M[i, i + d - B]."""
+    n, b1 = mb.shape
     bw = b1 - 1
-    out = np.zeros((nb, 2 * bw + 1, n))
+    out = np.zeros((2 * bw + 1, n))
     for k in range(b1):
-        out[:, bw - k, k:] = mb[:, k:, k]
-        out[:, bw + k, : n - k] = mb[:, k:, k]
+        out[bw - k, k:] = mb[k:, k]
+        out[bw + k, : n - k] = mb[k:, k]
     return out
 
 
@@ -447,7 +447,6 @@ def simulate_passes(
     # matrices
     consts = newmark_constants(dt)
     mb, cb, kb = batched_bands(tracks)
-    rail_mass = _rail_bands(t0.dof_layout, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]
     keff = kb + consts[0] * mb + consts[1] * cb
     lay = t0.dof_layout
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
@@ -529,7 +528,7 @@ def simulate_passes(
         int(t0.elements_per_bay),
         int(t0.n_sleepers),
         int(margin),
-        np.ascontiguousarray(_mass_diagonals(rail_mass[None])[0]),
+        _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]),
     )
     drive = _kernel.Drive(
         np.ascontiguousarray(x_axle),
