@@ -77,6 +77,7 @@ class EvaluationResult:
     final_mean_sd_mm: np.ndarray  # mean section SD at the end [mm]
     sum_rewards: np.ndarray  # sum of rewards per episode (= -cost)
     extra: dict[str, Any] = field(default_factory=dict)
+    tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
 
     @property
     def n_episodes(self) -> int:
@@ -154,6 +155,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
     tampings = np.zeros(n)
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
+    tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
     traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
     if record:
         traces["section_sd_mm"].append(obs["section_sd"].copy())
@@ -171,6 +173,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         for k in keys:
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
+        tamped[:, t] = info["tamped_sections"]
         exceed += info["immediate_action_exceedances"]
         if record:
             traces["section_sd_mm"].append(info["section_sd_mm"])
@@ -184,14 +187,14 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
                 raise RuntimeError("episodes did not end at the configured horizon")
             final_sd = info["section_sd_mm"].mean(axis=1)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
-            "traces": traces}
+            "tamped": tamped, "traces": traces}
 
 
 def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
                  action_type: str = "multibinary") -> dict[str, Any]:
     """One batch: an episode per slot ``(policy index, seed)`` to the horizon in one native vector env
     (NEXT_STEP autoreset: no episode is started past the horizon); per-episode totals as arrays in slot order
-    (``parts`` by cost key, ``rewards``, ``tampings``, ``exceed``, ``final_sd``). The unit of work that
+    (``parts`` by cost key, ``rewards``, ``tampings``, ``exceed``, ``final_sd``, ``tamped``). The unit of work that
     :func:`evaluate_many` runs in turn, or an executor runs in parallel."""
     env = _vector_env(len(slots), config, action_type)
     out = _run_chunk(env, list(slots), policies, action_type)
@@ -244,6 +247,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     seed_arr = np.array([s for _, s in slots])
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in _cost_keys(cfg)}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
+    tamped = cat("tamped")
     results = []
     for p, pol in enumerate(bound):
         m = pol_of == p
@@ -251,7 +255,8 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
         results.append(EvaluationResult(
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
-            immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m]))
+            immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
+            tamped=tamped[m]))
     return results
 
 

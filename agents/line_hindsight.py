@@ -1,14 +1,19 @@
-"""The per-section hindsight bound of TampingLine: the cheapest schedule a search finds for one episode whose
+"""The per-section hindsight bound of TampingLine: the cheapest schedule a search finds for an episode whose
 future (every draw of the seed: wet-spot onsets, tamping residuals, measurement errors) it knows.
 
 Why a per-section search can be exact: the sections of a line are physically independent (each is its own
 segment), so a section's own costs (geometry, speed restriction, immediate action, tamping, renewal) depend only
 on its own schedule; the only coupling is the possession cost, paid once per campaign step, and the capacity.
 Any mix of per-section schedules can therefore be priced exactly from per-section replays
-(:func:`section_costs`), and a coordinate descent over the sections' candidate schedules
+(:func:`replay_sections`), and a coordinate descent over the sections' candidate schedules
 (:func:`_descend`) optimises the exact total.
 
-The search (:func:`hindsight_bound`):
+The replays are cheap where candidates share a past: a candidate is a fork of the trajectory it agrees with
+longest and runs its own passes only from the step where its decision differs (:func:`replay_sections`), and the
+candidates of many episodes run in one batch (:func:`hindsight_bounds`). Bit for bit the same numbers as
+replaying each from the start (tested).
+
+The search (:func:`hindsight_bounds`, per episode):
 
 1. **Closed-loop candidates on the true state** (:class:`TrueStateRule`): tamp a section when its *true* SD
    reaches a threshold, or its true D1 mean-to-peak a fraction of the intervention limit (a guard against speed
@@ -21,9 +26,8 @@ The search (:func:`hindsight_bound`):
    episode and priced exactly like any other.
 2. **Local search**, ``rounds`` times: each section's incumbent schedule varied one tamping at a time (the k-th
    tamping moved by ±1 or ±2 steps or dropped; a tamping added one or two steps before the section's first
-   speed restriction); the distinct variants of all sections packed
-   into as few replayed lines as possible; coordinate descent again, started from the incumbent, so the cost never
-   rises.
+   speed restriction), each a fork of the incumbent; coordinate descent again, started from the incumbent, so the
+   cost never rises.
 
 It is a search, not an exact optimum, so the bound is an upper bound on the true hindsight optimum; the
 final schedule is replayed in the env as a check of the pricing.
@@ -36,8 +40,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "recorded_rule_schedules", "replay",
-           "room_summary", "schedule_rows", "section_costs"]
+__all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
+           "replay",
+           "replay_schedules", "replay_sections", "room_summary", "schedule_rows"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -59,39 +64,90 @@ class TrueStateRule:
     stop_steps: int = 0
 
 
-def section_costs(config: Any, seed: int, policies: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Replay episode ``seed`` once per policy, all in one batch. A policy is an (H, S) bool schedule (open
-    loop) or a :class:`TrueStateRule`. Returns per line and section the cost without possession (M, S), the
-    tamping schedule actually applied (M, H, S; masked tampings dropped) and the speed-restriction-or-worse
-    flags (M, H, S)."""
+def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
+                    share_prefixes: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Replay every candidate (seed, section j, policy) on its episode, all in one batch of segments (so many
+    episodes share the kernel's batch). A policy is an (H,) bool schedule of section j (open loop) or a
+    :class:`TrueStateRule`. Returns per candidate the section's cost without possession (N,), the schedule
+    actually applied (N, H; masked tampings dropped) and the speed-restriction-or-worse flags (N, H).
+
+    With ``share_prefixes`` (the default) candidates share their common past: each (episode, section)'s
+    no-tamping trajectory is a root, every candidate follows a parent of its episode and section (an open-loop
+    one: the earlier open-loop candidate with the longest common prefix; a closed-loop one: the earlier rule
+    with the same SD threshold, else the root) and is forked, a copy of the parent's segment
+    (:meth:`~trackenv.envs.line_episode.LineBatch.copy_rows`), only at the first step where its decision
+    differs. Until then it costs nothing. The numbers are those of replaying every candidate from the start
+    (a segment's numbers do not depend on its batch; tested), at a fraction of the passes."""
     from trackenv.envs.line_episode import LineBatch
     from trackenv.physics.geometry import classify
 
-    M, S, H = len(policies), config.n_sections, config.horizon_steps
-    bt = LineBatch(config, M)
-    bt.reset_lines(list(range(M)), [np.random.default_rng(seed) for _ in range(M)])
-    cost = np.zeros((M, S))
-    sched = np.zeros((M, H, S), dtype=bool)
-    restricted = np.zeros((M, H, S), dtype=bool)
+    S, H = config.n_sections, config.horizon_steps
+    seeds = sorted({int(e) for e, _, _ in candidates})
+    episode = {e: k for k, e in enumerate(seeds)}
+    if any(not 0 <= j < S for _, j, _ in candidates):
+        raise ValueError(f"candidate sections must lie in [0, {S}), got {sorted({j for _, j, _ in candidates})}")
+    # the nodes: one root (no tamping) per episode and section, then the candidates, each with its parent node
+    n_roots = len(seeds) * S
+    zero = np.zeros(H, dtype=bool)
+    policy: list[Any] = [zero] * n_roots + [p if isinstance(p, TrueStateRule) else np.asarray(p, dtype=bool)
+                                            for _, _, p in candidates]
+    key = list(range(n_roots)) + [episode[int(e)] * S + j for e, j, _ in candidates]  # (episode, section) index
+    parent = list(range(n_roots)) + [-1] * len(candidates)  # a root is its own parent; -1: replayed from the start
+    open_loop: list[list[int]] = [[k] for k in range(n_roots)]
+    rules: list[list[int]] = [[] for _ in range(n_roots)]
+    for i in range(n_roots, len(policy)):
+        k, p = key[i], policy[i]
+        if not share_prefixes:
+            continue
+        if isinstance(p, TrueStateRule):
+            same = [m for m in rules[k] if policy[m].sd_mm == p.sd_mm]
+            parent[i] = same[-1] if same else k
+            rules[k].append(i)
+        else:
+            prefix = [int(np.argmax(np.append(policy[m] != p, True))) for m in open_loop[k]]
+            parent[i] = open_loop[k][int(np.argmax(prefix))]
+            open_loop[k].append(i)
+    N = len(policy)
+    starts = [i for i in range(N) if parent[i] in (-1, i)]  # the nodes replayed from the first step
+    bt = LineBatch(config, -(-N // S))
+    ref = LineBatch(config, len(seeds))
+    ref.reset_lines(list(range(len(seeds))), [np.random.default_rng(e) for e in seeds])
+    row = np.full(N, -1)
+    row[starts] = np.arange(len(starts))
+    bt.copy_rows(row[starts], ref, np.array(key)[starts])
+    G = bt.n_lines * S
+    acc, sched, restr = np.zeros(G), np.zeros((G, H), dtype=bool), np.zeros((G, H), dtype=bool)
+    free = len(starts)
     limit = bt.limits.intervention_m
+    host, want = np.zeros(N, dtype=int), np.zeros(N, dtype=bool)
     for t in range(H):
-        want = np.zeros((M, S), dtype=bool)
-        for m, p in enumerate(policies):
+        allowed = bt.allowed_rows(t)
+        for i in range(N):  # parents come before their children
+            h = row[i] if row[i] >= 0 else host[parent[i]]
+            p = policy[i]
             if isinstance(p, TrueStateRule):
-                r = bt.rows(m)
-                want[m] = ((bt.sd[r] * 1e3 >= p.sd_mm) | (bt.peak[r] >= p.peak_fraction * limit)) & (
-                    t < H - p.stop_steps)
+                w = (bt.sd[h] * 1e3 >= p.sd_mm or bt.peak[h] >= p.peak_fraction * limit) and t < H - p.stop_steps
             else:
-                want[m] = p[t]
-        want &= bt.allowed()
-        renew = bt.renewing().reshape(M, S) & want
-        cost += want * config.section_tamping_cost + renew * config.section_renewal_cost
-        bt.apply(want)
-        bt.traffic()
-        cost += bt.section_costs().reshape(M, S)
-        sched[:, t] = want
-        restricted[:, t] = (classify(bt.peak, bt.limits) >= 2).reshape(M, S)
-    return cost, sched, restricted
+                w = bool(p[t])
+            w = bool(w and allowed[h])
+            if row[i] < 0 and w != want[parent[i]]:  # it parts from its parent: fork
+                bt.copy_rows(np.array([free]), bt, np.array([h]))
+                acc[free], sched[free], restr[free], allowed[free] = acc[h], sched[h], restr[h], allowed[h]
+                row[i], h, free = free, free, free + 1
+            host[i], want[i] = h, w
+        owned = row >= 0
+        tam = np.zeros(G, dtype=bool)
+        tam[row[owned]] = want[owned]
+        act = np.zeros(G, dtype=bool)
+        act[row[owned]] = True
+        acc += tam * config.section_tamping_cost + (tam & bt.renewing()) * config.section_renewal_cost
+        bt.tamp_rows(tam, t)
+        bt.traffic_rows(act, t)
+        acc[act] += bt.section_costs()[act]
+        sched[act, t] = tam[act]
+        restr[act, t] = classify(bt.peak[act], bt.limits) >= 2
+    out = host[n_roots:]
+    return acc[out], sched[out], restr[out]
 
 
 def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
@@ -112,16 +168,18 @@ def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
     return plan, cost
 
 
-def recorded_rule_schedules(config: Any, seed: int, policies: list,
-                            designs: tuple[dict[str, Any], ...] = RECORDING_DESIGNS) -> list[np.ndarray]:
-    """The (H, S) schedules that ``policies`` (SB3 ``predict``; line heuristics are bound to each config) apply
-    on episode ``seed`` of ``config`` recorded as each of ``designs`` (changes of ``measurement_interval``,
-    ``sd_noise_mm``, ``peak_noise_mm`` only: what the planner sees, never the physics or the costs; the
-    measurement errors are drawn as standard normals at reset whatever their size, so every design sees the same
-    episode). One batched run per design; designs equal to ``config``'s own recording are skipped."""
-    from .evaluation import _bound, _run_chunk, _vector_env
+def recorded_rule_schedules(config: Any, seeds: list[int], policies: list,
+                            designs: tuple[dict[str, Any], ...] = RECORDING_DESIGNS,
+                            batch_size: int = 32) -> list[list[np.ndarray]]:
+    """Per seed of ``seeds``, the (H, S) schedules that ``policies`` (SB3 ``predict``; line heuristics are bound
+    to each config) apply on that episode of ``config`` recorded as each of ``designs`` (changes of
+    ``measurement_interval``, ``sd_noise_mm``, ``peak_noise_mm`` only: what the planner sees, never the physics
+    or the costs; the measurement errors are drawn as standard normals at reset whatever their size, so every
+    design sees the same episode). All episodes of a design run batched (:func:`~.evaluation.evaluate_many`);
+    designs equal to ``config``'s own recording are skipped."""
+    from .evaluation import evaluate_many
 
-    out = []
+    out: list[list[np.ndarray]] = [[] for _ in seeds]
     for design in designs:
         unknown = set(design) - _RECORDING_FIELDS
         if unknown:
@@ -129,11 +187,9 @@ def recorded_rule_schedules(config: Any, seed: int, policies: list,
         cfg = config.replace(**design)
         if cfg == config:
             continue
-        env = _vector_env(len(policies), cfg, "multibinary")
-        bound = [_bound(p, cfg) for p in policies]
-        run = _run_chunk(env, [(i, seed) for i in range(len(policies))], bound, "multibinary", record=True)
-        tamped = np.stack(run["traces"]["tamped"], axis=1).astype(bool)  # (P, H, S)
-        out.extend(tamped)
+        for r in evaluate_many(policies, cfg, seeds, batch_size=batch_size):
+            for k in range(len(seeds)):
+                out[k].append(r.tamped[k])
     return out
 
 
@@ -201,44 +257,102 @@ def _variants(column: np.ndarray, restricted: np.ndarray) -> list[np.ndarray]:
     return list(unique.values())
 
 
-def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: int = 2,
-                    sd_thresholds_mm: tuple[float, ...] = (1.5, 2.0, 2.5, 3.0, 4.0),
-                    peak_fractions: tuple[float, ...] = (0.8, np.inf), stop_steps: tuple[int, ...] = (0, 4),
-                    extra_schedules: tuple = ()) -> dict:
-    """The hindsight search of the module docstring on episode ``seed``, from ``base_schedule`` ((H, S) bool,
-    a feasible schedule, e.g. the best rule's). Returns {"cost", "replayed_cost", "schedule", "search" (the
-    best total after each stage), "start_cost" (the base schedule's total)}."""
+def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> np.ndarray:
+    """Each (H, S) bool schedule of ``plans`` run on its episode of ``seeds`` in the env itself (one native vector
+    env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check of the per-section
+    pricing."""
+    from gymnasium.vector import AutoresetMode
+
+    from trackenv.envs.line import TampingLineVectorEnv
+
+    env = TampingLineVectorEnv(len(seeds), config, autoreset_mode=AutoresetMode.NEXT_STEP)
+    env.reset(seed=[int(s) for s in seeds])
+    plans_ = np.stack([np.asarray(p, dtype=np.int8) for p in plans])
+    cost = np.zeros(len(seeds))
+    for t in range(config.horizon_steps):
+        cost -= env.step(plans_[:, t])[1]
+    env.close()
+    return cost
+
+
+def _options(costs: np.ndarray, sched: np.ndarray, restr: np.ndarray) -> tuple[list, list]:
+    """One section's replayed candidates, (n,), (n, H), (n, H), as one option (schedule, cost) per distinct
+    applied schedule, and its restriction flags."""
+    options, flags, seen = [], [], set()
+    for c, s, r in zip(costs, sched, restr, strict=True):
+        if s.tobytes() not in seen:
+            seen.add(s.tobytes())
+            options.append((s, float(c)))
+            flags.append(r)
+    return options, flags
+
+
+def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]], rounds: int = 2,
+                     sd_thresholds_mm: tuple[float, ...] = (1.5, 2.0, 2.5, 3.0, 4.0),
+                     peak_fractions: tuple[float, ...] = (0.8, np.inf), stop_steps: tuple[int, ...] = (0, 4),
+                     progress: bool = False) -> list[dict]:
+    """The hindsight search of the module docstring on several episodes at once (each stage's replays of all
+    episodes share one batch): ``episodes`` are (seed, base schedule (H, S) bool: a feasible schedule, e.g. the
+    best rule's, extra candidate schedules). Returns per episode {"seed", "cost", "replayed_cost", "schedule",
+    "search" (the best total after each stage), "start_cost" (the base schedule's total)}."""
+    from tqdm.auto import tqdm
+
     S, H = config.n_sections, config.horizon_steps
+    seeds = [int(e[0]) for e in episodes]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"episodes must have distinct seeds, got {seeds}")
     rules = [TrueStateRule(s, p, k) for s in (*sd_thresholds_mm, np.inf) for p in peak_fractions for k in stop_steps
              if not (s == np.inf and p == np.inf)]
-    cands = [np.asarray(base_schedule, dtype=bool), np.zeros((H, S), dtype=bool),
-             *(np.asarray(x, dtype=bool) for x in extra_schedules), *rules]
-    cost, sched, restr = section_costs(config, seed, cands)
-    options = [[(sched[m, :, j], cost[m, j]) for m in range(len(cands))] for j in range(S)]
-    start = _total(sched[0], cost[0], config)
-    choice, best = _descend(options, np.zeros(S, dtype=int), config)
-    record = [best]
-    flags = [[restr[m, :, j] for m in range(len(cands))] for j in range(S)]
+    bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
+    cands, where = [], []
+    for seed, base, extra in episodes:
+        pols = [np.asarray(base, dtype=bool), np.zeros((H, S), dtype=bool), *(np.asarray(x, bool) for x in extra)]
+        first = len(cands)
+        cands += [(seed, j, p[:, j]) for p in pols for j in range(S)] + [(seed, j, r) for r in rules for j in range(S)]
+        where.append((first, len(pols) + len(rules)))
+    cost, sched, restr = replay_sections(config, cands)
+    bar.update()
+    options, flags, choice, best, record, start = [], [], [], [], [], []
+    for first, m in where:
+        sl = slice(first, first + m * S)
+        c, sc, rs = cost[sl].reshape(m, S), sched[sl].reshape(m, S, H), restr[sl].reshape(m, S, H)
+        opt = [_options(c[:, j], sc[:, j], rs[:, j]) for j in range(S)]
+        options.append([o for o, _ in opt])
+        flags.append([f for _, f in opt])
+        start.append(_total(sc[0].T, c[0], config))
+        ch, b = _descend(options[-1], np.zeros(S, dtype=int), config)
+        choice.append(ch)
+        best.append(b)
+        record.append([b])
     for _ in range(rounds):
-        # the incumbent and its per-section variants, packed: line m carries the m-th variant of every section
-        inc = [options[j][choice[j]] for j in range(S)]
-        inc_flag = [flags[j][choice[j]] for j in range(S)]
-        var = [_variants(inc[j][0], inc_flag[j]) for j in range(S)]
-        n_lines = max((len(v) for v in var), default=0)
-        if n_lines == 0:
-            break
-        plans = np.zeros((n_lines, H, S), dtype=bool)
-        for j in range(S):
-            for m in range(n_lines):
-                plans[m, :, j] = var[j][m] if m < len(var[j]) else inc[j][0]
-        c2, s2, r2 = section_costs(config, seed, list(plans))
-        options = [[inc[j]] + [(s2[m, :, j], c2[m, j]) for m in range(min(len(var[j]), n_lines))] for j in range(S)]
-        flags = [[inc_flag[j]] + [r2[m, :, j] for m in range(min(len(var[j]), n_lines))] for j in range(S)]
-        choice, best = _descend(options, np.zeros(S, dtype=int), config)
-        record.append(best)
-    plan = np.stack([options[j][choice[j]][0] for j in range(S)], axis=1)
-    return {"cost": best, "replayed_cost": replay(config, seed, plan)[1], "schedule": plan, "search": record,
-            "start_cost": start}
+        # each section's incumbent and its variants, replayed as forks of the incumbent where they part from it
+        cands, spans = [], []
+        for e, seed in enumerate(seeds):
+            inc = [options[e][j][choice[e][j]] for j in range(S)]
+            inc_flag = [flags[e][j][choice[e][j]] for j in range(S)]
+            var = [_variants(inc[j][0], inc_flag[j]) for j in range(S)]
+            cands += [(seed, j, inc[j][0]) for j in range(S)]
+            spans.append((inc, inc_flag, [(len(cands) + sum(len(v) for v in var[:j]), len(var[j])) for j in range(S)]))
+            cands += [(seed, j, v) for j in range(S) for v in var[j]]
+        c2, s2, r2 = replay_sections(config, cands)
+        for e, (inc, inc_flag, span) in enumerate(spans):
+            options[e] = [[inc[j]] + [(s2[i], float(c2[i])) for i in range(k, k + n)] for j, (k, n) in enumerate(span)]
+            flags[e] = [[inc_flag[j]] + [r2[i] for i in range(k, k + n)] for j, (k, n) in enumerate(span)]
+            choice[e], best[e] = _descend(options[e], np.zeros(S, dtype=int), config)
+            record[e].append(best[e])
+        bar.update()
+    plans = [np.stack([options[e][j][choice[e][j]][0] for j in range(S)], axis=1) for e in range(len(seeds))]
+    replayed = replay_schedules(config, seeds, plans)
+    bar.update()
+    bar.close()
+    return [{"seed": seed, "cost": best[e], "replayed_cost": float(replayed[e]), "schedule": plans[e],
+             "search": record[e], "start_cost": start[e]} for e, seed in enumerate(seeds)]
+
+
+def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: int = 2,
+                    extra_schedules: tuple = (), **search: Any) -> dict:
+    """:func:`hindsight_bounds` of one episode."""
+    return hindsight_bounds(config, [(seed, base_schedule, tuple(extra_schedules))], rounds=rounds, **search)[0]
 
 
 def schedule_rows(plan: np.ndarray) -> list[str]:

@@ -67,7 +67,7 @@ def main(argv=None) -> dict:
     rule_costs = aware["table"][0]["episode_costs"]
     for seed, rule_cost in zip(seeds, rule_costs, strict=True):
         plan, _ = replay(cfg, seed, pol)
-        extra = () if args.no_recorded else tuple(recorded_rule_schedules(cfg, seed, rules))
+        extra = () if args.no_recorded else tuple(recorded_rule_schedules(cfg, [seed], rules)[0])
         h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=(2.0, 3.0), extra_schedules=extra)
         out["episodes"].append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "search": h["search"]})
         print(f"seed {seed}: rule {rule_cost:.1f} hindsight {h['cost']:.1f} "

@@ -2,9 +2,13 @@
 
 1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
 2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
-3. For ``--n-hindsight`` of those episodes, the per-section hindsight search from the best rule's schedule
-   (:func:`trackenv_agents.line_hindsight.hindsight_bound`), with every tuned rule's schedule under the other
-   recording designs as candidates (:func:`trackenv_agents.line_hindsight.recorded_rule_schedules`).
+3. For ``--n-hindsight`` of those episodes, ``--hindsight-batch`` at a time, the per-section hindsight search
+   from the best rule's schedule (:func:`trackenv_agents.line_hindsight.hindsight_bounds`), with every tuned
+   rule's own schedule on the episode and the best rule's (``--recorded-rules all``: every rule's) under
+   ``--designs`` other recording designs as candidates
+   (:func:`trackenv_agents.line_hindsight.recorded_rule_schedules`).
+
+Searches of other seeds (``--test-start``) merge with ``line_room_summary.py``.
 
 Writes results/line_room.json (and the tuned parameters to agents/line_tuned_heuristics.json with
 ``--save-tuned``); progress goes to stdout (run it with a log file in the background).
@@ -21,9 +25,9 @@ from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import evaluate_many
 from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
 from trackenv_agents.line_hindsight import (
-    hindsight_bound,
+    RECORDING_DESIGNS,
+    hindsight_bounds,
     recorded_rule_schedules,
-    replay,
     room_summary,
     schedule_rows,
 )
@@ -42,8 +46,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--rounds", type=int, default=3, help="local-search rounds of the hindsight search")
     ap.add_argument("--thresholds", type=float, nargs="+", default=[2.0, 3.0],
                     help="true-SD thresholds [mm] of the hindsight search's closed-loop candidates")
-    ap.add_argument("--no-recorded", action="store_true",
-                    help="leave out the rules' schedules under other recording designs as hindsight candidates")
+    ap.add_argument("--designs", type=int, default=1,
+                    help="how many of RECORDING_DESIGNS (every step without error, twice a year, once a year) give "
+                         "the hindsight search the rules' schedules under that recording as candidates (0: none)")
+    ap.add_argument("--recorded-rules", choices=("best", "all"), default="best",
+                    help="whose schedules under those designs: the best rule's or every tuned rule's")
+    ap.add_argument("--hindsight-batch", type=int, default=10, help="episodes searched together (one batch)")
     ap.add_argument("--save-tuned", action="store_true")
     ap.add_argument("--use-saved", action="store_true", help="skip tuning: the saved tuned parameters")
     ap.add_argument("--out", default="results/line_room.json")
@@ -81,23 +89,34 @@ def main(argv=None) -> dict:
            "best_rule": best_rule.policy, "best_aware": aware.policy}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1, default=float))
-    # hindsight on the first episodes, from the best rule's own schedule
-    from trackenv_agents.evaluation import _bound
-
-    hs = []
-    pol = _bound(LINE_HEURISTICS[best_rule.policy](**best[best_rule.policy]), cfg)
-    for seed in test[: args.n_hindsight]:
-        plan, _ = replay(cfg, seed, pol)
-        extra = () if args.no_recorded else tuple(recorded_rule_schedules(cfg, seed, pols))
-        h = hindsight_bound(cfg, seed, plan, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds),
-                            extra_schedules=extra)
-        rule_cost = float(best_rule.cost[list(best_rule.seeds).index(seed)])
-        hs.append({"seed": seed, "rule": rule_cost, "hindsight": h["cost"], "replayed": h["replayed_cost"],
-                   "search": h["search"], "schedule": schedule_rows(h["schedule"])})
-        print("hindsight", json.dumps(hs[-1]), f"{time.time() - t0:.0f}s", flush=True)
-        rule_costs = {x["seed"]: x["rule"] for x in hs}
-        out["hindsight"] = {"episodes": hs, "best_rule": best_rule.policy, **room_summary(rule_costs, hs)}
+    # hindsight on the first episodes, from the best rule's own schedule; every tuned rule's own schedule (recorded
+    # by the evaluation) and the rules' schedules under other recording designs are candidates too
+    own = {r.policy: dict(zip(r.seeds.tolist(), r.tamped, strict=True)) for r in res}
+    rule_cost = dict(zip(best_rule.seeds.tolist(), best_rule.cost.tolist(), strict=True))
+    designs = RECORDING_DESIGNS[: args.designs]
+    recorders = pols if args.recorded_rules == "all" else [p for p in pols if p.name == best_rule.policy]
+    hs: list[dict] = []
+    seeds = test[: args.n_hindsight]
+    for k in range(0, len(seeds), args.hindsight_batch):
+        chunk = seeds[k : k + args.hindsight_batch]
+        recorded = recorded_rule_schedules(cfg, chunk, recorders, designs) if designs else [[] for _ in chunk]
+        episodes = [(s, own[best_rule.policy][s], tuple(own[n][s] for n in own if n != best_rule.policy)
+                     + tuple(recorded[i])) for i, s in enumerate(chunk)]
+        for h in hindsight_bounds(cfg, episodes, rounds=args.rounds, sd_thresholds_mm=tuple(args.thresholds),
+                                  progress=True):
+            if abs(h["start_cost"] - rule_cost[h["seed"]]) > 1e-6 * rule_cost[h["seed"]]:
+                raise RuntimeError(f"seed {h['seed']}: the search prices the rule's schedule at {h['start_cost']}, "
+                                   f"the evaluation at {rule_cost[h['seed']]}")
+            hs.append({"seed": h["seed"], "rule": rule_cost[h["seed"]], "hindsight": h["cost"],
+                       "replayed": h["replayed_cost"], "search": h["search"],
+                       "schedule": schedule_rows(h["schedule"])})
+            print("hindsight", json.dumps({k_: v for k_, v in hs[-1].items() if k_ != "schedule"}),
+                  f"{time.time() - t0:.0f}s", flush=True)
+        out["hindsight"] = {"episodes": hs, "best_rule": best_rule.policy,
+                            **room_summary({x["seed"]: x["rule"] for x in hs}, hs)}
         Path(args.out).write_text(json.dumps(out, indent=1, default=float))
+        print("room", json.dumps({k_: v for k_, v in out["hindsight"].items()
+                                  if k_ not in ("episodes", "per_episode_relative", "seeds")}), flush=True)
     print("done", f"{time.time() - t0:.0f}s", flush=True)
     return out
 

@@ -2,7 +2,7 @@
 schedule any search found, against the best rule's cost on that episode, with a paired 95 % bootstrap CI.
 
 The hindsight search costs minutes per episode, so the ≥ 100 episodes of the room criterion are searched in
-several runs (``line_room.py``, ``line_hindsight.py --seeds ...``, on this machine or others). A schedule's cost
+several runs (``line_room.py --use-saved --test-start A --n-test N``, on this machine or others). A schedule's cost
 depends only on the true state (tested: ``test_a_schedules_cost_does_not_depend_on_the_recording_design``), so
 a search run under another recording design of the same line bounds the same episode too; every search result
 was replayed in the env to its cost when it was found.
@@ -35,7 +35,7 @@ def summarise(room: dict, searches: list[dict]) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("room", help="line_room.py result (the rules' held-out costs)")
-    ap.add_argument("searches", nargs="*", help="more search results (line_hindsight.py or line_room.py JSON)")
+    ap.add_argument("searches", nargs="*", help="more search results (line_room.py JSON)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     room = json.loads(Path(args.room).read_text())

@@ -13,7 +13,15 @@ from trackenv_agents.line_heuristics import (
     SectionThreshold,
     UniformPeriodic,
 )
-from trackenv_agents.line_hindsight import _variants, hindsight_bound, recorded_rule_schedules, replay
+from trackenv_agents.line_hindsight import (
+    TrueStateRule,
+    _variants,
+    hindsight_bound,
+    hindsight_bounds,
+    recorded_rule_schedules,
+    replay,
+    replay_sections,
+)
 
 CFG = scenario("small", horizon_years=1.0)
 
@@ -70,6 +78,9 @@ def test_harness_scores_line_heuristics_with_cost_parts():
         assert np.allclose(r.cost, -r.sum_rewards)
         assert set(r.cost_parts) >= {"possession", "speed_restriction"}
     assert res[1].cost_parts["possession"].min() > 0
+    for r in res:  # the evaluation records what was tamped, step by step
+        assert r.tamped.shape == (2, cfg.horizon_steps, 6)
+        np.testing.assert_array_equal(r.tamped.sum(axis=(1, 2)), r.section_tampings)
 
 
 def test_hindsight_search_is_exact_and_no_worse_than_its_start():
@@ -87,11 +98,57 @@ def test_hindsight_search_is_exact_and_no_worse_than_its_start():
     assert (h["schedule"].sum(axis=1) <= cfg.capacity).all()
 
 
+def test_forked_section_replays_equal_replays_from_the_start_and_the_env():
+    """Candidates share their common past (forked where they part) and many episodes share a batch: the numbers
+    are bit for bit those of replaying every candidate from the first step, and an open-loop schedule of every
+    section priced per section (plus the possession per campaign step) is what the env charges."""
+    cfg = scenario("small", horizon_years=1.5)
+    H, S = cfg.horizon_steps, cfg.n_sections
+    rng = np.random.default_rng(2)
+    plans = {seed: rng.random((3, H, S)) < 0.25 for seed in (4, 9)}
+    cands, first = [], {}
+    for seed, ps in plans.items():
+        for j in range(S):
+            first.setdefault(seed, []).append(len(cands))  # the row of section j under the seed's first plan
+            cands += [(seed, j, p[:, j]) for p in ps]
+            cands += [(seed, j, TrueStateRule(1.5, 0.8, 0)), (seed, j, TrueStateRule(1.5, 0.8, 2)),
+                      (seed, j, TrueStateRule(1.0, np.inf, 0))]
+            late = ps[0][:, j].copy()
+            late[-1] = not late[-1]  # parts from its parent only at the last step
+            cands.append((seed, j, late))
+    shared = replay_sections(cfg, cands)
+    alone = replay_sections(cfg, cands, share_prefixes=False)
+    for a, b in zip(shared, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+    cost, sched = shared[0], shared[1]
+    for seed, ps in plans.items():
+        rows = first[seed]
+        applied = sched[rows].T  # (H, S) as the env applies it
+        _, env_cost = replay(cfg, seed, ps[0])
+        assert cost[rows].sum() + cfg.possession_cost * applied.any(axis=1).sum() == pytest.approx(env_cost, rel=1e-12)
+    with pytest.raises(ValueError, match="sections"):
+        replay_sections(cfg, [(4, S, np.zeros(H, bool))])
+
+
+def test_hindsight_of_several_episodes_at_once_is_each_episodes_own():
+    cfg = scenario("small", horizon_years=1.0)
+    H, S = cfg.horizon_steps, cfg.n_sections
+    plan = np.zeros((H, S), bool)
+    plan[1, :2] = True
+    kw = dict(rounds=1, sd_thresholds_mm=(2.0,), peak_fractions=(np.inf,), stop_steps=(0,))
+    both = hindsight_bounds(cfg, [(4, plan, ()), (6, plan, ())], **kw)
+    for h in both:
+        one = hindsight_bound(cfg, h["seed"], plan, **kw)
+        assert one["cost"] == h["cost"] and np.array_equal(one["schedule"], h["schedule"])
+    with pytest.raises(ValueError, match="distinct seeds"):
+        hindsight_bounds(cfg, [(4, plan, ()), (4, plan, ())], **kw)
+
+
 def test_recorded_rule_schedules_are_the_rules_own_under_another_recording_and_candidates():
     cfg = scenario("small", horizon_years=1.5, measurement_interval=4)
     exact = {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0}
     rule = SectionThreshold(threshold_mm=1.0)
-    (sched,) = recorded_rule_schedules(cfg, 3, [rule], designs=(exact, {"measurement_interval": 4}))
+    ((sched,),) = recorded_rule_schedules(cfg, [3], [rule], designs=(exact, {"measurement_interval": 4}))
     own, _ = replay(cfg.replace(**exact), 3, _bound(rule, cfg.replace(**exact)))
     assert sched.shape == (cfg.horizon_steps, 6) and sched.any() and np.array_equal(sched, own)  # cfg's design skipped
     _, sched_cost = replay(cfg, 3, sched.astype(bool))  # the same schedule is feasible on the episode as cfg records it
@@ -99,7 +156,7 @@ def test_recorded_rule_schedules_are_the_rules_own_under_another_recording_and_c
                         stop_steps=(0,), extra_schedules=(sched,))
     assert h["cost"] <= sched_cost + 1e-9
     with pytest.raises(ValueError, match="designs may change only"):
-        recorded_rule_schedules(cfg, 3, [rule], designs=({"possession_cost": 1.0},))
+        recorded_rule_schedules(cfg, [3], [rule], designs=({"possession_cost": 1.0},))
 
 
 def test_a_schedules_cost_does_not_depend_on_the_recording_design():

@@ -57,14 +57,15 @@ def test_same_seed_same_rollout_single_sync_native():
     a = _rollout(TampingLine(scenario="small", **SHORT), 7, actions)
     b = _rollout(TampingLine(scenario="small", **SHORT), 7, actions)
     _same(a, b)
-    vec = TampingLineVectorEnv(2, scenario="small", **SHORT)
+    # 3 lines: 18 segments, more than one chunk of the kernel's widest SIMD width (a single line runs narrower)
+    vec = TampingLineVectorEnv(3, scenario="small", **SHORT)
     obs, _ = vec.reset(seed=7)
     assert np.array_equal(obs["section_sd"][0], a[0]["section_sd"])
-    sync = gym.vector.SyncVectorEnv([lambda: TampingLine(scenario="small", **SHORT)] * 2)
+    sync = gym.vector.SyncVectorEnv([lambda: TampingLine(scenario="small", **SHORT)] * 3)
     sobs, _ = sync.reset(seed=7)
     assert np.array_equal(sobs["section_sd"], obs["section_sd"])
     for i, act in enumerate(actions[:2]):
-        batch = np.stack([act, act])
+        batch = np.stack([act] * 3)
         obs, r, _, _, _ = vec.step(batch)
         sobs, sr, _, _, _ = sync.step(batch)
         assert r[0] == a[i + 1][1]  # bit-identical: a line's numbers do not depend on its batch

@@ -50,6 +50,13 @@ def _lsq_line(z: np.ndarray) -> np.ndarray:
     return z.mean(axis=-1, keepdims=True) + slope[..., None] * t
 
 
+#: The per-segment arrays of :class:`LineBatch` (leading axis: segment), and those indexed (step, segment).
+_ROW_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "count", "tampings", "register", "wet_onset",
+               "wet_mask", "wet_active", "last_tamped", "measured_sd", "measured_peak", "measured_level",
+               "contact_force", "d1", "sd", "peak", "sd_after_tamping")
+_ROW_NOISE = ("tamp_noise", "meas_noise")
+
+
 class LineBatch:
     """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
     of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched."""
@@ -270,9 +277,11 @@ class LineBatch:
     # ------------------------------------------------------------------ a step
     def allowed(self) -> np.ndarray:
         """(n_lines, S) sections that may be tamped now (not within min_steps_between_tampings)."""
-        seg_step = np.repeat(self.step, self.S)
-        ok = (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
-        return ok.reshape(self.n_lines, self.S)
+        return self.allowed_rows(np.repeat(self.step, self.S)).reshape(self.n_lines, self.S)
+
+    def allowed_rows(self, seg_step: np.ndarray | int) -> np.ndarray:
+        """(segments,) bool: the segments that may be tamped at their step ``seg_step`` (per segment or one)."""
+        return (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
 
     def renewing(self) -> np.ndarray:
         """(segments,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
@@ -327,24 +336,33 @@ class LineBatch:
             c.section_tamping_cost * tamped.sum(1),
             c.section_renewal_cost * renew.reshape(self.n_lines, self.S).sum(1),
         ])
-        self.sd_after_tamping[:] = 0.0
-        if t.any():
-            z = self.level[t]
-            f = _lsq_line(z)
-            beta = np.where(renew[t], 0.0, self.tm.residual_fraction)[:, None]
-            seg_step = np.repeat(self.step, self.S)[t]
-            e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), np.flatnonzero(t)]
-            self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
-            self.sd_after_tamping[:] = 0.0
-            self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
-            self.u[t] = 0.0
-            self.cyc[t] = 0.0
-            self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
-            self.tampings[t] += 1
-            self.last_tamped[t] = seg_step
-            if c.annual_budget > 0:
-                self.budget_left -= parts.sum(axis=0)
+        self.tamp_rows(t, np.repeat(self.step, self.S))
+        if t.any() and c.annual_budget > 0:
+            self.budget_left -= parts.sum(axis=0)
         return parts
+
+    def tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """Tamp (or renew, where due) the segments ``t`` (segments,) bool at their step ``seg_step`` (per
+        segment or one): the level lifted to its least-squares line keeping the residual fraction of its shape
+        plus the pre-drawn residual of that step, consolidation restarted. No costs, no budget: :meth:`apply`
+        is the line-level step; a search over per-section schedules calls this directly."""
+        c = self.config
+        renew = t & self.renewing()
+        self.sd_after_tamping[:] = 0.0
+        if not t.any():
+            return
+        z = self.level[t]
+        f = _lsq_line(z)
+        beta = np.where(renew[t], 0.0, self.tm.residual_fraction)[:, None]
+        step_t = np.broadcast_to(np.asarray(seg_step), t.shape)[t]
+        e = self.tamp_noise[np.minimum(step_t, c.horizon_steps), np.flatnonzero(t)]
+        self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
+        self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
+        self.u[t] = 0.0
+        self.cyc[t] = 0.0
+        self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
+        self.tampings[t] += 1
+        self.last_tamped[t] = step_t
 
     def traffic(self, lines: np.ndarray | None = None) -> None:
         """The period's traffic on ``lines`` (bool over lines; None: every line): wet spots that start now, the
@@ -354,8 +372,18 @@ class LineBatch:
         lines = np.ones(self.n_lines, dtype=bool) if lines is None else np.asarray(lines, dtype=bool)
         if not lines.any():
             return
-        seg = np.repeat(lines, self.S)
-        seg_step = np.repeat(self.step, self.S)
+        self.traffic_rows(np.repeat(lines, self.S), np.repeat(self.step, self.S))
+        self.step[lines] += 1
+        year_start = self.step % c.steps_per_year == 0
+        if c.annual_budget > 0:
+            self.budget_left = np.where(lines & year_start, c.annual_budget, self.budget_left)
+        self._measure(lines & (self.step % c.measurement_interval == 0))
+
+    def traffic_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """The period's traffic on the segments ``seg`` (segments,) bool at their step ``seg_step`` (per segment
+        or one): wet spots whose onset it is, one batched pass per vehicle type, the settlement, the true
+        quality. No step count, no measurement: :meth:`traffic` is the line-level step."""
+        c = self.config
         start = seg & (self.wet_onset == seg_step) & ~self.wet_active
         if start.any():
             factor = np.where(self.wet_mask[start], c.wet_spot_rate_factor, 1.0)
@@ -365,12 +393,19 @@ class LineBatch:
         force, contact = self._passes(rows)
         self.contact_force[rows] = contact
         self._advance(rows, force, float(self.passes.sum()))
-        self.step[lines] += 1
         self._quality(rows)
-        year_start = self.step % c.steps_per_year == 0
-        if c.annual_budget > 0:
-            self.budget_left = np.where(lines & year_start, c.annual_budget, self.budget_left)
-        self._measure(lines & (self.step % c.measurement_interval == 0))
+
+    def copy_rows(self, dst: np.ndarray, source: LineBatch, src: np.ndarray) -> None:
+        """Make segments ``dst`` of this batch exact copies of segments ``src`` of ``source`` (the same config):
+        every per-segment array (state, statics, pre-drawn noise). A search forks a section's trajectory this
+        way where two schedules part, instead of replaying their common past."""
+        dst, src = np.atleast_1d(dst), np.atleast_1d(src)
+        for name in _ROW_FIELDS:
+            getattr(self, name)[dst] = getattr(source, name)[src]
+        for name in _ROW_NOISE:
+            getattr(self, name)[:, dst] = getattr(source, name)[:, src]
+        for d, s_ in zip(dst, src, strict=True):
+            self.model_tracks[d] = source.model_tracks[s_]
 
     def costs(self, campaign: np.ndarray) -> dict[str, np.ndarray]:
         """The period's costs per line (k€) in named parts; reward = −Σ parts."""

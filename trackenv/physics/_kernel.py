@@ -40,9 +40,11 @@ import numpy as np
 from numba import njit, prange
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
-# Floating-point freedoms that do not make a row depend on its SIMD lane: fused multiply-adds and no NaN/inf/-0
-# bookkeeping; never reassociation or approximate reciprocals (those could differ between lanes and widths).
-FASTMATH = {"contract", "nnan", "ninf", "nsz"}
+# Floating-point freedoms that do not make a row depend on its SIMD lane, width or compiled copy: no NaN/inf/-0
+# bookkeeping only. Never reassociation or approximate reciprocals, and no fused multiply-adds ("contract"): LLVM
+# fuses where it chooses, differently in each compiled copy (a chunk of 16 rows moved by ~1e-13 between the
+# serial and the parallel entry), which broke the bit-identity of a row across batch sizes.
+FASTMATH = {"nnan", "ninf", "nsz"}
 WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
 
 Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays rail_mass")
