@@ -5,8 +5,8 @@ Why a per-section search can be exact: the sections of a line are physically ind
 segment), so a section's own costs (geometry, speed restriction, immediate action, tamping, renewal) depend only
 on its own schedule; the only coupling is the possession cost, paid once per campaign step, and the capacity.
 Any mix of per-section schedules can therefore be priced exactly from per-section replays
-(:func:`replay_sections`), and a coordinate descent over the sections' candidate schedules
-(:func:`_descend`) optimises the exact total.
+(:func:`replay_sections`), and the cheapest pick of one candidate schedule per section, with the shared
+possessions and the capacity, is a small integer program solved exactly (:func:`_select`).
 
 The replays are cheap where candidates share a past: a candidate is a fork of the trajectory it agrees with
 longest and runs its own passes only from the step where its decision differs (:func:`replay_sections`), and the
@@ -19,15 +19,18 @@ The search (:func:`hindsight_bounds`, per episode):
    reaches a threshold, or its true D1 mean-to-peak a fraction of the intervention limit (a guard against speed
    restrictions), and not in the last ``stop_steps`` steps (the horizon truncates the episode, so a tamping
    whose benefit falls after it is wasted); plus the given rule's own schedule and no tamping. All are replayed in
-   one batch; coordinate descent picks one per section. Optionally (``extra_schedules``) the schedules the
+   one batch; the selection picks one per section. Optionally (``extra_schedules``) the schedules the
    tuned rules apply when the same episode is *recorded more often or without error*
    (:func:`recorded_rule_schedules`): a planner who knows the true state can act as any rule that measured it.
    The recording design changes nothing the physics or the costs see, so such a schedule is feasible on the
    episode and priced exactly like any other.
 2. **Local search**, ``rounds`` times: each section's incumbent schedule varied one tamping at a time (the k-th
-   tamping moved by ±1 or ±2 steps or dropped; a tamping added one or two steps before the section's first
-   speed restriction), each a fork of the incumbent; coordinate descent again, started from the incumbent, so the
-   cost never rises.
+   tamping moved by ±1 or ±2 steps, moved to a campaign of the incumbent plan within 4 steps, or dropped; a
+   tamping added one or two steps before the section's first speed restriction or at any campaign of the plan),
+   each new variant a fork of the incumbent; then the exact selection over *every* candidate replayed so far
+   (never worse than the incumbent). Joining a campaign costs no possession, so these moves are where a
+   per-section plan gains over a whole-line rule; the integer program moves several sections at once (it can
+   empty a campaign), which a one-section-at-a-time descent cannot.
 
 It is a search, not an exact optimum, so the bound is an upper bound on the true hindsight optimum; the
 final schedule is replayed in the env as a check of the pricing.
@@ -201,42 +204,63 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     return float(section_cost.sum() + config.possession_cost * np.count_nonzero(per_step))
 
 
-def _descend(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray,
-             config: Any) -> tuple[np.ndarray, float]:
-    """Coordinate descent: per section j, ``options[j]`` is a list of (schedule (H,), cost) of which
-    ``choice[j]`` is chosen; change one section at a time while the exact total falls."""
-    S = len(options)
+def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
+            incumbent: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """The cheapest pick of one option per section: ``options[j]`` is a list of (schedule (H,), cost) of section
+    j; the total is the sections' costs plus the possession cost of every step with a tamping, within the
+    capacity (:func:`_total`). Solved exactly as a small integer program (HiGHS through :func:`scipy.optimize.
+    milp`): binaries x[j, o] (section j takes option o, one per section) and y[t] (a campaign at step t) with
+    Σ_j,o tamp[j, o, t]·x[j, o] <= capacity·y[t]. Returns the choice (S,) and its total; never worse than
+    ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the optimum."""
+    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.sparse import coo_array
 
-    def plan_of(ch):
-        return np.stack([options[j][ch[j]][0] for j in range(S)], axis=1)
+    S, H = len(options), config.horizon_steps
+    n = [len(o) for o in options]
+    first = np.concatenate([[0], np.cumsum(n)])
+    nx = int(first[-1])
+    c = np.concatenate([[cost for _, cost in o] for o in options] + [np.full(H, config.possession_cost)])
+    # one option per section
+    rows = np.repeat(np.arange(S), n)
+    pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + H))
+    # tampings at step t need a campaign at t, of at most capacity sections
+    tamp = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(float)  # (nx, H)
+    r, q = np.nonzero(tamp.T)
+    load = coo_array((np.concatenate([np.ones(r.size), np.full(H, -float(config.capacity))]),
+                      (np.concatenate([r, np.arange(H)]), np.concatenate([q, nx + np.arange(H)]))),
+                     shape=(H, nx + H))
+    res = milp(c, integrality=np.ones(nx + H), bounds=Bounds(0, 1),
+               constraints=[LinearConstraint(pick, 1, 1), LinearConstraint(load, -np.inf, 0)],
+               options={"time_limit": 60.0})
+    found = None
+    if res.x is not None:
+        x = res.x[:nx] > 0.5
+        found = np.array([int(np.argmax(x[first[j]:first[j + 1]])) for j in range(S)])
 
-    def cost_of(ch):
-        return np.array([options[j][ch[j]][1] for j in range(S)])
+    def total(ch):
+        return _total(np.stack([options[j][ch[j]][0] for j in range(S)], axis=1),
+                      np.array([options[j][ch[j]][1] for j in range(S)]), config)
 
-    best = _total(plan_of(choice), cost_of(choice), config)
-    improved = True
-    while improved:
-        improved = False
-        for j in range(S):
-            for m in range(len(options[j])):
-                if m == choice[j]:
-                    continue
-                trial = choice.copy()
-                trial[j] = m
-                v = _total(plan_of(trial), cost_of(trial), config)
-                if v < best - 1e-9:
-                    best, choice, improved = v, trial, True
-    return choice, best
+    picks = [ch for ch in (found, incumbent) if ch is not None]
+    if not picks:
+        raise RuntimeError(f"the selection found no feasible choice ({res.message}) and has no incumbent")
+    best = min(picks, key=total)
+    return best, total(best)
 
 
-def _variants(column: np.ndarray, restricted: np.ndarray) -> list[np.ndarray]:
+def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray | None = None,
+              reach: int = 4) -> list[np.ndarray]:
     """One section's schedule (H,) varied by one tamping: each moved by ±1/±2 steps or dropped; one added 1-2
-    steps before the first step under a speed restriction (``restricted``, (H,) bool)."""
+    steps before the first step under a speed restriction (``restricted``, (H,) bool). With ``campaigns`` (H,)
+    bool (the steps where the line's plan tamps anything), also the moves that join a campaign, where the
+    possession is paid anyway: each tamping moved to a campaign step within ``reach`` steps, and one added at
+    any campaign step."""
     H = column.size
     out = []
+    join = np.flatnonzero(campaigns) if campaigns is not None else np.zeros(0, dtype=int)
     for t in np.flatnonzero(column):
-        for d in (-2, -1, 1, 2):
-            u = t + d
+        moves = {t + d for d in (-2, -1, 1, 2)} | {int(u) for u in join if 0 < abs(int(u) - t) <= reach}
+        for u in sorted(moves):
             if 0 <= u < H and not column[u]:
                 v = column.copy()
                 v[t], v[u] = False, True
@@ -244,13 +268,12 @@ def _variants(column: np.ndarray, restricted: np.ndarray) -> list[np.ndarray]:
         v = column.copy()
         v[t] = False
         out.append(v)
-    for f in np.flatnonzero(restricted)[:1]:
-        for d in (1, 2):
-            u = f - d
-            if 0 <= u < H and not column[u]:
-                v = column.copy()
-                v[u] = True
-                out.append(v)
+    adds = {f - d for f in np.flatnonzero(restricted)[:1] for d in (1, 2)} | {int(u) for u in join}
+    for u in sorted(adds):
+        if 0 <= u < H and not column[u]:
+            v = column.copy()
+            v[u] = True
+            out.append(v)
     unique: dict[bytes, np.ndarray] = {}
     for v in out:
         unique.setdefault(v.tobytes(), v)
@@ -275,16 +298,31 @@ def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> 
     return cost
 
 
-def _options(costs: np.ndarray, sched: np.ndarray, restr: np.ndarray) -> tuple[list, list]:
-    """One section's replayed candidates, (n,), (n, H), (n, H), as one option (schedule, cost) per distinct
-    applied schedule, and its restriction flags."""
-    options, flags, seen = [], [], set()
-    for c, s, r in zip(costs, sched, restr, strict=True):
-        if s.tobytes() not in seen:
-            seen.add(s.tobytes())
-            options.append((s, float(c)))
-            flags.append(r)
-    return options, flags
+class _Pool:
+    """One (episode, section)'s replayed candidates: one option (applied schedule, cost) per distinct schedule
+    the env applied, its restriction flags, and the requested schedules already replayed (never replayed
+    twice)."""
+
+    def __init__(self) -> None:
+        self.options: list[tuple[np.ndarray, float]] = []
+        self.flags: list[np.ndarray] = []
+        self.index: dict[bytes, int] = {}
+        self.asked: set[bytes] = set()
+
+    def add(self, asked: Any, cost: float, sched: np.ndarray, restr: np.ndarray) -> int:
+        """Record a replay; returns the index of its option."""
+        if not isinstance(asked, TrueStateRule):
+            self.asked.add(np.asarray(asked, dtype=bool).tobytes())
+        key = sched.tobytes()
+        if key not in self.index:
+            self.index[key] = len(self.options)
+            self.options.append((sched, float(cost)))
+            self.flags.append(restr)
+        return self.index[key]
+
+    def new(self, schedules: list[np.ndarray]) -> list[np.ndarray]:
+        """The schedules of ``schedules`` not yet replayed."""
+        return [v for v in schedules if v.tobytes() not in self.asked and v.tobytes() not in self.index]
 
 
 def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]], rounds: int = 2,
@@ -294,59 +332,70 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
     """The hindsight search of the module docstring on several episodes at once (each stage's replays of all
     episodes share one batch): ``episodes`` are (seed, base schedule (H, S) bool: a feasible schedule, e.g. the
     best rule's, extra candidate schedules). Returns per episode {"seed", "cost", "replayed_cost", "schedule",
-    "search" (the best total after each stage), "start_cost" (the base schedule's total)}."""
+    "search" (the best total after each stage), "start_cost" (the base schedule's total), "options" (candidates
+    replayed per section)}."""
     from tqdm.auto import tqdm
 
     S, H = config.n_sections, config.horizon_steps
+    if config.annual_budget > 0:
+        raise ValueError(f"the hindsight search prices sections independently and cannot keep an annual budget; "
+                         f"annual_budget must be 0, got {config.annual_budget}")
     seeds = [int(e[0]) for e in episodes]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"episodes must have distinct seeds, got {seeds}")
     rules = [TrueStateRule(s, p, k) for s in (*sd_thresholds_mm, np.inf) for p in peak_fractions for k in stop_steps
              if not (s == np.inf and p == np.inf)]
     bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
-    cands, where = [], []
+    pools = [[_Pool() for _ in range(S)] for _ in seeds]
+    cands, is_base = [], []
     for seed, base, extra in episodes:
         pols = [np.asarray(base, dtype=bool), np.zeros((H, S), dtype=bool), *(np.asarray(x, bool) for x in extra)]
-        first = len(cands)
         cands += [(seed, j, p[:, j]) for p in pols for j in range(S)] + [(seed, j, r) for r in rules for j in range(S)]
-        where.append((first, len(pols) + len(rules)))
+        is_base += [True] * S + [False] * ((len(pols) - 1 + len(rules)) * S)
     cost, sched, restr = replay_sections(config, cands)
+    e_of = {seed: e for e, seed in enumerate(seeds)}
+    start_idx = np.zeros((len(seeds), S), dtype=int)  # the base schedule's options
+    for i, (seed, j, p) in enumerate(cands):
+        k = pools[e_of[seed]][j].add(p, cost[i], sched[i], restr[i])
+        if is_base[i]:
+            start_idx[e_of[seed], j] = k
     bar.update()
-    options, flags, choice, best, record, start = [], [], [], [], [], []
-    for first, m in where:
-        sl = slice(first, first + m * S)
-        c, sc, rs = cost[sl].reshape(m, S), sched[sl].reshape(m, S, H), restr[sl].reshape(m, S, H)
-        opt = [_options(c[:, j], sc[:, j], rs[:, j]) for j in range(S)]
-        options.append([o for o, _ in opt])
-        flags.append([f for _, f in opt])
-        start.append(_total(sc[0].T, c[0], config))
-        ch, b = _descend(options[-1], np.zeros(S, dtype=int), config)
+    choice, best, record, start = [], [], [], []
+    for e in range(len(seeds)):
+        opts = [pools[e][j].options for j in range(S)]
+        start.append(_total(np.stack([opts[j][start_idx[e, j]][0] for j in range(S)], axis=1),
+                            np.array([opts[j][start_idx[e, j]][1] for j in range(S)]), config))
+        ch, b = _select(opts, config, incumbent=start_idx[e])
         choice.append(ch)
         best.append(b)
         record.append([b])
     for _ in range(rounds):
-        # each section's incumbent and its variants, replayed as forks of the incumbent where they part from it
-        cands, spans = [], []
+        # each section's incumbent varied (moves, drops, adds, joins of the plan's campaigns), the new variants
+        # replayed as forks of the incumbent where they part from it; the selection then sees every option so far
+        cands = []
         for e, seed in enumerate(seeds):
-            inc = [options[e][j][choice[e][j]] for j in range(S)]
-            inc_flag = [flags[e][j][choice[e][j]] for j in range(S)]
-            var = [_variants(inc[j][0], inc_flag[j]) for j in range(S)]
-            cands += [(seed, j, inc[j][0]) for j in range(S)]
-            spans.append((inc, inc_flag, [(len(cands) + sum(len(v) for v in var[:j]), len(var[j])) for j in range(S)]))
-            cands += [(seed, j, v) for j in range(S) for v in var[j]]
-        c2, s2, r2 = replay_sections(config, cands)
-        for e, (inc, inc_flag, span) in enumerate(spans):
-            options[e] = [[inc[j]] + [(s2[i], float(c2[i])) for i in range(k, k + n)] for j, (k, n) in enumerate(span)]
-            flags[e] = [[inc_flag[j]] + [r2[i] for i in range(k, k + n)] for j, (k, n) in enumerate(span)]
-            choice[e], best[e] = _descend(options[e], np.zeros(S, dtype=int), config)
+            plan = np.stack([pools[e][j].options[choice[e][j]][0] for j in range(S)], axis=1)
+            campaigns = plan.any(axis=1)
+            for j in range(S):
+                inc, flag = pools[e][j].options[choice[e][j]][0], pools[e][j].flags[choice[e][j]]
+                var = pools[e][j].new(_variants(inc, flag, campaigns))
+                if var:
+                    cands += [(seed, j, inc)] + [(seed, j, v) for v in var]
+        if cands:
+            c2, s2, r2 = replay_sections(config, cands)
+            for i, (seed, j, p) in enumerate(cands):
+                pools[e_of[seed]][j].add(p, c2[i], s2[i], r2[i])
+        for e in range(len(seeds)):
+            choice[e], best[e] = _select([pools[e][j].options for j in range(S)], config, incumbent=choice[e])
             record[e].append(best[e])
         bar.update()
-    plans = [np.stack([options[e][j][choice[e][j]][0] for j in range(S)], axis=1) for e in range(len(seeds))]
+    plans = [np.stack([pools[e][j].options[choice[e][j]][0] for j in range(S)], axis=1) for e in range(len(seeds))]
     replayed = replay_schedules(config, seeds, plans)
     bar.update()
     bar.close()
     return [{"seed": seed, "cost": best[e], "replayed_cost": float(replayed[e]), "schedule": plans[e],
-             "search": record[e], "start_cost": start[e]} for e, seed in enumerate(seeds)]
+             "search": record[e], "start_cost": start[e],
+             "options": [len(pools[e][j].options) for j in range(S)]} for e, seed in enumerate(seeds)]
 
 
 def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: int = 2,
