@@ -127,6 +127,8 @@ def test_selection_is_the_exact_optimum_over_the_options():
     # over capacity (2): steps 1 and 3 can hold two sections each
     _, total2 = _select(options, cfg, incumbent=np.zeros(S, dtype=int))
     assert total2 == pytest.approx(40.0 + 3 * cfg.possession_cost)
+    with pytest.raises(ValueError, match="annual_budget"):  # sections priced alone cannot share a budget
+        hindsight_bound(cfg.replace(annual_budget=50.0), 0, np.zeros((H, S), bool))
 
 
 def test_forked_section_replays_equal_replays_from_the_start_and_the_env():
