@@ -16,7 +16,7 @@ demo: setup
 	$(BIN)/trackenv validate
 	$(BIN)/trackenv paper
 	$(BIN)/trackenv evaluate
-	$(BIN)/trackenv calibrate --seeds 2000:2002
+	$(BIN)/trackenv calibrate
 	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:2
 
 test: setup

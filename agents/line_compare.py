@@ -90,6 +90,9 @@ def format_line_table(payload: dict[str, Any]) -> str:
                        ("steps_per_year", "horizon_steps", "capacity"))
         lines.append(f"{r['policy']:22s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
                      f"{diff:>30s}  {ps}")
+    if payload.get("episode_plot"):
+        lines.append(f"plots: {payload['plot']}, {payload['episode_plot']} (the best rule on episode "
+                     f"{payload['seeds'][0]})")
     return "\n".join(lines)
 
 
