@@ -204,6 +204,16 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     return float(section_cost.sum() + config.possession_cost * np.count_nonzero(per_step))
 
 
+def _plan(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray) -> np.ndarray:
+    """The (H, S) plan of ``choice`` (S,): option ``choice[j]`` of each section's ``options[j]``."""
+    return np.stack([options[j][choice[j]][0] for j in range(len(options))], axis=1)
+
+
+def _choice_total(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray, config: Any) -> float:
+    """Exact episode cost (:func:`_total`) of ``choice`` over ``options``."""
+    return _total(_plan(options, choice), np.array([options[j][choice[j]][1] for j in range(len(options))]), config)
+
+
 def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
             incumbent: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """The cheapest pick of one option per section: ``options[j]`` is a list of (schedule (H,), cost) of section
@@ -236,16 +246,12 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     if res.x is not None:
         x = res.x[:nx] > 0.5
         found = np.array([int(np.argmax(x[first[j]:first[j + 1]])) for j in range(S)])
-
-    def total(ch):
-        return _total(np.stack([options[j][ch[j]][0] for j in range(S)], axis=1),
-                      np.array([options[j][ch[j]][1] for j in range(S)]), config)
-
     picks = [ch for ch in (found, incumbent) if ch is not None]
     if not picks:
         raise RuntimeError(f"the selection found no feasible choice ({res.message}) and has no incumbent")
-    best = min(picks, key=total)
-    return best, total(best)
+    totals = [_choice_total(options, ch, config) for ch in picks]
+    k = int(np.argmin(totals))
+    return picks[k], totals[k]
 
 
 def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray | None = None,
@@ -347,25 +353,22 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
              if not (s == np.inf and p == np.inf)]
     bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
     pools = [[_Pool() for _ in range(S)] for _ in seeds]
-    cands, is_base = [], []
+    cands, firsts = [], []  # an episode's candidates start with its base schedule's S columns
     for seed, base, extra in episodes:
         pols = [np.asarray(base, dtype=bool), np.zeros((H, S), dtype=bool), *(np.asarray(x, bool) for x in extra)]
+        firsts.append(len(cands))
         cands += [(seed, j, p[:, j]) for p in pols for j in range(S)] + [(seed, j, r) for r in rules for j in range(S)]
-        is_base += [True] * S + [False] * ((len(pols) - 1 + len(rules)) * S)
     cost, sched, restr = replay_sections(config, cands)
     e_of = {seed: e for e, seed in enumerate(seeds)}
-    start_idx = np.zeros((len(seeds), S), dtype=int)  # the base schedule's options
+    options_of = [[pool.options for pool in pools[e]] for e in range(len(seeds))]  # live views of the pools
     for i, (seed, j, p) in enumerate(cands):
-        k = pools[e_of[seed]][j].add(p, cost[i], sched[i], restr[i])
-        if is_base[i]:
-            start_idx[e_of[seed], j] = k
+        pools[e_of[seed]][j].add(p, cost[i], sched[i], restr[i])
     bar.update()
     choice, best, record, start = [], [], [], []
     for e in range(len(seeds)):
-        opts = [pools[e][j].options for j in range(S)]
-        start.append(_total(np.stack([opts[j][start_idx[e, j]][0] for j in range(S)], axis=1),
-                            np.array([opts[j][start_idx[e, j]][1] for j in range(S)]), config))
-        ch, b = _select(opts, config, incumbent=start_idx[e])
+        base = np.array([pools[e][j].index[sched[firsts[e] + j].tobytes()] for j in range(S)])
+        start.append(_choice_total(options_of[e], base, config))
+        ch, b = _select(options_of[e], config, incumbent=base)
         choice.append(ch)
         best.append(b)
         record.append([b])
@@ -374,8 +377,7 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
         # replayed as forks of the incumbent where they part from it; the selection then sees every option so far
         cands = []
         for e, seed in enumerate(seeds):
-            plan = np.stack([pools[e][j].options[choice[e][j]][0] for j in range(S)], axis=1)
-            campaigns = plan.any(axis=1)
+            campaigns = _plan(options_of[e], choice[e]).any(axis=1)
             for j in range(S):
                 inc, flag = pools[e][j].options[choice[e][j]][0], pools[e][j].flags[choice[e][j]]
                 var = pools[e][j].new(_variants(inc, flag, campaigns))
@@ -386,10 +388,10 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
             for i, (seed, j, p) in enumerate(cands):
                 pools[e_of[seed]][j].add(p, c2[i], s2[i], r2[i])
         for e in range(len(seeds)):
-            choice[e], best[e] = _select([pools[e][j].options for j in range(S)], config, incumbent=choice[e])
+            choice[e], best[e] = _select(options_of[e], config, incumbent=choice[e])
             record[e].append(best[e])
         bar.update()
-    plans = [np.stack([pools[e][j].options[choice[e][j]][0] for j in range(S)], axis=1) for e in range(len(seeds))]
+    plans = [_plan(options_of[e], choice[e]) for e in range(len(seeds))]
     replayed = replay_schedules(config, seeds, plans)
     bar.update()
     bar.close()
