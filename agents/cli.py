@@ -141,7 +141,8 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     extra = _line_policies(args)
     executor = _executor(args)
     try:
-        result = line_comparison(args.env, seeds=seeds, n_train=args.n_train or 2, retune=args.retune,
+        rules = [r.strip() for r in args.rules.split(",")] if args.rules else None
+        result = line_comparison(args.env, seeds=seeds, rules=rules, n_train=args.n_train or 2, retune=args.retune,
                                  batch_size=args.batch_size, progress=not args.json,
                                  out_dir=args.out or "results/line_compare", extra=extra, executor=executor)
     finally:
@@ -169,6 +170,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.env is not None and args.env != "trackenv/Tamping-v0":
         return cmd_evaluate_line(args)
+    if args.rules is not None:
+        raise UsageError("--rules selects line rules: use it with a line --env")
     if args.quick and args.policy == "ppo":
         raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
     _existing(args.model, "--model")
@@ -219,9 +222,42 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_line(args: argparse.Namespace) -> int:
+    """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
+    --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
+    if args.resume or args.algo:
+        raise UsageError("--resume and --algo are for Tamping-v0; the line's learner reads its algorithm from "
+                         "the hyper-parameter file")
+    from .line_compare import scenario_of
+    from .train_line import train_line
+
+    t0 = time.perf_counter()
+    out = args.out or "runs/ppo_line"
+    path = train_line(scenario_of(args.env), total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
+                      out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
+                      iterations=args.iterations, verbose=0 if args.json else 1)
+    wall = time.perf_counter() - t0
+    summary = json.loads((Path(out) / "summary.json").read_text())
+    payload = {"model": str(path), "wall_time_s": wall, **summary}
+    evals = [it["evaluation"] for it in summary["iterations"] if "evaluation" in it]
+    best = min(evals, key=lambda e: e["mean_cost"]) if evals else None
+    human = f"trained -> {path} in {wall:.0f} s"
+    if best is not None:
+        d = best["vs_baseline"]
+        human += (f"\nbest held-out iteration: {best['mean_cost']:.1f} k€, vs {d['b']} {d['mean_difference']:+.1f} k€ "
+                  f"[{d['ci_low']:+.1f}, {d['ci_high']:+.1f}] on {d['n_episodes']} paired episodes "
+                  f"(best_model.zip; export it with experiments/train_line.py --export)")
+    _emit(args, payload, human)
+    return 0
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     _existing(args.hyperparams, "--hyperparams")
     _existing(args.resume, "--resume", folder=True)
+    if args.env is not None and args.env != "trackenv/Tamping-v0":
+        return cmd_train_line(args)
+    if args.iterations is not None:
+        raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
     from .train import train
 
     t0 = time.perf_counter()
@@ -345,6 +381,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "and the trained line policy")
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes of the line: A:B (seeds A..B-1) or a,b,c")
+    sp.add_argument("--rules", default=None, metavar="NAMES",
+                    help="with a line --env: score only these line rules, comma-separated (e.g. "
+                         "grouped-threshold,uniform-periodic; default: all)")
     sp.set_defaults(func=cmd_evaluate)
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")
@@ -371,6 +410,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="output folder of an earlier run to continue for --timesteps more steps")
     sp.add_argument("--hyperparams", default=None, metavar="FILE",
                     help="YAML (RL Zoo form) or flat JSON overriding agents/hyperparams/ppo.yml key by key")
+    sp.add_argument("--env", default=None, metavar="ID",
+                    help="a TampingLine id: train the line's per-section policy (counterfactual policy iteration, "
+                         "then MaskablePPO for --timesteps line-steps; default runs/ppo_line)")
+    sp.add_argument("--iterations", type=_positive(int), default=None, metavar="N",
+                    help="with a TampingLine --env: policy iterations (default: the hyper-parameter file's)")
     sp.set_defaults(func=cmd_train)
     return p
 

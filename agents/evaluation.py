@@ -76,6 +76,9 @@ class EvaluationResult:
     immediate_action_exceedances: np.ndarray  # section-steps in class 3 per episode
     final_mean_sd_mm: np.ndarray  # mean section SD at the end [mm]
     sum_rewards: np.ndarray  # sum of rewards per episode (= -cost)
+    # TampingLine: per episode and section its own costs ("section_cost", k€, possession excluded), its register
+    # class ("register": 0 plain, 1 transition, 2 switch or crossing) and whether a hidden wet spot started in it
+    # ("wet_spot"), each (episodes, sections)
     extra: dict[str, Any] = field(default_factory=dict)
     tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
 
@@ -156,6 +159,8 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
+    section_cost = np.zeros((n, cfg.n_sections))  # TampingLine: each section's own costs (info["section_costs"])
+    register = np.asarray(obs.get("register", np.zeros((n, cfg.n_sections))), dtype=np.int64)
     traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
     if record:
         traces["section_sd_mm"].append(obs["section_sd"].copy())
@@ -174,6 +179,8 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
         tamped[:, t] = info["tamped_sections"]
+        if "section_costs" in info:
+            section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
         if record:
             traces["section_sd_mm"].append(info["section_sd_mm"])
@@ -186,8 +193,10 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             if not trunc.all():  # pragma: no cover - guards a change of the env's horizon rule
                 raise RuntimeError("episodes did not end at the configured horizon")
             final_sd = info["section_sd_mm"].mean(axis=1)
+            wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
-            "tamped": tamped, "traces": traces}
+            "tamped": tamped, "section_cost": section_cost, "register": register, "wet_spot": wet,
+            "traces": traces}
 
 
 def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
@@ -248,6 +257,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in _cost_keys(cfg)}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     tamped = cat("tamped")
+    sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")} if isinstance(cfg, LineConfig) else {}
     results = []
     for p, pol in enumerate(bound):
         m = pol_of == p
@@ -256,7 +266,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
-            tamped=tamped[m]))
+            tamped=tamped[m], extra={k: v[m] for k, v in sections.items()}))
     return results
 
 

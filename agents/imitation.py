@@ -1,23 +1,21 @@
-"""Warm start by behaviour cloning: before PPO explores, its policy learns to act like a tuned rule.
+"""Learning from a teacher: behaviour cloning of a tuned rule (Tamping-v0's warm start), and fitting a policy to
+the cheaper of two priced choices (the line's counterfactual policy iteration).
 
-Why: exploration from a random (or never-tamping) policy spends most of a small training budget rediscovering
-that a full campaign every few years beats doing nothing. Cloning the best tuned rule first puts PPO where
-the rules are, and its own updates then only have to find the *improvements* (when a campaign can wait, when it
-should come early). The cloned rule is only a starting point: the trained policy is judged on held-out seeds
-like any other, against the same rule.
+Why a warm start: exploration from a random (or never-tamping) policy spends most of a small training budget
+rediscovering that a full campaign every few years beats doing nothing. Cloning the best tuned rule first puts
+PPO where the rules are, and its own updates then only have to find the *improvements* (when a campaign can
+wait, when it should come early). The cloned rule is only a starting point: the trained policy is judged on
+held-out seeds like any other, against the same rule.
 
-:func:`warm_start` rolls the teacher out on the training env and then fits the policy head to the teacher's
-actions (cross-entropy; for MultiBinary actions the binary cross-entropy of each section) and the value head
-to the discounted returns of those episodes in the learner's reward units (squared error). Two kinds of
-training env: Tamping-v0's, under VecNormalize (the roll-out also warms its observation and reward statistics;
-the fit sees normalised observations and returns), and TampingLine's, whose policy scales its own features and
-whose rewards are divided by a fixed scale (:class:`~trackenv_agents.sb3_vec.VecScaleReward`).
-:func:`agreement` checks a clone against its teacher on held-out episodes.
+:func:`warm_start` rolls the teacher out on the training env (under VecNormalize: the roll-out also warms its
+observation and reward statistics; the fit sees normalised observations and returns) and then fits the policy
+head to the teacher's actions (cross-entropy) and the value head to the discounted returns of those episodes in
+the learner's reward units (squared error). :func:`fit_choices` fits a policy to priced choices instead of a
+teacher's actions (:mod:`trackenv_agents.line_counterfactual`, :mod:`trackenv_agents.train_line`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -135,6 +133,24 @@ def return_scale(env) -> float:
     return float(getattr(env, "reward_scale", 1.0))
 
 
+def _adam_epochs(policy, n: int, epochs: int, batch_size: int, learning_rate: float, seed: int, batch_loss) -> None:
+    """Adam on ``policy``'s parameters over ``epochs`` shuffled passes of ``n`` samples in minibatches;
+    ``batch_loss(indices)`` gives a minibatch's loss (a torch scalar). The shuffles come from ``seed``."""
+    import torch
+
+    gen = torch.Generator().manual_seed(seed)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate)
+    policy.set_training_mode(True)
+    for _ in range(int(epochs)):
+        order = torch.randperm(n, generator=gen)
+        for start in range(0, n, batch_size):
+            loss = batch_loss(order[start:start + batch_size])
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+    policy.set_training_mode(False)
+
+
 def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size: int = 256,
                learning_rate: float = 1e-3, vf_coef: float = 0.5, label_smoothing: float = 0.02,
                seed: int = 0) -> dict[str, float]:
@@ -147,7 +163,8 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
     from stable_baselines3.common.utils import obs_as_tensor
 
     policy = model.policy
-    obs = {k: v.copy() for k, v in demos["obs"].items()}
+    obs = demos["obs"]
+    obs = {k: v.copy() for k, v in obs.items()} if isinstance(obs, dict) else np.array(obs, copy=True)
     normalize = getattr(env, "normalize_obs", None)
     if callable(normalize):
         obs = normalize(obs)
@@ -157,22 +174,13 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
     if isinstance(policy.action_space, spaces.MultiBinary):
         act_t = act_t.float()  # Bernoulli heads take their 0/1 targets as floats
     n = len(target)
-    gen = torch.Generator().manual_seed(seed)
-    optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate)
-    policy.set_training_mode(True)
-    for _ in range(int(epochs)):
-        order = torch.randperm(n, generator=gen)
-        for start in range(0, n, batch_size):
-            idx = order[start:start + batch_size]
-            batch = {k: v[idx] for k, v in obs_t.items()}
-            distribution = policy.get_distribution(batch)
-            values = policy.predict_values(batch)
-            value_loss = torch.nn.functional.mse_loss(values.flatten(), target[idx])
-            loss = _smoothed_nll(distribution, act_t[idx], label_smoothing) + vf_coef * value_loss
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
-    policy.set_training_mode(False)
+
+    def batch_loss(idx):
+        batch = {k: v[idx] for k, v in obs_t.items()} if isinstance(obs_t, dict) else obs_t[idx]
+        value_loss = torch.nn.functional.mse_loss(policy.predict_values(batch).flatten(), target[idx])
+        return _smoothed_nll(policy.get_distribution(batch), act_t[idx], label_smoothing) + vf_coef * value_loss
+
+    _adam_epochs(policy, n, epochs, batch_size, learning_rate, seed, batch_loss)
     with torch.no_grad():
         values, log_prob, _ = policy.evaluate_actions(obs_t, act_t)
         chosen = policy.get_distribution(obs_t).mode()
@@ -185,82 +193,65 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
             "accuracy": float(match.float().mean()), "section_accuracy": section_accuracy, "samples": int(n)}
 
 
-def relabel(demos: dict[str, Any], teacher, action_type: str, copies: int, sd_jitter_mm: float,
-            rng: np.random.Generator) -> dict[str, Any]:
-    """The demonstrations plus ``copies`` copies of their states with Gaussian noise of ``sd_jitter_mm`` on the
-    measured SD (``section_sd``, clipped at 0), each labelled by the teacher itself.
+def fit_choices(model, samples: dict[str, np.ndarray], reward_scale: float, epochs: int = 30,
+                batch_size: int = 512, learning_rate: float = 1e-3, vf_coef: float = 0.5, margin: float = 1.0,
+                seed: int = 0) -> dict[str, float]:
+    """Fit ``model.policy`` (an SB3 policy with ``Discrete(2)`` actions: 1 = tamp) to the cheaper of two priced
+    choices per sample (``samples``: ``features``, ``q_tamp``, ``q_wait`` k€ to the horizon, ``acted``,
+    ``weight``, as :func:`trackenv_agents.line_counterfactual.section_counterfactuals` gives them):
+    cost-sensitive classification, the cross-entropy of the cheaper choice weighted by ``weight`` ×
+    max(|q_tamp − q_wait|, ``margin``) (a choice that costs much when wrong counts as much). Where the two
+    differ by less than ``margin`` k€ the target is the choice the data's policy made: a difference that small
+    is within what one sampled future decides, and keeping the policy's choice there keeps the learner from
+    wandering where nothing is gained. The value head is fitted to minus the cost-to-go of the choice made, over
+    ``reward_scale`` (the learner's reward units). Returns the final losses, the share of samples whose target
+    the policy now chooses, and that share weighted."""
+    import torch
 
-    Why: the rules are thresholds on measured quantities, and a clone learns a threshold only as precisely as
-    its data lies near it (the first line clone's disagreements with the rule all sat within ~0.1 mm of the
-    trigger or inclusion SD). The teacher is a function of the observation, so labels near its thresholds cost
-    no env steps. A copy keeps the return of the state it came from (the jitter is of the order of the
-    recording car's noise), so the value head sees the same targets more often."""
-    if copies == 0:
-        return demos
-    obs, actions, returns = [demos["obs"]], [demos["actions"]], [demos["returns"]]
-    for _ in range(int(copies)):
-        o = {k: v.copy() for k, v in demos["obs"].items()}
-        sd = o["section_sd"]
-        o["section_sd"] = np.clip(sd + rng.normal(0.0, sd_jitter_mm, sd.shape), 0.0, None).astype(sd.dtype)
-        obs.append(o)
-        actions.append(teacher_to_agent_actions(teacher.predict(o)[0], action_type))
-        returns.append(demos["returns"])
-    return {**demos, "obs": {k: np.concatenate([o[k] for o in obs]) for k in obs[0]},
-            "actions": np.concatenate(actions), "returns": np.concatenate(returns)}
+    policy = model.policy
+    x = torch.as_tensor(samples["features"], dtype=torch.float32, device=policy.device)
+    q_tamp, q_wait = np.asarray(samples["q_tamp"], float), np.asarray(samples["q_wait"], float)
+    acted = np.asarray(samples["acted"], bool)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin must be a number >= 0 (k€), got {margin!r}")
+    clear = np.abs(q_tamp - q_wait) >= margin
+    target = torch.as_tensor(np.where(clear, q_tamp < q_wait, acted), dtype=torch.long, device=policy.device)
+    stake = np.asarray(samples["weight"], float) * np.maximum(np.abs(q_tamp - q_wait), margin)
+    if not stake.sum() > 0:
+        raise ValueError("the samples carry no cost difference to learn from")
+    w = torch.as_tensor(stake / stake.mean(), dtype=torch.float32, device=policy.device)
+    made = np.where(acted, q_tamp, q_wait)
+    value = torch.as_tensor(-made / reward_scale, dtype=torch.float32, device=policy.device)
+    n = len(target)
+
+    def batch_loss(idx):
+        choice_loss = -(w[idx] * policy.get_distribution(x[idx]).log_prob(target[idx])).mean()
+        return choice_loss + vf_coef * torch.nn.functional.mse_loss(policy.predict_values(x[idx]).flatten(),
+                                                                    value[idx])
+
+    _adam_epochs(policy, n, epochs, batch_size, learning_rate, seed, batch_loss)
+    with torch.no_grad():
+        dist = policy.get_distribution(x)
+        right = (dist.mode() == target).float()
+        choice_loss = -(w * dist.log_prob(target)).mean()
+        value_mse = torch.nn.functional.mse_loss(policy.predict_values(x).flatten(), value)
+    return {"choice_loss": float(choice_loss), "value_mse": float(value_mse), "samples": int(n),
+            "target_share": float(right.mean()), "weighted_target_share": float((right * w).sum() / w.sum())}
 
 
-def warm_start(model, env, config: TampingEnvConfig | LineConfig, action_type: str, rule: str, n_episodes: int = 64,
+def warm_start(model, env, config: TampingEnvConfig, action_type: str, rule: str, n_episodes: int = 64,
                epochs: int = 300, gamma: float = 0.99, label_smoothing: float = 0.02,
-               params: dict[str, Any] | None = None, seed: int = 0, relabel_copies: int = 0,
-               relabel_sd_mm: float = 0.15) -> dict[str, Any]:
-    """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring), with
-    ``relabel_copies`` teacher-labelled noisy copies of the demonstrated states (:func:`relabel`); return a
-    summary of the fit."""
+               params: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
+    """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring); return
+    a summary of the fit."""
     if int(n_episodes) < 1:
         raise ValueError(f"warm_start_episodes must be >= 1, got {n_episodes!r}")
     if int(epochs) < 1:
         raise ValueError(f"warm_start_epochs must be >= 1, got {epochs!r}")
     if not 0.0 <= label_smoothing < 1.0:
         raise ValueError(f"warm_start_label_smoothing must be in [0, 1), got {label_smoothing!r}")
-    if isinstance(relabel_copies, bool) or not isinstance(relabel_copies, (int, np.integer)) or \
-            not 0 <= relabel_copies <= 100:
-        raise ValueError(f"warm_start_relabel_copies must be an integer in [0, 100], got {relabel_copies!r}")
-    if not (np.isfinite(relabel_sd_mm) and 0.0 <= relabel_sd_mm <= 10.0):
-        raise ValueError(f"warm_start_relabel_sd_mm must be in [0, 10] mm, got {relabel_sd_mm!r}")
     teacher = teacher_policy(rule, config, params)
     demos = collect_demonstrations(env, teacher, action_type, n_episodes, gamma)
-    data = relabel(demos, teacher, action_type, relabel_copies, relabel_sd_mm, np.random.default_rng(seed))
-    fit = fit_policy(model, env, data, epochs=epochs, label_smoothing=label_smoothing, seed=seed)
+    fit = fit_policy(model, env, demos, epochs=epochs, label_smoothing=label_smoothing, seed=seed)
     return {"rule": rule, "params": teacher.params, "episodes": demos["episodes"],
-            "teacher_mean_return": demos["mean_episode_return"], "relabel_copies": int(relabel_copies), **fit}
-
-
-def agreement(clone, teacher, config: TampingEnvConfig | LineConfig, seeds: Sequence[int]) -> dict[str, Any]:
-    """How often ``clone``'s deterministic actions are ``teacher``'s on the states the teacher visits in the
-    episodes ``seeds`` (held out from the demonstrations), counted on the sections the env lets be tamped (a
-    masked section is dropped whatever is asked). Returns the share of states with the whole action equal
-    (``state``), of sections (``section``), and of the teacher's tampings the clone also asks for
-    (``tamping_recall``), with the counts. MultiBinary actions; both policies with SB3's ``predict``."""
-    from .evaluation import _bound, _vector_env
-
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("seeds must not be empty")
-    teacher = _bound(teacher, config)
-    env = _vector_env(len(seeds), config, "multibinary")
-    obs, _ = env.reset(seed=seeds)
-    equal_states = equal_sections = sections = tampings = recalled = 0
-    for _ in range(config.horizon_steps):
-        allowed = np.asarray(env.action_masks()).reshape(len(seeds), -1, 2)[:, :, 1]
-        want = np.asarray(teacher.predict(obs)[0]).astype(bool) & allowed
-        got = np.asarray(clone.predict(obs, deterministic=True)[0]).astype(bool) & allowed
-        equal_states += int((want == got).all(axis=1).sum())
-        equal_sections += int(((want == got) & allowed).sum())
-        sections += int(allowed.sum())
-        tampings += int(want.sum())
-        recalled += int((want & got).sum())
-        obs, *_ = env.step(want.astype(np.int8))
-    states = len(seeds) * config.horizon_steps
-    return {"state": equal_states / states, "section": equal_sections / max(sections, 1),
-            "tamping_recall": recalled / max(tampings, 1), "states": states, "sections": sections,
-            "teacher_tampings": tampings}
+            "teacher_mean_return": demos["mean_episode_return"], **fit}

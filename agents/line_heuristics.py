@@ -1,7 +1,10 @@
 """Rules a railway would use on TampingLine, with SB3's ``predict`` (batched observation dicts).
 
 All act on what the planner observes (measured SD, register, years since tamping, time) and respect the
-possession capacity themselves, worst measured SD first, so the env never has to clip them:
+possession capacity themselves, worst measured SD first, so the env never has to clip them. A section tamped
+since the last recording run is known to be fresh: its measured SD and peak are those from before the tamping
+(:func:`stale_measurement`), so every rule reads them as 0, not due (without this, a threshold rule tamped
+every section a second time two steps later, on the same stale measurement):
 
 * :class:`UniformPeriodic` — the whole line every ``interval_years`` (in capacity-sized campaigns on
   consecutive steps);
@@ -18,22 +21,43 @@ The per-section hindsight bound is :mod:`trackenv_agents.line_hindsight`.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
+from trackenv.envs.line_episode import keep_worst
+
 from .heuristics import Heuristic, _as_batch
 
 __all__ = ["BudgetedWorstFirst", "GroupedThreshold", "LINE_HEURISTICS", "RegisterPeriodic", "SectionThreshold",
-           "UniformPeriodic", "LineNoMaintenance", "LINE_TUNED_FILE", "line_tuned_params"]
+           "UniformPeriodic", "LineNoMaintenance", "LINE_TUNED_FILE", "line_tuned_params", "planner_view",
+           "stale_measurement"]
 
 
-def _keep_worst(want: np.ndarray, score: np.ndarray, k: int) -> np.ndarray:
-    s = np.where(want, score, -np.inf)
-    order = np.argsort(-s, axis=1, kind="stable")
-    rank = np.argsort(order, axis=1)
-    return want & (rank < k)
+def stale_measurement(obs: Mapping[str, Any]) -> Any:
+    """(batch, S) bool: the sections tamped in this episode since the last recording run, whose measured SD and
+    peak therefore describe the track *before* that tamping. A tamping at step t comes after the run of step t
+    (runs close a step), so a section is stale when its years since tamping are at most the measurement's age;
+    sections not tamped in the episode are never stale (their last tamping preceded the first run). Batched
+    observations as numpy arrays or torch tensors (the per-section policy reads the same flag)."""
+    return (obs["years_since_tamping"] <= obs["measurement_age"] + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
+
+
+#: float32 years are quarters (0.25 apart): this tolerance separates equal from one step apart
+STALE_TOLERANCE_YEARS = 1e-3
+
+
+def planner_view(obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The batched observation as the rules read it: the measured SD and peak of a section tamped since the last
+    recording run (:func:`stale_measurement`) set to 0 (fresh, not due), everything else as observed."""
+    stale = stale_measurement(obs)
+    out = dict(obs)
+    for key in ("section_sd", "section_peak"):
+        if key in obs:
+            out[key] = np.where(stale, np.zeros_like(obs[key]), obs[key])
+    return out
 
 
 class LineHeuristic(Heuristic):
@@ -56,10 +80,11 @@ class LineHeuristic(Heuristic):
         return max(int(round(years * self.steps_per_year)), 1)
 
     def _cap(self, want: np.ndarray, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return _keep_worst(want, obs["section_sd"], self.capacity)
+        return keep_worst(want, obs["section_sd"], self.capacity)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         b, batched = _as_batch(obs)
+        b = planner_view(b)
         act = np.asarray(self._cap(self._act(b), b), dtype=np.int8)
         return (act if batched else act[0]), state
 
@@ -121,7 +146,8 @@ class GroupedThreshold(LineHeuristic):
     def param_grid(cls):
         first = [(t, i) for t in (2.5, 3.0, 3.5) for i in (1.25, 1.5, 2.0)]
         refined = [(t, i) for t in (3.5, 4.0, 5.0) for i in (2.0, 2.5, 3.0) if (t, i) not in first]
-        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined]
+        lower = [(2.0, 1.0), (2.0, 1.25), (2.0, 1.5), (2.5, 1.0), (3.0, 1.0)]  # rules that read stale data as fresh
+        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined + lower]
 
 
 class RegisterPeriodic(LineHeuristic):
@@ -160,7 +186,7 @@ class BudgetedWorstFirst(LineHeuristic):
         t = self._step(obs)
         due = (np.mod(t, self._steps(self.params["every_years"])) == 0)[:, None]
         want = due & (obs["section_sd"] >= self.params["min_sd_mm"])
-        return _keep_worst(want, obs["section_sd"], int(self.params["n_worst"]))
+        return keep_worst(want, obs["section_sd"], int(self.params["n_worst"]))
 
     @classmethod
     def param_grid(cls):

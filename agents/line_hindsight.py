@@ -39,13 +39,14 @@ final schedule is replayed in the env as a check of the pricing.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
-           "replay",
-           "replay_schedules", "replay_sections", "room_summary", "schedule_rows"]
+           "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
+           "schedule_rows"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -143,7 +144,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
         tam[row[owned]] = want[owned]
         act = np.zeros(G, dtype=bool)
         act[row[owned]] = True
-        acc += tam * config.section_tamping_cost + (tam & bt.renewing()) * config.section_renewal_cost
+        acc += bt.intervention_costs(tam)
         bt.tamp_rows(tam, t)
         bt.traffic_rows(act, t)
         acc[act] += bt.section_costs()[act]
@@ -410,6 +411,39 @@ def schedule_rows(plan: np.ndarray) -> list[str]:
     """An (H, S) bool schedule as H strings of S '0'/'1' (JSON for the results files; a later search can start
     from it)."""
     return ["".join("1" if x else "0" for x in row) for row in np.asarray(plan, dtype=bool)]
+
+
+def schedule_from_rows(rows: list[str]) -> np.ndarray:
+    """The (H, S) bool schedule of :func:`schedule_rows`' strings (ValueError on anything but equal-length rows
+    of '0'/'1')."""
+    if not rows or len({len(r) for r in rows}) != 1 or any(set(r) - {"0", "1"} for r in rows):
+        raise ValueError("a schedule is a non-empty list of equal-length strings of '0' and '1'")
+    return np.array([[c == "1" for c in r] for r in rows], dtype=bool)
+
+
+def saved_schedules(paths: list[str | Path], config: Any) -> tuple[list[int], list[np.ndarray], list[float]]:
+    """The cheapest saved hindsight schedule per episode over the search files ``paths`` (``line_room.py``
+    results, their ``hindsight.episodes``; e.g. ``experiments/searches/line_room_milp_*.json``), each checked
+    against ``config``'s (horizon_steps, n_sections): sorted seeds, their (H, S) schedules and their costs (k€,
+    as replayed in the env when found). A search on another scenario is a ValueError."""
+    import json
+
+    best: dict[int, tuple[float, np.ndarray]] = {}
+    for path in paths:
+        payload = json.loads(Path(path).read_text())
+        for e in payload.get("hindsight", {}).get("episodes", []):
+            plan = schedule_from_rows(e["schedule"])
+            if plan.shape != (config.horizon_steps, config.n_sections):
+                raise ValueError(f"{path}: seed {e['seed']}'s schedule has shape {plan.shape}, the config needs "
+                                 f"({config.horizon_steps}, {config.n_sections})")
+            cost = float(e["replayed"])
+            seed = int(e["seed"])
+            if seed not in best or cost < best[seed][0]:
+                best[seed] = (cost, plan)
+    if not best:
+        raise ValueError(f"no hindsight schedule in {[str(p) for p in paths]}")
+    seeds = sorted(best)
+    return seeds, [best[s][1] for s in seeds], [best[s][0] for s in seeds]
 
 
 def room_summary(rule_costs: dict[int, float], searches: list[dict]) -> dict:

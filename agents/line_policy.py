@@ -1,35 +1,23 @@
-"""A per-section, permutation-equivariant actor-critic for TampingLine, as an SB3 policy.
+"""The per-section policy of TampingLine: one small network decides for every section, from its features.
 
-Why this shape. The line's sections are alike (the same physics, the same costs) and what differs between
-them is in their observation (measured SD and peak, register, tamping history). So one small network scores
-every section with shared weights — the policy learns one rule for a section, not twelve — and the same
-weights run on a line of any length (the small, default and hard scenarios: 6, 12 and 24 sections). A campaign
-is one possession for all its sections (its cost is shared), so each section also sees a pooled summary of the
-whole line (mean and max of the section embeddings): "a campaign is called anyway, join it" is expressible, as
-in the best rule (grouped-threshold).
+Why this shape. A line's step is one decision per section, and almost all of a section's costs are its own:
+its geometry, speed restrictions, immediate actions, tamping and renewal depend only on its own schedule (the
+sections are physically independent); only the possession of a campaign is shared. So one network with shared
+weights decides for every section, from that section's features and a summary of the line: the policy learns
+one rule for a section, runs on lines of any length (the small, default and hard scenarios: 6, 12 and 24
+sections), and a learner can credit each section's choice with that section's own costs (see
+:class:`trackenv_agents.sb3_vec.SectionAgentsVecEnv` and :mod:`trackenv_agents.line_counterfactual`).
 
-The network (a Deep Sets encoder with one round of pooling; ``H`` = ``hidden``):
-
-* **features** (:func:`section_features`): per section ``F`` = 13 numbers, each observation key divided by a
-  fixed scale of :data:`FEATURE_SCALES` (mm, years, counts; fixed rather than VecNormalize statistics, so that
-  the policy does not depend on the line it was trained on) and clipped to [0, :data:`FEATURE_CLIP`]:
-  measured SD, measured peak, register one-hot (3), tampings, tampings since renewal, years since tamping,
-  and the line's globals broadcast to every section (measurement age, time, budget left, and the line's worst
-  and mean measured SD: a campaign is called on the worst section, and a sharp threshold on an input is one
-  unit, where the same threshold on the pooled embeddings was learnt only to ~0.1 mm — the clone's
-  disagreements with the rule sat there);
-* **encoder** φ: ``F → H → H`` per section, ``h_i = φ(x_i)``; context ``c = [mean_i h_i, max_i h_i]``;
-* **actor**: per section ``[h_i, c] → H``, then one logit (:class:`SectionHead`): the probability of tamping
-  section ``i`` — SB3's MultiBinary (Bernoulli) distribution, or with MaskablePPO the pair (0, logit) per
-  section of sb3-contrib's masked MultiBinary distribution (the same Bernoulli; masked sections get none);
-* **critic**: ``c → H → 1``, invariant to the order of the sections.
-
-Permuting the sections permutes the logits and leaves the value unchanged (tested). Rewards are scaled by the
-trainer (:mod:`trackenv_agents.train_line`) per section, so the value — a mean over sections — is O(1) on
-every line length.
-
-:class:`LineAgent` wraps a trained policy with SB3's ``predict`` on raw observations of a line of any length,
-the interface of the evaluation harness and the heuristics.
+* :func:`section_features` — the (batch, S, F) features of a batched line observation: the section's measured
+  state and what the measurement history says beyond it (whether it was tamped since the recording run, its
+  growth since its last tamping, its SD and peak projected to now), its register and tamping history, the
+  line's context (time, measurement age, the other sections' projected SD: whether a campaign is likely to be
+  called anyway), each over a fixed scale and clipped, so the policy does not depend on the line it was trained
+  on; and optionally a rule's choice (an *advisor*: the learner has the rule exactly and learns where to depart
+  from it).
+* :class:`LineAgent` — a trained section policy (any SB3 policy over these features with ``Discrete(2)``
+  actions) with SB3's ``predict`` on raw line observations: it tamps the sections whose probability of tamping
+  is above one half, never one the env would drop, at most ``capacity`` (the most probable).
 """
 
 from __future__ import annotations
@@ -38,231 +26,149 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import torch
-from gymnasium import spaces
-from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
-from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-from torch import nn
+
+from trackenv.envs.line_config import LineConfig
 
 from .heuristics import _as_batch
+from .line_heuristics import stale_measurement
 
-__all__ = ["FEATURE_CLIP", "FEATURE_SCALES", "N_FEATURES", "LineAgent", "MaskableSectionActorCritic",
-           "SectionActorCritic", "SectionFeatures", "SectionHead", "SectionNet", "section_features",
-           "section_policy_class"]
+__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
+           "section_features"]
 
-#: Fixed scale of each observation key (the feature is value / scale), chosen so that typical values are O(1):
-#: SD 2 mm (between the rules' inclusion and trigger SDs; alert ~1.5-3 mm), peak 5 mm, tampings in an
-#: episode 4, tampings since renewal 8 (renewal at the 8th), years since tamping 4, measurement age half a
-#: year (one recording interval); time and budget are already fractions.
-FEATURE_SCALES: dict[str, float] = {
-    "section_sd": 2.0, "section_peak": 5.0, "tampings": 4.0, "tampings_since_renewal": 8.0,
-    "years_since_tamping": 4.0, "measurement_age": 0.5, "time": 1.0, "budget_left": 1.0,
-}
-#: Scaled features are clipped to [0, FEATURE_CLIP]: typical values are O(1), and a rare extreme (a hidden wet
-#: spot at 19 mm of SD, a section untended for 12 years) must not drive the network far beyond its training
-#: data — a clone without the clip tamped every section of a line whose worst SD was 19 mm, where the rule
-#: tamped the four above its inclusion SD. (VecNormalize's ``clip_obs`` does the same in standard deviations.)
+#: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
+#: β = 0.24 (README, calibration) at a 3 mm SD before.
+FRESH_SD_MM = 0.9
+#: Features are clipped to [0, FEATURE_CLIP] after scaling: typical values are O(1), and a rare extreme (a wet
+#: spot at 19 mm of SD, a section untended for 12 years) must not drive the network far beyond its training data.
 FEATURE_CLIP = 4.0
-_PER_SECTION = ("section_sd", "section_peak", "tampings", "tampings_since_renewal", "years_since_tamping")
-_GLOBAL = ("measurement_age", "time", "budget_left")
-N_REGISTER = 3  # plain, transition zone, switch or crossing (trackenv.envs.line_config.REGISTER_CLASSES)
-N_LINE = 2  # the line's worst and mean measured SD (scaled like section_sd)
-N_FEATURES = len(_PER_SECTION) + N_REGISTER + len(_GLOBAL) + N_LINE
+#: The features, in order, with the scale each is divided by (mm, years, counts; fractions as they are).
+FEATURES: tuple[tuple[str, float], ...] = (
+    ("measured_sd_mm", 2.0),
+    ("measured_peak_mm", 10.0),
+    ("stale", 1.0),  # tamped since the recording run: the measurement predates the tamping
+    ("growth_mm_per_year", 1.0),  # SD growth since the last tamping, as measured (0 where stale)
+    ("projected_sd_mm", 2.0),  # measured SD + growth × measurement age (the fresh SD where stale)
+    ("projected_peak_mm", 10.0),  # measured peak scaled like the SD
+    ("plain", 1.0), ("transition", 1.0), ("switch_or_crossing", 1.0),
+    ("tampings_since_renewal", 8.0),
+    ("renewal_due", 1.0),  # the next intervention is a ballast renewal (8 tampings since the last)
+    ("tampings", 4.0),
+    ("years_since_tamping", 4.0),
+    ("time", 1.0),
+    ("measurement_age_years", 1.0),
+    ("budget_left", 1.0),
+    ("line_max_other_projected_sd_mm", 2.0),  # the worst other section: will a campaign be called anyway?
+    ("line_mean_projected_sd_mm", 2.0),
+    ("line_share_projected_above_2mm", 1.0),
+    ("line_share_projected_above_3mm", 1.0),
+)
+RENEWAL_AFTER = 8  # TampingModel.max_tampings_before_renewal's default; a feature, not a rule of the env
 
 
-def _check_scales(scales: Mapping[str, float]) -> dict[str, float]:
-    out = {k: float(v) for k, v in scales.items()}
-    missing = set(FEATURE_SCALES) - set(out)
-    if missing or set(out) - set(FEATURE_SCALES):
-        raise ValueError(f"feature_scales must have exactly the keys {sorted(FEATURE_SCALES)}, got {sorted(out)}")
-    bad = {k: v for k, v in out.items() if not (np.isfinite(v) and v > 0)}
-    if bad:
-        raise ValueError(f"feature_scales must be finite and > 0, got {bad}")
-    return out
+#: With an advisor, two more features, last: whether it tamps the section now, and whether it calls a campaign
+#: now (tamps any section of the line)
+ADVISOR_FEATURES = ("advisor_tamps", "advisor_campaign")
 
 
-def section_features(obs: Mapping[str, torch.Tensor], scales: Mapping[str, float] = FEATURE_SCALES) -> torch.Tensor:
-    """(batch, S, :data:`N_FEATURES`) per-section features of a batched TampingLine observation (tensors)."""
-    per = torch.stack([obs[k].float() / scales[k] for k in _PER_SECTION], dim=-1).clamp(0.0, FEATURE_CLIP)
-    S = per.shape[1]
-    register = nn.functional.one_hot(obs["register"].round().long().clamp(0, N_REGISTER - 1), N_REGISTER)
-    sd = per[..., 0]
-    glob = torch.cat([*(obs[k].float().reshape(-1, 1) / scales[k] for k in _GLOBAL)], dim=-1).clamp(0.0, FEATURE_CLIP)
-    glob = torch.cat([glob, sd.amax(dim=1, keepdim=True), sd.mean(dim=1, keepdim=True)], dim=-1)  # (B, 5)
-    return torch.cat([per, register.float(), glob[:, None, :].expand(-1, S, -1)], dim=-1)
+def n_features(advisor: Any = None) -> int:
+    """How many features :func:`section_features` gives (two more with an advisor)."""
+    return len(FEATURES) + (len(ADVISOR_FEATURES) if advisor is not None else 0)
 
 
-class SectionFeatures(BaseFeaturesExtractor):
-    """SB3 features extractor: the (batch, S, F) tensor of :func:`section_features`. Its nominal
-    ``features_dim`` (S·F of the space it was built for) is not used: :class:`SectionNet` reads any S."""
-
-    def __init__(self, observation_space: spaces.Dict, scales: Mapping[str, float] = FEATURE_SCALES) -> None:
-        super().__init__(observation_space, features_dim=observation_space["section_sd"].shape[0] * N_FEATURES)
-        self.scales = _check_scales(scales)
-
-    def forward(self, observations: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        return section_features(observations, self.scales)
-
-
-class SectionNet(nn.Module):
-    """The shared encoder, the per-section actor and the pooled critic (the module docstring's φ, actor,
-    critic), in SB3's ``mlp_extractor`` interface: ``forward_actor`` → (batch, S, H) per-section latents,
-    ``forward_critic`` → (batch, H)."""
-
-    def __init__(self, hidden: int = 32, activation_fn: type[nn.Module] = nn.Tanh) -> None:
-        super().__init__()
-        H = int(hidden)
-        self.encoder = nn.Sequential(nn.Linear(N_FEATURES, H), activation_fn(), nn.Linear(H, H), activation_fn())
-        self.actor = nn.Sequential(nn.Linear(3 * H, H), activation_fn())
-        self.critic = nn.Sequential(nn.Linear(2 * H, H), activation_fn())
-        self.latent_dim_pi = H
-        self.latent_dim_vf = H
-
-    def _encode(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        h = self.encoder(features)
-        return h, torch.cat([h.mean(dim=1), h.amax(dim=1)], dim=-1)
-
-    def _actor(self, h: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
-        return self.actor(torch.cat([h, context[:, None, :].expand(-1, h.shape[1], -1)], dim=-1))
-
-    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        h, context = self._encode(features)
-        return self._actor(h, context), self.critic(context)
-
-    def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
-        return self._actor(*self._encode(features))
-
-    def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
-        return self.critic(self._encode(features)[1])
-
-
-class SectionHead(nn.Module):
-    """One logit per section from its latent (a shared ``Linear(H, 1)``), in the layout the action
-    distribution wants: (batch, S) for SB3's Bernoulli, or (batch, 2·S) pairs (0, logit) for sb3-contrib's
-    masked MultiBinary (``paired``). ``bias`` is the initial log-odds of tamping (settable, as
-    :func:`trackenv_agents.train._set_initial_tamp_logit` does)."""
-
-    def __init__(self, hidden: int, paired: bool = False) -> None:
-        super().__init__()
-        self.linear = nn.Linear(int(hidden), 1)
-        self.paired = bool(paired)
-
-    @property
-    def bias(self) -> torch.Tensor:
-        return self.linear.bias
-
-    def logits(self, latent: torch.Tensor) -> torch.Tensor:
-        return self.linear(latent).squeeze(-1)
-
-    def forward(self, latent: torch.Tensor) -> torch.Tensor:
-        logit = self.logits(latent)
-        if self.paired:
-            return torch.stack([torch.zeros_like(logit), logit], dim=-1).flatten(1)
-        return logit
-
-
-class _SectionPolicyMixin:
-    """What turns an SB3 actor-critic policy into the per-section one: the features extractor, the
-    ``mlp_extractor`` (:class:`SectionNet`) and the action head (:class:`SectionHead`)."""
-
-    _paired = False
-
-    def __init__(self, observation_space: spaces.Dict, action_space: spaces.MultiBinary, lr_schedule: Any,
-                 hidden: int = 32, feature_scales: Mapping[str, float] | None = None, **kwargs: Any) -> None:
-        if not isinstance(hidden, (int, np.integer)) or not 1 <= hidden <= 1024:
-            raise ValueError(f"hidden must be an integer in [1, 1024], got {hidden!r}")
-        if not isinstance(action_space, spaces.MultiBinary):
-            raise ValueError(f"the per-section policy needs a MultiBinary action space, got {action_space}")
-        self.hidden = int(hidden)
-        self.feature_scales = _check_scales(FEATURE_SCALES if feature_scales is None else feature_scales)
-        kwargs["features_extractor_class"] = SectionFeatures
-        kwargs["features_extractor_kwargs"] = {"scales": self.feature_scales}
-        kwargs.pop("net_arch", None)  # the architecture is SectionNet's
-        super().__init__(observation_space, action_space, lr_schedule, **kwargs)  # type: ignore[call-arg]
-
-    def _build_mlp_extractor(self) -> None:
-        self.mlp_extractor = SectionNet(self.hidden, self.activation_fn)  # type: ignore[attr-defined]
-
-    def _build(self, lr_schedule: Any) -> None:
-        super()._build(lr_schedule)  # type: ignore[misc]
-        # SB3 built a Linear(H, n_actions) head; the shared per-section one replaces it (with SB3's small
-        # initial gain), and the optimiser is rebuilt over the final parameters
-        self.action_net = SectionHead(self.hidden, paired=self._paired)
-        if self.ortho_init:  # type: ignore[attr-defined]
-            nn.init.orthogonal_(self.action_net.linear.weight, gain=0.01)
-            nn.init.zeros_(self.action_net.linear.bias)
-        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1),  # type: ignore[attr-defined]
-                                              **self.optimizer_kwargs)  # type: ignore[attr-defined]
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()  # type: ignore[misc]
-        data.update(hidden=self.hidden, feature_scales=dict(self.feature_scales))
-        data.pop("net_arch", None)
-        return data
-
-    def section_logits(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """(batch, S) log-odds of tamping each section, for a line of any length S."""
-        features = self.pi_features_extractor(obs)  # type: ignore[attr-defined]
-        return self.action_net.logits(self.mlp_extractor.forward_actor(features))  # type: ignore[attr-defined]
-
-    def section_value(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """(batch,) value, for a line of any length S."""
-        features = self.vf_features_extractor(obs)  # type: ignore[attr-defined]
-        return self.value_net(self.mlp_extractor.forward_critic(features)).squeeze(-1)  # type: ignore[attr-defined]
-
-
-class SectionActorCritic(_SectionPolicyMixin, ActorCriticPolicy):
-    """The per-section actor-critic for SB3's PPO (MultiBinary: one Bernoulli per section)."""
-
-
-class MaskableSectionActorCritic(_SectionPolicyMixin, MaskableActorCriticPolicy):
-    """The per-section actor-critic for sb3-contrib's MaskablePPO: the env's masks (a section tamped in the
-    last ``min_steps_between_tampings`` steps) remove the tamp choice of a section, so no update credits a
-    tamping the env would drop."""
-
-    _paired = True
-
-
-def section_policy_class(algo: str) -> type[ActorCriticPolicy]:
-    """The policy class for ``algo`` ("ppo" or "maskable_ppo")."""
-    classes = {"ppo": SectionActorCritic, "maskable_ppo": MaskableSectionActorCritic}
-    if algo not in classes:
-        raise ValueError(f"algo must be one of {sorted(classes)}, got {algo!r}")
-    return classes[algo]
+def section_features(obs: Mapping[str, Any], advisor: Any = None) -> np.ndarray:
+    """(batch, S, :func:`n_features`) float32 features of a batched TampingLine observation (see the module
+    docstring and :data:`FEATURES`). ``advisor``: a rule bound to the line's config (SB3 ``predict``) whose
+    choice is two more features, last (:data:`ADVISOR_FEATURES`: it tamps the section now; it calls a campaign
+    now): a learner then has the rule exactly and learns where to depart from it (residual policy learning)."""
+    o = {k: np.asarray(v, dtype=np.float64) for k, v in obs.items()}
+    sd, peak = o["section_sd"], o["section_peak"]
+    B, S = sd.shape
+    age = o["measurement_age"].reshape(B, 1)
+    stale = np.asarray(stale_measurement(o), dtype=bool)
+    since = np.maximum(o["years_since_tamping"] - age, 0.25)  # from the last tamping to the recording run
+    growth = np.where(stale, 0.0, np.maximum(sd - FRESH_SD_MM, 0.0) / since)
+    projected = np.where(stale, FRESH_SD_MM, sd + growth * age)
+    ratio = np.where(sd > 1e-6, projected / np.maximum(sd, 1e-6), 1.0)
+    projected_peak = np.where(stale, 0.0, peak * ratio)
+    reg = np.rint(o["register"]).astype(int).clip(0, 2)
+    count = o["tampings_since_renewal"]
+    # the worst projected SD among the *other* sections: the largest, or the second largest for the worst one
+    top2 = -np.sort(-projected, axis=1)[:, :2] if S > 1 else np.concatenate([projected, np.zeros((B, 1))], 1)
+    other_max = np.where(projected >= top2[:, :1], top2[:, 1:2], top2[:, :1])
+    cols = [
+        sd, peak, stale, growth, projected, projected_peak,
+        reg == 0, reg == 1, reg == 2,
+        count, count >= RENEWAL_AFTER, o["tampings"], o["years_since_tamping"],
+        np.broadcast_to(o["time"].reshape(B, 1), (B, S)),
+        np.broadcast_to(age, (B, S)),
+        np.broadcast_to(o["budget_left"].reshape(B, 1), (B, S)),
+        other_max,
+        np.broadcast_to(projected.mean(axis=1, keepdims=True), (B, S)),
+        np.broadcast_to((projected >= 2.0).mean(axis=1, keepdims=True), (B, S)),
+        np.broadcast_to((projected >= 3.0).mean(axis=1, keepdims=True), (B, S)),
+    ]
+    scales = np.array([s for _, s in FEATURES])
+    x = np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1) / scales
+    if advisor is not None:
+        advice = np.asarray(advisor.predict({k: np.asarray(v) for k, v in obs.items()})[0], dtype=np.float64)
+        advice = advice.reshape(B, S)
+        campaign = np.broadcast_to(advice.max(axis=1, keepdims=True), (B, S))
+        x = np.concatenate([x, advice[..., None], campaign[..., None]], axis=-1)
+    return np.clip(x, 0.0, FEATURE_CLIP).astype(np.float32)
 
 
 class LineAgent:
-    """A trained per-section policy with SB3's ``predict(obs, state=None, episode_start=None,
-    deterministic=True) -> (action, state)`` on raw TampingLine observations (one dict, or a batched one) of
-    a line of any length: int8 0/1 per section. Deterministic: tamp where the logit is > 0 (the Bernoulli's
-    mode); otherwise a draw from ``rng`` (a numpy Generator; None: a fresh unseeded one)."""
+    """A trained section policy (an SB3 policy over :func:`section_features`, ``Discrete(2)`` actions) with SB3's
+    ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)`` on raw TampingLine
+    observations (one dict or a batched one) of a line of any length: int8 0/1 per section. Deterministic: the
+    sections whose probability of tamping is above one half; otherwise each drawn with its probability (``rng``:
+    a numpy Generator; None: a fresh unseeded one). Bound to a config (:meth:`bind`, as the evaluation harness
+    does), never a section tamped within the config's ``min_steps_between_tampings`` (the env would drop it) and
+    at most ``capacity`` sections, the most probable."""
 
-    def __init__(self, policy: _SectionPolicyMixin, name: str = "ppo", rng: np.random.Generator | None = None) -> None:
+    def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
+                 rng: np.random.Generator | None = None, advisor: Any = None) -> None:
         self.policy = policy
         self.name = name
+        self.config = config
+        self.advisor = advisor if advisor is None or config is None else advisor.bind(config)
         self.params: dict[str, Any] = {}
         self._rng = rng
 
-    def section_logits(self, obs: Mapping[str, Any]) -> np.ndarray:
-        """(batch, S) log-odds of tamping (batched observation dict of numpy arrays)."""
-        t = {k: torch.as_tensor(np.asarray(obs[k]), dtype=torch.float32) for k in FEATURE_SCALES if k in obs}
-        t["register"] = torch.as_tensor(np.asarray(obs["register"]), dtype=torch.float32)
-        self.policy.set_training_mode(False)  # type: ignore[attr-defined]
+    def bind(self, config: LineConfig) -> LineAgent:
+        """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it)."""
+        return LineAgent(self.policy, self.name, config, self._rng, self.advisor)
+
+    def tamp_probability(self, obs: Mapping[str, Any]) -> np.ndarray:
+        """(batch, S) probability of tamping each section (batched observation dict of numpy arrays)."""
+        import torch
+
+        x = section_features(obs, self.advisor)
+        B, S, F = x.shape
+        self.policy.set_training_mode(False)
         with torch.no_grad():
-            return self.policy.section_logits(t).cpu().numpy()
+            t = torch.as_tensor(x.reshape(B * S, F), device=self.policy.device)
+            p = self.policy.get_distribution(t).distribution.probs[:, 1]
+        return p.cpu().numpy().reshape(B, S)
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
         b, batched = _as_batch(dict(observation))
-        logits = self.section_logits(b)
+        p = self.tamp_probability(b)
         if deterministic:
-            act = logits > 0.0
+            want = p > 0.5
         else:
             if self._rng is None:
                 self._rng = np.random.default_rng()
-            act = self._rng.random(logits.shape) < 1.0 / (1.0 + np.exp(-logits))
-        act = act.astype(np.int8)
+            want = self._rng.random(p.shape) < p
+        c = self.config
+        if c is not None:
+            from trackenv.envs.line_episode import keep_worst
+
+            gap = c.min_steps_between_tampings / c.steps_per_year  # years: tamped since then, masked
+            want &= np.asarray(b["years_since_tamping"]) > gap + 1e-3
+            want = keep_worst(want, p, c.capacity)
+        act = want.astype(np.int8)
         return (act if batched else act[0]), state
 
     def reset(self) -> None:

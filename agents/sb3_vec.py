@@ -1,6 +1,7 @@
-"""An SB3 ``VecEnv`` over the native vector envs: :class:`trackenv.envs.vector.TampingVectorEnv` (Tamping-v0)
-and :class:`trackenv.envs.line.TampingLineVectorEnv` (TampingLine; chosen by a
-:class:`~trackenv.envs.line_config.LineConfig` or a scenario name as ``config``).
+"""SB3 ``VecEnv`` s over the native vector envs: :class:`TampingSB3VecEnv` over
+:class:`trackenv.envs.vector.TampingVectorEnv` (Tamping-v0) and :class:`trackenv.envs.line.TampingLineVectorEnv`
+(TampingLine; chosen by a :class:`~trackenv.envs.line_config.LineConfig` or a scenario name as ``config``), and
+:class:`SectionAgentsVecEnv`, the sections of TampingLine lines as agents of their own.
 
 One physics implementation: the batched vector env steps all episodes in one call of the dynamics; this
 adapter only translates conventions:
@@ -28,7 +29,7 @@ statistics, so that a policy does not depend on the line it was trained on).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,7 @@ from trackenv.envs.vector import TampingVectorEnv
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
 from .actions import RANKED, env_action_type
+from .line_policy import FEATURE_CLIP, n_features, section_features
 
 
 def observation_keys(space: spaces.Dict, keep_per_sleeper: bool = True, n_sections: int | None = None) -> list[str]:
@@ -59,7 +61,49 @@ def filter_observation(obs: dict, keys: Sequence[str]) -> dict:
     return {k: obs[k] for k in keys}
 
 
-class TampingSB3VecEnv(VecEnv):
+class _OneObjectVecEnv(VecEnv):
+    """SB3's attribute and method access for a VecEnv whose envs are one object (a batched env): every index
+    gets the same attribute; a method returning one row per env (like ``action_masks``) is split by index."""
+
+    def _indices(self, indices) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        if isinstance(indices, (int, np.integer)):
+            return [int(indices)]
+        return [int(i) for i in indices]
+
+    def _target(self, name: str):
+        return getattr(self, name)
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        value = self._target(attr_name)
+        return [value for _ in self._indices(indices)]
+
+    def has_attr(self, attr_name: str) -> bool:
+        try:
+            self._target(attr_name)
+            return True
+        except AttributeError:
+            return False
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        idx = self._indices(indices)
+        result = self._target(method_name)(*method_args, **method_kwargs)
+        if isinstance(result, np.ndarray) and result.ndim >= 1 and result.shape[0] == self.num_envs:
+            return [result[i] for i in idx]
+        return [result for _ in idx]
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None for _ in range(self.num_envs)]
+
+
+class TampingSB3VecEnv(_OneObjectVecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
     ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults), or a TampingLine
@@ -136,47 +180,10 @@ class TampingSB3VecEnv(VecEnv):
         every count is valid; a masked section among the worst is simply not tamped by the env)."""
         return self.venv.action_masks()
 
-    # --- attribute / method access (all envs share this one object) ---
-    def _indices(self, indices) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        if isinstance(indices, (int, np.integer)):
-            return [int(indices)]
-        return [int(i) for i in indices]
-
     def _target(self, name: str):
         if hasattr(self, name):
             return getattr(self, name)
         return getattr(self.venv, name)  # raises AttributeError if neither has it
-
-    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
-        value = self._target(attr_name)
-        return [value for _ in self._indices(indices)]
-
-    def has_attr(self, attr_name: str) -> bool:
-        try:
-            self._target(attr_name)
-            return True
-        except AttributeError:
-            return False
-
-    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-        """Call a method of the envs; a method returning one row per env (like ``action_masks``) is split, so
-        each index gets its own row."""
-        idx = self._indices(indices)
-        result = self._target(method_name)(*method_args, **method_kwargs)
-        if isinstance(result, np.ndarray) and result.ndim >= 1 and result.shape[0] == self.num_envs:
-            return [result[i] for i in idx]
-        return [result for _ in idx]
-
-    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
-        return [False for _ in self._indices(indices)]
-
-    def get_images(self) -> Sequence[np.ndarray | None]:
-        return [None for _ in range(self.num_envs)]
 
 
 class VecScaleReward(VecEnvWrapper):
@@ -200,6 +207,90 @@ class VecScaleReward(VecEnvWrapper):
 
     def get_original_reward(self) -> np.ndarray:
         return self._raw.copy()
+
+
+class SectionAgentsVecEnv(_OneObjectVecEnv):
+    """SB3 ``VecEnv`` of the sections of ``n_lines`` TampingLine episodes as ``n_lines × S`` agents (env
+    ``b·S + j`` is section j of line b), over one native line vector env (:class:`TampingSB3VecEnv`): one
+    physics batch, and any SB3 algorithm for ``Discrete`` actions learns the per-section policy of
+    :mod:`trackenv_agents.line_policy`.
+
+    Why: almost all of a section's costs are its own (the sections are physically independent; only the
+    possession of a campaign is shared). A learner paid the line's total for every section's choice has to find
+    the effect of one tamping under the noise of the other sections; paid the section's own costs, the credit is
+    where it belongs (the reward decomposition of cooperative multi-agent RL, with the possession split equally
+    between the sections of a campaign so that the sections' rewards add up to the line's).
+
+    Observation: ``Box`` of :func:`section_features`. Action: ``Discrete(2)`` (1 = ask to tamp; the line env
+    resolves the campaign: masked sections dropped, at most ``capacity``). Reward: minus the section's own costs
+    of the step (``info["section_costs"]``) and, where it was tamped, an equal share of the campaign's
+    possession, over ``reward_scale`` k€; the sections' rewards add up to the line's. Episodes end together at
+    the horizon, reported as terminal (the life-cycle cost ends there; see :mod:`trackenv_agents.sb3_vec`), and
+    restart in the same step (SB3's convention, ``terminal_observation`` in the info). ``seed``: line ``i`` of
+    the first reset gets ``seed + i``; later resets continue each line's generator. ``advisor``: a rule whose
+    choice is a feature (:func:`~trackenv_agents.line_policy.section_features`)."""
+
+    def __init__(self, n_lines: int, config: LineConfig | str | dict | None = None, *, seed: int | None = None,
+                 reward_scale: float = 20.0, advisor: Any = None) -> None:
+        if not (np.isfinite(reward_scale) and reward_scale > 0):
+            raise ValueError(f"reward_scale must be a number > 0 (k€), got {reward_scale!r}")
+        self.lines = TampingSB3VecEnv(int(n_lines), LineConfig.coerce(config), seed=seed)
+        self.config = self.lines.config
+        self.n_lines, self.S = self.lines.num_envs, self.config.n_sections
+        self.reward_scale = float(reward_scale)
+        self.advisor = None if advisor is None else advisor.bind(self.config)
+        space = spaces.Box(0.0, FEATURE_CLIP, (n_features(advisor),), np.float32)
+        self.render_mode = None
+        super().__init__(self.n_lines * self.S, space, spaces.Discrete(2))
+        self._actions: np.ndarray | None = None
+        self.line_obs: dict[str, np.ndarray] = {}  # the lines' last raw observation (a rule acting on it: cloning)
+
+    def _features(self, line_obs: Mapping[str, np.ndarray]) -> np.ndarray:
+        return section_features(line_obs, self.advisor).reshape(self.num_envs, -1)
+
+    def reset(self):
+        obs = self.line_obs = self.lines.reset()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return self._features(obs)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions).reshape(self.n_lines, self.S)
+
+    def step_wait(self):
+        if self._actions is None:
+            raise RuntimeError("step_async() must be called before step_wait()")
+        want, self._actions = self._actions.astype(np.int8), None
+        obs, _, dones, infos = self.lines.step(want)
+        self.line_obs = obs
+        rewards = np.empty((self.n_lines, self.S))
+        section_infos: list[dict] = []
+        for b, info in enumerate(infos):  # the step's own info (the ended episode's last one where done)
+            tamped = np.asarray(info["tamped_sections"], dtype=bool)
+            share = info["costs"]["possession"] / max(int(tamped.sum()), 1)
+            rewards[b] = -(np.asarray(info["section_costs"]) + share * tamped) / self.reward_scale
+            terminal = section_features({k: v[None] for k, v in info["terminal_observation"].items()},
+                                        self.advisor)[0] if dones[b] else None
+            for j in range(self.S):
+                d: dict[str, Any] = {"tamped": bool(tamped[j])}
+                if terminal is not None:
+                    d["terminal_observation"] = terminal[j]
+                    d["TimeLimit.truncated"] = False
+                section_infos.append(d)
+        return (self._features(obs), rewards.ravel().astype(np.float32), np.repeat(dones, self.S),
+                section_infos)
+
+    def action_masks(self) -> np.ndarray:
+        """(num_envs, 2): [may leave, may tamp] per section (a section tamped within the env's
+        ``min_steps_between_tampings`` may not be tamped)."""
+        may = np.asarray(self.lines.action_masks()).reshape(self.n_lines, self.S, 2)[:, :, 1]
+        return np.stack([np.ones_like(may), may], axis=-1).reshape(self.num_envs, 2)
+
+    def close(self) -> None:
+        self.lines.close()
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        self.lines.seed(seed)
+        return [seed]
 
 
 def _unstack_infos(infos: dict, n: int) -> list[dict]:
@@ -229,4 +320,5 @@ def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict
                             seed=seed)
 
 
-__all__ = ["TampingSB3VecEnv", "VecScaleReward", "make_vec_env", "observation_keys", "filter_observation"]
+__all__ = ["SectionAgentsVecEnv", "TampingSB3VecEnv", "VecScaleReward", "make_vec_env", "observation_keys",
+           "filter_observation"]

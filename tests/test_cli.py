@@ -57,6 +57,14 @@ def test_train_seed_default_is_the_training_seed_of_agents_train():
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED
 
 
+def test_train_line_options_are_refused_where_they_do_not_apply(capsys):
+    assert main(["train", "--iterations", "2"]) == 2  # Tamping-v0 has no policy iteration
+    assert "--iterations" in capsys.readouterr().err
+    assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--algo", "ppo"]) == 2
+    assert "hyper-parameter file" in capsys.readouterr().err
+    assert main(["train", "--env", "trackenv/Tamping-v9"]) == 2  # not a registered id
+
+
 def test_evaluate_ray_options_parse():
     from trackenv_agents.cli import build_parser
 
@@ -85,6 +93,30 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
     assert json.loads(capsys.readouterr().out)["ray"] == "local"
     assert main(["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--json"]) == 0
     assert seen["executor"] is None and json.loads(capsys.readouterr().out)["ray"] is None
+
+
+def test_evaluate_line_rules_option(monkeypatch, capsys):
+    """`--rules a,b` reaches the line comparison as a list; it is a usage error without a line --env, and an
+    unknown rule name is refused by the comparison, naming the rules there are."""
+    import trackenv_agents.line_compare as lc
+
+    seen = {}
+    real = lc.line_comparison
+
+    def fake(env_id, **kw):
+        seen.update(kw)
+        return {"env": env_id, "scenario": "small", "seeds": [0, 1], "tuned_from": "-", "results": []}
+
+    monkeypatch.setattr(lc, "line_comparison", fake)
+    args = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--json", "--policy", "heuristics"]
+    assert main(args + ["--rules", "grouped-threshold, uniform-periodic"]) == 0
+    assert seen["rules"] == ["grouped-threshold", "uniform-periodic"]
+    assert main(args) == 0 and seen["rules"] is None
+    capsys.readouterr()
+    assert main(["evaluate", "--rules", "grouped-threshold"]) == 2
+    assert "--rules" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="rules must name line rules among"):
+        real("trackenv/TampingLineSmall-v0", rules=["grouped", "uniform-periodic"])
 
 
 def test_hyperparams_file_is_the_one_agents_train_reads():

@@ -6,12 +6,15 @@ import pytest
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation import _bound, evaluate_many
-from trackenv_agents.line_compare import parse_seeds, scenario_of
+from trackenv_agents.line_compare import SECTION_CLASSES, class_breakdown, parse_seeds, scenario_of
 from trackenv_agents.line_heuristics import (
     LINE_HEURISTICS,
+    GroupedThreshold,
     RegisterPeriodic,
     SectionThreshold,
     UniformPeriodic,
+    planner_view,
+    stale_measurement,
 )
 from trackenv_agents.line_hindsight import (
     TrueStateRule,
@@ -23,6 +26,9 @@ from trackenv_agents.line_hindsight import (
     recorded_rule_schedules,
     replay,
     replay_sections,
+    saved_schedules,
+    schedule_from_rows,
+    schedule_rows,
 )
 
 CFG = scenario("small", horizon_years=1.0)
@@ -33,7 +39,9 @@ def _obs(n_envs=3, S=6, seed=0):
     return {"section_sd": rng.uniform(0.5, 4.0, (n_envs, S)).astype(np.float32),
             "register": rng.integers(0, 3, (n_envs, S)).astype(np.float32),
             "time": np.full((n_envs, 1), 0.25, np.float32),
-            "years_since_tamping": np.ones((n_envs, S), np.float32)}
+            "years_since_tamping": np.ones((n_envs, S), np.float32),
+            "measurement_age": np.full((n_envs, 1), 0.5, np.float32),
+            "tampings": np.ones((n_envs, S), np.float32)}
 
 
 @pytest.mark.parametrize("name", sorted(LINE_HEURISTICS))
@@ -46,6 +54,34 @@ def test_actions_are_binary_and_within_capacity(name):
         assert (a.sum(axis=1) <= CFG.capacity).all()
         single, _ = pol.predict({k: v[0] for k, v in _obs().items()})
         assert single.shape == (6,)
+
+
+def test_rules_read_a_section_tamped_since_the_recording_run_as_fresh():
+    """The measured SD of a section tamped after the last recording run is the SD before that tamping: no rule
+    tamps it again on that measurement, nor calls a campaign for it."""
+    obs = _obs(1)
+    obs["section_sd"][:] = [[3.5, 1.0, 1.0, 1.0, 1.0, 1.0]]
+    obs["years_since_tamping"][:] = [[0.5, 2.0, 2.0, 2.0, 2.0, 2.0]]  # section 0 tamped after the run (age 0.5)
+    for name, params in (("section-threshold", {"threshold_mm": 2.0}),
+                         ("grouped-threshold", {"trigger_mm": 3.0, "include_mm": 0.5}),
+                         ("budgeted-worst-first", {"every_years": 0.25, "n_worst": 2, "min_sd_mm": 0.5})):
+        pol = _bound(LINE_HEURISTICS[name](**params), CFG)
+        assert pol.predict(obs)[0][0, 0] == 0
+        if name == "grouped-threshold":
+            assert not pol.predict(obs)[0].any()  # nothing else triggers a campaign
+    fresh = planner_view(obs)
+    assert fresh["section_sd"][0, 0] == 0.0 and fresh["section_sd"][0, 1] == 1.0
+    untouched = {**obs, "tampings": np.zeros_like(obs["tampings"])}  # not tamped in the episode: not stale
+    assert not stale_measurement(untouched).any()
+    # in the env: every tamping of the best rule is of a section not tamped since its last measurement
+    cfg = scenario("small", horizon_years=2.0)
+    res = evaluate_many([GroupedThreshold(trigger_mm=1.5, include_mm=1.0)], cfg, seeds=[1, 2], batch_size=2)[0]
+    assert res.tamped.sum() >= 4
+    for tamped in res.tamped:  # (steps, sections); a run closes steps 3, 7, ...: it sees tampings of steps 0-3, ...
+        for j in range(6):
+            steps = np.flatnonzero(tamped[:, j])
+            assert all(b // cfg.measurement_interval > a // cfg.measurement_interval
+                       for a, b in zip(steps[:-1], steps[1:]))
 
 
 def test_uniform_periodic_covers_the_line_once_per_interval():
@@ -83,6 +119,15 @@ def test_harness_scores_line_heuristics_with_cost_parts():
     for r in res:  # the evaluation records what was tamped, step by step
         assert r.tamped.shape == (2, cfg.horizon_steps, 6)
         np.testing.assert_array_equal(r.tamped.sum(axis=(1, 2)), r.section_tampings)
+    # where the costs fall: the classes' own costs and the possessions add up to the episodes' costs
+    for r in res:
+        cl = class_breakdown(r)
+        assert sum(cl[c]["sections_per_episode"] for c in SECTION_CLASSES) == 6
+        own = sum((cl[c]["cost_per_section"] or 0.0) * cl[c]["sections_per_episode"] for c in SECTION_CLASSES)
+        assert own + cl["line"]["possession_per_episode"] == pytest.approx(r.cost.mean(), rel=1e-9)
+        assert all(cl[c]["cost_per_section"] is None for c in SECTION_CLASSES if cl[c]["sections_per_episode"] == 0)
+    assert class_breakdown(res[0])["line"]["campaigns_per_episode"] == 0
+    assert class_breakdown(res[1])["line"]["campaigns_per_episode"] > 0
 
 
 def test_hindsight_search_is_exact_and_no_worse_than_its_start():
@@ -224,3 +269,46 @@ def test_cli_helpers():
     assert scenario_of("trackenv/TampingLineSmall-v0") == "small"
     with pytest.raises(ValueError):
         scenario_of("trackenv/Tamping-v0")
+
+
+def test_line_comparison_of_chosen_rules_keeps_episode_costs_and_classes(tmp_path):
+    """`trackenv evaluate --env ... --rules`: only the chosen rules, each row with its per-episode costs (in the
+    order of the seeds, for paired analyses afterwards) and its class breakdown; the table names the best rule."""
+    import json
+
+    from trackenv_agents.line_compare import format_line_table, line_comparison
+
+    out = line_comparison("trackenv/TampingLineSmall-v0", seeds=[0, 1], rules=["uniform-periodic", "no-maintenance"],
+                          batch_size=2, progress=False, out_dir=str(tmp_path), horizon_years=0.5)
+    assert sorted(r["policy"] for r in out["results"]) == ["no-maintenance", "uniform-periodic"]
+    saved = json.loads((tmp_path / "line_compare.json").read_text())
+    assert saved["best_rule"] == out["results"][0]["policy"] and saved["extra"] == []
+    for r in saved["results"]:
+        assert len(r["episode_costs"]) == 2 and np.mean(r["episode_costs"]) == pytest.approx(r["mean_cost"])
+        assert set(r["classes"]) == {*SECTION_CLASSES, "line"}
+    assert "IA" in format_line_table(out)
+
+
+def test_saved_schedules_keep_the_cheapest_search_per_episode_and_check_the_scenario(tmp_path):
+    rng = np.random.default_rng(3)
+    plans = [rng.random((CFG.horizon_steps, CFG.n_sections)) < 0.2 for _ in range(3)]
+    assert np.array_equal(schedule_from_rows(schedule_rows(plans[0])), plans[0])
+    import json
+
+    def search(name, episodes):
+        path = tmp_path / name
+        path.write_text(json.dumps({"hindsight": {"episodes": [
+            {"seed": s, "replayed": c, "schedule": schedule_rows(p)} for s, c, p in episodes]}}))
+        return path
+
+    a = search("a.json", [(7, 100.0, plans[0]), (2, 50.0, plans[1])])
+    b = search("b.json", [(7, 90.0, plans[2])])
+    seeds, schedules, costs = saved_schedules([a, b], CFG)
+    assert seeds == [2, 7] and costs == [50.0, 90.0]
+    assert np.array_equal(schedules[1], plans[2]) and np.array_equal(schedules[0], plans[1])
+    with pytest.raises(ValueError, match="shape"):
+        saved_schedules([a], scenario("default"))
+    with pytest.raises(ValueError, match="no hindsight schedule"):
+        saved_schedules([search("c.json", [])], CFG)
+    with pytest.raises(ValueError, match="'0' and '1'"):
+        schedule_from_rows(["01", "0x"])

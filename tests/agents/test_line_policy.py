@@ -1,141 +1,119 @@
-"""The per-section actor-critic: features, one policy on every line length, permutation equivariance."""
-
-from __future__ import annotations
+"""The per-section policy of TampingLine: its features, the line agent's predict, and the SB3 VecEnv of
+section agents."""
 
 import numpy as np
 import pytest
 
+pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
-import torch  # noqa: E402
-from gymnasium import spaces  # noqa: E402
-
-from trackenv.envs.line import TampingLine, line_observation_space  # noqa: E402
+from trackenv.envs.line import TampingLine, TampingLineVectorEnv  # noqa: E402
 from trackenv.envs.line_config import scenario  # noqa: E402
 from trackenv_agents.line_policy import (  # noqa: E402
     FEATURE_CLIP,
-    FEATURE_SCALES,
-    N_FEATURES,
+    FEATURES,
+    FRESH_SD_MM,
     LineAgent,
-    MaskableSectionActorCritic,
-    SectionActorCritic,
     section_features,
-    section_policy_class,
 )
+from trackenv_agents.sb3_vec import SectionAgentsVecEnv  # noqa: E402
 
-CLASSES = [SectionActorCritic, MaskableSectionActorCritic]
-
-
-def _policy(cls, n_sections: int = 6, hidden: int = 16, seed: int = 0):
-    torch.manual_seed(seed)
-    cfg = scenario("small").replace(n_sections=n_sections, capacity=3)
-    return cls(line_observation_space(cfg), spaces.MultiBinary(n_sections), lambda _: 1e-3, hidden=hidden)
+CFG = scenario("small", horizon_years=1.0)
+NAMES = [n for n, _ in FEATURES]
 
 
-def _batch(n_sections: int, n: int = 5, seed: int = 0) -> dict[str, torch.Tensor]:
-    """Random but valid observations (the space's bounds, registers 0-2), batched."""
-    space = line_observation_space(scenario("small").replace(n_sections=n_sections, capacity=3))
-    space.seed(seed)
-    obs = [space.sample() for _ in range(n)]
-    out = {k: torch.as_tensor(np.stack([o[k] for o in obs])) for k in obs[0]}
-    out["register"] = out["register"].round()
-    out["section_sd"] = out["section_sd"] / 20.0  # the sampled range (0-100 mm) dwarfs real SDs; keep some variety
-    return out
+def _col(name: str) -> int:
+    return NAMES.index(name)
 
 
-def test_features_are_the_observation_over_fixed_scales():
-    env = TampingLine(scenario("small"))
-    obs, _ = env.reset(seed=3)
-    x = section_features({k: torch.as_tensor(v)[None] for k, v in obs.items()}).numpy()
-    assert x.shape == (1, 6, N_FEATURES)
-    np.testing.assert_allclose(x[0, :, 0], obs["section_sd"] / FEATURE_SCALES["section_sd"], rtol=1e-6)
-    np.testing.assert_allclose(x[0, :, 4], obs["years_since_tamping"] / FEATURE_SCALES["years_since_tamping"],
-                               rtol=1e-6)
-    register = x[0, :, 5:8]
-    assert np.all(register.sum(axis=1) == 1) and np.all(register.argmax(axis=1) == obs["register"])
-    np.testing.assert_allclose(x[0, :, 9], obs["time"][0])  # globals broadcast to every section
-    np.testing.assert_allclose(x[0, :, 11], obs["section_sd"].max() / FEATURE_SCALES["section_sd"], rtol=1e-6)
-    np.testing.assert_allclose(x[0, :, 12], obs["section_sd"].mean() / FEATURE_SCALES["section_sd"], rtol=1e-6)
+def test_features_follow_the_measurement_calendar_and_the_line():
+    """Measured values over their scales; a section tamped after the recording run is stale (its measurement
+    predates the tamping) and projected at the fresh SD; otherwise the growth since its last tamping projects
+    the SD to now; the line context is the other sections' worst and the line's mean."""
+    obs = {"section_sd": np.array([[3.0, 3.0, 0.5, 2.9]]), "section_peak": np.array([[8.0, 8.0, 2.0, 6.0]]),
+           "years_since_tamping": np.array([[0.25, 2.25, 1.0, 0.5]]), "measurement_age": np.array([[0.25]]),
+           "tampings": np.array([[1.0, 0.0, 0.0, 1.0]]), "tampings_since_renewal": np.array([[8.0, 2.0, 0.0, 1.0]]),
+           "register": np.array([[1.0, 0.0, 2.0, 0.0]]), "time": np.array([[0.5]]), "budget_left": np.array([[1.0]])}
+    x = section_features(obs)[0]
+    assert x.shape == (4, len(FEATURES)) and x.dtype == np.float32
+    np.testing.assert_array_equal(x[:, _col("stale")], [1, 0, 0, 0])
+    growth = [0.0, (3.0 - FRESH_SD_MM) / 2.0, 0.0, (2.9 - FRESH_SD_MM) / 0.25]
+    np.testing.assert_allclose(x[:, _col("growth_mm_per_year")], np.minimum(growth, FEATURE_CLIP), rtol=1e-6)
+    projected = np.array([FRESH_SD_MM, 3.0 + growth[1] * 0.25, 0.5, 2.9 + growth[3] * 0.25])
+    np.testing.assert_allclose(x[:, _col("projected_sd_mm")], projected / 2.0, rtol=1e-6)
+    np.testing.assert_allclose(x[:, _col("line_max_other_projected_sd_mm")],
+                               [projected[3], projected[3], projected[3], projected[1]] / np.float64(2.0), rtol=1e-6)
+    np.testing.assert_array_equal(x[:, _col("renewal_due")], [1, 0, 0, 0])
+    np.testing.assert_array_equal(x[:, [_col("plain"), _col("transition"), _col("switch_or_crossing")]].argmax(1),
+                                  [1, 0, 2, 0])
+    assert x.min() >= 0.0 and x.max() <= FEATURE_CLIP
+    # permuting the sections permutes the features
+    perm = np.array([2, 0, 3, 1])
+    np.testing.assert_array_equal(section_features({k: (v[:, perm] if v.shape[1] == 4 else v)
+                                                    for k, v in obs.items()})[0], x[perm])
 
 
-def test_extreme_observations_are_clipped_to_the_training_range():
-    obs, _ = TampingLine(scenario("small")).reset(seed=3)
-    obs = {k: torch.as_tensor(v)[None] for k, v in obs.items()}
-    wild = {**obs, "section_sd": obs["section_sd"].clone(), "years_since_tamping": obs["years_since_tamping"] + 50}
-    wild["section_sd"][0, 2] = 19.0  # mm: a hidden wet spot gone wild
-    x = section_features(wild).numpy()
-    assert x.max() == FEATURE_CLIP and x[0, 2, 0] == FEATURE_CLIP and np.all(x[0, :, 11] == FEATURE_CLIP)
-    assert np.all(x[0, :, 4] == FEATURE_CLIP)
+def test_section_rewards_add_up_to_the_line_reward_and_episodes_end_together():
+    env = SectionAgentsVecEnv(2, CFG, seed=5, reward_scale=10.0)
+    lines = TampingLineVectorEnv(2, CFG)
+    lines.reset(seed=5)
+    obs = env.reset()
+    assert obs.shape == (12, len(FEATURES)) and env.action_space.n == 2
+    def may_tamp():  # the line env's masks, pairs per section
+        return lines.action_masks().reshape(2, 6, 2)[:, :, 1].ravel()
+
+    np.testing.assert_array_equal(env.action_masks(), np.stack([np.ones(12, bool), may_tamp()], axis=1))
+    j = 6 + int(np.flatnonzero(may_tamp()[6:])[0])  # a section of line 1 that may be tamped now
+    for t in range(CFG.horizon_steps):
+        a = np.zeros(12, dtype=np.int8)
+        a[:2] = t == 1
+        a[j] = t in (0, 1)  # asked again one step after its tamping: masked, dropped
+        a = a.reshape(2, 6)
+        obs, r, done, infos = env.step(a.ravel())
+        _, line_r, _, _, _ = lines.step(a)
+        np.testing.assert_allclose(r.reshape(2, 6).sum(axis=1) * 10.0, line_r, rtol=1e-5)
+        np.testing.assert_array_equal(env.action_masks()[:, 1], may_tamp())
+        if t == 0:  # the section tamped at step 0 may not be tamped at step 1, and paid the whole possession
+            assert not may_tamp()[j] and r[j] < -CFG.possession_cost / 10.0
+    assert done.all() and all("terminal_observation" in i and not i["TimeLimit.truncated"] for i in infos)
+    assert infos[0]["terminal_observation"].shape == (len(FEATURES),)
+    assert (obs[:, NAMES.index("time")] == 0.0).all()  # the next episodes started in the same step
+    with pytest.raises(ValueError, match="reward_scale"):
+        SectionAgentsVecEnv(1, CFG, reward_scale=0.0)
 
 
-@pytest.mark.parametrize("cls", CLASSES)
-def test_one_policy_runs_on_every_scenario(cls):
-    """Weights are shared over sections: a policy built for 6 sections scores 6, 12 and 24."""
-    agent = LineAgent(_policy(cls, n_sections=6))
-    for name, S in (("small", 6), ("default", 12), ("hard", 24)):
-        env = TampingLine(scenario(name))
-        obs, _ = env.reset(seed=1)
-        action, state = agent.predict(obs)
-        assert state is None and action.shape == (S,) and env.action_space.contains(action)
-        batched = {k: np.stack([v, v, v]) for k, v in obs.items()}
-        actions, _ = agent.predict(batched)
-        assert actions.shape == (3, S)
-        np.testing.assert_array_equal(actions[1], action)
-        assert agent.section_logits(batched).shape == (3, S)
-        value = agent.policy.section_value({k: torch.as_tensor(v) for k, v in batched.items()})
-        assert value.shape == (3,)
+class _Fixed:
+    """A stand-in SB3 policy: probability of tamping = projected SD / 4 mm (a function of the features)."""
+
+    device = "cpu"
+
+    def set_training_mode(self, mode):
+        pass
+
+    def get_distribution(self, x):
+        import torch
+
+        p = (x[:, _col("projected_sd_mm")] * 2.0 / 4.0).clamp(0, 1)
+
+        class D:
+            distribution = torch.distributions.Categorical(probs=torch.stack([1 - p, p], dim=-1))
+
+        return D()
 
 
-@pytest.mark.parametrize("cls", CLASSES)
-@pytest.mark.parametrize("n_sections", [6, 12])
-def test_permuting_sections_permutes_logits_and_keeps_the_value(cls, n_sections):
-    policy = _policy(cls, n_sections=n_sections, seed=2)
-    with torch.no_grad():  # the encoder's weights are not tiny, so the logits carry the sections' differences
-        policy.action_net.linear.weight.mul_(100.0)
-    obs = _batch(n_sections)
-    perm = torch.as_tensor(np.random.default_rng(0).permutation(n_sections))
-    shuffled = {k: (v[:, perm] if v.shape[1] == n_sections else v) for k, v in obs.items()}
-    with torch.no_grad():
-        logits, logits_p = policy.section_logits(obs), policy.section_logits(shuffled)
-        value, value_p = policy.section_value(obs), policy.section_value(shuffled)
-    assert logits.std(dim=1).min() > 1e-3  # sections are scored differently: the check below means something
-    torch.testing.assert_close(logits_p, logits[:, perm], rtol=1e-5, atol=1e-5)
-    torch.testing.assert_close(value_p, value, rtol=1e-5, atol=1e-5)
-
-
-@pytest.mark.parametrize("cls", CLASSES)
-def test_the_action_distribution_is_one_bernoulli_per_section(cls):
-    policy = _policy(cls, seed=4)
-    with torch.no_grad():
-        policy.action_net.linear.weight.mul_(100.0)
-    obs = _batch(6)
-    with torch.no_grad():
-        logits = policy.section_logits(obs)
-        dist = policy.get_distribution(obs)
-        ones = torch.ones_like(logits)
-        # log P(tamp every section) = Σ log σ(logit): the same under SB3's Bernoulli and contrib's masked pairs
-        torch.testing.assert_close(dist.log_prob(ones), torch.nn.functional.logsigmoid(logits).sum(dim=1))
-        np.testing.assert_array_equal(dist.mode().numpy().astype(bool), (logits > 0).numpy())
-
-
-def test_initial_logit_is_settable_and_bad_arguments_name_the_parameter():
-    from trackenv_agents.train import _set_initial_tamp_logit
-
-    class Model:
-        policy = _policy(MaskableSectionActorCritic)
-
-    _set_initial_tamp_logit(Model, -3.0, "multibinary")
-    logits = Model.policy.section_logits(_batch(6))
-    assert torch.all((logits - -3.0).abs() < 0.1)  # the head starts with a small gain: the bias dominates
-    with pytest.raises(ValueError, match="hidden"):
-        _policy(SectionActorCritic, hidden=0)
-    with pytest.raises(ValueError, match="feature_scales"):
-        SectionActorCritic(line_observation_space(scenario("small")), spaces.MultiBinary(6), lambda _: 1e-3,
-                           feature_scales={"section_sd": 2.0})
-    with pytest.raises(ValueError, match="feature_scales"):
-        SectionActorCritic(line_observation_space(scenario("small")), spaces.MultiBinary(6), lambda _: 1e-3,
-                           feature_scales={**FEATURE_SCALES, "time": 0.0})
-    with pytest.raises(ValueError, match="algo"):
-        section_policy_class("a2c")
-    with pytest.raises(ValueError, match="MultiBinary"):
-        SectionActorCritic(line_observation_space(scenario("small")), spaces.Discrete(7), lambda _: 1e-3)
+def test_line_agent_tamps_the_likely_sections_within_capacity_and_masks():
+    env = TampingLine(CFG)
+    obs, _ = env.reset(seed=2)
+    obs = {k: v.copy() for k, v in obs.items()}
+    obs["section_sd"][:] = [3.0, 3.5, 1.0, 2.5, 3.9, 3.2]  # capacity 3: sections 4, 1 and 5
+    obs["years_since_tamping"][:] = 2.0
+    agent = LineAgent(_Fixed()).bind(CFG)
+    a, state = agent.predict(obs)
+    assert state is None and a.dtype == np.int8
+    np.testing.assert_array_equal(a, [0, 1, 0, 0, 1, 1])
+    obs["years_since_tamping"][4] = 0.25  # tamped last step: masked, the next most probable takes its place
+    np.testing.assert_array_equal(agent.predict(obs)[0], [1, 1, 0, 0, 0, 1])
+    batched = {k: np.stack([v, v]) for k, v in obs.items()}
+    assert agent.predict(batched)[0].shape == (2, 6)
+    sampled = LineAgent(_Fixed(), rng=np.random.default_rng(0)).bind(CFG).predict(batched, deterministic=False)[0]
+    assert sampled.shape == (2, 6) and sampled.sum(axis=1).max() <= CFG.capacity

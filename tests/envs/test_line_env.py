@@ -97,6 +97,28 @@ def test_reward_is_minus_sum_of_parts_and_vector_autoreset():
     assert info["year"].tolist() == [0.0, 0.0] and info["cost"].tolist() == [0.0, 0.0]  # the new episodes' first
 
 
+def test_section_costs_add_up_to_the_lines_cost_with_the_possession():
+    """info["section_costs"]: each section's own costs of the step (tamping or renewal, geometry, restrictions);
+    with the line's possession they are the step's cost, and a tamped section pays its tamping or its renewal."""
+    cfg = scenario("small", horizon_years=1.0)
+    vec = TampingLineVectorEnv(2, cfg)
+    vec.reset(seed=3)
+    vec.batch.count[1] = cfg.tamping_model.max_tampings_before_renewal  # line 0, section 1: its renewal is due
+    vec.batch.last_tamped[[1, 2, 6, 11]] = -8  # last tamped two years before: none of the asked is masked
+    steps = []
+    for a in ([[0, 1, 1, 0, 0, 0], [0, 0, 0, 0, 0, 0]], [[0, 0, 0, 0, 0, 0], [1, 0, 0, 0, 0, 1]]):
+        _, r, _, _, info = vec.step(np.array(a, dtype=np.int8))
+        sec, tamped = info["section_costs"], info["tamped_sections"]
+        assert sec.shape == (2, 6) and (sec > 0).all()
+        np.testing.assert_allclose(sec.sum(axis=1) + info["costs"]["possession"], -r, rtol=1e-12)
+        assert sec[~tamped].max() < cfg.section_tamping_cost < sec[tamped].min()
+        steps.append(sec)
+    assert vec.batch.count[1] == 0  # renewed in the first step, and charged for it; section 2 was tamped
+    assert steps[0][0, 1] > cfg.section_renewal_cost > steps[0][0, 2]
+    reset_info = vec.reset(seed=3)[1]
+    np.testing.assert_array_equal(reset_info["section_costs"], np.zeros((2, 6)))
+
+
 SEEDS = [7, 8]
 H = 4  # steps of the episodes compared with SyncVectorEnv (horizon_years=1.0)
 # (steps, lines, sections): a different pattern per line, over capacity (clipped to 3) and masked repeats

@@ -82,7 +82,7 @@ class TampingLineVectorEnv(BatchedVectorEnv):
 
     def _reset_info(self, i: int) -> dict:
         S = self.config.n_sections
-        return self._lines().info(i, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False)
+        return self._lines().info(i, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False, np.zeros(S))
 
     def _step_lines(self, want: np.ndarray, lines: list[int]) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
         """One step of ``lines``, which ask to tamp ``want`` (num_envs, S) bool (rows of other lines: False):
@@ -92,12 +92,15 @@ class TampingLineVectorEnv(BatchedVectorEnv):
         stepped = np.zeros(self.num_envs, dtype=bool)
         stepped[lines] = True
         tamped, clipped = bt.resolve(want & stepped[:, None])
+        section = bt.intervention_costs(tamped.ravel())
         campaign = bt.apply(tamped)
         bt.traffic(stepped)
         parts = bt.costs(campaign)
+        section += bt.section_costs()
         rewards = np.where(stepped, -np.asarray(sum(parts.values()), dtype=float), 0.0)
         truncated = stepped & (bt.step >= self.config.horizon_steps)
-        infos = {b: bt.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b]) for b in lines}
+        infos = {b: bt.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
+                            section[bt.rows(b)]) for b in lines}
         return rewards, truncated, infos
 
     def _step_envs(self, actions: np.ndarray, stepping: list[int],
@@ -177,6 +180,9 @@ class TampingLine(gym.Env):
 
     The true state is in ``info``: ``section_sd_m``, ``section_peak_m``, ``section_class`` (0 OK, 1 alert,
     2 intervention, 3 immediate action, EN 13848-5 style at 100 km/h), ``wet_spot_active``, ``rate_factor``.
+    ``info["section_costs"]``: each section's own costs of the step (k€: its tamping or renewal, geometry,
+    speed restriction, immediate action); with the line's possession they add up to the step's cost (a
+    learner can credit each section's choice with its own costs).
 
     **Reward.** −Σ of the step's cost parts (k€) in ``info["costs"]``: ``possession`` (per campaign),
     ``tamping`` (per metre × 200 m per section), ``renewal``, ``geometry`` (per section-year ∝
@@ -209,7 +215,8 @@ class TampingLine(gym.Env):
     "rgb_array"``; the vector env's two autoreset modes and Gymnasium's info layout (``final_info`` a dict of
     arrays, as ``SyncVectorEnv`` gives it, where it was an object array of per-line dicts); the settlement's
     Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
-    no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance).
+    no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance);
+    ``info["section_costs"]``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}

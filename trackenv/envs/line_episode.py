@@ -123,16 +123,21 @@ class LineBatch:
 
     def _measure(self, lines: np.ndarray) -> None:
         """A recording-car run on ``lines`` (bool over lines), with the pre-drawn errors of this step."""
+        self.measure_rows(np.repeat(lines, self.S), np.repeat(self.step, self.S))
+        self.last_measured = np.where(lines, self.step, self.last_measured)
+
+    def measure_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """A recording-car run on the segments ``seg`` (segments,) bool at their step ``seg_step`` (per segment or
+        one), with the pre-drawn errors of that step: the measured SD, mean-to-peak and level. No calendar:
+        :meth:`_measure` is the line-level run; a per-section fork is measured through this directly."""
         c = self.config
-        seg = np.repeat(lines, self.S)
-        step = np.repeat(self.step, self.S)
+        step = np.broadcast_to(np.asarray(seg_step), seg.shape)
         e = self.meas_noise[np.minimum(step, c.horizon_steps), np.arange(seg.size)]
         sd = np.maximum(self.sd + c.sd_noise_mm * 1e-3 * e[:, 0], 0.0)
         pk = np.maximum(self.peak + c.peak_noise_mm * 1e-3 * e[:, 1], 0.0)
         self.measured_sd = np.where(seg, sd, self.measured_sd)
         self.measured_peak = np.where(seg, pk, self.measured_peak)
         self.measured_level[seg] = self.level[seg]
-        self.last_measured = np.where(lines, self.step, self.last_measured)
 
     # ------------------------------------------------------------------ reset
     def reset_lines(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
@@ -309,7 +314,7 @@ class LineBatch:
                 raise ValueError(
                     f"line {b}: {int(want[b].sum())} sections requested in one campaign, capacity is {c.capacity} "
                     "(over_capacity='raise')")
-            want = _keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), c.capacity)
+            want = keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), c.capacity)
             clipped |= over
         if c.annual_budget > 0:
             for _ in range(self.S):  # drop the mildest section until each line fits its remaining budget
@@ -321,7 +326,7 @@ class LineBatch:
                     raise ValueError(f"line {b}: campaign costs more than the remaining annual budget "
                                      f"{self.budget_left[b]:.1f} k€ (over_capacity='raise')")
                 keep = want.sum(axis=1) - too.astype(int)
-                want = _keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), keep)
+                want = keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), keep)
                 clipped |= too
         return want, clipped
 
@@ -423,6 +428,13 @@ class LineBatch:
             "immediate_action": c.immediate_action_cost * (cls == 3).sum(1),
         }
 
+    def intervention_costs(self, t: np.ndarray) -> np.ndarray:
+        """(segments,) what tamping the segments ``t`` (segments,) bool costs each (k€): the tamping, or the
+        ballast renewal where one is due (:meth:`renewing`); possession excluded (it is the line's). Call it
+        before the tamping (:meth:`tamp_rows` resets the count)."""
+        c = self.config
+        return t * c.section_tamping_cost + (t & self.renewing()) * c.section_renewal_cost
+
     def section_costs(self) -> np.ndarray:
         """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
         the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
@@ -432,20 +444,35 @@ class LineBatch:
         return geo + c.speed_restriction_cost * (cls == 2) + c.immediate_action_cost * (cls == 3)
 
     # ------------------------------------------------------------------ observation and info
+    def section_entries(self, rows, step) -> dict[str, np.ndarray]:
+        """The per-section keys of the observation for the segments ``rows`` (a slice or indices) at step
+        ``step`` (per segment or one): what a planner sees of each section, float32."""
+        c = self.config
+        f32 = np.float32
+        years = (np.asarray(step) - self.last_tamped[rows]) / c.steps_per_year
+        return {
+            "section_sd": np.clip(self.measured_sd[rows] * 1e3, 0.0, 100.0).astype(f32),
+            "section_peak": np.clip(self.measured_peak[rows] * 1e3, 0.0, 200.0).astype(f32),
+            "register": self.register[rows].astype(f32),
+            "tampings": np.clip(self.tampings[rows], 0, 1000).astype(f32),
+            "tampings_since_renewal": np.clip(self.count[rows], 0, 1000).astype(f32),
+            "years_since_tamping": np.clip(years, 0.0, 100.0).astype(f32),
+        }
+
     def observation(self, b: int) -> dict[str, np.ndarray]:
         c = self.config
         r = self.rows(b)
         f32 = np.float32
-        years = (self.step[b] - self.last_tamped[r]) / c.steps_per_year
+        sections = self.section_entries(r, self.step[b])
         obs = {
-            "section_sd": np.clip(self.measured_sd[r] * 1e3, 0.0, 100.0).astype(f32),
-            "section_peak": np.clip(self.measured_peak[r] * 1e3, 0.0, 200.0).astype(f32),
+            "section_sd": sections["section_sd"],
+            "section_peak": sections["section_peak"],
             "measurement_age": np.array([min((self.step[b] - self.last_measured[b]) / c.steps_per_year,
                                              c.horizon_years + 1.0)], dtype=f32),
-            "register": self.register[r].astype(f32),
-            "tampings": np.clip(self.tampings[r], 0, 1000).astype(f32),
-            "tampings_since_renewal": np.clip(self.count[r], 0, 1000).astype(f32),
-            "years_since_tamping": np.clip(years, 0.0, 100.0).astype(f32),
+            "register": sections["register"],
+            "tampings": sections["tampings"],
+            "tampings_since_renewal": sections["tampings_since_renewal"],
+            "years_since_tamping": sections["years_since_tamping"],
             "time": np.array([min(self.step[b] / c.horizon_steps, 1.0)], dtype=f32),
             "budget_left": np.array([np.clip(self.budget_left[b] / c.annual_budget, 0.0, 1.0)
                                      if c.annual_budget > 0 else 1.0], dtype=f32),
@@ -454,12 +481,16 @@ class LineBatch:
             obs["level"] = np.clip(self.measured_level[r] * 1e3, -100.0, 200.0).astype(f32)
         return obs
 
-    def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool) -> dict:
+    def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool,
+             section_costs: np.ndarray) -> dict:
+        """Line ``b``'s step info: the cost parts (k€), and per section its own costs ``section_costs`` (k€:
+        tamping or renewal, geometry, speed restriction, immediate action; the possession is the line's)."""
         r = self.rows(b)
         cls = classify(self.peak[r], self.limits)
         return {
             "costs": parts,
             "cost": float(sum(parts.values())),
+            "section_costs": np.asarray(section_costs, dtype=float).copy(),
             "tamped_sections": tamped.copy(),
             "clipped": bool(clipped),
             "section_sd_m": self.sd[r].copy(),
@@ -475,8 +506,9 @@ class LineBatch:
         }
 
 
-def _keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:
-    """Per row, keep at most k (scalar or per row) of the True entries of ``want``, highest ``score`` first."""
+def keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:
+    """(rows, S) bool: per row, keep at most k (scalar or per row) of the True entries of ``want``, highest
+    ``score`` first."""
     k = np.broadcast_to(np.asarray(k), (want.shape[0],))
     s = np.where(want, score, -np.inf)
     order = np.argsort(-s, axis=1, kind="stable")
