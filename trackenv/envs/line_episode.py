@@ -463,16 +463,10 @@ class LineBatch:
         c = self.config
         r = self.rows(b)
         f32 = np.float32
-        sections = self.section_entries(r, self.step[b])
         obs = {
-            "section_sd": sections["section_sd"],
-            "section_peak": sections["section_peak"],
+            **self.section_entries(r, self.step[b]),
             "measurement_age": np.array([min((self.step[b] - self.last_measured[b]) / c.steps_per_year,
                                              c.horizon_years + 1.0)], dtype=f32),
-            "register": sections["register"],
-            "tampings": sections["tampings"],
-            "tampings_since_renewal": sections["tampings_since_renewal"],
-            "years_since_tamping": sections["years_since_tamping"],
             "time": np.array([min(self.step[b] / c.horizon_steps, 1.0)], dtype=f32),
             "budget_left": np.array([np.clip(self.budget_left[b] / c.annual_budget, 0.0, 1.0)
                                      if c.annual_budget > 0 else 1.0], dtype=f32),
