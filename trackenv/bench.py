@@ -18,7 +18,10 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs;
 * ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
   30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
-  ``pass_share``: the share of the step's wall time spent in the batched passes (the physics).
+  ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
+* every env figure carries ``profile``: the shares of its wall time spent in the compiled kernel, the pass set-up
+  around it (irregularity, matrices, static start), the settlement step, the D1/quality computation and the rest
+  (:data:`PROFILE_STAGES`; :func:`format_profile` renders them as the README's table).
 
 Every figure carries ``load_average_1min``, the machine's load when it was taken: other work on the machine
 slows every figure, so compare figures taken at a similar load.
@@ -42,7 +45,7 @@ from .physics.dynamics import simulate_pass, simulate_passes
 from .physics.track import Track
 from .physics.vehicle import Car, Wheelset
 
-__all__ = ["run_benchmarks", "format_benchmarks"]
+__all__ = ["run_benchmarks", "format_benchmarks", "format_profile"]
 
 SPEED = 80 / 3.6
 DT = 1e-4
@@ -170,23 +173,60 @@ def _bench_paper_b(repeats: int, iterations: int = 6) -> dict:
     return t
 
 
-class _PassTimer:
-    """Wall time spent in a LineBatch's batched passes (wraps the instance's ``_passes``)."""
+# Where an env step's wall time goes: each stage is a function the env reaches through a module attribute, wrapped
+# for the length of a benchmark. "passes" contains "kernel"; the profile reports the set-up (passes − kernel).
+PROFILE_STAGES = (
+    ("kernel", "trackenv.physics._kernel", "run"),
+    ("passes", "trackenv.degradation", "simulate_passes"),
+    ("passes", "trackenv.envs.line_episode", "simulate_passes"),
+    ("settlement", "trackenv.degradation", "implicit_settlement_step"),
+    ("quality", "trackenv.envs.episode", "d1_filter"),
+    ("quality", "trackenv.envs.line_episode", "d1_filter"),
+)
+
+
+class _StageTimer:
+    """Wall time spent in the stages of :data:`PROFILE_STAGES` while in a ``with`` block (the functions are
+    wrapped on entry and restored on exit)."""
 
     def __init__(self) -> None:
-        self.seconds = 0.0
+        self.seconds: dict[str, float] = {}
+        self._saved: list[tuple[Any, str, Any]] = []
 
-    def attach(self, batch: Any) -> None:
-        inner = batch._passes
+    def __enter__(self) -> _StageTimer:
+        import importlib
 
+        for stage, module, name in PROFILE_STAGES:
+            owner = importlib.import_module(module)
+            inner = getattr(owner, name)
+            self._saved.append((owner, name, inner))
+            setattr(owner, name, self._timed(stage, inner))
+        return self
+
+    def _timed(self, stage: str, inner: Callable) -> Callable:
         def timed(*args: Any, **kwargs: Any) -> Any:
             t0 = time.perf_counter()
             try:
                 return inner(*args, **kwargs)
             finally:
-                self.seconds += time.perf_counter() - t0
+                self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - t0
 
-        batch._passes = timed
+        return timed
+
+    def __exit__(self, *exc: object) -> None:
+        for owner, name, inner in reversed(self._saved):
+            setattr(owner, name, inner)
+        self._saved.clear()
+
+    def profile(self, wall_s: float) -> dict[str, float]:
+        """Shares of ``wall_s``: the kernel, the pass set-up around it, the settlement step, the D1/quality
+        computation and the rest (env bookkeeping, tamping, costs, observation)."""
+        t = self.seconds
+        kernel, passes = t.get("kernel", 0.0), t.get("passes", 0.0)
+        parts = {"kernel": kernel, "pass_setup": max(passes - kernel, 0.0), "settlement": t.get("settlement", 0.0),
+                 "quality": t.get("quality", 0.0)}
+        parts["other"] = max(wall_s - sum(parts.values()), 0.0)
+        return {k: v / wall_s for k, v in parts.items()}
 
 
 def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v0") -> dict:
@@ -206,28 +246,21 @@ def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping
         env.reset(seed=0)
         reset_s = time.perf_counter() - t0
         env.step(env.action_space.sample())  # warm-up
-        timer = _PassTimer()
-        batch = getattr(env.unwrapped, "batch", None)
-        if batch is not None:
-            timer.attach(batch)
         done_steps, resets = 0, 0
-        t0 = time.perf_counter()
-        while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            done_steps += 1
-            if terminated or truncated:
-                env.reset()
-                resets += 1
-                if batch is not None:  # a reset makes a new batch: time its passes too
-                    batch = getattr(env.unwrapped, "batch", None)
-                    timer.attach(batch)
-        wall = time.perf_counter() - t0
-        out = {"status": "ok", "env_id": env_id, "steps": done_steps, "wall_s": wall,
-               "steps_per_s": done_steps / wall, "episodes_ended": resets, "first_reset_s": reset_s,
-               "load_average_1min": _load_average()}
-        if batch is not None:
-            out["pass_share"] = timer.seconds / wall
-        return out
+        with _StageTimer() as timer:
+            t0 = time.perf_counter()
+            while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                done_steps += 1
+                if terminated or truncated:
+                    env.reset()
+                    resets += 1
+            wall = time.perf_counter() - t0
+        profile = timer.profile(wall)
+        return {"status": "ok", "env_id": env_id, "steps": done_steps, "wall_s": wall,
+                "steps_per_s": done_steps / wall, "episodes_ended": resets, "first_reset_s": reset_s,
+                "profile": profile, "pass_share": profile["kernel"] + profile["pass_setup"],
+                "load_average_1min": _load_average()}
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
@@ -252,21 +285,18 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: boo
         venv.reset(seed=0)
         reset_s = time.perf_counter() - t0
         venv.step(venv.action_space.sample())  # warm-up
-        timer = _PassTimer()
-        if line:
-            timer.attach(venv.batch)
         done_steps = 0
-        t0 = time.perf_counter()
-        while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
-            venv.step(venv.action_space.sample())
-            done_steps += 1
-        wall = time.perf_counter() - t0
-        out = {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
-               "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
-               "load_average_1min": _load_average()}
-        if line:
-            out["pass_share"] = timer.seconds / wall
-        return out
+        with _StageTimer() as timer:
+            t0 = time.perf_counter()
+            while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
+                venv.step(venv.action_space.sample())
+                done_steps += 1
+            wall = time.perf_counter() - t0
+        profile = timer.profile(wall)
+        return {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
+                "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
+                "profile": profile, "pass_share": profile["kernel"] + profile["pass_setup"],
+                "load_average_1min": _load_average()}
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
@@ -332,6 +362,26 @@ def _in_passes(t: dict) -> str:
     return "" if share is None else f", {100 * share:.0f} % in the passes"
 
 
+PROFILE_LABELS = (("kernel", "kernel"), ("pass_setup", "pass set-up"), ("settlement", "settlement"),
+                  ("quality", "quality (D1)"), ("other", "other"))
+
+
+def format_profile(d: dict) -> str:
+    """Where the env steps' wall time went (shares of :func:`_StageTimer.profile`), one column per env
+    benchmark: the README's profile table, as Markdown."""
+    found: list[tuple[str, Any]] = [("Tamping-v0, 1 env", d.get("env"))]
+    found += [(f"Tamping-v0, {n} envs", v) for n, v in d.get("vector_env", {}).items()]
+    found += [("TampingLine-v0, 1 line", d.get("line_env"))]
+    found += [(f"TampingLine-v0, {n} lines", v) for n, v in d.get("line_vector_env", {}).items()]
+    cols: list[tuple[str, dict]] = [(name, e) for name, e in found
+                                    if e is not None and e.get("status") == "ok" and "profile" in e]
+    lines = ["| share of the step | " + " | ".join(name for name, _ in cols) + " |",
+             "|---|" + "---:|" * len(cols)]
+    for key, label in PROFILE_LABELS:
+        lines.append(f"| {label} | " + " | ".join(f"{100 * e['profile'][key]:.0f} %" for _, e in cols) + " |")
+    return "\n".join(lines)
+
+
 def _env_row(env_id: str, e: dict) -> tuple[str, str, str]:
     if e["status"] != "ok":
         return (f"env {env_id}", "unavailable", e["reason"][:80])
@@ -385,5 +435,7 @@ def format_benchmarks(d: dict) -> str:
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]
+    if any("profile" in (e or {}) for e in [d.get("env"), d.get("line_env")]):
+        lines += ["where an env step's wall time goes:", format_profile(d)]
     lines.append(f"total benchmark wall time {d['total_wall_s']:.1f} s")
     return "\n".join(lines)
