@@ -10,19 +10,26 @@ from trackenv.envs.config import TampingEnvConfig
 # --- numba: compile (or load) the kernel once, before the first test ---
 @pytest.fixture(scope="session", autouse=True)
 def warm_dynamics_kernel():
-    """Load (or, on a fresh machine, compile) the dynamics kernel once per session, before the first test, so
-    its compile cost lands here once instead of inside whichever test happens to run first. Each batch width is
-    its own compiled entry (see trackenv.physics._kernel), so a batch of one and a batch of two (one row per
-    thread) are warmed; wider batches load their entries from numba's on-disk cache when first used."""
-    import numpy as np
+    """Load (or, on a fresh machine, compile) every entry of the dynamics kernel once per session, before the
+    first test, so that its compile cost lands here once instead of inside whichever test happens to run first.
+    Each (serial/parallel, batch width) pair is its own compiled entry (see trackenv.physics._kernel) and the
+    suite uses them all; cold, their compilation is most of the suite's time, so a second process compiles the
+    parallel entries while this one compiles the serial ones (they share numba's on-disk cache), then this one
+    loads them."""
+    import subprocess
+    import sys
 
-    from trackenv.physics.dynamics import simulate_passes
-    from trackenv.physics.track import Track
-    from trackenv.physics.vehicle import Wheelset
+    from trackenv.physics.dynamics import KERNEL_ENTRIES, warm_kernel
 
-    track, wheel = Track.seed(), Wheelset.seed()
-    for rows in (1, 2):
-        simulate_passes(track, wheel, 20.0, np.zeros((rows, track.n_sleepers)), x_start=10.0, x_end=10.5)
+    parallel = [e for e in KERNEL_ENTRIES if e[0]]
+    helper = subprocess.Popen(
+        [sys.executable, "-c", f"from trackenv.physics.dynamics import warm_kernel; warm_kernel({parallel!r})"]
+    )
+    try:
+        warm_kernel([e for e in KERNEL_ENTRIES if not e[0]])
+    finally:
+        helper.wait()
+    warm_kernel(parallel)  # compiled by the helper: loaded from the cache (or compiled here if it failed)
     # the compiled inverse of the root-solved settlement laws (trackenv.physics._newton), one entry
     from trackenv.physics.settlement import SatoLaw
 

@@ -467,3 +467,20 @@ def test_sleeper_mass_of_a_row_enters_its_pass():
     np.testing.assert_array_equal(loaded.sleeper_force, alone.sleeper_force)
     changed = np.abs(loaded.sleeper_force - plain.sleeper_force) / plain.sleeper_force.max()
     assert changed[20:30].max() > 1e-3  # the heavier sleepers move their own peak forces
+
+
+def test_warm_kernel_reaches_every_compiled_entry():
+    """The session fixture warms every entry through warm_kernel: each must then hold its compiled code (a batch
+    that warm_kernel sizes wrongly would leave an entry to compile inside a test), and bad entries are refused."""
+    import numba
+
+    from trackenv.physics import _kernel
+    from trackenv.physics.dynamics import KERNEL_ENTRIES, warm_kernel
+
+    warm_kernel()  # loaded from the cache by now: cheap
+    reachable = [e for e in KERNEL_ENTRIES if not e[0] or numba.config.NUMBA_NUM_THREADS >= 2]
+    assert len(reachable) >= len(_kernel.WIDTHS)
+    for entry in reachable:
+        assert _kernel._RUNNERS[entry].signatures, entry
+    with pytest.raises(ValueError, match="entries must be among"):
+        warm_kernel([(False, 3)])

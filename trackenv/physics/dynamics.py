@@ -253,11 +253,17 @@ def _window_dofs(track: Track, x_axles: np.ndarray, margin_bays: int) -> tuple[i
     return int(lay.node_w[lay.sleeper_node[s_lo]]), int(lay.sleeper[s_hi] + 1)
 
 
-def _static_in_windows(k_band: np.ndarray, f: np.ndarray, windows) -> np.ndarray:
-    """Static displacements with the track outside the windows held at rest."""
+def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
+    """The banded Cholesky factor of the stiffness on each window [lo, hi) (LAPACK pbtrf, what solveh_banded
+    runs before its solve): factored once for the static start's fixed-point sweeps."""
+    return [(lo, hi, scipy.linalg.cholesky_banded(lapack_lower(k_band[lo:hi]), lower=True)) for lo, hi in windows]
+
+
+def _static_in_windows(factors: list[tuple[int, int, np.ndarray]], f: np.ndarray) -> np.ndarray:
+    """Static displacements under ``f`` with the track outside the windows (``_window_factors``) at rest."""
     u = np.zeros_like(f)
-    for lo, hi in windows:
-        u[lo:hi] = scipy.linalg.solveh_banded(lapack_lower(k_band[lo:hi]), f[lo:hi], lower=True)
+    for lo, hi, factor in factors:
+        u[lo:hi] = scipy.linalg.cho_solve_banded((factor, True), f[lo:hi])
     return u
 
 
@@ -452,6 +458,7 @@ def simulate_passes(
     static_ballast = np.zeros((n_rows, t0.n_sleepers))
     static_total = np.zeros((n_rows, t0.n_sleepers))
     sag = np.zeros((n_rows, t0.n_dof))  # static rail sag over settled supports (the kernel adds it to z)
+    start_points = [_point_load_vector(t0, x) for x in x_axle[0]]  # DOFs and weights of each axle at t = 0
     if support_settlement is not None:
         g = settlement_rows = _settlement_rows(support_settlement, n_rows, t0)
         for b, t in enumerate(tracks):
@@ -459,7 +466,7 @@ def simulate_passes(
             f[lay.sleeper] = t.ballast_stiffness * g[b]
             u0 = scipy.linalg.solveh_banded(lapack_lower(kb[b]), f, lower=True)
             sag[b] = u0
-            z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in map(functools.partial(_point_load_vector, t0), x_axle[0])]
+            z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in start_points]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
             static_ballast[b] = t.ballast_stiffness * (us - g[b])
             static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
@@ -484,13 +491,13 @@ def simulate_passes(
         z0 = z_axle[b, 0]
         if start == "static":
             loads = sys_.static_wheel_loads.copy()
+            factors = _window_factors(kb[b], windows)
             for _ in range(4):  # loads on a compliant, uneven rail: a few fixed-point sweeps
                 f = np.zeros(t0.n_dof)
-                pts = [_point_load_vector(t0, x) for x in x_axle[0]]
-                for (dofs, shp), p in zip(pts, loads):
+                for (dofs, shp), p in zip(start_points, loads):
                     f[dofs] += shp * p
-                u[b] = _static_in_windows(kb[b], f, windows)
-                w = np.array([shp @ u[b][dofs] for dofs, shp in pts])
+                u[b] = _static_in_windows(factors, f)
+                w = np.array([shp @ u[b][dofs] for dofs, shp in start_points])
                 q[b] = sys_.static_displacements(w + z0 + law.compression(loads))
                 new = sys_.force[sys_.wheel_dofs] - sys_.stiffness[sys_.wheel_dofs] @ q[b]
                 if np.allclose(new, loads, rtol=1e-12, atol=1e-9):
@@ -506,8 +513,7 @@ def simulate_passes(
     out_rail = np.zeros_like(out_force)
     out_wheel = np.zeros_like(out_force)
     for b in range(nb):
-        for j, x in enumerate(x_axle[0]):
-            dofs, shp = _point_load_vector(t0, x)
+        for j, (dofs, shp) in enumerate(start_points):
             out_rail[b, 0, j] = shp @ u[b][dofs]
         out_wheel[b, 0] = q[b][sys_.wheel_dofs]
     pad_k = np.stack([t.pad_stiffness for t in tracks])
@@ -617,3 +623,31 @@ def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularit
             raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
         return simulate_passes(track, vehicle, speed, [arr], **options)[0]
     return simulate_passes(track, vehicle, speed, None if irregularity is None else [irregularity], **options)[0]
+
+
+KERNEL_ENTRIES = tuple(_kernel._RUNNERS)
+"""The kernel's compiled entries, as (runs chunks in parallel, rows per chunk) pairs."""
+
+
+def warm_kernel(entries=KERNEL_ENTRIES) -> None:
+    """Compile now, or load from numba's on-disk cache, the kernel's ``entries`` (pairs of
+    :data:`KERNEL_ENTRIES`) by a pass of half a metre with a batch that :func:`simulate_passes` runs on each
+    entry. Each entry compiles on its own (~25-60 s of one core on a fresh install); processes that warm
+    different entries at once share the cache, so N cores warm them in about 1/N of the time."""
+    import numba
+
+    unknown = [e for e in entries if e not in KERNEL_ENTRIES]
+    if unknown:
+        raise ValueError(f"entries must be among {KERNEL_ENTRIES}, got {unknown}")
+    track, wheel = Track.seed(), Wheelset.seed()
+    threads = numba.get_num_threads()
+    try:
+        for parallel, width in entries:
+            if parallel and numba.config.NUMBA_NUM_THREADS < 2:  # type: ignore[attr-defined]
+                continue  # one thread can never reach a parallel entry
+            # one chunk of `width` rows on one thread; two chunks of `width` rows on two threads
+            numba.set_num_threads(2 if parallel else 1)
+            rows = 2 * width if parallel else width
+            simulate_passes(track, wheel, 20.0, np.zeros((rows, track.n_sleepers)), x_start=10.0, x_end=10.5)
+    finally:
+        numba.set_num_threads(threads)
