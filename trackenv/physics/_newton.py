@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["SATO", "SHENTON", "growth_inverse"]
+__all__ = ["SATO", "SHENTON", "growth_inverse", "inverse_one"]
 
 SATO = 0  # g(N) = -gamma·expm1(-alpha·N) + beta·N, params (alpha, beta, gamma)
 SHENTON = 1  # g(N) = K1·N^0.2 + K2·N, params (K1, K2)
@@ -40,41 +40,44 @@ def _slope(kind: int, p: np.ndarray, n: float) -> float:
     return 0.2 * p[0] * n ** (0.2 - 1.0) + p[1]
 
 
-@njit(cache=True, error_model="numpy")
-def growth_inverse(kind: int, p: np.ndarray, y: np.ndarray, hi: np.ndarray, max_iter: int) -> np.ndarray:
-    """N >= 1 with g(N) = y (y > g(1)), elementwise; +inf where ``hi`` (an upper bracket) is not finite.
+@njit(cache=True, inline="always", error_model="numpy")
+def inverse_one(kind: int, p: np.ndarray, t: float, h: float, max_iter: int) -> float:
+    """N >= 1 with g(N) = t (t > g(1)); +inf where the upper bracket ``h`` is not finite.
 
-    Safeguarded Newton on the bracket [1, max(hi, 1)]: the Newton step where it stays inside the bracket,
-    the geometric midpoint otherwise; stops at a residual at the rounding level of y, or a step or bracket
+    Safeguarded Newton on the bracket [1, max(h, 1)]: the Newton step where it stays inside the bracket,
+    the geometric midpoint otherwise; stops at a residual at the rounding level of t, or a step or bracket
     of a few ulps (see the numpy reference for the reasoning).
     """
+    if not np.isfinite(h):
+        return np.inf
+    lo = 1.0
+    h = max(h, 1.0)
+    x = math.sqrt(lo * h)
+    for _ in range(max_iter):
+        f = _growth(kind, p, x) - t
+        if f < 0.0:
+            lo = x
+        else:
+            h = x
+        step = x - f / _slope(kind, p, x)
+        if np.isfinite(step) and step >= lo and step <= h:
+            new = step
+        else:
+            new = math.sqrt(lo * h)
+        at_root = abs(f) <= 4.0 * _EPS * abs(t)
+        if at_root:
+            new = x
+        done = at_root or abs(new - x) <= 8.0 * _EPS * x or h - lo <= 8.0 * _EPS * h
+        x = new
+        if done:
+            break
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def growth_inverse(kind: int, p: np.ndarray, y: np.ndarray, hi: np.ndarray, max_iter: int) -> np.ndarray:
+    """:func:`inverse_one` of every element of ``y`` with its upper bracket ``hi``."""
     out = np.empty(y.shape[0])
     for i in range(y.shape[0]):
-        h = hi[i]
-        if not np.isfinite(h):
-            out[i] = np.inf
-            continue
-        t = y[i]
-        lo = 1.0
-        h = max(h, 1.0)
-        x = math.sqrt(lo * h)
-        for _ in range(max_iter):
-            f = _growth(kind, p, x) - t
-            if f < 0.0:
-                lo = x
-            else:
-                h = x
-            step = x - f / _slope(kind, p, x)
-            if np.isfinite(step) and step >= lo and step <= h:
-                new = step
-            else:
-                new = math.sqrt(lo * h)
-            at_root = abs(f) <= 4.0 * _EPS * abs(t)
-            if at_root:
-                new = x
-            done = at_root or abs(new - x) <= 8.0 * _EPS * x or h - lo <= 8.0 * _EPS * h
-            x = new
-            if done:
-                break
-        out[i] = x
+        out[i] = inverse_one(kind, p, y[i], hi[i], max_iter)
     return out

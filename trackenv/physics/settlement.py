@@ -31,6 +31,8 @@ the source paper of this project (its Eqs. 4-8 and Fig. 9; reference numbers [11
 
 from __future__ import annotations
 
+import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, runtime_checkable
@@ -38,6 +40,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _implicit
 from ._checks import check_array, check_field, check_int, check_scalar, readonly_array
 from ._newton import SATO, SHENTON, growth_inverse
 
@@ -149,6 +152,11 @@ class _SeparableLaw:
     def _growth_inverse(self, y: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        """The law for the compiled implicit step (:mod:`._implicit`): the amplitude A(F) = c·(F / F0)^p as
+        (c, F0, p), the growth kind and its parameters."""
+        raise NotImplementedError
+
     # -------------------------------------------------------------- the protocol
     def _g1(self) -> float:
         return float(self._growth(np.ones(1))[0])
@@ -209,6 +217,9 @@ class _PowerScaledLaw(_SeparableLaw):
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         return (force / self.reference_force) ** self.force_exponent
 
+    def _compiled_amplitude(self) -> tuple[float, float, float]:
+        return (1.0, self.reference_force, self.force_exponent)
+
 
 # ====================================================================== the laws
 @dataclass(frozen=True)
@@ -254,6 +265,9 @@ class HettlerLaw(_SeparableLaw):
         if self.C == 0.0:
             return np.full(y.shape, np.inf)
         return np.exp((y - 1.0) / self.C)
+
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        return (self.s * M_PER_MM, N_PER_KN, self.a), _implicit.LOG, (1.0, self.C)
 
 
 @dataclass(frozen=True)
@@ -313,6 +327,10 @@ class SeligWatersLaw(_SeparableLaw):
 
     def _growth_inverse(self, y: np.ndarray) -> np.ndarray:
         return y ** (1.0 / self.beta)
+
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        scale = self.loaded_area * self.reference_stress
+        return (self.epsilon_1 * self.ballast_thickness, scale, self.stress_exponent), _implicit.POWER, (self.beta,)
 
 
 @dataclass(frozen=True)
@@ -379,6 +397,11 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
             return np.full(y.shape, np.inf)
         return 10.0 ** ((y - 1.0) / self.C)
 
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        eps1 = 0.082 * (100.0 * self.porosity - 38.2) / 100.0 * self.ballast_thickness
+        amplitude = (eps1, self.loaded_area * self.stress_unit, 2.0)
+        return amplitude, _implicit.LOG, (1.0, self.C / math.log(10.0))  # log10 N = ln N / ln 10
+
 
 @dataclass(frozen=True)
 class SatoLaw(_PowerScaledLaw):
@@ -436,6 +459,9 @@ class SatoLaw(_PowerScaledLaw):
             hi = np.minimum(hi, h2)
         return _solve_bracketed(SATO, (self.alpha, self.beta, self.gamma), y, hi)
 
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        return self._compiled_amplitude(), SATO, (self.alpha, self.beta, self.gamma)
+
 
 @dataclass(frozen=True)
 class ShentonLaw(_PowerScaledLaw):
@@ -486,6 +512,9 @@ class ShentonLaw(_PowerScaledLaw):
                 hi = np.minimum(hi, (y / self.K1) ** (1.0 / self._POWER))
         return _solve_bracketed(SHENTON, (self.K1, self.K2), y, hi)
 
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        return self._compiled_amplitude(), SHENTON, (self.K1, self.K2)
+
 
 @dataclass(frozen=True)
 class IndraratnaLaw(_PowerScaledLaw):
@@ -525,6 +554,9 @@ class IndraratnaLaw(_PowerScaledLaw):
         if self.b == 0.0:
             return np.full(y.shape, np.inf)
         return np.exp((y - self.a) / self.b)
+
+    def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
+        return self._compiled_amplitude(), _implicit.LOG, (self.a, self.b)
 
 
 LAWS: dict[str, type[_SeparableLaw]] = {
@@ -762,9 +794,45 @@ def implicit_settlement_step(
     c_now = np.asarray(cycles, dtype=np.float64)
     rate = np.asarray(rate_factor, dtype=np.float64)
     f0 = np.asarray(force, dtype=np.float64)
-    s_mat = np.broadcast_to(np.asarray(influence, dtype=np.float64), (nb, n, n))
+    s_in = np.asarray(influence, dtype=np.float64)
     dn = np.broadcast_to(np.asarray(delta_cycles, dtype=np.float64).reshape(-1, 1), (nb, 1))
+    for name, arr in (("cycles", c_now), ("force", f0)):
+        if arr.shape != (nb, n):
+            raise ValueError(f"{name} must have the shape of settlement {(nb, n)}, got {arr.shape}")
+    if s_in.shape not in ((n, n), (nb, n, n)):
+        raise ValueError(f"influence must have shape {(n, n)} or {(nb, n, n)}, got {s_in.shape}")
     band = min(band, n - 1)
+    if isinstance(law, _SeparableLaw):  # the module's laws: the whole step compiled (see ._implicit)
+        amplitude, kind, params = law._compiled_form()
+        s_rows = np.ascontiguousarray(s_in.reshape(-1, n, n))
+        u, c, flag = _implicit.implicit_rows(
+            np.asarray(amplitude, dtype=np.float64), kind, np.asarray(params, dtype=np.float64),
+            np.ascontiguousarray(u_now), np.ascontiguousarray(c_now),
+            np.ascontiguousarray(np.broadcast_to(rate, (nb, n))), np.ascontiguousarray(f0), s_rows,
+            np.ascontiguousarray(dn[:, 0]), band, tol, max_iter,
+        )  # fmt: skip
+        if np.any(flag == 2):
+            raise np.linalg.LinAlgError("singular Jacobian in the implicit settlement step")
+        _warn_unconverged(np.flatnonzero(flag == 1), max_iter, tol)
+        return u, c
+    return _implicit_step_numpy(law, u_now, c_now, rate, f0, s_in, dn, band, tol, max_iter)
+
+
+def _warn_unconverged(rows: np.ndarray, max_iter: int, tol: float) -> None:
+    if rows.size:
+        warnings.warn(
+            f"the implicit settlement step did not converge to {tol:g} m within max_iter={max_iter} Newton "
+            f"iterations in row(s) {rows.tolist()}: their settlement is that of the last iterate",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
+def _implicit_step_numpy(law, u_now, c_now, rate, f0, influence, dn, band, tol, max_iter):
+    """:func:`implicit_settlement_step` for a law that only has the protocol (any law outside this module):
+    the same Newton iteration on numpy arrays, the law evaluated through :func:`advance_settlement`."""
+    nb, n = u_now.shape
+    s_mat = np.broadcast_to(influence, (nb, n, n))
     s_band = _band_rows(s_mat, band)  # S within the band, once per call
     eye_band = _band_rows(np.eye(n), band)
     df = 1e-3  # [N] finite-difference step of the force
@@ -801,5 +869,7 @@ def implicit_settlement_step(
         )
         step = _solve_banded_rows(jac, r[go], band)
         delta[idx[go]] = np.maximum(delta[idx[go]] - step, 0.0)
+    else:
+        _warn_unconverged(np.flatnonzero(active), max_iter, tol)
     f = np.maximum(f0 + np.matmul(s_mat, delta[..., None])[..., 0], 0.0)
     return advance_settlement(law, u_now, c_now, rate, f, dn)

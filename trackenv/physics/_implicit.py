@@ -1,0 +1,181 @@
+"""Compiled implicit settlement step for the settlement laws of :mod:`trackenv.physics.settlement`.
+
+:func:`trackenv.physics.settlement.implicit_settlement_step` solves, row by row, Δ = u(F0 + S·Δ, N + ΔN) − u_now
+by Newton's method. Each iteration evaluates the law (with curve shifting) on every sleeper twice and solves a
+banded system: in numpy that is ~40 calls on arrays of a hundred numbers, ~4 ms per env step of which the
+arithmetic is a few per cent. Here the whole step runs compiled, one row after the other, with the same
+iteration: the same forward-difference Jacobian, the same banded S, the same stopping rule, the same clipping.
+
+Every law of the module is separable with an amplitude of one form, A(F) = c·(F / F0)^p, and a growth function
+g(N) of four kinds (the ramp g(1)·N below N = 1 as in the module's convention):
+
+* ``SATO`` and ``SHENTON`` (:mod:`._newton`: no closed-form inverse, the compiled safeguarded Newton solve);
+* ``LOG``: g = a + b·ln N (Hettler, Alva-Hurtado & Selig with b = C / ln 10, Indraratna), params (a, b);
+* ``POWER``: g = N^β (Selig & Waters), params (β,).
+
+A law describes itself by ``_compiled_form()`` (amplitude (c, F0, p), kind, growth params); the numbers agree
+with the law's numpy methods to the last bits of pow/log/exp (tested in ``tests/physics/test_settlement.py``,
+against the numpy step which stays the path of any other law). Each row's numbers depend on that row only,
+so a row gives the same result in any batch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._newton import SATO, SHENTON, inverse_one
+from ._newton import _growth as _root_growth
+
+__all__ = ["LOG", "POWER", "SATO", "SHENTON", "implicit_rows"]
+
+LOG = 2  # g(N) = a + b·ln N, params (a, b)
+POWER = 3  # g(N) = N^beta, params (beta,)
+_MAX_NEWTON = 200  # iterations of the root-solved inverse (as the numpy laws)
+_DF = 1e-3  # [N] forward-difference step of the force (as the numpy step)
+
+
+@njit(cache=True, inline="always")
+def _growth(kind: int, p: np.ndarray, n: float) -> float:
+    """g(N) for N >= 1."""
+    if kind == LOG:
+        return p[0] + p[1] * math.log(n)
+    if kind == POWER:
+        return n ** p[0]
+    return _root_growth(kind, p, n)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _growth_inverse(kind: int, p: np.ndarray, y: float) -> float:
+    """N > 1 with g(N) = y for y > g(1); +inf where the law can never reach y."""
+    if kind == LOG:
+        if p[1] == 0.0:
+            return np.inf
+        return math.exp((y - p[0]) / p[1])
+    if kind == POWER:
+        return y ** (1.0 / p[0])
+    hi = np.inf  # upper brackets, as the laws' numpy inverses take them
+    if kind == SATO:  # g >= beta·N, and g >= gamma·(1 − e^(−alpha·N)) for y < gamma
+        alpha, beta, gamma = p[0], p[1], p[2]
+        if beta > 0.0:
+            hi = y / beta
+        if gamma > 0.0:
+            h2 = -math.log1p(-min(y / gamma, 1.0)) / alpha if y < gamma else np.inf
+            hi = min(hi, h2)
+    else:  # SHENTON: g >= K2·N and g >= K1·N^0.2
+        if p[1] > 0.0:
+            hi = y / p[1]
+        if p[0] > 0.0:
+            hi = min(hi, (y / p[0]) ** (1.0 / 0.2))
+    return inverse_one(kind, p, y, hi, _MAX_NEWTON)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _advance(amp: np.ndarray, kind: int, p: np.ndarray, g1: float, u: float, c: float, r: float, f: float,
+             dn: float) -> tuple[float, float]:
+    """Curve shifting of one sleeper (see ``SettlementState.advance``): the new (settlement, cycles)."""
+    if not (f > 0.0 and dn > 0.0):
+        return u, c
+    a = amp[0] * (f / amp[1]) ** amp[2]
+    y = u / r
+    if y > 0.0:
+        if a > 0.0:
+            ya = y / a
+            n_eq = ya / g1 if ya <= g1 else _growth_inverse(kind, p, ya)
+        else:
+            n_eq = np.inf
+    else:
+        n_eq = 0.0
+    if not np.isfinite(n_eq):
+        return u, np.inf
+    n = n_eq + dn
+    g = n * g1 if n < 1.0 else _growth(kind, p, n)
+    return max(r * (a * g), u), n
+
+
+@njit(cache=True, error_model="numpy")
+def _banded_solve(jac: np.ndarray, rhs: np.ndarray, band: int, out: np.ndarray) -> bool:
+    """Solve jac·x = rhs in place (jac dense (n, n) but zero beyond ``band`` diagonals) by Gaussian
+    elimination with partial pivoting within the band (what LAPACK's gbsv does); False if singular."""
+    n = rhs.shape[0]
+    for k in range(n):
+        last = min(k + band, n - 1)
+        piv = k
+        for i in range(k + 1, last + 1):
+            if abs(jac[i, k]) > abs(jac[piv, k]):
+                piv = i
+        if jac[piv, k] == 0.0:
+            return False
+        right = min(k + 2 * band, n - 1)  # fill-in of the row swaps reaches 2·band
+        if piv != k:
+            for j in range(k, right + 1):
+                jac[k, j], jac[piv, j] = jac[piv, j], jac[k, j]
+            rhs[k], rhs[piv] = rhs[piv], rhs[k]
+        for i in range(k + 1, last + 1):
+            m = jac[i, k] / jac[k, k]
+            if m != 0.0:
+                for j in range(k + 1, right + 1):
+                    jac[i, j] -= m * jac[k, j]
+                rhs[i] -= m * rhs[k]
+    for k in range(n - 1, -1, -1):
+        s = rhs[k]
+        for j in range(k + 1, min(k + 2 * band, n - 1) + 1):
+            s -= jac[k, j] * out[j]
+        out[k] = s / jac[k, k]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def implicit_rows(amp, kind, p, u_now, c_now, rate, f0, s_mat, dn, band, tol, max_iter):
+    """The implicit step of every row: ``u_now``, ``c_now``, ``rate``, ``f0`` (nb, n), ``s_mat`` (1 or nb,
+    n, n), ``dn`` (nb,); returns the new settlement and cycles (nb, n) and a flag per row (0 converged, 1 not
+    converged within ``max_iter``, 2 singular Jacobian)."""
+    nb, n = u_now.shape
+    u_out = np.empty((nb, n))
+    c_out = np.empty((nb, n))
+    flag = np.zeros(nb, dtype=np.int64)
+    g1 = _growth(kind, p, 1.0)
+    delta = np.zeros(n)
+    f = np.zeros(n)
+    uf = np.zeros(n)
+    r = np.zeros(n)
+    step = np.zeros(n)
+    jac = np.zeros((n, n))
+    for b in range(nb):
+        s = s_mat[b if s_mat.shape[0] > 1 else 0]
+        d = dn[b]
+        delta[:] = 0.0
+        flag[b] = 1
+        for _ in range(max_iter):
+            err = 0.0
+            for i in range(n):
+                acc = f0[b, i]
+                for j in range(n):
+                    acc += s[i, j] * delta[j]
+                f[i] = max(acc, 0.0)
+                uf[i] = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i], f[i], d)[0]
+                r[i] = delta[i] - (uf[i] - u_now[b, i])
+                err = max(err, abs(r[i]))
+            if err < tol:
+                flag[b] = 0
+                break
+            jac[:, :] = 0.0  # I − diag(∂u/∂F)·S·[F > 0] within the band
+            for i in range(n):
+                ufd = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i], f[i] + _DF, d)[0]
+                slope = (ufd - uf[i]) / _DF if f[i] > 0.0 else 0.0
+                for j in range(max(i - band, 0), min(i + band, n - 1) + 1):
+                    jac[i, j] = (1.0 if i == j else 0.0) - slope * s[i, j]
+            if not _banded_solve(jac, r, band, step):
+                flag[b] = 2
+                break
+            for i in range(n):
+                delta[i] = max(delta[i] - step[i], 0.0)
+        for i in range(n):
+            acc = f0[b, i]
+            for j in range(n):
+                acc += s[i, j] * delta[j]
+            u_out[b, i], c_out[b, i] = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i],
+                                                max(acc, 0.0), d)
+    return u_out, c_out, flag
