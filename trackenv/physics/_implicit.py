@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._newton import SATO, SHENTON, inverse_one
 from ._newton import _growth as _root_growth
@@ -128,54 +128,63 @@ def _banded_solve(jac: np.ndarray, rhs: np.ndarray, band: int, out: np.ndarray) 
 
 
 @njit(cache=True, error_model="numpy")
-def implicit_rows(amp, kind, p, u_now, c_now, rate, f0, s_mat, dn, band, tol, max_iter):
-    """The implicit step of every row: ``u_now``, ``c_now``, ``rate``, ``f0`` (nb, n), ``s_mat`` (1 or nb,
-    n, n), ``dn`` (nb,); returns the new settlement and cycles (nb, n) and a flag per row (0 converged, 1 not
-    converged within ``max_iter``, 2 singular Jacobian)."""
-    nb, n = u_now.shape
-    u_out = np.empty((nb, n))
-    c_out = np.empty((nb, n))
-    flag = np.zeros(nb, dtype=np.int64)
-    g1 = _growth(kind, p, 1.0)
+def _implicit_row(amp, kind, p, g1, u_now, c_now, rate, f0, s, dn, band, tol, max_iter, u_out, c_out):
+    """The implicit step of one row (arrays (n,), ``s`` (n, n)): fills ``u_out``, ``c_out``; returns 0
+    (converged), 1 (not converged within ``max_iter``) or 2 (singular Jacobian)."""
+    n = u_now.shape[0]
     delta = np.zeros(n)
     f = np.zeros(n)
     uf = np.zeros(n)
     r = np.zeros(n)
     step = np.zeros(n)
     jac = np.zeros((n, n))
-    for b in range(nb):
-        s = s_mat[b if s_mat.shape[0] > 1 else 0]
-        d = dn[b]
-        delta[:] = 0.0
-        flag[b] = 1
-        for _ in range(max_iter):
-            err = 0.0
-            for i in range(n):
-                acc = f0[b, i]
-                for j in range(n):
-                    acc += s[i, j] * delta[j]
-                f[i] = max(acc, 0.0)
-                uf[i] = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i], f[i], d)[0]
-                r[i] = delta[i] - (uf[i] - u_now[b, i])
-                err = max(err, abs(r[i]))
-            if err < tol:
-                flag[b] = 0
-                break
-            jac[:, :] = 0.0  # I − diag(∂u/∂F)·S·[F > 0] within the band
-            for i in range(n):
-                ufd = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i], f[i] + _DF, d)[0]
-                slope = (ufd - uf[i]) / _DF if f[i] > 0.0 else 0.0
-                for j in range(max(i - band, 0), min(i + band, n - 1) + 1):
-                    jac[i, j] = (1.0 if i == j else 0.0) - slope * s[i, j]
-            if not _banded_solve(jac, r, band, step):
-                flag[b] = 2
-                break
-            for i in range(n):
-                delta[i] = max(delta[i] - step[i], 0.0)
+    flag = 1
+    for _ in range(max_iter):
+        err = 0.0
         for i in range(n):
-            acc = f0[b, i]
+            acc = f0[i]
             for j in range(n):
                 acc += s[i, j] * delta[j]
-            u_out[b, i], c_out[b, i] = _advance(amp, kind, p, g1, u_now[b, i], c_now[b, i], rate[b, i],
-                                                max(acc, 0.0), d)
+            f[i] = max(acc, 0.0)
+            uf[i] = _advance(amp, kind, p, g1, u_now[i], c_now[i], rate[i], f[i], dn)[0]
+            r[i] = delta[i] - (uf[i] - u_now[i])
+            err = max(err, abs(r[i]))
+        if err < tol:
+            flag = 0
+            break
+        jac[:, :] = 0.0  # I − diag(∂u/∂F)·S·[F > 0] within the band
+        for i in range(n):
+            ufd = _advance(amp, kind, p, g1, u_now[i], c_now[i], rate[i], f[i] + _DF, dn)[0]
+            slope = (ufd - uf[i]) / _DF if f[i] > 0.0 else 0.0
+            for j in range(max(i - band, 0), min(i + band, n - 1) + 1):
+                jac[i, j] = (1.0 if i == j else 0.0) - slope * s[i, j]
+        if not _banded_solve(jac, r, band, step):
+            flag = 2
+            break
+        for i in range(n):
+            delta[i] = max(delta[i] - step[i], 0.0)
+    for i in range(n):
+        acc = f0[i]
+        for j in range(n):
+            acc += s[i, j] * delta[j]
+        u_out[i], c_out[i] = _advance(amp, kind, p, g1, u_now[i], c_now[i], rate[i], max(acc, 0.0), dn)
+    return flag
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def implicit_rows(amp, kind, p, u_now, c_now, rate, f0, s_mat, dn, band, tol, max_iter):
+    """The implicit step of every row, the rows spread over numba's threads: ``u_now``, ``c_now``, ``rate``,
+    ``f0`` (nb, n), ``s_mat`` (1 or nb, n, n), ``dn`` (nb,); returns the new settlement and cycles (nb, n) and
+    a flag per row (0 converged, 1 not converged within ``max_iter``, 2 singular Jacobian). A row's numbers do
+    not depend on its thread."""
+    nb, n = u_now.shape
+    u_out = np.empty((nb, n))
+    c_out = np.empty((nb, n))
+    flag = np.zeros(nb, dtype=np.int64)
+    g1 = _growth(kind, p, 1.0)
+    shared = s_mat.shape[0] == 1
+    for b in prange(nb):
+        s = s_mat[0] if shared else s_mat[b]
+        flag[b] = _implicit_row(amp, kind, p, g1, u_now[b], c_now[b], rate[b], f0[b], s, dn[b], band, tol,
+                                max_iter, u_out[b], c_out[b])
     return u_out, c_out, flag

@@ -805,12 +805,14 @@ def implicit_settlement_step(
     if isinstance(law, _SeparableLaw):  # the module's laws: the whole step compiled (see ._implicit)
         amplitude, kind, params = law._compiled_form()
         s_rows = np.ascontiguousarray(s_in.reshape(-1, n, n))
+        def own(x: np.ndarray) -> np.ndarray:  # writable C arrays: one compiled signature, not one per flag
+            return np.array(x, dtype=np.float64, order="C")
+
         u, c, flag = _implicit.implicit_rows(
-            np.asarray(amplitude, dtype=np.float64), kind, np.asarray(params, dtype=np.float64),
-            np.ascontiguousarray(u_now), np.ascontiguousarray(c_now),
-            np.ascontiguousarray(np.broadcast_to(rate, (nb, n))), np.ascontiguousarray(f0), s_rows,
-            np.ascontiguousarray(dn[:, 0]), band, tol, max_iter,
-        )  # fmt: skip
+            own(amplitude), int(kind), own(params), own(u_now), own(c_now), own(np.broadcast_to(rate, (nb, n))),
+            own(f0), s_rows if s_rows.flags.writeable else own(s_rows), own(dn[:, 0]), int(band), float(tol),
+            int(max_iter),
+        )
         if np.any(flag == 2):
             raise np.linalg.LinAlgError("singular Jacobian in the implicit settlement step")
         _warn_unconverged(np.flatnonzero(flag == 1), max_iter, tol)
