@@ -253,17 +253,45 @@ def _window_dofs(track: Track, x_axles: np.ndarray, margin_bays: int) -> tuple[i
     return int(lay.node_w[lay.sleeper_node[s_lo]]), int(lay.sleeper[s_hi] + 1)
 
 
+# LAPACK's banded Cholesky routines, called directly for the pass set-up's per-row solves: the same routines
+# (and numbers) as scipy.linalg.solveh_banded / cholesky_banded / cho_solve_banded, without their input checks
+# and dispatch, which cost several times the solve on these small systems. Our arrays are finite by construction.
+_PBSV, _PBTRF, _PBTRS = scipy.linalg.get_lapack_funcs(("pbsv", "pbtrf", "pbtrs"), (np.zeros(1),))
+
+
+def _lapack_info(routine: str, info: int) -> None:
+    if info > 0:
+        raise np.linalg.LinAlgError(f"{routine}: the track's stiffness is not positive definite (minor {info})")
+    if info < 0:  # pragma: no cover (our arguments are well-formed)
+        raise ValueError(f"{routine}: illegal value in argument {-info}")
+
+
+def _solve_stiffness(k_band: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """K⁻¹ f for K in our lower band storage (LAPACK pbsv, what scipy.linalg.solveh_banded runs)."""
+    _, x, info = _PBSV(lapack_lower(k_band), f, lower=1)
+    _lapack_info("pbsv", info)
+    return x
+
+
 def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
     """The banded Cholesky factor of the stiffness on each window [lo, hi) (LAPACK pbtrf, what solveh_banded
     runs before its solve): factored once for the static start's fixed-point sweeps."""
-    return [(lo, hi, scipy.linalg.cholesky_banded(lapack_lower(k_band[lo:hi]), lower=True)) for lo, hi in windows]
+    out = []
+    for lo, hi in windows:
+        factor, info = _PBTRF(lapack_lower(k_band[lo:hi]), lower=1)
+        _lapack_info("pbtrf", info)
+        out.append((lo, hi, factor))
+    return out
 
 
 def _static_in_windows(factors: list[tuple[int, int, np.ndarray]], f: np.ndarray) -> np.ndarray:
-    """Static displacements under ``f`` with the track outside the windows (``_window_factors``) at rest."""
+    """Static displacements under ``f`` with the track outside the windows (``_window_factors``) at rest
+    (LAPACK pbtrs, what scipy.linalg.cho_solve_banded runs)."""
     u = np.zeros_like(f)
     for lo, hi, factor in factors:
-        u[lo:hi] = scipy.linalg.cho_solve_banded((factor, True), f[lo:hi])
+        x, info = _PBTRS(factor, f[lo:hi], lower=1)
+        _lapack_info("pbtrs", info)
+        u[lo:hi] = x
     return u
 
 
@@ -464,7 +492,7 @@ def simulate_passes(
         for b, t in enumerate(tracks):
             f = np.zeros(t0.n_dof)
             f[lay.sleeper] = t.ballast_stiffness * g[b]
-            u0 = scipy.linalg.solveh_banded(lapack_lower(kb[b]), f, lower=True)
+            u0 = _solve_stiffness(kb[b], f)
             sag[b] = u0
             z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in start_points]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
@@ -500,7 +528,7 @@ def simulate_passes(
                 w = np.array([shp @ u[b][dofs] for dofs, shp in start_points])
                 q[b] = sys_.static_displacements(w + z0 + law.compression(loads))
                 new = sys_.force[sys_.wheel_dofs] - sys_.stiffness[sys_.wheel_dofs] @ q[b]
-                if np.allclose(new, loads, rtol=1e-12, atol=1e-9):
+                if np.all(np.abs(new - loads) <= 1e-9 + 1e-12 * np.abs(loads)):  # np.allclose's test
                     break
                 loads = new
             f0[b] = loads

@@ -57,15 +57,22 @@ class VehicleSystem:
             return f[w] - k[np.ix_(w, free)] @ q_free
         return f[w].copy()
 
+    @cached_property
+    def _free_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The DOFs that are not wheels, K on them, and K between them and the wheels (for the statics)."""
+        w = self.wheel_dofs
+        free = np.setdiff1d(np.arange(self.n_dof), w)
+        k = self.stiffness
+        return free, k[np.ix_(free, free)], k[np.ix_(free, w)]
+
     def static_displacements(self, wheel_displacements: np.ndarray) -> np.ndarray:
         """Vehicle displacements in static equilibrium when the wheels stand at ``wheel_displacements`` [m]."""
         w = self.wheel_dofs
         q = np.zeros(self.n_dof)
         q[w] = wheel_displacements
-        free = np.setdiff1d(np.arange(self.n_dof), w)
+        free, k_ff, k_fw = self._free_blocks
         if free.size:
-            k = self.stiffness
-            q[free] = np.linalg.solve(k[np.ix_(free, free)], self.force[free] - k[np.ix_(free, w)] @ q[w])
+            q[free] = np.linalg.solve(k_ff, self.force[free] - k_fw @ q[w])
         return q
 
 
