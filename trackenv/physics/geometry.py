@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import integrate, linalg, signal
+from scipy import integrate, signal
 
+from trackenv.physics import _d1
 from trackenv.physics._checks import check_array, check_field, check_int, check_scalar, dataclass_from_dict
 
 __all__ = [
@@ -285,39 +286,6 @@ def _bandpass_sos(spacing: float, band_lo: float, band_hi: float, order: int) ->
     return sos, zi
 
 
-def _filtfilt(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Forward-backward filtering of the rows of ``x`` (as scipy.signal.sosfiltfilt with padtype=None)."""
-    zi = zi[:, None, :]
-    y, _ = signal.sosfilt(sos, x, axis=-1, zi=zi * x[None, :, :1])
-    y = y[:, ::-1]
-    y, _ = signal.sosfilt(sos, y, axis=-1, zi=zi * y[None, :, :1])
-    return y[:, ::-1]
-
-
-def _ar_extension(y: np.ndarray, order: int, n_pad: int) -> tuple[np.ndarray, np.ndarray]:
-    """Backward and forward linear-prediction continuations (``n_pad`` samples each) of the 1-D series ``y``.
-
-    Yule-Walker AR(``order``) model from the biased autocorrelation (positive definite, so the model is
-    stable and the prediction decays to zero); the same coefficients predict backwards, because the
-    autocorrelation is symmetric in time.
-    """
-    n = y.size
-    r = np.correlate(y, y, mode="full")[n - 1 : n + order] / n
-    if order < 1 or not r[0] > 0.0:
-        return np.zeros(n_pad), np.zeros(n_pad)
-    col = r[:order].copy()
-    col[0] *= 1.0 + 1e-9  # guard against round-off making the Toeplitz matrix singular
-    coef = linalg.solve_toeplitz(col, r[1 : order + 1])
-    den = np.concatenate(([1.0], -coef))
-    # all-pole recursion y[t] = sum_k coef[k-1] y[t-k] run on zero input from the state of the last `order`
-    # values (transposed direct form: zi[k] = sum_m coef[k+m] * y_recent[m], a Hankel product)
-    state = linalg.hankel(coef)
-    zeros = np.zeros(n_pad)
-    fwd = signal.lfilter([1.0], den, zeros, zi=state @ y[::-1][:order])[0]
-    bwd = signal.lfilter([1.0], den, zeros, zi=state @ y[:order])[0]
-    return bwd[::-1], fwd
-
-
 def d1_filter(
     z,
     spacing: float,
@@ -386,21 +354,12 @@ def d1_filter(
     sos, zi = _bandpass_sos(dx, b_lo, b_hi, int(order))
     shape = arr.shape
     n = shape[-1]
-    rows = arr.reshape(-1, n)
-    t = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
-    slope = (rows * t).sum(axis=1) / float(t @ t)  # row by row: a matrix product's rounding depends on the rows
-    resid = rows - rows.mean(axis=1, keepdims=True) - slope[:, None] * t
+    rows = np.array(arr.reshape(-1, n), dtype=np.float64, order="C")
     pad = math.ceil(pad_w * b_hi / dx)
-    if pad > 0:
-        p_eff = min(p, (n - 1) // 3)
-        ext = np.empty((rows.shape[0], n + 2 * pad))
-        for i, y in enumerate(resid):
-            ext[i, :pad], ext[i, pad + n :] = _ar_extension(y, p_eff, pad)
-        ext[:, pad : pad + n] = resid
-    else:
-        ext = resid
-    out = _filtfilt(sos.copy(), zi, ext)[:, pad : pad + n]
-    return np.ascontiguousarray(out).reshape(shape)
+    p_eff = min(p, (n - 1) // 3)  # the AR order a record of n samples supports (0: no extension)
+    # compiled, row by row (see ._d1): detrend, AR end extension, forward-backward band-pass
+    out = _d1.d1_rows(rows, np.array(sos), np.array(zi), p_eff, pad)
+    return out.reshape(shape)
 
 
 # ---------------------------------------------------------------------------------------------------------

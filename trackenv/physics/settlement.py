@@ -805,7 +805,7 @@ def implicit_settlement_step(
     if isinstance(law, _SeparableLaw):  # the module's laws: the whole step compiled (see ._implicit)
         amplitude, kind, params = law._compiled_form()
         s_rows = np.ascontiguousarray(s_in.reshape(-1, n, n))
-        def own(x: np.ndarray) -> np.ndarray:  # writable C arrays: one compiled signature, not one per flag
+        def own(x: ArrayLike) -> np.ndarray:  # writable C arrays: one compiled signature, not one per flag
             return np.array(x, dtype=np.float64, order="C")
 
         u, c, flag = _implicit.implicit_rows(
