@@ -521,7 +521,7 @@ class _NotTheLaw:
     protocol path."""
 
 
-def test_implicit_step_rejects_mismatched_shapes_and_warns_when_not_converged() -> None:
+def test_implicit_step_rejects_bad_input_and_warns_when_not_converged() -> None:
     from trackenv.physics.settlement import implicit_settlement_step
 
     law = make_law("shenton")
@@ -532,6 +532,10 @@ def test_implicit_step_rejects_mismatched_shapes_and_warns_when_not_converged() 
         implicit_settlement_step(law, u0, c0, rate, force[:, :-1], s_mat, 5e5)
     with pytest.raises(ValueError, match="^influence must have shape"):
         implicit_settlement_step(law, u0, c0, rate, force, s_mat[:-1], 5e5)
+    bad = force.copy()
+    bad[0, 3] = np.nan  # a failed pass: must not read as an unloaded sleeper
+    with pytest.raises(ValueError, match=r"^force must be finite.*row\(s\) \[0\]"):
+        implicit_settlement_step(law, u0, c0, rate, bad, s_mat, 5e5)
     force[0, ::2] = 9e4  # uneven forces: the load redistribution needs more than one Newton iteration
     with pytest.warns(RuntimeWarning, match="did not converge"):
         implicit_settlement_step(law, u0, c0, rate, force, s_mat, 5e7, max_iter=1)

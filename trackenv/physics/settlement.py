@@ -801,6 +801,11 @@ def implicit_settlement_step(
             raise ValueError(f"{name} must have the shape of settlement {(nb, n)}, got {arr.shape}")
     if s_in.shape not in ((n, n), (nb, n, n)):
         raise ValueError(f"influence must have shape {(n, n)} or {(nb, n, n)}, got {s_in.shape}")
+    # cheap checks that keep a failed pass from settling silently (a NaN force would read as an unloaded sleeper)
+    for name, arr in (("force", f0), ("settlement", u_now)):
+        if not np.all(np.isfinite(arr)):
+            rows = sorted({int(r) for r in np.argwhere(~np.isfinite(arr))[:, 0]})
+            raise ValueError(f"{name} must be finite, got NaN or inf in row(s) {rows}")
     band = min(band, n - 1)
     if isinstance(law, _SeparableLaw):  # the module's laws: the whole step compiled (see ._implicit)
         amplitude, kind, params = law._compiled_form()
