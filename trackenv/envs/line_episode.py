@@ -17,7 +17,7 @@ from scipy.ndimage import gaussian_filter1d
 from ..degradation import TrackDegradation
 from ..physics.dynamics import simulate_passes
 from ..physics.geometry import classify, d1_filter, german_psd, synthesize_profile
-from ..physics.settlement import SettlementState
+from ..physics.settlement import implicit_settlement_step
 from ..physics.track import Track
 from .line_config import SLEEPER_SPACING_M, LineConfig
 
@@ -247,37 +247,16 @@ class LineBatch:
     def _advance(self, rows: np.ndarray, force: np.ndarray, cycles: float) -> None:
         """Advance the segments ``rows`` by ``cycles`` axle passes under the equivalent forces ``force`` (rows, n),
         with the static load redistribution taken implicitly (backward Euler, as TrackDegradation's support
-        feedback), batched: Δ = u(F0 + S·Δ, N + ΔN) − u_now, solved by Newton on the (rows, n, n) systems.
+        feedback): :func:`~trackenv.physics.settlement.implicit_settlement_step`, batched over the segments.
 
         Each segment iterates until its own residual is below 1e-9 m and then stops, so its settlement does not
         depend on the other segments of the batch: a line gives the same numbers alone (``TampingLine``) and
         among others (:class:`~trackenv.envs.line.TampingLineVectorEnv`), and a section's cost depends only on
         its own schedule (the hindsight search relies on that)."""
-        n = force.shape[1]
-        u_now, cyc, rate, influence = self.u[rows], self.cyc[rows], self.rate()[rows], self.influence[rows]
-
-        def adv(live: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            st = SettlementState(u_now[live].ravel(), cyc[live].ravel(), rate[live].ravel())
-            new = st.advance(self.law, np.maximum(f, 0.0).ravel(), cycles)
-            return np.array(new.settlement).reshape(-1, n), np.array(new.cycles).reshape(-1, n)
-
-        delta = np.zeros_like(u_now)
-        eye = np.eye(n)
-        df = 1e-3
-        live = np.arange(len(rows))  # segments still iterating
-        for _ in range(30):
-            f = np.maximum(force[live] + np.einsum("gij,gj->gi", influence[live], delta[live]), 0.0)
-            u_f, _ = adv(live, f)
-            res = delta[live] - (u_f - u_now[live])
-            still = ~(np.max(np.abs(res), axis=1) < 1e-9)  # written so that a NaN residual counts as not converged
-            if not still.any():
-                break
-            live, f, u_f, res = live[still], f[still], u_f[still], res[still]
-            du_df = (adv(live, f + df)[0] - u_f) / df
-            jac = eye - du_df[:, :, None] * influence[live] * (f > 0)[:, :, None]
-            delta[live] = np.maximum(delta[live] - np.linalg.solve(jac, res[..., None])[..., 0], 0.0)
-        f = np.maximum(force + np.einsum("gij,gj->gi", influence, delta), 0.0)
-        self.u[rows], self.cyc[rows] = adv(np.arange(len(rows)), f)
+        self.u[rows], self.cyc[rows] = implicit_settlement_step(
+            self.law, self.u[rows], self.cyc[rows], self.rate()[rows], force, self.influence[rows], cycles,
+            band=force.shape[1],  # segments are short: the full Jacobian, as the line's calibration was run
+        )
 
     # ------------------------------------------------------------------ a step
     def allowed(self) -> np.ndarray:
