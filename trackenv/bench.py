@@ -180,6 +180,7 @@ PROFILE_STAGES = (
     ("passes", "trackenv.degradation", "simulate_passes"),
     ("passes", "trackenv.envs.line_episode", "simulate_passes"),
     ("settlement", "trackenv.degradation", "implicit_settlement_step"),
+    ("settlement", "trackenv.envs.line_episode", "implicit_settlement_step"),
     ("quality", "trackenv.envs.episode", "d1_filter"),
     ("quality", "trackenv.envs.line_episode", "d1_filter"),
 )
