@@ -21,9 +21,7 @@ that compile to SIMD at any width, across the rows of a chunk and, for the singl
 The triangular sweeps are chains along the track: one row keeps the chain in registers, several rows run it with
 the rows as SIMD lanes. Loops index views from 0 wherever they can: numba wraps negative indices, and the check
 it emits where it cannot prove an index non-negative blocks vectorisation (it cost the single pass half its
-time). For one row the loops over the window's sleepers (damping, peak forces) work on scalars: the ten views
-per sleeper and step they create for several rows cost the single pass a sixth of its time. The rail's mass band
-is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of
+time). The rail's mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of
 rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is
 compiled without reassociating fast-math: every row's arithmetic is the same IEEE sequence whatever its SIMD
 lane, chunk width or thread, so a row's result does not depend on the batch it runs in (bit-identical; tested).
@@ -444,18 +442,12 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
                 d = sleeper_dof[s_] * W
                 w = node_w[sleeper_node[s_]] * W
-                if W == 1:  # one row: scalars (ten array views per sleeper cost more than the arithmetic)
-                    qs = qdamp[d]
-                    fp = pad_c[s_, 0] * (qdamp[w] - qs)
-                    pred[w] += fp
-                    pred[d] += bal_c[s_, 0] * qs - fp
-                    continue
-                qw, qs_, pw, ps = qdamp[w : w + W], qdamp[d : d + W], pred[w : w + W], pred[d : d + W]
+                qw, qs, pw, ps = qdamp[w : w + W], qdamp[d : d + W], pred[w : w + W], pred[d : d + W]
                 cp, cb = pad_c[s_], bal_c[s_]
                 for b in range(W):
-                    fp = cp[b] * (qw[b] - qs_[b])
+                    fp = cp[b] * (qw[b] - qs[b])
                     pw[b] += fp
-                    ps[b] += cb[b] * qs_[b] - fp
+                    ps[b] += cb[b] * qs[b] - fp
             _solve(Fw[c], Bw[c], invd[c], m, pred[lo * W : hi * W], W)
 
         # ---- vehicle predictor
@@ -572,13 +564,6 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
                 d = sleeper_dof[s_] * W
                 w = node_w[sleeper_node[s_]] * W
-                if W == 1:  # one row: scalars, as in the predictor's damping
-                    u_s, v_s = u[d], v[d]
-                    fb = bal_k[s_, 0] * u_s + bal_c[s_, 0] * v_s
-                    fp = pad_k[s_, 0] * (u[w] - u_s) + pad_c[s_, 0] * (v[w] - v_s)
-                    peak_ballast[s_, 0] = max(peak_ballast[s_, 0], fb)
-                    peak_total[s_, 0] = max(peak_total[s_, 0], fb + fp)
-                    continue
                 uw, us, vw, vs = u[w : w + W], u[d : d + W], v[w : w + W], v[d : d + W]
                 kp, cp, kb, cb = pad_k[s_], pad_c[s_], bal_k[s_], bal_c[s_]
                 pb, pt = peak_ballast[s_], peak_total[s_]
