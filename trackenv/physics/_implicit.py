@@ -2,9 +2,10 @@
 
 :func:`trackenv.physics.settlement.implicit_settlement_step` solves, row by row, Δ = u(F0 + S·Δ, N + ΔN) − u_now
 by Newton's method. Each iteration evaluates the law (with curve shifting) on every sleeper twice and solves a
-banded system: in numpy that is ~40 calls on arrays of a hundred numbers, ~4 ms per env step of which the
-arithmetic is a few per cent. Here the whole step runs compiled, one row after the other, with the same
-iteration: the same forward-difference Jacobian, the same banded S, the same stopping rule, the same clipping.
+banded system: in numpy that is ~40 calls on arrays of a hundred numbers, 4.1 ms per ``Tamping-v0`` step against
+0.8 ms compiled. Here the whole step runs compiled, the rows of a batch spread over numba's threads, with the
+same iteration: the same forward-difference Jacobian, the same banded S, the same stopping rule, the same
+clipping.
 
 Every law of the module is separable with an amplitude of one form, A(F) = c·(F / F0)^p, and a growth function
 g(N) of four kinds (the ramp g(1)·N below N = 1 as in the module's convention):
