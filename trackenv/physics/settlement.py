@@ -788,6 +788,11 @@ def implicit_settlement_step(
 
     Shapes: ``settlement``, ``cycles``, ``rate_factor``, ``force`` (batch, n); ``influence`` (batch, n, n) or
     (n, n); ``delta_cycles`` a scalar or (batch,). Returns the new (settlement, cycles), each (batch, n).
+
+    The module's laws run the step compiled (:mod:`._implicit`, the rows over numba's threads); any other law
+    runs the same iteration in numpy through :func:`advance_settlement`. A force or settlement that is NaN or
+    infinite raises ValueError naming its rows; a row whose Newton iteration has not converged within
+    ``max_iter`` keeps its last iterate and a RuntimeWarning names it.
     """
     u_now = np.asarray(settlement, dtype=np.float64)
     nb, n = u_now.shape
