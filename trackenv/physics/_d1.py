@@ -6,7 +6,8 @@ method compiled: the residual of each row continued beyond both ends by linear p
 AR model of the row (Levinson's recursion for the Toeplitz system), then the Butterworth second-order sections
 forwards and backwards, each pass started in the steady state of its first sample (as ``sosfiltfilt`` with
 ``padtype=None``). It agrees with the scipy implementation (kept as the reference in
-``tests/physics/test_geometry.py``) to rounding; each row's numbers depend on that row only.
+``tests/physics/d1_reference.py``, compared in ``tests/physics/test_geometry.py``) to rounding; each row's
+numbers depend on that row only.
 """
 
 from __future__ import annotations

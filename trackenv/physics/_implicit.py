@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._newton import SATO, SHENTON, inverse_one
+from ._newton import SATO, SHENTON, inverse_one, upper_bracket
 from ._newton import _growth as _root_growth
 
 __all__ = ["LOG", "POWER", "SATO", "SHENTON", "implicit_rows"]
@@ -57,20 +57,7 @@ def _growth_inverse(kind: int, p: np.ndarray, y: float) -> float:
         return math.exp((y - p[0]) / p[1])
     if kind == POWER:
         return y ** (1.0 / p[0])
-    hi = np.inf  # upper brackets, as the laws' numpy inverses take them
-    if kind == SATO:  # g >= beta·N, and g >= gamma·(1 − e^(−alpha·N)) for y < gamma
-        alpha, beta, gamma = p[0], p[1], p[2]
-        if beta > 0.0:
-            hi = y / beta
-        if gamma > 0.0:
-            h2 = -math.log1p(-min(y / gamma, 1.0)) / alpha if y < gamma else np.inf
-            hi = min(hi, h2)
-    else:  # SHENTON: g >= K2·N and g >= K1·N^0.2
-        if p[1] > 0.0:
-            hi = y / p[1]
-        if p[0] > 0.0:
-            hi = min(hi, (y / p[0]) ** (1.0 / 0.2))
-    return inverse_one(kind, p, y, hi, _MAX_NEWTON)
+    return inverse_one(kind, p, y, upper_bracket(kind, p, y), _MAX_NEWTON)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

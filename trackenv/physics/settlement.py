@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike
 
 from . import _implicit
 from ._checks import check_array, check_field, check_int, check_scalar, readonly_array
-from ._newton import SATO, SHENTON, growth_inverse
+from ._newton import SATO, SHENTON, growth_inverse, upper_brackets
 
 __all__ = [
     "LAWS",
@@ -108,6 +108,13 @@ def _solve_bracketed(kind: int, params: tuple[float, ...], y: np.ndarray, hi: np
         200,
     )
     return out.reshape(shape)
+
+
+def _upper_brackets(kind: int, params: tuple[float, ...], y: np.ndarray) -> np.ndarray:
+    """Upper brackets of the root-solved inverse for every element of ``y`` (:func:`._newton.upper_bracket`:
+    the same bounds the compiled implicit step takes)."""
+    flat = np.ascontiguousarray(y, dtype=np.float64).ravel()
+    return upper_brackets(kind, np.asarray(params, dtype=np.float64), flat).reshape(np.shape(y))
 
 
 _POSITIVE: dict[str, Any] = {"low": 0.0, "low_inclusive": False}
@@ -447,17 +454,8 @@ class SatoLaw(_PowerScaledLaw):
         return self.gamma * self.alpha * np.exp(-self.alpha * cycles) + self.beta
 
     def _growth_inverse(self, y: np.ndarray) -> np.ndarray:
-        # Upper brackets: g(N) >= β·N, so N <= y/β; g(N) >= γ(1 − e^(−αN)), so N <= −ln(1 − y/γ)/α for y < γ.
-        hi = np.full(y.shape, np.inf)
-        if self.beta > 0.0:
-            hi = y / self.beta
-        if self.gamma > 0.0:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                h2 = np.where(
-                    y < self.gamma, -np.log1p(-np.minimum(y / self.gamma, 1.0)) / self.alpha, np.inf
-                )
-            hi = np.minimum(hi, h2)
-        return _solve_bracketed(SATO, (self.alpha, self.beta, self.gamma), y, hi)
+        params = (self.alpha, self.beta, self.gamma)
+        return _solve_bracketed(SATO, params, y, _upper_brackets(SATO, params, y))
 
     def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
         return self._compiled_amplitude(), SATO, (self.alpha, self.beta, self.gamma)
@@ -503,14 +501,8 @@ class ShentonLaw(_PowerScaledLaw):
         return self._POWER * self.K1 * cycles ** (self._POWER - 1.0) + self.K2
 
     def _growth_inverse(self, y: np.ndarray) -> np.ndarray:
-        # Upper brackets: g(N) >= K2·N and g(N) >= K1·N^0.2.
-        hi = np.full(y.shape, np.inf)
-        with np.errstate(over="ignore"):
-            if self.K2 > 0.0:
-                hi = y / self.K2
-            if self.K1 > 0.0:
-                hi = np.minimum(hi, (y / self.K1) ** (1.0 / self._POWER))
-        return _solve_bracketed(SHENTON, (self.K1, self.K2), y, hi)
+        params = (self.K1, self.K2)
+        return _solve_bracketed(SHENTON, params, y, _upper_brackets(SHENTON, params, y))
 
     def _compiled_form(self) -> tuple[tuple[float, float, float], int, tuple[float, ...]]:
         return self._compiled_amplitude(), SHENTON, (self.K1, self.K2)

@@ -50,11 +50,11 @@ class VehicleSystem:
     def static_wheel_loads(self) -> np.ndarray:
         """Wheel loads [N] that hold the vehicle still on a rigid, level rail (statics with the wheels fixed)."""
         w = self.wheel_dofs
-        free = np.setdiff1d(np.arange(self.n_dof), w)
-        k, f = self.stiffness, self.force
+        free, k_ff, _ = self._free_blocks
+        f = self.force
         if free.size:
-            q_free = np.linalg.solve(k[np.ix_(free, free)], f[free])
-            return f[w] - k[np.ix_(w, free)] @ q_free
+            q_free = np.linalg.solve(k_ff, f[free])
+            return f[w] - self.stiffness[np.ix_(w, free)] @ q_free
         return f[w].copy()
 
     @cached_property
