@@ -173,6 +173,46 @@ def _solve(fw, bw, inv_diag, m, x, W):
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
+def _solve_columns_one(fw, bw, inv_diag, m, cols_t, ncol):
+    """One row (W = 1): :func:`_solve` for the ``ncol`` columns of ``cols_t`` (m, ncol) side by side, in place.
+    One column's sweep is a chain of dependent steps; the columns are independent chains, so sweeping them
+    together keeps the processor busy instead of waiting on each step. Each column's arithmetic is exactly
+    :func:`_solve`'s (bit-identical). Row indices are unsigned: no negative-index wrap-around check."""
+    for i in range(min(m, B)):
+        row, d = cols_t[i], inv_diag[i]
+        for k in range(ncol):
+            row[k] = row[k] * d
+        for kk in range(i, 0, -1):
+            f, prev = fw[kk, i], cols_t[np.uint64(i - kk)]
+            for k in range(ncol):
+                row[k] -= f * prev[k]
+    for i in range(B, m):
+        row, d = cols_t[i], inv_diag[i]
+        p4, p3 = cols_t[np.uint64(i - 4)], cols_t[np.uint64(i - 3)]
+        p2, p1 = cols_t[np.uint64(i - 2)], cols_t[np.uint64(i - 1)]
+        f4, f3, f2, f1 = fw[4, i], fw[3, i], fw[2, i], fw[1, i]
+        for k in range(ncol):
+            row[k] = row[k] * d - f4 * p4[k] - f3 * p3[k] - f2 * p2[k] - f1 * p1[k]
+    for r in range(min(m, B)):
+        i = np.uint64(m - 1 - r)
+        row, d = cols_t[i], inv_diag[i]
+        for k in range(ncol):
+            row[k] = row[k] * d
+        for kk in range(r, 0, -1):
+            f, nxt = bw[kk, i], cols_t[i + np.uint64(kk)]
+            for k in range(ncol):
+                row[k] -= f * nxt[k]
+    for r in range(m - B):
+        i = np.uint64(m - 1 - B - r)
+        row, d = cols_t[i], inv_diag[i]
+        n4, n3 = cols_t[i + np.uint64(4)], cols_t[i + np.uint64(3)]
+        n2, n1 = cols_t[i + np.uint64(2)], cols_t[i + np.uint64(1)]
+        g4, g3, g2, g1 = bw[4, i], bw[3, i], bw[2, i], bw[1, i]
+        for k in range(ncol):
+            row[k] = row[k] * d - g4 * n4[k] - g3 * n3[k] - g2 * n2[k] - g1 * n1[k]
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _mass_times(rail_mass, mass_diag, xpad, out, lo, hi, W):
     """out = M x on the DOFs of the window [lo, hi) (the track outside it is at rest), every row: flat vectors
     (DOF i of row b at i*W + b), x padded by B DOFs on each side (DOF i at xpad[(i + B)*W + b]) whose B DOFs
@@ -298,6 +338,10 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     peak_total = peaks.total[ch]
 
     n_steps = x_axle.shape[0] - 1
+    # the DOF layout is regular (track.DofLayout): a bay is bay_dofs DOFs, and a sleeper's DOF follows its rail
+    # node's deflection by sleeper_shift; a window starts at a sleeper's rail node
+    bay_dofs = sleeper_dof[1] - sleeper_dof[0]
+    sleeper_shift = sleeper_dof[0] - node_w[sleeper_node[0]]
     n_axles = x_axle.shape[1]
     nv = q.shape[0]
     m_max = n
@@ -318,6 +362,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     rv = np.zeros((nv, W))
     qpred = np.zeros((nv, W))
     tmp = np.zeros(m_max * W)
+    cols_t = np.zeros((m_max, ncol))  # one row: a bay's columns side by side (see _solve_columns_one)
     scratch = np.zeros(W)
     shape = np.zeros((n_axles, 4))
     edofs = np.zeros((n_axles, 4), dtype=np.int64)
@@ -406,6 +451,18 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     continue
                 bay = elem_of[j] // epb
                 bay_cache[j] = bay
+                if W == 1:  # one row: the bay's columns in one sweep, side by side
+                    for i in range(m):
+                        for k in range(ncol):
+                            cols_t[i, k] = 0.0
+                    for k in range(ncol):
+                        cols_t[node_w[sleeper_node[bay] + k // 2] + (k % 2) - lo, k] = 1.0
+                    _solve_columns_one(Fw[c], Bw[c], invd[c], m, cols_t, ncol)
+                    for k in range(ncol):
+                        colk = cols[j, k]
+                        for i in range(m):
+                            colk[i] = cols_t[i, k]
+                    continue
                 for k in range(ncol):
                     # the bay's rail DOFs: (w, θ) of its epb+1 nodes; the sleeper DOF after node 0 is skipped
                     node = k // 2
@@ -438,16 +495,19 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 before[g] = 0.0
                 after[g] = 0.0
             _mass_times(rail_mass, mass_diag, rhs, pred, lo, hi, W)
-            # damping sits only in the pads and the ballast
-            for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
-                d = sleeper_dof[s_] * W
-                w = node_w[sleeper_node[s_]] * W
-                qw, qs, pw, ps = qdamp[w : w + W], qdamp[d : d + W], pred[w : w + W], pred[d : d + W]
-                cp, cb = pad_c[s_], bal_c[s_]
+            # damping sits only in the pads and the ballast: sleeper g of the window has its rail node's
+            # deflection at DOF lo + g*bay_dofs and its own sleeper_shift DOFs after it
+            s_lo = s_lo_c[c]
+            qw, qs = qdamp[lo * W :], qdamp[(lo + sleeper_shift) * W :]
+            pw, ps = pred[lo * W :], pred[(lo + sleeper_shift) * W :]
+            cp, cb = pad_c[s_lo:], bal_c[s_lo:]
+            for g in range(s_hi_c[c] + 1 - s_lo):
+                base = np.uint64(g * bay_dofs * W)  # unsigned: no negative-index wrap-around check
                 for b in range(W):
-                    fp = cp[b] * (qw[b] - qs[b])
-                    pw[b] += fp
-                    ps[b] += cb[b] * qs[b] - fp
+                    f = base + np.uint64(b)
+                    fp = cp[g, b] * (qw[f] - qs[f])
+                    pw[f] += fp
+                    ps[f] += cb[g, b] * qs[f] - fp
             _solve(Fw[c], Bw[c], invd[c], m, pred[lo * W : hi * W], W)
 
         # ---- vehicle predictor
@@ -560,18 +620,19 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 vw[g] += a6 * aw[g] + a7 * an
                 aw[g] = an
                 uw[g] = pw[g]
-            # peak sleeper forces in the window
-            for s_ in range(s_lo_c[c], s_hi_c[c] + 1):
-                d = sleeper_dof[s_] * W
-                w = node_w[sleeper_node[s_]] * W
-                uw, us, vw, vs = u[w : w + W], u[d : d + W], v[w : w + W], v[d : d + W]
-                kp, cp, kb, cb = pad_k[s_], pad_c[s_], bal_k[s_], bal_c[s_]
-                pb, pt = peak_ballast[s_], peak_total[s_]
+            # peak sleeper forces in the window (sleepers indexed as in the predictor's damping)
+            s_lo = s_lo_c[c]
+            uw, us, vw, vs = u[lo * W :], u[(lo + sleeper_shift) * W :], v[lo * W :], v[(lo + sleeper_shift) * W :]
+            kp, cp, kb, cb = pad_k[s_lo:], pad_c[s_lo:], bal_k[s_lo:], bal_c[s_lo:]
+            pb, pt = peak_ballast[s_lo:], peak_total[s_lo:]
+            for g in range(s_hi_c[c] + 1 - s_lo):
+                base = np.uint64(g * bay_dofs * W)
                 for b in range(W):
-                    fb = kb[b] * us[b] + cb[b] * vs[b]
-                    fp = kp[b] * (uw[b] - us[b]) + cp[b] * (vw[b] - vs[b])
-                    pb[b] = max(pb[b], fb)
-                    pt[b] = max(pt[b], fb + fp)
+                    f = base + np.uint64(b)
+                    fb = kb[g, b] * us[f] + cb[g, b] * vs[f]
+                    fp = kp[g, b] * (uw[f] - us[f]) + cp[g, b] * (vw[f] - vs[f])
+                    pb[g, b] = max(pb[g, b], fb)
+                    pt[g, b] = max(pt[g, b], fb + fp)
 
         # ---- correct the vehicle
         for i in range(nv):
