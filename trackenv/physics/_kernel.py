@@ -273,6 +273,21 @@ def _contact(law, param, d):
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
+def _contact_lane(law, param, d):
+    """:func:`_contact` written without branches, for SIMD across the rows (same IEEE operations, so the same
+    force and stiffness; where d <= 0 the arithmetic runs on 0 and the result is replaced by 0)."""
+    pos = d > 0.0
+    dd = d if pos else 0.0
+    if law == 0:
+        r = dd / param
+        sr = np.sqrt(r)
+        f, fp = r * sr, 1.5 * sr / param
+    else:
+        f, fp = param * dd, param
+    return (f if pos else 0.0), (fp if pos else 0.0)
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _local(dof, base, epb):
     """Index of a rail DOF among the cached columns of its bay (w, θ per node; the sleeper DOF after the first
     node shifts the later nodes by one)."""
@@ -378,6 +393,8 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     fprime = np.zeros(n_axles)
     res = np.zeros(n_axles)
     fsh = np.zeros((n_axles, 4, W))
+    res_w = np.zeros(W)  # one axle, several rows: the Newton's right-hand sides and converged flags per row
+    done_w = np.zeros(W)
     for j in range(n_axles):  # compression that carries the initial force
         for b in range(W):
             force[j, b] = out_force[0, j, b]
@@ -563,7 +580,33 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                         H[j, i, b] += shape[i, k] * acc
 
         # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
-        for b in range(W):
+        if W > 1 and n_axles == 1:
+            # one axle: the rows' scalar Newton iterations side by side (SIMD); a row that has converged keeps
+            # its compression while the others go on, so each row takes exactly the steps it takes alone
+            d0, f0, h0, z0 = delta[0], force[0], H[0, 0], z_axle[step, 0]
+            for b in range(W):
+                res_w[b] = ypred[0, b] - wpred[0, b] - z0[b]
+                if f0[b] <= 0.0:
+                    d0[b] = res_w[b]
+                done_w[b] = 0.0
+            for _it in range(60):
+                alive = 0.0
+                for b in range(W):
+                    fb, fpb = _contact_lane(law, param, d0[b])
+                    r = d0[b] - res_w[b]
+                    r += h0[b] * fb
+                    stop = done_w[b] > 0.0 or abs(r) < 1e-15
+                    step_b = -r / (h0[b] * fpb + 1.0)
+                    d0[b] = d0[b] if stop else d0[b] + step_b
+                    done_w[b] = 1.0 if stop else 0.0
+                    alive += 0.0 if stop else 1.0
+                if alive == 0.0:
+                    break
+            for b in range(W):
+                f0[b], fpb = _contact_lane(law, param, d0[b])
+                for k in range(4):
+                    fsh[0, k, b] = f0[b] * shape[0, k]
+        for b in range(W if not (W > 1 and n_axles == 1) else 0):
             for j in range(n_axles):
                 res[j] = ypred[j, b] - wpred[j, b] - z_axle[step, j, b]
                 if force[j, b] <= 0.0:
