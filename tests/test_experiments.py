@@ -44,3 +44,23 @@ def test_room_summary_takes_each_episodes_cheapest_search_and_never_more_than_th
     np.testing.assert_allclose(out["per_episode_relative"], [-0.2, 0.0])
     np.testing.assert_allclose(out["relative"], -10.0 / 150.0)
     assert out["ci_low"] <= out["mean_difference"] <= out["ci_high"]
+
+
+def test_kernel_profile_counts_every_section_of_the_kernels_time_step():
+    kp = _script("kernel_profile")
+    source = kp.KERNEL.read_text()
+    text, names = kp.instrument(source)
+    compile(text, "instrumented_kernel.py", "exec")  # valid Python
+    headers = [line.split("# ---- ", 1)[1].strip() for line in source.splitlines() if "        # ---- " in line]
+    assert names[1:] == headers and len(headers) >= 8  # one section per header, plus the step's start
+    assert "Newton on the compressions" in " ".join(names) and "triangular sweeps" in names
+    # a counter read at every header and once at the end of the step, each closing one section
+    assert [f"prof[{k}] +=" in text for k in range(len(names))] == [True] * len(names)
+    assert text.count("_cycles(); prof[") == len(names)
+    assert "cache=True" not in text and "def _run_chunk(mesh, drive, rows, peaks, ch, W, prof):" in text
+    try:
+        kp.instrument(source.replace("# ---- ", "# "))
+    except ValueError as e:
+        assert "section headers" in str(e)
+    else:
+        raise AssertionError("a kernel without section headers must be refused")

@@ -21,8 +21,12 @@ that compile to SIMD at any width, across the rows of a chunk and, for the singl
 The triangular sweeps are chains along the track: one row keeps the chain in registers, several rows run it with
 the rows as SIMD lanes. Loops index views from 0 wherever they can: numba wraps negative indices, and the check
 it emits where it cannot prove an index non-negative blocks vectorisation (it cost the single pass half its
-time). The rail's mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of
-rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is
+time). Where an index has to be computed (the sleepers of a window, the rows of a column sweep) it is cast to
+unsigned, for which numba emits no wrap-around: the one-row sleeper loops ran twice as fast that way. The comment
+lines ``# ---- <name>`` of the time-step loop mark its sections: ``experiments/kernel_profile.py`` counts the
+processor cycles spent in each (sampling profilers see nothing inside this one inlined function). The rail's
+mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of rows (``Chunks``
+arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is
 compiled without reassociating fast-math: every row's arithmetic is the same IEEE sequence whatever its SIMD
 lane, chunk width or thread, so a row's result does not depend on the batch it runs in (bit-identical; tested).
 The single pass is a batch of one.
@@ -432,6 +436,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     + shape[j, 2] * sag[edofs[j, 2], b]
                     + shape[j, 3] * sag[edofs[j, 3], b]
                 )
+        # ---- move the window of every axle group that has entered a new bay: factor, columns of its bay
         for c in range(n_clusters):
             changed = False
             bay_min = n_sleepers
@@ -492,6 +497,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     colk = cols[j, k]
                     for f in range(m * W):
                         colk[f] = tmp[f]
+        # ---- where the axles' element DOFs sit among their bay's columns
         for j in range(n_axles):
             basej = node_w[sleeper_node[bay_cache[j]]]
             for k in range(4):
@@ -511,8 +517,10 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             for g in range(B * W):
                 before[g] = 0.0
                 after[g] = 0.0
+            # ---- mass product
             _mass_times(rail_mass, mass_diag, rhs, pred, lo, hi, W)
-            # damping sits only in the pads and the ballast: sleeper g of the window has its rail node's
+            # ---- damping (only in the pads and the ballast)
+            # sleeper g of the window has its rail node's
             # deflection at DOF lo + g*bay_dofs and its own sleeper_shift DOFs after it
             s_lo = s_lo_c[c]
             qw, qs = qdamp[lo * W :], qdamp[(lo + sleeper_shift) * W :]
@@ -525,6 +533,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     fp = cp[g, b] * (qw[f] - qs[f])
                     pw[f] += fp
                     ps[f] += cb[g, b] * qs[f] - fp
+            # ---- triangular sweeps
             _solve(Fw[c], Bw[c], invd[c], m, pred[lo * W : hi * W], W)
 
         # ---- vehicle predictor
@@ -658,12 +667,14 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     for b in range(W):
                         f = i * W + b
                         pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
+            # ---- Newmark update of the track
             for g in range(m * W):
                 an = a0 * (pw[g] - uw[g]) - a2 * vw[g] - a3 * aw[g]
                 vw[g] += a6 * aw[g] + a7 * an
                 aw[g] = an
                 uw[g] = pw[g]
-            # peak sleeper forces in the window (sleepers indexed as in the predictor's damping)
+            # ---- peak sleeper forces in the window
+            # (sleepers indexed as in the predictor's damping)
             s_lo = s_lo_c[c]
             uw, us, vw, vs = u[lo * W :], u[(lo + sleeper_shift) * W :], v[lo * W :], v[(lo + sleeper_shift) * W :]
             kp, cp, kb, cb = pad_k[s_lo:], pad_c[s_lo:], bal_k[s_lo:], bal_c[s_lo:]
@@ -691,6 +702,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 qdd[i, b] = an
                 q[i, b] = rv[i, b]
 
+        # ---- outputs under the wheels
         for j in range(n_axles):
             for b in range(W):
                 out_force[step, j, b] = force[j, b]

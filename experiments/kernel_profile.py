@@ -1,0 +1,170 @@
+"""Where a time step of the compiled kernel goes: processor cycles per section, from counters read inside the kernel.
+
+Sampling profilers do not help here: the kernel is one JIT-compiled function with everything inlined, this VM
+has no hardware performance counters, and ``perf`` sees the JIT code without symbols. So this script makes a copy
+of ``trackenv/physics/_kernel.py`` with a cycle counter (LLVM's ``readcyclecounter``, the x86 TSC) read at
+every section header of the time-step loop — the comment lines ``# ---- <name>`` of ``_run_chunk`` — and adds up
+the cycles between consecutive headers. Reading the counter costs a few cycles per section (the totals come out
+~1-3 % above the plain kernel's); it does not change the arithmetic, so the copy's results are the kernel's.
+
+Give several kernel files (``--kernel A --kernel B``, e.g. an older commit's ``_kernel.py`` from ``git show``) to
+compare them: their passes alternate in one process, so a drifting machine moves both alike, which is what makes
+the comparison fair on a shared machine (whole-process timings of this VM drift by ±15 % within minutes).
+
+    python experiments/kernel_profile.py                       # one row: the env's 60 m pass at the auto dt
+    python experiments/kernel_profile.py --rows 16 --repeats 3  # a 16-row chunk in lockstep (per row)
+    python experiments/kernel_profile.py --kernel old_kernel.py --kernel trackenv/physics/_kernel.py
+
+Workload: the passes of ``Tamping-v0``'s first step (``rows`` new episodes of the default config: 60 m with
+approach and exit zones, 100 km/h, dt 4e-4, one wheelset), on one thread. Cycles are TSC cycles (this VM's
+TSC runs at the nominal 2.0 GHz). Each copy compiles on its own (~40-60 s cold; no on-disk cache).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+KERNEL = ROOT / "trackenv" / "physics" / "_kernel.py"
+HEADER = re.compile(r"^(\s+)# ---- (.*)$")
+COUNTER = '''
+from llvmlite import ir as _ir
+from numba.core import cgutils as _cgutils
+from numba.core import types as _types
+from numba.extending import intrinsic as _intrinsic
+
+
+@_intrinsic
+def _cycles(typingctx):
+    """The processor's cycle counter (x86: RDTSC)."""
+    def codegen(context, builder, signature, args):
+        fn = _cgutils.get_or_insert_function(builder.module, _ir.FunctionType(_ir.IntType(64), []),
+                                             "llvm.readcyclecounter")
+        return builder.call(fn, [])
+    return _types.uint64(), codegen
+
+'''
+
+
+def instrument(source: str) -> tuple[str, list[str]]:
+    """The kernel's source with a cycle counter at every section header of ``_run_chunk``'s time-step loop, and
+    the sections' names (the first is the step's start, before the first header)."""
+    lines = source.replace("cache=True", "cache=False").splitlines()
+    start = next(i for i, s in enumerate(lines) if s.startswith("def _run_chunk("))
+    lines[start] = lines[start].replace("ch, W):", "ch, W, prof):")
+    loop = next(i for i in range(start, len(lines)) if lines[i].strip().startswith("for step in range("))
+    indent = len(lines[loop]) - len(lines[loop].lstrip())
+    def outside(line: str) -> bool:  # a non-blank line at or left of the loop's indentation ends its body
+        return bool(line.strip()) and len(line) - len(line.lstrip()) <= indent
+
+    end = next((i for i in range(loop + 1, len(lines)) if outside(lines[i])), len(lines))
+    while not lines[end - 1].strip():
+        end -= 1
+    names = ["start of step (axle positions)"]
+    out = lines[:loop] + [" " * indent + "_tp = _cycles()"]
+    for i in range(loop, end):
+        m = HEADER.match(lines[i])
+        if m:
+            out.append(f"{m.group(1)}_t = _cycles(); prof[{len(names) - 1}] += _t - _tp; _tp = _t")
+            names.append(m.group(2).strip())
+        out.append(lines[i])
+    out.append(" " * (indent + 4) + f"_t = _cycles(); prof[{len(names) - 1}] += _t - _tp; _tp = _t")
+    out += lines[end:]
+    if len(names) == 1:
+        raise ValueError("no '# ---- <name>' section headers found in _run_chunk's time-step loop")
+    text = "\n".join(out) + "\n"
+    first = text.index("\nB = ")  # the counter goes after the imports, before the module's constants
+    return text[:first] + "\n" + COUNTER + text[first:], names
+
+
+def load(path: Path, tag: str, workdir: Path):
+    """Import an instrumented copy of the kernel at ``path`` as module ``tag``; returns (module, names)."""
+    text, names = instrument(path.read_text())
+    copy = workdir / f"{tag}.py"
+    copy.write_text(text)
+    spec = importlib.util.spec_from_file_location(tag, copy)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[tag] = module
+    spec.loader.exec_module(module)
+    return module, names
+
+
+def runner(module, width: int):
+    """A compiled entry that runs every chunk of the batch through ``module``'s instrumented chunk integrator."""
+    from numba import njit
+
+    chunk = module._run_chunk
+
+    @njit(fastmath=module.FASTMATH)
+    def run(mesh, drive, rows, peaks, prof):
+        for ch in range(rows.u.shape[0]):
+            chunk(mesh, drive, rows, peaks, ch, width, prof)
+
+    return run
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--kernel", action="append", type=Path, help="kernel file(s) (default: this tree's)")
+    parser.add_argument("--rows", type=int, default=1, choices=(1, 4, 8, 16), help="rows in lockstep (a chunk)")
+    parser.add_argument("--repeats", type=int, default=7, help="passes per kernel (alternating)")
+    args = parser.parse_args(argv)
+    if args.repeats < 1:
+        parser.error(f"--repeats must be >= 1, got {args.repeats}")
+    kernels = args.kernel or [KERNEL]
+
+    import numba
+
+    import trackenv.envs.episode as E
+    import trackenv.physics._kernel as K
+    from trackenv.degradation import simulate_batch
+    from trackenv.envs.config import TampingEnvConfig
+
+    numba.set_num_threads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        loaded = [load(p, f"_kernel_profile_{i}", Path(tmp)) for i, p in enumerate(kernels)]
+        names = loaded[0][1]
+        if any(n != names for _, n in loaded):
+            raise SystemExit("the kernels' section headers differ; compare kernels with the same sections")
+        runs = [runner(mod, args.rows) for mod, _ in loaded]
+        counts = [np.zeros(len(names), dtype=np.uint64) for _ in kernels]
+        steps = {}
+        current = [0]
+
+        def run(mesh, drive, rows, peaks, width):
+            if width != args.rows:
+                raise SystemExit(f"the batch ran at width {width}, not {args.rows}")
+            steps["n"] = drive.x_axle.shape[0] - 1
+            runs[current[0]](mesh, drive, rows, peaks, counts[current[0]])
+
+        K.run = run  # simulate_passes calls _kernel.run at run time
+        config = TampingEnvConfig()
+        rng = np.random.default_rng(0)
+        sims = [E.new_episode(config, rng).sim for _ in range(args.rows)]
+        for k in range(len(kernels)):  # compile (not counted)
+            current[0] = k
+            simulate_batch(sims)
+            counts[k][:] = 0
+        for _ in range(args.repeats):
+            for k in range(len(kernels)):
+                current[0] = k
+                simulate_batch(sims)
+    per = [c.astype(float) / (args.repeats * steps["n"] * args.rows) for c in counts]
+    labels = [str(p) if len(str(p)) < 28 else "…" + str(p)[-27:] for p in kernels]
+    print(f"cycles per time step and row, {args.rows} row(s) in lockstep, {steps['n']} steps per pass, "
+          f"{args.repeats} passes per kernel (alternating)")
+    print(f"{'section':52s}" + "".join(f"{s:>30s}" for s in labels))
+    for i, name in enumerate(names):
+        print(f"{name[:52]:52s}" + "".join(f"{p[i]:30.0f}" for p in per))
+    print(f"{'total':52s}" + "".join(f"{p.sum():30.0f}" for p in per))
+
+
+if __name__ == "__main__":
+    main()
