@@ -74,6 +74,8 @@ def test_mesh_counts_and_layout():
         np.testing.assert_array_equal(lay.sleeper_node, epb * np.arange(51))
         # the sleeper DOF follows the (w, θ) of the rail node above it: half-bandwidth 4
         np.testing.assert_array_equal(lay.sleeper, lay.node_w[lay.sleeper_node] + 2)
+        # a bay is 2·epb + 1 DOFs, the same for every bay: the kernel indexes a window's sleepers from its start
+        np.testing.assert_array_equal(lay.node_w[lay.sleeper_node], (2 * epb + 1) * np.arange(51))
 
 
 # ------------------------------------------------------------------------------------------ modifiers
