@@ -266,20 +266,16 @@ def _mass_times(rail_mass, mass_diag, xpad, out, lo, hi, W):
 
 @njit(cache=True, fastmath=FASTMATH)
 def _contact(law, param, d):
-    """Force and tangent stiffness of the contact law at compression d (0 when d <= 0)."""
-    if d <= 0.0:
-        return 0.0, 0.0
-    if law == 0:
-        r = d / param
-        sr = np.sqrt(r)
-        return r * sr, 1.5 * sr / param
-    return param * d, param
+    """Force and tangent stiffness of the contact law at compression d (0 when d <= 0): :func:`_contact_lane`,
+    called (not inlined) where one row at a time needs it."""
+    return _contact_lane(law, param, d)
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _contact_lane(law, param, d):
-    """:func:`_contact` written without branches, for SIMD across the rows (same IEEE operations, so the same
-    force and stiffness; where d <= 0 the arithmetic runs on 0 and the result is replaced by 0)."""
+    """Force and tangent stiffness of the contact law at compression d (0 when d <= 0), written without branches
+    so that it runs as SIMD across the rows: where d <= 0 the arithmetic runs on 0 and the result is replaced by
+    0."""
     pos = d > 0.0
     dd = d if pos else 0.0
     if law == 0:
@@ -289,6 +285,13 @@ def _contact_lane(law, param, d):
     else:
         f, fp = param * dd, param
     return (f if pos else 0.0), (fp if pos else 0.0)
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _bay_dof(node_w, sleeper_node, bay, k):
+    """DOF of the bay's k-th cached column: (w, θ) of its epb+1 rail nodes in turn (the sleeper DOF after the
+    first node is skipped; see :func:`_local`)."""
+    return node_w[sleeper_node[bay] + k // 2] + (k % 2)
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
@@ -478,7 +481,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                         for k in range(ncol):
                             cols_t[i, k] = 0.0
                     for k in range(ncol):
-                        cols_t[node_w[sleeper_node[bay] + k // 2] + (k % 2) - lo, k] = 1.0
+                        cols_t[_bay_dof(node_w, sleeper_node, bay, k) - lo, k] = 1.0
                     _solve_columns_one(Fw[c], Bw[c], invd[c], m, cols_t, ncol)
                     for k in range(ncol):
                         colk = cols[j, k]
@@ -486,9 +489,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                             colk[i] = cols_t[i, k]
                     continue
                 for k in range(ncol):
-                    # the bay's rail DOFs: (w, θ) of its epb+1 nodes; the sleeper DOF after node 0 is skipped
-                    node = k // 2
-                    dof = node_w[sleeper_node[bay] + node] + (k % 2)
+                    dof = _bay_dof(node_w, sleeper_node, bay, k)
                     for f in range(m * W):
                         tmp[f] = 0.0
                     for b in range(W):
@@ -589,7 +590,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                         H[j, i, b] += shape[i, k] * acc
 
         # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
-        if W > 1 and n_axles == 1:
+        if W > 1 and n_axles == 1:  # compile-time W: the one-row entry has only the general loop below
             # one axle: the rows' scalar Newton iterations side by side (SIMD); a row that has converged keeps
             # its compression while the others go on, so each row takes exactly the steps it takes alone
             d0, f0, h0, z0 = delta[0], force[0], H[0, 0], z_axle[step, 0]
@@ -615,36 +616,37 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 f0[b], fpb = _contact_lane(law, param, d0[b])
                 for k in range(4):
                     fsh[0, k, b] = f0[b] * shape[0, k]
-        for b in range(W if not (W > 1 and n_axles == 1) else 0):
-            for j in range(n_axles):
-                res[j] = ypred[j, b] - wpred[j, b] - z_axle[step, j, b]
-                if force[j, b] <= 0.0:
-                    delta[j, b] = res[j]
-            for _it in range(60):
+        else:
+            for b in range(W):
+                for j in range(n_axles):
+                    res[j] = ypred[j, b] - wpred[j, b] - z_axle[step, j, b]
+                    if force[j, b] <= 0.0:
+                        delta[j, b] = res[j]
+                for _it in range(60):
+                    for j in range(n_axles):
+                        force[j, b], fprime[j] = _contact(law, param, delta[j, b])
+                    err = 0.0
+                    for j in range(n_axles):
+                        r = delta[j, b] - res[j]
+                        for i in range(n_axles):
+                            r += H[j, i, b] * force[i, b]
+                        rj[j] = -r
+                        for i in range(n_axles):
+                            J[j, i] = H[j, i, b] * fprime[i] + (1.0 if i == j else 0.0)
+                        err = max(err, abs(r))
+                    if err < 1e-15:
+                        break
+                    if n_axles == 1:
+                        delta[0, b] += rj[0] / J[0, 0]
+                    else:
+                        dx = np.linalg.solve(J, rj)
+                        for j in range(n_axles):
+                            delta[j, b] += dx[j]
                 for j in range(n_axles):
                     force[j, b], fprime[j] = _contact(law, param, delta[j, b])
-                err = 0.0
                 for j in range(n_axles):
-                    r = delta[j, b] - res[j]
-                    for i in range(n_axles):
-                        r += H[j, i, b] * force[i, b]
-                    rj[j] = -r
-                    for i in range(n_axles):
-                        J[j, i] = H[j, i, b] * fprime[i] + (1.0 if i == j else 0.0)
-                    err = max(err, abs(r))
-                if err < 1e-15:
-                    break
-                if n_axles == 1:
-                    delta[0, b] += rj[0] / J[0, 0]
-                else:
-                    dx = np.linalg.solve(J, rj)
-                    for j in range(n_axles):
-                        delta[j, b] += dx[j]
-            for j in range(n_axles):
-                force[j, b], fprime[j] = _contact(law, param, delta[j, b])
-            for j in range(n_axles):
-                for k in range(4):
-                    fsh[j, k, b] = force[j, b] * shape[j, k]
+                    for k in range(4):
+                        fsh[j, k, b] = force[j, b] * shape[j, k]
 
         # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, then its Newmark update
         for c in range(n_clusters):
