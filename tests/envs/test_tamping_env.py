@@ -424,3 +424,24 @@ def test_clipped_observations_are_reported_in_info(small_config) -> None:
 
 def cfg_sleepers(ep) -> int:
     return ep.config.n_sleepers
+
+
+def test_section_classes_follow_the_geometry_and_the_info_owns_its_copy(small_config) -> None:
+    """The quality classes are computed once per geometry (with the D1 level) and used by the costs and the
+    info: every step's ``section_class`` is the classification of that step's section peaks, through tamping
+    and settlement, and writing into one info's array changes neither the episode nor the next info."""
+    from trackenv.physics.geometry import classify
+
+    env = TampingEnv(small_config)
+    _, info = env.reset(seed=4)
+    rng = np.random.default_rng(4)
+    for _ in range(small_config.horizon_steps):
+        expected = classify(info["section_peak_m"], small_config.band_limits)
+        np.testing.assert_array_equal(info["section_class"], expected)
+        assert info["immediate_action_exceedances"] == int(np.sum(expected == 3))
+        info["section_class"][:] = 3  # the caller's copy
+        _, _, _, truncated, info = env.step(rng.integers(0, 2, small_config.n_sections))
+        if truncated:
+            break
+    np.testing.assert_array_equal(env.episode.section_classes(),
+                                  classify(info["section_peak_m"], small_config.band_limits))

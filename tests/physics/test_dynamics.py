@@ -484,3 +484,19 @@ def test_warm_kernel_reaches_every_compiled_entry():
         assert _kernel._RUNNERS[entry].signatures, entry
     with pytest.raises(ValueError, match="entries must be among"):
         warm_kernel([(False, 3)])
+
+
+def test_a_vehicles_system_is_assembled_once_and_cannot_be_changed_by_a_pass():
+    """Passes of one vehicle share its assembled system (its statics, which the static start and the auto time
+    step read every pass, are computed once): an equal vehicle gives the same system, another vehicle its own,
+    and the shared arrays are read-only, so that no caller can change the vehicle of later passes."""
+    from trackenv.physics.dynamics import _vehicle_system
+
+    system = _vehicle_system(Wheelset(mass=1800.0, static_load=50e3))
+    assert _vehicle_system(Wheelset(mass=1800.0, static_load=50e3)) is system
+    assert _vehicle_system(Wheelset(mass=1500.0, static_load=50e3)) is not system
+    for arr in (system.mass, system.damping, system.stiffness, system.force, system.wheel_dofs, system.axle_offsets):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[...] = 0
+    car = _vehicle_system(Car.manchester_coach())
+    np.testing.assert_allclose(car.static_wheel_loads, Car.manchester_coach().system().static_wheel_loads, rtol=0)

@@ -48,11 +48,20 @@ class Episode:
     def quality(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """D1 level per sleeper, SD and mean-to-peak per section [m] (computed once per geometry: the level
         changes only when the simulator replaces its settlement state or offset)."""
+        return self._geometry()[:3]
+
+    def section_classes(self) -> np.ndarray:
+        """Quality class per section (:func:`classify` of the section peaks in the config's speed band),
+        computed with :meth:`quality`, once per geometry."""
+        return self._geometry()[3]
+
+    def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         cached = self._quality_cache
         if cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset:
             return cached[2]
         d1 = d1_filter(self.sim.level, self.sim.track.sleeper_spacing)
-        value = (d1, section_sd(d1, self.sections, self.n_sections), section_peak(d1, self.sections, self.n_sections))
+        peak = section_peak(d1, self.sections, self.n_sections)
+        value = (d1, section_sd(d1, self.sections, self.n_sections), peak, classify(peak, self.config.band_limits))
         self._quality_cache = (self.sim.state, self.sim.offset, value)
         return value
 
@@ -151,9 +160,9 @@ def traffic_batch(eps: list[Episode], results: list[PassResult]) -> None:
 def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     """The period's costs in named parts (k€); the reward is minus their sum."""
     c = ep.config
-    _, sd, peak = ep.quality()
+    _, sd, _ = ep.quality()
     lim = c.band_limits
-    cls = classify(peak, lim)
+    cls = ep.section_classes()
     dt_years = 1.0 / c.steps_per_year
     return {
         "tamping": float(tamping_cost),
@@ -216,8 +225,7 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
     """The step's info dict (see TampingEnv's table): track geometry in mm like the observation, each key
     naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0."""
     _, sd, peak = ep.quality()
-    lim = ep.config.band_limits
-    cls = classify(peak, lim)
+    cls = ep.section_classes().copy()
     return {
         "costs": parts,
         "cost": float(sum(parts.values())),

@@ -70,8 +70,19 @@ def _vehicle_system(vehicle) -> VehicleSystem:
     if isinstance(vehicle, VehicleSystem):
         return vehicle
     if isinstance(vehicle, (Wheelset, Car, Train)):
-        return vehicle.system()
+        return _assembled_system(vehicle)
     raise ValueError(f"vehicle must be a Wheelset, Car, Train or VehicleSystem, got {type(vehicle).__name__}")
+
+
+@functools.lru_cache(maxsize=32)
+def _assembled_system(vehicle: Wheelset | Car | Train) -> VehicleSystem:
+    """``vehicle.system()``, assembled once per vehicle and shared by its passes (with its statics, which the
+    static start and the auto time step read every pass): vehicles are frozen values, and the shared system's
+    arrays are made read-only so that no pass can change another's vehicle."""
+    system = vehicle.system()
+    for arr in (system.mass, system.damping, system.stiffness, system.force, system.wheel_dofs, system.axle_offsets):
+        arr.flags.writeable = False
+    return system
 
 
 def _contact_law(contact):
@@ -363,6 +374,14 @@ def _pack(x: np.ndarray, n_chunks: int, width: int) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(x, 1, -1))
 
 
+def _packed_history(first: np.ndarray, n_steps: int, n_chunks: int, width: int) -> np.ndarray:
+    """A time history (rows, n_steps + 1, ...) as :func:`_pack` lays it out, zero but for its first step
+    ``first`` (rows, ...): allocated in place, not transposed from a zero array."""
+    out = np.zeros((n_chunks, n_steps + 1) + first.shape[1:] + (width,))
+    out[:, 0] = _pack(first, n_chunks, width)
+    return out
+
+
 def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
     """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
     x = np.moveaxis(x, -1, 1)
@@ -536,14 +555,12 @@ def simulate_passes(
             q[b] = sys_.static_displacements(z0)
             qdd[b] = np.linalg.solve(sys_.mass, sys_.force - sys_.stiffness @ q[b])
 
-    out_force = np.zeros((nb, n_steps + 1, n_axles))
-    out_force[:, 0] = f0
-    out_rail = np.zeros_like(out_force)
-    out_wheel = np.zeros_like(out_force)
+    rail0 = np.zeros((nb, n_axles))  # rail and wheel under each wheel at t = 0
+    wheel0 = np.zeros((nb, n_axles))
     for b in range(nb):
         for j, (dofs, shp) in enumerate(start_points):
-            out_rail[b, 0, j] = shp @ u[b][dofs]
-        out_wheel[b, 0] = q[b][sys_.wheel_dofs]
+            rail0[b, j] = shp @ u[b][dofs]
+        wheel0[b] = q[b][sys_.wheel_dofs]
     pad_k = np.stack([t.pad_stiffness for t in tracks])
     pad_c = np.stack([t.pad_damping for t in tracks])
     bal_k = np.stack([t.ballast_stiffness for t in tracks])
@@ -593,7 +610,8 @@ def simulate_passes(
         pack(qd),
         pack(qdd),
     )
-    peaks = _kernel.Peaks(pack(out_force), pack(out_rail), pack(out_wheel), pack(peak_ballast), pack(peak_total))
+    history = functools.partial(_packed_history, n_steps=n_steps, n_chunks=n_chunks, width=width)
+    peaks = _kernel.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
     _kernel.run(mesh, drive, rows, peaks, width)
     unpack = functools.partial(_unpack, n_rows=nb)
     out_force, out_rail, out_wheel = unpack(peaks.force), unpack(peaks.rail), unpack(peaks.wheel)
@@ -623,7 +641,7 @@ def simulate_passes(
         )
     if auto and dt > DT_REFERENCE_S:
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
-        lost = [b for b in range(nb) if np.any(out_force[b, 1:] <= 0.0)]
+        lost = np.flatnonzero(np.any(out_force[:, 1:] <= 0.0, axis=(1, 2))).tolist()
         if lost:
             _rerun_rows(results, lost, tracks, irr_rows, None if support_settlement is None else settlement_rows,
                         vehicle, speed, dt=DT_REFERENCE_S, contact=contact, start=start, x_start=x_start,
@@ -660,8 +678,9 @@ KERNEL_ENTRIES = tuple(_kernel._RUNNERS)
 def warm_kernel(entries=KERNEL_ENTRIES) -> None:
     """Compile now, or load from numba's on-disk cache, the kernel's ``entries`` (pairs of
     :data:`KERNEL_ENTRIES`) by a pass of half a metre with a batch that :func:`simulate_passes` runs on each
-    entry. Each entry compiles on its own (~25-60 s of one core on a fresh install); processes that warm
-    different entries at once share the cache, so N cores warm them in about 1/N of the time."""
+    entry. On a fresh install the single pass's entry compiles in ~50-70 s of one core, each other width's chunk
+    integrator in ~50-60 s, shared by that width's serial and parallel entries (~2-15 s each on top); processes
+    that warm different widths at once share the cache, so two cores warm them in about half the time."""
     import numba
 
     unknown = [e for e in entries if e not in KERNEL_ENTRIES]
