@@ -14,22 +14,23 @@ def warm_dynamics_kernel():
     first test, so that its compile cost lands here once instead of inside whichever test happens to run first.
     Each (serial/parallel, batch width) pair is its own compiled entry (see trackenv.physics._kernel) and the
     suite uses them all; cold, their compilation is most of the suite's time, so a second process compiles the
-    parallel entries while this one compiles the serial ones (they share numba's on-disk cache), then this one
-    loads them."""
+    entries of the wide chunks while this one compiles those of one and four rows (they share numba's on-disk
+    cache; the two entries of a width share their chunk integrator, so a width is compiled in one process), then
+    this one loads them."""
     import subprocess
     import sys
 
     from trackenv.physics.dynamics import KERNEL_ENTRIES, warm_kernel
 
-    parallel = [e for e in KERNEL_ENTRIES if e[0]]
+    wide = [e for e in KERNEL_ENTRIES if e[1] >= 8]
     helper = subprocess.Popen(
-        [sys.executable, "-c", f"from trackenv.physics.dynamics import warm_kernel; warm_kernel({parallel!r})"]
+        [sys.executable, "-c", f"from trackenv.physics.dynamics import warm_kernel; warm_kernel({wide!r})"]
     )
     try:
-        warm_kernel([e for e in KERNEL_ENTRIES if not e[0]])
+        warm_kernel([e for e in KERNEL_ENTRIES if e not in wide])
     finally:
         helper.wait()
-    warm_kernel(parallel)  # compiled by the helper: loaded from the cache (or compiled here if it failed)
+    warm_kernel(wide)  # compiled by the helper: loaded from the cache (or compiled here if it failed)
     # the compiled inverse of the root-solved settlement laws (trackenv.physics._newton), one entry
     from trackenv.physics.settlement import SatoLaw
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import literally, njit, prange
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 # Floating-point freedoms that do not make a row depend on its SIMD lane, width or compiled copy: no NaN/inf/-0
@@ -717,9 +717,22 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                 out_wheel[step, j, b] = q[wheel_dofs[j], b]
 
 
-# One compiled entry per (threads, width): the width is a constant in each, so that after numba inlines the
-# chunk integrator the loops over the rows have a known trip count (a width read at run time costs the single
-# pass 2.5x). Written out, not generated, so that numba's on-disk cache keeps each one.
+@njit(cache=True, fastmath=FASTMATH)
+def _run_chunk_shared(mesh, drive, rows, peaks, ch, W):
+    """:func:`_run_chunk` compiled once per width ``W`` (a literal, so a compile-time constant in each compiled
+    copy) and called by both the serial and the parallel entry of that width: the chunk integrator is most of the
+    kernel's compile time, which several rows' widths then pay once instead of once per entry. ``ch`` is int64
+    from either entry (prange's index is unsigned), so that both share one compiled copy."""
+    literally(W)
+    _run_chunk(mesh, drive, rows, peaks, ch, W)
+
+
+# One compiled entry per (threads, width): the width is a constant in each, so that the loops over the rows have
+# a known trip count (a width read at run time costs the single pass 2.5x). The serial one-row entry, the single
+# pass, inlines the chunk integrator (called, it ran 6-12 % slower on the env's pass); the others call the copy of
+# their width (no measurable difference at 16 rows): a width compiles once for both entries, and a parallel entry
+# around a call compiles in ~15 s instead of ~70-120 s around the inlined integrator. Written out, not
+# generated, so that numba's on-disk cache keeps each one.
 @njit(cache=True, fastmath=FASTMATH)
 def _serial_1(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
@@ -729,43 +742,43 @@ def _serial_1(mesh, drive, rows, peaks):
 @njit(cache=True, fastmath=FASTMATH)
 def _serial_4(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 4)
+        _run_chunk_shared(mesh, drive, rows, peaks, ch, 4)
 
 
 @njit(cache=True, fastmath=FASTMATH)
 def _serial_8(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 8)
+        _run_chunk_shared(mesh, drive, rows, peaks, ch, 8)
 
 
 @njit(cache=True, fastmath=FASTMATH)
 def _serial_16(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+        _run_chunk_shared(mesh, drive, rows, peaks, ch, 16)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_1(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 1)
+        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 1)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_4(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 4)
+        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 4)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_8(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 8)
+        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 8)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _parallel_16(mesh, drive, rows, peaks):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 16)
+        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 16)
 
 
 _RUNNERS = {
