@@ -721,18 +721,19 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
 def _run_chunk_shared(mesh, drive, rows, peaks, ch, W):
     """:func:`_run_chunk` compiled once per width ``W`` (a literal, so a compile-time constant in each compiled
     copy) and called by both the serial and the parallel entry of that width: the chunk integrator is most of the
-    kernel's compile time, which several rows' widths then pay once instead of once per entry. ``ch`` is int64
-    from either entry (prange's index is unsigned), so that both share one compiled copy."""
+    kernel's compile time, which each width of several rows then pays once instead of once per entry. ``ch`` is
+    int64 from either entry (prange's index is unsigned), so that both share one compiled copy."""
     literally(W)
     _run_chunk(mesh, drive, rows, peaks, ch, W)
 
 
 # One compiled entry per (threads, width): the width is a constant in each, so that the loops over the rows have
 # a known trip count (a width read at run time costs the single pass 2.5x). The serial one-row entry, the single
-# pass, inlines the chunk integrator (called, it ran 6-12 % slower on the env's pass); the others call the copy of
-# their width (no measurable difference at 16 rows): a width compiles once for both entries, and a parallel entry
-# around a call compiles in ~15 s instead of ~70-120 s around the inlined integrator. Written out, not
-# generated, so that numba's on-disk cache keeps each one.
+# pass, inlines the chunk integrator (called, it looked 6-12 % slower on the env's pass in one comparison and not
+# in another; inlined is the safe side); the others call the copy of their width (no measurable difference at 4 to
+# 16 rows): a width of several rows compiles once for both entries, and a parallel entry around a call compiles
+# in ~15 s instead of ~70-120 s around the inlined integrator. Written out, not generated, so that numba's on-disk
+# cache keeps each one.
 @njit(cache=True, fastmath=FASTMATH)
 def _serial_1(mesh, drive, rows, peaks):
     for ch in range(rows.u.shape[0]):
