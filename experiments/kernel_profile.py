@@ -4,8 +4,10 @@ Sampling profilers do not help here: the kernel is one JIT-compiled function wit
 has no hardware performance counters, and ``perf`` sees the JIT code without symbols. So this script makes a copy
 of ``trackenv/physics/_kernel.py`` with a cycle counter (LLVM's ``readcyclecounter``, the x86 TSC) read at
 every section header of the time-step loop — the comment lines ``# ---- <name>`` of ``_run_chunk`` — and adds up
-the cycles between consecutive headers. Reading the counter costs a few cycles per section (the totals come out
-~1-3 % above the plain kernel's); it does not change the arithmetic, so the copy's results are the kernel's.
+the cycles between consecutive headers. The track's predictor and corrector on a window (mass product, damping,
+triangular sweeps; correction, Newmark update, peak sleeper forces) are functions of their own, each one section.
+Reading the counter costs a few cycles per section (the totals come out ~1-3 % above the plain kernel's); it does
+not change the arithmetic, so the copy's results are the kernel's.
 
 Give several kernel files (``--kernel A --kernel B``, e.g. an older commit's ``_kernel.py`` from ``git show``) to
 compare them: their passes alternate in one process, so a drifting machine moves both alike, which is what makes

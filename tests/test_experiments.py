@@ -53,7 +53,7 @@ def test_kernel_profile_counts_every_section_of_the_kernels_time_step():
     compile(text, "instrumented_kernel.py", "exec")  # valid Python
     headers = [line.split("# ---- ", 1)[1].strip() for line in source.splitlines() if "        # ---- " in line]
     assert names[1:] == headers and len(headers) >= 8  # one section per header, plus the step's start
-    assert "Newton on the compressions" in " ".join(names) and "triangular sweeps" in names
+    assert "Newton on the compressions" in " ".join(names) and "track predictor" in " ".join(names)
     # a counter read at every header and once at the end of the step, each closing one section
     assert [f"prof[{k}] +=" in text for k in range(len(names))] == [True] * len(names)
     assert text.count("_cycles(); prof[") == len(names)

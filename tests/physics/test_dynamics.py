@@ -500,3 +500,29 @@ def test_a_vehicles_system_is_assembled_once_and_cannot_be_changed_by_a_pass():
             arr[...] = 0
     car = _vehicle_system(Car.manchester_coach())
     np.testing.assert_allclose(car.static_wheel_loads, Car.manchester_coach().system().static_wheel_loads, rtol=0)
+
+
+@pytest.mark.parametrize("n_rows", [1, 3, 17])
+def test_the_kernel_gets_arrays_that_do_not_overlap(monkeypatch, n_rows):
+    """The kernel's window functions are compiled with the promise that their arrays do not overlap
+    (``_kernel._NoAliasCompiler``): no two of a pass's per-row arrays (inputs, state, outputs) may share memory,
+    nor any of them with the shared mesh and vehicle arrays, at any chunk width and for a train of several axles."""
+    from trackenv.physics import _kernel, dynamics
+
+    seen = []
+
+    def recording_run(mesh, drive, rows, peaks, width):
+        seen.append((mesh, drive, rows, peaks))
+        return _kernel.run(mesh, drive, rows, peaks, width)
+
+    monkeypatch.setattr(dynamics, "_kernel", type("K", (), {**vars(_kernel), "run": staticmethod(recording_run)}))
+    for t, vehicle in ((Track.seed(), LOADED), (Track.realistic(40.0), Car.manchester_coach())):
+        rows = 5e-4 * np.random.default_rng(3).standard_normal((n_rows, t.n_sleepers))
+        simulate_passes(t, vehicle, V80, rows, support_settlement=np.abs(rows), dt="auto")
+    assert len(seen) == 2
+    for mesh, drive, rows_, peaks in seen:
+        shared = [x for x in (*mesh, *drive) if isinstance(x, np.ndarray)]
+        per_row = [*rows_, *peaks]
+        for i, x in enumerate(per_row):
+            for y in per_row[i + 1 :] + shared:
+                assert not np.may_share_memory(x, y), (rows_._fields + peaks._fields)[i]

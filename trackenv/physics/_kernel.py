@@ -24,12 +24,15 @@ it emits where it cannot prove an index non-negative blocks vectorisation (it co
 time). Where an index has to be computed (the sleepers of a window, the rows of a column sweep) it is cast to
 unsigned, for which numba emits no wrap-around: the one-row sleeper loops ran twice as fast that way. The comment
 lines ``# ---- <name>`` of the time-step loop mark its sections: ``experiments/kernel_profile.py`` counts the
-processor cycles spent in each (sampling profilers see nothing inside this one inlined function). The rail's
-mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of rows (``Chunks``
-arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is
-compiled without reassociating fast-math: every row's arithmetic is the same IEEE sequence whatever its SIMD
-lane, chunk width or thread, so a row's result does not depend on the batch it runs in (bit-identical; tested).
-The single pass is a batch of one.
+processor cycles spent in each (sampling profilers see nothing inside this one inlined function). The track's
+predictor and corrector on a window are functions of their own (:func:`_predict_window`, :func:`_correct_window`,
+their arrays gathered in ``Window``); for several rows they, and the triangular sweeps, are compiled apart with
+the promise that their arrays do not overlap (:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks
+it put around every loop across the rows. The rail's mass band is stored once (``Mesh.rail_mass``), not per row.
+The batch is cut into chunks of rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores
+in parallel. The kernel is compiled without reassociating fast-math: every row's arithmetic is the same IEEE
+sequence whatever its SIMD lane, chunk width or thread, so a row's result does not depend on the batch it runs in
+(bit-identical; tested). The single pass is a batch of one.
 
 The arguments are four typed structures (namedtuples of arrays, which numba accepts), defined once here:
 ``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place) and ``Peaks``
@@ -42,6 +45,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import literally, njit, prange
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 # Floating-point freedoms that do not make a row depend on its SIMD lane, width or compiled copy: no NaN/inf/-0
@@ -58,9 +62,7 @@ rail's consistent mass matrix as its 2B+1 full diagonals, rail_mass[d, i] = M_ra
 [kg]: the rail is the same in every row, so its mass is stored once; the kernel reads its off-diagonals (the
 diagonal, with the sleepers' masses, is per row)."""
 
-Drive = namedtuple(
-    "Drive", "x_axle consts law param mass damping kv_inv force wheel_dofs cluster_of_axle n_clusters"
-)
+Drive = namedtuple("Drive", "x_axle consts law param mass damping kv_inv force wheel_dofs cluster_of_axle n_clusters")
 Drive.__doc__ = """What moves over the track, shared by every row: axle positions (n_steps+1, n_axles) [m],
 Newmark constants a0..a7, contact law code and parameter, the vehicle's M, C, K_eff⁻¹ (nv, nv), its constant
 forces (nv,), the DOF of each wheel, the window group of each axle and the number of groups."""
@@ -174,6 +176,31 @@ def _solve(fw, bw, inv_diag, m, x, W):
                     - g2[b] * xr[2 * W + b]
                     - g1[b] * xr[W + b]
                 )
+
+
+class _NoAliasCompiler(CompilerBase):
+    """numba's nopython pipeline with its ``noalias`` flag on: every pointer among the function's arguments (an
+    array's data, a namedtuple's arrays) is marked ``noalias`` for LLVM, the promise that memory written through
+    one argument is not read or written through another during the call. numba cannot know this of arrays, and
+    without it LLVM guards each short loop across a chunk's rows with run-time overlap checks (~80 instructions
+    per DOF, more than the DOF's arithmetic at 4 to 16 rows). The functions compiled with it are called with
+    distinct arrays only: the kernel's inputs, outputs and workspaces are each their own allocation. numba sets
+    the same flag on its parallel loop bodies when it finds no aliasing; it has no decorator option for it, so it
+    is set here through numba's custom-pipeline hook (``pipeline_class``). It changes what LLVM may assume, not
+    the arithmetic: results are bit-identical."""
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+
+@njit(cache=True, fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
+def _solve_rows(fw, bw, inv_diag, m, x, W):
+    """:func:`_solve` compiled on its own (``W`` a literal) with distinct arrays (:class:`_NoAliasCompiler`).
+    Inlined into the chunk integrator, the sweeps ran slower: with the call, the kernel's time on the env's pass
+    fell ~8 % for one row (the call alone; no overlap checks at one row) and ~15 % at 32 rows (interleaved A/B)."""
+    literally(W)
+    _solve(fw, bw, inv_diag, m, x, W)
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
@@ -309,6 +336,111 @@ def _local(dof, base, epb):
     return off
 
 
+Window = namedtuple("Window", "u v a pred rhs qdamp mass_diag pad_k pad_c bal_k bal_c peak_ballast peak_total")
+Window.__doc__ = """One chunk's track arrays as the window steps see them: state u, v, a and the predictor pred, flat
+(n_dof*W); the padded right-hand side rhs ((n_dof + 2B)*W, see :func:`_mass_times`), the damping term qdamp and
+the mass diagonal, flat; pads, ballast and peak sleeper forces (n_sleepers, W). Each a distinct array (see
+:class:`_NoAliasCompiler`)."""
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
+    """Track predictor on the window [lo, hi) (no contact force): K_eff pred = M p + C q for every row, with
+    p = a0 u + a2 v + a3 a and q = a1 u + a4 v + a5 a; the window's sleepers are s_lo..s_hi (sleeper g of the
+    window has its rail node's deflection at DOF lo + g*bay_dofs and its own DOF sleeper_shift after it)."""
+    consts = drive.consts
+    a0, a1, a2, a3, a4, a5 = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
+    u, v, a, rhs, qdamp, pred = win.u, win.v, win.a, win.rhs, win.qdamp, win.pred
+    m = hi - lo
+    uw, vw, aw = u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
+    rw, qw = rhs[(lo + B) * W : (hi + B) * W], qdamp[lo * W : hi * W]
+    for g in range(m * W):
+        rw[g] = a0 * uw[g] + a2 * vw[g] + a3 * aw[g]
+        qw[g] = a1 * uw[g] + a4 * vw[g] + a5 * aw[g]
+    before, after = rhs[lo * W : (lo + B) * W], rhs[(hi + B) * W : (hi + 2 * B) * W]
+    for g in range(B * W):
+        before[g] = 0.0
+        after[g] = 0.0
+    # mass product
+    _mass_times(mesh.rail_mass, win.mass_diag, rhs, pred, lo, hi, W)
+    # damping (only in the pads and the ballast)
+    qw, qs = qdamp[lo * W :], qdamp[(lo + sleeper_shift) * W :]
+    pw, ps = pred[lo * W :], pred[(lo + sleeper_shift) * W :]
+    cp, cb = win.pad_c[s_lo:], win.bal_c[s_lo:]
+    for g in range(s_hi + 1 - s_lo):
+        base = np.uint64(g * bay_dofs * W)  # unsigned: no negative-index wrap-around check
+        for b in range(W):
+            f = base + np.uint64(b)
+            fp = cp[g, b] * (qw[f] - qs[f])
+            pw[f] += fp
+            ps[f] += cb[g, b] * qs[f] - fp
+    # triangular sweeps
+    _solve_rows(fw, bw, inv_diag, m, pred[lo * W : hi * W], W)
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
+    """Correct the track on the window [lo, hi) of axle group c, u = pred + Σ_j F_j K⁻¹ N_j (cols[j, loc[j, k]]:
+    the solved column of axle j's element DOF k, fsh[j, k]: its contact force times shape function), then its
+    Newmark update and the peak sleeper forces of the window's sleepers s_lo..s_hi (indexed as in
+    :func:`_predict_window`)."""
+    consts, cluster_of_axle = drive.consts, drive.cluster_of_axle
+    a0, a2, a3, a6, a7 = consts[0], consts[2], consts[3], consts[6], consts[7]
+    m = hi - lo
+    u, v, a = win.u, win.v, win.a
+    pw, uw, vw, aw = win.pred[lo * W : hi * W], u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
+    for j in range(cluster_of_axle.shape[0]):
+        if cluster_of_axle[j] != c:
+            continue
+        c0 = cols[j, loc[j, 0]]
+        c1 = cols[j, loc[j, 1]]
+        c2 = cols[j, loc[j, 2]]
+        c3 = cols[j, loc[j, 3]]
+        f0 = fsh[j, 0]
+        f1 = fsh[j, 1]
+        f2 = fsh[j, 2]
+        f3 = fsh[j, 3]
+        for i in range(m):
+            for b in range(W):
+                f = i * W + b
+                pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
+    # Newmark update of the track
+    for g in range(m * W):
+        an = a0 * (pw[g] - uw[g]) - a2 * vw[g] - a3 * aw[g]
+        vw[g] += a6 * aw[g] + a7 * an
+        aw[g] = an
+        uw[g] = pw[g]
+    # peak sleeper forces in the window
+    uw, us, vw, vs = u[lo * W :], u[(lo + sleeper_shift) * W :], v[lo * W :], v[(lo + sleeper_shift) * W :]
+    kp, cp, kb, cb = win.pad_k[s_lo:], win.pad_c[s_lo:], win.bal_k[s_lo:], win.bal_c[s_lo:]
+    pb, pt = win.peak_ballast[s_lo:], win.peak_total[s_lo:]
+    for g in range(s_hi + 1 - s_lo):
+        base = np.uint64(g * bay_dofs * W)
+        for b in range(W):
+            f = base + np.uint64(b)
+            fb = kb[g, b] * us[f] + cb[g, b] * vs[f]
+            fp = kp[g, b] * (uw[f] - us[f]) + cp[g, b] * (vw[f] - vs[f])
+            pb[g, b] = max(pb[g, b], fb)
+            pt[g, b] = max(pt[g, b], fb + fp)
+
+
+@njit(cache=True, fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
+def _predict_window_rows(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
+    """:func:`_predict_window` for a chunk of several rows, compiled on its own with distinct arrays
+    (:class:`_NoAliasCompiler`): its loops across the rows then run without overlap checks. One row inlines
+    :func:`_predict_window` instead: a call per step with the window's arrays costs its short loops more."""
+    literally(W)
+    _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
+
+
+@njit(cache=True, fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
+def _correct_window_rows(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
+    """:func:`_correct_window` for a chunk of several rows, compiled on its own with distinct arrays (as
+    :func:`_predict_window_rows`)."""
+    literally(W)
+    _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
+
+
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _run_chunk(mesh, drive, rows, peaks, ch, W):
     """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass.
@@ -338,7 +470,6 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
         drive.consts[4], drive.consts[5], drive.consts[6], drive.consts[7],
     )  # fmt: skip
     n = rows.u.shape[1]
-    rail_mass = mesh.rail_mass
     mass_diag = rows.mass_diag[ch].reshape(n * W)
     keff = rows.keff[ch]
     pad_k = rows.pad_k[ch]
@@ -400,6 +531,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     fprime = np.zeros(n_axles)
     res = np.zeros(n_axles)
     fsh = np.zeros((n_axles, 4, W))
+    win = Window(u, v, a, pred, rhs, qdamp, mass_diag, pad_k, pad_c, bal_k, bal_c, peak_ballast, peak_total)
     res_w = np.zeros(W)  # one axle, several rows: the Newton's right-hand sides and converged flags per row
     done_w = np.zeros(W)
     for j in range(n_axles):  # compression that carries the initial force
@@ -494,7 +626,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                         tmp[f] = 0.0
                     for b in range(W):
                         tmp[(dof - lo) * W + b] = 1.0
-                    _solve(Fw[c], Bw[c], invd[c], m, tmp, W)
+                    _solve_rows(Fw[c], Bw[c], invd[c], m, tmp, W)
                     colk = cols[j, k]
                     for f in range(m * W):
                         colk[f] = tmp[f]
@@ -506,36 +638,12 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
 
         # ---- track predictor (no contact force) in every window: K_eff u = M p + C q
         for c in range(n_clusters):
-            lo = lo_c[c]
-            hi = hi_c[c]
-            m = hi - lo
-            uw, vw, aw = u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
-            rw, qw = rhs[(lo + B) * W : (hi + B) * W], qdamp[lo * W : hi * W]
-            for g in range(m * W):
-                rw[g] = a0 * uw[g] + a2 * vw[g] + a3 * aw[g]
-                qw[g] = a1 * uw[g] + a4 * vw[g] + a5 * aw[g]
-            before, after = rhs[lo * W : (lo + B) * W], rhs[(hi + B) * W : (hi + 2 * B) * W]
-            for g in range(B * W):
-                before[g] = 0.0
-                after[g] = 0.0
-            # ---- mass product
-            _mass_times(rail_mass, mass_diag, rhs, pred, lo, hi, W)
-            # ---- damping (only in the pads and the ballast)
-            # sleeper g of the window has its rail node's
-            # deflection at DOF lo + g*bay_dofs and its own sleeper_shift DOFs after it
-            s_lo = s_lo_c[c]
-            qw, qs = qdamp[lo * W :], qdamp[(lo + sleeper_shift) * W :]
-            pw, ps = pred[lo * W :], pred[(lo + sleeper_shift) * W :]
-            cp, cb = pad_c[s_lo:], bal_c[s_lo:]
-            for g in range(s_hi_c[c] + 1 - s_lo):
-                base = np.uint64(g * bay_dofs * W)  # unsigned: no negative-index wrap-around check
-                for b in range(W):
-                    f = base + np.uint64(b)
-                    fp = cp[g, b] * (qw[f] - qs[f])
-                    pw[f] += fp
-                    ps[f] += cb[g, b] * qs[f] - fp
-            # ---- triangular sweeps
-            _solve(Fw[c], Bw[c], invd[c], m, pred[lo * W : hi * W], W)
+            lo, hi, s_lo, s_hi = lo_c[c], hi_c[c], s_lo_c[c], s_hi_c[c]
+            fw, bw, inv_diag = Fw[c], Bw[c], invd[c]
+            if W == 1:  # one row: inlined (a call per step with the window's arrays costs the short loops more)
+                _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
+            else:
+                _predict_window_rows(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
 
         # ---- vehicle predictor
         for i in range(nv):
@@ -648,47 +756,13 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                     for k in range(4):
                         fsh[j, k, b] = force[j, b] * shape[j, k]
 
-        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, then its Newmark update
+        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, its Newmark update and peak sleeper forces
         for c in range(n_clusters):
-            lo = lo_c[c]
-            hi = hi_c[c]
-            m = hi - lo
-            pw, uw, vw, aw = pred[lo * W : hi * W], u[lo * W : hi * W], v[lo * W : hi * W], a[lo * W : hi * W]
-            for j in range(n_axles):
-                if cluster_of_axle[j] != c:
-                    continue
-                c0 = cols[j, loc[j, 0]]
-                c1 = cols[j, loc[j, 1]]
-                c2 = cols[j, loc[j, 2]]
-                c3 = cols[j, loc[j, 3]]
-                f0 = fsh[j, 0]
-                f1 = fsh[j, 1]
-                f2 = fsh[j, 2]
-                f3 = fsh[j, 3]
-                for i in range(m):
-                    for b in range(W):
-                        f = i * W + b
-                        pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
-            # ---- Newmark update of the track
-            for g in range(m * W):
-                an = a0 * (pw[g] - uw[g]) - a2 * vw[g] - a3 * aw[g]
-                vw[g] += a6 * aw[g] + a7 * an
-                aw[g] = an
-                uw[g] = pw[g]
-            # ---- peak sleeper forces in the window
-            # (sleepers indexed as in the predictor's damping)
-            s_lo = s_lo_c[c]
-            uw, us, vw, vs = u[lo * W :], u[(lo + sleeper_shift) * W :], v[lo * W :], v[(lo + sleeper_shift) * W :]
-            kp, cp, kb, cb = pad_k[s_lo:], pad_c[s_lo:], bal_k[s_lo:], bal_c[s_lo:]
-            pb, pt = peak_ballast[s_lo:], peak_total[s_lo:]
-            for g in range(s_hi_c[c] + 1 - s_lo):
-                base = np.uint64(g * bay_dofs * W)
-                for b in range(W):
-                    f = base + np.uint64(b)
-                    fb = kb[g, b] * us[f] + cb[g, b] * vs[f]
-                    fp = kp[g, b] * (uw[f] - us[f]) + cp[g, b] * (vw[f] - vs[f])
-                    pb[g, b] = max(pb[g, b], fb)
-                    pt[g, b] = max(pt[g, b], fb + fp)
+            lo, hi, s_lo, s_hi = lo_c[c], hi_c[c], s_lo_c[c], s_hi_c[c]
+            if W == 1:
+                _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
+            else:
+                _correct_window_rows(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
 
         # ---- correct the vehicle
         for i in range(nv):
