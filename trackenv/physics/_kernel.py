@@ -18,13 +18,14 @@ together; only the supports, the irregularity and the state differ. Every per-ro
 *last* (innermost), and the track's state vectors are used flat, DOF i of row b at i*W + b, with the chunk width
 W a compile-time constant: the hot loops (mass product, Newmark update, correction) are then unit-stride loops
 that compile to SIMD at any width, across the rows of a chunk and, for the single pass (W = 1), along the track.
-The triangular sweeps are chains along the track: one row keeps the chain in registers, several rows run it with
-the rows as SIMD lanes. Loops index views from 0 wherever they can: numba wraps negative indices, and the check
-it emits where it cannot prove an index non-negative blocks vectorisation (it cost the single pass half its
-time). Where an index has to be computed (the sleepers of a window, the rows of a column sweep) it is cast to
-unsigned, for which numba emits no wrap-around: the one-row sleeper loops ran twice as fast that way. The comment
-lines ``# ---- <name>`` of the time-step loop mark its sections: ``experiments/kernel_profile.py`` counts the
-processor cycles spent in each (sampling profilers see nothing inside this one inlined function). The track's
+The triangular sweeps are chains along the track: one row keeps the chain in registers, 4 and 8 rows run blocks of
+four such chains side by side, 16 rows run the chain with the rows as SIMD lanes. Loops index views from 0 wherever
+they can: numba wraps negative indices, and the check it emits where it cannot prove an index non-negative blocks
+vectorisation (it cost the single pass half its time). Where an index has to be computed (the sleepers of a window,
+the rows of a column sweep) it is cast to unsigned, for which numba emits no wrap-around: the one-row sleeper loops
+ran twice as fast that way. The comment lines ``# ---- <name>`` of the time-step loop mark its sections:
+``experiments/kernel_profile.py`` counts the processor cycles spent in each (sampling profilers see nothing
+inside this one inlined function). The track's
 predictor and corrector on a window are functions of their own (:func:`_predict_window`, :func:`_correct_window`,
 their arrays gathered in ``Window``); for several rows they, and the triangular sweeps, are compiled apart with
 the promise that their arrays do not overlap (:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks
