@@ -25,11 +25,11 @@ vectorisation (it cost the single pass half its time). Where an index has to be 
 the rows of a column sweep) it is cast to unsigned, for which numba emits no wrap-around: the one-row sleeper loops
 ran twice as fast that way. The comment lines ``# ---- <name>`` of the time-step loop mark its sections:
 ``experiments/kernel_profile.py`` counts the processor cycles spent in each (sampling profilers see nothing
-inside this one inlined function). The track's
-predictor and corrector on a window are functions of their own (:func:`_predict_window`, :func:`_correct_window`,
-their arrays gathered in ``Window``); for several rows they, and the triangular sweeps, are compiled apart with
-the promise that their arrays do not overlap (:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks
-it put around every loop across the rows. The rail's mass band is stored once (``Mesh.rail_mass``), not per row.
+inside the compiled functions). The track's predictor and corrector on a window are functions of their own
+(:func:`_predict_window`, :func:`_correct_window`, their arrays gathered in ``Window``); for several rows they, and
+the triangular sweeps, are compiled apart with the promise that their arrays do not overlap
+(:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks it put around every loop across the rows.
+The rail's mass band is stored once (``Mesh.rail_mass``), not per row.
 The batch is cut into chunks of rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores
 in parallel. The kernel is compiled without reassociating fast-math: every row's arithmetic is the same IEEE
 sequence whatever its SIMD lane, chunk width or thread, so a row's result does not depend on the batch it runs in
