@@ -437,18 +437,21 @@ def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one_thread = simulate_passes(tracks, LOADED, V80, rows, **kw)
+        one_thread = simulate_passes(tracks, LOADED, V80, rows, **kw)  # chunks of 16 rows
+        eight = simulate_passes(  # one chunk of 8 rows
+            tracks[:8], LOADED, V80, rows[:8], **{**kw, "support_settlement": kw["support_settlement"][:8]}
+        )
     finally:
         numba.set_num_threads(threads)
     all_threads = simulate_passes(tracks, LOADED, V80, rows, **kw)
-    five = simulate_passes(
+    five = simulate_passes(  # two chunks of 4 rows
         tracks[3:8], LOADED, V80, rows[3:8], **{**kw, "support_settlement": kw["support_settlement"][3:8]}
     )
     for b in (0, 3, 7, 16):
         single = simulate_pass(
             tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": kw["support_settlement"][b]}
         )
-        others = [one_thread[b], all_threads[b]] + ([five[b - 3]] if 3 <= b < 8 else [])
+        others = [one_thread[b], all_threads[b]] + ([five[b - 3]] if 3 <= b < 8 else []) + ([eight[b]] if b < 8 else [])
         for other in others:
             for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
                 np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)

@@ -13,27 +13,27 @@ rest. Every quantity the caller sees (contact force, rail deflection, peak sleep
 window is. With the window as long as the track this is the full model. (The caller sizes the window from the
 track's decay length: see ``dynamics.window_margin``.)
 
-Lockstep batch. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move
-together; only the supports, the irregularity and the state differ. Every per-row array carries the batch axis
-*last* (innermost), and the track's state vectors are used flat, DOF i of row b at i*W + b, with the chunk width
-W a compile-time constant: the hot loops (mass product, Newmark update, correction) are then unit-stride loops
-that compile to SIMD at any width, across the rows of a chunk and, for the single pass (W = 1), along the track.
-The triangular sweeps are chains along the track: one row keeps the chain in registers, 4 and 8 rows run blocks of
-four such chains side by side, 16 rows run the chain with the rows as SIMD lanes. Loops index views from 0 wherever
-they can: numba wraps negative indices, and the check it emits where it cannot prove an index non-negative blocks
-vectorisation (it cost the single pass half its time). Where an index has to be computed (the sleepers of a window,
-the rows of a column sweep) it is cast to unsigned, for which numba emits no wrap-around: the one-row sleeper loops
-ran twice as fast that way. The comment lines ``# ---- <name>`` of the time-step loop mark its sections:
-``experiments/kernel_profile.py`` counts the processor cycles spent in each (sampling profilers see nothing
-inside the compiled functions). The track's predictor and corrector on a window are functions of their own
+Lockstep batch. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move together;
+only the supports, the irregularity and the state differ. Every per-row array carries the batch axis *last*
+(innermost), and the track's state vectors are used flat, DOF i of row b at i*W + b, with the chunk width W a
+compile-time constant: the hot loops (mass product, Newmark update, correction) are then unit-stride loops that
+compile to SIMD at any width, across the rows of a chunk and, for the single pass (W = 1), along the track. The
+triangular sweeps are chains along the track of fused multiply-adds, the chain's last four DOFs in registers: one
+row's as scalars, several rows' as the lanes of one vector (written in LLVM's IR, :func:`_sweep_lanes`). Loops index
+views from 0 wherever they can: numba wraps negative indices, and the check it emits where it cannot prove an index
+non-negative blocks vectorisation (it cost the single pass half its time). Where an index has to be computed (the
+sleepers of a window, the rows of a column sweep) it is cast to unsigned, for which numba emits no wrap-around: the
+one-row sleeper loops ran twice as fast that way. The comment lines ``# ---- <name>`` of the time-step loop mark its
+sections: ``experiments/kernel_profile.py`` counts the processor cycles spent in each (sampling profilers see
+nothing inside the compiled functions). The track's predictor and corrector on a window are functions of their own
 (:func:`_predict_window`, :func:`_correct_window`, their arrays gathered in ``Window``); for several rows they, and
 the triangular sweeps, are compiled apart with the promise that their arrays do not overlap
-(:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks it put around every loop across the rows.
-The rail's mass band is stored once (``Mesh.rail_mass``), not per row.
-The batch is cut into chunks of rows (``Chunks`` arrays have a leading chunk axis), and the chunks run on the cores
-in parallel. The kernel is compiled without reassociating fast-math: every row's arithmetic is the same IEEE
-sequence whatever its SIMD lane, chunk width or thread, so a row's result does not depend on the batch it runs in
-(bit-identical; tested). The single pass is a batch of one.
+(:class:`_NoAliasCompiler`), which lets LLVM drop the overlap checks it put around every loop across the rows. The
+rail's mass band is stored once (``Mesh.rail_mass``), not per row. The batch is cut into chunks of rows (``Chunks``
+arrays have a leading chunk axis), and the chunks run on the cores in parallel. The kernel is compiled without
+reassociating fast-math: every row's arithmetic is the same IEEE sequence whatever its SIMD lane, chunk width or
+thread, so a row's result does not depend on the batch it runs in (bit-identical; tested). The single pass is a
+batch of one.
 
 The arguments are four typed structures (namedtuples of arrays, which numba accepts), defined once here:
 ``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place) and ``Peaks``
@@ -45,14 +45,18 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
+from llvmlite import ir
 from numba import literally, njit, prange
+from numba.core import cgutils, types
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
+from numba.extending import intrinsic
 
 B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 # Floating-point freedoms that do not make a row depend on its SIMD lane, width or compiled copy: no NaN/inf/-0
-# bookkeeping only. Never reassociation or approximate reciprocals, and no fused multiply-adds ("contract"): LLVM
-# fuses where it chooses, differently in each compiled copy (a chunk of 16 rows moved by ~1e-13 between the
-# serial and the parallel entry), which broke the bit-identity of a row across batch sizes.
+# bookkeeping only. Never reassociation or approximate reciprocals, and no fused multiply-adds left to the compiler
+# ("contract"): LLVM fuses where it chooses, differently in each compiled copy (a chunk of 16 rows moved by ~1e-13
+# between the serial and the parallel entry), which broke the bit-identity of a row across batch sizes. Where a
+# fused multiply-add pays, the kernel writes it out (:func:`_fma`), the same in every path.
 FASTMATH = {"nnan", "ninf", "nsz"}
 WIDTHS = (1, 4, 8, 16)  # rows per chunk the kernel is compiled for (each a constant in its own compiled copy)
 
@@ -118,11 +122,96 @@ def _scale(L, inv_diag, m, fw, bw, W):
                 bw[k, f] = L[i + k, k, b] * inv_diag[f] if i + k < m else 0.0
 
 
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a·b + c rounded once: LLVM's ``llvm.fma`` intrinsic, one instruction on a processor with FMA (a correctly
+    rounded library call on one without, same result). Written out where the kernel wants it, never left to the
+    compiler (see FASTMATH), so that every compiled copy fuses the same operations."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        f64 = ir.DoubleType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [f64], ir.FunctionType(f64, [f64, f64, f64]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _chain_step(x, inv_diag, g4, g3, g2, g1, f, x4, x3, x2, x1):
     """One DOF of a triangular sweep for one row: x[f] / L(i, i) less the terms of the sweep's four previous DOFs
-    x4..x1 (g: the pre-scaled factors), in the one order of operations every path of :func:`_solve` uses."""
-    return x[f] * inv_diag[f] - g4[f] * x4 - g3[f] * x3 - g2[f] * x2 - g1[f] * x1
+    x4..x1 (g: the pre-scaled factors), in the one order of operations every path of :func:`_solve` uses. The
+    terms are fused multiply-adds: the chain from one DOF to the next is then one FMA (4 cycles) instead of a
+    multiply and a subtraction (8), which halves a one-row sweep (a micro-benchmark on 68 DOFs: 6.3 -> 3.5
+    cycles per DOF at the nominal clock)."""
+    return _fma(-g1[f], x1, _fma(-g2[f], x2, _fma(-g3[f], x3, _fma(-g4[f], x4, x[f] * inv_diag[f]))))
+
+
+@intrinsic
+def _sweep_lanes(typingctx, x, inv_diag, g1, g2, g3, g4, m, forward, width):
+    """The chain part of a triangular sweep for a chunk of ``width`` rows: DOFs B..m-1 (``forward``) or m-1-B..0
+    (backward) of the flat vector x (DOF i of row b at i*W + b), the rows as the lanes of one LLVM vector whose
+    sweep's four previous DOFs stay in registers, each lane doing :func:`_chain_step`'s arithmetic (so a row's
+    result is the one-row path's, bit for bit). numba has no vector type and its loop vectoriser does not see
+    through the chain, so the loop is written here in LLVM's IR: a micro-benchmark (TSC cycles per DOF and sweep,
+    90 DOFs) gave 13 against 21 for blocks of four register chains at 8 rows, and 26 against 40 for the loop
+    across the lanes at 16. Every array must be contiguous (checked when the caller is compiled)."""
+    arrays = (x, inv_diag, g1, g2, g3, g4)
+    if not isinstance(width, types.IntegerLiteral) or not all(
+        isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.float64 for a in arrays
+    ):
+        return None
+    W = width.literal_value
+    sig = types.none(x, inv_diag, g1, g2, g3, g4, m, forward, width)
+
+    def codegen(context, builder, signature, args):
+        i64, f64 = ir.IntType(64), ir.DoubleType()
+        vec = ir.VectorType(f64, W)
+        vfma_type = ir.FunctionType(vec, [vec, vec, vec])
+        vfma = cgutils.get_or_insert_function(builder.module, vfma_type, f"llvm.fma.v{W}f64")
+        xp, dp, p1, p2, p3, p4 = (
+            context.make_array(ty)(context, builder, val).data for ty, val in zip(signature.args[:6], args[:6])
+        )
+        m_, fwd = args[6], builder.icmp_unsigned("!=", args[7], ir.Constant(args[7].type, 0))
+
+        def at(p, dof):  # pointer to the W lanes of DOF ``dof``
+            return builder.bitcast(builder.gep(p, [builder.mul(dof, ir.Constant(i64, W))]), vec.as_pointer())
+
+        def load(p, dof):
+            return builder.load(at(p, dof), align=8)
+
+        count = builder.sub(m_, ir.Constant(i64, B))  # the chain's DOFs
+        step = builder.select(fwd, ir.Constant(i64, 1), ir.Constant(i64, -1))
+        first = builder.select(fwd, ir.Constant(i64, B), builder.sub(m_, ir.Constant(i64, B + 1)))
+        with builder.if_then(builder.icmp_signed(">", count, ir.Constant(i64, 0))):
+            # the four DOFs before the first, as the sweep runs: first - 4*step .. first - step
+            prev = [load(xp, builder.sub(first, builder.mul(step, ir.Constant(i64, k)))) for k in (4, 3, 2, 1)]
+            entry = builder.block
+            loop = builder.append_basic_block("sweep_lanes")
+            done = builder.append_basic_block("sweep_lanes_done")
+            builder.branch(loop)
+            builder.position_at_end(loop)
+            k, i = builder.phi(i64), builder.phi(i64)
+            v = [builder.phi(vec) for _ in range(4)]  # x4, x3, x2, x1
+            k.add_incoming(ir.Constant(i64, 0), entry)
+            i.add_incoming(first, entry)
+            for phi, val in zip(v, prev):
+                phi.add_incoming(val, entry)
+            t = builder.fmul(load(xp, i), load(dp, i))
+            for g, xv in zip((p4, p3, p2, p1), v):
+                t = builder.call(vfma, [builder.fneg(load(g, i)), xv, t])
+            builder.store(t, at(xp, i), align=8)
+            k_next, i_next = builder.add(k, ir.Constant(i64, 1)), builder.add(i, step)
+            body = builder.block
+            k.add_incoming(k_next, body)
+            i.add_incoming(i_next, body)
+            for phi, val in zip(v, (v[1], v[2], v[3], t)):
+                phi.add_incoming(val, body)
+            builder.cbranch(builder.icmp_signed("<", k_next, count), loop, done)
+            builder.position_at_end(done)
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
@@ -130,11 +219,9 @@ def _solve(fw, bw, inv_diag, m, x, W):
     """Solve (L Lᵀ) y = x in place for the m DOFs of the flat vector x, every row (factors from :func:`_scale`;
     DOF i of row b at x[i*W + b]). Every index is written so that the compiler sees it is >= 0: numba wraps
     negative indices, and the check it would emit otherwise costs more than the arithmetic. Each sweep is a chain
-    along the track per row: one row keeps its last four DOFs in registers; 4 and 8 rows run blocks of four such
-    chains side by side (a micro-benchmark, TSC cycles per DOF and sweep: 19.8 against 22.4 for the loop across
-    the lanes at 4 rows, 33.7 against 44.4 at 8); 16 rows run the rows as the SIMD lanes of a loop per DOF (as
-    fast as four blocks there). Every path does a row's arithmetic in the same order (:func:`_chain_step`), so a
-    row's result does not depend on its chunk's width."""
+    along the track per row, its last four DOFs kept in registers: one row as scalars, several rows as the lanes of
+    one vector (:func:`_sweep_lanes`). Every path does a row's arithmetic in the same order (:func:`_chain_step`),
+    so a row's result does not depend on its chunk's width."""
     fw1, fw2, fw3, fw4 = fw[1], fw[2], fw[3], fw[4]
     bw1, bw2, bw3, bw4 = bw[1], bw[2], bw[3], bw[4]
     for i in range(min(m, B)):
@@ -150,35 +237,8 @@ def _solve(fw, bw, inv_diag, m, x, W):
             x0 = _chain_step(x, inv_diag, fw4, fw3, fw2, fw1, i, x4, x3, x2, x1)
             x[i] = x0
             x4, x3, x2, x1 = x3, x2, x1, x0
-    elif W <= 8:  # 4 or 8 rows: blocks of four rows, their chains side by side, each in registers as one row's
-        for o in range(0, W, 4):
-            a4, a3, a2, a1 = x[o], x[W + o], x[2 * W + o], x[3 * W + o]
-            b4, b3, b2, b1 = x[o + 1], x[W + o + 1], x[2 * W + o + 1], x[3 * W + o + 1]
-            c4, c3, c2, c1 = x[o + 2], x[W + o + 2], x[2 * W + o + 2], x[3 * W + o + 2]
-            d4, d3, d2, d1 = x[o + 3], x[W + o + 3], x[2 * W + o + 3], x[3 * W + o + 3]
-            for i in range(B, m):
-                f = np.uint64(i * W + o)  # unsigned: no negative-index wrap-around check
-                a0 = _chain_step(x, inv_diag, fw4, fw3, fw2, fw1, f, a4, a3, a2, a1)
-                b0 = _chain_step(x, inv_diag, fw4, fw3, fw2, fw1, f + np.uint64(1), b4, b3, b2, b1)
-                c0 = _chain_step(x, inv_diag, fw4, fw3, fw2, fw1, f + np.uint64(2), c4, c3, c2, c1)
-                d0 = _chain_step(x, inv_diag, fw4, fw3, fw2, fw1, f + np.uint64(3), d4, d3, d2, d1)
-                x[f], x[f + np.uint64(1)], x[f + np.uint64(2)], x[f + np.uint64(3)] = a0, b0, c0, d0
-                a4, a3, a2, a1 = a3, a2, a1, a0
-                b4, b3, b2, b1 = b3, b2, b1, b0
-                c4, c3, c2, c1 = c3, c2, c1, c0
-                d4, d3, d2, d1 = d3, d2, d1, d0
-    else:  # 16 rows, the SIMD lanes: a view of the five DOFs the step reads per DOF, indices from 0
-        for i in range(B, m):
-            xr, dr = x[(i - B) * W : (i + 1) * W], inv_diag[i * W :]
-            f1, f2, f3, f4 = fw[1, i * W :], fw[2, i * W :], fw[3, i * W :], fw[4, i * W :]
-            for b in range(W):
-                xr[4 * W + b] = (
-                    xr[4 * W + b] * dr[b]
-                    - f4[b] * xr[b]
-                    - f3[b] * xr[W + b]
-                    - f2[b] * xr[2 * W + b]
-                    - f1[b] * xr[3 * W + b]
-                )
+    else:  # several rows: the rows as the lanes of one vector, chained in registers
+        _sweep_lanes(x, inv_diag, fw1, fw2, fw3, fw4, m, True, W)
     for r in range(min(m, B)):
         i = m - 1 - r
         for b in range(W):
@@ -194,36 +254,8 @@ def _solve(fw, bw, inv_diag, m, x, W):
             x0 = _chain_step(x, inv_diag, bw4, bw3, bw2, bw1, i, x4, x3, x2, x1)
             x[i] = x0
             x4, x3, x2, x1 = x3, x2, x1, x0
-    elif W <= 8:
-        e = (m - 1) * W
-        for o in range(0, W, 4):
-            a4, a3, a2, a1 = x[e + o], x[e - W + o], x[e - 2 * W + o], x[e - 3 * W + o]
-            b4, b3, b2, b1 = x[e + o + 1], x[e - W + o + 1], x[e - 2 * W + o + 1], x[e - 3 * W + o + 1]
-            c4, c3, c2, c1 = x[e + o + 2], x[e - W + o + 2], x[e - 2 * W + o + 2], x[e - 3 * W + o + 2]
-            d4, d3, d2, d1 = x[e + o + 3], x[e - W + o + 3], x[e - 2 * W + o + 3], x[e - 3 * W + o + 3]
-            for r in range(m - B):
-                f = np.uint64((m - 1 - B - r) * W + o)
-                a0 = _chain_step(x, inv_diag, bw4, bw3, bw2, bw1, f, a4, a3, a2, a1)
-                b0 = _chain_step(x, inv_diag, bw4, bw3, bw2, bw1, f + np.uint64(1), b4, b3, b2, b1)
-                c0 = _chain_step(x, inv_diag, bw4, bw3, bw2, bw1, f + np.uint64(2), c4, c3, c2, c1)
-                d0 = _chain_step(x, inv_diag, bw4, bw3, bw2, bw1, f + np.uint64(3), d4, d3, d2, d1)
-                x[f], x[f + np.uint64(1)], x[f + np.uint64(2)], x[f + np.uint64(3)] = a0, b0, c0, d0
-                a4, a3, a2, a1 = a3, a2, a1, a0
-                b4, b3, b2, b1 = b3, b2, b1, b0
-                c4, c3, c2, c1 = c3, c2, c1, c0
-                d4, d3, d2, d1 = d3, d2, d1, d0
     else:
-        for i in range(m - 1 - B, -1, -1):
-            xr, dr = x[i * W : (i + B + 1) * W], inv_diag[i * W :]
-            g1, g2, g3, g4 = bw[1, i * W :], bw[2, i * W :], bw[3, i * W :], bw[4, i * W :]
-            for b in range(W):
-                xr[b] = (
-                    xr[b] * dr[b]
-                    - g4[b] * xr[4 * W + b]
-                    - g3[b] * xr[3 * W + b]
-                    - g2[b] * xr[2 * W + b]
-                    - g1[b] * xr[W + b]
-                )
+        _sweep_lanes(x, inv_diag, bw1, bw2, bw3, bw4, m, False, W)
 
 
 class _NoAliasCompiler(CompilerBase):
@@ -270,8 +302,8 @@ def _solve_columns_one(fw, bw, inv_diag, m, cols_t, ncol):
         p4, p3 = cols_t[np.uint64(i - 4)], cols_t[np.uint64(i - 3)]
         p2, p1 = cols_t[np.uint64(i - 2)], cols_t[np.uint64(i - 1)]
         f4, f3, f2, f1 = fw[4, i], fw[3, i], fw[2, i], fw[1, i]
-        for k in range(ncol):
-            row[k] = row[k] * d - f4 * p4[k] - f3 * p3[k] - f2 * p2[k] - f1 * p1[k]
+        for k in range(ncol):  # :func:`_chain_step`'s arithmetic
+            row[k] = _fma(-f1, p1[k], _fma(-f2, p2[k], _fma(-f3, p3[k], _fma(-f4, p4[k], row[k] * d))))
     for r in range(min(m, B)):
         i = np.uint64(m - 1 - r)
         row, d = cols_t[i], inv_diag[i]
@@ -287,8 +319,8 @@ def _solve_columns_one(fw, bw, inv_diag, m, cols_t, ncol):
         n4, n3 = cols_t[i + np.uint64(4)], cols_t[i + np.uint64(3)]
         n2, n1 = cols_t[i + np.uint64(2)], cols_t[i + np.uint64(1)]
         g4, g3, g2, g1 = bw[4, i], bw[3, i], bw[2, i], bw[1, i]
-        for k in range(ncol):
-            row[k] = row[k] * d - g4 * n4[k] - g3 * n3[k] - g2 * n2[k] - g1 * n1[k]
+        for k in range(ncol):  # :func:`_chain_step`'s arithmetic
+            row[k] = _fma(-g1, n1[k], _fma(-g2, n2[k], _fma(-g3, n3[k], _fma(-g4, n4[k], row[k] * d))))
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
