@@ -137,15 +137,12 @@ def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.n
     rail = _rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)
     m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
     w, d = lay.node_w[lay.sleeper_node], lay.sleeper
-    for b, t in enumerate(tracks):
-        for band, pad, bal in (
-            (k[b], t.pad_stiffness, t.ballast_stiffness),
-            (c[b], t.pad_damping, t.ballast_damping),
-        ):
-            band[w, 0] += pad
-            band[d, 0] += pad + bal
-            band[d, d - w] -= pad
-        m[b, d, 0] += t.sleeper_mass
+    for band, pad_name, bal_name in ((k, "pad_stiffness", "ballast_stiffness"), (c, "pad_damping", "ballast_damping")):
+        pad, bal = (np.stack([getattr(t, name) for t in tracks]) for name in (pad_name, bal_name))
+        band[:, w, 0] += pad
+        band[:, d, 0] += pad + bal
+        band[:, d, d - w] -= pad
+    m[:, d, 0] += np.stack([t.sleeper_mass for t in tracks])
     return m, c, k
 
 
@@ -382,6 +379,11 @@ def _packed_history(first: np.ndarray, n_steps: int, n_chunks: int, width: int) 
     return out
 
 
+def _row(x: np.ndarray, b: int, width: int) -> np.ndarray:
+    """Row ``b`` of an array in the kernel's layout (chunks, ..., width): a view, (...)."""
+    return x[b // width, ..., b % width]
+
+
 def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
     """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
     x = np.moveaxis(x, -1, 1)
@@ -496,7 +498,18 @@ def simulate_passes(
     time = np.arange(n_steps + 1) * dt
     x_lead = np.minimum(x_start + speed * time, t0.length)
     x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
-    z_axle = np.stack([_irregularity_at(irr, t0, x_axle, "irregularity") for irr in irr_rows])
+    # per-row arrays the kernel reads or writes over time are allocated in its layout (chunks, ..., width) and used
+    # through one view per row (``_row``): no stacking, transposing or copying of time histories around the kernel
+    n_chunks, width = _chunking(n_rows)
+    row = functools.partial(_row, width=width)
+    z_packed = np.zeros((n_chunks, n_steps + 1, sys_.n_axles, width))
+    z_rows = [row(z_packed, b) for b in range(n_rows)]
+    levels: dict[int, np.ndarray] = {}  # one evaluation per irregularity object (a shared one is shared)
+    for b, irr in enumerate(irr_rows):
+        if irr is not None:
+            if id(irr) not in levels:
+                levels[id(irr)] = _irregularity_at(irr, t0, x_axle, "irregularity")
+            z_rows[b][...] = levels[id(irr)]
     # matrices
     consts = newmark_constants(dt)
     mb, cb, kb = batched_bands(tracks)
@@ -513,7 +526,7 @@ def simulate_passes(
             f[lay.sleeper] = t.ballast_stiffness * g[b]
             u0 = _solve_stiffness(kb[b], f)
             sag[b] = u0
-            z_axle[b, 0] += [shp @ u0[dofs] for dofs, shp in start_points]
+            z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
             static_ballast[b] = t.ballast_stiffness * (us - g[b])
             static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
@@ -535,7 +548,7 @@ def simulate_passes(
     qdd = np.zeros_like(q)
     f0 = np.zeros((nb, n_axles))
     for b in range(nb):
-        z0 = z_axle[b, 0]
+        z0 = z_rows[b][0]
         if start == "static":
             loads = sys_.static_wheel_loads.copy()
             factors = _window_factors(kb[b], windows)
@@ -569,8 +582,9 @@ def simulate_passes(
     peak_ballast = bal_k * u[:, ds]
     peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
 
-    n_chunks, width = _chunking(nb)
     pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    for b in range(nb, n_chunks * width):  # the padding rows copy the last row, as _pack pads
+        row(z_packed, b)[...] = z_rows[-1]
     mesh = _kernel.Mesh(
         lay.node_w.astype(np.int64),
         lay.sleeper.astype(np.int64),
@@ -601,7 +615,7 @@ def simulate_passes(
         pack(pad_c),
         pack(bal_k),
         pack(bal_c),
-        pack(z_axle),
+        z_packed,
         pack(sag),
         pack(u),
         pack(v),
@@ -614,8 +628,7 @@ def simulate_passes(
     peaks = _kernel.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
     _kernel.run(mesh, drive, rows, peaks, width)
     unpack = functools.partial(_unpack, n_rows=nb)
-    out_force, out_rail, out_wheel = unpack(peaks.force), unpack(peaks.rail), unpack(peaks.wheel)
-    peak_ballast, peak_total, z_axle = unpack(peaks.ballast), unpack(peaks.total), unpack(rows.z)
+    peak_ballast, peak_total = unpack(peaks.ballast), unpack(peaks.total)
 
     peak_ballast += static_ballast
     peak_total += static_total
@@ -626,10 +639,10 @@ def simulate_passes(
             PassResult(
                 time=time,
                 wheel_position=x_axle,
-                contact_force=out_force[b],
-                rail_displacement=out_rail[b],
-                wheel_displacement=out_wheel[b],
-                irregularity=z_axle[b],
+                contact_force=row(peaks.force, b),
+                rail_displacement=row(peaks.rail, b),
+                wheel_displacement=row(peaks.wheel, b),
+                irregularity=z_rows[b],
                 sleeper_force=sf,
                 ballast_force=peak_ballast[b],
                 pad_plus_ballast_force=peak_total[b],
@@ -641,7 +654,7 @@ def simulate_passes(
         )
     if auto and dt > DT_REFERENCE_S:
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
-        lost = np.flatnonzero(np.any(out_force[:, 1:] <= 0.0, axis=(1, 2))).tolist()
+        lost = np.flatnonzero(np.any(peaks.force[:, 1:] <= 0.0, axis=(1, 2)).reshape(-1)[:nb]).tolist()
         if lost:
             _rerun_rows(results, lost, tracks, irr_rows, None if support_settlement is None else settlement_rows,
                         vehicle, speed, dt=DT_REFERENCE_S, contact=contact, start=start, x_start=x_start,
