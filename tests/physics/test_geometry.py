@@ -217,6 +217,21 @@ def test_section_sd_and_peak_by_hand():
     np.testing.assert_allclose(section_peak(z, np.array([0, 1, 0, 1, 0, 1, 0, 1]), 2), [2.0, 4.0])
 
 
+def test_section_statistics_of_a_batch_are_those_of_each_row():
+    """A batch of records (rows, n) gives each row's SD and peak exactly as the row alone (one call of the vector
+    env for all its envs)."""
+    rng = np.random.default_rng(3)
+    z = rng.standard_normal((5, 2, 23))
+    idx = section_index(23, 4)
+    sd, peak = section_sd(z, idx, 4), section_peak(z, idx, 4)
+    assert sd.shape == peak.shape == (5, 2, 4)
+    for r in np.ndindex(5, 2):
+        np.testing.assert_array_equal(sd[r], section_sd(z[r], idx, 4))
+        np.testing.assert_array_equal(peak[r], section_peak(z[r], idx, 4))
+    with pytest.raises(ValueError, match="section_index"):
+        section_sd(z, section_index(22, 4), 4)
+
+
 def test_section_bad_input():
     z = np.zeros(4)
     with pytest.raises(ValueError, match="section_index"):

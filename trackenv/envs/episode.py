@@ -56,19 +56,36 @@ class Episode:
         return self._geometry()[3]
 
     def _geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        if not self._geometry_current():
+            refresh_geometry([self])
+        return self._quality_cache[2]  # type: ignore[index]  # set by refresh_geometry
+
+    def _geometry_current(self) -> bool:
         cached = self._quality_cache
-        if cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset:
-            return cached[2]
-        d1 = d1_filter(self.sim.level, self.sim.track.sleeper_spacing)
-        peak = section_peak(d1, self.sections, self.n_sections)
-        value = (d1, section_sd(d1, self.sections, self.n_sections), peak, classify(peak, self.config.band_limits))
-        self._quality_cache = (self.sim.state, self.sim.offset, value)
-        return value
+        return cached is not None and cached[0] is self.sim.state and cached[1] is self.sim.offset
 
     def mask(self) -> np.ndarray:
         """Sections that may be tamped now (not tamped within the last min_steps_between_tampings steps)."""
         k = self.config.min_steps_between_tampings
         return (self.step_count - self.last_tamped_step) > k
+
+
+def refresh_geometry(eps: list[Episode]) -> None:
+    """Compute the geometry (D1 level, section SD and peak, classes) of every episode among ``eps`` whose level
+    changed since it was last computed, all in one call of each function (one config: the vector env's envs).
+    An episode's numbers are those it computes alone (the functions work row by row)."""
+    stale = [ep for ep in eps if not ep._geometry_current()]
+    if not stale:
+        return
+    ep0 = stale[0]
+    if any(ep.config is not ep0.config and ep.config != ep0.config for ep in stale):
+        raise ValueError("refresh_geometry needs episodes of one config")
+    d1 = d1_filter(np.stack([ep.sim.level for ep in stale]), ep0.sim.track.sleeper_spacing)
+    sd = section_sd(d1, ep0.sections, ep0.n_sections)
+    peak = section_peak(d1, ep0.sections, ep0.n_sections)
+    cls = classify(peak, ep0.config.band_limits)
+    for b, ep in enumerate(stale):
+        ep._quality_cache = (ep.sim.state, ep.sim.offset, (d1[b], sd[b], peak[b], cls[b]))
 
 
 def _correlated_lognormal(rng: np.random.Generator, n: int, cv: float, corr_sleepers: float) -> np.ndarray:
@@ -216,8 +233,10 @@ def clipped_values(ep: Episode) -> int:
     counted."""
     bounds = observation_bounds(ep.config)
     raw = raw_observation(ep)
-    return int(
-        sum(np.sum((v < bounds[k][0]) | (v > bounds[k][1])) for k, v in raw.items() if k != "years_since_tamping")
+    return sum(
+        np.count_nonzero(v < bounds[k][0]) + np.count_nonzero(v > bounds[k][1])
+        for k, v in raw.items()
+        if k != "years_since_tamping"
     )
 
 

@@ -61,6 +61,7 @@ class TampingVectorEnv(BatchedVectorEnv):
 
     def _start(self, idx: list[int]) -> None:
         self._new_episodes(idx)
+        E.refresh_geometry([self.episodes[i] for i in idx])
 
     def _observation(self, i: int) -> dict[str, np.ndarray]:
         return E.observation(self.episodes[i])
@@ -81,6 +82,7 @@ class TampingVectorEnv(BatchedVectorEnv):
         results = self._new_episodes(resetting, [self.episodes[i] for i in stepping])
         if stepping:
             E.traffic_batch([self.episodes[i] for i in stepping], results)
+        E.refresh_geometry(self.episodes)  # the new levels' D1 (stepped and new episodes), for costs, info, obs
         rewards = np.zeros(n)
         truncated = np.zeros(n, dtype=bool)
         infos: dict[int, dict] = {}

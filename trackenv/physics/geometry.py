@@ -387,14 +387,16 @@ def section_index(n_samples: int, n_sections: int) -> np.ndarray:
     return np.repeat(np.arange(len(edges) - 1, dtype=np.int64), np.diff(edges))
 
 
-def _check_sections(z, section_idx, n_sections: int) -> tuple[np.ndarray, np.ndarray, int]:
+def _check_sections(z, section_idx, n_sections: int) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """``z`` as float rows (rows, n), the section of each of its n samples, the number of sections and the
+    samples per section; ValueError naming what is wrong."""
     arr = check_array("z", z)
-    if arr.ndim != 1:
-        raise ValueError(f"z must be 1-D, got shape {arr.shape}")
+    if arr.ndim == 0:
+        raise ValueError(f"z must be 1-D (or a batch of rows, (..., n)), got shape {arr.shape}")
     k = check_int("n_sections", n_sections, low=1)
     idx = np.asarray(section_idx)
-    if idx.shape != arr.shape:
-        raise ValueError(f"section_index must have shape {arr.shape}, got {idx.shape}")
+    if idx.shape != arr.shape[-1:]:
+        raise ValueError(f"section_index must have shape {arr.shape[-1:]}, got {idx.shape}")
     if not np.issubdtype(idx.dtype, np.integer):
         raise ValueError(f"section_index must be an integer array, got dtype {idx.dtype}")
     if idx.size and (idx.min() < 0 or idx.max() >= k):
@@ -402,33 +404,42 @@ def _check_sections(z, section_idx, n_sections: int) -> tuple[np.ndarray, np.nda
     counts = np.bincount(idx, minlength=k)
     if np.any(counts == 0):
         raise ValueError(f"section_index leaves section(s) {np.flatnonzero(counts == 0).tolist()} empty")
-    return arr, idx.astype(np.intp), k
+    return arr.reshape(-1, idx.size), idx.astype(np.intp), k, counts
+
+
+def _row_sections(idx: np.ndarray, rows: int, k: int) -> np.ndarray:
+    """Bin of every sample of ``rows`` rows of sections ``idx`` when row r's sections are bins r·k .. r·k + k − 1
+    (one ``np.bincount`` then sums each row's sections, in the order of their samples: as row by row)."""
+    return (np.arange(rows)[:, None] * k + idx[None, :]).ravel()
 
 
 def section_sd(z, section_index, n_sections: int) -> np.ndarray:
-    """Standard deviation [m] of ``z`` within each section (population SD, ddof = 0), shape (n_sections,).
+    """Standard deviation [m] of ``z`` within each section (population SD, ddof = 0), shape (..., n_sections).
 
     ``SD_j = sqrt(mean_{i in j} (z_i - mean_j z)^2)``. Applied to the D1 signal this is the EN 13848-6 track
-    quality measure (there over 200 m; here over whatever the sections are).
+    quality measure (there over 200 m; here over whatever the sections are). ``z`` is one record (n,) or a
+    batch of records (..., n) sharing ``section_index`` (n,); each row's numbers are those of the row alone.
     """
-    arr, idx, k = _check_sections(z, section_index, n_sections)
-    counts = np.bincount(idx, minlength=k)
-    mean = np.bincount(idx, weights=arr, minlength=k) / counts
-    dev = arr - mean[idx]
-    return np.sqrt(np.bincount(idx, weights=dev * dev, minlength=k) / counts)
+    rows, idx, k, counts = _check_sections(z, section_index, n_sections)
+    bins = _row_sections(idx, rows.shape[0], k)
+    size = rows.shape[0] * k
+    mean = np.bincount(bins, weights=rows.ravel(), minlength=size).reshape(-1, k) / counts
+    dev = rows - mean[:, idx]
+    sd = np.sqrt(np.bincount(bins, weights=(dev * dev).ravel(), minlength=size).reshape(-1, k) / counts)
+    return sd.reshape(np.shape(z)[:-1] + (k,))
 
 
 def section_peak(z, section_index, n_sections: int) -> np.ndarray:
-    """Largest mean-to-peak amplitude ``max_{i in j} |z_i|`` [m] per section, shape (n_sections,).
+    """Largest mean-to-peak amplitude ``max_{i in j} |z_i|`` [m] per section, shape (..., n_sections).
 
     EN 13848-5 assesses isolated defects of the D1 signal by their amplitude from the mean line; the D1
     band-pass has already removed the mean line, so the amplitude is ``|z|`` of the filtered signal. Pass the
-    D1 signal (:func:`d1_filter`), not the raw level.
+    D1 signal (:func:`d1_filter`), not the raw level. A batch of records (..., n) as in :func:`section_sd`.
     """
-    arr, idx, k = _check_sections(z, section_index, n_sections)
-    out = np.zeros(k)
-    np.maximum.at(out, idx, np.abs(arr))
-    return out
+    rows, idx, k, _ = _check_sections(z, section_index, n_sections)
+    out = np.zeros(rows.shape[0] * k)
+    np.maximum.at(out, _row_sections(idx, rows.shape[0], k), np.abs(rows).ravel())
+    return out.reshape(np.shape(z)[:-1] + (k,))
 
 
 # ---------------------------------------------------------------------------------------------------------
