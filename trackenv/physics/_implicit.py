@@ -123,6 +123,7 @@ def _implicit_row(amp, kind, p, g1, u_now, c_now, rate, f0, s, dn, band, tol, ma
     delta = np.zeros(n)
     f = np.zeros(n)
     uf = np.zeros(n)
+    cf = np.zeros(n)
     r = np.zeros(n)
     step = np.zeros(n)
     jac = np.zeros((n, n))
@@ -134,7 +135,7 @@ def _implicit_row(amp, kind, p, g1, u_now, c_now, rate, f0, s, dn, band, tol, ma
             for j in range(n):
                 acc += s[i, j] * delta[j]
             f[i] = max(acc, 0.0)
-            uf[i] = _advance(amp, kind, p, g1, u_now[i], c_now[i], rate[i], f[i], dn)[0]
+            uf[i], cf[i] = _advance(amp, kind, p, g1, u_now[i], c_now[i], rate[i], f[i], dn)
             r[i] = delta[i] - (uf[i] - u_now[i])
             err = max(err, abs(r[i]))
         if err < tol:
@@ -151,6 +152,10 @@ def _implicit_row(amp, kind, p, g1, u_now, c_now, rate, f0, s, dn, band, tol, ma
             break
         for i in range(n):
             delta[i] = max(delta[i] - step[i], 0.0)
+    if flag == 0:  # converged: the last evaluation was at the final increment (the forces and the law as below)
+        for i in range(n):
+            u_out[i], c_out[i] = uf[i], cf[i]
+        return flag
     for i in range(n):
         acc = f0[i]
         for j in range(n):
