@@ -18,8 +18,10 @@ the comparison fair on a shared machine (whole-process timings of this VM drift 
     python experiments/kernel_profile.py --kernel old_kernel.py --kernel trackenv/physics/_kernel.py
 
 Workload: the passes of ``Tamping-v0``'s first step (``rows`` new episodes of the default config: 60 m with
-approach and exit zones, 100 km/h, dt 4e-4, one wheelset), on one thread. Cycles are TSC cycles (this VM's
-TSC runs at the nominal 2.0 GHz). Each copy compiles on its own (~40-60 s cold; no on-disk cache).
+approach and exit zones, 100 km/h, dt 4e-4, one wheelset), on one thread. Cycles are TSC cycles, which tick at
+the processor's nominal clock, not its actual one (2.0 GHz on the Zen 1 VM of the earlier rounds, 2.6 GHz on the
+Xeon VM of the fifth): compare figures taken on one machine. Each copy compiles on its own (~40-60 s cold; no
+on-disk cache).
 """
 
 from __future__ import annotations
