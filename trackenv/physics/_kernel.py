@@ -131,7 +131,7 @@ def _fma(typingctx, a, b, c):
 
     def codegen(context, builder, signature, args):
         f64 = ir.DoubleType()
-        fn = builder.module.declare_intrinsic("llvm.fma", [f64], ir.FunctionType(f64, [f64, f64, f64]))
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(f64, [f64, f64, f64]), "llvm.fma.f64")
         return builder.call(fn, args)
 
     return sig, codegen
