@@ -348,6 +348,15 @@ def test_state_restarted_resets_only_masked_sleepers() -> None:
         state.restarted(mask, rate_factor=0.0)
 
 
+def test_state_cycles_may_be_infinite_but_not_nan_or_negative() -> None:
+    state = SettlementState(np.zeros(3), np.array([0.0, 5.0, np.inf]))
+    assert state.cycles[2] == np.inf
+    for bad in (np.array([0.0, np.nan, 1.0]), np.array([0.0, -1.0, 1.0]), np.array([np.nan, -np.inf, 1.0])):
+        with pytest.raises(ValueError, match="cycles must be >= 0"):
+            SettlementState(np.zeros(3), bad)
+    assert SettlementState(np.zeros(0), np.zeros(0)).n == 0
+
+
 def test_state_arrays_are_read_only_copies() -> None:
     u = np.array([1e-3, 2e-3])
     state = SettlementState(u, np.array([10.0, 20.0]))

@@ -603,7 +603,7 @@ class SettlementState:
             raise ValueError("cycles must be an array of real numbers") from None
         if c.shape != (n,):
             raise ValueError(f"cycles must have shape {(n,)}, got {c.shape}")
-        if np.any(np.isnan(c)) or np.any(c < 0.0):
+        if c.size and not c.min() >= 0.0:  # a NaN makes the minimum NaN, which fails the test
             raise ValueError("cycles must be >= 0 everywhere (+inf allowed, NaN not)")
         if self.rate_factor is None:
             r = np.ones(n)
@@ -674,7 +674,7 @@ class SettlementState:
             new_r = check_array("rate_factor", rate_factor, low=0.0, low_inclusive=False)
             if new_r.ndim != 0 and new_r.shape != (self.n,):
                 raise ValueError(f"rate_factor must have shape {(self.n,)} or be a scalar, got {new_r.shape}")
-            r = np.where(m, np.broadcast_to(new_r, (self.n,)), r)
+            r = np.where(m, new_r, r)
         return SettlementState(settlement=u, cycles=c, rate_factor=r)
 
 

@@ -181,6 +181,10 @@ def _check_counts(name: str, value, shape) -> np.ndarray:
     arr = np.asarray(value)
     if arr.dtype == np.bool_:
         raise ValueError(f"{name} must be an array of integers >= 0, got booleans")
+    if arr.dtype.kind in "iu" and (shape is None or arr.shape == shape):  # integers: only the sign to check
+        if arr.size and arr.min() < 0:
+            raise ValueError(f"{name} must be >= 0 everywhere, got min {arr.min()}")
+        return arr.astype(np.int64)
     f = check_array(name, arr, shape=shape, low=0.0)
     if np.any(f != np.round(f)):
         raise ValueError(f"{name} must hold integers >= 0")
@@ -190,8 +194,10 @@ def _check_counts(name: str, value, shape) -> np.ndarray:
 def tamped_runs(mask) -> np.ndarray:
     """Contiguous runs of True in a 1-D bool ``mask`` as an (m, 2) int array of [start, stop) pairs."""
     m = np.asarray(mask, dtype=bool)
-    d = np.diff(np.concatenate(([0], m.astype(np.int8), [0])))
-    return np.stack((np.flatnonzero(d == 1), np.flatnonzero(d == -1)), axis=1).astype(np.int64)
+    padded = np.zeros(m.size + 2, dtype=np.int8)
+    padded[1:-1] = m
+    edges = np.flatnonzero(np.diff(padded))  # starts and stops alternate
+    return edges.reshape(-1, 2).astype(np.int64)
 
 
 def _line_fit(y: np.ndarray) -> np.ndarray:
@@ -266,7 +272,7 @@ def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -
 
     new = z.copy()
     r = model.runout_sleepers
-    for start, stop in tamped_runs(m):
+    for start, stop in tamped_runs(m).tolist():
         seg = z[start:stop]
         base: float | np.ndarray
         if model.reference == "design":
