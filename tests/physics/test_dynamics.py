@@ -94,6 +94,24 @@ def test_result_shapes_and_time_grid():
     assert res.contact_force_profile().max() == pytest.approx(res.max_contact_force)
 
 
+def test_contact_force_profile_is_the_peak_of_every_axle_over_each_bay():
+    """The batch finds each row's bay peaks in the kernel's layout (PassResult.bay_contact_force); they are the
+    maxima over every (time step, axle) whose wheel lies within ±s/2 of the sleeper, as computed here element by
+    element, for every row of a batch of several chunks and a four-axle car; the same from the general path
+    (positions given)."""
+    t = Track.realistic(30.0)
+    rng = np.random.default_rng(3)
+    irr = 1e-3 * rng.standard_normal((5, t.n_sleepers))
+    for res in simulate_passes(t, Car.manchester_coach(), 30.0, irr, dt="auto"):
+        idx = np.clip(np.rint(res.wheel_position / t.sleeper_spacing).astype(int), 0, t.n_sleepers - 1)
+        want = np.zeros(t.n_sleepers)
+        for step, axle in np.ndindex(idx.shape):
+            want[idx[step, axle]] = max(want[idx[step, axle]], res.contact_force[step, axle])
+        np.testing.assert_array_equal(res.contact_force_profile(), want)
+        np.testing.assert_array_equal(res.contact_force_profile(t.sleeper_positions), want)
+        assert want.max() == res.max_contact_force
+
+
 def test_smooth_mean_contact_force_is_static_load():
     res = smooth_pass()
     f = res.contact_force[central(res.time.size), 0]

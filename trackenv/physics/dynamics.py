@@ -51,6 +51,7 @@ class PassResult:
     sleeper_positions: np.ndarray  # (n_sleepers,) [m]
     speed: float  # [m/s]
     dt: float  # [s]
+    bay_contact_force: np.ndarray | None = None  # (n_sleepers,) contact_force_profile(), when the batch found it
 
     @property
     def max_contact_force(self) -> float:
@@ -58,12 +59,35 @@ class PassResult:
 
     def contact_force_profile(self, positions: np.ndarray | None = None) -> np.ndarray:
         """Peak contact force of any axle within each sleeper bay (bay k spans ±s/2 around sleeper k) [N]."""
+        if positions is None and self.bay_contact_force is not None:
+            return self.bay_contact_force.copy()
         pos = self.sleeper_positions if positions is None else np.asarray(positions)
-        s = pos[1] - pos[0]
-        idx = np.clip(np.rint(self.wheel_position / s).astype(int), 0, pos.size - 1)
         out = np.zeros(pos.size)
-        np.maximum.at(out, idx.ravel(), self.contact_force.ravel())
+        for j, (starts, bays) in enumerate(_bay_runs(self.wheel_position, pos)):
+            np.maximum.at(out, bays, np.maximum.reduceat(self.contact_force[:, j], starts))
         return out
+
+
+def _bay_runs(wheel_position: np.ndarray, pos: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """For each axle: the first time step of every run of steps with its wheel over one sleeper bay (bay k
+    spans ±s/2 around sleeper k, the ends taking whatever lies beyond them), and that bay."""
+    s = pos[1] - pos[0]
+    idx = np.clip(np.rint(wheel_position / s).astype(int), 0, pos.size - 1)
+    runs = []
+    for j in range(idx.shape[1]):
+        col = idx[:, j]
+        starts = np.flatnonzero(np.concatenate(([True], col[1:] != col[:-1])))
+        runs.append((starts, col[starts]))
+    return runs
+
+
+def _bay_peaks(force: np.ndarray, wheel_position: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """:meth:`PassResult.contact_force_profile` of every row of a contact-force history in the kernel's layout
+    (chunks, n_steps + 1, n_axles, width), read once in that layout: (chunks, n_sleepers, width)."""
+    out = np.zeros((pos.size,) + force.shape[:1] + force.shape[3:])
+    for j, (starts, bays) in enumerate(_bay_runs(wheel_position, pos)):
+        np.maximum.at(out, bays, np.moveaxis(np.maximum.reduceat(force[:, :, j], starts, axis=1), 1, 0))
+    return np.moveaxis(out, 0, 1)
 
 
 def _vehicle_system(vehicle) -> VehicleSystem:
@@ -632,6 +656,7 @@ def simulate_passes(
 
     peak_ballast += static_ballast
     peak_total += static_total
+    bay_force = _bay_peaks(peaks.force, x_axle, t0.sleeper_positions)
     results = []
     for b in range(nb):
         sf = peak_ballast[b] if sleeper_force_measure == "ballast" else peak_total[b]
@@ -650,11 +675,12 @@ def simulate_passes(
                 sleeper_positions=t0.sleeper_positions,
                 speed=speed,
                 dt=dt,
+                bay_contact_force=row(bay_force, b),
             )
         )
     if auto and dt > DT_REFERENCE_S:
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
-        lost = np.flatnonzero(np.any(peaks.force[:, 1:] <= 0.0, axis=(1, 2)).reshape(-1)[:nb]).tolist()
+        lost = np.flatnonzero(peaks.force[:, 1:].min(axis=(1, 2)).reshape(-1)[:nb] <= 0.0).tolist()
         if lost:
             _rerun_rows(results, lost, tracks, irr_rows, None if support_settlement is None else settlement_rows,
                         vehicle, speed, dt=DT_REFERENCE_S, contact=contact, start=start, x_start=x_start,
