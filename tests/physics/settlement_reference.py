@@ -22,7 +22,7 @@ def solve_increasing(
     """Solve ``func(x) = target`` elementwise, ``func`` increasing, ``func(lo) <= target <= func(hi)``."""
     lo = np.array(lo, dtype=np.float64, copy=True)
     hi = np.array(hi, dtype=np.float64, copy=True)
-    x = np.sqrt(lo * hi)
+    x = hi.copy()  # from the upper end of the bracket, as the compiled solve
     active = np.ones(x.shape, dtype=bool)
     for _ in range(max_iter):
         xa = x[active]
