@@ -226,6 +226,14 @@ def observation(ep: Episode) -> dict[str, np.ndarray]:
     return {k: np.clip(v, *bounds[k]).astype(np.float32) for k, v in raw_observation(ep).items()}
 
 
+def observations(eps: list[Episode], keys) -> dict[str, np.ndarray]:
+    """:func:`observation` of each of ``eps`` (one config), stacked (n_eps, ...) under ``keys`` (the space's
+    order): each key clipped once for the whole batch, the numbers those of every episode alone."""
+    bounds = observation_bounds(eps[0].config)
+    raws = [raw_observation(ep) for ep in eps]
+    return {k: np.clip(np.stack([r[k] for r in raws]), *bounds[k]).astype(np.float32) for k in keys}
+
+
 def clipped_values(ep: Episode) -> int:
     """How many observed values lie outside their bounds (and are clipped in the observation).
 

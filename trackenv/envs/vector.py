@@ -66,6 +66,9 @@ class TampingVectorEnv(BatchedVectorEnv):
     def _observation(self, i: int) -> dict[str, np.ndarray]:
         return E.observation(self.episodes[i])
 
+    def _observations(self) -> dict:
+        return E.observations(self.episodes, self.single_observation_space.spaces)
+
     def _reset_info(self, i: int) -> dict:
         zero = dict.fromkeys(E.COST_KEYS, 0.0)
         return E.info(self.episodes[i], zero, np.zeros(self.config.n_sections, dtype=bool))
