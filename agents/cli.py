@@ -270,6 +270,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         progress=not args.json,
         resume=args.resume,
         hyperparams=args.hyperparams,
+        workers=args.workers,
     )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
@@ -404,6 +405,9 @@ def build_parser() -> argparse.ArgumentParser:
                          f"{hp.get('total_timesteps', 'n/a')})")
     sp.add_argument("--n-envs", type=_positive(int), default=None, metavar="N",
                     help=f"envs stepped together (default: the hyper-parameter file's, {hp.get('n_envs', 'n/a')})")
+    sp.add_argument("--workers", type=_positive(int), default=1, metavar="N",
+                    help="processes the training envs are split over (the same episodes, the steps' Python in "
+                         "parallel; 2 on a 2-core machine: +10-20 %% env steps/s at 32 envs)")
     sp.add_argument("--seed", type=_positive(int, zero=True), default=DEFAULT_TRAIN_SEED, metavar="N",
                     help="env i starts with seed + i, apart from the test, tuning and evaluation seeds")
     sp.add_argument("--resume", default=None, metavar="DIR",

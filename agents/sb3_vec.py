@@ -30,6 +30,7 @@ statistics, so that a policy does not depend on the line it was trained on).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
+from trackenv.envs.sharded import ShardedVectorEnv
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
@@ -109,19 +111,24 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
     ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults), or a TampingLine
     :class:`LineConfig` or scenario name ("small", "default", "hard"); ``action_type`` is "multibinary",
     "discrete" or "ranked" (the line: "multibinary" only); ``seed`` (optional) seeds the first reset (env ``i``
-    gets ``seed + i``).
+    gets ``seed + i``); ``workers`` > 1 splits the envs over that many processes
+    (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps in parallel;
+    call :meth:`close` when done).
     """
 
     def __init__(self, num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict | str | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
-                 bootstrap_at_horizon: bool = False, seed: int | None = None) -> None:
+                 bootstrap_at_horizon: bool = False, seed: int | None = None, workers: int = 1) -> None:
         venv: Any
+        make: Any
         if isinstance(config, (LineConfig, str)):
             if action_type != "multibinary":
                 raise ValueError(f"action_type must be 'multibinary' on TampingLine, got {action_type!r}")
-            venv = TampingLineVectorEnv(num_envs, LineConfig.coerce(config))
+            make = partial(TampingLineVectorEnv, config=LineConfig.coerce(config))
         else:
-            venv = TampingVectorEnv(num_envs, config, action_type=env_action_type(action_type))
+            make = partial(TampingVectorEnv, config=TampingEnvConfig.coerce(config),
+                           action_type=env_action_type(action_type))
+        venv = make(num_envs) if workers == 1 else ShardedVectorEnv(make, num_envs, workers)
         self.config = venv.config
         if action_type == RANKED:
             venv = RankedVectorActions(venv)

@@ -280,7 +280,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
           eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
-          on_evaluation: Callable[[dict], None] | None = None) -> Path:
+          on_evaluation: Callable[[dict], None] | None = None, workers: int = 1) -> Path:
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
     ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
@@ -288,6 +288,8 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
     or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
     (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
+    ``workers`` > 1 steps the training envs in that many processes (the same episodes; see
+    :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
 
     ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
     are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
@@ -327,7 +329,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
     raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
-                           bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)))
+                           bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)), workers=workers)
     if resume is not None:
         env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
         env.training = True

@@ -15,7 +15,8 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   the paper's reproduction runs it);
 * ``env``: environment steps per second of ``trackenv/Tamping-v0`` with random actions, or "unavailable" and
   the reason when the environment cannot be made; ``vector_env``: env steps per second (steps × envs) of the
-  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs;
+  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs; ``vector_env_sharded``: the
+  32 envs split over 2 processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`; machines with >= 2 cores);
 * ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
   30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
   ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
@@ -51,6 +52,7 @@ SPEED = 80 / 3.6
 DT = 1e-4
 BATCH_SIZES = (1, 16, 64)
 VECTOR_ENVS = (8, 32)
+SHARDED_ENVS, SHARDED_WORKERS = 32, 2  # the vector env split over processes (on machines with >= 2 cores)
 LINE_VECTOR_ENVS = (8,)
 
 
@@ -268,16 +270,21 @@ def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping
         env.close()
 
 
-def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: bool = False) -> dict:
+def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: bool = False,
+                      workers: int = 1) -> dict:
     """Env steps per second (vector steps × envs) of the native vector env (``line``: of TampingLine) with
-    random actions."""
+    random actions; ``workers`` > 1: split over that many processes (:class:`ShardedVectorEnv`, no profile:
+    the stages run in the workers)."""
     try:
         if line:
             from .envs.line import TampingLineVectorEnv as Vec
         else:
             from .envs.vector import TampingVectorEnv as Vec  # type: ignore[assignment]
+        from .envs.sharded import ShardedVectorEnv
 
-        venv = Vec(num_envs=num_envs)
+        t0 = time.perf_counter()
+        venv = Vec(num_envs=num_envs) if workers == 1 else ShardedVectorEnv(Vec, num_envs, workers)
+        start_s = time.perf_counter() - t0
     except Exception as exc:  # optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     try:
@@ -293,11 +300,13 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: boo
                 venv.step(venv.action_space.sample())
                 done_steps += 1
             wall = time.perf_counter() - t0
-        profile = timer.profile(wall)
-        return {"status": "ok", "num_envs": num_envs, "vector_steps": done_steps, "wall_s": wall,
-                "env_steps_per_s": done_steps * num_envs / wall, "first_reset_s": reset_s,
-                "profile": profile, "pass_share": profile["kernel"] + profile["pass_setup"],
-                "load_average_1min": _load_average()}
+        out = {"status": "ok", "num_envs": num_envs, "workers": workers, "vector_steps": done_steps,
+               "wall_s": wall, "env_steps_per_s": done_steps * num_envs / wall, "start_s": start_s,
+               "first_reset_s": reset_s, "load_average_1min": _load_average()}
+        if workers == 1:
+            profile = timer.profile(wall)
+            out.update(profile=profile, pass_share=profile["kernel"] + profile["pass_setup"])
+        return out
     except Exception as exc:
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     finally:
@@ -332,6 +341,11 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
     for n in VECTOR_ENVS:
         tell(f"vector_env_{n}")
         out["vector_env"][str(n)] = _bench_vector_env(n, 3 if quick else 20, 10.0 if quick else 60.0)
+    out["vector_env_sharded"] = {}
+    if (os.cpu_count() or 1) >= SHARDED_WORKERS:
+        tell(f"vector_env_{SHARDED_ENVS}_sharded")
+        out["vector_env_sharded"][str(SHARDED_ENVS)] = _bench_vector_env(
+            SHARDED_ENVS, 3 if quick else 20, 10.0 if quick else 60.0, workers=SHARDED_WORKERS)
     tell("line_env")
     out["line_env"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0")
     out["line_vector_env"] = {}
@@ -345,7 +359,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "line_env", "line_vector_env_8")
+          "vector_env_32_sharded", "line_env", "line_vector_env_8")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -426,13 +440,15 @@ def format_benchmarks(d: dict) -> str:
     p = d["paper_b"]
     rows.append((f"paper scenario B ({p['iterations']} iterations)", _ms(p),
                  f"{p['per_iteration_s'] * 1e3:.0f} ms per iteration"))
-    envs = (("trackenv/Tamping-v0", d["env"], d.get("vector_env", {}), "native vector env, {} envs"),
-            ("trackenv/TampingLine-v0", d.get("line_env"), d.get("line_vector_env", {}),
-             "native line vector env, {} lines"))
-    for env_id, e, vectors, vector_label in envs:
+    vectors = [(f"native vector env, {n} envs", v) for n, v in d.get("vector_env", {}).items()]
+    vectors += [(f"native vector env, {n} envs in {v.get('workers', SHARDED_WORKERS)} processes", v)
+                for n, v in d.get("vector_env_sharded", {}).items()]
+    lines_ = [(f"native line vector env, {n} lines", v) for n, v in d.get("line_vector_env", {}).items()]
+    for env_id, e, vector_rows in (("trackenv/Tamping-v0", d["env"], vectors),
+                                   ("trackenv/TampingLine-v0", d.get("line_env"), lines_)):
         if e is not None:
             rows.append(_env_row(env_id, e))
-        rows += [_vector_row(vector_label.format(n), v) for n, v in vectors.items()]
+        rows += [_vector_row(label, v) for label, v in vector_rows]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]

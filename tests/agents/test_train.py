@@ -96,6 +96,39 @@ def test_adapter_seeding_and_dropping_per_sleeper_keys(small_config):
     assert not np.array_equal(oa["section_sd"][0], oa["section_sd"][1])
 
 
+@pytest.mark.parametrize("action_type", ["multibinary", "ranked"])
+def test_adapter_over_worker_processes_gives_the_same_steps(action_type, small_config):
+    """workers=2 (ShardedVectorEnv under the adapter, and under the ranked wrapper): the observations, rewards,
+    dones and infos (terminal observations included) of one process, bit for bit, across an episode's end."""
+    envs = [TampingSB3VecEnv(3, small_config, seed=5, action_type=action_type, workers=w) for w in (1, 2)]
+    try:
+        obs = [e.reset() for e in envs]
+        rng = np.random.default_rng(0)
+        ended = False
+        for _ in range(small_config.horizon_steps + 1):
+            for k in obs[0]:
+                np.testing.assert_array_equal(obs[0][k], obs[1][k])
+            if action_type == "ranked":
+                action = rng.integers(0, small_config.n_sections + 1, size=3)
+            else:
+                action = rng.integers(0, 2, size=(3, small_config.n_sections))
+            (obs0, r0, d0, i0), (obs1, r1, d1, i1) = (e.step(action) for e in envs)
+            obs = [obs0, obs1]
+            np.testing.assert_array_equal(r0, r1)
+            np.testing.assert_array_equal(d0, d1)
+            ended |= bool(d0.all())
+            for a, b in zip(i0, i1):
+                assert a.keys() == b.keys() and a["cost"] == b["cost"]
+                if "terminal_observation" in a:
+                    for k in a["terminal_observation"]:
+                        np.testing.assert_array_equal(a["terminal_observation"][k], b["terminal_observation"][k])
+        assert ended  # the episodes ended on the way
+        np.testing.assert_array_equal(envs[0].action_masks(), envs[1].action_masks())
+    finally:
+        for e in envs:
+            e.close()
+
+
 def test_maskable_ppo_runs_on_adapter(tmp_path, small_config):
     pytest.importorskip("sb3_contrib")
     from sb3_contrib import MaskablePPO

@@ -7,17 +7,19 @@ import numpy as np
 from ..physics._checks import check_int
 
 
-def vector_rngs(seed: int | list[int] | np.ndarray | None, num_envs: int) -> list[np.random.Generator]:
-    """One generator per env for ``reset(seed=...)``: None draws fresh entropy for every env; an int ``s``
+def vector_seeds(seed: int | list[int] | np.ndarray | None, num_envs: int) -> list[int | None]:
+    """One seed per env for ``reset(seed=...)``: None gives None for every env (fresh entropy); an int ``s``
     seeds env ``i`` with ``s + i`` (Gymnasium's convention); a list (tuple, 1-d array) of ``num_envs`` seeds,
     each non-negative or None, seeds each env with its own."""
-    seeds: list[int | None]
     if seed is None:
-        seeds = [None] * num_envs
-    elif isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
+        return [None] * num_envs
+    if isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
         if len(seed) != num_envs:
             raise ValueError(f"seed must be an int or a list of {num_envs} seeds, got {len(seed)}")
-        seeds = [None if s is None else check_int("seed", s, low=0) for s in seed]
-    else:
-        seeds = [check_int("seed", seed, low=0) + i for i in range(num_envs)]
-    return [np.random.default_rng(s) for s in seeds]
+        return [None if s is None else check_int("seed", s, low=0) for s in seed]
+    return [check_int("seed", seed, low=0) + i for i in range(num_envs)]
+
+
+def vector_rngs(seed: int | list[int] | np.ndarray | None, num_envs: int) -> list[np.random.Generator]:
+    """One generator per env for ``reset(seed=...)``, from :func:`vector_seeds`."""
+    return [np.random.default_rng(s) for s in vector_seeds(seed, num_envs)]

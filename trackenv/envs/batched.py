@@ -56,6 +56,20 @@ def check_render_mode(value: str | None) -> str | None:
     return value
 
 
+def check_vector_actions(actions: Any, num_envs: int, single_action_space: spaces.Space) -> np.ndarray:
+    """``actions`` as an array of one action per env, (num_envs, *action shape); else ValueError naming the
+    shape expected."""
+    try:
+        arr = np.asarray(actions)
+    except ValueError:  # ragged nested sequences
+        arr = np.empty(0)
+    want = (num_envs,) + tuple(single_action_space.shape or ())
+    if arr.shape != want:
+        raise ValueError(
+            f"actions must have shape {want} (one action per env), got shape {arr.shape} ({actions!r:.60})")
+    return arr
+
+
 class BatchedVectorEnv(VectorEnv):
     """``num_envs`` episodes of one problem, stepped together (see the module docstring).
 
@@ -110,15 +124,7 @@ class BatchedVectorEnv(VectorEnv):
         return concatenate(self.single_observation_space, obs, out)  # type: ignore[return-value]
 
     def _checked_actions(self, actions: Any) -> np.ndarray:
-        try:
-            arr = np.asarray(actions)
-        except ValueError:  # ragged nested sequences
-            arr = np.empty(0)
-        want = (self.num_envs,) + tuple(self.single_action_space.shape or ())
-        if arr.shape != want:
-            raise ValueError(
-                f"actions must have shape {want} (one action per env), got shape {arr.shape} ({actions!r:.60})")
-        return arr
+        return check_vector_actions(actions, self.num_envs, self.single_action_space)
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict | None = None) -> tuple[dict, dict[str, Any]]:

@@ -45,7 +45,9 @@ class TampingVectorEnv(BatchedVectorEnv):
             config = config.replace(**overrides)
         self.config = config
         self.action_type = action_type
-        super().__init__(num_envs, observation_space(config), action_space(config, action_type),
+        obs_space = observation_space(config)
+        self._observation_keys = list(obs_space.spaces)
+        super().__init__(num_envs, obs_space, action_space(config, action_type),
                          autoreset_mode=autoreset_mode, render_mode=render_mode)
         self.episodes: list[E.Episode] = [None] * self.num_envs  # type: ignore[list-item]  # filled by reset()
 
@@ -67,7 +69,7 @@ class TampingVectorEnv(BatchedVectorEnv):
         return E.observation(self.episodes[i])
 
     def _observations(self) -> dict:
-        return E.observations(self.episodes, self.single_observation_space.spaces)
+        return E.observations(self.episodes, self._observation_keys)
 
     def _reset_info(self, i: int) -> dict:
         zero = dict.fromkeys(E.COST_KEYS, 0.0)

@@ -1,0 +1,268 @@
+"""ShardedVectorEnv: a native vector env split over worker processes, so that the Python of one shard's step
+runs while another shard's physics does.
+
+A native vector env (:class:`~trackenv.envs.vector.TampingVectorEnv`,
+:class:`~trackenv.envs.line.TampingLineVectorEnv`) runs its batched physics on every core, but the rest of its
+step (tamping, settlement, costs, observations: about 40 % of a 32-env step) runs in one Python thread while the
+other cores wait. Here each of ``workers`` processes holds a shard of the envs, a native vector env of its own
+whose physics runs on ``threads_per_worker`` numba threads; a step sends every shard its rows of the actions and
+gathers the shards' results, so the shards' Python and physics overlap across the cores.
+
+The results are those of the one-process native vector env of ``num_envs`` envs with the same seeds, bit for
+bit (``tests/envs/test_sharded.py``): ``reset(seed=s)`` seeds env ``i`` with ``s + i`` whatever its shard, every
+row of the physics depends on its own row only, and the infos are merged into Gymnasium's vector layout (each
+key with its ``_key`` mask) exactly as the one-process env builds them. Warnings raised in a worker are raised
+again in the caller; an exception in a worker is raised again in the caller with the worker's traceback; a
+worker that died raises RuntimeError instead of hanging.
+
+Workers start with the ``spawn`` method by default (safe with numba's threads): as with any multiprocessing
+code, a script that builds this env at import time must guard it with ``if __name__ == "__main__":``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import traceback
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..physics._checks import check_choice, check_int
+from ._seeding import vector_seeds
+from .batched import BatchedVectorEnv, check_vector_actions
+
+__all__ = ["ShardedVectorEnv", "shard_sizes"]
+
+_REPLY_TIMEOUT_S = 1.0  # how often a wait for a worker checks that the worker is still alive
+
+
+def shard_sizes(num_envs: int, workers: int) -> list[int]:
+    """Envs per shard: ``num_envs`` split over ``workers`` shards as evenly as possible, the larger first."""
+    return [num_envs // workers + (i < num_envs % workers) for i in range(workers)]
+
+
+def _worker(conn, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, threads: int) -> None:
+    """A shard's process: build the shard, then answer commands until "close" (or the pipe closes)."""
+    import numba
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
+    env = None
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            env = make_shard(num_envs)
+        conn.send(("ok", None, [(w.category, str(w.message)) for w in caught]))
+        while True:
+            try:
+                command, arg = conn.recv()
+            except EOFError:
+                return
+            if command == "close":
+                return
+            try:
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    if command == "reset":
+                        out: Any = env.reset(seed=arg[0], options=arg[1])
+                    elif command == "step":
+                        out = env.step(arg)
+                    elif command == "action_masks":
+                        out = env.action_masks()  # type: ignore[attr-defined]
+                    elif command == "render":
+                        out = env.render()
+                    else:  # pragma: no cover (the parent sends only the commands above)
+                        raise ValueError(f"unknown command {command!r}")
+                conn.send(("ok", out, [(w.category, str(w.message)) for w in caught]))
+            except Exception as exc:  # the caller raises it again
+                conn.send(("error", (type(exc), str(exc), traceback.format_exc()), []))
+    except Exception as exc:  # building the shard failed
+        conn.send(("error", (type(exc), str(exc), traceback.format_exc()), []))
+    finally:
+        if env is not None:
+            env.close()
+        conn.close()
+
+
+def _blank(like: np.ndarray, n: int) -> np.ndarray:
+    """The entries of a vector info key for ``n`` envs that did not report it: what Gymnasium's ``_add_info``
+    leaves there (zeros of the key's dtype, None in object arrays)."""
+    if like.dtype == object:
+        return np.full((n,) + like.shape[1:], None, dtype=object)
+    return np.zeros((n,) + like.shape[1:], dtype=like.dtype)
+
+
+def merge_infos(parts: list[dict], sizes: list[int]) -> dict:
+    """The vector infos of consecutive shards (``sizes`` envs each) as one vector info dict of ``sum(sizes)``
+    envs: every key's arrays concatenated, nested dicts merged alike, blanks where a shard lacks a key."""
+    keys: dict = {}
+    for part in parts:
+        keys.update(dict.fromkeys(part))
+    out: dict = {}
+    for key in keys:
+        values = [part.get(key) for part in parts]
+        ref = next(v for v in values if v is not None)
+        if isinstance(ref, dict):
+            out[key] = merge_infos([{} if v is None else v for v in values], sizes)
+        else:
+            out[key] = np.concatenate([_blank(ref, n) if v is None else v for v, n in zip(values, sizes)])
+    return out
+
+
+class ShardedVectorEnv(VectorEnv):
+    """``num_envs`` envs of a native vector env in ``workers`` processes (see the module docstring).
+
+    ``make_shard``: a picklable callable that builds a shard of ``n`` envs, ``make_shard(n)`` (e.g.
+    ``functools.partial(TampingVectorEnv, config=cfg)``); ``workers`` in [1, num_envs];
+    ``threads_per_worker``: numba threads of each shard's physics (default: the machine's cores shared out,
+    at least 1); ``context``: the multiprocessing start method ("spawn", "forkserver" or "fork").
+    The spaces, ``config``, autoreset mode and render mode are those of the shards. Use :meth:`close` (or
+    ``with``) to stop the workers."""
+
+    def __init__(self, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, workers: int = 2, *,
+                 threads_per_worker: int | None = None, context: str = "spawn") -> None:
+        self.closed = True  # until the workers start (a failed construction has nothing to close)
+        self._conns: list = []
+        self._procs: list = []
+        if not callable(make_shard):
+            raise ValueError(f"make_shard must be a callable that builds a shard of n envs, got {make_shard!r}")
+        self.num_envs = check_int("num_envs", num_envs, low=1, high=4096)
+        self.workers = check_int("workers", workers, low=1, high=self.num_envs)
+        cores = os.cpu_count() or 1
+        threads = max(1, cores // self.workers) if threads_per_worker is None else threads_per_worker
+        self.threads_per_worker = check_int("threads_per_worker", threads, low=1, high=1024)
+        check_choice("context", context, ("spawn", "forkserver", "fork"))
+        template = make_shard(1)  # spaces and config, without episodes (no physics runs here)
+        if not isinstance(template, BatchedVectorEnv):
+            raise ValueError(f"make_shard must build a native vector env, got {type(template).__name__}")
+        self.config = getattr(template, "config", None)
+        self.autoreset_mode = template.autoreset_mode
+        self.render_mode = template.render_mode
+        self.metadata = dict(template.metadata)
+        self.single_observation_space = template.single_observation_space
+        self.single_action_space = template.single_action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._obs_keys = list(getattr(self.single_observation_space, "spaces", {}))
+        template.close()
+        self.sizes = shard_sizes(self.num_envs, self.workers)
+        self._bounds = np.cumsum([0] + self.sizes)
+        ctx: Any = mp.get_context(context)
+        self.closed = False
+        try:
+            for n in self.sizes:
+                parent, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker, args=(child, make_shard, n, self.threads_per_worker),
+                                   daemon=True)
+                proc.start()
+                child.close()
+                self._conns.append(parent)
+                self._procs.append(proc)
+            self._gather(range(self.workers))  # each shard built (or its error raised)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ talking to the workers
+    def _receive(self, k: int) -> Any:
+        conn, proc = self._conns[k], self._procs[k]
+        while not conn.poll(_REPLY_TIMEOUT_S):
+            if not proc.is_alive():
+                raise self._died(k)
+        try:
+            status, out, caught = conn.recv()
+        except EOFError:
+            raise self._died(k) from None
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=4)
+        if status == "error":
+            kind, message, trace = out
+            raise kind(f"{message}\n(raised in worker {k} of the sharded vector env:\n{trace})")
+        return out
+
+    def _died(self, k: int) -> RuntimeError:
+        self._procs[k].join(timeout=1.0)  # its exit code
+        return RuntimeError(f"worker {k} of the sharded vector env died (exit code {self._procs[k].exitcode}); "
+                            "close this env and make a new one")
+
+    def _gather(self, shards) -> list:
+        """Every shard's reply, in order; the first error (after all replies are read, so no pipe is left with
+        an unread reply) is raised again."""
+        replies, error = [], None
+        for k in shards:
+            try:
+                replies.append(self._receive(k))
+            except Exception as exc:
+                replies.append(None)
+                if error is None:
+                    error = exc
+        if error is not None:
+            raise error
+        return replies
+
+    def _send_all(self, command: str, args: list) -> list:
+        if self.closed:
+            raise RuntimeError("the sharded vector env is closed")
+        for k, (conn, arg) in enumerate(zip(self._conns, args)):
+            try:
+                conn.send((command, arg))
+            except (BrokenPipeError, OSError):
+                raise self._died(k) from None
+        return self._gather(range(self.workers))
+
+    def _rows(self, x: np.ndarray) -> list[np.ndarray]:
+        return [x[a:b] for a, b in zip(self._bounds[:-1], self._bounds[1:])]
+
+    def _observations(self, parts: list[dict]) -> dict:
+        return {k: np.concatenate([p[k] for p in parts]) for k in self._obs_keys}
+
+    # ------------------------------------------------------------------ the Gymnasium API
+    def reset(self, *, seed: int | list[int] | None = None,
+              options: dict | None = None) -> tuple[dict, dict[str, Any]]:
+        seeds = vector_seeds(seed, self.num_envs)
+        replies = self._send_all("reset", [(list(s), options) for s in self._rows(np.array(seeds, dtype=object))])
+        return (self._observations([r[0] for r in replies]),
+                merge_infos([r[1] for r in replies], self.sizes))
+
+    def step(self, actions: Any) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        actions = check_vector_actions(actions, self.num_envs, self.single_action_space)
+        replies = self._send_all("step", self._rows(actions))
+        obs = self._observations([r[0] for r in replies])
+        rewards, terminated, truncated = (np.concatenate([r[i] for r in replies]) for i in (1, 2, 3))
+        return obs, rewards, terminated, truncated, merge_infos([r[4] for r in replies], self.sizes)
+
+    def action_masks(self) -> np.ndarray:
+        """(num_envs, ...) action masks of the shards, in env order."""
+        return np.concatenate(self._send_all("action_masks", [None] * self.workers))
+
+    def render(self):  # one frame, as the native vector env draws it
+        """The first env's state as an RGB array (``render_mode="rgb_array"``), else None."""
+        if self.render_mode != "rgb_array":
+            return None
+        self._conns[0].send(("render", None))
+        return self._gather([0])[0]
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stop the workers (:meth:`close` calls this once)."""
+        for conn in self._conns:
+            try:
+                conn.send(("close", None))
+            except (BrokenPipeError, OSError):
+                pass
+        for proc in self._procs:
+            proc.join(timeout=10.0)
+            if proc.is_alive():  # pragma: no cover (a worker stuck in a command)
+                proc.terminate()
+                proc.join(timeout=5.0)
+        for conn in self._conns:
+            conn.close()
+
+    def __enter__(self) -> ShardedVectorEnv:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
