@@ -288,7 +288,7 @@ def _window_dofs(track: Track, x_axles: np.ndarray, margin_bays: int) -> tuple[i
 # LAPACK's banded Cholesky routines, called directly for the pass set-up's per-row solves: the same routines
 # (and numbers) as scipy.linalg.solveh_banded / cholesky_banded / cho_solve_banded, without their input checks
 # and dispatch, which cost several times the solve on these small systems. Our arrays are finite by construction.
-_PBSV, _PBTRF, _PBTRS = scipy.linalg.get_lapack_funcs(("pbsv", "pbtrf", "pbtrs"), (np.zeros(1),))
+_PBTRF, _PBTRS = scipy.linalg.get_lapack_funcs(("pbtrf", "pbtrs"), (np.zeros(1),))
 
 
 def _lapack_info(routine: str, info: int) -> None:
@@ -298,11 +298,26 @@ def _lapack_info(routine: str, info: int) -> None:
         raise ValueError(f"{routine}: illegal value in argument {-info}")
 
 
-def _solve_stiffness(k_band: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """K⁻¹ f for K in our lower band storage (LAPACK pbsv, what scipy.linalg.solveh_banded runs)."""
-    _, x, info = _PBSV(lapack_lower(k_band), f, lower=1)
-    _lapack_info("pbsv", info)
-    return x
+@functools.lru_cache(maxsize=256)
+def _track_stiffness(track: Track) -> np.ndarray:
+    """``track``'s stiffness band as :func:`batched_bands` assembles a row of it (the same numbers), kept per track
+    object (immutable, hashed by identity): an episode's passes over one model track build it once."""
+    return batched_bands([track])[2][0]
+
+
+@functools.lru_cache(maxsize=256)
+def _stiffness_factor(track: Track) -> np.ndarray:
+    """The banded Cholesky factor (LAPACK pbtrf) of ``track``'s stiffness, kept per track: pbtrs with it solves
+    K u = f as pbsv (scipy.linalg.solveh_banded) does, which runs the same two routines."""
+    factor, info = _PBTRF(lapack_lower(_track_stiffness(track)), lower=1)
+    _lapack_info("pbtrf", info)
+    return factor
+
+
+@functools.lru_cache(maxsize=256)
+def _track_window_factors(track: Track, windows: tuple) -> list[tuple[int, int, np.ndarray]]:
+    """:func:`_window_factors` of ``track``'s stiffness, kept per track and windows."""
+    return _window_factors(_track_stiffness(track), windows)
 
 
 def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
@@ -548,7 +563,8 @@ def simulate_passes(
         for b, t in enumerate(tracks):
             f = np.zeros(t0.n_dof)
             f[lay.sleeper] = t.ballast_stiffness * g[b]
-            u0 = _solve_stiffness(kb[b], f)
+            u0, info = _PBTRS(_stiffness_factor(t), f, lower=1)
+            _lapack_info("pbtrs", info)
             sag[b] = u0
             z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
             us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
@@ -575,7 +591,7 @@ def simulate_passes(
         z0 = z_rows[b][0]
         if start == "static":
             loads = sys_.static_wheel_loads.copy()
-            factors = _window_factors(kb[b], windows)
+            factors = _track_window_factors(tracks[b], tuple(windows))
             for _ in range(4):  # loads on a compliant, uneven rail: a few fixed-point sweeps
                 f = np.zeros(t0.n_dof)
                 for (dofs, shp), p in zip(start_points, loads):
