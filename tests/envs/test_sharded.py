@@ -79,6 +79,8 @@ def test_sharded_env_errors_reach_the_caller() -> None:
         ShardedVectorEnv(TampingVectorEnv, 2, workers=3)
     with pytest.raises(ValueError, match="make_shard"):
         ShardedVectorEnv(lambda n: object(), 2, workers=1)  # type: ignore[arg-type,return-value]
+    with pytest.raises(ValueError, match="make_shard must be picklable"):
+        ShardedVectorEnv(lambda n: TampingVectorEnv(n), 2, workers=2)
     with pytest.raises(ValueError, match="context"):
         ShardedVectorEnv(TampingVectorEnv, 2, workers=1, context="threads")
     with pytest.warns(UserWarning, match="built a shard"):  # raised in a worker, raised again here

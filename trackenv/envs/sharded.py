@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import pickle
 import traceback
 import warnings
 from collections.abc import Callable
@@ -158,7 +159,13 @@ class ShardedVectorEnv(VectorEnv):
                 parent, child = ctx.Pipe()
                 proc = ctx.Process(target=_worker, args=(child, make_shard, n, self.threads_per_worker),
                                    daemon=True)
-                proc.start()
+                try:
+                    proc.start()
+                except (pickle.PicklingError, AttributeError) as exc:  # spawn and forkserver pickle make_shard
+                    raise ValueError(
+                        f"make_shard must be picklable for the {context!r} start method (a class, or a "
+                        f"functools.partial of one, from an importable module), got {make_shard!r}: {exc}"
+                    ) from exc
                 child.close()
                 self._conns.append(parent)
                 self._procs.append(proc)
