@@ -55,6 +55,17 @@ def test_sharded_line_env_is_the_native_vector_env_bit_for_bit() -> None:
         assert_same(a, b, f"step {i}")
 
 
+def test_sharded_env_renders_the_first_env_and_raises_worker_errors_as_theirs() -> None:
+    make = partial(TampingVectorEnv, config={"track_length_m": 30.0, "n_sections": 3}, render_mode="rgb_array")
+    one = make(2)
+    one.reset(seed=2)
+    with ShardedVectorEnv(make, 2, workers=2) as env:
+        env.reset(seed=2)
+        np.testing.assert_array_equal(env.render(), one.render())
+        with pytest.raises(ValueError, match="seed must be an int or a list of 2 seeds"):  # checked here
+            env.reset(seed=[1, 2, 3])
+
+
 def test_shard_sizes_and_info_merge() -> None:
     assert shard_sizes(5, 2) == [3, 2] and shard_sizes(32, 3) == [11, 11, 10] and shard_sizes(4, 4) == [1] * 4
     # a key only the second shard reported: blanks (zeros, None in object arrays) and False masks in the first

@@ -80,13 +80,34 @@ def _worker(conn, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, 
                         raise ValueError(f"unknown command {command!r}")
                 conn.send(("ok", out, [(w.category, str(w.message)) for w in caught]))
             except Exception as exc:  # the caller raises it again
-                conn.send(("error", (type(exc), str(exc), traceback.format_exc()), []))
+                conn.send(("error", _error_report(exc), []))
     except Exception as exc:  # building the shard failed
-        conn.send(("error", (type(exc), str(exc), traceback.format_exc()), []))
+        conn.send(("error", _error_report(exc), []))
     finally:
         if env is not None:
             env.close()
         conn.close()
+
+
+def _error_report(exc: Exception) -> tuple[type, str, str]:
+    """What the caller needs to raise a worker's exception again: its class (RuntimeError where the class cannot
+    be pickled), message and traceback."""
+    kind: type = type(exc)
+    try:
+        pickle.dumps(kind)
+    except Exception:
+        kind = RuntimeError
+    return kind, str(exc), traceback.format_exc()
+
+
+def _raised_again(kind: type, message: str) -> Exception:
+    """The caller's copy of a worker's exception: its class with ``message``, or RuntimeError where the class
+    does not take a single message."""
+    try:
+        err = kind(message)
+    except Exception:
+        return RuntimeError(message)
+    return err if isinstance(err, Exception) else RuntimeError(message)
 
 
 def _blank(like: np.ndarray, n: int) -> np.ndarray:
@@ -188,7 +209,7 @@ class ShardedVectorEnv(VectorEnv):
             warnings.warn(message, category, stacklevel=4)
         if status == "error":
             kind, message, trace = out
-            raise kind(f"{message}\n(raised in worker {k} of the sharded vector env:\n{trace})")
+            raise _raised_again(kind, f"{message}\n(raised in worker {k} of the sharded vector env:\n{trace})")
         return out
 
     def _died(self, k: int) -> RuntimeError:
@@ -211,14 +232,17 @@ class ShardedVectorEnv(VectorEnv):
             raise error
         return replies
 
-    def _send_all(self, command: str, args: list) -> list:
+    def _send(self, k: int, command: str, arg: Any) -> None:
         if self.closed:
             raise RuntimeError("the sharded vector env is closed")
-        for k, (conn, arg) in enumerate(zip(self._conns, args)):
-            try:
-                conn.send((command, arg))
-            except (BrokenPipeError, OSError):
-                raise self._died(k) from None
+        try:
+            self._conns[k].send((command, arg))
+        except (BrokenPipeError, OSError):
+            raise self._died(k) from None
+
+    def _send_all(self, command: str, args: list) -> list:
+        for k, arg in enumerate(args):
+            self._send(k, command, arg)
         return self._gather(range(self.workers))
 
     def _rows(self, x: np.ndarray) -> list[np.ndarray]:
@@ -250,7 +274,7 @@ class ShardedVectorEnv(VectorEnv):
         """The first env's state as an RGB array (``render_mode="rgb_array"``), else None."""
         if self.render_mode != "rgb_array":
             return None
-        self._conns[0].send(("render", None))
+        self._send(0, "render", None)
         return self._gather([0])[0]
 
     def close_extras(self, **kwargs: Any) -> None:
