@@ -66,6 +66,24 @@ def test_sharded_env_renders_the_first_env_and_raises_worker_errors_as_theirs() 
             env.reset(seed=[1, 2, 3])
 
 
+def test_make_vec_with_workers_gives_the_sharded_env() -> None:
+    """gym.make_vec(..., vectorization_mode="vector_entry_point", workers=2): the same envs in two processes;
+    without workers the native vector env itself (tests/envs/test_vector_env.py)."""
+    import gymnasium as gym
+
+    kwargs = {"vectorization_mode": "vector_entry_point", "track_length_m": 30.0, "n_sections": 3}
+    one = gym.make_vec("trackenv/Tamping-v0", num_envs=3, **kwargs)
+    assert isinstance(one, TampingVectorEnv)
+    want = _rollout(one, 2, 5, 3)
+    with gym.make_vec("trackenv/Tamping-v0", num_envs=3, workers=2, **kwargs) as env:
+        assert isinstance(env, ShardedVectorEnv) and env.sizes == [2, 1]
+        got = _rollout(env, 2, 5, 3)
+    for i, (a, b) in enumerate(zip(want, got)):
+        assert_same(a, b, f"step {i}")
+    with pytest.raises(ValueError, match="workers"):
+        gym.make_vec("trackenv/TampingLineSmall-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=0)
+
+
 def test_shard_sizes_and_info_merge() -> None:
     assert shard_sizes(5, 2) == [3, 2] and shard_sizes(32, 3) == [11, 11, 10] and shard_sizes(4, 4) == [1] * 4
     # a key only the second shard reported: blanks (zeros, None in object arrays) and False masks in the first

@@ -89,7 +89,7 @@ def test_stable_baselines3_env_checker(env_id: str) -> None:
 def test_registration(env_id: str) -> None:
     spec = gym.spec(env_id)
     assert spec.max_episode_steps is None  # the env truncates itself at its configured horizon
-    assert spec.vector_entry_point == "trackenv.envs.vector:TampingVectorEnv"
+    assert spec.vector_entry_point == "trackenv.envs.sharded:tamping_vector_env"  # TampingVectorEnv, or sharded
     env = gym.make(env_id)
     assert env.unwrapped.config == TampingEnvConfig()
     expected = gym.spaces.MultiBinary(6) if env_id.endswith("Tamping-v0") else gym.spaces.Discrete(7)

@@ -7,7 +7,8 @@ Ids: ``trackenv/Tamping-v0`` (MultiBinary actions, the full Dict observation), `
 (one section or none per step), and for learners (:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v0``
 (``Discrete(n_sections + 1)`` ranked actions, section-level Dict observation) and
 ``trackenv/TampingRankedFlat-v0`` (the same with one flat ``Box`` observation: RLlib's and CleanRL's default
-encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``).
+encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add
+``workers=N`` for the same envs in N processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
 The line problem (:mod:`trackenv.envs.line`): ``trackenv/TampingLine-v0`` (the default line),
 ``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``.
 """
@@ -18,9 +19,9 @@ from .config import TampingEnvConfig
 from .tamping import TampingEnv
 
 _ENVS = (
-    ("trackenv/Tamping-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.vector:TampingVectorEnv",
+    ("trackenv/Tamping-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "multibinary"}),
-    ("trackenv/TampingDiscrete-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.vector:TampingVectorEnv",
+    ("trackenv/TampingDiscrete-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "discrete"}),
     ("trackenv/TampingRanked-v0", "trackenv.envs.wrappers:make_ranked", "trackenv.envs.wrappers:make_ranked_vector",
      {"env_id": "trackenv/Tamping-v0"}),
@@ -43,5 +44,5 @@ for _id, _scenario in (
             id=_id,
             entry_point="trackenv.envs.line:TampingLine",
             kwargs={"scenario": _scenario},
-            vector_entry_point="trackenv.envs.line:TampingLineVectorEnv",
+            vector_entry_point="trackenv.envs.sharded:line_vector_env",
         )

@@ -27,6 +27,7 @@ import pickle
 import traceback
 import warnings
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,7 @@ from ..physics._checks import check_choice, check_int
 from ._seeding import vector_seeds
 from .batched import BatchedVectorEnv, check_vector_actions
 
-__all__ = ["ShardedVectorEnv", "shard_sizes"]
+__all__ = ["ShardedVectorEnv", "line_vector_env", "shard_sizes", "tamping_vector_env"]
 
 _REPLY_TIMEOUT_S = 1.0  # how often a wait for a worker checks that the worker is still alive
 
@@ -297,3 +298,29 @@ class ShardedVectorEnv(VectorEnv):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _native_or_sharded(native: Callable[..., BatchedVectorEnv], num_envs: int, workers: int,
+                       kwargs: dict) -> VectorEnv:
+    workers = check_int("workers", workers, low=1, high=4096)
+    if workers == 1:
+        return native(num_envs, **kwargs)
+    return ShardedVectorEnv(partial(native, **kwargs), num_envs, workers)
+
+
+def tamping_vector_env(num_envs: int = 8, *, workers: int = 1, **kwargs: Any) -> VectorEnv:
+    """The vector entry point of the Tamping ids (``gym.make_vec(..., vectorization_mode="vector_entry_point")``):
+    :class:`~trackenv.envs.vector.TampingVectorEnv` of ``num_envs`` envs with ``kwargs``, or with ``workers`` > 1
+    the same envs in that many processes (:class:`ShardedVectorEnv`)."""
+    from .vector import TampingVectorEnv
+
+    return _native_or_sharded(TampingVectorEnv, num_envs, workers, kwargs)
+
+
+def line_vector_env(num_envs: int = 4, *, workers: int = 1, **kwargs: Any) -> VectorEnv:
+    """The vector entry point of the TampingLine ids: :class:`~trackenv.envs.line.TampingLineVectorEnv`, or with
+    ``workers`` > 1 the same lines in that many processes (:class:`ShardedVectorEnv`)."""
+    from .line import TampingLineVectorEnv
+
+    return _native_or_sharded(TampingLineVectorEnv, num_envs, workers, kwargs)
+
