@@ -31,7 +31,7 @@ def warm_dynamics_kernel():
     finally:
         helper.wait()
     warm_kernel(wide)  # compiled by the helper: loaded from the cache (or compiled here if it failed)
-    # the compiled inverse of the root-solved settlement laws (trackenv.physics._newton), one entry
+    # the compiled inverse of the root-solved settlement laws (trackenv.physics._implicit), one entry
     from trackenv.physics.settlement import SatoLaw
 
     SatoLaw().equivalent_cycles(5e4, 1e-3)

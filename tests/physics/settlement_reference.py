@@ -1,5 +1,5 @@
 """The vectorised numpy safeguarded Newton solve that inverted the Sato and Shenton growth functions before
-the compiled one (:mod:`trackenv.physics._newton`): kept as the reference the compiled solve is tested
+the compiled one (:mod:`trackenv.physics._implicit`): kept as the reference the compiled solve is tested
 against."""
 
 from __future__ import annotations

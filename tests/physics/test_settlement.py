@@ -442,22 +442,22 @@ def test_implicit_step_rows_do_not_depend_on_the_batch():
     ids=["sato", "sato_bounded", "shenton", "shenton_power", "shenton_linear"],
 )
 def test_compiled_growth_inverse_matches_the_numpy_reference(law) -> None:
-    """The compiled Newton inverse (trackenv.physics._newton) runs the iteration of the numpy solve it
+    """The compiled Newton inverse (trackenv.physics._implicit) runs the iteration of the numpy solve it
     replaced (tests/physics/settlement_reference.py); the two differ only by the last bits of exp/expm1/pow
     (numpy's and LLVM's libm): measured <= 5.6e-15 relative in N, bound 2e-14; +inf in the same places."""
     from settlement_reference import solve_bracketed
 
-    from trackenv.physics import _newton
+    from trackenv.physics import _implicit
     from trackenv.physics import settlement as settlement_module
 
     rng = np.random.default_rng(7)
     y = law._g1() * np.exp(rng.uniform(0.0, 8.0, 50_000))
     # the compiled g and the law's g are the same function
-    kind = _newton.SATO if isinstance(law, SatoLaw) else _newton.SHENTON
+    kind = _implicit.SATO if isinstance(law, SatoLaw) else _implicit.SHENTON
     params = (law.alpha, law.beta, law.gamma) if isinstance(law, SatoLaw) else (law.K1, law.K2)
     n = 10.0 ** rng.uniform(0.0, 8.0, 1000)
     g_law = law._growth(n)
-    g_jit = np.array([_newton._growth.py_func(kind, np.asarray(params), x) for x in n])
+    g_jit = np.array([_implicit._root_growth.py_func(kind, np.asarray(params), x) for x in n])
     np.testing.assert_allclose(g_jit, g_law, rtol=1e-15)
     new = law._growth_inverse(y)
 

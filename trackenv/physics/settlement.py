@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike
 
 from . import _implicit
 from ._checks import check_array, check_field, check_int, check_scalar, readonly_array
-from ._newton import SATO, SHENTON, growth_inverse, upper_brackets
+from ._implicit import SATO, SHENTON, growth_inverse, upper_brackets
 
 __all__ = [
     "LAWS",
@@ -93,7 +93,7 @@ class SettlementLaw(Protocol):
 def _solve_bracketed(kind: int, params: tuple[float, ...], y: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """N >= 1 with g(N) = y, for y > g(1); +inf where no finite upper bracket ``hi`` exists.
 
-    g is the growth function ``kind`` of :mod:`._newton` (Sato or Shenton) with ``params``; the solve is a
+    g is the growth function ``kind`` of :mod:`._implicit` (Sato or Shenton) with ``params``; the solve is a
     compiled safeguarded Newton iteration on the bracket [1, hi], element by element: g is increasing, and
     the brackets may span many decades of N, so a step that leaves the bracket is replaced by the geometric
     midpoint sqrt(lo·hi). It stops once the residual is at the rounding level of y (the best the
@@ -111,7 +111,7 @@ def _solve_bracketed(kind: int, params: tuple[float, ...], y: np.ndarray, hi: np
 
 
 def _upper_brackets(kind: int, params: tuple[float, ...], y: np.ndarray) -> np.ndarray:
-    """Upper brackets of the root-solved inverse for every element of ``y`` (:func:`._newton.upper_bracket`:
+    """Upper brackets of the root-solved inverse for every element of ``y`` (:func:`._implicit.upper_bracket`:
     the same bounds the compiled implicit step takes)."""
     flat = np.ascontiguousarray(y, dtype=np.float64).ravel()
     return upper_brackets(kind, np.asarray(params, dtype=np.float64), flat).reshape(np.shape(y))
