@@ -6,6 +6,7 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from trackenv_agents.evaluation import evaluate_one
 from trackenv_agents.heuristics import Periodic
@@ -64,3 +65,21 @@ def test_kernel_profile_counts_every_section_of_the_kernels_time_step():
         assert "section headers" in str(e)
     else:
         raise AssertionError("a kernel without section headers must be refused")
+
+
+def test_ab_speed_alternates_the_versions_and_summarises_the_pairs():
+    ab = _script("ab_speed")
+    runs = ab.order(3)
+    assert runs == ["base", "new", "new", "base", "base", "new"]
+    assert runs.count("base") == runs.count("new") == 3
+    rep = ab.summary([100.0, 110.0, 90.0], [105.0, 99.0, 99.0])
+    assert rep["median_base"] == 100.0 and rep["median_new"] == 99.0
+    np.testing.assert_allclose(rep["ratios"], [1.05, 0.9, 1.1])
+    assert rep["median_ratio"] == rep["ratios"][0] and rep["new_faster"] == 2 and rep["pairs"] == 3
+    with pytest.raises(ValueError, match="pairs"):
+        ab.order(0)
+    with pytest.raises(ValueError, match="equal, non-empty"):
+        ab.summary([1.0], [])
+    with pytest.raises(ValueError, match="equal, non-empty"):
+        ab.summary([], [])
+

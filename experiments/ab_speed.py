@@ -1,0 +1,171 @@
+"""Interleaved A/B of a speed figure between two versions of trackenv: which one is faster, on a machine whose
+speed drifts.
+
+    python experiments/ab_speed.py --base 782868f                      # the working tree against a commit
+    python experiments/ab_speed.py --base main~3 --new main --figure env --pairs 6
+    python experiments/ab_speed.py --base 782868f --figure vector --envs 32 --out results/ab_vector32.json
+
+A single `trackenv bench` figure moves by ±10–30 % with the machine's load and clock from one minute to the next,
+more than most changes it is meant to judge. Here each version runs in its own process, one after the other,
+in the order A B B A A B … (so that a drift over the run favours neither), each measuring the figure in a fresh
+process after a warm-up; the report gives both medians, the median of the per-pair ratios (new / base) and how
+many pairs favour the new version. ``--base`` and ``--new`` are git revisions checked out as temporary worktrees
+(``--new`` defaults to the working tree itself); each worktree compiles the kernel the first time it runs (a few
+minutes, untimed), and is removed at the end. Figures (``--figure``):
+
+* ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
+* ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
+* ``env``: env steps per second of ``trackenv/Tamping-v0`` (random actions);
+* ``seed``: passes per second of the seed pass at dt = 1e-4 (the benchmark's ``seed_pass``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_SNIPPETS = {
+    "vector": """
+import time, numpy as np
+from trackenv.envs.vector import TampingVectorEnv
+env = TampingVectorEnv({envs}); env.reset(seed=0); rng = np.random.default_rng(0)
+act = lambda: rng.integers(0, 2, size=(env.num_envs, env.config.n_sections))
+for _ in range(3): env.step(act())
+t = time.perf_counter()
+for _ in range({steps}): env.step(act())
+print({envs} * {steps} / (time.perf_counter() - t))
+""",
+    "sharded": """
+import time, numpy as np
+from trackenv.envs.sharded import ShardedVectorEnv
+from trackenv.envs.vector import TampingVectorEnv
+if __name__ == "__main__":
+    env = ShardedVectorEnv(TampingVectorEnv, {envs}, workers={workers}); env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    act = lambda: rng.integers(0, 2, size=(env.num_envs, env.config.n_sections))
+    for _ in range(3): env.step(act())
+    t = time.perf_counter()
+    for _ in range({steps}): env.step(act())
+    print({envs} * {steps} / (time.perf_counter() - t))
+    env.close()
+""",
+    "env": """
+import time, gymnasium as gym
+import trackenv.envs
+env = gym.make("trackenv/Tamping-v0"); env.reset(seed=0); env.action_space.seed(0)
+for _ in range(5): env.step(env.action_space.sample())
+t = time.perf_counter()
+for _ in range({steps}):
+    _, _, te, tr, _ = env.step(env.action_space.sample())
+    if te or tr: env.reset()
+print({steps} / (time.perf_counter() - t))
+""",
+    "seed": """
+import time
+from trackenv.physics.dynamics import simulate_pass
+from trackenv.physics.track import Track
+from trackenv.physics.vehicle import Wheelset
+track, wheel = Track.seed(), Wheelset(mass=1800.0, static_load=100e3)
+simulate_pass(track, wheel, 80 / 3.6, dt=1e-4)
+t = time.perf_counter()
+for _ in range({steps}): simulate_pass(track, wheel, 80 / 3.6, dt=1e-4)
+print({steps} / (time.perf_counter() - t))
+""",
+}
+FIGURES = tuple(_SNIPPETS)
+_UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s", "seed": "passes/s"}
+
+
+def order(pairs: int) -> list[str]:
+    """The run order A B B A A B … for ``pairs`` pairs: every pair has one run of each, and the first of a pair
+    alternates, so that a steady drift of the machine over the whole run favours neither version."""
+    if pairs < 1:
+        raise ValueError(f"pairs must be >= 1, got {pairs!r}")
+    return [x for p in range(pairs) for x in (("base", "new") if p % 2 == 0 else ("new", "base"))]
+
+
+def summary(base: list[float], new: list[float]) -> dict:
+    """Medians of both, the per-pair ratios new / base, their median and how many pairs favour ``new`` (a higher
+    figure is faster)."""
+    if len(base) != len(new) or not base:
+        raise ValueError(f"base and new must be equal, non-empty lists of figures, got {len(base)} and {len(new)}")
+    ratios = [n / b for b, n in zip(base, new)]
+    return {"base": base, "new": new, "median_base": statistics.median(base), "median_new": statistics.median(new),
+            "ratios": ratios, "median_ratio": statistics.median(ratios), "new_faster": sum(r > 1.0 for r in ratios),
+            "pairs": len(ratios)}
+
+
+def _checkout(rev: str, where: Path) -> Path:
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet", str(where), rev], check=True)
+    return where
+
+
+def _run(tree: Path, code: str) -> float:
+    """The figure printed by ``code`` run in a fresh process on the trackenv of ``tree``."""
+    check = f"import trackenv, sys; assert trackenv.__file__.startswith({str(tree)!r}), trackenv.__file__\n"
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:  # a file: spawn needs a __main__
+        f.write(check + code)
+    try:
+        out = subprocess.run([sys.executable, f.name], cwd=tree, env=env, capture_output=True, text=True)
+    finally:
+        os.unlink(f.name)
+    if out.returncode != 0:
+        raise RuntimeError(f"the figure failed in {tree}:\n{out.stderr[-2000:]}")
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--base", required=True, help="git revision of the base version")
+    parser.add_argument("--new", default=None, help="git revision of the new version (default: the working tree)")
+    parser.add_argument("--figure", choices=FIGURES, default="vector", help="what to time (default: vector)")
+    parser.add_argument("--pairs", type=int, default=8, help="pairs of runs (default 8)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="steps (passes for seed) per run (default: vector/sharded 40, env 300, seed 20)")
+    parser.add_argument("--envs", type=int, default=32, help="envs of the vector figures (default 32)")
+    parser.add_argument("--workers", type=int, default=2, help="processes of the sharded figure (default 2)")
+    parser.add_argument("--out", default="", help="write the JSON report here")
+    args = parser.parse_args(argv)
+    if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
+        parser.error("pairs, steps, envs and workers must be >= 1")
+    steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "seed": 20}[args.figure]
+    code = _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers)
+    runs = order(args.pairs)
+    with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
+        trees = {"base": _checkout(args.base, Path(tmp) / "base")}
+        trees["new"] = ROOT if args.new is None else _checkout(args.new, Path(tmp) / "new")
+        try:
+            for name, tree in trees.items():  # compile (or load) each version's kernel, untimed
+                print(f"warming {name} ({tree}) ...", file=sys.stderr, flush=True)
+                _run(tree, code)
+            figures: dict[str, list[float]] = {"base": [], "new": []}
+            for i, name in enumerate(runs):
+                figures[name].append(_run(trees[name], code))
+                print(f"run {i + 1}/{len(runs)} {name}: {figures[name][-1]:.2f}", file=sys.stderr, flush=True)
+        finally:
+            for tree in trees.values():
+                if tree != ROOT:
+                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+    report = {"figure": args.figure, "unit": _UNITS[args.figure], "base": args.base, "new": args.new or "working tree",
+              "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
+              **summary(figures["base"], figures["new"])}
+    print(f"{args.figure} ({report['unit']}), {report['pairs']} pairs: base {report['median_base']:.2f}, new "
+          f"{report['median_new']:.2f}, median ratio {report['median_ratio']:.3f} "
+          f"({report['new_faster']}/{report['pairs']} pairs favour new), load {report['load_average_1min']:.2f}")
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(report, indent=2))
+    return report
+
+
+if __name__ == "__main__":
+    main()
