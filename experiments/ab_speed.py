@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> dict:
             for tree in trees.values():
                 if tree != ROOT:
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
-    report = {"figure": args.figure, "unit": _UNITS[args.figure], "base": args.base, "new": args.new or "working tree",
+    report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
+              "new_rev": args.new or "working tree",
               "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
               **summary(figures["base"], figures["new"])}
     print(f"{args.figure} ({report['unit']}), {report['pairs']} pairs: base {report['median_base']:.2f}, new "
