@@ -142,7 +142,8 @@ class ShardedVectorEnv(VectorEnv):
     ``make_shard``: a picklable callable that builds a shard of ``n`` envs, ``make_shard(n)`` (e.g.
     ``functools.partial(TampingVectorEnv, config=cfg)``); ``workers`` in [1, num_envs];
     ``threads_per_worker``: numba threads of each shard's physics (default: the machine's cores shared out,
-    at least 1); ``context``: the multiprocessing start method ("spawn", "forkserver" or "fork").
+    at least 1); ``context``: the multiprocessing start method, "spawn" or "forkserver" ("fork" is refused: a
+    child forked from a process whose numba threads have run aborts).
     The spaces, ``config``, autoreset mode and render mode are those of the shards. Use :meth:`close` (or
     ``with``) to stop the workers."""
 
@@ -158,7 +159,8 @@ class ShardedVectorEnv(VectorEnv):
         cores = os.cpu_count() or 1
         threads = max(1, cores // self.workers) if threads_per_worker is None else threads_per_worker
         self.threads_per_worker = check_int("threads_per_worker", threads, low=1, high=1024)
-        check_choice("context", context, ("spawn", "forkserver", "fork"))
+        # not "fork": a child forked from a process whose numba threads have run (OpenMP) aborts
+        check_choice("context", context, ("spawn", "forkserver"))
         template = make_shard(1)  # spaces and config, without episodes (no physics runs here)
         if not isinstance(template, BatchedVectorEnv):
             raise ValueError(f"make_shard must build a native vector env, got {type(template).__name__}")
