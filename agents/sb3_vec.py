@@ -40,7 +40,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
-from trackenv.envs.sharded import ShardedVectorEnv
+from trackenv.envs.sharded import native_or_sharded
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
@@ -128,7 +128,7 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
         else:
             make = partial(TampingVectorEnv, config=TampingEnvConfig.coerce(config),
                            action_type=env_action_type(action_type))
-        venv = make(num_envs) if workers == 1 else ShardedVectorEnv(make, num_envs, workers)
+        venv = native_or_sharded(make, num_envs, workers)
         self.config = venv.config
         if action_type == RANKED:
             venv = RankedVectorActions(venv)

@@ -280,10 +280,10 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: boo
             from .envs.line import TampingLineVectorEnv as Vec
         else:
             from .envs.vector import TampingVectorEnv as Vec  # type: ignore[assignment]
-        from .envs.sharded import ShardedVectorEnv
+        from .envs.sharded import native_or_sharded
 
         t0 = time.perf_counter()
-        venv = Vec(num_envs=num_envs) if workers == 1 else ShardedVectorEnv(Vec, num_envs, workers)
+        venv = native_or_sharded(Vec, num_envs, workers)
         start_s = time.perf_counter() - t0
     except Exception as exc:  # optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}

@@ -38,7 +38,7 @@ from ..physics._checks import check_choice, check_int
 from ._seeding import vector_seeds
 from .batched import BatchedVectorEnv, check_vector_actions
 
-__all__ = ["ShardedVectorEnv", "line_vector_env", "shard_sizes", "tamping_vector_env"]
+__all__ = ["ShardedVectorEnv", "line_vector_env", "native_or_sharded", "shard_sizes", "tamping_vector_env"]
 
 _REPLY_TIMEOUT_S = 1.0  # how often a wait for a worker checks that the worker is still alive
 
@@ -55,10 +55,8 @@ def _worker(conn, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, 
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
     env = None
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            env = make_shard(num_envs)
-        conn.send(("ok", None, [(w.category, str(w.message)) for w in caught]))
+        env, caught = _recorded(make_shard, num_envs)
+        conn.send(("ok", None, caught))
         while True:
             try:
                 command, arg = conn.recv()
@@ -67,19 +65,7 @@ def _worker(conn, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, 
             if command == "close":
                 return
             try:
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always")
-                    if command == "reset":
-                        out: Any = env.reset(seed=arg[0], options=arg[1])
-                    elif command == "step":
-                        out = env.step(arg)
-                    elif command == "action_masks":
-                        out = env.action_masks()  # type: ignore[attr-defined]
-                    elif command == "render":
-                        out = env.render()
-                    else:  # pragma: no cover (the parent sends only the commands above)
-                        raise ValueError(f"unknown command {command!r}")
-                conn.send(("ok", out, [(w.category, str(w.message)) for w in caught]))
+                conn.send(("ok", *_recorded(_command, env, command, arg)))
             except Exception as exc:  # the caller raises it again
                 conn.send(("error", _error_report(exc), []))
     except Exception as exc:  # building the shard failed
@@ -88,6 +74,27 @@ def _worker(conn, make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, 
         if env is not None:
             env.close()
         conn.close()
+
+
+def _command(env: BatchedVectorEnv, command: str, arg: Any) -> Any:
+    """What a worker's shard answers to ``command``."""
+    if command == "reset":
+        return env.reset(seed=arg[0], options=arg[1])
+    if command == "step":
+        return env.step(arg)
+    if command == "action_masks":
+        return env.action_masks()  # type: ignore[attr-defined]
+    if command == "render":
+        return env.render()
+    raise ValueError(f"unknown command {command!r}")  # pragma: no cover (the parent sends only the above)
+
+
+def _recorded(fn: Callable, *args: Any) -> tuple[Any, list[tuple[type, str]]]:
+    """``fn(*args)`` and the warnings it raised, as (category, message) pairs for the caller to raise again."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn(*args)
+    return out, [(w.category, str(w.message)) for w in caught]
 
 
 def _error_report(exc: Exception) -> tuple[type, str, str]:
@@ -302,12 +309,14 @@ class ShardedVectorEnv(VectorEnv):
         self.close()
 
 
-def _native_or_sharded(native: Callable[..., BatchedVectorEnv], num_envs: int, workers: int,
-                       kwargs: dict) -> VectorEnv:
+def native_or_sharded(make_shard: Callable[[int], BatchedVectorEnv], num_envs: int, workers: int = 1) -> VectorEnv:
+    """``make_shard(num_envs)`` itself for ``workers`` = 1, else the same envs in that many processes
+    (:class:`ShardedVectorEnv`): the one choice every entry point (make_vec, the SB3 adapter, the benchmark)
+    makes."""
     workers = check_int("workers", workers, low=1, high=4096)
     if workers == 1:
-        return native(num_envs, **kwargs)
-    return ShardedVectorEnv(partial(native, **kwargs), num_envs, workers)
+        return make_shard(num_envs)
+    return ShardedVectorEnv(make_shard, num_envs, workers)
 
 
 def tamping_vector_env(num_envs: int = 8, *, workers: int = 1, **kwargs: Any) -> VectorEnv:
@@ -316,7 +325,7 @@ def tamping_vector_env(num_envs: int = 8, *, workers: int = 1, **kwargs: Any) ->
     the same envs in that many processes (:class:`ShardedVectorEnv`)."""
     from .vector import TampingVectorEnv
 
-    return _native_or_sharded(TampingVectorEnv, num_envs, workers, kwargs)
+    return native_or_sharded(partial(TampingVectorEnv, **kwargs), num_envs, workers)
 
 
 def line_vector_env(num_envs: int = 4, *, workers: int = 1, **kwargs: Any) -> VectorEnv:
@@ -324,5 +333,5 @@ def line_vector_env(num_envs: int = 4, *, workers: int = 1, **kwargs: Any) -> Ve
     ``workers`` > 1 the same lines in that many processes (:class:`ShardedVectorEnv`)."""
     from .line import TampingLineVectorEnv
 
-    return _native_or_sharded(TampingLineVectorEnv, num_envs, workers, kwargs)
+    return native_or_sharded(partial(TampingLineVectorEnv, **kwargs), num_envs, workers)
 
