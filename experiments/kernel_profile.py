@@ -105,8 +105,12 @@ def runner(module, width: int):
     from numba import njit
 
     chunk = module._run_chunk
+    # compiled as the kernel compiles its chunk integrator: several rows through the kernel's wide-vector pipeline
+    # where it has one, one row (the single pass's entry) by numba's default
+    wide = width > 1 and hasattr(module, "_WideCompiler")
+    options = {"pipeline_class": module._WideCompiler} if wide else {}
 
-    @njit(fastmath=module.FASTMATH)
+    @njit(fastmath=module.FASTMATH, **options)
     def run(mesh, drive, rows, peaks, prof):
         for ch in range(rows.u.shape[0]):
             chunk(mesh, drive, rows, peaks, ch, width, prof)
