@@ -404,6 +404,25 @@ def test_batch_of_irregularities_equals_single_passes():
     assert not np.allclose(batch[0].contact_force, batch[2].contact_force)
 
 
+def test_batch_interpolates_its_profiles_together_as_one_row_at_a_time():
+    """The rows' profiles are interpolated by one spline through all of them: each row's rail level and forces are
+    bit for bit those of its pass alone, whatever else is in the batch (per-sleeper and per-node profiles, a
+    callable, None, one profile object in two rows)."""
+    t = Track.seed()
+    rng = np.random.default_rng(7)
+    sleeper_a, sleeper_b = 1e-3 * rng.standard_normal(t.n_sleepers), 1e-3 * rng.standard_normal(t.n_sleepers)
+    node = 5e-4 * np.sin(t.node_positions)
+    rows = [sleeper_a, None, node, cosine_dip(2e-3, x0=12.0), sleeper_b, sleeper_a]
+    kw = dict(x_start=3.0, x_end=27.0, dt=1e-4)
+    batch = simulate_passes(t, LOADED, V80, rows, **kw)
+    for b, z in zip(batch, rows, strict=True):
+        single = simulate_pass(t, LOADED, V80, z, **kw)
+        for name in ("irregularity", "contact_force", "sleeper_force"):
+            assert np.array_equal(getattr(b, name), getattr(single, name)), name
+    assert np.array_equal(batch[0].contact_force, batch[5].contact_force)
+    assert not np.array_equal(batch[0].contact_force, batch[4].contact_force)
+
+
 def test_batch_of_tracks_with_different_ballast():
     seed = Track.seed()
     tracks = [seed, seed.scaled(ballast_stiffness=1.1, from_sleeper=40), seed.scaled(ballast_stiffness=0.5)]
