@@ -110,12 +110,30 @@ def runner(module, width: int):
     wide = width > 1 and hasattr(module, "_WideCompiler")
     options = {"pipeline_class": module._WideCompiler} if wide else {}
 
-    @njit(fastmath=module.FASTMATH, **options)
-    def run(mesh, drive, rows, peaks, prof):
-        for ch in range(rows.u.shape[0]):
-            chunk(mesh, drive, rows, peaks, ch, width, prof)
+    if hasattr(module, "Reuse"):  # a kernel that keeps window factors across passes
+
+        @njit(fastmath=module.FASTMATH, **options)
+        def run(mesh, drive, rows, peaks, reuse, prof):
+            for ch in range(rows.u.shape[0]):
+                chunk(mesh, drive, rows, peaks, reuse, ch, width, prof)
+
+    else:  # an older kernel file
+
+        @njit(fastmath=module.FASTMATH, **options)
+        def run(mesh, drive, rows, peaks, reuse, prof):
+            for ch in range(rows.u.shape[0]):
+                chunk(mesh, drive, rows, peaks, ch, width, prof)
 
     return run
+
+
+def own_store(reuse, stores: dict):
+    """A kernel's own copy of the pass's store of kept window factors (empty at first), so that kernels compared
+    in one process do not read each other's."""
+    key = id(reuse)
+    if key not in stores:
+        stores[key] = type(reuse)(*(np.full_like(a, -1) if a.dtype.kind == "i" else np.zeros_like(a) for a in reuse))
+    return stores[key]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -143,14 +161,16 @@ def main(argv: list[str] | None = None) -> None:
             raise SystemExit("the kernels' section headers differ; compare kernels with the same sections")
         runs = [runner(mod, args.rows) for mod, _ in loaded]
         counts = [np.zeros(len(names), dtype=np.uint64) for _ in kernels]
+        stores: list[dict] = [{} for _ in kernels]
         steps = {}
         current = [0]
 
-        def run(mesh, drive, rows, peaks, width):
+        def run(mesh, drive, rows, peaks, reuse, width):
             if width != args.rows:
                 raise SystemExit(f"the batch ran at width {width}, not {args.rows}")
             steps["n"] = drive.x_axle.shape[0] - 1
-            runs[current[0]](mesh, drive, rows, peaks, counts[current[0]])
+            k = current[0]
+            runs[k](mesh, drive, rows, peaks, own_store(reuse, stores[k]), counts[k])
 
         K.run = run  # simulate_passes calls _kernel.run at run time
         config = TampingEnvConfig()

@@ -58,7 +58,7 @@ def test_kernel_profile_counts_every_section_of_the_kernels_time_step():
     # a counter read at every header and once at the end of the step, each closing one section
     assert [f"prof[{k}] +=" in text for k in range(len(names))] == [True] * len(names)
     assert text.count("_cycles(); prof[") == len(names)
-    assert "cache=True" not in text and "def _run_chunk(mesh, drive, rows, peaks, ch, W, prof):" in text
+    assert "cache=True" not in text and "def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W, prof):" in text
     try:
         kp.instrument(source.replace("# ---- ", "# "))
     except ValueError as e:

@@ -552,18 +552,58 @@ def test_the_kernel_gets_arrays_that_do_not_overlap(monkeypatch, n_rows):
     seen = []
     run = _kernel.run
 
-    def recording_run(mesh, drive, rows, peaks, width):
-        seen.append((mesh, drive, rows, peaks))
-        return run(mesh, drive, rows, peaks, width)
+    def recording_run(mesh, drive, rows, peaks, reuse, width):
+        seen.append((mesh, drive, rows, peaks, reuse))
+        return run(mesh, drive, rows, peaks, reuse, width)
 
     monkeypatch.setattr(_kernel, "run", recording_run)
     for t, vehicle in ((Track.seed(), LOADED), (Track.realistic(40.0), Car.manchester_coach())):
         rows = 5e-4 * np.random.default_rng(3).standard_normal((n_rows, t.n_sleepers))
         simulate_passes(t, vehicle, V80, rows, support_settlement=np.abs(rows), dt="auto")
     assert len(seen) == 2
-    for mesh, drive, rows_, peaks in seen:
+    for mesh, drive, rows_, peaks, reuse in seen:
         shared = [x for x in (*mesh, *drive) if isinstance(x, np.ndarray)]
-        per_row = [*rows_, *peaks]
+        per_row = [*rows_, *peaks, *reuse]
         for i, x in enumerate(per_row):
             for y in per_row[i + 1 :] + shared:
-                assert not np.may_share_memory(x, y), (rows_._fields + peaks._fields)[i]
+                assert not np.may_share_memory(x, y), (rows_._fields + peaks._fields + reuse._fields)[i]
+
+
+@pytest.mark.parametrize("case", ["wheelset", "coach"])
+def test_one_row_passes_keep_their_window_factors_bit_identically(monkeypatch, case):
+    """A one-row pass keeps each window's factor and each bay's columns for the next pass over the same track at
+    the same dt (the effective stiffness is the same): the next pass reads them back and its results are bit for
+    bit the first pass's, a batch's (which keeps nothing) and those of a pass over a new, equal track; another dt
+    or window size is kept apart. Corrupting what was kept changes the next pass: it is read, not recomputed."""
+    from trackenv.physics import dynamics
+
+    kept_factors = dynamics._kept_factors
+    kept_factors.cache_clear()
+    stores = []
+    monkeypatch.setattr(dynamics, "_kept_factors", lambda *a: stores.append(kept_factors(*a)) or stores[-1])
+    if case == "wheelset":
+        make, vehicle = Track.seed, LOADED
+    else:
+        make, vehicle = (lambda: Track.realistic(40.0)), Car.manchester_coach()
+    t = make()
+    z = 5e-4 * np.random.default_rng(11).standard_normal(t.n_sleepers)
+    kw = dict(dt=4e-4, support_settlement=np.abs(z))
+    first = simulate_pass(t, vehicle, V80, z, **kw)
+    store = stores[0]
+    assert (store.factor_window[:, 0] >= 0).sum() > 10 and (store.columns_window[:, 0] >= 0).sum() > 10
+    second = simulate_pass(t, vehicle, V80, z, **kw)
+    assert stores[1] is store and kept_factors.cache_info().hits == 1
+    fresh = simulate_pass(make(), vehicle, V80, z, **kw)
+    batch = simulate_passes(t, vehicle, V80, [z, 0.5 * z], support_settlement=np.abs(np.stack([z, z])), dt=4e-4)
+    assert len(stores) == 3  # the batch keeps nothing
+    for name in ("contact_force", "rail_displacement", "sleeper_force", "pad_plus_ballast_force"):
+        want = getattr(first, name)
+        for other in (second, fresh, batch[0]):
+            assert np.array_equal(getattr(other, name), want), name
+    for options in (dict(dt=2e-4, support_settlement=np.abs(z)), dict(window_bays=12, **kw)):
+        alone = simulate_pass(t, vehicle, V80, z, **options)
+        assert stores[-1] is not store
+        assert np.array_equal(simulate_pass(t, vehicle, V80, z, **options).contact_force, alone.contact_force)
+    store.columns[...] *= 1.01
+    assert not np.array_equal(simulate_pass(t, vehicle, V80, z, **kw).contact_force, first.contact_force)
+    kept_factors.cache_clear()

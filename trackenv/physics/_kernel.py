@@ -83,6 +83,15 @@ level under each wheel (chunks, n_steps+1, n_axles, W) [m] to which the kernel a
 (chunks, n_dof, W) of settled supports, and the track and vehicle state u, v, a (chunks, n_dof, W), q, qd, qdd
 (chunks, nv, W), all updated in place."""
 
+Reuse = namedtuple("Reuse", "factor factor_window columns columns_window")
+Reuse.__doc__ = """Window factors and bay columns kept from pass to pass over one track at one dt (the effective
+stiffness, and so every window's factor and every bay's columns, is the same in each; one-row passes only): the
+pre-scaled factor of the window that starts at sleeper s, factor[s] = (fw[0..B], bw[0..B], inv_diag)
+(n_sleepers, 2B+3, m_cap), stored for the window [lo, hi) = factor_window[s] (n_sleepers, 2) (-1: none yet); the
+solved columns of bay s, columns[s] (n_sleepers, 2(epb+1), m_cap), for the window columns_window[s]. A window of
+more than m_cap DOFs is not kept. Filled by the kernel as it goes; arrays of zero sleepers keep nothing (batches
+of several rows, whose chunks' rows change from pass to pass)."""
+
 Peaks = namedtuple("Peaks", "force rail wheel ballast total")
 Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and wheel displacement under each wheel
 (n_steps+1, n_axles), peak ballast force and peak pad + ballast force per sleeper (n_sleepers,)."""
@@ -427,6 +436,13 @@ def _contact_lane(law, param, d):
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
+def _copy(src, dst, m):
+    """dst[:m] = src[:m] for 1-D views (indexed from 0: no negative-index check, so the loop vectorises)."""
+    for i in range(m):
+        dst[i] = src[i]
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
 def _bay_dof(node_w, sleeper_node, bay, k):
     """DOF of the bay's k-th cached column: (w, θ) of its epb+1 rail nodes in turn (the sleeper DOF after the
     first node is skipped; see :func:`_local`)."""
@@ -556,7 +572,7 @@ def _correct_window_rows(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
-def _run_chunk(mesh, drive, rows, peaks, ch, W):
+def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
     """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass.
 
     The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): the loops
@@ -612,6 +628,7 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
     n_axles = x_axle.shape[1]
     nv = q.shape[0]
     m_max = n
+    m_cap = reuse.factor.shape[2] if reuse.factor.shape[0] == n_sleepers else 0  # no sleepers kept: 0
     Ls = np.zeros((m_max, B + 1, W))
     Fw = np.zeros((n_clusters, B + 1, m_max * W))
     Bw = np.zeros((n_clusters, B + 1, m_max * W))
@@ -715,14 +732,35 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
             s_lo_c[c] = s_lo
             s_hi_c[c] = s_hi
             m = hi - lo
-            _factor(keff, lo, m, Ls, invd[c], scratch, W)
-            _scale(Ls, invd[c], m, Fw[c], Bw[c], W)
+            keep = W == 1 and m <= m_cap  # one row: this window's factor and columns are kept across passes
+            if keep and reuse.factor_window[s_lo, 0] == lo and reuse.factor_window[s_lo, 1] == hi:
+                kept = reuse.factor[s_lo]
+                for k in range(1, B + 1):  # (row 0 of fw and bw is not used)
+                    _copy(kept[k], Fw[c, k], m)
+                    _copy(kept[B + 1 + k], Bw[c, k], m)
+                _copy(kept[2 * B + 2], invd[c], m)
+            else:
+                _factor(keff, lo, m, Ls, invd[c], scratch, W)
+                _scale(Ls, invd[c], m, Fw[c], Bw[c], W)
+                if keep:
+                    kept = reuse.factor[s_lo]
+                    for k in range(1, B + 1):
+                        _copy(Fw[c, k], kept[k], m)
+                        _copy(Bw[c, k], kept[B + 1 + k], m)
+                    _copy(invd[c], kept[2 * B + 2], m)
+                    reuse.factor_window[s_lo, 0] = lo
+                    reuse.factor_window[s_lo, 1] = hi
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
                 bay = elem_of[j] // epb
                 bay_cache[j] = bay
                 if W == 1:  # one row: the bay's columns in one sweep, side by side
+                    if keep and reuse.columns_window[bay, 0] == lo and reuse.columns_window[bay, 1] == hi:
+                        kept = reuse.columns[bay]
+                        for k in range(ncol):
+                            _copy(kept[k], cols[j, k], m)
+                        continue
                     for i in range(m):
                         for k in range(ncol):
                             cols_t[i, k] = 0.0
@@ -733,6 +771,12 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
                         colk = cols[j, k]
                         for i in range(m):
                             colk[i] = cols_t[i, k]
+                    if keep:
+                        kept = reuse.columns[bay]
+                        for k in range(ncol):
+                            _copy(cols[j, k], kept[k], m)
+                        reuse.columns_window[bay, 0] = lo
+                        reuse.columns_window[bay, 1] = hi
                     continue
                 for k in range(ncol):
                     dof = _bay_dof(node_w, sleeper_node, bay, k)
@@ -906,13 +950,13 @@ def _run_chunk(mesh, drive, rows, peaks, ch, W):
 
 
 @njit(cache=True, fastmath=FASTMATH, pipeline_class=_WideCompiler)
-def _run_chunk_shared(mesh, drive, rows, peaks, ch, W):
+def _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, W):
     """:func:`_run_chunk` compiled once per width ``W`` (a literal, so a compile-time constant in each compiled
     copy) and called by both the serial and the parallel entry of that width: the chunk integrator is most of the
     kernel's compile time, which each width of several rows then pays once instead of once per entry. ``ch`` is
     int64 from either entry (prange's index is unsigned), so that both share one compiled copy."""
     literally(W)
-    _run_chunk(mesh, drive, rows, peaks, ch, W)
+    _run_chunk(mesh, drive, rows, peaks, reuse, ch, W)
 
 
 # One compiled entry per (threads, width): the width is a constant in each, so that the loops over the rows have
@@ -923,51 +967,51 @@ def _run_chunk_shared(mesh, drive, rows, peaks, ch, W):
 # in ~15 s instead of ~70-120 s around the inlined integrator. Written out, not generated, so that numba's on-disk
 # cache keeps each one.
 @njit(cache=True, fastmath=FASTMATH)
-def _serial_1(mesh, drive, rows, peaks):
+def _serial_1(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
-        _run_chunk(mesh, drive, rows, peaks, ch, 1)
+        _run_chunk(mesh, drive, rows, peaks, reuse, ch, 1)
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _serial_4(mesh, drive, rows, peaks):
+def _serial_4(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, ch, 4)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 4)
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _serial_8(mesh, drive, rows, peaks):
+def _serial_8(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, ch, 8)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 8)
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _serial_16(mesh, drive, rows, peaks):
+def _serial_16(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, ch, 16)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 16)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _parallel_1(mesh, drive, rows, peaks):
+def _parallel_1(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 1)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 1)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _parallel_4(mesh, drive, rows, peaks):
+def _parallel_4(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 4)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 4)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _parallel_8(mesh, drive, rows, peaks):
+def _parallel_8(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 8)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 8)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _parallel_16(mesh, drive, rows, peaks):
+def _parallel_16(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
-        _run_chunk_shared(mesh, drive, rows, peaks, np.int64(ch), 16)
+        _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 16)
 
 
 _RUNNERS = {
@@ -982,7 +1026,7 @@ _RUNNERS = {
 }
 
 
-def run(mesh, drive, rows, peaks, width: int) -> None:
+def run(mesh, drive, rows, peaks, reuse, width: int) -> None:
     """Integrate every chunk of the batch (``width`` rows each, one of :data:`WIDTHS`), filling the arrays in
     place: on the calling thread for one chunk, else the chunks spread over numba's threads."""
-    _RUNNERS[(rows.u.shape[0] > 1, width)](mesh, drive, rows, peaks)
+    _RUNNERS[(rows.u.shape[0] > 1, width)](mesh, drive, rows, peaks, reuse)
