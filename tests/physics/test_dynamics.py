@@ -607,3 +607,17 @@ def test_one_row_passes_keep_their_window_factors_bit_identically(monkeypatch, c
     store.columns[...] *= 1.01
     assert not np.array_equal(simulate_pass(t, vehicle, V80, z, **kw).contact_force, first.contact_force)
     kept_factors.cache_clear()
+
+
+def test_long_tracks_keep_no_window_factors(monkeypatch):
+    """A one-row pass over a track whose store would exceed its bound (600 m: ~12 MB) keeps nothing, so that the
+    lru of stores cannot hold hundreds of MB; the pass is the same as a batch's."""
+    from trackenv.physics import dynamics
+
+    calls = []
+    monkeypatch.setattr(dynamics, "_kept_factors", lambda *a: calls.append(a))
+    t = Track.realistic(600.0)
+    alone = simulate_pass(t, LOADED, V80, dt=4e-4, x_end=60.0)
+    assert calls == []
+    batch = simulate_passes(t, LOADED, V80, [None, None], dt=4e-4, x_end=60.0)
+    assert np.array_equal(alone.contact_force, batch[0].contact_force)

@@ -360,7 +360,7 @@ def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
     of up to ``m_cap`` DOFs), kept per track object, dt and window size: the effective stiffness K + a0 M + a1 C
     is the same in every such pass, so each window's factor and each bay's columns are computed once, by the
     same arithmetic, and read back in later passes (bit-identical; an episode's or the paper loop's passes run
-    over one model track). ~1.5 MB for the env's 60 m track (16 entries at most)."""
+    over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each."""
     n, ncol = track.n_sleepers, 2 * (track.elements_per_bay + 1)
     return _kernel.Reuse(np.zeros((n, 2 * _kernel.B + 3, m_cap)), np.full((n, 2), -1, dtype=np.int64),
                          np.zeros((n, ncol, m_cap)), np.full((n, 2), -1, dtype=np.int64))
@@ -377,6 +377,9 @@ def _window_dof_bound(track: Track, axle_offsets: np.ndarray, cluster: np.ndarra
 
 
 _REUSE_MAX_DOFS = 400  # windows longer than this (a window as long as the track) do not move: nothing to keep
+# the most one track's store may hold (~650 sleepers, ~390 m, with the env's window): a pass over a km-long track
+# would keep ~100 MB, and 16 of them would stay alive in the lru; such tracks recompute (as batches do)
+_REUSE_MAX_BYTES = 8 * 2**20
 
 
 def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
@@ -725,7 +728,8 @@ def simulate_passes(
     reuse = _NO_REUSE
     if n_chunks == 1 and width == 1:  # one row: its window factors and bay columns are kept for the next pass
         m_cap = _window_dof_bound(t0, sys_.axle_offsets, cluster, margin)
-        if m_cap <= _REUSE_MAX_DOFS:
+        store_bytes = 8 * t0.n_sleepers * (2 * _kernel.B + 3 + 2 * (t0.elements_per_bay + 1)) * m_cap
+        if m_cap <= _REUSE_MAX_DOFS and store_bytes <= _REUSE_MAX_BYTES:
             reuse = _kept_factors(t0, float(dt), m_cap)
     _kernel.run(mesh, drive, rows, peaks, reuse, width)
     unpack = functools.partial(_unpack, n_rows=nb)
