@@ -44,10 +44,12 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+import llvmlite.binding as ll
 import numpy as np
 from llvmlite import ir
 from numba import literally, njit, prange
 from numba.core import cgutils, types
+from numba.core import config as numba_config
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
 from numba.core.compiler_machinery import register_pass
 from numba.core.lowering import Lower
@@ -270,6 +272,12 @@ def _solve(fw, bw, inv_diag, m, x, W):
         _sweep_lanes(x, inv_diag, bw1, bw2, bw3, bw4, m, False, W)
 
 
+# Intel's first AVX-512 server cores (and the Xeon Phi), whose clock drops under sustained 512-bit arithmetic
+_NARROW_CPUS = frozenset({"skylake-avx512", "cascadelake", "cooperlake", "knl", "knm"})
+# the processor numba compiles for (NUMBA_CPU_NAME overrides the host)
+_HOST_CPU = getattr(numba_config, "CPU_NAME", None) or ll.get_host_cpu_name()
+
+
 class _WideLower(Lower):
     """numba's lowering, with the function marked for LLVM to prefer vectors of 512 bits where the processor has
     them (function attribute ``prefer-vector-width``). LLVM's tuning for Intel processors with AVX-512 prefers
@@ -277,12 +285,15 @@ class _WideLower(Lower):
     instead of two, and the step's time follows the instructions it issues. Lanes do the same IEEE operations at
     any vector width (no reassociation; see FASTMATH), so results do not change. Without AVX-512 the attribute
     has no effect. A function whose last argument is the chunk width W = 1 is left as LLVM tunes it: one row's
-    loops run along a window of ~90 DOFs, where 512-bit vectors made the pass ~7 % slower."""
+    loops run along a window of ~90 DOFs, where 512-bit vectors made the pass ~7 % slower. So are all functions
+    on the processors whose clock drops under sustained 512-bit arithmetic (:data:`_NARROW_CPUS`), the reason for
+    LLVM's preference: the gain measured here (~3.5 % of the 16-row kernel, on a processor without that drop)
+    would not survive it."""
 
     def lower_normal_function(self, fndesc):
         super().lower_normal_function(fndesc)
         width = fndesc.argtypes[-1] if fndesc.argtypes else None
-        if isinstance(width, types.IntegerLiteral) and width.literal_value == 1:
+        if _HOST_CPU in _NARROW_CPUS or (isinstance(width, types.IntegerLiteral) and width.literal_value == 1):
             return
         # llvmlite's attribute set accepts only LLVM's keyword attributes; a string attribute is written as is
         set.add(self.function.attributes, '"prefer-vector-width"="512"')
