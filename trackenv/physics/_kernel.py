@@ -35,9 +35,10 @@ reassociating fast-math: every row's arithmetic is the same IEEE sequence whatev
 thread, so a row's result does not depend on the batch it runs in (bit-identical; tested). The single pass is a
 batch of one.
 
-The arguments are four typed structures (namedtuples of arrays, which numba accepts), defined once here:
-``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place) and ``Peaks``
-(per-row outputs).
+The arguments are five typed structures (namedtuples of arrays, which numba accepts), defined once here:
+``Mesh`` and ``Drive`` (shared by all rows), ``Rows`` (per-row inputs and state, updated in place), ``Peaks``
+(per-row outputs) and ``Reuse`` (window factors and bay columns a one-row pass keeps for the next pass over its
+track; empty for batches).
 """
 
 from __future__ import annotations
