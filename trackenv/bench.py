@@ -6,7 +6,10 @@ timing is the median wall time over repeats after a warm-up run (which also trig
 loads it from numba's cache), measured with :func:`time.perf_counter`.
 
 * ``seed_pass``: one pass of ``Wheelset(mass=1800, static_load=100e3)`` over ``Track.seed()`` at 80 km/h,
-  dt = 1e-4 s (the paper's setting); ``seed_pass_auto``: the same at ``dt="auto"``;
+  dt = 1e-4 s (the paper's setting); ``seed_pass_auto``: the same at ``dt="auto"``. The passes repeat over one
+  track object, so they use what a pass keeps per track (stiffness factor, window factors and bay columns), as
+  an episode's passes do: a pass over a new track object took ~0.3 ms more (2.9 against 2.6 ms at the auto step,
+  8.9 against 8.5 ms at 1e-4; 2026-12-03);
 * ``batch``: throughput of :func:`simulate_passes` with 1, 16 and 64 rows, a different random irregularity in
   every row, once with numba's default thread count (chunks of rows in parallel) and once with one thread;
   ``lockstep_gain``: passes/s of a batch of 64 over 64 single passes (one thread);
