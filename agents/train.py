@@ -196,6 +196,32 @@ class NormalizedPolicy:
 
 
 # --- callbacks ---
+def make_progress_callback(desc: str, unit: str = "step"):
+    """A progress bar over the timesteps of one ``model.learn`` call (tqdm, a dependency of the library), for
+    ``callback=``. stable-baselines3's own (``progress_bar=True``) needs ``rich`` as well, which the ``rl`` extra
+    does not install: ``trackenv train`` without ``--json`` raised ImportError."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm.auto import tqdm
+
+    class TqdmProgress(BaseCallback):
+        """Advances by the vector env's width at every step; closed at the end of training."""
+
+        def _on_training_start(self) -> None:
+            # on-policy algorithms collect whole rollouts: the run ends at the first multiple of one past the total
+            rollout = getattr(self.model, "n_steps", 1) * self.training_env.num_envs
+            remaining = self.locals["total_timesteps"] - self.model.num_timesteps
+            self.bar = tqdm(total=-(-remaining // rollout) * rollout, desc=desc, unit=unit)
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TqdmProgress()
+
+
 def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_policy: Callable, save_policy: Callable,
                         action_type: str, verbose: int, evaluate_at_start: bool = False, on_evaluation=None,
                         baseline: Any = None):
@@ -381,8 +407,10 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
 
     t0 = time.time()
     start_steps = int(model.num_timesteps)
-    model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), progress_bar=progress,
-                tb_log_name=algo, reset_num_timesteps=resume is None)
+    if progress:
+        callbacks.append(make_progress_callback(f"train {algo}"))
+    model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), tb_log_name=algo,
+                reset_num_timesteps=resume is None)
     wall = time.time() - t0
     env.save(str(out_dir / "vecnormalize.pkl"))
     policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo, action_type=action_type)

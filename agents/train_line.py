@@ -51,6 +51,7 @@ from .train import (
     _make_eval_callback,
     export_policy,
     load_hyperparams,
+    make_progress_callback,
     single_torch_thread,
 )
 
@@ -245,6 +246,7 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
         from stable_baselines3.common.callbacks import CallbackList
 
         callbacks: list[Any] = []
+        eval_cb = None
         if baseline is not None and eval_freq > 0:
             eval_cb = _make_eval_callback(
                 config, list(eval_seeds), eval_freq * config.n_sections, out_dir,
@@ -254,10 +256,12 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
             callbacks.append(eval_cb)
         t_ppo = time.time()
         # SB3 counts a step of every section agent: n_sections per line-step
+        if progress:
+            callbacks.append(make_progress_callback(f"train {algo}", unit="section-step"))
         model.learn(total_timesteps=total_timesteps * config.n_sections, callback=CallbackList(callbacks),
-                    progress_bar=progress, tb_log_name=algo)
+                    tb_log_name=algo)
         ppo = {"line_steps": total_timesteps, "wall_seconds": time.time() - t_ppo,
-               "evaluations": callbacks[0].history if callbacks else []}
+               "evaluations": eval_cb.history if eval_cb is not None else []}
     path = _save_line_policy(model, out_dir / "model.zip", meta)
     summary = {"iterations": history, "policy_iteration_seconds": wall_pi,
                "policy_runs_line_steps": line_steps, "fork_segment_steps": fork_steps,

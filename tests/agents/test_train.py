@@ -165,12 +165,14 @@ def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path, small_config):
     assert trained > random + 0.5 * abs(random), (trained, random)
 
 
-def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config):
+def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config, capsys):
     cfg = small_config.replace(dt=2e-4)
     hp = {"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16], "action_type": "ranked",
           "keep_per_sleeper": False, "initial_tamp_logit": -2.0, "warm_start_rule": None}
     path = train("ppo", cfg, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
-                 progress=False, eval_seeds=[5], eval_freq=8, checkpoint_every=0, verbose=0)
+                 progress=True, eval_seeds=[5], eval_freq=8, checkpoint_every=0, verbose=0)
+    # the progress bar (tqdm; stable-baselines3's own needs rich, which is not installed) ran to its end
+    assert "16/16" in capsys.readouterr().err
     policy = load_trained(path)
     assert policy.action_type == "ranked"
     env = TampingEnv(cfg)

@@ -88,7 +88,7 @@ def test_policy_iteration_improves_over_its_start(tmp_path, fast_line):
     hp = {"advisor": "section-threshold", "advisor_params": {"threshold_mm": 0.0}, "episodes_per_iteration": 6,
           "fit_epochs": 30, "net_arch": [32, 32], "n_steps": 8, "batch_size": 48, "n_epochs": 1, "eval_freq": 16}
     path = train_line(cfg, iterations=1, total_timesteps=16, n_envs=1, seed=20_000, out_dir=tmp_path / "run",
-                      hyperparams=hp, progress=False, eval_seeds=list(range(100, 106)), verbose=0)
+                      hyperparams=hp, progress=True, eval_seeds=list(range(100, 106)), verbose=0)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     (it,) = summary["iterations"]
     start, learnt = summary["baseline"]["mean_cost"], it["evaluation"]["mean_cost"]
