@@ -268,6 +268,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         seed=args.seed,
         out_dir=args.out or "runs/ppo",
         progress=not args.json,
+        verbose=0 if args.json else 1,  # --json: one JSON object on stdout, no training log
         resume=args.resume,
         hyperparams=args.hyperparams,
         workers=args.workers,

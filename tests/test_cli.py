@@ -57,6 +57,18 @@ def test_train_seed_default_is_the_training_seed_of_agents_train():
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED
 
 
+def test_train_json_prints_one_json_object(tmp_path, capsys):
+    """``trackenv train --json``: exactly one JSON object on stdout (the training log and the progress bar stay
+    off it), naming the saved model."""
+    hp = tmp_path / "hp.json"
+    hp.write_text(json.dumps({"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16],
+                              "warm_start_rule": None}))
+    assert main(["train", "--json", "--timesteps", "16", "--n-envs", "2", "--hyperparams", str(hp),
+                 "--out", str(tmp_path / "run")]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["model"].endswith("model.zip") and (tmp_path / "run" / "model.zip").exists()
+
+
 def test_train_line_options_are_refused_where_they_do_not_apply(capsys):
     assert main(["train", "--iterations", "2"]) == 2  # Tamping-v0 has no policy iteration
     assert "--iterations" in capsys.readouterr().err
