@@ -89,8 +89,9 @@ level under each wheel (chunks, n_steps+1, n_axles, W) [m] to which the kernel a
 Reuse = namedtuple("Reuse", "factor factor_window columns columns_window")
 Reuse.__doc__ = """Window factors and bay columns kept from pass to pass over one track at one dt (the effective
 stiffness, and so every window's factor and every bay's columns, is the same in each; one-row passes only): the
-pre-scaled factor of the window that starts at sleeper s, factor[s] = (fw[0..B], bw[0..B], inv_diag)
-(n_sleepers, 2B+3, m_cap), stored for the window [lo, hi) = factor_window[s] (n_sleepers, 2) (-1: none yet); the
+pre-scaled factor of the window of the axle group whose first axle is in bay s (near the track's ends several
+such windows start or end at the same sleeper), factor[s] = (fw[0..B], bw[0..B], inv_diag) (n_sleepers, 2B+3,
+m_cap), stored for the window [lo, hi) = factor_window[s] (n_sleepers, 2) (-1: none yet); the
 solved columns of bay s, columns[s] (n_sleepers, 2(epb+1), m_cap), for the window columns_window[s]. A window of
 more than m_cap DOFs is not kept. Filled by the kernel as it goes; arrays of zero sleepers keep nothing (batches
 of several rows, whose chunks' rows change from pass to pass)."""
@@ -745,8 +746,8 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
             s_hi_c[c] = s_hi
             m = hi - lo
             keep = W == 1 and m <= m_cap  # one row: this window's factor and columns are kept across passes
-            if keep and reuse.factor_window[s_lo, 0] == lo and reuse.factor_window[s_lo, 1] == hi:
-                kept = reuse.factor[s_lo]
+            if keep and reuse.factor_window[bay_min, 0] == lo and reuse.factor_window[bay_min, 1] == hi:
+                kept = reuse.factor[bay_min]
                 for k in range(1, B + 1):  # (row 0 of fw and bw is not used)
                     _copy(kept[k], Fw[c, k], m)
                     _copy(kept[B + 1 + k], Bw[c, k], m)
@@ -755,13 +756,13 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
                 _factor(keff, lo, m, Ls, invd[c], scratch, W)
                 _scale(Ls, invd[c], m, Fw[c], Bw[c], W)
                 if keep:
-                    kept = reuse.factor[s_lo]
+                    kept = reuse.factor[bay_min]
                     for k in range(1, B + 1):
                         _copy(Fw[c, k], kept[k], m)
                         _copy(Bw[c, k], kept[B + 1 + k], m)
                     _copy(invd[c], kept[2 * B + 2], m)
-                    reuse.factor_window[s_lo, 0] = lo
-                    reuse.factor_window[s_lo, 1] = hi
+                    reuse.factor_window[bay_min, 0] = lo
+                    reuse.factor_window[bay_min, 1] = hi
             for j in range(n_axles):
                 if cluster_of_axle[j] != c:
                     continue
