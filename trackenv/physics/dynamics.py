@@ -258,12 +258,12 @@ _SPLINE_ROWS = 64  # rows per spline of :func:`_irregularity_levels`
 
 
 def _irregularity_levels(irrs: list, track: Track, x: np.ndarray, name: str) -> list[np.ndarray | None]:
-    """Rail level at positions x for each row's irregularity: None (a straight rail: None), a callable of x, or a
-    per-sleeper or per-node profile (natural cubic spline through it). The profiles on one grid are interpolated
-    by one spline through all of them (its columns), evaluated once: the same numbers as one spline per row
-    (bit-identical; scipy solves and evaluates each column alike) at a fraction of the cost, since finding each
-    position's interval and building the spline's system are shared (64 rows of the seed pass: 21 -> 5 ms). A row
-    whose irregularity is the same object as an earlier row's shares its levels."""
+    """Rail level at positions x for each row's irregularity, None where the row has none (a straight rail): a
+    callable of x, or a per-sleeper or per-node profile (natural cubic spline through it). The profiles on one
+    grid are interpolated by one spline through all of them (its columns), evaluated once: the same numbers as
+    one spline per row (bit-identical; scipy solves and evaluates each column alike) at a fraction of the cost,
+    since finding each position's interval and building the spline's system are shared (64 rows of the seed
+    pass: 21 -> 5 ms). A row whose irregularity is the same object as an earlier row's shares its levels."""
     out: list[np.ndarray | None] = [None] * len(irrs)
     first: dict[int, int] = {}  # id of an irregularity -> the first row that has it
     profiles: dict[str, list[tuple[int, np.ndarray]]] = {"sleeper": [], "node": []}
@@ -354,6 +354,13 @@ _NO_REUSE = _kernel.Reuse(np.zeros((0, 2 * _kernel.B + 3, 0)), np.zeros((0, 2), 
 """What a batch of several rows passes the kernel: nothing kept (see :class:`_kernel.Reuse`)."""
 
 
+def _store_shapes(track: Track, m_cap: int) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
+    """Shapes of a store's factors and bay columns (:class:`_kernel.Reuse`) for ``track``, windows of up to
+    ``m_cap`` DOFs."""
+    n = track.n_sleepers
+    return (n, 2 * _kernel.B + 3, m_cap), (n, 2 * (track.elements_per_bay + 1), m_cap)
+
+
 @functools.lru_cache(maxsize=16)
 def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
     """The kernel's store of window factors and bay columns for one-row passes over ``track`` at ``dt`` (windows
@@ -361,9 +368,10 @@ def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
     is the same in every such pass, so each window's factor and each bay's columns are computed once, by the
     same arithmetic, and read back in later passes (bit-identical; an episode's or the paper loop's passes run
     over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each."""
-    n, ncol = track.n_sleepers, 2 * (track.elements_per_bay + 1)
-    return _kernel.Reuse(np.zeros((n, 2 * _kernel.B + 3, m_cap)), np.full((n, 2), -1, dtype=np.int64),
-                         np.zeros((n, ncol, m_cap)), np.full((n, 2), -1, dtype=np.int64))
+    factor_shape, columns_shape = _store_shapes(track, m_cap)
+    n = track.n_sleepers
+    return _kernel.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
+                         np.zeros(columns_shape), np.full((n, 2), -1, dtype=np.int64))
 
 
 def _window_dof_bound(track: Track, axle_offsets: np.ndarray, cluster: np.ndarray, margin: int) -> int:
@@ -380,6 +388,17 @@ _REUSE_MAX_DOFS = 400  # windows longer than this (a window as long as the track
 # the most one track's store may hold (~650 sleepers, ~390 m, with the env's window): a pass over a km-long track
 # would keep ~100 MB, and 16 of them would stay alive in the lru; such tracks recompute (as batches do)
 _REUSE_MAX_BYTES = 8 * 2**20
+
+
+def _one_row_reuse(track: Track, dt: float, axle_offsets: np.ndarray, cluster: np.ndarray,
+                   margin: int) -> _kernel.Reuse:
+    """What a one-row pass over ``track`` keeps for the next one (:func:`_kept_factors`), or nothing
+    (``_NO_REUSE``) where its windows or its store would exceed the bounds above."""
+    m_cap = _window_dof_bound(track, axle_offsets, cluster, margin)
+    store_bytes = 8 * sum(math.prod(shape) for shape in _store_shapes(track, m_cap))
+    if m_cap > _REUSE_MAX_DOFS or store_bytes > _REUSE_MAX_BYTES:
+        return _NO_REUSE
+    return _kept_factors(track, float(dt), m_cap)
 
 
 def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
@@ -725,12 +744,9 @@ def simulate_passes(
     )
     history = functools.partial(_packed_history, n_steps=n_steps, n_chunks=n_chunks, width=width)
     peaks = _kernel.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
-    reuse = _NO_REUSE
-    if n_chunks == 1 and width == 1:  # one row: its window factors and bay columns are kept for the next pass
-        m_cap = _window_dof_bound(t0, sys_.axle_offsets, cluster, margin)
-        store_bytes = 8 * t0.n_sleepers * (2 * _kernel.B + 3 + 2 * (t0.elements_per_bay + 1)) * m_cap
-        if m_cap <= _REUSE_MAX_DOFS and store_bytes <= _REUSE_MAX_BYTES:
-            reuse = _kept_factors(t0, float(dt), m_cap)
+    # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
+    one_row = n_chunks == 1 and width == 1
+    reuse = _one_row_reuse(t0, dt, sys_.axle_offsets, cluster, margin) if one_row else _NO_REUSE
     _kernel.run(mesh, drive, rows, peaks, reuse, width)
     unpack = functools.partial(_unpack, n_rows=nb)
     peak_ballast, peak_total = unpack(peaks.ballast), unpack(peaks.total)
