@@ -12,7 +12,13 @@ import scipy.signal
 from reference import load_vector, reference_pass
 
 from trackenv.physics.contact import LinearContact
-from trackenv.physics.dynamics import newmark_constants, simulate_pass, simulate_passes, static_deflection
+from trackenv.physics.dynamics import (
+    batched_bands,
+    newmark_constants,
+    simulate_pass,
+    simulate_passes,
+    static_deflection,
+)
 from trackenv.physics.track import Track
 from trackenv.physics.vehicle import Car, Train, Wheelset
 
@@ -71,6 +77,22 @@ def test_static_deflection_matches_full_sparse_solve():
 
 
 # ------------------------------------------------------------------------------------------ smooth track
+def test_batched_bands_are_each_tracks_own_bands():
+    """A batch's bands (the rail assembled once, every track's supports added at once) are, row by row, each
+    track's own ``banded_matrices``, bit for bit: the tracks differ in every support property."""
+    base = Track.realistic(30.0)
+    rng = np.random.default_rng(3)
+    names = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
+    tracks = [base.replace(**{n: getattr(base, n) * rng.uniform(0.5, 1.5, base.n_sleepers) for n in names})
+              for _ in range(3)]
+    tracks.append(base.with_voided_sleeper(7, residual_support=0.05))
+    batch = batched_bands(tracks)
+    for r, track in enumerate(tracks):
+        for rows, own in zip(batch, track.banded_matrices(), strict=True):
+            np.testing.assert_array_equal(rows[r], own)
+    assert not np.array_equal(batch[2][0], batch[2][1])
+
+
 def test_result_shapes_and_time_grid():
     res = smooth_pass()
     t = Track.seed()

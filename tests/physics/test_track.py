@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trackenv.physics.dynamics import receptance, static_deflection
-from trackenv.physics.track import PER_SLEEPER_FIELDS, Track, hermite_shape
+from trackenv.physics.track import PER_SLEEPER_FIELDS, Track, hermite_element_matrices, hermite_shape
 
 P = 100e3  # [N]
 
@@ -207,6 +207,51 @@ def test_matrices_symmetric_definite_and_banded():
     # band[i, k] = A[i, i - k]
     for i, kk in [(10, 0), (10, 3), (57, 4), (t.n_dof - 1, 1)]:
         assert kb[i, kk] == k[i, i - kk]
+
+
+def dense_element_by_element(t: Track) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M, C, K of ``t`` as full matrices, assembled the plain way: one element at a time into every entry of its
+    4x4 block, then one support at a time."""
+    n, lay = t.n_dof, t.dof_layout
+    m, c, k = (np.zeros((n, n)) for _ in range(3))
+    ke, me = hermite_element_matrices(t.element_length, t.rail_bending_stiffness, t.rail_mass)
+    for e in range(t.n_nodes - 1):
+        dofs = [lay.node_w[e], lay.node_theta[e], lay.node_w[e + 1], lay.node_theta[e + 1]]
+        for a in range(4):
+            for b in range(4):
+                k[dofs[a], dofs[b]] += ke[a, b]
+                m[dofs[a], dofs[b]] += me[a, b]
+    for s in range(t.n_sleepers):
+        w, d = lay.node_w[lay.sleeper_node[s]], lay.sleeper[s]
+        supports = ((k, t.pad_stiffness[s], t.ballast_stiffness[s]), (c, t.pad_damping[s], t.ballast_damping[s]))
+        for mat, pad, bal in supports:
+            mat[w, w] += pad
+            mat[d, d] += pad + bal
+            mat[d, w] -= pad
+            mat[w, d] -= pad
+        m[d, d] += t.sleeper_mass[s]
+    return m, c, k
+
+
+@pytest.mark.parametrize(
+    "track",
+    [Track.seed(), Track.realistic(30.0).with_voided_sleeper(12, residual_support=0.05),
+     Track.seed().scaled(ballast_stiffness=1.3, pad_stiffness=0.7, from_sleeper=20)],
+    ids=["seed", "voided", "transition"],
+)
+def test_banded_assembly_is_the_element_by_element_sum(track):
+    """The band storage, assembled for all elements at once, holds exactly (bit for bit) the entries of the
+    plain element-by-element assembly, and nothing outside the band."""
+    dense = dense_element_by_element(track)
+    n = track.n_dof
+    for band, full in zip(track.banded_matrices(), dense, strict=True):
+        assert band.shape == (n, 5)
+        for kk in range(5):
+            i = np.arange(kk, n)
+            np.testing.assert_array_equal(band[kk:, kk], full[i, i - kk])
+            np.testing.assert_array_equal(band[:kk, kk], 0.0)
+        i, j = np.nonzero(full)
+        assert np.max(np.abs(i - j)) <= 4
 
 
 def test_rigid_translation_and_total_mass():

@@ -22,7 +22,7 @@ from . import _kernel
 from ._checks import check_array, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
-from .track import HALF_BANDWIDTH, Track, assemble_banded, hermite_shape
+from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
@@ -142,9 +142,7 @@ def _as_tracks(tracks) -> list[Track]:
 def _rail_bands_cached(n_sleepers: int, epb: int, element_length: float, ei: float, mass: float):
     from .track import DofLayout
 
-    lay = DofLayout.build(n_sleepers, epb)
-    zero = np.zeros(n_sleepers)
-    return assemble_banded(lay, element_length, ei, mass, zero, zero, zero, zero, zero)
+    return rail_bands(DofLayout.build(n_sleepers, epb), element_length, ei, mass)
 
 
 def _rail_bands(lay, element_length: float, ei: float, mass: float):
@@ -155,18 +153,14 @@ def _rail_bands(lay, element_length: float, ei: float, mass: float):
 
 
 def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """M, C, K bands of every track, shape (batch, n_dof, 5): the rail is assembled once, supports per item."""
+    """M, C, K bands of every track, shape (batch, n_dof, 5): the rail is assembled once, the supports of all
+    tracks added at once (each row is ``Track.banded_matrices``, the same numbers)."""
     t0 = tracks[0]
     lay = t0.dof_layout
     rail = _rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)
     m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
-    w, d = lay.node_w[lay.sleeper_node], lay.sleeper
-    for band, pad_name, bal_name in ((k, "pad_stiffness", "ballast_stiffness"), (c, "pad_damping", "ballast_damping")):
-        pad, bal = (np.stack([getattr(t, name) for t in tracks]) for name in (pad_name, bal_name))
-        band[:, w, 0] += pad
-        band[:, d, 0] += pad + bal
-        band[:, d, d - w] -= pad
-    m[:, d, 0] += np.stack([t.sleeper_mass for t in tracks])
+    names = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
+    add_supports(m, c, k, lay, *(np.stack([getattr(t, name) for t in tracks]) for name in names))
     return m, c, k
 
 

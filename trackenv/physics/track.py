@@ -369,6 +369,36 @@ def hermite_shape(xi: float, length: float) -> np.ndarray:
     )
 
 
+def rail_bands(layout: DofLayout, element_length: float, ei: float, rail_mass: float):
+    """M, C, K of the bare rail (no supports) in lower banded storage (see :meth:`Track.banded_matrices`):
+    every element's Hermite stiffness and consistent mass added at its four DOFs, all elements in one
+    ``np.add.at`` (unbuffered, in element order: each entry gets the sum a loop over the elements gives)."""
+    n, b = layout.n_dof, HALF_BANDWIDTH
+    ke, me = hermite_element_matrices(element_length, ei, rail_mass)
+    w, theta = layout.node_w, layout.node_theta
+    dofs = np.stack([w[:-1], theta[:-1], w[1:], theta[1:]], axis=1)  # (n_elements, 4)
+    a, c = np.tril_indices(4)  # each symmetric element matrix's lower triangle, row by row
+    i, j = dofs[:, a], dofs[:, c]
+    row, col = np.maximum(i, j).ravel(), np.minimum(i, j).ravel()
+    m_band, c_band, k_band = (np.zeros((n, b + 1)) for _ in range(3))
+    for band, elem in ((k_band, ke), (m_band, me)):
+        np.add.at(band, (row, row - col), np.broadcast_to(elem[a, c], i.shape).ravel())
+    return m_band, c_band, k_band
+
+
+def add_supports(m_band, c_band, k_band, layout: DofLayout, pad_k, pad_c, sleeper_m, ballast_k, ballast_c) -> None:
+    """Add the railpads, sleepers and ballast to the bands (..., n_dof, HALF_BANDWIDTH + 1) in place: each pad
+    couples its rail node and its sleeper, each ballast spring holds a sleeper to the ground. The support
+    arrays are (..., n_sleepers), with the bands' leading axes (a batch of tracks on one mesh at once)."""
+    w, d = layout.node_w[layout.sleeper_node], layout.sleeper
+    for band, pad, bal in ((k_band, pad_k, ballast_k), (c_band, pad_c, ballast_c)):
+        pad, bal = np.asarray(pad), np.asarray(bal)
+        band[..., w, 0] += pad
+        band[..., d, 0] += pad + bal
+        band[..., d, d - w] -= pad
+    m_band[..., d, 0] += sleeper_m
+
+
 def assemble_banded(
     layout: DofLayout,
     element_length: float,
@@ -380,30 +410,10 @@ def assemble_banded(
     ballast_k,
     ballast_c,
 ):
-    """Assemble M, C, K of the track in lower banded storage (see :meth:`Track.banded_matrices`)."""
-    n, b = layout.n_dof, HALF_BANDWIDTH
-    bands = [np.zeros((n, b + 1)) for _ in range(3)]
-    m_band, c_band, k_band = bands
-
-    def add(band, i, j, v):
-        if i < j:
-            i, j = j, i
-        band[i, i - j] += v
-
-    ke, me = hermite_element_matrices(element_length, ei, rail_mass)
-    for e in range(layout.node_w.size - 1):
-        dofs = (layout.node_w[e], layout.node_theta[e], layout.node_w[e + 1], layout.node_theta[e + 1])
-        for a in range(4):
-            for c in range(a + 1):
-                add(k_band, dofs[a], dofs[c], ke[a, c])
-                add(m_band, dofs[a], dofs[c], me[a, c])
-    for s in range(layout.sleeper.size):
-        w, d = layout.node_w[layout.sleeper_node[s]], layout.sleeper[s]
-        for band, pad, bal in ((k_band, pad_k[s], ballast_k[s]), (c_band, pad_c[s], ballast_c[s])):
-            add(band, w, w, pad)
-            add(band, d, d, pad + bal)
-            add(band, d, w, -pad)
-        add(m_band, d, d, sleeper_m[s])
+    """Assemble M, C, K of the track in lower banded storage (see :meth:`Track.banded_matrices`): the rail
+    (:func:`rail_bands`), then its supports (:func:`add_supports`)."""
+    m_band, c_band, k_band = rail_bands(layout, element_length, ei, rail_mass)
+    add_supports(m_band, c_band, k_band, layout, pad_k, pad_c, sleeper_m, ballast_k, ballast_c)
     return m_band, c_band, k_band
 
 
