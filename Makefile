@@ -33,5 +33,6 @@ bench: setup
 validate: setup
 	$(BIN)/trackenv validate
 
-clean:
+clean:  # also numba's on-disk cache of the compiled kernel (its index files pile up as the kernel's source changes)
 	rm -rf $(VENV) results runs .pytest_cache .mypy_cache
+	find trackenv agents -path '*/__pycache__/*.nb[ic]' -delete

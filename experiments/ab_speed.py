@@ -16,6 +16,7 @@ minutes, untimed), and is removed at the end. Figures (``--figure``):
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
 * ``env``: env steps per second of ``trackenv/Tamping-v0`` (random actions);
+* ``line``: line-steps per second of ``trackenv/TampingLine-v0`` (random actions);
 * ``seed``: passes per second of the seed pass at dt = 1e-4 (the benchmark's ``seed_pass``).
 """
 
@@ -68,6 +69,17 @@ for _ in range({steps}):
     if te or tr: env.reset()
 print({steps} / (time.perf_counter() - t))
 """,
+    "line": """
+import time, gymnasium as gym
+import trackenv.envs
+env = gym.make("trackenv/TampingLine-v0"); env.reset(seed=0); env.action_space.seed(0)
+for _ in range(3): env.step(env.action_space.sample())
+t = time.perf_counter()
+for _ in range({steps}):
+    _, _, te, tr, _ = env.step(env.action_space.sample())
+    if te or tr: env.reset()
+print({steps} / (time.perf_counter() - t))
+""",
     "seed": """
 import time
 from trackenv.physics.dynamics import simulate_pass
@@ -81,7 +93,8 @@ print({steps} / (time.perf_counter() - t))
 """,
 }
 FIGURES = tuple(_SNIPPETS)
-_UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s", "seed": "passes/s"}
+_UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s", "line": "line-steps/s",
+          "seed": "passes/s"}
 
 
 def order(pairs: int) -> list[str]:
@@ -130,14 +143,14 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--figure", choices=FIGURES, default="vector", help="what to time (default: vector)")
     parser.add_argument("--pairs", type=int, default=8, help="pairs of runs (default 8)")
     parser.add_argument("--steps", type=int, default=None,
-                        help="steps (passes for seed) per run (default: vector/sharded 40, env 300, seed 20)")
+                        help="steps (passes for seed) per run (default: vector/sharded 40, env 300, line 60, seed 20)")
     parser.add_argument("--envs", type=int, default=32, help="envs of the vector figures (default 32)")
     parser.add_argument("--workers", type=int, default=2, help="processes of the sharded figure (default 2)")
     parser.add_argument("--out", default="", help="write the JSON report here")
     args = parser.parse_args(argv)
     if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
         parser.error("pairs, steps, envs and workers must be >= 1")
-    steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "seed": 20}[args.figure]
+    steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "seed": 20}[args.figure]
     code = _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers)
     runs = order(args.pairs)
     with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:

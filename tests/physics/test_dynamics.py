@@ -506,11 +506,15 @@ def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
     five = simulate_passes(  # two chunks of 4 rows
         tracks[3:8], LOADED, V80, rows[3:8], **{**kw, "support_settlement": kw["support_settlement"][3:8]}
     )
-    for b in (0, 3, 7, 16):
+    eleven = simulate_passes(  # two chunks of 6 rows
+        tracks[3:14], LOADED, V80, rows[3:14], **{**kw, "support_settlement": kw["support_settlement"][3:14]}
+    )
+    for b in (0, 3, 7, 13, 16):
         single = simulate_pass(
             tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": kw["support_settlement"][b]}
         )
         others = [one_thread[b], all_threads[b]] + ([five[b - 3]] if 3 <= b < 8 else []) + ([eight[b]] if b < 8 else [])
+        others += [eleven[b - 3]] if 3 <= b < 14 else []
         for other in others:
             for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
                 np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
