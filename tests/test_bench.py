@@ -41,3 +41,15 @@ def test_format_profile_is_a_markdown_table_of_every_env_benchmark():
     assert table[0] == "| share of the step | Tamping-v0, 1 env | Tamping-v0, 8 envs | TampingLine-v0, 1 line |"
     assert table[2] == "| kernel | 50 % | 50 % | 50 % |"
     assert len(table) == 2 + len(PROFILE_LABELS)
+
+
+def test_batch_gains_compare_the_largest_batch_with_single_passes():
+    """``batch_gain`` divides the largest batch's passes/s on the default threads by the single pass's,
+    ``lockstep_gain`` the same on one thread; both from the timings the benchmark reports."""
+    from trackenv.bench import _bench_batches
+
+    out = _bench_batches(1, sizes=(1, 2))
+    one, two = out["rows"]["1"], out["rows"]["2"]
+    assert out["batch_gain"] == two["all_threads"]["passes_per_s"] / one["all_threads"]["passes_per_s"]
+    assert out["lockstep_gain"] == two["one_thread"]["passes_per_s"] / one["one_thread"]["passes_per_s"]
+    assert out["batch_gain"] > 0.0 and out["lockstep_gain"] > 0.0
