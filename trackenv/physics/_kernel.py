@@ -16,10 +16,15 @@ track's decay length: see ``dynamics.window_margin``.)
 Lockstep batch. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move together;
 only the supports, the irregularity and the state differ. Every per-row array carries the batch axis *last*
 (innermost), and the track's state vectors are used flat, DOF i of row b at i*W + b, with the chunk width W a
-compile-time constant: the hot loops (mass product, Newmark update, correction) are then unit-stride loops that
-compile to SIMD at any width, across the rows of a chunk and, for the single pass (W = 1), along the track. The
-triangular sweeps are chains along the track of fused multiply-adds, the chain's last four DOFs in registers: one
-row's as scalars, several rows' as the lanes of one vector (written in LLVM's IR, :func:`_sweep_lanes`). Loops index
+compile-time constant. For one row (W = 1) the hot loops run along the track as unit-stride loops, which compile to
+SIMD. For several rows, each DOF's (or sleeper's) work across the chunk's rows is written in LLVM's IR with the rows
+as the lanes of one vector (:func:`_mass_lanes`, :func:`_correct_lanes`, :func:`_damp_lanes`,
+:func:`_peak_lanes`): a loop over 4, 6 or 8 rows is too short for LLVM's loop vectoriser, which unrolled it and
+then left it scalar or vectorised it along the track with gathers and scatters (the 8-row kernel took 1 250 cycles
+per row and step, against 860 with the lane code; the 16-row one 820 against 790). The Newmark update and the
+predictor's right-hand side are one loop over the flat window at any width. The triangular sweeps are chains along
+the track of fused multiply-adds, the chain's last four DOFs in registers: one row's as scalars, several rows' as the
+lanes of one vector (:func:`_sweep_lanes`). Loops index
 views from 0 wherever they can: numba wraps negative indices, and the check it emits where it cannot prove an index
 non-negative blocks vectorisation (it cost the single pass half its time). Where an index has to be computed (the
 sleepers of a window, the rows of a column sweep) it is cast to unsigned, for which numba emits no wrap-around: the
@@ -233,6 +238,142 @@ def _sweep_lanes(typingctx, x, inv_diag, g1, g2, g3, g4, m, forward, width):
     return sig, codegen
 
 
+def _lane_arrays(arrays) -> bool:
+    """Whether every one of ``arrays`` is a contiguous 1-D float64 array (what the lane intrinsics index)."""
+    return all(isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.float64
+               for a in arrays)
+
+
+def _lanes(context, builder, signature, args, n_arrays, W):
+    """The pieces every lane intrinsic's code needs: the data pointers of its first ``n_arrays`` arguments,
+    the vector type of W lanes, ``at`` (pointer to the W lanes from flat index ``start``), ``load``, ``store``
+    and ``splat`` (a scalar in every lane)."""
+    i64, f64 = ir.IntType(64), ir.DoubleType()
+    vec = ir.VectorType(f64, W)
+    ptrs = [context.make_array(ty)(context, builder, val).data
+            for ty, val in zip(signature.args[:n_arrays], args[:n_arrays])]
+
+    def at(p, start):
+        return builder.bitcast(builder.gep(p, [start]), vec.as_pointer())
+
+    def load(p, start):
+        return builder.load(at(p, start), align=8)
+
+    def store(v, p, start):
+        builder.store(v, at(p, start), align=8)
+
+    def splat(x):
+        undef, i32 = ir.Constant(vec, ir.Undefined), ir.IntType(32)
+        one = builder.insert_element(undef, x, ir.Constant(i32, 0))
+        return builder.shuffle_vector(one, undef, ir.Constant(ir.VectorType(i32, W), [0] * W))
+
+    fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{W}f64")
+    return i64, vec, ptrs, load, store, splat, fma
+
+
+@intrinsic
+def _mass_lanes(typingctx, xpad, mass_diag, out, i, r0, r1, r2, r3, r5, r6, r7, r8, width):
+    """One DOF i of :func:`_mass_times` for a chunk of ``width`` rows, the rows as the lanes of one LLVM vector:
+    out[i*W + b] = Σ_k M(i, i + k - B) xpad[(i + k)*W + b], the same fused multiply-adds in the same order as
+    the one-row loop (a row's result is the one-row path's, bit for bit). Written in LLVM's IR because a loop
+    over 4, 6 or 8 rows is too short for LLVM's loop vectoriser (it unrolls it first, then vectorises it badly
+    or not at all: the 8-row mass product took longer than the 16-row one)."""
+    if not isinstance(width, types.IntegerLiteral) or not _lane_arrays((xpad, mass_diag, out)):
+        return None
+    W = width.literal_value
+    sig = types.none(xpad, mass_diag, out, i, r0, r1, r2, r3, r5, r6, r7, r8, width)
+
+    def codegen(context, builder, signature, args):
+        i64, vec, (xp, mp, op), load, store, splat, fma = _lanes(context, builder, signature, args, 3, W)
+        base = builder.mul(args[3], ir.Constant(i64, W))
+        x = [load(xp, builder.add(base, ir.Constant(i64, k * W))) for k in range(2 * B + 1)]
+        r = [splat(v) for v in args[4:12]]  # r0 r1 r2 r3 r5 r6 r7 r8
+        s = builder.fmul(r[0], x[0])
+        for c, xv in ((r[1], x[1]), (r[2], x[2]), (r[3], x[3]), (load(mp, base), x[4]), (r[4], x[5]), (r[5], x[6]),
+                      (r[6], x[7]), (r[7], x[8])):
+            s = builder.call(fma, [c, xv, s])
+        store(s, op, base)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _correct_lanes(typingctx, pred, c0, c1, c2, c3, f0, f1, f2, f3, i, width):
+    """One DOF i of the correction in :func:`_correct_window` for a chunk of ``width`` rows (the rows as the
+    lanes of one LLVM vector): pred[i*W + b] += f0[b]*c0[i*W + b] + f1[b]*c1[…] + f2[b]*c2[…] + f3[b]*c3[…],
+    products and sums in the one-row path's order (bit for bit its result). See :func:`_mass_lanes` for why."""
+    if not isinstance(width, types.IntegerLiteral) or not _lane_arrays((pred, c0, c1, c2, c3, f0, f1, f2, f3)):
+        return None
+    W = width.literal_value
+    sig = types.none(pred, c0, c1, c2, c3, f0, f1, f2, f3, i, width)
+
+    def codegen(context, builder, signature, args):
+        i64, vec, ptrs, load, store, splat, fma = _lanes(context, builder, signature, args, 9, W)
+        pp, cp, fp = ptrs[0], ptrs[1:5], ptrs[5:9]
+        base = builder.mul(args[9], ir.Constant(i64, W))
+        zero = ir.Constant(i64, 0)
+        t = [builder.fmul(load(f, zero), load(c, base)) for f, c in zip(fp, cp)]
+        s = builder.fadd(builder.fadd(builder.fadd(t[0], t[1]), t[2]), t[3])
+        store(builder.fadd(load(pp, base), s), pp, base)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _damp_lanes(typingctx, pred, qdamp, pad_c, bal_c, w_at, s_at, width):
+    """The damping of one sleeper in :func:`_predict_window` for a chunk of ``width`` rows (the rows as the
+    lanes of one LLVM vector): with the pad's force fp = c_pad (q_rail − q_sleeper), pred[rail] += fp and
+    pred[sleeper] += c_ballast q_sleeper − fp (a fused multiply-add, as in the one-row path); ``w_at`` and
+    ``s_at`` are the flat indices of the rail node's and the sleeper's lanes. See :func:`_mass_lanes` for why."""
+    if not isinstance(width, types.IntegerLiteral) or not _lane_arrays((pred, qdamp, pad_c, bal_c)):
+        return None
+    W = width.literal_value
+    sig = types.none(pred, qdamp, pad_c, bal_c, w_at, s_at, width)
+
+    def codegen(context, builder, signature, args):
+        i64, vec, (pp, qp, cpp, cbp), load, store, splat, fma = _lanes(context, builder, signature, args, 4, W)
+        w_at, s_at, zero = args[4], args[5], ir.Constant(i64, 0)
+        qs = load(qp, s_at)
+        fp = builder.fmul(load(cpp, zero), builder.fsub(load(qp, w_at), qs))
+        store(builder.fadd(load(pp, w_at), fp), pp, w_at)
+        store(builder.fadd(load(pp, s_at), builder.call(fma, [load(cbp, zero), qs, builder.fneg(fp)])), pp, s_at)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _peak_lanes(typingctx, u, v, pad_k, pad_c, bal_k, bal_c, peak_ballast, peak_total, w_at, s_at, width):
+    """The peak forces of one sleeper in :func:`_correct_window` for a chunk of ``width`` rows (the rows as the
+    lanes of one LLVM vector): ballast force fb = c_b v_s + k_b u_s and pad force c_p (v_w − v_s) + k_p (u_w − u_s)
+    (fused multiply-adds, as in the one-row path), peak_ballast = max(peak_ballast, fb) and peak_total =
+    max(peak_total, fb + fp) as numba's ``max`` selects (the new value where it is greater). See
+    :func:`_mass_lanes` for why."""
+    arrays = (u, v, pad_k, pad_c, bal_k, bal_c, peak_ballast, peak_total)
+    if not isinstance(width, types.IntegerLiteral) or not _lane_arrays(arrays):
+        return None
+    W = width.literal_value
+    sig = types.none(u, v, pad_k, pad_c, bal_k, bal_c, peak_ballast, peak_total, w_at, s_at, width)
+
+    def codegen(context, builder, signature, args):
+        i64, vec, ptrs, load, store, splat, fma = _lanes(context, builder, signature, args, 8, W)
+        up, vp, kpp, cpp, kbp, cbp, pbp, ptp = ptrs
+        w_at, s_at, zero = args[8], args[9], ir.Constant(i64, 0)
+        us, vs = load(up, s_at), load(vp, s_at)
+        fb = builder.call(fma, [load(cbp, zero), vs, builder.fmul(load(kbp, zero), us)])
+        pad = builder.fmul(load(kpp, zero), builder.fsub(load(up, w_at), us))
+        fp = builder.call(fma, [load(cpp, zero), builder.fsub(load(vp, w_at), vs), pad])
+        total = builder.fadd(fb, fp)
+        for peak, new in ((pbp, fb), (ptp, total)):
+            old = load(peak, zero)
+            store(builder.select(builder.fcmp_ordered(">", new, old), new, old), peak, zero)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _solve(fw, bw, inv_diag, m, x, W):
     """Solve (L Lᵀ) y = x in place for the m DOFs of the flat vector x, every row (factors from :func:`_scale`;
@@ -417,15 +558,9 @@ def _mass_times(rail_mass, mass_diag, xpad, out, lo, hi, W):
             s = _fma(m7[g], x7[g], _fma(m6[g], x6[g], _fma(m5[g], x5[g], _fma(m4[g], x4[g], s))))
             o[g] = _fma(m8[g], x8[g], s)
     else:
-        for i in range(lo, hi):
-            xr, o, md = xpad[i * W : (i + 2 * B + 1) * W], out[i * W : (i + 1) * W], mass_diag[i * W : (i + 1) * W]
-            r0, r1, r2, r3 = rail_mass[0, i], rail_mass[1, i], rail_mass[2, i], rail_mass[3, i]
-            r5, r6, r7, r8 = rail_mass[5, i], rail_mass[6, i], rail_mass[7, i], rail_mass[8, i]
-            for b in range(W):  # the one-row loop's arithmetic, term by term
-                s = _fma(r3, xr[3 * W + b], _fma(r2, xr[2 * W + b], _fma(r1, xr[W + b], r0 * xr[b])))
-                s = _fma(md[b], xr[4 * W + b], s)
-                s = _fma(r7, xr[7 * W + b], _fma(r6, xr[6 * W + b], _fma(r5, xr[5 * W + b], s)))
-                o[b] = _fma(r8, xr[8 * W + b], s)
+        for i in range(lo, hi):  # the one-row loop's arithmetic, term by term, the rows as vector lanes
+            _mass_lanes(xpad, mass_diag, out, i, rail_mass[0, i], rail_mass[1, i], rail_mass[2, i], rail_mass[3, i],
+                        rail_mass[5, i], rail_mass[6, i], rail_mass[7, i], rail_mass[8, i], W)
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -511,13 +646,16 @@ def _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_
     qw, qs = qdamp[lo * W :], qdamp[(lo + sleeper_shift) * W :]
     pw, ps = pred[lo * W :], pred[(lo + sleeper_shift) * W :]
     cp, cb = win.pad_c[s_lo:], win.bal_c[s_lo:]
-    for g in range(s_hi + 1 - s_lo):
-        base = np.uint64(g * bay_dofs * W)  # unsigned: no negative-index wrap-around check
-        for b in range(W):
-            f = base + np.uint64(b)
-            fp = cp[g, b] * (qw[f] - qs[f])
+    if W == 1:
+        for g in range(s_hi + 1 - s_lo):
+            f = np.uint64(g * bay_dofs)  # unsigned: no negative-index wrap-around check
+            fp = cp[g, 0] * (qw[f] - qs[f])
             pw[f] += fp
-            ps[f] += _fma(cb[g, b], qs[f], -fp)
+            ps[f] += _fma(cb[g, 0], qs[f], -fp)
+    else:  # the same arithmetic, the rows as vector lanes
+        for g in range(s_hi + 1 - s_lo):
+            w_at = (lo + g * bay_dofs) * W
+            _damp_lanes(win.pred, win.qdamp, cp[g], cb[g], w_at, w_at + sleeper_shift * W, W)
     # triangular sweeps
     _solve_rows(fw, bw, inv_diag, m, pred[lo * W : hi * W], W)
 
@@ -544,12 +682,14 @@ def _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs,
         f1 = fsh[j, 1]
         f2 = fsh[j, 2]
         f3 = fsh[j, 3]
-        for i in range(m):
-            for b in range(W):
-                f = i * W + b
-                # products and sums, not fused multiply-adds: written as a chain of _fma, LLVM vectorised this
-                # loop along the track with gathers and scatters (the correction took 1.8x as long at 16 rows)
-                pw[f] += f0[b] * c0[f] + f1[b] * c1[f] + f2[b] * c2[f] + f3[b] * c3[f]
+        if W == 1:
+            for i in range(m):
+                # products and sums, not fused multiply-adds: written as a chain of _fma, LLVM vectorised the
+                # lane loop along the track with gathers and scatters (the correction took 1.8x as long at 16 rows)
+                pw[i] += f0[0] * c0[i] + f1[0] * c1[i] + f2[0] * c2[i] + f3[0] * c3[i]
+        else:
+            for i in range(m):  # the same products and sums, the rows as vector lanes
+                _correct_lanes(pw, c0, c1, c2, c3, f0, f1, f2, f3, i, W)
     # Newmark update of the track
     for g in range(m * W):
         an = _fma(-a3, aw[g], _fma(-a2, vw[g], a0 * (pw[g] - uw[g])))
@@ -560,14 +700,17 @@ def _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs,
     uw, us, vw, vs = u[lo * W :], u[(lo + sleeper_shift) * W :], v[lo * W :], v[(lo + sleeper_shift) * W :]
     kp, cp, kb, cb = win.pad_k[s_lo:], win.pad_c[s_lo:], win.bal_k[s_lo:], win.bal_c[s_lo:]
     pb, pt = win.peak_ballast[s_lo:], win.peak_total[s_lo:]
-    for g in range(s_hi + 1 - s_lo):
-        base = np.uint64(g * bay_dofs * W)
-        for b in range(W):
-            f = base + np.uint64(b)
-            fb = _fma(cb[g, b], vs[f], kb[g, b] * us[f])
-            fp = _fma(cp[g, b], vw[f] - vs[f], kp[g, b] * (uw[f] - us[f]))
-            pb[g, b] = max(pb[g, b], fb)
-            pt[g, b] = max(pt[g, b], fb + fp)
+    if W == 1:
+        for g in range(s_hi + 1 - s_lo):
+            f = np.uint64(g * bay_dofs)
+            fb = _fma(cb[g, 0], vs[f], kb[g, 0] * us[f])
+            fp = _fma(cp[g, 0], vw[f] - vs[f], kp[g, 0] * (uw[f] - us[f]))
+            pb[g, 0] = max(pb[g, 0], fb)
+            pt[g, 0] = max(pt[g, 0], fb + fp)
+    else:  # the same arithmetic, the rows as vector lanes
+        for g in range(s_hi + 1 - s_lo):
+            w_at = (lo + g * bay_dofs) * W
+            _peak_lanes(u, v, kp[g], cp[g], kb[g], cb[g], pb[g], pt[g], w_at, w_at + sleeper_shift * W, W)
 
 
 @njit(cache=True, fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
