@@ -33,6 +33,18 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# steps per second of one registered env with random actions (ENV_ID, WARM warm-up steps filled in below)
+_GYM_STEPS = """
+import time, gymnasium as gym
+import trackenv.envs
+env = gym.make("ENV_ID"); env.reset(seed=0); env.action_space.seed(0)
+for _ in range(WARM): env.step(env.action_space.sample())
+t = time.perf_counter()
+for _ in range({steps}):
+    _, _, te, tr, _ = env.step(env.action_space.sample())
+    if te or tr: env.reset()
+print({steps} / (time.perf_counter() - t))
+"""
 _SNIPPETS = {
     "vector": """
 import time, numpy as np
@@ -58,28 +70,8 @@ if __name__ == "__main__":
     print({envs} * {steps} / (time.perf_counter() - t))
     env.close()
 """,
-    "env": """
-import time, gymnasium as gym
-import trackenv.envs
-env = gym.make("trackenv/Tamping-v0"); env.reset(seed=0); env.action_space.seed(0)
-for _ in range(5): env.step(env.action_space.sample())
-t = time.perf_counter()
-for _ in range({steps}):
-    _, _, te, tr, _ = env.step(env.action_space.sample())
-    if te or tr: env.reset()
-print({steps} / (time.perf_counter() - t))
-""",
-    "line": """
-import time, gymnasium as gym
-import trackenv.envs
-env = gym.make("trackenv/TampingLine-v0"); env.reset(seed=0); env.action_space.seed(0)
-for _ in range(3): env.step(env.action_space.sample())
-t = time.perf_counter()
-for _ in range({steps}):
-    _, _, te, tr, _ = env.step(env.action_space.sample())
-    if te or tr: env.reset()
-print({steps} / (time.perf_counter() - t))
-""",
+    "env": _GYM_STEPS.replace("ENV_ID", "trackenv/Tamping-v0").replace("WARM", "5"),
+    "line": _GYM_STEPS.replace("ENV_ID", "trackenv/TampingLine-v0").replace("WARM", "3"),
     "seed": """
 import time
 from trackenv.physics.dynamics import simulate_pass

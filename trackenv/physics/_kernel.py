@@ -171,73 +171,6 @@ def _chain_step(x, inv_diag, g4, g3, g2, g1, f, x4, x3, x2, x1):
     return _fma(-g1[f], x1, _fma(-g2[f], x2, _fma(-g3[f], x3, _fma(-g4[f], x4, x[f] * inv_diag[f]))))
 
 
-@intrinsic
-def _sweep_lanes(typingctx, x, inv_diag, g1, g2, g3, g4, m, forward, width):
-    """The chain part of a triangular sweep for a chunk of ``width`` rows: DOFs B..m-1 (``forward``) or m-1-B..0
-    (backward) of the flat vector x (DOF i of row b at i*W + b), the rows as the lanes of one LLVM vector whose
-    sweep's four previous DOFs stay in registers, each lane doing :func:`_chain_step`'s arithmetic (so a row's
-    result is the one-row path's, bit for bit). numba has no vector type and its loop vectoriser does not see
-    through the chain, so the loop is written here in LLVM's IR: a micro-benchmark (TSC cycles per DOF and sweep,
-    90 DOFs) gave 13 against 21 for blocks of four register chains at 8 rows, and 26 against 40 for the loop
-    across the lanes at 16. Every array must be contiguous (checked when the caller is compiled)."""
-    arrays = (x, inv_diag, g1, g2, g3, g4)
-    if not isinstance(width, types.IntegerLiteral) or not all(
-        isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.float64 for a in arrays
-    ):
-        return None
-    W = width.literal_value
-    sig = types.none(x, inv_diag, g1, g2, g3, g4, m, forward, width)
-
-    def codegen(context, builder, signature, args):
-        i64, f64 = ir.IntType(64), ir.DoubleType()
-        vec = ir.VectorType(f64, W)
-        vfma_type = ir.FunctionType(vec, [vec, vec, vec])
-        vfma = cgutils.get_or_insert_function(builder.module, vfma_type, f"llvm.fma.v{W}f64")
-        xp, dp, p1, p2, p3, p4 = (
-            context.make_array(ty)(context, builder, val).data for ty, val in zip(signature.args[:6], args[:6])
-        )
-        m_, fwd = args[6], builder.icmp_unsigned("!=", args[7], ir.Constant(args[7].type, 0))
-
-        def at(p, dof):  # pointer to the W lanes of DOF ``dof``
-            return builder.bitcast(builder.gep(p, [builder.mul(dof, ir.Constant(i64, W))]), vec.as_pointer())
-
-        def load(p, dof):
-            return builder.load(at(p, dof), align=8)
-
-        count = builder.sub(m_, ir.Constant(i64, B))  # the chain's DOFs
-        step = builder.select(fwd, ir.Constant(i64, 1), ir.Constant(i64, -1))
-        first = builder.select(fwd, ir.Constant(i64, B), builder.sub(m_, ir.Constant(i64, B + 1)))
-        with builder.if_then(builder.icmp_signed(">", count, ir.Constant(i64, 0))):
-            # the four DOFs before the first, as the sweep runs: first - 4*step .. first - step
-            prev = [load(xp, builder.sub(first, builder.mul(step, ir.Constant(i64, k)))) for k in (4, 3, 2, 1)]
-            entry = builder.block
-            loop = builder.append_basic_block("sweep_lanes")
-            done = builder.append_basic_block("sweep_lanes_done")
-            builder.branch(loop)
-            builder.position_at_end(loop)
-            k, i = builder.phi(i64), builder.phi(i64)
-            v = [builder.phi(vec) for _ in range(4)]  # x4, x3, x2, x1
-            k.add_incoming(ir.Constant(i64, 0), entry)
-            i.add_incoming(first, entry)
-            for phi, val in zip(v, prev):
-                phi.add_incoming(val, entry)
-            t = builder.fmul(load(xp, i), load(dp, i))
-            for g, xv in zip((p4, p3, p2, p1), v):
-                t = builder.call(vfma, [builder.fneg(load(g, i)), xv, t])
-            builder.store(t, at(xp, i), align=8)
-            k_next, i_next = builder.add(k, ir.Constant(i64, 1)), builder.add(i, step)
-            body = builder.block
-            k.add_incoming(k_next, body)
-            i.add_incoming(i_next, body)
-            for phi, val in zip(v, (v[1], v[2], v[3], t)):
-                phi.add_incoming(val, body)
-            builder.cbranch(builder.icmp_signed("<", k_next, count), loop, done)
-            builder.position_at_end(done)
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
 def _lane_arrays(arrays) -> bool:
     """Whether every one of ``arrays`` is a contiguous 1-D float64 array (what the lane intrinsics index)."""
     return all(isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.float64
@@ -269,6 +202,62 @@ def _lanes(context, builder, signature, args, n_arrays, W):
 
     fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{W}f64")
     return i64, vec, ptrs, load, store, splat, fma
+
+
+@intrinsic
+def _sweep_lanes(typingctx, x, inv_diag, g1, g2, g3, g4, m, forward, width):
+    """The chain part of a triangular sweep for a chunk of ``width`` rows: DOFs B..m-1 (``forward``) or m-1-B..0
+    (backward) of the flat vector x (DOF i of row b at i*W + b), the rows as the lanes of one LLVM vector whose
+    sweep's four previous DOFs stay in registers, each lane doing :func:`_chain_step`'s arithmetic (so a row's
+    result is the one-row path's, bit for bit). numba has no vector type and its loop vectoriser does not see
+    through the chain, so the loop is written here in LLVM's IR: a micro-benchmark (TSC cycles per DOF and sweep,
+    90 DOFs) gave 13 against 21 for blocks of four register chains at 8 rows, and 26 against 40 for the loop
+    across the lanes at 16. Every array must be contiguous (checked when the caller is compiled)."""
+    if not isinstance(width, types.IntegerLiteral) or not _lane_arrays((x, inv_diag, g1, g2, g3, g4)):
+        return None
+    W = width.literal_value
+    sig = types.none(x, inv_diag, g1, g2, g3, g4, m, forward, width)
+
+    def codegen(context, builder, signature, args):
+        i64, vec, ptrs, load_flat, store_flat, _, vfma = _lanes(context, builder, signature, args, 6, W)
+        xp, dp, p1, p2, p3, p4 = ptrs
+        m_, fwd = args[6], builder.icmp_unsigned("!=", args[7], ir.Constant(args[7].type, 0))
+
+        def load(p, dof):  # the W lanes of DOF ``dof``
+            return load_flat(p, builder.mul(dof, ir.Constant(i64, W)))
+
+        count = builder.sub(m_, ir.Constant(i64, B))  # the chain's DOFs
+        step = builder.select(fwd, ir.Constant(i64, 1), ir.Constant(i64, -1))
+        first = builder.select(fwd, ir.Constant(i64, B), builder.sub(m_, ir.Constant(i64, B + 1)))
+        with builder.if_then(builder.icmp_signed(">", count, ir.Constant(i64, 0))):
+            # the four DOFs before the first, as the sweep runs: first - 4*step .. first - step
+            prev = [load(xp, builder.sub(first, builder.mul(step, ir.Constant(i64, k)))) for k in (4, 3, 2, 1)]
+            entry = builder.block
+            loop = builder.append_basic_block("sweep_lanes")
+            done = builder.append_basic_block("sweep_lanes_done")
+            builder.branch(loop)
+            builder.position_at_end(loop)
+            k, i = builder.phi(i64), builder.phi(i64)
+            v = [builder.phi(vec) for _ in range(4)]  # x4, x3, x2, x1
+            k.add_incoming(ir.Constant(i64, 0), entry)
+            i.add_incoming(first, entry)
+            for phi, val in zip(v, prev):
+                phi.add_incoming(val, entry)
+            t = builder.fmul(load(xp, i), load(dp, i))
+            for g, xv in zip((p4, p3, p2, p1), v):
+                t = builder.call(vfma, [builder.fneg(load(g, i)), xv, t])
+            store_flat(t, xp, builder.mul(i, ir.Constant(i64, W)))
+            k_next, i_next = builder.add(k, ir.Constant(i64, 1)), builder.add(i, step)
+            body = builder.block
+            k.add_incoming(k_next, body)
+            i.add_incoming(i_next, body)
+            for phi, val in zip(v, (v[1], v[2], v[3], t)):
+                phi.add_incoming(val, body)
+            builder.cbranch(builder.icmp_signed("<", k_next, count), loop, done)
+            builder.position_at_end(done)
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @intrinsic
