@@ -71,7 +71,7 @@ B = 4  # half-bandwidth of the track matrices (see track.DofLayout)
 FASTMATH = {"nnan", "ninf", "nsz"}
 # rows per chunk the kernel is compiled for (each a constant in its own compiled copy); 6: the line env's 12
 # segments on two threads run as two chunks of 6 (as chunks of 8, a quarter of the lanes were padding: the line step
-# took ~10 % longer)
+# took ~14 % longer)
 WIDTHS = (1, 4, 6, 8, 16)
 
 Mesh = namedtuple("Mesh", "node_w sleeper_dof sleeper_node elem_len epb n_sleepers margin_bays rail_mass")
@@ -178,9 +178,10 @@ def _lane_arrays(arrays) -> bool:
 
 
 def _lanes(context, builder, signature, args, n_arrays, W):
-    """The pieces every lane intrinsic's code needs: the data pointers of its first ``n_arrays`` arguments,
-    the vector type of W lanes, ``at`` (pointer to the W lanes from flat index ``start``), ``load``, ``store``
-    and ``splat`` (a scalar in every lane)."""
+    """The pieces every lane intrinsic's code needs, as (i64, vec, ptrs, load, store, splat, fma): the 64-bit
+    integer and W-lane vector types, the data pointers of its first ``n_arrays`` arguments, ``load(p, start)`` and
+    ``store(v, p, start)`` of the W lanes from flat index ``start``, ``splat`` (a scalar in every lane) and the
+    vector fused multiply-add."""
     i64, f64 = ir.IntType(64), ir.DoubleType()
     vec = ir.VectorType(f64, W)
     ptrs = [context.make_array(ty)(context, builder, val).data
@@ -532,8 +533,9 @@ def _mass_times(rail_mass, mass_diag, xpad, out, lo, hi, W):
     adds exactly nothing). M's off-diagonals are the rail's (``Mesh.rail_mass``, shared by the rows), its
     diagonal ``mass_diag`` is per row (the sleepers' masses differ). The nine terms are summed in band order by
     fused multiply-adds (:func:`_fma`), in both loops alike: 17 instructions per DOF and vector become 9.
-    The loops index views from 0, which the compiler vectorises (numba wraps negative indices, and a check it
-    cannot drop blocks SIMD): along the track for one row, across the rows for several."""
+    For one row the loop indexes views from 0, which the compiler vectorises along the track (numba wraps
+    negative indices, and a check it cannot drop blocks SIMD); for several rows each DOF is one
+    :func:`_mass_lanes`, the rows as vector lanes."""
     if W == 1:
         o = out[lo:hi]
         x0, x1, x2 = xpad[lo:], xpad[lo + 1 :], xpad[lo + 2 :]
@@ -723,9 +725,9 @@ def _correct_window_rows(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_
 def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
     """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass.
 
-    The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): the loops
-    over a window's DOFs and rows are then one unit-stride loop, which vectorises at any width, also for the
-    single pass (W = 1) where the SIMD lanes run along the track."""
+    The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): loops over
+    a whole window's DOFs and rows are one unit-stride loop at any width, and for several rows each DOF's lanes
+    are one vector (the lane intrinsics; see the module's docstring)."""
     node_w = mesh.node_w
     sleeper_dof = mesh.sleeper_dof
     sleeper_node = mesh.sleeper_node
