@@ -17,6 +17,7 @@ in the model, only the time steps that can no longer change an evaluated sleeper
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from functools import cached_property, partial
@@ -211,6 +212,19 @@ class TrackDegradation:
         self.tampings = np.zeros(n, dtype=np.int64)
         self.cycles = 0.0
         self.history = DegradationHistory(track.sleeper_positions.copy())
+
+    def copy(self) -> TrackDegradation:
+        """An independent copy of this simulator, exact and cheap: the mutable state (settlement state, level
+        offset, tamping counts, cycles, history, runaway series) is copied; the track, the vehicle, the law and
+        what is derived from them once (the model track, the support influence) are shared, as they never
+        change. The copy advances exactly as this simulator would (the planning state API of the envs rests
+        on it)."""
+        twin = copy.copy(self)
+        twin.offset = self.offset.copy()
+        twin.tampings = self.tampings.copy()
+        twin.history = DegradationHistory(self.history.sleeper_positions, list(self.history.records))
+        twin._differential = list(self._differential)
+        return twin
 
     @staticmethod
     def zone_sleepers(sleeper_spacing: float, span: float, approach_sleepers: int = 10) -> int:

@@ -245,6 +245,28 @@ def test_config_validation_and_scenarios():
         env.step(np.ones(5, int))
 
 
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("n_sections", 2.0, r"n_sections must be an integer in \[1, 256\]"),
+    ("annual_mgt", "15", r"annual_mgt must be a real number"),
+    ("initial_scale", "wide", r"initial_scale must be two numbers \(lower, upper\) with 0 <= lower <= upper <= 10"),
+    ("initial_scale", (1.2, 0.4), r"initial_scale must be two numbers"),
+    ("initial_scale", (0.4,), r"initial_scale must be two numbers"),
+    ("over_capacity", "drop", r"over_capacity must be one of \('clip', 'raise'\)"),
+    ("profiles", 1, r"profiles must be True or False"),
+    ("law", "linear", r"law must be one of"),
+])
+def test_line_config_refuses_bad_values_by_name(field, value, message):
+    """LineConfig checks its fields with the same mechanism as TampingEnvConfig: one line naming the field and
+    what is allowed."""
+    with pytest.raises(ValueError, match=message):
+        LineConfig(**{field: value})
+
+
+def test_line_config_stores_fields_in_their_canonical_types():
+    c = LineConfig(n_sections=np.int64(6), capacity=3, annual_mgt=15, initial_scale=[0.5, 1])
+    assert type(c.n_sections) is int and type(c.annual_mgt) is float and c.initial_scale == (0.5, 1.0)
+
+
 def test_episode_end_and_reset_arguments_are_enforced():
     env = TampingLine(scenario="small", horizon_years=0.25)  # one step
     env.reset(seed=3)

@@ -23,6 +23,7 @@ A subclass says what its problem is: :meth:`_start` (new episodes), :meth:`_step
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -32,9 +33,10 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from ..physics._checks import check_int
 from ._seeding import vector_rngs
+from .common import check_render_mode
+from .state import EnvState
 
 AUTORESET_MODES = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
-RENDER_MODES = (None, "rgb_array")
 
 
 def check_autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
@@ -47,13 +49,6 @@ def check_autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
     if mode not in AUTORESET_MODES:
         raise ValueError(f"autoreset_mode must be one of {[m.value for m in AUTORESET_MODES]}, got {value!r}")
     return mode
-
-
-def check_render_mode(value: str | None) -> str | None:
-    """``value`` if it is a render mode trackenv's envs draw (None or "rgb_array"), else ValueError."""
-    if value not in RENDER_MODES:
-        raise ValueError(f"render_mode must be None or 'rgb_array', got {value!r}")
-    return value
 
 
 def check_vector_actions(actions: Any, num_envs: int, single_action_space: spaces.Space) -> np.ndarray:
@@ -90,7 +85,7 @@ class BatchedVectorEnv(VectorEnv):
         self.action_space = batch_space(single_action_space, self.num_envs)
         self._rngs: list[np.random.Generator] = []  # one per env, from reset(seed=...)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)  # NEXT_STEP: envs to reset at the next step
-        self._first_info: dict = {}  # the first env's last info, for render()
+        self._infos: list[dict] = []  # each env's last info (render() draws the first; snapshots keep theirs)
 
     # ------------------------------------------------------------------ what a problem supplies
     def _start(self, idx: list[int]) -> None:
@@ -133,11 +128,9 @@ class BatchedVectorEnv(VectorEnv):
         self._start(everyone)
         self._autoreset[:] = False
         infos: dict = {}
-        for i in everyone:
-            info = self._reset_info(i)
+        self._infos = [self._reset_info(i) for i in everyone]
+        for i, info in enumerate(self._infos):
             infos = self._add_info(infos, info, i)  # Gymnasium's vector infos, with masks
-            if i == 0:
-                self._first_info = info
         return self._observations(), infos
 
     def step(self, actions: Any) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -162,11 +155,26 @@ class BatchedVectorEnv(VectorEnv):
             step_infos[i] = self._reset_info(i)
         for i in range(self.num_envs):
             infos = self._add_info(infos, step_infos[i], i)
-        self._first_info = step_infos[0]
+        self._infos = [step_infos[i] for i in range(self.num_envs)]
         return self._observations(), rewards, terminated, truncated, infos
 
     def render(self):  # one frame, not the tuple of frames VectorEnv.render is typed with
         """The first env's current state as an RGB array (``render_mode="rgb_array"``), else None."""
         if self.render_mode != "rgb_array" or not self._rngs:
             return None
-        return self._frame(self._first_info)
+        return self._frame(self._infos[0])
+
+    # ------------------------------------------------------------------ the planning state API, per row
+    def _env_index(self, index: int) -> int:
+        """``index`` checked as an env of this vector env that has been reset."""
+        i = check_int("index", index, low=0, high=self.num_envs - 1)
+        if not self._rngs:
+            raise RuntimeError("call reset() before get_state() or set_state()")
+        return i
+
+    def _restore_row(self, i: int, state: EnvState) -> None:
+        """The Gymnasium side of restoring env ``i`` from ``state``: its generator and last info; a pending
+        NEXT_STEP reset is dropped (the env continues the restored episode)."""
+        self._rngs[i].bit_generator.state = copy.deepcopy(state.rng_state)
+        self._infos[i] = copy.deepcopy(state.last_info)
+        self._autoreset[i] = False

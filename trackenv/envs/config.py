@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 from functools import cached_property, partial
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from ..degradation import TrackDegradation
-from ..physics._checks import check_choice, check_field, check_int_field, check_time_steps
+from ..physics._checks import check_choice, check_field, check_int_field, check_scalar, check_time_steps
 from ..physics.contact import HertzContact
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
@@ -30,6 +30,10 @@ class ConfigBase:
     derived objects are built once per config (it is frozen, so they cannot go stale), not once per step."""
 
     _MAPPING_FIELDS: tuple[str, ...] = ("law_params", "tamping", "limits")
+    #: the cost parts of a step that interventions make, in the order of ``info["costs"]``
+    _INTERVENTION_COST_KEYS: ClassVar[tuple[str, ...]] = ()
+    #: (cost part, quality class, config field of its cost per section and step) for each class that costs
+    _CLASS_COST_FIELDS: ClassVar[tuple[tuple[str, int, str], ...]] = ()
     speed_kmh: float
     law: str
     law_params: tuple
@@ -54,6 +58,18 @@ class ConfigBase:
         for k in self._MAPPING_FIELDS:
             d[k] = dict(getattr(self, k))
         return d
+
+    @classmethod
+    def cost_keys(cls) -> tuple[str, ...]:
+        """The names of a step's cost parts (``info["costs"]``), in order: the interventions', the geometry, the
+        quality classes'."""
+        return cls._INTERVENTION_COST_KEYS + ("geometry",) + tuple(name for name, _, _ in cls._CLASS_COST_FIELDS)
+
+    @property
+    def class_costs(self) -> dict[str, tuple[int, float]]:
+        """Cost part name -> (quality class, cost per section and step in k€), for
+        :func:`~trackenv.envs.costs.section_quality_costs`."""
+        return {name: (cls, getattr(self, field)) for name, cls, field in self._CLASS_COST_FIELDS}
 
     @property
     def speed(self) -> float:
@@ -148,6 +164,10 @@ class TampingEnvConfig(ConfigBase):
     min_steps_between_tampings: int = 1
     dt: float | str = "auto"
 
+    _INTERVENTION_COST_KEYS = ("tamping",)
+    _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("intervention", 2, "intervention_cost"),
+                          ("immediate_action", 3, "immediate_action_cost"))
+
     def __post_init__(self) -> None:
         # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
         c, ci = partial(check_field, self), partial(check_int_field, self)
@@ -161,16 +181,7 @@ class TampingEnvConfig(ConfigBase):
         c("ballast_stiffness_correlation_m", low=0.0, high=100.0)
         c("transition_probability", low=0.0, high=1.0)
         c("transition_stiffness_ratio", low=0.2, high=10.0)
-        try:
-            if isinstance(self.transition_position, str):
-                raise TypeError
-            lo, hi = (float(v) for v in self.transition_position)
-        except (TypeError, ValueError):
-            raise ValueError(f"transition_position must be two fractions (low, high), got "
-                             f"{self.transition_position!r}") from None
-        if not 0.0 <= lo < hi <= 1.0:
-            raise ValueError(f"transition_position must satisfy 0 <= low < high <= 1, got {self.transition_position!r}")
-        object.__setattr__(self, "transition_position", (lo, hi))
+        check_range_field(self, "transition_position", low=0.0, high=1.0, strict=True)
         c("voided_sleepers_mean", low=0.0, high=10.0)
         c("voided_residual_support", low=0.0, high=1.0)
         c("settlement_rate_cv", low=0.0, high=2.0)
@@ -253,6 +264,25 @@ class TampingEnvConfig(ConfigBase):
         if self.vehicle == "wheelset":
             return Wheelset(mass=1800.0, static_load=max(wheel_load - 900.0 * GRAVITY, 0.0))
         return getattr(Car, self.vehicle)()
+
+
+def check_range_field(obj: object, name: str, *, low: float, high: float, strict: bool = False) -> tuple[float, float]:
+    """Check the field ``name`` of a frozen config as a range (lower, upper) of real numbers with ``low <= lower
+    <= upper <= high`` (``lower < upper`` if ``strict``) and store it as a tuple of floats; else ValueError naming
+    the field and what is allowed."""
+    value = getattr(obj, name)
+    rel = "<" if strict else "<="
+    allowed = f"two numbers (lower, upper) with {low:g} <= lower {rel} upper <= {high:g}"
+    try:
+        if isinstance(value, str):
+            raise TypeError
+        lower, upper = (check_scalar(name, v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {allowed}, got {value!r}") from None
+    if not (low <= lower <= upper <= high) or (strict and lower == upper):
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+    object.__setattr__(obj, name, (lower, upper))
+    return lower, upper
 
 
 def _as_items(name: str, value) -> tuple:

@@ -3,7 +3,7 @@ Gymnasium API. The single env and the vector env both call these, so the rules e
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -21,9 +21,12 @@ from ..physics.geometry import (
     synthesize_profile,
 )
 from ..physics.track import Track
+from .common import SHARED_BOUNDS, clip_observation
 from .config import TampingEnvConfig
+from .costs import section_quality_costs
+from .info import step_info
 
-COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
+COST_KEYS = TampingEnvConfig.cost_keys()
 
 
 @dataclass(eq=False)
@@ -68,6 +71,17 @@ class Episode:
         """Sections that may be tamped now (not tamped within the last min_steps_between_tampings steps)."""
         k = self.config.min_steps_between_tampings
         return (self.step_count - self.last_tamped_step) > k
+
+
+def copy_episode(ep: Episode) -> Episode:
+    """An independent copy of ``ep`` that steps exactly as ``ep`` would (its simulator copied with
+    :meth:`~trackenv.TrackDegradation.copy`, its arrays copied, its cached geometry kept): the snapshot behind
+    ``TampingEnv.get_state`` / ``set_state``."""
+    sim = ep.sim.copy()
+    cache = (sim.state, sim.offset, ep._quality_cache[2]) if ep._geometry_current() else None  # type: ignore[index]
+    return replace(ep, sim=sim, last_tamped_step=ep.last_tamped_step.copy(),
+                   section_tampings=ep.section_tampings.copy(), contact_force=ep.contact_force.copy(),
+                   tamped_last=ep.tamped_last.copy(), _quality_cache=cache)
 
 
 def refresh_geometry(eps: list[Episode]) -> None:
@@ -178,29 +192,25 @@ def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
     """The period's costs in named parts (k€); the reward is minus their sum."""
     c = ep.config
     _, sd, _ = ep.quality()
-    lim = c.band_limits
-    cls = ep.section_classes()
-    dt_years = 1.0 / c.steps_per_year
-    return {
-        "tamping": float(tamping_cost),
-        "geometry": float(c.geometry_cost_per_section_year * dt_years * np.sum((sd / lim.sd_alert_m) ** 2)),
-        "alert": float(c.alert_cost * np.sum(cls == 1)),
-        "intervention": float(c.intervention_cost * np.sum(cls == 2)),
-        "immediate_action": float(c.immediate_action_cost * np.sum(cls == 3)),
-    }
+    per_section = section_quality_costs(
+        sd, ep.section_classes(), sd_alert_m=c.band_limits.sd_alert_m,
+        geometry_cost_per_section_year=c.geometry_cost_per_section_year, steps_per_year=c.steps_per_year,
+        class_costs=c.class_costs)
+    return {"tamping": float(tamping_cost), **{k: float(np.sum(v)) for k, v in per_section.items()}}
 
 
 def observation_bounds(config: TampingEnvConfig) -> dict[str, tuple[float, float]]:
     """Bounds of each observation key (the env's observation space is built from these, and the clipping in
     :func:`observation` uses them, so the two cannot drift apart)."""
+    shared = SHARED_BOUNDS
     return {
-        "level": (-100.0, 200.0),
+        "level": shared["level"],
         "contact_force": (0.0, 2000.0),
-        "section_sd": (0.0, 100.0),
-        "section_peak": (0.0, 200.0),
-        "tampings": (0.0, 1000.0),
+        "section_sd": shared["section_sd"],
+        "section_peak": shared["section_peak"],
+        "tampings": shared["tampings"],
         "years_since_tamping": (0.0, config.horizon_years + 1.0),
-        "time": (0.0, 1.0),
+        "time": shared["time"],
     }
 
 
@@ -222,8 +232,7 @@ def raw_observation(ep: Episode) -> dict[str, np.ndarray]:
 def observation(ep: Episode) -> dict[str, np.ndarray]:
     """The observation dict (see TampingEnv's table), clipped to its bounds (``info["observation_clipped"]``
     counts the values that were)."""
-    bounds = observation_bounds(ep.config)
-    return {k: np.clip(v, *bounds[k]).astype(np.float32) for k, v in raw_observation(ep).items()}
+    return clip_observation(raw_observation(ep), observation_bounds(ep.config))
 
 
 def observations(eps: list[Episode], keys) -> dict[str, np.ndarray]:
@@ -252,32 +261,10 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
     """The step's info dict (see TampingEnv's table): track geometry in mm like the observation, each key
     naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0."""
     _, sd, peak = ep.quality()
-    cls = ep.section_classes().copy()
-    return {
-        "costs": parts,
-        "cost": float(sum(parts.values())),
-        "tamped_sections": tamped.copy(),
-        "section_sd_mm": sd * 1e3,
-        "section_peak_mm": peak * 1e3,
-        "section_sd_m": sd.copy(),
-        "section_peak_m": peak.copy(),
-        "section_class": cls,
-        "immediate_action_exceedances": int(np.sum(cls == 3)),
-        "year": ep.step_count / ep.config.steps_per_year,
-        "max_contact_force_N": float(ep.contact_force.max()),
-        "observation_clipped": clipped_values(ep),
-    }
+    return step_info(parts, tamped, sd, peak, ep.section_classes(), ep.step_count / ep.config.steps_per_year,
+                     ep.contact_force.max(), observation_clipped=clipped_values(ep))
 
 
 def traffic_free_pass(ep: Episode) -> None:
     """A pass without settlement: what the contact force looks like on the initial geometry."""
     ep.contact_force = ep.sim.evaluated(ep.sim.simulate().contact_force_profile())
-
-
-def action_mask(ep: Episode | None, action_type: str, n_sections: int) -> np.ndarray:
-    """Valid actions for masked algorithms: Discrete (n_sections + 1,), MultiBinary (2·n_sections,) as
-    [may-not-tamp, may-tamp] pairs per section (sb3-contrib's convention)."""
-    allowed = np.ones(n_sections, dtype=bool) if ep is None else ep.mask()
-    if action_type == "discrete":
-        return np.concatenate([[True], allowed])
-    return np.stack([np.ones_like(allowed), allowed], axis=1).ravel()

@@ -8,6 +8,7 @@ suite in :mod:`trackenv.envs.line_config`.
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import gymnasium as gym
@@ -16,29 +17,29 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from .batched import BatchedVectorEnv
+from .common import action_mask, check_render_mode, check_reset_arguments, decode_action, observation_space
 from .line_config import LineConfig
-from .line_episode import COST_KEYS, LineBatch
-from .tamping import check_reset_arguments, decode_action
+from .line_episode import LineBatch, line_observation_bounds
+from .state import EnvState, checked, snapshot
 
 __all__ = ["TampingLine", "TampingLineVectorEnv", "line_observation_space"]
 
 
 def line_observation_space(config: LineConfig) -> spaces.Dict:
-    S, f32 = config.n_sections, np.float32
-    d = {
-        "section_sd": spaces.Box(0.0, 100.0, (S,), f32),
-        "section_peak": spaces.Box(0.0, 200.0, (S,), f32),
-        "measurement_age": spaces.Box(0.0, config.horizon_years + 1.0, (1,), f32),
-        "register": spaces.Box(0.0, 2.0, (S,), f32),
-        "tampings": spaces.Box(0.0, 1000.0, (S,), f32),
-        "tampings_since_renewal": spaces.Box(0.0, 1000.0, (S,), f32),
-        "years_since_tamping": spaces.Box(0.0, 100.0, (S,), f32),
-        "time": spaces.Box(0.0, 1.0, (1,), f32),
-        "budget_left": spaces.Box(0.0, 1.0, (1,), f32),
-    }
-    if config.profiles:
-        d["level"] = spaces.Box(-100.0, 200.0, (S, config.n_sleepers), f32)
-    return spaces.Dict(dict(d))
+    """The Dict space of TampingLine's observation table (its bounds: :func:`line_observation_bounds`)."""
+    bounds = line_observation_bounds(config)
+    per_line = {"measurement_age": (1,), "time": (1,), "budget_left": (1,),
+                "level": (config.n_sections, config.n_sleepers)}
+    return observation_space(bounds, {key: per_line.get(key, (config.n_sections,)) for key in bounds})
+
+
+def line_config(config: LineConfig | dict | str | None, scenario: str | None, overrides: dict[str, Any]) -> LineConfig:
+    """The config of a TampingLine env from its arguments: ``config`` (a config, a dict or a scenario name),
+    else ``scenario``, else the default line, with the field ``overrides`` (``max_episode_steps``, which
+    ``gym.make`` may pass, is dropped: the env truncates itself at its horizon)."""
+    overrides.pop("max_episode_steps", None)
+    out = LineConfig.coerce(scenario if config is None and scenario is not None else config)
+    return out.replace(**overrides) if overrides else out
 
 
 class TampingLineVectorEnv(BatchedVectorEnv):
@@ -56,11 +57,7 @@ class TampingLineVectorEnv(BatchedVectorEnv):
     def __init__(self, num_envs: int = 4, config: LineConfig | dict | str | None = None, *,
                  scenario: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        overrides.pop("max_episode_steps", None)
-        config = LineConfig.coerce(scenario if config is None and scenario is not None else config)
-        if overrides:
-            config = config.replace(**overrides)
-        self.config = config
+        self.config = config = line_config(config, scenario, overrides)
         super().__init__(num_envs, line_observation_space(config), spaces.MultiBinary(config.n_sections),
                          autoreset_mode=autoreset_mode, render_mode=render_mode)
         self.batch: LineBatch | None = None
@@ -81,27 +78,7 @@ class TampingLineVectorEnv(BatchedVectorEnv):
         return self._lines().observation(i)
 
     def _reset_info(self, i: int) -> dict:
-        S = self.config.n_sections
-        return self._lines().info(i, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False, np.zeros(S))
-
-    def _step_lines(self, want: np.ndarray, lines: list[int]) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
-        """One step of ``lines``, which ask to tamp ``want`` (num_envs, S) bool (rows of other lines: False):
-        rewards and truncation flags (num_envs,; 0 and False elsewhere) and the info of each stepped line. The
-        other lines are not stepped. :class:`TampingLine` steps through here too."""
-        bt = self._lines()
-        stepped = np.zeros(self.num_envs, dtype=bool)
-        stepped[lines] = True
-        tamped, clipped = bt.resolve(want & stepped[:, None])
-        section = bt.intervention_costs(tamped.ravel())
-        campaign = bt.apply(tamped)
-        bt.traffic(stepped)
-        parts = bt.costs(campaign)
-        section += bt.section_costs()
-        rewards = np.where(stepped, -np.asarray(sum(parts.values()), dtype=float), 0.0)
-        truncated = stepped & (bt.step >= self.config.horizon_steps)
-        infos = {b: bt.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
-                            section[bt.rows(b)]) for b in lines}
-        return rewards, truncated, infos
+        return self._lines().reset_info(i)
 
     def _step_envs(self, actions: np.ndarray, stepping: list[int],
                    resetting: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, dict]]:
@@ -109,10 +86,24 @@ class TampingLineVectorEnv(BatchedVectorEnv):
         want = np.zeros((self.num_envs, S), dtype=bool)
         for b in stepping:
             want[b] = decode_action(actions[b], "multibinary", S)
-        rewards, truncated, infos = self._step_lines(want, stepping)
+        rewards, truncated, infos = self._lines().step_lines(want, stepping)
         if resetting:
             self._start(resetting)
         return rewards, np.zeros(self.num_envs, dtype=bool), truncated, infos
+
+    def get_state(self, index: int) -> EnvState:
+        """A snapshot of line ``index`` (:mod:`trackenv.envs.state`), the same as :meth:`TampingLine.get_state`
+        gives: it can be restored here, in another row, or in a single env of this config."""
+        i = self._env_index(index)
+        return snapshot(self.config, self._lines().get_state(i), self._rngs[i], self._infos[i])
+
+    def set_state(self, index: int, state: EnvState) -> None:
+        """Continue line ``index`` from ``state`` (a snapshot of this config); a pending NEXT_STEP reset of that
+        line is dropped."""
+        i = self._env_index(index)
+        state = checked(state, self.config)
+        self._lines().set_state(i, state.episode)
+        self._restore_row(i, state)
 
     def _frame(self, info: dict) -> np.ndarray:
         from ..render import line_frame
@@ -124,8 +115,7 @@ class TampingLineVectorEnv(BatchedVectorEnv):
         The capacity (at most ``capacity`` sections per campaign) is a cardinality limit that per-section masks
         cannot express: see ``over_capacity``."""
         shape = (self.num_envs, self.config.n_sections)
-        allowed = self.batch.allowed() if self.batch is not None else np.ones(shape, bool)
-        return np.stack([np.ones_like(allowed), allowed], axis=2).reshape(self.num_envs, -1)
+        return action_mask(self.batch.allowed() if self.batch is not None else np.ones(shape, bool), "multibinary")
 
 
 class TampingLine(gym.Env):
@@ -223,46 +213,57 @@ class TampingLine(gym.Env):
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        self._vec = TampingLineVectorEnv(1, config, scenario=scenario, render_mode=render_mode, **overrides)
-        self.config = self._vec.config
-        self.render_mode = render_mode
-        self.observation_space = self._vec.single_observation_space
-        self.action_space = self._vec.single_action_space
+        self.config = line_config(config, scenario, overrides)
+        self.render_mode = check_render_mode(render_mode)
+        self.observation_space = line_observation_space(self.config)
+        self.action_space = spaces.MultiBinary(self.config.n_sections)
+        self.batch: LineBatch | None = None  # the engine, a batch of one line, made by reset()
         self._last_info: dict = {}
 
-    @property
-    def batch(self) -> LineBatch | None:
-        return self._vec.batch
+    def _line(self) -> LineBatch:
+        if self.batch is None:
+            raise RuntimeError("call reset() before step()")
+        return self.batch
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=check_reset_arguments(seed, options))
-        vec = self._vec
-        vec._rngs = [self.np_random]  # a line of its own, drawn from this env's generator (reset() continues it)
-        vec.batch = LineBatch(self.config, 1)
-        vec._start([0])
-        self._last_info = vec._reset_info(0)
-        return vec._observation(0), self._last_info
+        self.batch = LineBatch(self.config, 1)
+        self.batch.reset_lines([0], [self.np_random])  # drawn from this env's generator (reset() continues it)
+        self._last_info = self.batch.reset_info(0)
+        return self.batch.observation(0), self._last_info
 
     def step(self, action):
-        vec = self._vec
-        if vec.batch is None:
-            raise RuntimeError("call reset() before step()")
-        if vec.batch.step[0] >= self.config.horizon_steps:
-            raise RuntimeError(
-                f"the episode was truncated at its horizon ({self.config.horizon_steps} steps, "
-                f"{self.config.horizon_years:g} years): call reset() before step()"
-            )
+        bt = self._line()
+        bt.check_not_truncated(0)
         want = decode_action(action, "multibinary", self.config.n_sections)[None, :]
-        rewards, truncated, infos = vec._step_lines(want, [0])
+        rewards, truncated, infos = bt.step_lines(want, [0])
         self._last_info = infos[0]
-        return vec._observation(0), float(rewards[0]), False, bool(truncated[0]), self._last_info
+        return bt.observation(0), float(rewards[0]), False, bool(truncated[0]), self._last_info
 
     def action_masks(self) -> np.ndarray:
-        return self._vec.action_masks()[0]
+        """(2·S,) [may-not-tamp, may-tamp] pairs per section, as :meth:`TampingLineVectorEnv.action_masks`."""
+        allowed = self.batch.allowed()[0] if self.batch is not None else np.ones(self.config.n_sections, bool)
+        return action_mask(allowed, "multibinary")
+
+    def get_state(self) -> EnvState:
+        """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, on any env of
+        the same config or on a row of its vector env continues it bit for bit."""
+        return snapshot(self.config, self._line().get_state(0), self.np_random, self._last_info)
+
+    def set_state(self, state: EnvState) -> None:
+        """Continue from ``state`` (from ``get_state`` of an env of this config); the snapshot is not changed."""
+        state = checked(state, self.config)
+        if self.batch is None:
+            self.batch = LineBatch(self.config, 1)
+        self.batch.set_state(0, state.episode)
+        self.np_random.bit_generator.state = copy.deepcopy(state.rng_state)
+        self._last_info = copy.deepcopy(state.last_info)
 
     def render(self):
         """The line's state as an RGB array (``render_mode="rgb_array"``; :func:`trackenv.render.line_frame`),
         else None."""
         if self.render_mode != "rgb_array" or self.batch is None:
             return None
-        return self._vec._frame(self._last_info)
+        from ..render import line_frame
+
+        return line_frame(self.batch, 0, self._last_info)

@@ -12,24 +12,20 @@ switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 time
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from ..physics._checks import check_scalar
+from ..physics._checks import check_bool, check_choice, check_field, check_int_field
 from ..physics.settlement import LAWS
 from ..physics.timestep import check_dt_option
 from ..physics.vehicle import GRAVITY, Car, Wheelset
-from .config import ConfigBase, _as_items
+from .config import ConfigBase, _as_items, check_range_field
 
 SLEEPER_SPACING_M = 0.6
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
-
-
-def _int(name: str, value, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-    return int(value)
+OVER_CAPACITY = ("clip", "raise")
 
 
 @dataclass(frozen=True)
@@ -145,41 +141,41 @@ class LineConfig(ConfigBase):
     limits: tuple = ()
     dt: float | str = "auto"
 
+    _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
+    _CLASS_COST_FIELDS = (("speed_restriction", 2, "speed_restriction_cost"),
+                          ("immediate_action", 3, "immediate_action_cost"))
+
     def __post_init__(self) -> None:
-        c = check_scalar
-        _int("n_sections", self.n_sections, 1, 256)
-        c("section_length_m", self.section_length_m, low=30.0, high=1000.0)
-        c("segment_length_m", self.segment_length_m, low=12.0, high=self.section_length_m)
-        c("speed_kmh", self.speed_kmh, low=5.0, high=300.0)
-        c("annual_mgt", self.annual_mgt, low=0.1, high=200.0)
-        c("freight_share", self.freight_share, low=0.0, high=1.0)
-        c("freight_axle_load_t", self.freight_axle_load_t, low=5.0, high=40.0)
-        _int("steps_per_year", self.steps_per_year, 1, 52)
-        c("horizon_years", self.horizon_years, low=1.0 / self.steps_per_year, high=100.0)
-        _int("measurement_interval", self.measurement_interval, 1, 1000)
-        c("sd_noise_mm", self.sd_noise_mm, low=0.0, high=10.0)
-        c("peak_noise_mm", self.peak_noise_mm, low=0.0, high=50.0)
-        c("rate_sigma", self.rate_sigma, low=0.0, high=3.0)
-        c("rate_correlation_m", self.rate_correlation_m, low=0.0, high=1e5)
-        c("sleeper_rate_cv", self.sleeper_rate_cv, low=0.0, high=2.0)
-        c("sleeper_rate_correlation_m", self.sleeper_rate_correlation_m, low=0.0, high=100.0)
-        c("ballast_stiffness_cv", self.ballast_stiffness_cv, low=0.0, high=1.0)
+        # each check stores the value back in its canonical type, as TampingEnvConfig does
+        c, ci = partial(check_field, self), partial(check_int_field, self)
+        ci("n_sections", low=1, high=256)
+        c("section_length_m", low=30.0, high=1000.0)
+        c("segment_length_m", low=12.0, high=self.section_length_m)
+        c("speed_kmh", low=5.0, high=300.0)
+        c("annual_mgt", low=0.1, high=200.0)
+        c("freight_share", low=0.0, high=1.0)
+        c("freight_axle_load_t", low=5.0, high=40.0)
+        ci("steps_per_year", low=1, high=52)
+        c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
+        ci("measurement_interval", low=1, high=1000)
+        c("sd_noise_mm", low=0.0, high=10.0)
+        c("peak_noise_mm", low=0.0, high=50.0)
+        c("rate_sigma", low=0.0, high=3.0)
+        c("rate_correlation_m", low=0.0, high=1e5)
+        c("sleeper_rate_cv", low=0.0, high=2.0)
+        c("sleeper_rate_correlation_m", low=0.0, high=100.0)
+        c("ballast_stiffness_cv", low=0.0, high=1.0)
         for name in ("transition_probability", "switch_probability", "wet_spot_probability"):
-            c(name, getattr(self, name), low=0.0, high=1.0)
-        c("transition_stiffness_ratio", self.transition_stiffness_ratio, low=0.2, high=10.0)
+            c(name, low=0.0, high=1.0)
+        c("transition_stiffness_ratio", low=0.2, high=10.0)
         for name in ("transition_rate_factor", "switch_rate_factor", "wet_spot_rate_factor"):
-            c(name, getattr(self, name), low=0.1, high=100.0)
-        c("wet_spot_length_m", self.wet_spot_length_m, low=0.6, high=self.segment_length_m)
-        c("rate_scale", self.rate_scale, low=1e-3, high=1e3)
-        c("initial_age_years", self.initial_age_years, low=0.0, high=50.0)
-        _int("initial_max_tampings", self.initial_max_tampings, 0, 100)
-        lo_hi = tuple(float(v) for v in self.initial_scale)
-        if len(lo_hi) != 2 or not 0.0 <= lo_hi[0] <= lo_hi[1] <= 10.0:
-            raise ValueError(
-                f"initial_scale must be (low, high) with 0 <= low <= high <= 10, got {self.initial_scale!r}")
-        object.__setattr__(self, "initial_scale", lo_hi)
-        if self.law not in LAWS:
-            raise ValueError(f"law must be one of {sorted(LAWS)}, got {self.law!r}")
+            c(name, low=0.1, high=100.0)
+        c("wet_spot_length_m", low=0.6, high=self.segment_length_m)
+        c("rate_scale", low=1e-3, high=1e3)
+        c("initial_age_years", low=0.0, high=50.0)
+        ci("initial_max_tampings", low=0, high=100)
+        check_range_field(self, "initial_scale", low=0.0, high=10.0)
+        check_choice("law", self.law, sorted(LAWS))
         object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
         object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
         object.__setattr__(self, "limits", _as_items("limits", self.limits))
@@ -188,13 +184,11 @@ class LineConfig(ConfigBase):
         self.quality_limits.for_speed(self.speed)
         for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
                      "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
-            c(name, getattr(self, name), low=0.0, high=1e9)
-        _int("capacity", self.capacity, 1, self.n_sections)
-        if self.over_capacity not in ("clip", "raise"):
-            raise ValueError(f"over_capacity must be 'clip' or 'raise', got {self.over_capacity!r}")
-        _int("min_steps_between_tampings", self.min_steps_between_tampings, 0, 100)
-        if not isinstance(self.profiles, (bool, np.bool_)):
-            raise ValueError(f"profiles must be a bool, got {self.profiles!r}")
+            c(name, low=0.0, high=1e9)
+        ci("capacity", low=1, high=self.n_sections)
+        check_choice("over_capacity", self.over_capacity, OVER_CAPACITY)
+        ci("min_steps_between_tampings", low=0, high=100)
+        object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
         object.__setattr__(self, "dt", check_dt_option(self.dt))
 
     # ------------------------------------------------------------------ construction

@@ -9,6 +9,7 @@ numbers and a hindsight search can replay the future of any schedule.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -19,9 +20,12 @@ from ..physics.dynamics import simulate_passes
 from ..physics.geometry import classify, d1_filter, german_psd, synthesize_profile
 from ..physics.settlement import implicit_settlement_step
 from ..physics.track import Track
-from .line_config import SLEEPER_SPACING_M, LineConfig
+from .common import SHARED_BOUNDS, clip_observation
+from .costs import section_quality_costs
+from .info import step_info
+from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
-COST_KEYS = ("possession", "tamping", "renewal", "geometry", "speed_restriction", "immediate_action")
+COST_KEYS = LineConfig.cost_keys()
 APPROACH_SLEEPERS = 10
 
 
@@ -57,12 +61,48 @@ _ROW_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "count", "tamping
 _ROW_NOISE = ("tamp_noise", "meas_noise")
 
 
+@dataclass(frozen=True, eq=False)
+class LineState:
+    """One line's episode, copied out of a :class:`LineBatch` (:meth:`LineBatch.get_state`): its segments'
+    arrays (``rows``: name -> (S, ...); ``noise``: name -> (H + 1, S, ...), the pre-drawn residuals and
+    measurement errors), its segments' model tracks (shared: immutable), and the line's step, last recording
+    run and remaining annual budget."""
+
+    rows: dict[str, np.ndarray]
+    noise: dict[str, np.ndarray]
+    model_tracks: tuple
+    step: int
+    last_measured: int
+    budget_left: float
+
+
+def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]]:
+    """Bounds of each key of TampingLine's observation (its space is built from these and the observation is
+    clipped to them, so the two cannot drift apart); ``level`` only with ``profiles``."""
+    shared = SHARED_BOUNDS
+    bounds = {
+        "section_sd": shared["section_sd"],
+        "section_peak": shared["section_peak"],
+        "measurement_age": (0.0, config.horizon_years + 1.0),
+        "register": (0.0, float(len(REGISTER_CLASSES) - 1)),
+        "tampings": shared["tampings"],
+        "tampings_since_renewal": shared["tampings"],
+        "years_since_tamping": (0.0, 100.0),
+        "time": shared["time"],
+        "budget_left": (0.0, 1.0),
+    }
+    if config.profiles:
+        bounds["level"] = shared["level"]
+    return bounds
+
+
 class LineBatch:
     """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
     of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched."""
 
     def __init__(self, config: LineConfig, n_lines: int) -> None:
         self.config = c = config
+        self.bounds = line_observation_bounds(c)
         self.n_lines = int(n_lines)
         S, n, H = c.n_sections, c.n_sleepers, c.horizon_steps
         G = self.n_lines * S
@@ -391,21 +431,47 @@ class LineBatch:
         for d, s_ in zip(dst, src, strict=True):
             self.model_tracks[d] = source.model_tracks[s_]
 
+    def get_state(self, line: int) -> LineState:
+        """A copy of line ``line``'s episode (every per-segment array, the pre-drawn noise, the line's step,
+        recording-car calendar and budget): :meth:`set_state` restores it exactly, here or in another batch
+        of the same config."""
+        r = self.rows(line)
+        return LineState(
+            rows={name: getattr(self, name)[r].copy() for name in _ROW_FIELDS},
+            noise={name: getattr(self, name)[:, r].copy() for name in _ROW_NOISE},
+            model_tracks=tuple(self.model_tracks[r]),
+            step=int(self.step[line]),
+            last_measured=int(self.last_measured[line]),
+            budget_left=float(self.budget_left[line]),
+        )
+
+    def set_state(self, line: int, state: LineState) -> None:
+        """Make line ``line`` continue from ``state`` (:meth:`get_state` of a batch of this config); the state
+        itself is not changed."""
+        r = self.rows(line)
+        for name in _ROW_FIELDS:
+            getattr(self, name)[r] = state.rows[name]
+        for name in _ROW_NOISE:
+            getattr(self, name)[:, r] = state.noise[name]
+        self.model_tracks[r] = list(state.model_tracks)
+        self.step[line] = state.step
+        self.last_measured[line] = state.last_measured
+        self.budget_left[line] = state.budget_left
+
     def costs(self, campaign: np.ndarray) -> dict[str, np.ndarray]:
         """The period's costs per line (k€) in named parts; reward = −Σ parts."""
+        shape = (self.n_lines, self.S)
+        per_section = self._quality_costs()
+        return {"possession": campaign[0], "tamping": campaign[1], "renewal": campaign[2],
+                **{k: v.reshape(shape).sum(1) for k, v in per_section.items()}}
+
+    def _quality_costs(self) -> dict[str, np.ndarray]:
+        """The step's quality costs per segment (:func:`~trackenv.envs.costs.section_quality_costs`)."""
         c = self.config
-        L, S = self.n_lines, self.S
-        cls = classify(self.peak, self.limits).reshape(L, S)
-        dt_years = 1.0 / c.steps_per_year
-        geo = c.geometry_cost_per_section_year * dt_years * ((self.sd / self.limits.sd_alert_m) ** 2).reshape(L, S)
-        return {
-            "possession": campaign[0],
-            "tamping": campaign[1],
-            "renewal": campaign[2],
-            "geometry": geo.sum(1),
-            "speed_restriction": c.speed_restriction_cost * (cls == 2).sum(1),
-            "immediate_action": c.immediate_action_cost * (cls == 3).sum(1),
-        }
+        return section_quality_costs(
+            self.sd, classify(self.peak, self.limits), sd_alert_m=self.limits.sd_alert_m,
+            geometry_cost_per_section_year=c.geometry_cost_per_section_year, steps_per_year=c.steps_per_year,
+            class_costs=c.class_costs)
 
     def intervention_costs(self, t: np.ndarray) -> np.ndarray:
         """(segments,) what tamping the segments ``t`` (segments,) bool costs each (k€): the tamping, or the
@@ -417,66 +483,78 @@ class LineBatch:
     def section_costs(self) -> np.ndarray:
         """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
         the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
+        return sum(self._quality_costs().values(), np.zeros(self.sd.shape))
+
+    def step_lines(self, want: np.ndarray, lines: list[int]) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
+        """One step of ``lines``, which ask to tamp ``want`` (n_lines, S) bool (rows of other lines: ignored): the
+        campaign resolved against masks, capacity and budget, the tamping, the period's traffic, the costs.
+        Returns the rewards and truncation flags (n_lines,; 0 and False for lines not stepped) and the info of
+        each stepped line. Lines not in ``lines`` are left as they are. Every TampingLine env steps here."""
+        stepped = np.zeros(self.n_lines, dtype=bool)
+        stepped[lines] = True
+        tamped, clipped = self.resolve(want & stepped[:, None])
+        section = self.intervention_costs(tamped.ravel())
+        campaign = self.apply(tamped)
+        self.traffic(stepped)
+        parts = self.costs(campaign)
+        section += self.section_costs()
+        rewards = np.where(stepped, -np.asarray(sum(parts.values()), dtype=float), 0.0)
+        truncated = stepped & (self.step >= self.config.horizon_steps)
+        infos = {b: self.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
+                              section[self.rows(b)]) for b in lines}
+        return rewards, truncated, infos
+
+    def reset_info(self, b: int) -> dict:
+        """Line ``b``'s info at the start of its episode (no costs, nothing tamped)."""
+        S = self.S
+        return self.info(b, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False, np.zeros(S))
+
+    def check_not_truncated(self, b: int) -> None:
+        """RuntimeError if line ``b`` has reached its horizon (it must be reset before the next step)."""
         c = self.config
-        cls = classify(self.peak, self.limits)
-        geo = c.geometry_cost_per_section_year / c.steps_per_year * (self.sd / self.limits.sd_alert_m) ** 2
-        return geo + c.speed_restriction_cost * (cls == 2) + c.immediate_action_cost * (cls == 3)
+        if self.step[b] >= c.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({c.horizon_steps} steps, {c.horizon_years:g} years): "
+                "call reset() before step()")
 
     # ------------------------------------------------------------------ observation and info
     def section_entries(self, rows, step) -> dict[str, np.ndarray]:
         """The per-section keys of the observation for the segments ``rows`` (a slice or indices) at step
         ``step`` (per segment or one): what a planner sees of each section, float32."""
-        c = self.config
-        f32 = np.float32
-        years = (np.asarray(step) - self.last_tamped[rows]) / c.steps_per_year
-        return {
-            "section_sd": np.clip(self.measured_sd[rows] * 1e3, 0.0, 100.0).astype(f32),
-            "section_peak": np.clip(self.measured_peak[rows] * 1e3, 0.0, 200.0).astype(f32),
-            "register": self.register[rows].astype(f32),
-            "tampings": np.clip(self.tampings[rows], 0, 1000).astype(f32),
-            "tampings_since_renewal": np.clip(self.count[rows], 0, 1000).astype(f32),
-            "years_since_tamping": np.clip(years, 0.0, 100.0).astype(f32),
-        }
+        years = (np.asarray(step) - self.last_tamped[rows]) / self.config.steps_per_year
+        return clip_observation({
+            "section_sd": self.measured_sd[rows] * 1e3,
+            "section_peak": self.measured_peak[rows] * 1e3,
+            "register": self.register[rows],
+            "tampings": self.tampings[rows],
+            "tampings_since_renewal": self.count[rows],
+            "years_since_tamping": years,
+        }, self.bounds)
 
     def observation(self, b: int) -> dict[str, np.ndarray]:
+        """Line ``b``'s observation (the table of ``TampingLine``), clipped to :func:`line_observation_bounds`."""
         c = self.config
         r = self.rows(b)
-        f32 = np.float32
-        obs = {
-            **self.section_entries(r, self.step[b]),
-            "measurement_age": np.array([min((self.step[b] - self.last_measured[b]) / c.steps_per_year,
-                                             c.horizon_years + 1.0)], dtype=f32),
-            "time": np.array([min(self.step[b] / c.horizon_steps, 1.0)], dtype=f32),
-            "budget_left": np.array([np.clip(self.budget_left[b] / c.annual_budget, 0.0, 1.0)
-                                     if c.annual_budget > 0 else 1.0], dtype=f32),
+        line = {
+            "measurement_age": np.array([(self.step[b] - self.last_measured[b]) / c.steps_per_year]),
+            "time": np.array([self.step[b] / c.horizon_steps]),
+            "budget_left": np.array([self.budget_left[b] / c.annual_budget if c.annual_budget > 0 else 1.0]),
         }
         if c.profiles:
-            obs["level"] = np.clip(self.measured_level[r] * 1e3, -100.0, 200.0).astype(f32)
-        return obs
+            line["level"] = self.measured_level[r] * 1e3
+        return {**self.section_entries(r, self.step[b]), **clip_observation(line, self.bounds)}
 
     def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool,
              section_costs: np.ndarray) -> dict:
         """Line ``b``'s step info: the cost parts (k€), and per section its own costs ``section_costs`` (k€:
         tamping or renewal, geometry, speed restriction, immediate action; the possession is the line's)."""
         r = self.rows(b)
-        cls = classify(self.peak[r], self.limits)
-        return {
-            "costs": parts,
-            "cost": float(sum(parts.values())),
-            "section_costs": np.asarray(section_costs, dtype=float).copy(),
-            "tamped_sections": tamped.copy(),
-            "clipped": bool(clipped),
-            "section_sd_m": self.sd[r].copy(),
-            "section_sd_mm": self.sd[r] * 1e3,
-            "section_peak_m": self.peak[r].copy(),
-            "section_class": cls,
-            "section_sd_after_tamping_m": self.sd_after_tamping[r].copy(),
-            "wet_spot_active": self.wet_active[r].copy(),
-            "rate_factor": self.rate()[r].mean(axis=1),
-            "immediate_action_exceedances": int(np.sum(cls == 3)),
-            "year": float(self.step[b] / self.config.steps_per_year),
-            "max_contact_force_N": float(self.contact_force[r].max()),
-        }
+        return step_info(
+            parts, tamped, self.sd[r], self.peak[r], classify(self.peak[r], self.limits),
+            self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
+            section_costs=np.asarray(section_costs, dtype=float).copy(), clipped=bool(clipped),
+            section_sd_after_tamping_m=self.sd_after_tamping[r].copy(), wet_spot_active=self.wet_active[r].copy(),
+            rate_factor=self.rate()[r].mean(axis=1))
 
 
 def keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:

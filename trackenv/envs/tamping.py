@@ -7,81 +7,26 @@ and the new level fed back for the next pass (:class:`trackenv.TrackDegradation`
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..physics._checks import check_int
 from . import episode as E
+from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
+from .common import observation_space as common_space
 from .config import TampingEnvConfig
+from .state import EnvState, checked, snapshot
 
 
 def observation_space(config: TampingEnvConfig) -> spaces.Dict:
+    """The Dict space of the observation table (its bounds: :func:`~trackenv.envs.episode.observation_bounds`)."""
     n, s = config.n_sleepers, config.n_sections
+    bounds = E.observation_bounds(config)
     size = {"level": n, "contact_force": n, "time": 1}
-    return spaces.Dict(
-        {
-            key: spaces.Box(low, high, (size.get(key, s),), np.float32)
-            for key, (low, high) in E.observation_bounds(config).items()
-        }
-    )
-
-
-def action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
-    if action_type == "multibinary":
-        return spaces.MultiBinary(config.n_sections)
-    if action_type == "discrete":
-        return spaces.Discrete(config.n_sections + 1)
-    raise ValueError(f"action_type must be 'multibinary' or 'discrete', got {action_type!r}")
-
-
-RESET_OPTIONS: tuple[str, ...] = ()  # reset() takes no options yet; any key is refused, not ignored
-
-
-def check_reset_arguments(seed, options) -> int | None:
-    """The seed as a Python int (or None); refuse a seed that is not a non-negative integer, and any option
-    (none is known)."""
-    if seed is not None:
-        seed = check_int("seed", seed, low=0)
-    if options is not None:
-        if not isinstance(options, dict):
-            raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
-        unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
-    return seed
-
-
-def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
-    """The sections to tamp (bool, n_sections) from an action; a malformed action raises ValueError."""
-    if action_type == "discrete":
-        a = np.asarray(action)
-        if (
-            a.size != 1
-            or not np.all(np.isfinite(a.astype(float)))
-            or float(a.ravel()[0]) != int(a.ravel()[0])
-        ):
-            raise ValueError(f"action must be one integer in [0, {n_sections}], got {action!r}")
-        k = int(a.ravel()[0])
-        if not 0 <= k <= n_sections:
-            raise ValueError(f"action must be an integer in [0, {n_sections}] (0 = no tamping), got {k}")
-        out = np.zeros(n_sections, dtype=bool)
-        if k:
-            out[k - 1] = True
-        return out
-    try:
-        a = np.asarray(action, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}"
-        ) from None
-    if a.shape != (n_sections,):
-        raise ValueError(f"action must have shape ({n_sections},) (one 0/1 per section), got {a.shape}")
-    if not np.all(np.isfinite(a)) or not np.all((a == 0) | (a == 1)):
-        raise ValueError(f"action values must be 0 or 1 (no NaN), got {a.tolist()}")
-    return a.astype(bool)
+    return common_space(bounds, {key: (size.get(key, s),) for key in bounds})
 
 
 class TampingEnv(gym.Env):
@@ -181,11 +126,9 @@ class TampingEnv(gym.Env):
         config = TampingEnvConfig.coerce(config)
         if overrides:
             config = config.replace(**overrides)
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.config = config
         self.action_type = action_type
-        self.render_mode = render_mode
+        self.render_mode = check_render_mode(render_mode)
         self.observation_space = observation_space(config)
         self.action_space = action_space(config, action_type)
         self.episode: E.Episode | None = None
@@ -218,10 +161,26 @@ class TampingEnv(gym.Env):
         self._last_info = E.info(ep, parts, tamped)
         return E.observation(ep), reward, False, truncated, self._last_info
 
+    def get_state(self) -> EnvState:
+        """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, or on any env of
+        the same config, continues it bit for bit."""
+        if self.episode is None:
+            raise RuntimeError("call reset() before get_state()")
+        return snapshot(self.config, E.copy_episode(self.episode), self.np_random, self._last_info)
+
+    def set_state(self, state: EnvState) -> None:
+        """Continue from ``state`` (from :meth:`get_state` of an env of this config); the snapshot itself is not
+        changed, so it can be restored again."""
+        state = checked(state, self.config)
+        self.episode = E.copy_episode(state.episode)
+        self.np_random.bit_generator.state = copy.deepcopy(state.rng_state)
+        self._last_info = copy.deepcopy(state.last_info)
+
     def action_masks(self) -> np.ndarray:
         """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): for MultiBinary, (2·n_sections,)
         pairs [may-not-tamp, may-tamp] per section; for Discrete, (n_sections + 1,)."""
-        return E.action_mask(self.episode, self.action_type, self.config.n_sections)
+        allowed = np.ones(self.config.n_sections, bool) if self.episode is None else self.episode.mask()
+        return action_mask(allowed, self.action_type)
 
     def render(self):
         if self.render_mode != "rgb_array" or self.episode is None:

@@ -18,8 +18,10 @@ from gymnasium.vector import AutoresetMode
 from ..degradation import simulate_batch
 from . import episode as E
 from .batched import BatchedVectorEnv
+from .common import action_mask, action_space, check_reset_arguments, decode_action
 from .config import TampingEnvConfig
-from .tamping import action_space, check_reset_arguments, decode_action, observation_space
+from .state import EnvState, checked, snapshot
+from .tamping import observation_space
 
 
 class TampingVectorEnv(BatchedVectorEnv):
@@ -105,6 +107,20 @@ class TampingVectorEnv(BatchedVectorEnv):
 
         return episode_frame(self.episodes[0], info)
 
+    def get_state(self, index: int) -> EnvState:
+        """A snapshot of env ``index`` (:mod:`trackenv.envs.state`), the same as :meth:`TampingEnv.get_state`
+        gives: it can be restored here, in another row, or in a single env of this config."""
+        i = self._env_index(index)
+        return snapshot(self.config, E.copy_episode(self.episodes[i]), self._rngs[i], self._infos[i])
+
+    def set_state(self, index: int, state: EnvState) -> None:
+        """Continue env ``index`` from ``state`` (a snapshot of this config); a pending NEXT_STEP reset of that
+        env is dropped."""
+        i = self._env_index(index)
+        state = checked(state, self.config)
+        self.episodes[i] = E.copy_episode(state.episode)
+        self._restore_row(i, state)
+
     def action_masks(self) -> np.ndarray:
         """(num_envs, ...) masks as :meth:`TampingEnv.action_masks` gives them for one env."""
-        return np.array([E.action_mask(ep, self.action_type, self.config.n_sections) for ep in self.episodes])
+        return action_mask(np.array([ep.mask() for ep in self.episodes]), self.action_type)
