@@ -445,3 +445,18 @@ def test_section_classes_follow_the_geometry_and_the_info_owns_its_copy(small_co
             break
     np.testing.assert_array_equal(env.episode.section_classes(),
                                   classify(info["section_peak_m"], small_config.band_limits))
+
+
+def test_section_costs_add_up_to_the_step_cost_with_the_mobilisation():
+    """Each section's own costs (its tamping and its quality costs), as the line reports them, plus the
+    campaign's mobilisation make up the step's cost."""
+    cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)
+    env = TampingEnv(cfg)
+    _, info = env.reset(seed=2)
+    np.testing.assert_array_equal(info["section_costs"], np.zeros(3))
+    for action in ([1, 0, 1], [0, 0, 0], [0, 1, 0]):
+        _, reward, _, _, info = env.step(np.array(action))
+        mobilisation = cfg.mobilisation_cost * bool(info["tamped_sections"].any())
+        assert info["section_costs"].shape == (3,)
+        np.testing.assert_allclose(info["section_costs"].sum() + mobilisation, info["cost"], rtol=1e-12)
+        assert -reward == info["cost"]

@@ -188,15 +188,17 @@ def traffic_batch(eps: list[Episode], results: list[PassResult]) -> None:
         ep.step_count += 1
 
 
-def costs(ep: Episode, tamping_cost: float) -> dict[str, float]:
-    """The period's costs in named parts (k€); the reward is minus their sum."""
+def costs(ep: Episode, tamping_cost: float, tamped: np.ndarray) -> tuple[dict[str, float], np.ndarray]:
+    """The period's costs in named parts (k€; the reward is minus their sum), and each section's own costs
+    (k€, n_sections: its tamping and its quality costs; the mobilisation is the campaign's)."""
     c = ep.config
     _, sd, _ = ep.quality()
     per_section = section_quality_costs(
         sd, ep.section_classes(), sd_alert_m=c.band_limits.sd_alert_m,
         geometry_cost_per_section_year=c.geometry_cost_per_section_year, steps_per_year=c.steps_per_year,
         class_costs=c.class_costs)
-    return {"tamping": float(tamping_cost), **{k: float(np.sum(v)) for k, v in per_section.items()}}
+    parts = {"tamping": float(tamping_cost), **{k: float(np.sum(v)) for k, v in per_section.items()}}
+    return parts, sum(per_section.values(), c.section_tamping_cost * tamped)
 
 
 def observation_bounds(config: TampingEnvConfig) -> dict[str, tuple[float, float]]:
@@ -257,12 +259,14 @@ def clipped_values(ep: Episode) -> int:
     )
 
 
-def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray) -> dict:
+def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray, section_costs: np.ndarray | None = None) -> dict:
     """The step's info dict (see TampingEnv's table): track geometry in mm like the observation, each key
-    naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0."""
+    naming its unit; ``section_sd_m`` and ``section_peak_m`` are the same numbers in metres, kept for v0;
+    ``section_costs`` (zeros at a reset) as :func:`costs` gives them."""
     _, sd, peak = ep.quality()
+    own = np.zeros(ep.n_sections) if section_costs is None else np.asarray(section_costs, dtype=float).copy()
     return step_info(parts, tamped, sd, peak, ep.section_classes(), ep.step_count / ep.config.steps_per_year,
-                     ep.contact_force.max(), observation_clipped=clipped_values(ep))
+                     ep.contact_force.max(), section_costs=own, observation_clipped=clipped_values(ep))
 
 
 def traffic_free_pass(ep: Episode) -> None:

@@ -1,7 +1,7 @@
 """The configuration of the TampingLine environment and its scenario suite (small, default, hard).
 
-Every default carries its source, or says **[assumption]**. Sources are those of ``PHYSICS-NOTES.md``
-(planning a line): EN 13848-5/-6 (200 m SD sections, limits), Andrade & Teixeira 2011 (J. Transp. Eng.
+Every default carries its source, or says **[assumption]**. The sources (the documentation's line-problem
+page lists them with their figures): EN 13848-5/-6 (200 m SD sections, limits), Andrade & Teixeira 2011 (J. Transp. Eng.
 137:193; lognormal rates between sections, spatially correlated), Wang & Markine 2018 (Proc. IMechE F,
 doi 10.1177/0954409717748789; transition zones need 4-8x the maintenance of open track), GB figures for
 switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 times a year), tamper output

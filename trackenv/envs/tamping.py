@@ -75,6 +75,8 @@ class TampingEnv(gym.Env):
     key                           quantity                                                            unit
     ============================  ==================================================================  ====
     costs, cost                   the period's cost in named parts, and their sum (= -reward)         k€
+    section_costs                 each section's own costs: its tamping and quality costs (with the   k€
+                                  campaign's mobilisation they add up to ``cost``; 0 at a reset)
     tamped_sections               sections tamped this step (bool, n_sections)                        -
     section_sd_mm                 SD of the D1 level per section (unclipped)                          mm
     section_peak_mm               D1 mean-to-peak per section (unclipped)                             mm
@@ -155,10 +157,10 @@ class TampingEnv(gym.Env):
         want = decode_action(action, self.action_type, self.config.n_sections)
         tamping_cost, tamped = E.apply_tamping(ep, want, self.np_random)
         E.traffic(ep, ep.sim.simulate())
-        parts = E.costs(ep, tamping_cost)
+        parts, section_costs = E.costs(ep, tamping_cost, tamped)
         reward = -float(sum(parts.values()))
         truncated = ep.step_count >= self.config.horizon_steps
-        self._last_info = E.info(ep, parts, tamped)
+        self._last_info = E.info(ep, parts, tamped, section_costs)
         return E.observation(ep), reward, False, truncated, self._last_info
 
     def get_state(self) -> EnvState:

@@ -96,10 +96,10 @@ class TampingVectorEnv(BatchedVectorEnv):
         for i in stepping:
             ep = self.episodes[i]
             cost, tamped = tamping[i]
-            parts = E.costs(ep, cost)
+            parts, section_costs = E.costs(ep, cost, tamped)
             rewards[i] = -sum(parts.values())
             truncated[i] = ep.step_count >= self.config.horizon_steps
-            infos[i] = E.info(ep, parts, tamped)
+            infos[i] = E.info(ep, parts, tamped, section_costs)
         return rewards, np.zeros(n, dtype=bool), truncated, infos
 
     def _frame(self, info: dict) -> np.ndarray:
