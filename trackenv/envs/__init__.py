@@ -11,12 +11,20 @@ encoders). Each has a native vector entry point (``gym.make_vec(..., vectorizati
 ``workers=N`` for the same envs in N processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
 The line problem (:mod:`trackenv.envs.line`): ``trackenv/TampingLine-v0`` (the default line),
 ``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``.
+
+Every env has the planning state API (:mod:`trackenv.envs.state`): ``get_state()`` / ``set_state(state)``, and
+per row on the native vector envs.
 """
 
 from gymnasium.envs.registration import register, registry
 
 from .config import TampingEnvConfig
+from .line import TampingLine, TampingLineVectorEnv
+from .line_config import SCENARIOS, LineConfig, scenario
+from .problems import make_vector_env, problem_config
+from .state import EnvState
 from .tamping import TampingEnv
+from .vector import TampingVectorEnv
 
 _ENVS = (
     ("trackenv/Tamping-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
@@ -32,7 +40,8 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
-__all__ = ["TampingEnv", "TampingEnvConfig"]
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "TampingEnv", "TampingEnvConfig", "TampingLine",
+           "TampingLineVectorEnv", "TampingVectorEnv", "make_vector_env", "problem_config", "scenario"]
 
 for _id, _scenario in (
     ("trackenv/TampingLine-v0", "default"),

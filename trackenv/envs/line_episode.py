@@ -98,7 +98,21 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
 
 class LineBatch:
     """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
-    of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched."""
+    of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched.
+
+    **The engine's public API** (what envs, searches and planning code may call; everything else is internal):
+
+    * lines: :meth:`reset_lines`, :meth:`step_lines` (one step of the env), :meth:`observation`,
+      :meth:`reset_info`, :meth:`allowed`, :meth:`get_state` / :meth:`set_state` (a line's episode, exactly);
+    * rows (one section each), for searches that fork single sections, which evolve independently of each
+      other but for the line's possession: :meth:`copy_rows` (fork), :meth:`allowed_rows`,
+      :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`, :meth:`measure_rows`,
+      :meth:`section_costs`, :meth:`section_entries` (what a planner sees of a section), :meth:`true_quality`;
+    * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band), ``step``
+      (per line), ``register`` (per row).
+
+    Rows of other lines and the arrays behind them are the engine's; code outside this module reads the state
+    through the methods above."""
 
     def __init__(self, config: LineConfig, n_lines: int) -> None:
         self.config = c = config
@@ -457,6 +471,11 @@ class LineBatch:
         self.step[line] = state.step
         self.last_measured[line] = state.last_measured
         self.budget_left[line] = state.budget_left
+
+    def true_quality(self) -> tuple[np.ndarray, np.ndarray]:
+        """(segments,) copies of the true SD and D1 mean-to-peak of every row [m] (what the recording car would
+        measure without error)."""
+        return self.sd.copy(), self.peak.copy()
 
     def costs(self, campaign: np.ndarray) -> dict[str, np.ndarray]:
         """The period's costs per line (k€) in named parts; reward = −Σ parts."""
