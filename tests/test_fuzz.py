@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 
 import trackenv as te
 from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.tamping import TampingEnv
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.physics.settlement import LAWS, make_law
@@ -85,6 +86,30 @@ def test_config_refuses_or_stores_canonical_values(kw: dict) -> None:
         value = getattr(cfg, name)
         if TYPED[name] in (float, int):
             assert type(value) is TYPED[name], (name, value)
+            assert math.isfinite(value)
+
+
+LINE_FIELDS = [f.name for f in dataclasses.fields(LineConfig)]
+LINE_TYPED = {f.name: type(f.default) for f in dataclasses.fields(LineConfig)}
+
+
+@FUZZ
+@given(st.dictionaries(st.sampled_from(LINE_FIELDS), mostly(st.one_of(st.floats(0, 300), st.integers(0, 300)), 2),
+                       min_size=1, max_size=3))
+def test_line_config_refuses_or_stores_canonical_values(kw: dict) -> None:
+    """LineConfig checks its fields with the mechanism of TampingEnvConfig: a refusal names a field it was given
+    (a bound may be another given field: capacity <= n_sections, wet spot <= segment <= section length)."""
+    t0 = time.perf_counter()
+    try:
+        cfg = LineConfig(**kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "LineConfig")
+        _assert_names(e, kw)
+        return
+    for name in kw:
+        value = getattr(cfg, name)
+        if LINE_TYPED[name] in (float, int):
+            assert type(value) is LINE_TYPED[name], (name, value)
             assert math.isfinite(value)
 
 

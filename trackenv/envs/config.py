@@ -285,6 +285,15 @@ def check_range_field(obj: object, name: str, *, low: float, high: float, strict
     return lower, upper
 
 
+def bounded_by(obj: object, other: str, check: Any, name: str, **limits: Any) -> Any:
+    """``check(name, **limits)`` for a field whose range depends on the field ``other``: a refusal names both
+    (the user may have changed either)."""
+    try:
+        return check(name, **limits)
+    except ValueError as e:
+        raise ValueError(f"{e} (its bound follows {other} = {getattr(obj, other)!r})") from None
+
+
 def _as_items(name: str, value) -> tuple:
     """Mappings are stored as sorted (key, value) tuples so the config stays hashable and frozen."""
     if isinstance(value, dict):

@@ -21,7 +21,7 @@ from ..physics._checks import check_bool, check_choice, check_field, check_int_f
 from ..physics.settlement import LAWS
 from ..physics.timestep import check_dt_option
 from ..physics.vehicle import GRAVITY, Car, Wheelset
-from .config import ConfigBase, _as_items, check_range_field
+from .config import ConfigBase, _as_items, bounded_by, check_range_field
 
 SLEEPER_SPACING_M = 0.6
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
@@ -150,7 +150,7 @@ class LineConfig(ConfigBase):
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
         c("section_length_m", low=30.0, high=1000.0)
-        c("segment_length_m", low=12.0, high=self.section_length_m)
+        bounded_by(self, "section_length_m", c, "segment_length_m", low=12.0, high=self.section_length_m)
         c("speed_kmh", low=5.0, high=300.0)
         c("annual_mgt", low=0.1, high=200.0)
         c("freight_share", low=0.0, high=1.0)
@@ -170,7 +170,7 @@ class LineConfig(ConfigBase):
         c("transition_stiffness_ratio", low=0.2, high=10.0)
         for name in ("transition_rate_factor", "switch_rate_factor", "wet_spot_rate_factor"):
             c(name, low=0.1, high=100.0)
-        c("wet_spot_length_m", low=0.6, high=self.segment_length_m)
+        bounded_by(self, "segment_length_m", c, "wet_spot_length_m", low=0.6, high=self.segment_length_m)
         c("rate_scale", low=1e-3, high=1e3)
         c("initial_age_years", low=0.0, high=50.0)
         ci("initial_max_tampings", low=0, high=100)
@@ -185,7 +185,7 @@ class LineConfig(ConfigBase):
         for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
                      "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
             c(name, low=0.0, high=1e9)
-        ci("capacity", low=1, high=self.n_sections)
+        bounded_by(self, "n_sections", ci, "capacity", low=1, high=self.n_sections)
         check_choice("over_capacity", self.over_capacity, OVER_CAPACITY)
         ci("min_steps_between_tampings", low=0, high=100)
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
