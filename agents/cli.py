@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import Any
 
 DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
-# = trackenv_agents.train.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
+# = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
-HYPERPARAMS_FILE = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
-# = trackenv_agents.train_line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
-LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "pretrained" / "ppo_tamping_line.zip"
+HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
+# = trackenv_agents.learning.line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
+LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "ppo_tamping_line.zip"
 
 
 class UsageError(Exception):
@@ -60,7 +60,7 @@ def _existing(path: str | None, what: str, *, folder: bool = False) -> None:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from trackenv.validation import format_checks, run_validation
+    from trackenv_studies.validation import format_checks, run_validation
 
     out = args.out or "results/validation"
     summary = run_validation(out_dir=out, make_plots=not args.no_plots, progress=not args.json)
@@ -75,7 +75,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from trackenv.paper import format_summary, reproduce_paper
+    from trackenv_studies.paper import format_summary, reproduce_paper
 
     summary = reproduce_paper(
         out_dir=args.out or "results/paper",
@@ -91,7 +91,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
-    from trackenv.bench import STAGES, format_benchmarks, run_benchmarks
+    from trackenv_studies.bench import STAGES, format_benchmarks, run_benchmarks
 
     with tqdm(total=len(STAGES), desc="bench", unit="benchmark", leave=False) as bar:
 
@@ -118,23 +118,23 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
             raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass "
                              "--model")
         return {}
-    from .train_line import load_line_trained
+    from .learning.line import load_line_trained
 
     return {"ppo": load_line_trained(path)}
 
 
 def _executor(args: argparse.Namespace) -> Any:
     """Where `evaluate` runs its batches of episodes: None (here, in turn), or a RayExecutor for ``--ray`` (a
-    local Ray) or ``--ray-address`` (agents/distributed.py); the caller closes it."""
+    local Ray) or ``--ray-address`` (agents/evaluation/distributed.py); the caller closes it."""
     if not (args.ray or args.ray_address):
         return None
-    from .distributed import RayExecutor
+    from .evaluation.distributed import RayExecutor
 
     return RayExecutor(address=args.ray_address)
 
 
 def cmd_evaluate_line(args: argparse.Namespace) -> int:
-    from .line_compare import format_line_table, line_comparison, parse_seeds
+    from .evaluation.line_compare import format_line_table, line_comparison, parse_seeds
 
     t0 = time.perf_counter()
     seeds = parse_seeds(args.seeds) if args.seeds else None
@@ -155,9 +155,9 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from trackenv.line_calibration import format_calibration
+    from trackenv_studies.calibration import format_calibration
 
-    from .line_compare import parse_seeds, run_calibration
+    from .evaluation.line_compare import parse_seeds, run_calibration
 
     overrides = {"horizon_years": args.horizon_years} if args.horizon_years else {}
     result = run_calibration(args.scenario, parse_seeds(args.seeds), args.threshold,
@@ -175,19 +175,19 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.quick and args.policy == "ppo":
         raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
     _existing(args.model, "--model")
-    from .compare import run_comparison
+    from .evaluation.tamping_compare import run_comparison
 
     extra = {}
     if args.policy in ("ppo", "all") and not args.quick:  # the shipped policy knows the default track only
         try:
-            from .train import load_trained
+            from .learning.tamping import load_trained
 
             extra["ppo"] = load_trained(args.model)
         except Exception as exc:  # a missing or broken model must not hide the heuristics' results
             if args.policy == "ppo":
                 raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
             print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
-    from .heuristics import TUNED_PARAMS_FILE as shipped
+    from .rules.tamping import TUNED_PARAMS_FILE as shipped
 
     tuned = None
     if not (args.retune or args.quick) and shipped.exists():
@@ -214,7 +214,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
     result["wall_time_s"] = time.perf_counter() - t0
     result["ray"] = args.ray_address or ("local" if args.ray else None)
-    from .reporting import format_table
+    from .evaluation.reporting import format_table
 
     names = [Path(f).name for f in result.get("files", {}).values()]
     human = f"{format_table(result['results'])}\nwrote {', '.join(names)} to {out}"
@@ -228,8 +228,8 @@ def cmd_train_line(args: argparse.Namespace) -> int:
     if args.resume or args.algo:
         raise UsageError("--resume and --algo are for Tamping-v0; the line's learner reads its algorithm from "
                          "the hyper-parameter file")
-    from .line_compare import scenario_of
-    from .train_line import train_line
+    from .evaluation.line_compare import scenario_of
+    from .learning.line import train_line
 
     t0 = time.perf_counter()
     out = args.out or "runs/ppo_line"
@@ -258,7 +258,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         return cmd_train_line(args)
     if args.iterations is not None:
         raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
-    from .train import train
+    from .learning.tamping import train
 
     t0 = time.perf_counter()
     path = train(
@@ -363,8 +363,8 @@ def build_parser() -> argparse.ArgumentParser:
     out(sp, "results/compare")
     sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all", help="which policies to score")
     sp.add_argument("--model", default=None, metavar="ZIP",
-                    help="a trained model (default: the shipped agents/pretrained/ppo_tamping.zip; with a line --env, "
-                         "agents/pretrained/ppo_tamping_line.zip if it exists)")
+                    help="a trained model (default: the shipped agents/learning/pretrained/ppo_tamping.zip; with a "
+                         "line --env, agents/learning/pretrained/ppo_tamping_line.zip if it exists)")
     sp.add_argument("--n-test", type=_positive(int), default=None, metavar="N",
                     help=f"held-out episodes (default: {DEFAULT_N_TEST} of the 200 test seeds; 6 with --quick)")
     sp.add_argument("--n-train", type=_positive(int), default=None, metavar="N",
@@ -397,7 +397,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_calibrate)
 
     hp = _hyperparam_defaults()
-    sp = command("train", "train a PPO agent (stable-baselines3), hyper-parameters from agents/hyperparams/ppo.yml")
+    sp = command("train",
+                 "train a PPO agent (stable-baselines3), hyper-parameters from agents/learning/hyperparams/ppo.yml")
     out(sp, "runs/ppo")
     sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default=None,
                     help=f"algorithm (default: the hyper-parameter file's, {hp.get('algo', 'ppo')})")
@@ -414,7 +415,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--resume", default=None, metavar="DIR",
                     help="output folder of an earlier run to continue for --timesteps more steps")
     sp.add_argument("--hyperparams", default=None, metavar="FILE",
-                    help="YAML (RL Zoo form) or flat JSON overriding agents/hyperparams/ppo.yml key by key")
+                    help="YAML (RL Zoo form) or flat JSON overriding agents/learning/hyperparams/ppo.yml key by key")
     sp.add_argument("--env", default=None, metavar="ID",
                     help="a TampingLine id: train the line's per-section policy (counterfactual policy iteration, "
                          "then MaskablePPO for --timesteps line-steps; default runs/ppo_line)")

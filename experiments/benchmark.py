@@ -13,7 +13,7 @@ import argparse
 import json
 from pathlib import Path
 
-from trackenv.bench import format_benchmarks, run_benchmarks
+from trackenv_studies.bench import format_benchmarks, run_benchmarks
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -8,8 +8,8 @@ import argparse
 import shutil
 from pathlib import Path
 
-from trackenv.line_calibration import format_calibration
-from trackenv_agents.line_compare import parse_seeds, run_calibration
+from trackenv_agents.evaluation.line_compare import parse_seeds, run_calibration
+from trackenv_studies.calibration import format_calibration
 
 
 def main(argv=None) -> dict:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from trackenv_agents.compare import run_comparison
+from trackenv_agents.evaluation.tamping_compare import run_comparison
 
 
 def main(argv: list[str] | None = None) -> dict:

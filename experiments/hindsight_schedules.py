@@ -27,8 +27,8 @@ from tqdm import tqdm
 
 from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.vector import TampingVectorEnv
-from trackenv_agents.evaluation import TRAIN_SEEDS
-from trackenv_agents.heuristics import Periodic
+from trackenv_agents.evaluation.harness import TRAIN_SEEDS
+from trackenv_agents.rules.tamping import Periodic
 
 # the whole-track intervals of the periodic rule's tuning grid, in steps of the default calendar (4 a year)
 PERIODIC_STEPS = tuple(Periodic(**p).interval_steps for p in Periodic.param_grid() if p["sections"] == "all")

@@ -5,7 +5,7 @@ For one variant of the default line (``--set name=value`` overrides, validated b
 1. grid-tune grouped-threshold and section-threshold (the two best state-aware families on the default line)
    and uniform periodic on ``--seeds`` (in sample: the rule is tuned on the very episodes it is scored on, which
    favours the rule, so the room measured here is conservative);
-2. the per-section hindsight search (:func:`trackenv_agents.line_hindsight.hindsight_bound`, ``--rounds``
+2. the per-section hindsight search (:func:`trackenv_agents.evaluation.line_hindsight.hindsight_bound`, ``--rounds``
    local-search rounds) from the best state-aware rule's schedule on the same episodes, with the three rules'
    schedules under the other recording designs as candidates, as ``line_room.py`` does (``--no-recorded``: without
    them, as in the first screen of the README).
@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation import _bound
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, GroupedThreshold, SectionThreshold, UniformPeriodic
-from trackenv_agents.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
-from trackenv_agents.tuning import tune_many
+from trackenv_agents.evaluation.harness import _bound
+from trackenv_agents.evaluation.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
+from trackenv_agents.evaluation.tuning import tune_many
+from trackenv_agents.rules.line import LINE_HEURISTICS, GroupedThreshold, SectionThreshold, UniformPeriodic
 
 
 def _value(text: str):

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.line_config import LineConfig, scenario
-from trackenv_agents.evaluation import evaluate_many
-from trackenv_agents.line_compare import SECTION_CLASSES, class_breakdown, parse_seeds, plot_line_episode
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, line_tuned_params
-from trackenv_agents.line_hindsight import saved_schedules
-from trackenv_agents.statistics import paired_difference
-from trackenv_agents.train_line import load_line_trained
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.evaluation.line_compare import SECTION_CLASSES, class_breakdown, parse_seeds, plot_line_episode
+from trackenv_agents.evaluation.line_hindsight import saved_schedules
+from trackenv_agents.evaluation.statistics import paired_difference
+from trackenv_agents.learning.line import load_line_trained
+from trackenv_agents.rules.line import LINE_HEURISTICS, line_tuned_params
 
 SEARCHES = Path(__file__).resolve().parent / "searches"
 

@@ -1,7 +1,7 @@
 """Refine the tuned line rules on more training episodes: each rule's saved best and its neighbours
 (:data:`NEIGHBOURS`) scored together on ``--n-train`` training seeds 1000+ (default 32; the grid search of
 ``line_room.py`` uses 8), on common random numbers; the cheapest per rule is kept (``--save`` writes it to
-agents/line_tuned_heuristics.json with the seeds it was chosen on).
+agents/rules/line_tuned_heuristics.json with the seeds it was chosen on).
 
 Why: the grids are searched on 8 episodes, where neighbouring points differ by less than the spread between
 episodes; the rules are the learner's yardstick, so their parameters get the same care as the learner's.
@@ -14,8 +14,8 @@ import json
 import time
 
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation import evaluate_many
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.rules.line import LINE_HEURISTICS, LINE_TUNED_FILE
 
 #: the candidates scored besides each rule's saved best (the points around the 8-episode optimum of 2026-12-02)
 NEIGHBOURS: dict[str, list[dict]] = {

@@ -3,14 +3,14 @@
 1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
 2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
 3. For ``--n-hindsight`` of those episodes, ``--hindsight-batch`` at a time, the per-section hindsight search
-   from the best rule's schedule (:func:`trackenv_agents.line_hindsight.hindsight_bounds`), with every tuned
+   from the best rule's schedule (:func:`trackenv_agents.evaluation.line_hindsight.hindsight_bounds`), with every tuned
    rule's own schedule on the episode and the best rule's (``--recorded-rules all``: every rule's) under
    ``--designs`` other recording designs as candidates
-   (:func:`trackenv_agents.line_hindsight.recorded_rule_schedules`).
+   (:func:`trackenv_agents.evaluation.line_hindsight.recorded_rule_schedules`).
 
 Searches of other seeds (``--test-start``) merge with ``line_room_summary.py``.
 
-Writes results/line_room.json (and the tuned parameters to agents/line_tuned_heuristics.json with
+Writes results/line_room.json (and the tuned parameters to agents/rules/line_tuned_heuristics.json with
 ``--save-tuned``); progress goes to stdout (run it with a log file in the background).
 """
 
@@ -22,17 +22,17 @@ import time
 from pathlib import Path
 
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation import evaluate_many
-from trackenv_agents.line_heuristics import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
-from trackenv_agents.line_hindsight import (
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.evaluation.line_hindsight import (
     RECORDING_DESIGNS,
     hindsight_bounds,
     recorded_rule_schedules,
     room_summary,
     schedule_rows,
 )
-from trackenv_agents.statistics import paired_difference
-from trackenv_agents.tuning import tune_many
+from trackenv_agents.evaluation.statistics import paired_difference
+from trackenv_agents.evaluation.tuning import tune_many
+from trackenv_agents.rules.line import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
 
 
 def main(argv=None) -> dict:

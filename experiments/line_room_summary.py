@@ -16,7 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
-from trackenv_agents.line_hindsight import room_summary
+from trackenv_agents.evaluation.line_hindsight import room_summary
 
 
 def _searches(payload) -> list[dict]:
@@ -26,8 +26,8 @@ def _searches(payload) -> list[dict]:
 
 
 def summarise(room: dict, searches: list[dict]) -> dict:
-    """:func:`~trackenv_agents.line_hindsight.room_summary` of ``searches`` against the best rule of ``room`` (a
-    ``line_room.py`` result)."""
+    """:func:`~trackenv_agents.evaluation.line_hindsight.room_summary` of ``searches`` against the best rule of
+    ``room`` (a ``line_room.py`` result)."""
     rule = dict(zip(room["test_seeds"], room["episode_costs"][room["best_rule"]], strict=True))
     return {"best_rule": room["best_rule"], **room_summary(rule, searches)}
 

@@ -2,9 +2,10 @@
 
     python experiments/plot_training.py runs/ppo runs/ppo_more --out docs/training_curve.png
 
-Reads each run's ``evaluations.json`` (written by the evaluation callback of :func:`trackenv_agents.train.train`) and
-draws mean return against env steps; the tuned heuristics of ``agents/tuned_heuristics.json`` are scored on
-the same evaluation seeds and drawn as horizontal lines, so the curve reads as "how far from the best rule".
+Reads each run's ``evaluations.json`` (written by the evaluation callback of
+:func:`trackenv_agents.learning.tamping.train`) and draws mean return against env steps; the tuned heuristics of
+``agents/rules/tuned_heuristics.json`` are scored on the same evaluation seeds and drawn as horizontal lines, so
+the curve reads as "how far from the best rule".
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ import argparse
 import json
 from pathlib import Path
 
-from trackenv_agents.evaluation import evaluate_many
-from trackenv_agents.heuristics import HEURISTICS, tuned_params
-from trackenv_agents.train import DEFAULT_EVAL_SEEDS
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.learning.tamping import DEFAULT_EVAL_SEEDS
+from trackenv_agents.rules.tamping import HEURISTICS, tuned_params
 
 
 def main(argv: list[str] | None = None) -> dict:

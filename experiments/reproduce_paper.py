@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from trackenv.paper import PAPER_ELEMENTS_PER_BAY, format_summary, reproduce_paper
+from trackenv_studies.paper import PAPER_ELEMENTS_PER_BAY, format_summary, reproduce_paper
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.line_config import scenario
-from trackenv.line_calibration import _slopes, run_line
+from trackenv_studies.calibration import _slopes, run_line
 
 
 def main(argv=None) -> dict:

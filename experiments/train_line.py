@@ -4,9 +4,9 @@ MaskablePPO for ``--timesteps`` line-steps, none by default).
 Example: ``python experiments/train_line.py --out runs/ppo_line`` (the default line, the shipped
 hyper-parameters: 6 iterations of 16 training episodes, each run and forked, a held-out evaluation of 16 episodes
 after each; see the README for its wall time). ``--scenario small`` for the small line; ``--export`` copies
-the best iteration (``best_model.zip``) to ``agents/pretrained/ppo_tamping_line.zip``, which ``trackenv evaluate
---env trackenv/TampingLine-v0`` then scores next to the rules. ``trackenv train --env trackenv/TampingLine-v0``
-runs the same training.
+the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamping_line.zip``, which
+``trackenv evaluate --env trackenv/TampingLine-v0`` then scores next to the rules.
+``trackenv train --env trackenv/TampingLine-v0`` runs the same training.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import json
 import time
 from pathlib import Path
 
-from trackenv_agents.train import DEFAULT_TRAIN_SEED
-from trackenv_agents.train_line import DEFAULT_LINE_PRETRAINED, export_line_policy, train_line
+from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, export_line_policy, train_line
+from trackenv_agents.learning.tamping import DEFAULT_TRAIN_SEED
 
 
 def main(argv=None) -> None:
@@ -39,7 +39,7 @@ def main(argv=None) -> None:
     p.add_argument("--export", action="store_true", help=f"copy the best iteration to {DEFAULT_LINE_PRETRAINED}")
     a = p.parse_args(argv)
     from trackenv.envs.line_config import scenario
-    from trackenv_agents.line_compare import parse_seeds
+    from trackenv_agents.evaluation.line_compare import parse_seeds
 
     config = scenario(a.scenario, **({"horizon_years": a.horizon_years} if a.horizon_years else {}))
     t0 = time.time()

@@ -11,20 +11,22 @@ import json
 import time
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv_agents.train import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
+from trackenv_agents.learning.tamping import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--algo", choices=["ppo", "maskable_ppo"], default=None, help="default: agents/hyperparams/ppo.yml")
-    p.add_argument("--timesteps", type=int, default=None, help="total env steps (default: agents/hyperparams/ppo.yml)")
+    p.add_argument("--algo", choices=["ppo", "maskable_ppo"], default=None,
+                   help="default: agents/learning/hyperparams/ppo.yml")
+    p.add_argument("--timesteps", type=int, default=None,
+                   help="total env steps (default: agents/learning/hyperparams/ppo.yml)")
     p.add_argument("--n-envs", type=int, default=None)
     p.add_argument("--seed", type=int, default=DEFAULT_TRAIN_SEED,
                    help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
     p.add_argument("--out", default="runs/ppo")
     p.add_argument("--config-json", default=None, help="JSON file of TampingEnvConfig fields")
     p.add_argument("--hyperparams", default=None,
-                   help="YAML (RL Zoo form) or JSON overriding agents/hyperparams/ppo.yml")
+                   help="YAML (RL Zoo form) or JSON overriding agents/learning/hyperparams/ppo.yml")
     p.add_argument("--eval-freq", type=int, default=None)
     p.add_argument("--checkpoint-every", type=int, default=None)
     p.add_argument("--resume", default=None, help="output folder of an earlier run to continue (--timesteps more)")

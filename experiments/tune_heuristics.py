@@ -5,7 +5,7 @@
 
 Each named heuristic is searched over its ``param_grid()`` on the first ``--n-train`` training seeds (all
 candidates batched in one run); the best parameters replace that heuristic's entry in ``--file`` (default
-``agents/tuned_heuristics.json``, which ``trackenv evaluate`` uses), with the seeds it was tuned on. Entries
+``agents/rules/tuned_heuristics.json``, which ``trackenv evaluate`` uses), with the seeds it was tuned on. Entries
 of other heuristics are kept as they are. The full tuning tables, with the cost of every candidate in every
 episode, go to ``--out``, together with the **hindsight bound**: the mean over episodes of the cheapest
 candidate *of that episode*. No rule in the grids can beat it, and a learned policy that beats the best
@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv_agents.evaluation import TRAIN_SEEDS
-from trackenv_agents.heuristics import HEURISTICS, TUNED_PARAMS_FILE
-from trackenv_agents.tuning import tune_many
+from trackenv_agents.evaluation.harness import TRAIN_SEEDS
+from trackenv_agents.evaluation.tuning import tune_many
+from trackenv_agents.rules.tamping import HEURISTICS, TUNED_PARAMS_FILE
 
 DEFAULT_FILE = TUNED_PARAMS_FILE
 
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> dict:
     classes = [HEURISTICS[name] for name in args.policies]
     executor = None
     if args.ray or args.ray_address:
-        from trackenv_agents.distributed import RayExecutor
+        from trackenv_agents.evaluation.distributed import RayExecutor
 
         executor = RayExecutor(address=args.ray_address)
     try:

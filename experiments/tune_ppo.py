@@ -1,6 +1,6 @@
-"""Ray Tune over PPO's hyper-parameters (stable-baselines3 through ``trackenv_agents.train``), with ASHA.
+"""Ray Tune over PPO's hyper-parameters (stable-baselines3 through ``trackenv_agents.learning.tamping``), with ASHA.
 
-Each trial trains from the hyper-parameters of ``agents/hyperparams/ppo.yml`` with four of them drawn from a
+Each trial trains from the hyper-parameters of ``agents/learning/hyperparams/ppo.yml`` with four of them drawn from a
 small space (learning rate, clip range, rollout length, entropy bonus); the held-out evaluation of the training
 run (deterministic return on evaluation seeds 10000-, never the test seeds) is reported to Tune after every
 ``--eval-freq`` env steps, and ASHA stops the trials that trail the others at each rung. One CPU per trial
@@ -28,7 +28,7 @@ QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.0}
 
 
 def search_space() -> dict[str, Any]:
-    """The hyper-parameters searched (the rest come from agents/hyperparams/ppo.yml)."""
+    """The hyper-parameters searched (the rest come from agents/learning/hyperparams/ppo.yml)."""
     from ray import tune
 
     return {
@@ -44,7 +44,7 @@ def trainable(params: dict[str, Any], *, config: dict | None, timesteps: int, ev
     """One Tune trial: train() with ``params`` over the shipped hyper-parameters, reporting every evaluation."""
     from ray import tune
 
-    from trackenv_agents.train import train
+    from trackenv_agents.learning.tamping import train
 
     def report(rec: dict) -> None:
         tune.report({"eval_return": rec["mean_return"], "timesteps": rec["timesteps"]})

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from trackenv.validation import run_validation
+from trackenv_studies.validation import run_validation
 
 
 def main(argv: list[str] | None = None) -> None:

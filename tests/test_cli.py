@@ -28,7 +28,7 @@ def test_evaluate_quick_prints_one_json_object(tmp_path, capsys):
 
 def test_evaluate_says_where_it_wrote(tmp_path, capsys, monkeypatch):
     """The comparison itself is stubbed (it runs end to end in the test above): the printing is under test."""
-    import trackenv_agents.compare as compare
+    import trackenv_agents.evaluation.tamping_compare as compare
 
     row = {"policy": "periodic", "params": {"interval_years": 3.5, "sections": "all"}, "n_episodes": 2,
            "mean_cost": 10.0, "ci_low": 9.0, "ci_high": 11.0, "tampings_per_km_year": 0.3,
@@ -52,7 +52,7 @@ def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
 def test_train_seed_default_is_the_training_seed_of_agents_train():
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.cli import build_parser
-    from trackenv_agents.train import DEFAULT_TRAIN_SEED
+    from trackenv_agents.learning.tamping import DEFAULT_TRAIN_SEED
 
     assert build_parser().parse_args(["train"]).seed == DEFAULT_TRAIN_SEED
 
@@ -88,8 +88,8 @@ def test_evaluate_ray_options_parse():
 def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
     """`--ray` hands the line's comparison (not only the tamping one) a Ray executor, closed after; Ray itself is
     not started (the stub runs nothing): the same results over Ray are tested in tests/agents/test_distributed.py."""
-    import trackenv_agents.line_compare as lc
-    from trackenv_agents.distributed import RayExecutor
+    import trackenv_agents.evaluation.line_compare as lc
+    from trackenv_agents.evaluation.distributed import RayExecutor
 
     seen = {}
 
@@ -110,7 +110,7 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
 def test_evaluate_line_rules_option(monkeypatch, capsys):
     """`--rules a,b` reaches the line comparison as a list; it is a usage error without a line --env, and an
     unknown rule name is refused by the comparison, naming the rules there are."""
-    import trackenv_agents.line_compare as lc
+    import trackenv_agents.evaluation.line_compare as lc
 
     seen = {}
     real = lc.line_comparison
@@ -134,7 +134,7 @@ def test_evaluate_line_rules_option(monkeypatch, capsys):
 def test_hyperparams_file_is_the_one_agents_train_reads():
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.cli import HYPERPARAMS_FILE
-    from trackenv_agents.train import DEFAULT_HYPERPARAMS
+    from trackenv_agents.learning.tamping import DEFAULT_HYPERPARAMS
 
     assert HYPERPARAMS_FILE == DEFAULT_HYPERPARAMS
 
@@ -215,7 +215,7 @@ def test_broken_hyperparams_file_gives_one_line(tmp_path, capsys):
 
 def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys, monkeypatch):
     """The heavy passes are stubbed: the command's printing is under test, not the physics."""
-    import trackenv.validation as val
+    import trackenv_studies.validation as val
 
     monkeypatch.setattr(val, "_receptance_summary", lambda track: ({
         "static_limit_max_abs_rel_error": 1e-4, "pinned_pinned_rel_error": 0.25}, {}))
@@ -233,8 +233,8 @@ def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys
 
 
 def test_periodic_all_sections_shows_no_n_worst():
-    from trackenv_agents.heuristics import Periodic
-    from trackenv_agents.reporting import format_table
+    from trackenv_agents.evaluation.reporting import format_table
+    from trackenv_agents.rules.tamping import Periodic
 
     assert Periodic(3.5, sections="all").params == {"interval_years": 3.5, "sections": "all"}
     assert Periodic(2.0, sections="worst", n_worst=2).params["n_worst"] == 2

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackenv_agents.evaluation import evaluate_one
-from trackenv_agents.heuristics import Periodic
+from trackenv_agents.evaluation.harness import evaluate_one
+from trackenv_agents.rules.tamping import Periodic
 
 
 def _script(name: str):

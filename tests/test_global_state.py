@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 import trackenv
 from trackenv.envs import TampingEnvConfig
-from trackenv_agents.reporting import plot_comparison
+from trackenv_agents.evaluation.reporting import plot_comparison
 from trackenv_agents.evaluation import EvaluationResult
 
 cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)

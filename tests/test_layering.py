@@ -13,8 +13,9 @@ def _modules_after(imports: str) -> set[str]:
 
 
 def test_the_library_never_imports_the_agents():
-    loaded = _modules_after("import trackenv, trackenv.envs, trackenv.render, trackenv.paper, trackenv.validation, "
-                            "trackenv.bench, trackenv.degradation")
+    loaded = _modules_after("import trackenv, trackenv.envs, trackenv.render, trackenv.degradation, "
+                            "trackenv_studies.paper, trackenv_studies.validation, trackenv_studies.bench, "
+                            "trackenv_studies.calibration")
     assert not {m for m in loaded if m.split(".")[0] in ("trackenv_agents", "agents", "stable_baselines3", "torch")}
 
 

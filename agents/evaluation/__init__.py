@@ -1,0 +1,61 @@
+"""Scoring policies: the harness (:mod:`.harness`: episodes on the native vector envs), its statistics
+(:mod:`.statistics`), grid tuning of the rules (:mod:`.tuning`), the comparisons of both problems
+(:mod:`.tamping_compare`, :mod:`.line_compare`), tables and figures (:mod:`.reporting`), the per-section
+hindsight bound of the line (:mod:`.line_hindsight`) and the Ray executor (:mod:`.distributed`)."""
+
+from .distributed import RayExecutor
+from .harness import (
+    TEST_SEEDS,
+    TRAIN_SEEDS,
+    EvaluationResult,
+    evaluate_many,
+    evaluate_one,
+    evaluate_policy,  # noqa: F401  (the deprecated name of evaluate_one, kept where it was)
+    policy_name,
+    policy_params,
+    record_episode,
+    run_episodes,
+)
+from .line_compare import (
+    SECTION_CLASSES,
+    class_breakdown,
+    format_line_table,
+    line_comparison,
+    parse_seeds,
+    plot_line_episode,
+    run_calibration,
+    scenario_of,
+)
+from .line_hindsight import (
+    RECORDING_DESIGNS,
+    TrueStateRule,
+    hindsight_bound,
+    hindsight_bounds,
+    recorded_rule_schedules,
+    replay,
+    replay_schedules,
+    replay_sections,
+    room_summary,
+    saved_schedules,
+    schedule_from_rows,
+    schedule_rows,
+)
+from .reporting import format_markdown, format_table, plot_comparison, plot_episode
+from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
+from .tamping_compare import compare, compare_results, run_comparison
+from .tuning import tune, tune_many
+
+__all__ = [
+    # the harness (.harness) and its statistics (.statistics)
+    "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
+    "policy_params", "record_episode", "run_episodes", "N_BOOTSTRAP", "bootstrap_ci", "paired_difference",
+    # tuning, reports, the executor
+    "tune", "tune_many", "format_markdown", "format_table", "plot_comparison", "plot_episode", "RayExecutor",
+    # comparisons: Tamping-v0 (.tamping_compare), TampingLine (.line_compare)
+    "compare", "compare_results", "run_comparison", "SECTION_CLASSES", "class_breakdown", "format_line_table",
+    "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "scenario_of",
+    # the line's hindsight bound (.line_hindsight)
+    "RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
+    "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
+    "schedule_rows",
+]

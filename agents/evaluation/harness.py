@@ -1,0 +1,304 @@
+"""One harness to score tamping policies: heuristics (:mod:`agents.heuristics`) and trained agents alike.
+
+A policy is anything with SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)
+-> (action, state)`` that accepts a batched observation dict. Each episode is identified by its seed: the
+envs of :class:`~trackenv.envs.vector.TampingVectorEnv` are reset with one seed each, so the same seed gives
+every policy the same track, ballast, initial level and (as long as the actions agree) tamping residuals:
+policies are compared on common random numbers and differences are paired
+(:func:`trackenv_agents.evaluation.statistics.paired_difference`).
+
+Per episode we collect the life-cycle cost (k€, the sum of ``info["costs"]`` = minus the sum of rewards),
+its parts, the number of section tampings, the immediate-action exceedances (section-steps in class 3) and
+the mean section SD at the end. **Tampings per km-year** is the tamped length per length of track per year:
+``section_tampings · section_length_km / (track_length_km · horizon_years) = section_tampings /
+(n_sections · horizon_years)``; 1.0 means the whole track is tamped once a year.
+
+Many (policy, seed) pairs run in one vector env (``batch_size`` envs at a time), so the physics of a batch is
+one call per step whatever mix of policies it holds; :mod:`trackenv_agents.evaluation.tuning` uses that to search grids.
+Each batch is one call of :func:`run_episodes`; an ``executor`` (anything with ``map(fn, items)`` in order, e.g.
+:class:`trackenv_agents.evaluation.distributed.RayExecutor`) runs the batches elsewhere, with the same results.
+
+The neighbours: :mod:`trackenv_agents.evaluation.statistics` (bootstrap CIs, paired differences),
+:mod:`trackenv_agents.evaluation.tuning` (grid search of the heuristics),
+:mod:`trackenv_agents.evaluation.tamping_compare` (tune, then score on the test seeds) and
+:mod:`trackenv_agents.evaluation.reporting` (tables and figures).
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+from trackenv.envs import line_episode
+from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.episode import COST_KEYS
+from trackenv.envs.line import TampingLineVectorEnv
+from trackenv.envs.line_config import LineConfig
+from trackenv.envs.vector import TampingVectorEnv
+
+from .statistics import bootstrap_ci
+
+__all__ = [
+    "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
+    "policy_params", "record_episode", "run_episodes",
+]
+
+TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
+TEST_SEEDS: tuple[int, ...] = tuple(range(0, 200))
+
+
+def policy_name(policy: Any) -> str:
+    """The policy's ``name`` attribute, else its class name."""
+    return str(getattr(policy, "name", None) or type(policy).__name__)
+
+
+def policy_params(policy: Any) -> dict[str, Any]:
+    params = getattr(policy, "params", None)
+    return dict(params) if isinstance(params, Mapping) else {}
+
+
+@dataclass
+class EvaluationResult:
+    """Per-episode outcomes of one policy (arrays aligned with ``seeds``)."""
+
+    policy: str
+    params: dict[str, Any]
+    config: TampingEnvConfig
+    seeds: np.ndarray
+    cost: np.ndarray  # life-cycle cost per episode [k€]
+    cost_parts: dict[str, np.ndarray]  # per COST_KEYS [k€]
+    section_tampings: np.ndarray  # number of section tampings per episode
+    immediate_action_exceedances: np.ndarray  # section-steps in class 3 per episode
+    final_mean_sd_mm: np.ndarray  # mean section SD at the end [mm]
+    sum_rewards: np.ndarray  # sum of rewards per episode (= -cost)
+    # TampingLine: per episode and section its own costs ("section_cost", k€, possession excluded), its register
+    # class ("register": 0 plain, 1 transition, 2 switch or crossing) and whether a hidden wet spot started in it
+    # ("wet_spot"), each (episodes, sections)
+    extra: dict[str, Any] = field(default_factory=dict)
+    tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
+
+    @property
+    def n_episodes(self) -> int:
+        return int(self.cost.size)
+
+    @property
+    def tampings_per_km_year(self) -> np.ndarray:
+        """Tamped length per length of track per year, per episode (see the module docstring)."""
+        c = self.config
+        return self.section_tampings / (c.n_sections * c.horizon_years)
+
+    def summary(self) -> dict[str, Any]:
+        lo, hi = bootstrap_ci(self.cost)
+        return {
+            "policy": self.policy,
+            "params": dict(self.params),
+            "n_episodes": self.n_episodes,
+            "mean_cost": float(self.cost.mean()),
+            "ci_low": lo,
+            "ci_high": hi,
+            "std_cost": float(self.cost.std(ddof=1)) if self.n_episodes > 1 else 0.0,
+            "cost_parts": {k: float(v.mean()) for k, v in self.cost_parts.items()},
+            "section_tampings": float(self.section_tampings.mean()),
+            "tampings_per_km_year": float(self.tampings_per_km_year.mean()),
+            "immediate_action_exceedances": int(self.immediate_action_exceedances.sum()),
+            "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
+            "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
+        }
+
+
+def _coerce(config: Any) -> TampingEnvConfig | LineConfig:
+    """A Tamping config, or a TampingLine one (a LineConfig or a scenario name such as "default")."""
+    if isinstance(config, (LineConfig, str)):
+        return LineConfig.coerce(config)
+    return TampingEnvConfig.coerce(config)
+
+
+def _cost_keys(cfg: Any) -> tuple[str, ...]:
+    return line_episode.COST_KEYS if isinstance(cfg, LineConfig) else COST_KEYS
+
+
+def _vector_env(n: int, cfg: Any, action_type: str) -> Any:
+    """The native vector env of ``cfg``'s problem (Tamping or TampingLine), in NEXT_STEP autoreset: no episode
+    is started past the horizon and the last step's info stays in place (both follow the same conventions)."""
+    if isinstance(cfg, LineConfig):
+        return TampingLineVectorEnv(n, cfg, autoreset_mode=AutoresetMode.NEXT_STEP)
+    return TampingVectorEnv(n, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+
+
+def _bound(policy: Any, config: TampingEnvConfig) -> Any:
+    bind = getattr(policy, "bind", None)
+    return bind(config) if callable(bind) else policy
+
+
+def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
+    return {k: v[idx] for k, v in obs.items()}
+
+
+def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Sequence[Any],
+               action_type: str, record: bool = False, pbar: Any = None) -> dict[str, Any]:
+    """Run one episode per slot (policy index, seed) to the horizon; per-env totals (and traces if record)."""
+    cfg = env.config
+    n = len(slots)
+    obs, _ = env.reset(seed=[s for _, s in slots])
+    pol_of = np.array([p for p, _ in slots])
+    groups = {p: np.flatnonzero(pol_of == p) for p in np.unique(pol_of)}
+    states: dict[int, Any] = dict.fromkeys(groups)
+    for p in groups:
+        reset = getattr(policies[p], "reset", None)
+        if callable(reset):
+            reset()
+    keys = _cost_keys(cfg)
+    parts = {k: np.zeros(n) for k in keys}
+    rewards = np.zeros(n)
+    tampings = np.zeros(n)
+    exceed = np.zeros(n)
+    final_sd = np.zeros(n)
+    tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
+    section_cost = np.zeros((n, cfg.n_sections))  # TampingLine: each section's own costs (info["section_costs"])
+    register = np.asarray(obs.get("register", np.zeros((n, cfg.n_sections))), dtype=np.int64)
+    traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
+    if record:
+        traces["section_sd_mm"].append(obs["section_sd"].copy())
+    if action_type == "discrete":
+        actions = np.zeros(n, dtype=np.int64)
+    else:
+        actions = np.zeros((n, cfg.n_sections), dtype=np.int8)
+    for t in range(cfg.horizon_steps):
+        for p, idx in groups.items():
+            a, states[p] = policies[p].predict(_take(obs, idx), state=states[p],
+                                               episode_start=np.full(idx.size, t == 0), deterministic=True)
+            actions[idx] = np.asarray(a).reshape(actions[idx].shape)
+        obs, r, _, trunc, info = env.step(actions)
+        rewards += r
+        for k in keys:
+            parts[k] += info["costs"][k]
+        tampings += info["tamped_sections"].sum(axis=1)
+        tamped[:, t] = info["tamped_sections"]
+        if "section_costs" in info:
+            section_cost += info["section_costs"]
+        exceed += info["immediate_action_exceedances"]
+        if record:
+            traces["section_sd_mm"].append(info["section_sd_mm"])
+            traces["tamped"].append(info["tamped_sections"].copy())
+            traces["cost"].append(info["cost"].copy())
+            traces["year"].append(info["year"].copy())
+        if pbar is not None:
+            pbar.update(1)
+        if t == cfg.horizon_steps - 1:
+            if not trunc.all():  # pragma: no cover - guards a change of the env's horizon rule
+                raise RuntimeError("episodes did not end at the configured horizon")
+            final_sd = info["section_sd_mm"].mean(axis=1)
+            wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
+    return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
+            "tamped": tamped, "section_cost": section_cost, "register": register, "wet_spot": wet,
+            "traces": traces}
+
+
+def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
+                 action_type: str = "multibinary") -> dict[str, Any]:
+    """One batch: an episode per slot ``(policy index, seed)`` to the horizon in one native vector env
+    (NEXT_STEP autoreset: no episode is started past the horizon); per-episode totals as arrays in slot order
+    (``parts`` by cost key, ``rewards``, ``tampings``, ``exceed``, ``final_sd``, ``tamped``). The unit of work that
+    :func:`evaluate_many` runs in turn, or an executor runs in parallel."""
+    env = _vector_env(len(slots), config, action_type)
+    out = _run_chunk(env, list(slots), policies, action_type)
+    out.pop("traces")
+    return out
+
+
+def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | None = None,
+                  seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                  progress: bool = False, desc: str = "evaluate", executor: Any = None) -> list[EvaluationResult]:
+    """Evaluate every policy on every seed, all (policy, seed) pairs batched ``batch_size`` at a time.
+
+    Results are independent of the batching: each env draws only from its own seed's generator. ``executor``:
+    runs the batches (:func:`run_episodes`) through its ``map`` (e.g. on Ray workers); None: here, in turn.
+    """
+    cfg = _coerce(config)
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must not be empty")
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size!r}")
+    bound = [_bound(p, cfg) for p in policies]
+    slots = [(p, s) for p in range(len(bound)) for s in seeds]
+    chunks = [slots[i:i + batch_size] for i in range(0, len(slots), batch_size)]
+    pbar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        pbar = tqdm(total=len(chunks) * cfg.horizon_steps, desc=desc, unit="step")
+    outs = []
+    try:
+        if executor is None:
+            for chunk in chunks:
+                env = _vector_env(len(chunk), cfg, action_type)
+                outs.append(_run_chunk(env, chunk, bound, action_type, pbar=pbar))
+        else:
+            for out in executor.map(functools.partial(run_episodes, cfg, policies=bound, action_type=action_type),
+                                    chunks):
+                outs.append(out)
+                if pbar is not None:
+                    pbar.update(cfg.horizon_steps)
+    finally:
+        if pbar is not None:
+            pbar.close()
+
+    def cat(key: str) -> np.ndarray:
+        return np.concatenate([o[key] for o in outs])
+
+    pol_of = np.array([p for p, _ in slots])
+    seed_arr = np.array([s for _, s in slots])
+    parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in _cost_keys(cfg)}
+    rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
+    tamped = cat("tamped")
+    sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")} if isinstance(cfg, LineConfig) else {}
+    results = []
+    for p, pol in enumerate(bound):
+        m = pol_of == p
+        parts = {k: v[m] for k, v in parts_all.items()}
+        results.append(EvaluationResult(
+            policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
+            cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
+            immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
+            tamped=tamped[m], extra={k: v[m] for k, v in sections.items()}))
+    return results
+
+
+def evaluate_one(policy: Any, config: TampingEnvConfig | dict | None = None,
+                 seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                 progress: bool = False) -> EvaluationResult:
+    """One policy, one episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time):
+    :func:`evaluate_many` for a single policy. The episode returns are ``.sum_rewards``."""
+    return evaluate_many([policy], config, seeds, action_type, batch_size, progress,
+                         desc=policy_name(policy))[0]
+
+
+def evaluate_policy(*args: Any, **kwargs: Any) -> EvaluationResult:
+    """Deprecated name of :func:`evaluate_one` (it shadowed stable-baselines3's ``evaluate_policy``, which takes
+    an env and returns a mean and a standard deviation)."""
+    import warnings
+
+    warnings.warn("trackenv_agents.evaluation.evaluate_policy is now evaluate_one", DeprecationWarning,
+                  stacklevel=2)
+    return evaluate_one(*args, **kwargs)
+
+
+def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, seed: int = 0,
+                   action_type: str = "multibinary") -> dict[str, np.ndarray]:
+    """One episode's traces: section SD [mm] (steps+1, n_sections), tamped (steps, n_sections), cost and year
+    per step."""
+    cfg = TampingEnvConfig.coerce(config)
+    pol = _bound(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
+    env = TampingVectorEnv(1, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+    out = _run_chunk(env, [(0, int(seed))], [pol], action_type, record=True)
+    tr = out["traces"]
+    return {"section_sd_mm": np.array([x[0] for x in tr["section_sd_mm"]]),
+            "tamped": np.array([x[0] for x in tr["tamped"]]), "cost": np.array([x[0] for x in tr["cost"]]),
+            "year": np.array([x[0] for x in tr["year"]])}

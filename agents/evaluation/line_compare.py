@@ -1,0 +1,218 @@
+"""`trackenv evaluate --env trackenv/TampingLine-v0` and `trackenv calibrate`: the line's comparison and
+calibration, written as JSON and PNG (the logic of the env and the calibration lives in the library)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.line_config import LineConfig, scenario
+
+from ..rules.line import LINE_HEURISTICS, line_tuned_params
+from .harness import _bound, evaluate_many, policy_name
+from .statistics import paired_difference
+from .tuning import tune_many
+
+
+def scenario_of(env_id: str) -> str:
+    """The scenario name registered for a TampingLine id."""
+    import gymnasium as gym
+
+    import trackenv  # noqa: F401
+
+    try:
+        spec = gym.spec(env_id)
+    except gym.error.Error as exc:  # an unknown name or version: the user's input, not a crash
+        raise ValueError(f"{env_id!r} is not a registered env id ({exc})") from None
+    if not str(spec.entry_point).endswith(":TampingLine"):
+        raise ValueError(f"{env_id} is not a TampingLine id")
+    return spec.kwargs["scenario"]
+
+
+def parse_seeds(text: str) -> list[int]:
+    """'A:B' -> A..B-1; 'a,b,c' -> those."""
+    if ":" in text:
+        a, b = (int(v) for v in text.split(":"))
+        if b <= a:
+            raise ValueError(f"--seeds A:B needs B > A, got {text!r}")
+        return list(range(a, b))
+    return [int(v) for v in text.split(",") if v]
+
+
+def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | None = None,
+                    rules: list[str] | None = None, n_train: int = 2, retune: bool = False, batch_size: int = 24,
+                    progress: bool = True, out_dir: str = "results/line_compare", extra: dict[str, Any] | None = None,
+                    executor: Any = None, **overrides: Any) -> dict[str, Any]:
+    """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
+    ``extra`` policies (by name, e.g. the trained line policy) scored on ``seeds`` with 95 % CIs, and the paired
+    difference of each against the best. ``rules``: the rule families to score (names of
+    :data:`LINE_HEURISTICS`; default all, no-maintenance included). ``executor``: runs the batches of episodes (e.g.
+    :class:`~trackenv_agents.evaluation.distributed.RayExecutor`), with the same results as here."""
+    name = scenario_of(env_id)
+    cfg = scenario(name, **overrides)
+    unknown = sorted(set(rules or ()) - set(LINE_HEURISTICS))
+    if unknown or (rules is not None and not rules):
+        raise ValueError(f"rules must name line rules among {sorted(LINE_HEURISTICS)}, got {rules!r}")
+    wanted = set(rules or LINE_HEURISTICS)
+    classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance" and n in wanted]
+    params = {} if retune else {n: p for n, p in line_tuned_params().items() if n in wanted}
+    tuned_from = "shipped (agents/rules/line_tuned_heuristics.json)" if params else f"tuned now on {n_train} seeds"
+    if not params and classes:
+        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor)
+        params = {classes[i].name: v["best_params"] for i, v in t.items()}
+    pols = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
+    pols += [LINE_HEURISTICS[n](**p) for n, p in params.items()]
+    pols += list((extra or {}).values())
+    seeds = seeds or list(range(8))
+    res = evaluate_many(pols, cfg, seeds, batch_size=batch_size, progress=progress, desc="test", executor=executor)
+    res.sort(key=lambda r: float(r.cost.mean()))
+    best = res[0]
+    rows = []
+    for r in res:
+        s = r.summary()
+        s["vs_best"] = None if r is best else paired_difference(r, best)
+        s["episode_costs"] = r.cost.tolist()  # in the order of "seeds": for paired analyses afterwards
+        s["classes"] = class_breakdown(r)
+        rows.append(s)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    by_name = {policy_name(p): p for p in pols}
+    rule_names = {policy_name(p) for p in pols[:len(pols) - len(extra or {})]}
+    best_rule = next((r.policy for r in res if r.policy in rule_names), None)
+    payload = {"env": env_id, "scenario": name, "config": cfg.to_dict(), "seeds": seeds, "tuned_from": tuned_from,
+               "best_rule": best_rule, "extra": [policy_name(p) for p in (extra or {}).values()], "results": rows}
+    (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
+    from .reporting import plot_comparison
+
+    payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
+    # the best rule and the trained policy, side by side
+    shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
+    payload["episode_plot"] = plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png"))
+    return payload
+
+
+#: The section classes of :func:`class_breakdown`: the register's three, and hidden wet spots (a section whose
+#: wet spot started within the horizon, whatever its register; in no register, so no rule sees it coming)
+SECTION_CLASSES = ("plain", "transition", "switch_or_crossing", "hidden_wet_spot")
+
+
+def class_breakdown(result: Any) -> dict[str, dict[str, float | None]]:
+    """Where a TampingLine policy's costs fall, per section class (:data:`SECTION_CLASSES`), from an
+    :class:`~trackenv_agents.evaluation.harness.EvaluationResult` (its per-section costs, registers and wet spots):
+    sections per episode, own cost (k€) and tampings per section and episode (None for a class with no section);
+    and for the line, campaigns and possession (k€) per episode."""
+    x = result.extra
+    if "section_cost" not in x:
+        raise ValueError("class_breakdown needs a TampingLine evaluation (per-section costs)")
+    reg, wet, cost = np.asarray(x["register"]), np.asarray(x["wet_spot"], bool), np.asarray(x["section_cost"])
+    tampings = np.asarray(result.tamped).sum(axis=1)  # (episodes, sections)
+    cls = np.where(wet, 3, reg)
+    n = len(cost)
+    out: dict[str, dict[str, float | None]] = {}
+    for k, name in enumerate(SECTION_CLASSES):
+        m = cls == k
+        out[name] = {"sections_per_episode": float(m.sum() / n),
+                     "cost_per_section": float(cost[m].mean()) if m.any() else None,
+                     "tampings_per_section": float(tampings[m].mean()) if m.any() else None}
+    campaigns = np.asarray(result.tamped).any(axis=2).sum(axis=1)
+    out["line"] = {"campaigns_per_episode": float(campaigns.mean()),
+                   "possession_per_episode": float(np.mean(result.cost_parts["possession"]))}
+    return out
+
+
+def format_line_table(payload: dict[str, Any]) -> str:
+    lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
+             f"{payload['tuned_from']}",
+             f"{'policy':22s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
+             f"{'IA':>4s}  params"]
+    for r in payload["results"]:
+        d = r["vs_best"]
+        diff = "-" if d is None else f"{d['mean_difference']:+.1f} [{d['ci_low']:+.1f}, {d['ci_high']:+.1f}]"
+        ps = ", ".join(f"{k}={v}" for k, v in r["params"].items() if k not in
+                       ("steps_per_year", "horizon_steps", "capacity"))
+        lines.append(f"{r['policy']:22s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
+                     f"{diff:>30s} {r.get('immediate_action_exceedances', 0):4d}  {ps}")
+    shown = [r for r in payload["results"] if r["policy"] in (payload.get("best_rule"), *payload.get("extra", []))]
+    if len(shown) > 1 and all("classes" in r for r in shown):  # where the trained policy's costs differ
+        lines.append("own cost per section and episode, k€ (tampings per section and episode):")
+        lines.append(f"{'policy':22s} " + " ".join(f"{c:>20s}" for c in SECTION_CLASSES) + "  campaigns")
+        for r in shown:
+            cl = r["classes"]
+            cells = ["-" if cl[c]["cost_per_section"] is None else
+                     f"{cl[c]['cost_per_section']:.1f} ({cl[c]['tampings_per_section']:.2f})" for c in SECTION_CLASSES]
+            lines.append(f"{r['policy']:22s} " + " ".join(f"{c:>20s}" for c in cells)
+                         + f"  {cl['line']['campaigns_per_episode']:9.1f}")
+    lines.append("IA: section-steps at the immediate-action limit, all episodes together")
+    if payload.get("episode_plot"):
+        lines.append(f"plots: {payload['plot']}, {payload['episode_plot']} (episode {payload['seeds'][0]} under "
+                     f"{payload.get('best_rule', 'the best rule')} and any trained policy)")
+    return "\n".join(lines)
+
+
+def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str) -> str:
+    """One episode under each of ``policies`` (one policy or a list, SB3-style ``predict``), side by side on
+    shared axes: the true SD of every section over time (dotted: as last measured), tamping marked, each
+    panel's cost in its title."""
+    from matplotlib.figure import Figure
+
+    from trackenv.envs.line import TampingLine
+
+    pols = [_bound(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    fig = Figure(figsize=(10 * len(pols), 4.5))
+    axes = fig.subplots(1, len(pols), sharey=True, squeeze=False)[0]
+    years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
+    for ax, pol in zip(axes, pols, strict=True):
+        env = TampingLine(cfg)
+        obs, info = env.reset(seed=seed)
+        sd, tam, meas, cost = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()], 0.0
+        for _ in range(cfg.horizon_steps):
+            a = pol.predict(obs)[0]
+            obs, r, _, _, info = env.step(a)
+            sd.append(info["section_sd_m"] * 1e3)
+            meas.append(obs["section_sd"].copy())
+            tam.append(info["tamped_sections"])
+            cost -= r
+        sd_, tam_, meas_ = np.array(sd), np.array(tam), np.array(meas)
+        reg = env.batch.register
+        for j in range(cfg.n_sections):
+            col = f"C{j % 10}"
+            ax.plot(years, sd_[:, j], color=col, lw=1.2 if reg[j] else 0.8,
+                    label=f"s{j}" + {0: "", 1: " (transition)", 2: " (switch)"}[int(reg[j])])
+            ax.plot(years, meas_[:, j], color=col, lw=0.5, ls=":")
+            for t in np.flatnonzero(tam_[:, j]):
+                ax.plot(years[t], sd_[t, j], "v", color=col, ms=6)
+        ax.axhline(env.batch.limits.sd_alert_m * 1e3, color="k", ls="--", lw=0.8, label="SD alert")
+        ax.set_xlabel("year")
+        ax.set_title(f"{policy_name(pol)} on {cfg.n_sections} sections, seed {seed}: {cost:.0f} k€, "
+                     f"{int(tam_.sum())} tampings in {int(tam_.any(axis=1).sum())} campaigns", fontsize=9)
+    axes[0].set_ylabel("SD of D1 level [mm] (solid true, dotted measured; ▼ tamping)")
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    return out_png
+
+
+def run_calibration(scenario_name: str = "default", seeds: list[int] | None = None, threshold_mm: float = 2.0,
+                    out_dir: str = "results/line_calibration", progress: bool = True, **overrides: Any) -> dict:
+    from trackenv_studies.calibration import calibrate, plot_calibration
+
+    cfg = scenario(scenario_name, **overrides)
+    seeds = seeds or [2000, 2001]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=2 * cfg.horizon_steps, desc="calibrate", unit="step")
+    try:
+        result = calibrate(cfg, seeds, threshold_mm, progress=bar.update if bar is not None else None)
+    finally:
+        if bar is not None:
+            bar.close()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    result["plot"] = plot_calibration(result, str(out / "line_calibration.png"))
+    (out / "line_calibration.json").write_text(json.dumps(result, indent=1, default=float))
+    return result

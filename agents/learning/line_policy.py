@@ -1,0 +1,175 @@
+"""The per-section policy of TampingLine: one small network decides for every section, from its features.
+
+Why this shape. A line's step is one decision per section, and almost all of a section's costs are its own:
+its geometry, speed restrictions, immediate actions, tamping and renewal depend only on its own schedule (the
+sections are physically independent); only the possession of a campaign is shared. So one network with shared
+weights decides for every section, from that section's features and a summary of the line: the policy learns
+one rule for a section, runs on lines of any length (the small, default and hard scenarios: 6, 12 and 24
+sections), and a learner can credit each section's choice with that section's own costs (see
+:class:`trackenv_agents.learning.sb3_vec.SectionAgentsVecEnv` and :mod:`trackenv_agents.learning.line_counterfactual`).
+
+* :func:`section_features` — the (batch, S, F) features of a batched line observation: the section's measured
+  state and what the measurement history says beyond it (whether it was tamped since the recording run, its
+  growth since its last tamping, its SD and peak projected to now), its register and tamping history, the
+  line's context (time, measurement age, the other sections' projected SD: whether a campaign is likely to be
+  called anyway), each over a fixed scale and clipped, so the policy does not depend on the line it was trained
+  on; and optionally a rule's choice (an *advisor*: the learner has the rule exactly and learns where to depart
+  from it).
+* :class:`LineAgent` — a trained section policy (any SB3 policy over these features with ``Discrete(2)``
+  actions) with SB3's ``predict`` on raw line observations: it tamps the sections whose probability of tamping
+  is above one half, never one the env would drop, at most ``capacity`` (the most probable).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.line_config import LineConfig
+
+from ..rules.line import stale_measurement
+from ..rules.tamping import _as_batch
+
+__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
+           "section_features"]
+
+#: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
+#: β = 0.24 (README, calibration) at a 3 mm SD before.
+FRESH_SD_MM = 0.9
+#: Features are clipped to [0, FEATURE_CLIP] after scaling: typical values are O(1), and a rare extreme (a wet
+#: spot at 19 mm of SD, a section untended for 12 years) must not drive the network far beyond its training data.
+FEATURE_CLIP = 4.0
+#: The features, in order, with the scale each is divided by (mm, years, counts; fractions as they are).
+FEATURES: tuple[tuple[str, float], ...] = (
+    ("measured_sd_mm", 2.0),
+    ("measured_peak_mm", 10.0),
+    ("stale", 1.0),  # tamped since the recording run: the measurement predates the tamping
+    ("growth_mm_per_year", 1.0),  # SD growth since the last tamping, as measured (0 where stale)
+    ("projected_sd_mm", 2.0),  # measured SD + growth × measurement age (the fresh SD where stale)
+    ("projected_peak_mm", 10.0),  # measured peak scaled like the SD
+    ("plain", 1.0), ("transition", 1.0), ("switch_or_crossing", 1.0),
+    ("tampings_since_renewal", 8.0),
+    ("renewal_due", 1.0),  # the next intervention is a ballast renewal (8 tampings since the last)
+    ("tampings", 4.0),
+    ("years_since_tamping", 4.0),
+    ("time", 1.0),
+    ("measurement_age_years", 1.0),
+    ("budget_left", 1.0),
+    ("line_max_other_projected_sd_mm", 2.0),  # the worst other section: will a campaign be called anyway?
+    ("line_mean_projected_sd_mm", 2.0),
+    ("line_share_projected_above_2mm", 1.0),
+    ("line_share_projected_above_3mm", 1.0),
+)
+RENEWAL_AFTER = 8  # TampingModel.max_tampings_before_renewal's default; a feature, not a rule of the env
+
+
+#: With an advisor, two more features, last: whether it tamps the section now, and whether it calls a campaign
+#: now (tamps any section of the line)
+ADVISOR_FEATURES = ("advisor_tamps", "advisor_campaign")
+
+
+def n_features(advisor: Any = None) -> int:
+    """How many features :func:`section_features` gives (two more with an advisor)."""
+    return len(FEATURES) + (len(ADVISOR_FEATURES) if advisor is not None else 0)
+
+
+def section_features(obs: Mapping[str, Any], advisor: Any = None) -> np.ndarray:
+    """(batch, S, :func:`n_features`) float32 features of a batched TampingLine observation (see the module
+    docstring and :data:`FEATURES`). ``advisor``: a rule bound to the line's config (SB3 ``predict``) whose
+    choice is two more features, last (:data:`ADVISOR_FEATURES`: it tamps the section now; it calls a campaign
+    now): a learner then has the rule exactly and learns where to depart from it (residual policy learning)."""
+    o = {k: np.asarray(v, dtype=np.float64) for k, v in obs.items()}
+    sd, peak = o["section_sd"], o["section_peak"]
+    B, S = sd.shape
+    age = o["measurement_age"].reshape(B, 1)
+    stale = np.asarray(stale_measurement(o), dtype=bool)
+    since = np.maximum(o["years_since_tamping"] - age, 0.25)  # from the last tamping to the recording run
+    growth = np.where(stale, 0.0, np.maximum(sd - FRESH_SD_MM, 0.0) / since)
+    projected = np.where(stale, FRESH_SD_MM, sd + growth * age)
+    ratio = np.where(sd > 1e-6, projected / np.maximum(sd, 1e-6), 1.0)
+    projected_peak = np.where(stale, 0.0, peak * ratio)
+    reg = np.rint(o["register"]).astype(int).clip(0, 2)
+    count = o["tampings_since_renewal"]
+    # the worst projected SD among the *other* sections: the largest, or the second largest for the worst one
+    top2 = -np.sort(-projected, axis=1)[:, :2] if S > 1 else np.concatenate([projected, np.zeros((B, 1))], 1)
+    other_max = np.where(projected >= top2[:, :1], top2[:, 1:2], top2[:, :1])
+    cols = [
+        sd, peak, stale, growth, projected, projected_peak,
+        reg == 0, reg == 1, reg == 2,
+        count, count >= RENEWAL_AFTER, o["tampings"], o["years_since_tamping"],
+        np.broadcast_to(o["time"].reshape(B, 1), (B, S)),
+        np.broadcast_to(age, (B, S)),
+        np.broadcast_to(o["budget_left"].reshape(B, 1), (B, S)),
+        other_max,
+        np.broadcast_to(projected.mean(axis=1, keepdims=True), (B, S)),
+        np.broadcast_to((projected >= 2.0).mean(axis=1, keepdims=True), (B, S)),
+        np.broadcast_to((projected >= 3.0).mean(axis=1, keepdims=True), (B, S)),
+    ]
+    scales = np.array([s for _, s in FEATURES])
+    x = np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1) / scales
+    if advisor is not None:
+        advice = np.asarray(advisor.predict({k: np.asarray(v) for k, v in obs.items()})[0], dtype=np.float64)
+        advice = advice.reshape(B, S)
+        campaign = np.broadcast_to(advice.max(axis=1, keepdims=True), (B, S))
+        x = np.concatenate([x, advice[..., None], campaign[..., None]], axis=-1)
+    return np.clip(x, 0.0, FEATURE_CLIP).astype(np.float32)
+
+
+class LineAgent:
+    """A trained section policy (an SB3 policy over :func:`section_features`, ``Discrete(2)`` actions) with SB3's
+    ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)`` on raw TampingLine
+    observations (one dict or a batched one) of a line of any length: int8 0/1 per section. Deterministic: the
+    sections whose probability of tamping is above one half; otherwise each drawn with its probability (``rng``:
+    a numpy Generator; None: a fresh unseeded one). Bound to a config (:meth:`bind`, as the evaluation harness
+    does), never a section tamped within the config's ``min_steps_between_tampings`` (the env would drop it) and
+    at most ``capacity`` sections, the most probable."""
+
+    def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
+                 rng: np.random.Generator | None = None, advisor: Any = None) -> None:
+        self.policy = policy
+        self.name = name
+        self.config = config
+        self.advisor = advisor if advisor is None or config is None else advisor.bind(config)
+        self.params: dict[str, Any] = {}
+        self._rng = rng
+
+    def bind(self, config: LineConfig) -> LineAgent:
+        """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it)."""
+        return LineAgent(self.policy, self.name, config, self._rng, self.advisor)
+
+    def tamp_probability(self, obs: Mapping[str, Any]) -> np.ndarray:
+        """(batch, S) probability of tamping each section (batched observation dict of numpy arrays)."""
+        import torch
+
+        x = section_features(obs, self.advisor)
+        B, S, F = x.shape
+        self.policy.set_training_mode(False)
+        with torch.no_grad():
+            t = torch.as_tensor(x.reshape(B * S, F), device=self.policy.device)
+            p = self.policy.get_distribution(t).distribution.probs[:, 1]
+        return p.cpu().numpy().reshape(B, S)
+
+    def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        b, batched = _as_batch(dict(observation))
+        p = self.tamp_probability(b)
+        if deterministic:
+            want = p > 0.5
+        else:
+            if self._rng is None:
+                self._rng = np.random.default_rng()
+            want = self._rng.random(p.shape) < p
+        c = self.config
+        if c is not None:
+            from trackenv.envs.line_episode import keep_worst
+
+            gap = c.min_steps_between_tampings / c.steps_per_year  # years: tamped since then, masked
+            want &= np.asarray(b["years_since_tamping"]) > gap + 1e-3
+            want = keep_worst(want, p, c.capacity)
+        act = want.astype(np.int8)
+        return (act if batched else act[0]), state
+
+    def reset(self) -> None:
+        """Nothing to forget: the policy is stateless."""

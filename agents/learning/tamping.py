@@ -1,0 +1,467 @@
+"""Train PPO / MaskablePPO on the tamping environment, and load the shipped policy.
+
+* :func:`train` — SB3 PPO (or sb3-contrib MaskablePPO) on :class:`agents.sb3_vec.TampingSB3VecEnv` with
+  VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
+  evaluation callback and reproducible seeding. Hyper-parameters: ``agents/learning/hyperparams/ppo.yml`` (RL Zoo's
+  form, one entry per env id), read by :func:`load_hyperparams`.
+* :func:`load_trained` — the shipped policy (``agents/learning/pretrained/ppo_tamping.zip`` + its observation
+  statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env
+  observations.
+
+Policies are scored by :func:`trackenv_agents.evaluation.harness.evaluate_one` (the held-out evaluation during
+training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.tamping.NoMaintenance`,
+:class:`~trackenv_agents.rules.tamping.RandomPolicy`).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.config import TampingEnvConfig
+
+from ..evaluation.harness import evaluate_one
+from .actions import RANKED, env_action_type, ranked_to_sections
+from .sb3_vec import TampingSB3VecEnv, filter_observation
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_HYPERPARAMS = HERE / "hyperparams" / "ppo.yml"
+DEFAULT_ENV_ID = "trackenv/Tamping-v0"
+DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
+DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
+# training env i starts with seed DEFAULT_TRAIN_SEED + i: apart from the test (0-199), tuning (1000-1099) and
+# evaluation (10000-10015) seeds, so that no held-out episode is ever trained on
+DEFAULT_TRAIN_SEED = 20_000
+STATS_SUFFIX = "_obs_stats.json"
+
+# keys of the flat hyper-parameters that go to the algorithm's constructor (the rest configure train() itself)
+_ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
+              "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
+_TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
+               "eval_freq", "checkpoint_every", "initial_tamp_logit", "warm_start_rule", "warm_start_episodes",
+               "warm_start_epochs", "warm_start_label_smoothing", "warm_start_params",
+               "bootstrap_at_horizon")
+
+
+@dataclass(frozen=True)
+class ZooSchema:
+    """What one trainer reads from an RL Zoo entry: the ``policy`` it builds (and why that one), the
+    ``policy_kwargs`` it honours (flattened into the hyper-parameters), whether it trains under VecNormalize
+    (``normalize``) and every flat key it reads (``keys``; others raise ValueError)."""
+
+    policy: str
+    policy_note: str
+    policy_keys: tuple[str, ...]
+    normalize: bool
+    keys: tuple[str, ...]
+
+
+#: the schema of :func:`train` (Tamping-v0); TampingLine's is ``trackenv_agents.learning.line.LINE_ZOO``
+TAMPING_ZOO = ZooSchema("MultiInputPolicy", "the observation is a Dict", ("net_arch",), True, _ALGO_KEYS + _TRAIN_KEYS)
+
+
+def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID,
+                     schema: ZooSchema = TAMPING_ZOO) -> dict[str, Any]:
+    """The flat hyper-parameters that a trainer (:func:`train`, or the line's with its ``schema``) reads, from
+    ``path`` (default ``agents/learning/hyperparams/ppo.yml``): a YAML file in RL Zoo's form (its entry for ``env_id``,
+    see :func:`from_zoo`) or a flat JSON object of the same keys. Unknown keys raise ValueError."""
+    path = Path(path) if path is not None else DEFAULT_HYPERPARAMS
+    if path.suffix in (".yml", ".yaml"):
+        import yaml
+
+        table = yaml.safe_load(path.read_text()) or {}
+        if env_id not in table:
+            raise ValueError(f"{path} has no entry for env id {env_id!r} (it has {sorted(table)})")
+        hp = from_zoo(table[env_id], schema)
+    else:
+        hp = json.loads(path.read_text())
+    unknown = set(hp) - set(schema.keys)
+    if unknown:
+        raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
+    return hp
+
+
+def from_zoo(entry: dict[str, Any], schema: ZooSchema = TAMPING_ZOO) -> dict[str, Any]:
+    """One RL Zoo entry as flat hyper-parameters: the algorithm's arguments as they are; Zoo's ``n_timesteps``
+    → ``total_timesteps``, ``policy_kwargs`` (those of ``schema.policy_keys``, e.g. ``net_arch``) as they are,
+    ``normalize.clip_obs`` → ``clip_obs``, ``n_envs`` as is; the ``trackenv`` block's training options merged
+    in. What the trainer cannot honour (another policy class, other policy_kwargs, training without
+    normalisation under VecNormalize's schema, with it under the line's) raises ValueError."""
+    e = dict(entry)
+    hp = dict(e.pop("trackenv", None) or {})
+    policy = e.pop("policy", schema.policy)
+    if policy != schema.policy:
+        raise ValueError(f"policy must be {schema.policy} ({schema.policy_note}), got {policy!r}")
+    kwargs = dict(e.pop("policy_kwargs", None) or {})
+    unsupported = sorted(set(kwargs) - set(schema.policy_keys))
+    if unsupported:
+        raise ValueError(f"unsupported policy_kwargs {unsupported} (only {', '.join(schema.policy_keys)})")
+    hp.update({k: list(v) if k == "net_arch" else v for k, v in kwargs.items()})
+    if "n_timesteps" in e:
+        hp["total_timesteps"] = int(e.pop("n_timesteps"))
+    norm = e.pop("normalize", None)
+    if norm is not None and schema.normalize:
+        norm = dict(norm) if isinstance(norm, dict) else {"norm_obs": bool(norm), "norm_reward": bool(norm)}
+        if not (norm.pop("norm_obs", True) and norm.pop("norm_reward", True)):
+            raise ValueError("train() always normalises observations and rewards (VecNormalize)")
+        if "clip_obs" in norm:
+            hp["clip_obs"] = float(norm.pop("clip_obs"))
+        if norm:
+            raise ValueError(f"unsupported normalize keys {sorted(norm)}")
+    elif norm is not None and (any(dict(norm).values()) if isinstance(norm, dict) else bool(norm)):
+        raise ValueError(f"normalize must be false for {schema.policy}: it normalises with fixed scales of its own")
+    hp.update(e)
+    return hp
+
+
+def single_torch_thread() -> None:
+    """One thread for torch, the cores for the physics. Numba's OpenMP threading layer sets the process's
+    OpenMP thread count when it starts (at the first parallel physics call), and torch reads that same count:
+    so numba's threads are started first, then torch's count is set. The other order left torch on 2 threads
+    competing with numba's, and every small torch op ~50x slower after the first env step (measured: a
+    behaviour-cloning fit took 630 s instead of 15 s)."""
+    import numba
+    import torch
+
+    numba.get_num_threads()  # starts numba's threading layer
+    torch.set_num_threads(1)
+
+
+def _algo_class(algo: str):
+    if algo == "ppo":
+        from stable_baselines3 import PPO
+
+        return PPO
+    if algo == "maskable_ppo":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    raise ValueError(f"algo must be 'ppo' or 'maskable_ppo', got {algo!r}")
+
+
+# --- policies on raw observations ---
+class NormalizedPolicy:
+    """An SB3 model plus frozen VecNormalize observation statistics: ``predict`` on raw env observations
+    (one observation dict, or a batched one), the interface of SB3's ``model.predict``.
+
+    A model trained in the ``ranked`` parameterisation (:mod:`agents.actions`) answers with the env's
+    MultiBinary actions (its count of worst sections translated on the observation's SD)."""
+
+    def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
+                 epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo",
+                 action_type: str = "multibinary") -> None:
+        self.model = model
+        self.obs_keys = list(obs_keys)
+        self.mean = {k: np.asarray(mean[k], dtype=np.float64) for k in self.obs_keys}
+        self.var = {k: np.asarray(var[k], dtype=np.float64) for k in self.obs_keys}
+        self.clip_obs = float(clip_obs)
+        self.epsilon = float(epsilon)
+        self.name = name
+        self.algo = algo
+        self.action_type = action_type
+
+    @classmethod
+    def from_vecnormalize(cls, model, vecnorm, obs_keys: Sequence[str], **kw) -> NormalizedPolicy:
+        rms = vecnorm.obs_rms
+        return cls(model, obs_keys, {k: rms[k].mean.copy() for k in obs_keys},
+                   {k: rms[k].var.copy() for k in obs_keys}, clip_obs=vecnorm.clip_obs,
+                   epsilon=vecnorm.epsilon, **kw)
+
+    def normalize(self, obs: dict) -> dict:
+        obs = filter_observation(obs, self.obs_keys)
+        return {k: np.clip((np.asarray(obs[k], dtype=np.float64) - self.mean[k]) / np.sqrt(self.var[k]
+                                                                                           + self.epsilon),
+                           -self.clip_obs, self.clip_obs).astype(np.float32) for k in self.obs_keys}
+
+    def predict(self, observation: dict, state=None, episode_start=None, deterministic: bool = True,
+                action_masks: np.ndarray | None = None):
+        kw = {} if action_masks is None or self.algo != "maskable_ppo" else {"action_masks": action_masks}
+        action, state = self.model.predict(self.normalize(observation), state=state, episode_start=episode_start,
+                                           deterministic=deterministic, **kw)
+        if self.action_type == RANKED:
+            action = ranked_to_sections(action, observation["section_sd"])
+        return action, state
+
+    def stats_dict(self) -> dict:
+        return {"obs_keys": self.obs_keys, "mean": {k: v.tolist() for k, v in self.mean.items()},
+                "var": {k: v.tolist() for k, v in self.var.items()}, "clip_obs": self.clip_obs,
+                "epsilon": self.epsilon, "algo": self.algo, "action_type": self.action_type}
+
+
+# --- callbacks ---
+def make_progress_callback(desc: str, unit: str = "step"):
+    """A progress bar over the timesteps of one ``model.learn`` call (tqdm, a dependency of the library), for
+    ``callback=``. stable-baselines3's own (``progress_bar=True``) needs ``rich`` as well, which the ``rl`` extra
+    does not install: ``trackenv train`` without ``--json`` raised ImportError."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm.auto import tqdm
+
+    class TqdmProgress(BaseCallback):
+        """Advances by the vector env's width at every step; closed at the end of training."""
+
+        def _on_training_start(self) -> None:
+            # on-policy algorithms collect whole rollouts: the run ends at the first multiple of one past the total
+            rollout = getattr(self.model, "n_steps", 1) * self.training_env.num_envs
+            remaining = self.locals["total_timesteps"] - self.model.num_timesteps
+            self.bar = tqdm(total=-(-remaining // rollout) * rollout, desc=desc, unit=unit)
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TqdmProgress()
+
+
+def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_policy: Callable, save_policy: Callable,
+                        action_type: str, verbose: int, evaluate_at_start: bool = False, on_evaluation=None,
+                        baseline: Any = None):
+    """The held-out evaluation during training. ``make_policy(model)``: the policy to score, with ``predict``
+    on raw observations; ``save_policy(model, policy, path)`` keeps the best one. ``baseline``: an
+    :class:`~trackenv_agents.evaluation.harness.EvaluationResult` on the same seeds (e.g. the rule the learner was
+    cloned from): each evaluation then records the paired difference of the costs (common random numbers)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from ..evaluation.statistics import paired_difference
+
+    class HeldOutEvalCallback(BaseCallback):
+        """Every ``eval_freq`` timesteps (and at the end): deterministic returns on held-out seeds with the
+        current policy (and, Tamping-v0, its VecNormalize statistics); logs ``eval/mean_return`` (and
+        ``eval/vs_baseline`` with a baseline), keeps ``best_model.zip``."""
+
+        def __init__(self):
+            super().__init__(verbose)
+            self.last_eval = 0
+            self.best = -np.inf
+            self.history: list[dict] = []
+
+        def _evaluate(self) -> None:
+            self.last_eval = self.num_timesteps
+            policy = make_policy(self.model)
+            t0 = time.time()
+            result = evaluate_one(policy, config, eval_seeds, env_action_type(action_type),
+                                  batch_size=len(eval_seeds))
+            ret = result.sum_rewards
+            rec: dict[str, Any] = {"timesteps": int(self.num_timesteps), "mean_return": float(ret.mean()),
+                                   "std_return": float(ret.std()), "eval_seconds": time.time() - t0}
+            if baseline is not None:
+                rec["vs_baseline"] = paired_difference(result, baseline)
+            self.history.append(rec)
+            if on_evaluation is not None:  # e.g. a Ray Tune report (experiments/tune_ppo.py)
+                on_evaluation(rec)
+            self.logger.record("eval/mean_return", rec["mean_return"])
+            self.logger.record("eval/std_return", rec["std_return"])
+            if baseline is not None:  # < 0: cheaper than the baseline on the same episodes
+                self.logger.record("eval/vs_baseline", rec["vs_baseline"]["mean_difference"])
+            if verbose:
+                print(f"[eval] {rec}", flush=True)
+            (out_dir / "evaluations.json").write_text(json.dumps(self.history, indent=1))
+            if rec["mean_return"] > self.best:
+                self.best = rec["mean_return"]
+                save_policy(self.model, policy, out_dir / "best_model.zip")
+
+        def _on_training_start(self) -> None:
+            if evaluate_at_start:  # the warm-started policy is a candidate like every later one
+                self._evaluate()
+
+        def _on_step(self) -> bool:
+            if eval_freq and self.num_timesteps - self.last_eval >= eval_freq:
+                self._evaluate()
+            return True
+
+        def _on_training_end(self) -> None:
+            if self.num_timesteps != self.last_eval:
+                self._evaluate()
+
+    return HeldOutEvalCallback()
+
+
+def _save_policy(model, policy: NormalizedPolicy, zip_path: Path, extra: dict | None = None) -> Path:
+    zip_path = Path(zip_path)
+    model.save(zip_path)
+    stats = {**policy.stats_dict(), **(extra or {})}
+    stats_path(zip_path).write_text(json.dumps(stats))
+    return zip_path
+
+
+def stats_path(zip_path: str | Path) -> Path:
+    """Where the observation statistics of the model ``zip_path`` live (``<stem>_obs_stats.json``)."""
+    zip_path = Path(zip_path)
+    return zip_path.with_name(zip_path.stem + STATS_SUFFIX)
+
+
+# --- training ---
+def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
+          total_timesteps: int | None = None, n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED,
+          out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
+          progress: bool = True,
+          eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
+          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
+          on_evaluation: Callable[[dict], None] | None = None, workers: int = 1) -> Path:
+    """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
+
+    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
+    overriding ``agents/learning/hyperparams/ppo.yml`` key by key. Explicit
+    arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
+    or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
+    (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
+    ``workers`` > 1 steps the training envs in that many processes (the same episodes; see
+    :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+
+    ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
+    are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
+    ``seed`` so that the continued run sees new episodes. The algorithm's own hyper-parameters (learning rate,
+    n_steps, ...) are those saved with the model; ``hyperparams`` then only changes train()'s keys.
+    """
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    hp = load_hyperparams()
+    if resume is not None:
+        resume = Path(resume)
+        if not (resume / "model.zip").exists() or not (resume / "vecnormalize.pkl").exists():
+            raise FileNotFoundError(f"resume: no model.zip and vecnormalize.pkl in {resume}")
+        earlier = json.loads((resume / "train_meta.json").read_text())
+        hp.update(earlier["hyperparams"])
+        if config is None:
+            config = earlier["config"]
+    if isinstance(hyperparams, (str, Path)):
+        hyperparams = load_hyperparams(hyperparams)
+    hp.update(hyperparams or {})
+    algo = algo or hp.get("algo", "ppo")
+    n_envs = int(n_envs or hp.get("n_envs", 8))
+    total_timesteps = int(total_timesteps or hp.get("total_timesteps", 8000))
+    if checkpoint_every is None:
+        checkpoint_every = hp.get("checkpoint_every", 0)
+    checkpoint_every = int(checkpoint_every)
+    eval_freq = int(eval_freq if eval_freq is not None else hp.get("eval_freq", 0))
+    action_type = hp.get("action_type", "multibinary")
+    keep = bool(hp.get("keep_per_sleeper", True))
+    config = TampingEnvConfig.coerce(config)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    AlgoClass = _algo_class(algo)
+
+    single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
+    set_random_seed(seed)
+    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
+                           bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)), workers=workers)
+    if resume is not None:
+        env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
+        env.training = True
+        model = AlgoClass.load(str(resume / "model.zip"), env=env, device="cpu", tensorboard_log=str(out_dir),
+                               verbose=verbose)
+        model.set_random_seed(seed)
+    else:
+        env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True,
+                           clip_obs=float(hp.get("clip_obs", 10.0)), gamma=float(hp.get("gamma", 0.99)))
+        algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
+        policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
+        model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
+                          policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
+        if "initial_tamp_logit" in hp:
+            _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
+    warm = None
+    if resume is None and hp.get("warm_start_rule"):
+        from .imitation import warm_start
+
+        t_warm = time.time()
+        warm = warm_start(model, env, config, action_type, hp["warm_start_rule"],
+                          n_episodes=int(hp.get("warm_start_episodes", 64)),
+                          epochs=int(hp.get("warm_start_epochs", 300)), gamma=float(hp.get("gamma", 0.99)),
+                          label_smoothing=float(hp.get("warm_start_label_smoothing", 0.02)),
+                          params=hp.get("warm_start_params"), seed=seed)
+        warm["wall_seconds"] = time.time() - t_warm
+        if verbose:
+            print(f"[warm start] {warm}", flush=True)
+
+    callbacks = []
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // n_envs, 1),
+                                            save_path=str(out_dir / "checkpoints"), name_prefix="model",
+                                            save_vecnormalize=True))
+    eval_cb = None
+    if eval_seeds and eval_freq > 0:
+        def make_policy(model) -> NormalizedPolicy:
+            return NormalizedPolicy.from_vecnormalize(model, model.get_vec_normalize_env(), raw.obs_keys,
+                                                      algo=algo, action_type=action_type)
+
+        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, make_policy, _save_policy,
+                                      action_type, verbose, evaluate_at_start=warm is not None,
+                                      on_evaluation=on_evaluation)
+        callbacks.append(eval_cb)
+    meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
+            "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),
+            "resumed_from": str(resume) if resume is not None else None, "warm_start": warm}
+    (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
+
+    t0 = time.time()
+    start_steps = int(model.num_timesteps)
+    if progress:
+        callbacks.append(make_progress_callback(f"train {algo}"))
+    model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), tb_log_name=algo,
+                reset_num_timesteps=resume is None)
+    wall = time.time() - t0
+    env.save(str(out_dir / "vecnormalize.pkl"))
+    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo, action_type=action_type)
+    path = _save_policy(model, policy, out_dir / "model.zip",
+                        {"action_type": action_type, "config": config.to_dict()})
+    summary = {"timesteps": int(model.num_timesteps), "timesteps_this_run": int(model.num_timesteps) - start_steps,
+               "wall_seconds": wall,
+               "steps_per_second": (model.num_timesteps - start_steps) / max(wall, 1e-9),
+               "warm_start": warm, "evaluations": eval_cb.history if eval_cb is not None else []}
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
+    env.close()
+    return path
+
+
+def _set_initial_tamp_logit(model, logit: float, action_type: str) -> None:
+    """Start from a policy that rarely tamps: the action head's bias sets the initial log-odds of tamping a
+    section (MultiBinary) or of choosing any section over "nothing" (Discrete). A random policy that tamps
+    half the sections every quarter is ruinous, and exploring from there wastes most of a small budget."""
+    import torch
+
+    with torch.no_grad():
+        bias = model.policy.action_net.bias
+        if action_type in ("discrete", RANKED):
+            bias.zero_()
+            bias[0] = -logit
+        else:
+            bias.fill_(logit)
+
+
+def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED,
+                  sidecar: Callable[[str | Path], Path] | None = None) -> Path:
+    """Copy a trained ``model.zip`` and the file beside it that it needs (``sidecar(path)``; default its
+    observation statistics, :func:`stats_path`) to ``dest`` (default the shipped path)."""
+    side = sidecar or stats_path
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(model_zip, dest)
+    shutil.copyfile(side(model_zip), side(dest))
+    return dest
+
+
+def load_trained(path: str | Path | None = None, name: str = "ppo") -> NormalizedPolicy:
+    """The trained policy at ``path`` (default ``agents/learning/pretrained/ppo_tamping.zip``) with its observation
+    statistics (``<stem>_obs_stats.json`` beside it): ``predict(obs, state=None, episode_start=None,
+    deterministic=True)`` on raw env observations (single or batched dict)."""
+    path = Path(path) if path is not None else DEFAULT_PRETRAINED
+    if not path.exists():
+        raise FileNotFoundError(f"no trained model at {path}")
+    stats = json.loads(stats_path(path).read_text())
+    algo = stats.get("algo", "ppo")
+    model = _algo_class(algo).load(str(path), device="cpu")
+    return NormalizedPolicy(model, stats["obs_keys"], stats["mean"], stats["var"], stats["clip_obs"],
+                            stats["epsilon"], name=name, algo=algo,
+                            action_type=stats.get("action_type", "multibinary"))

@@ -1,0 +1,149 @@
+"""The evaluation harness on a tiny config (30 m, 3 sections, 2 years = 8 steps)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from trackenv.envs.tamping import TampingEnv
+from trackenv_agents.evaluation.harness import EvaluationResult, evaluate_many, evaluate_one
+from trackenv_agents.evaluation.reporting import format_markdown, format_table
+from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.evaluation.tamping_compare import compare
+from trackenv_agents.evaluation.tuning import tune, tune_many
+from trackenv_agents.rules.tamping import NoMaintenance, Periodic, SDThreshold
+
+SEEDS = [0, 1, 2, 3]
+
+
+@pytest.fixture(scope="module")
+def results(small_config) -> dict[str, EvaluationResult]:
+    """NoMaintenance and SDThreshold on SEEDS, in one batched run (chunks of 3 to exercise the chunking)."""
+    no, sd = evaluate_many([NoMaintenance(), SDThreshold(0.8)], small_config, SEEDS, batch_size=3)
+    return {"no": no, "sd": sd}
+
+
+@pytest.mark.slow
+def test_cost_is_minus_sum_of_rewards(results):
+    for r in results.values():
+        np.testing.assert_allclose(r.cost, -r.sum_rewards, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(r.cost, sum(r.cost_parts.values()))
+        assert r.n_episodes == len(SEEDS)
+        np.testing.assert_array_equal(r.seeds, SEEDS)
+
+
+@pytest.mark.slow
+def test_same_seeds_identical_results_whatever_the_batching(results, small_config):
+    again = evaluate_one(SDThreshold(0.8), small_config, SEEDS, batch_size=4)
+    first = results["sd"]
+    np.testing.assert_array_equal(again.cost, first.cost)
+    np.testing.assert_array_equal(again.section_tampings, first.section_tampings)
+    np.testing.assert_array_equal(again.final_mean_sd_mm, first.final_mean_sd_mm)
+    assert again.summary() == first.summary()
+
+
+@pytest.mark.slow
+def test_matches_single_env_rollout(results, small_config):
+    """The harness's episode for seed 2 is the one TampingEnv.reset(seed=2) plays."""
+    env = TampingEnv(small_config)
+    policy = SDThreshold(0.8)
+    obs, _ = env.reset(seed=2)
+    total, tamped = 0.0, 0
+    for _ in range(small_config.horizon_steps):
+        obs, r, term, trunc, info = env.step(policy.predict(obs)[0])
+        total -= r
+        tamped += int(info["tamped_sections"].sum())
+    assert trunc and not term
+    i = SEEDS.index(2)
+    np.testing.assert_allclose(results["sd"].cost[i], total, rtol=1e-9)
+    assert results["sd"].section_tampings[i] == tamped
+
+
+@pytest.mark.slow  # uses the 5 s fixture
+def test_no_maintenance_has_zero_tampings(results):
+    s = results["no"].summary()
+    assert s["tampings_per_km_year"] == 0.0 and s["section_tampings"] == 0.0
+    assert results["no"].cost_parts["tamping"].sum() == 0.0
+    assert results["sd"].section_tampings.sum() > 0  # a low threshold does tamp
+
+
+@pytest.mark.slow  # uses the 5 s fixture
+def test_summary_fields_and_ci(results, small_config):
+    s = results["sd"].summary()
+    for key in ("policy", "params", "n_episodes", "mean_cost", "ci_low", "ci_high", "tampings_per_km_year",
+                "immediate_action_exceedances", "immediate_action_exceedances_mean", "mean_final_sd_mm"):
+        assert key in s
+    assert s["policy"] == "sd_threshold" and s["params"] == {"threshold_mm": 0.8}
+    assert s["ci_low"] <= s["mean_cost"] <= s["ci_high"]
+    r = results["sd"]
+    expected = r.section_tampings.mean() / (small_config.n_sections * small_config.horizon_years)
+    assert s["tampings_per_km_year"] == pytest.approx(expected)
+    json.dumps(s)  # JSON-friendly
+
+
+def test_bootstrap_ci_contains_mean_and_is_reproducible():
+    x = np.random.default_rng(5).normal(10, 2, 50)
+    lo, hi = bootstrap_ci(x)
+    assert lo < x.mean() < hi
+    assert (lo, hi) == bootstrap_ci(x)
+    assert bootstrap_ci(np.full(4, 3.0)) == (3.0, 3.0)
+
+
+@pytest.mark.slow  # uses the 5 s fixture
+def test_paired_difference(results):
+    d = paired_difference(results["sd"], results["no"])
+    np.testing.assert_allclose(d["mean_difference"], results["sd"].cost.mean() - results["no"].cost.mean())
+    assert d["ci_low"] <= d["mean_difference"] <= d["ci_high"]
+    assert d["n_episodes"] == len(SEEDS)
+    z = paired_difference(results["no"], results["no"])
+    assert z["mean_difference"] == z["ci_low"] == z["ci_high"] == 0.0
+
+
+@pytest.mark.slow  # uses the 5 s fixture
+def test_tables(results):
+    rows = [r.summary() for r in results.values()]
+    txt = format_table(rows)
+    assert "sd_threshold" in txt and "threshold_mm=0.8" in txt and len(txt.splitlines()) == 4
+    md = format_markdown(rows)
+    assert md.startswith("| policy") and len(md.splitlines()) == 4
+
+
+@pytest.mark.slow
+def test_tune_returns_grid_member(small_config):
+    grid = [{"threshold_mm": 0.8}, {"threshold_mm": 50.0}]
+    out = tune(SDThreshold, small_config, train_seeds=[10, 11], grid=grid)
+    assert out["best_params"] in grid
+    assert [row["mean_cost"] for row in out["table"]] == sorted(row["mean_cost"] for row in out["table"])
+    assert out["best_mean_cost"] == out["table"][0]["mean_cost"]
+
+
+@pytest.mark.slow
+def test_tune_many_keeps_per_episode_costs(small_config):
+    out = tune_many([SDThreshold], small_config, [10, 11], batch_size=4, progress=False)
+    table = out[0]["table"]
+    assert len(table) == len(SDThreshold.param_grid())
+    for row in table:
+        assert len(row["episode_costs"]) == 2
+        assert np.mean(row["episode_costs"]) == pytest.approx(row["mean_cost"])
+
+
+@pytest.mark.slow
+def test_compare_sorted_and_tunes(monkeypatch, small_config):
+    monkeypatch.setattr(Periodic, "param_grid", classmethod(lambda cls: [{"interval_years": 1.0},
+                                                                         {"interval_years": 0.5}]))
+    rows = compare([NoMaintenance, Periodic, SDThreshold(0.8)], small_config, test_seeds=[0, 1], train_seeds=[10])
+    costs = [r["mean_cost"] for r in rows]
+    assert costs == sorted(costs)
+    assert {r["policy"] for r in rows} == {"no_maintenance", "periodic", "sd_threshold"}
+    periodic = next(r for r in rows if r["policy"] == "periodic")
+    assert periodic["params"]["interval_years"] in (1.0, 0.5)
+
+
+def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
+    from trackenv_agents import evaluation
+
+    with pytest.warns(DeprecationWarning, match="evaluate_one"):
+        old = evaluation.evaluate_policy(SDThreshold(0.8), small_config, SEEDS[:1])
+    np.testing.assert_array_equal(old.cost, evaluate_one(SDThreshold(0.8), small_config, SEEDS[:1]).cost)

@@ -1,0 +1,136 @@
+"""Training on TampingLine: hyper-parameters, saving and loading, and a learning smoke test of the counterfactual
+policy iteration (and MaskablePPO on the sections as agents)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("sb3_contrib")
+
+from trackenv.envs.line import TampingLine  # noqa: E402
+from trackenv.envs.line_config import scenario  # noqa: E402
+from trackenv_agents.learning.line import (  # noqa: E402
+    DEFAULT_LINE_PRETRAINED,
+    LINE_ENV_ID,
+    LINE_ZOO,
+    _save_line_policy,
+    line_meta_path,
+    load_line_trained,
+    train_line,
+)
+from trackenv_agents.learning.tamping import from_zoo, load_hyperparams  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def fast_line():
+    """The small line (6 sections) over 2 years (8 steps) on 12 m segments (21 sleepers, ~3x faster physics):
+    for tests of the learner, not of the line's calibration."""
+    return scenario("small", horizon_years=2.0, segment_length_m=12.0)
+
+
+def test_line_hyperparams_entry_and_its_schema(tmp_path):
+    hp = load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO)
+    assert hp["algo"] == "maskable_ppo" and hp["advisor"] == "grouped-threshold" and hp["iterations"] >= 1
+    assert hp["net_arch"] == [64, 64] and "clip_obs" not in hp
+    with pytest.raises(ValueError, match="normalize"):
+        from_zoo({"policy": "MlpPolicy", "normalize": True}, LINE_ZOO)
+    with pytest.raises(ValueError, match="policy_kwargs"):
+        from_zoo({"policy": "MlpPolicy", "policy_kwargs": {"activation_fn": "relu"}}, LINE_ZOO)
+    with pytest.raises(ValueError, match="policy must be MlpPolicy"):
+        from_zoo({"policy": "MultiInputPolicy"}, LINE_ZOO)
+    with pytest.raises(ValueError, match="clip_obs"):
+        train_line("small", hyperparams={"clip_obs": 5.0}, out_dir=tmp_path, progress=False, verbose=0)
+    for key, value in (("reward_scale", 0.0), ("iterations", -1), ("focus_rate", 1.5), ("fit_margin", -1.0)):
+        with pytest.raises(ValueError, match=key):
+            train_line("small", hyperparams={key: value}, out_dir=tmp_path, progress=False, verbose=0)
+
+
+def test_saved_policy_loads_with_its_advisor_and_acts_the_same(tmp_path, fast_line):
+    from sb3_contrib import MaskablePPO
+
+    from trackenv_agents.learning.imitation import teacher_policy
+    from trackenv_agents.learning.line import _feature_names
+    from trackenv_agents.learning.line_policy import LineAgent
+    from trackenv_agents.learning.sb3_vec import SectionAgentsVecEnv
+
+    rule = teacher_policy("grouped-threshold", fast_line)
+    model = MaskablePPO("MlpPolicy", SectionAgentsVecEnv(1, fast_line, advisor=rule), seed=0, device="cpu")
+    meta = {"features": _feature_names(True), "advisor": rule.name, "advisor_params": rule.params}
+    path = _save_line_policy(model, tmp_path / "line.zip", meta)
+    assert json.loads(line_meta_path(path).read_text())["algo"] == "maskable_ppo"
+    assert path.stat().st_size < 128 * 1024  # ships in the repository
+    loaded = load_line_trained(path)
+    assert loaded.advisor.params == rule.params
+    default = scenario("default")
+    obs, _ = TampingLine(default).reset(seed=5)  # any line length
+    batched = {k: v[None] for k, v in obs.items()}
+    np.testing.assert_allclose(loaded.bind(default).tamp_probability(batched),
+                               LineAgent(model.policy, advisor=rule).bind(default).tamp_probability(batched), rtol=1e-6)
+    meta["features"] = meta["features"][:-1]
+    line_meta_path(path).write_text(json.dumps({"algo": "maskable_ppo", **meta}))
+    with pytest.raises(ValueError, match="features"):
+        load_line_trained(path)
+    with pytest.raises(FileNotFoundError, match="no trained line policy"):
+        load_line_trained(tmp_path / "missing.zip")
+
+
+@pytest.mark.slow
+def test_policy_iteration_improves_over_its_start(tmp_path, fast_line):
+    """The advisor, and so the first policy, is a bad rule: tamp every section whenever allowed (a section
+    threshold of 0 mm), with tamping at 10 k€ a section. One iteration of counterfactual forks finds that most
+    of those tampings cost more than they save: the learnt policy's cost on held-out episodes falls below half
+    the rule's, paired on the same episodes. Then a few MaskablePPO updates on the section agents run from it,
+    with the same evaluation."""
+    cfg = fast_line.replace(tamping_cost_per_m=0.05)
+    hp = {"advisor": "section-threshold", "advisor_params": {"threshold_mm": 0.0}, "episodes_per_iteration": 6,
+          "fit_epochs": 30, "net_arch": [32, 32], "n_steps": 8, "batch_size": 48, "n_epochs": 1, "eval_freq": 16}
+    path = train_line(cfg, iterations=1, total_timesteps=16, n_envs=1, seed=20_000, out_dir=tmp_path / "run",
+                      hyperparams=hp, progress=True, eval_seeds=list(range(100, 106)), verbose=0)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    (it,) = summary["iterations"]
+    start, learnt = summary["baseline"]["mean_cost"], it["evaluation"]["mean_cost"]
+    assert it["samples"] > 20 and it["other_choice_cheaper"] > 0.3
+    assert learnt < 0.5 * start, (start, learnt)
+    assert it["evaluation"]["vs_baseline"]["ci_high"] < 0
+    assert summary["line_steps_per_second"] > 0 and summary["ppo"]["line_steps"] == 16
+    assert summary["ppo"]["evaluations"] and (tmp_path / "run" / "best_model.zip").exists()
+    assert (tmp_path / "run" / "checkpoints" / "iteration_0.zip").exists()
+    assert list((tmp_path / "run" / "policy_iteration").glob("events.out.tfevents*"))  # TensorBoard
+    agent = load_line_trained(path).bind(cfg)
+    obs, _ = TampingLine(cfg).reset(seed=7)
+    assert agent.predict(obs)[0].shape == (6,)
+
+
+def test_cli_scores_the_given_line_policy_and_skips_a_missing_shipped_one(tmp_path, monkeypatch):
+    import argparse
+
+    import trackenv_agents.cli as cli
+
+    assert cli.LINE_PRETRAINED_FILE == DEFAULT_LINE_PRETRAINED
+    monkeypatch.setattr(cli, "LINE_PRETRAINED_FILE", tmp_path / "none.zip")
+    args = argparse.Namespace(policy="all", model=None)
+    assert cli._line_policies(args) == {}
+    with pytest.raises(cli.UsageError, match="no trained line policy"):
+        cli._line_policies(argparse.Namespace(policy="ppo", model=None))
+    assert cli._line_policies(argparse.Namespace(policy="heuristics", model="whatever.zip")) == {}
+
+
+@pytest.mark.parametrize("name", ["small", "default", "hard"])
+def test_shipped_line_policy_loads_and_acts_within_the_lines_rules(name):
+    """The shipped policy (one network for every section) runs on every scenario: its actions are one 0/1 per
+    section, within the campaign's capacity, never on a section the env masks."""
+    assert DEFAULT_LINE_PRETRAINED.exists()
+    cfg = scenario(name)
+    agent = load_line_trained().bind(cfg)
+    assert agent.advisor is not None and agent.advisor.name == "grouped-threshold"
+    env = TampingLine(cfg)
+    obs, _ = env.reset(seed=3)
+    for _ in range(3):
+        action, _ = agent.predict(obs)
+        assert action.shape == (cfg.n_sections,) and set(np.unique(action)) <= {0, 1}
+        assert action.sum() <= cfg.capacity and not (action.astype(bool) & ~env.action_masks()[1::2]).any()
+        obs, _, _, _, info = env.step(action)
+        assert not info["clipped"]

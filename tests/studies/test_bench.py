@@ -1,0 +1,55 @@
+"""The benchmark harness's stage profile: shares that add up, stages that are really timed, nothing left wrapped."""
+
+import time
+
+import gymnasium
+import numpy as np
+
+import trackenv.degradation
+import trackenv.envs  # noqa: F401  (registers the environments)
+import trackenv.physics._kernel
+from trackenv_studies.bench import PROFILE_LABELS, _StageTimer, format_profile
+
+
+def test_stage_timer_profiles_env_steps_and_restores_the_functions():
+    before = (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step)
+    env = gymnasium.make("trackenv/Tamping-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    with _StageTimer() as timer:
+        t0 = time.perf_counter()
+        for _ in range(2):
+            env.step(env.action_space.sample())
+        wall = time.perf_counter() - t0
+    after = (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step)
+    assert after == before  # unwrapped on exit
+    for stage in ("kernel", "passes", "settlement", "quality"):
+        assert timer.seconds.get(stage, 0.0) > 0.0, stage
+    assert timer.seconds["passes"] >= timer.seconds["kernel"]  # the kernel runs inside the passes
+    shares = timer.profile(wall)
+    assert set(shares) == {key for key, _ in PROFILE_LABELS}
+    assert all(v >= 0.0 for v in shares.values())
+    assert np.isclose(sum(shares.values()), 1.0)  # the stages are disjoint and "other" is the rest
+
+
+def test_format_profile_is_a_markdown_table_of_every_env_benchmark():
+    share = {"kernel": 0.5, "pass_setup": 0.1, "settlement": 0.2, "quality": 0.05, "other": 0.15}
+    ok = {"status": "ok", "profile": share}
+    d = {"env": ok, "vector_env": {"8": ok, "32": {"status": "unavailable", "reason": "x"}}, "line_env": ok,
+         "line_vector_env": {}}
+    table = format_profile(d).splitlines()
+    assert table[0] == "| share of the step | Tamping-v0, 1 env | Tamping-v0, 8 envs | TampingLine-v0, 1 line |"
+    assert table[2] == "| kernel | 50 % | 50 % | 50 % |"
+    assert len(table) == 2 + len(PROFILE_LABELS)
+
+
+def test_batch_gains_compare_the_largest_batch_with_single_passes():
+    """``batch_gain`` divides the largest batch's passes/s on the default threads by the single pass's,
+    ``lockstep_gain`` the same on one thread; both from the timings the benchmark reports."""
+    from trackenv_studies.bench import _bench_batches
+
+    out = _bench_batches(1, sizes=(1, 2))
+    one, two = out["rows"]["1"], out["rows"]["2"]
+    assert out["batch_gain"] == two["all_threads"]["passes_per_s"] / one["all_threads"]["passes_per_s"]
+    assert out["lockstep_gain"] == two["one_thread"]["passes_per_s"] / one["one_thread"]["passes_per_s"]
+    assert out["batch_gain"] > 0.0 and out["lockstep_gain"] > 0.0
