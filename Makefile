@@ -9,7 +9,7 @@ $(BIN)/trackenv: pyproject.toml constraints.txt
 	$(BIN)/pip install -q -c constraints.txt -e ".[dev]"
 	touch $@
 
-.PHONY: setup demo test typecheck lint bench validate clean
+.PHONY: setup demo test docs typecheck lint bench validate clean
 setup: $(BIN)/trackenv
 
 demo: setup
@@ -23,6 +23,9 @@ test: setup
 	$(BIN)/ruff check trackenv agents tests experiments
 	$(BIN)/mypy  # the library's types, as configured in pyproject.toml ([tool.mypy])
 	$(BIN)/python -m pytest -q
+
+docs: setup  # the documentation site into build/docs; --strict: any warning fails the build
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 typecheck: setup
 	$(BIN)/mypy
