@@ -25,6 +25,9 @@ DEFAULT_TRAIN_SEED = 20_000
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
 # = trackenv_agents.learning.line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
 LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "ppo_tamping_line.zip"
+# the shipped line policy's name in every table: a network over section features, trained by counterfactual policy
+# iteration (its file format is stable-baselines3's, hence "ppo" in the file name)
+LINE_AGENT_NAME = "cpi-agent"
 
 
 class UsageError(Exception):
@@ -120,7 +123,7 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
         return {}
     from .learning.line import load_line_trained
 
-    return {"ppo": load_line_trained(path)}
+    return {LINE_AGENT_NAME: load_line_trained(path, name=LINE_AGENT_NAME)}
 
 
 def _executor(args: argparse.Namespace) -> Any:

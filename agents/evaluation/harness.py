@@ -35,12 +35,8 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from trackenv.envs import line_episode
-from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.episode import COST_KEYS
-from trackenv.envs.line import TampingLineVectorEnv
-from trackenv.envs.line_config import LineConfig
-from trackenv.envs.vector import TampingVectorEnv
+from trackenv.envs.batched import BatchedVectorEnv
+from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
 
@@ -69,7 +65,7 @@ class EvaluationResult:
 
     policy: str
     params: dict[str, Any]
-    config: TampingEnvConfig
+    config: ProblemConfig
     seeds: np.ndarray
     cost: np.ndarray  # life-cycle cost per episode [k€]
     cost_parts: dict[str, np.ndarray]  # per COST_KEYS [k€]
@@ -112,26 +108,13 @@ class EvaluationResult:
         }
 
 
-def _coerce(config: Any) -> TampingEnvConfig | LineConfig:
-    """A Tamping config, or a TampingLine one (a LineConfig or a scenario name such as "default")."""
-    if isinstance(config, (LineConfig, str)):
-        return LineConfig.coerce(config)
-    return TampingEnvConfig.coerce(config)
+def _vector_env(n: int, cfg: Any, action_type: str) -> BatchedVectorEnv:
+    """The native vector env of ``cfg``'s problem, in NEXT_STEP autoreset: no episode is started past the
+    horizon and the last step's info stays in place (every problem follows the same conventions)."""
+    return make_vector_env(cfg, n, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
 
 
-def _cost_keys(cfg: Any) -> tuple[str, ...]:
-    return line_episode.COST_KEYS if isinstance(cfg, LineConfig) else COST_KEYS
-
-
-def _vector_env(n: int, cfg: Any, action_type: str) -> Any:
-    """The native vector env of ``cfg``'s problem (Tamping or TampingLine), in NEXT_STEP autoreset: no episode
-    is started past the horizon and the last step's info stays in place (both follow the same conventions)."""
-    if isinstance(cfg, LineConfig):
-        return TampingLineVectorEnv(n, cfg, autoreset_mode=AutoresetMode.NEXT_STEP)
-    return TampingVectorEnv(n, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
-
-
-def _bound(policy: Any, config: TampingEnvConfig) -> Any:
+def _bound(policy: Any, config: ProblemConfig) -> Any:
     bind = getattr(policy, "bind", None)
     return bind(config) if callable(bind) else policy
 
@@ -140,7 +123,7 @@ def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
     return {k: v[idx] for k, v in obs.items()}
 
 
-def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Sequence[Any],
+def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Sequence[Any],
                action_type: str, record: bool = False, pbar: Any = None) -> dict[str, Any]:
     """Run one episode per slot (policy index, seed) to the horizon; per-env totals (and traces if record)."""
     cfg = env.config
@@ -153,14 +136,14 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
         reset = getattr(policies[p], "reset", None)
         if callable(reset):
             reset()
-    keys = _cost_keys(cfg)
+    keys = type(cfg).cost_keys()
     parts = {k: np.zeros(n) for k in keys}
     rewards = np.zeros(n)
     tampings = np.zeros(n)
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
-    section_cost = np.zeros((n, cfg.n_sections))  # TampingLine: each section's own costs (info["section_costs"])
+    section_cost = np.zeros((n, cfg.n_sections))  # each section's own costs (info["section_costs"])
     register = np.asarray(obs.get("register", np.zeros((n, cfg.n_sections))), dtype=np.int64)
     traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
     if record:
@@ -180,8 +163,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
         tamped[:, t] = info["tamped_sections"]
-        if "section_costs" in info:
-            section_cost += info["section_costs"]
+        section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
         if record:
             traces["section_sd_mm"].append(info["section_sd_mm"])
@@ -200,7 +182,7 @@ def _run_chunk(env: TampingVectorEnv, slots: list[tuple[int, int]], policies: Se
             "traces": traces}
 
 
-def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
+def run_episodes(config: ProblemConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
                  action_type: str = "multibinary") -> dict[str, Any]:
     """One batch: an episode per slot ``(policy index, seed)`` to the horizon in one native vector env
     (NEXT_STEP autoreset: no episode is started past the horizon); per-episode totals as arrays in slot order
@@ -212,7 +194,7 @@ def run_episodes(config: TampingEnvConfig, slots: Sequence[tuple[int, int]], pol
     return out
 
 
-def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | None = None,
+def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | None = None,
                   seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
                   progress: bool = False, desc: str = "evaluate", executor: Any = None) -> list[EvaluationResult]:
     """Evaluate every policy on every seed, all (policy, seed) pairs batched ``batch_size`` at a time.
@@ -220,7 +202,7 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     Results are independent of the batching: each env draws only from its own seed's generator. ``executor``:
     runs the batches (:func:`run_episodes`) through its ``map`` (e.g. on Ray workers); None: here, in turn.
     """
-    cfg = _coerce(config)
+    cfg = problem_config(config)
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must not be empty")
@@ -255,10 +237,10 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
 
     pol_of = np.array([p for p, _ in slots])
     seed_arr = np.array([s for _, s in slots])
-    parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in _cost_keys(cfg)}
+    parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     tamped = cat("tamped")
-    sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")} if isinstance(cfg, LineConfig) else {}
+    sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
     results = []
     for p, pol in enumerate(bound):
         m = pol_of == p
@@ -271,10 +253,10 @@ def evaluate_many(policies: Sequence[Any], config: TampingEnvConfig | dict | Non
     return results
 
 
-def evaluate_one(policy: Any, config: TampingEnvConfig | dict | None = None,
+def evaluate_one(policy: Any, config: ProblemConfig | dict | str | None = None,
                  seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
                  progress: bool = False) -> EvaluationResult:
-    """One policy, one episode per seed through :class:`TampingVectorEnv` (``batch_size`` envs at a time):
+    """One policy, one episode per seed through the problem's native vector env (``batch_size`` envs at a time):
     :func:`evaluate_many` for a single policy. The episode returns are ``.sum_rewards``."""
     return evaluate_many([policy], config, seeds, action_type, batch_size, progress,
                          desc=policy_name(policy))[0]
@@ -290,13 +272,13 @@ def evaluate_policy(*args: Any, **kwargs: Any) -> EvaluationResult:
     return evaluate_one(*args, **kwargs)
 
 
-def record_episode(policy: Any, config: TampingEnvConfig | dict | None = None, seed: int = 0,
+def record_episode(policy: Any, config: ProblemConfig | dict | str | None = None, seed: int = 0,
                    action_type: str = "multibinary") -> dict[str, np.ndarray]:
     """One episode's traces: section SD [mm] (steps+1, n_sections), tamped (steps, n_sections), cost and year
     per step."""
-    cfg = TampingEnvConfig.coerce(config)
+    cfg = problem_config(config)
     pol = _bound(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
-    env = TampingVectorEnv(1, cfg, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
+    env = _vector_env(1, cfg, action_type)
     out = _run_chunk(env, [(0, int(seed))], [pol], action_type, record=True)
     tr = out["traces"]
     return {"section_sd_mm": np.array([x[0] for x in tr["section_sd_mm"]]),

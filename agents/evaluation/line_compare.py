@@ -123,6 +123,26 @@ def class_breakdown(result: Any) -> dict[str, dict[str, float | None]]:
     return out
 
 
+def agent_headline(payload: dict[str, Any], name: str) -> str | None:
+    """One line: the policy ``name`` against the best tuned rule, paired per episode (mean difference, its 95 %
+    CI and the relative change), from a :func:`line_comparison` payload; None where neither of the two is the
+    best policy (the payload's paired differences are taken against the best)."""
+    by = {r["policy"]: r for r in payload["results"]}
+    rule = payload.get("best_rule")
+    if name not in by or rule not in by:
+        return None
+    agent_d, rule_d = by[name]["vs_best"], by[rule]["vs_best"]
+    if agent_d is None and rule_d is not None:  # the agent is the best: the rule's difference, turned round
+        diff, low, high = -rule_d["mean_difference"], -rule_d["ci_high"], -rule_d["ci_low"]
+    elif rule_d is None and agent_d is not None:
+        diff, low, high = agent_d["mean_difference"], agent_d["ci_low"], agent_d["ci_high"]
+    else:
+        return None
+    pct = 100.0 * diff / by[rule]["mean_cost"]
+    return (f"{name} vs the best tuned rule ({rule}), paired over {len(payload['seeds'])} episodes: {diff:+.1f} k€ "
+            f"[{low:+.1f}, {high:+.1f}] per episode, {pct:+.1f} %")
+
+
 def format_line_table(payload: dict[str, Any]) -> str:
     lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
              f"{payload['tuned_from']}",
@@ -146,6 +166,7 @@ def format_line_table(payload: dict[str, Any]) -> str:
             lines.append(f"{r['policy']:22s} " + " ".join(f"{c:>20s}" for c in cells)
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
     lines.append("IA: section-steps at the immediate-action limit, all episodes together")
+    lines += [headline for name in payload.get("extra", []) if (headline := agent_headline(payload, name))]
     if payload.get("episode_plot"):
         lines.append(f"plots: {payload['plot']}, {payload['episode_plot']} (episode {payload['seeds'][0]} under "
                      f"{payload.get('best_rule', 'the best rule')} and any trained policy)")

@@ -126,17 +126,19 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     host, want = np.zeros(N, dtype=int), np.zeros(N, dtype=bool)
     for t in range(H):
         allowed = bt.allowed_rows(t)
+        sd, peak = bt.true_quality()
         for i in range(N):  # parents come before their children
             h = row[i] if row[i] >= 0 else host[parent[i]]
             p = policy[i]
             if isinstance(p, TrueStateRule):
-                w = (bt.sd[h] * 1e3 >= p.sd_mm or bt.peak[h] >= p.peak_fraction * limit) and t < H - p.stop_steps
+                w = (sd[h] * 1e3 >= p.sd_mm or peak[h] >= p.peak_fraction * limit) and t < H - p.stop_steps
             else:
                 w = bool(p[t])
             w = bool(w and allowed[h])
             if row[i] < 0 and w != want[parent[i]]:  # it parts from its parent: fork
                 bt.copy_rows(np.array([free]), bt, np.array([h]))
                 acc[free], sched[free], restr[free], allowed[free] = acc[h], sched[h], restr[h], allowed[h]
+                sd[free], peak[free] = sd[h], peak[h]
                 row[i], h, free = free, free, free + 1
             host[i], want[i] = h, w
         owned = row >= 0
@@ -149,7 +151,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
         bt.traffic_rows(act, t)
         acc[act] += bt.section_costs()[act]
         sched[act, t] = tam[act]
-        restr[act, t] = classify(bt.peak[act], bt.limits) >= 2
+        restr[act, t] = classify(bt.true_quality()[1][act], bt.limits) >= 2
     out = host[n_roots:]
     return acc[out], sched[out], restr[out]
 

@@ -22,9 +22,9 @@ import numpy as np
 
 from trackenv._json import json_default
 from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.problems import problem_config
 
-from .harness import TEST_SEEDS, TRAIN_SEEDS, EvaluationResult, _coerce, evaluate_many
+from .harness import TEST_SEEDS, TRAIN_SEEDS, EvaluationResult, evaluate_many
 from .reporting import format_table, plot_comparison, plot_episode
 from .statistics import paired_difference
 from .tuning import tune_many
@@ -45,14 +45,12 @@ def compare_results(policies: Sequence[Any] | Mapping[str, Any],
     name -> any of these (the name labels the result). Returns the results sorted by mean cost and the tuning
     tables by policy name.
     """
-    from ..rules.line import LINE_HEURISTICS
-    from ..rules.tamping import HEURISTICS
+    from ..rules import rules_for
 
-    cfg = _coerce(config)
-    if isinstance(cfg, LineConfig):
-        HEURISTICS = LINE_HEURISTICS  # noqa: N806
+    cfg = problem_config(config)
+    rules = rules_for(cfg)
     items = list(policies.items()) if isinstance(policies, Mapping) else [(None, p) for p in policies]
-    items = [(label, HEURISTICS[p] if isinstance(p, str) else p) for label, p in items]
+    items = [(label, rules[p] if isinstance(p, str) else p) for label, p in items]
     tunable = [i for i, (_, p) in enumerate(items) if isinstance(p, type) and hasattr(p, "param_grid")]
     tuning: dict[str, dict] = {}
     chosen: list[Any] = []

@@ -10,8 +10,9 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.problems import problem_config
 
-from .harness import TRAIN_SEEDS, _coerce, evaluate_many
+from .harness import TRAIN_SEEDS, evaluate_many
 
 __all__ = ["tune", "tune_many"]
 
@@ -27,7 +28,7 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
     grid = list(policy_cls.param_grid() if grid is None else grid)
     if not grid:
         raise ValueError("empty parameter grid")
-    return tune_many([policy_cls], _coerce(config), list(train_seeds), batch_size, progress,
+    return tune_many([policy_cls], problem_config(config), list(train_seeds), batch_size, progress,
                      grids=[grid], executor=executor)[0]
 
 

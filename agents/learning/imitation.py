@@ -22,24 +22,22 @@ import numpy as np
 from gymnasium import spaces
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.problems import ProblemConfig
 
-from ..rules.line import LINE_HEURISTICS, line_tuned_params
-from ..rules.tamping import HEURISTICS, make_policy, tuned_params
+from ..rules import rules_for, tuned_params_for
 from .actions import RANKED
 
 
-def teacher_policy(rule: str, config: TampingEnvConfig | LineConfig, params: dict[str, Any] | None = None):
+def teacher_policy(rule: str, config: ProblemConfig, params: dict[str, Any] | None = None):
     """The heuristic ``rule`` with ``params`` (default: its tuned parameters in
     ``agents/rules/tuned_heuristics.json``, or ``agents/rules/line_tuned_heuristics.json`` for a TampingLine
     config), bound to ``config``'s planning calendar."""
-    line = isinstance(config, LineConfig)
-    rules = LINE_HEURISTICS if line else HEURISTICS
+    rules = rules_for(config)
     if rule not in rules:
         raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
     if params is None:
-        params = (line_tuned_params() if line else tuned_params()).get(rule, {})
-    return (rules[rule](**params) if line else make_policy(rule, **params)).bind(config)
+        params = tuned_params_for(config).get(rule, {})
+    return rules[rule](**params).bind(config)
 
 
 def teacher_to_agent_actions(sections: np.ndarray, action_type: str) -> np.ndarray:

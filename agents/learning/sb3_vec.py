@@ -38,10 +38,9 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
+from trackenv.envs.problems import make_vector_env, problem_config
 from trackenv.envs.sharded import native_or_sharded
-from trackenv.envs.vector import TampingVectorEnv
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
 from .actions import RANKED, env_action_type
@@ -120,14 +119,11 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  bootstrap_at_horizon: bool = False, seed: int | None = None, workers: int = 1) -> None:
         venv: Any
-        make: Any
-        if isinstance(config, (LineConfig, str)):
-            if action_type != "multibinary":
-                raise ValueError(f"action_type must be 'multibinary' on TampingLine, got {action_type!r}")
-            make = partial(TampingLineVectorEnv, config=LineConfig.coerce(config))
-        else:
-            make = partial(TampingVectorEnv, config=TampingEnvConfig.coerce(config),
-                           action_type=env_action_type(action_type))
+        problem = problem_config(config)
+        if action_type not in problem.agent_action_types:
+            raise ValueError(f"action_type must be one of {problem.agent_action_types} on "
+                             f"{type(problem).__name__}, got {action_type!r}")
+        make = partial(make_vector_env, problem, action_type=env_action_type(action_type))
         venv = native_or_sharded(make, num_envs, workers)
         self.config = venv.config
         if action_type == RANKED:

@@ -14,6 +14,7 @@ from .line import (
     planner_view,
     stale_measurement,
 )
+from .problems import rules_for, tuned_params_for
 from .tamping import (
     HEURISTICS,
     TUNED_PARAMS_FILE,
@@ -37,4 +38,6 @@ __all__ = [
     "LINE_HEURISTICS", "LINE_TUNED_FILE", "BudgetedWorstFirst", "GroupedThreshold", "LineNoMaintenance",
     "RegisterPeriodic", "SectionThreshold", "UniformPeriodic", "line_tuned_params", "planner_view",
     "stale_measurement",
+    # either problem, by its config
+    "rules_for", "tuned_params_for",
 ]

@@ -30,6 +30,9 @@ class ConfigBase:
     derived objects are built once per config (it is frozen, so they cannot go stale), not once per step."""
 
     _MAPPING_FIELDS: tuple[str, ...] = ("law_params", "tamping", "limits")
+    #: the action parameterisations a learner may use on this problem: the env's own action types, and
+    #: "ranked" (tamp the k worst sections by measured SD: ``trackenv.envs.wrappers``) where it is offered
+    agent_action_types: ClassVar[tuple[str, ...]] = ("multibinary",)
     #: the cost parts of a step that interventions make, in the order of ``info["costs"]``
     _INTERVENTION_COST_KEYS: ClassVar[tuple[str, ...]] = ()
     #: (cost part, quality class, config field of its cost per section and step) for each class that costs
@@ -164,6 +167,7 @@ class TampingEnvConfig(ConfigBase):
     min_steps_between_tampings: int = 1
     dt: float | str = "auto"
 
+    agent_action_types = ("multibinary", "discrete", "ranked")
     _INTERVENTION_COST_KEYS = ("tamping",)
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("intervention", 2, "intervention_cost"),
                           ("immediate_action", 3, "immediate_action_cost"))
