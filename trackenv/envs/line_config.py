@@ -35,7 +35,8 @@ class LineConfig(ConfigBase):
     **Line.** ``n_sections`` sections of ``section_length_m`` (200 m: the EN 13848-6 / Trafikverket / Network
     Rail decision unit), each represented in the physics by a *segment* of ``segment_length_m`` of standing
     track (UIC60 on concrete sleepers at 0.6 m, ``Track.realistic``) that carries the section's properties.
-    Why 30 m: see ``experiments/segment_error.py`` and the README (segment vs full 200 m SD growth).
+    Why 30 m: ``experiments/segment_error.py`` compares the SD growth of a segment with that of the full 200 m
+    section (the documentation's line-problem page gives the figures).
 
     **Traffic.** ``annual_mgt`` million gross tonnes a year at ``speed_kmh``; ``freight_share`` of the tonnage
     is freight at ``freight_axle_load_t`` (22.5 t: EN 15528 line category D), the rest passenger coaches
@@ -245,7 +246,7 @@ class LineConfig(ConfigBase):
         return tonnes * share / axle_t
 
 
-#: The scenario suite (documented like IMP-act's levels in the TampingLine docstring and the README).
+#: The scenario suite (documented in the TampingLine docstring and on the documentation's environment pages).
 SCENARIOS: dict[str, dict[str, Any]] = {
     "small": {"n_sections": 6, "capacity": 3},
     "default": {},

@@ -95,7 +95,8 @@ class TampingEnv(gym.Env):
     **Episode end.** No terminal state: truncation at the horizon (default 10 years = 40 steps). The
     life-cycle cost counts the horizon only and ``time`` is observed, so a learner scored on that cost should
     treat the horizon as the end of the problem and not bootstrap past it (else it values tamping in the last
-    year for benefits no evaluation counts); the SB3 adapter in ``agents/sb3_vec.py`` does so by default.
+    year for benefits no evaluation counts); the SB3 adapter in ``trackenv_agents.learning.sb3_vec`` does so by
+    default.
 
     **Arguments.** ``config`` (:class:`TampingEnvConfig` or dict) or its fields as keywords;
     ``action_type``; ``render_mode`` ("rgb_array").

@@ -24,7 +24,7 @@ methods: call ``env.get_wrapper_attr("action_masks")()`` or ``env.unwrapped.acti
 
 The ranked decoding is also batched (:func:`ranked_to_sections`) and exists as vector wrappers
 (:class:`RankedVectorActions`, :class:`SectionVectorObservation`) over the native vector env, which the SB3
-adapter in ``agents/sb3_vec.py`` uses: one implementation for every library.
+adapter in ``trackenv_agents.learning.sb3_vec`` uses: one implementation for every library.
 """
 
 from __future__ import annotations
