@@ -58,7 +58,6 @@ def mostly(valid: st.SearchStrategy, junk_share: int = 4) -> st.SearchStrategy:
 
 
 CONFIG_FIELDS = [f.name for f in dataclasses.fields(TampingEnvConfig)]
-TYPED = {f.name: type(f.default) for f in dataclasses.fields(TampingEnvConfig)}
 
 
 def _assert_names(err: Exception, names) -> None:
@@ -71,46 +70,37 @@ def _fast(t0: float, what: str) -> None:
     assert time.perf_counter() - t0 < 1.0, f"{what} took more than a second to refuse"
 
 
+def _refuses_or_stores_canonical_values(cls: type, kw: dict) -> None:
+    """``cls(**kw)`` refuses quickly, naming a field it was given (a bound may follow another given field), or
+    stores every given numeric field in the type of its default, finite."""
+    typed = {f.name: type(f.default) for f in dataclasses.fields(cls)}
+    t0 = time.perf_counter()
+    try:
+        cfg = cls(**kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, cls.__name__)
+        _assert_names(e, kw)
+        return
+    for name in kw:
+        value = getattr(cfg, name)
+        if typed[name] in (float, int):
+            assert type(value) is typed[name], (name, value)
+            assert math.isfinite(value)
+
+
 @FUZZ
 @given(st.dictionaries(st.sampled_from(CONFIG_FIELDS), mostly(st.one_of(st.floats(0, 100), st.integers(0, 60)), 2),
                        min_size=1, max_size=3))
 def test_config_refuses_or_stores_canonical_values(kw: dict) -> None:
-    t0 = time.perf_counter()
-    try:
-        cfg = TampingEnvConfig(**kw)
-    except (ValueError, TypeError) as e:
-        _fast(t0, "TampingEnvConfig")
-        _assert_names(e, kw)
-        return
-    for name in kw:
-        value = getattr(cfg, name)
-        if TYPED[name] in (float, int):
-            assert type(value) is TYPED[name], (name, value)
-            assert math.isfinite(value)
-
-
-LINE_FIELDS = [f.name for f in dataclasses.fields(LineConfig)]
-LINE_TYPED = {f.name: type(f.default) for f in dataclasses.fields(LineConfig)}
+    _refuses_or_stores_canonical_values(TampingEnvConfig, kw)
 
 
 @FUZZ
-@given(st.dictionaries(st.sampled_from(LINE_FIELDS), mostly(st.one_of(st.floats(0, 300), st.integers(0, 300)), 2),
-                       min_size=1, max_size=3))
+@given(st.dictionaries(st.sampled_from([f.name for f in dataclasses.fields(LineConfig)]),
+                       mostly(st.one_of(st.floats(0, 300), st.integers(0, 300)), 2), min_size=1, max_size=3))
 def test_line_config_refuses_or_stores_canonical_values(kw: dict) -> None:
-    """LineConfig checks its fields with the mechanism of TampingEnvConfig: a refusal names a field it was given
-    (a bound may be another given field: capacity <= n_sections, wet spot <= segment <= section length)."""
-    t0 = time.perf_counter()
-    try:
-        cfg = LineConfig(**kw)
-    except (ValueError, TypeError) as e:
-        _fast(t0, "LineConfig")
-        _assert_names(e, kw)
-        return
-    for name in kw:
-        value = getattr(cfg, name)
-        if LINE_TYPED[name] in (float, int):
-            assert type(value) is LINE_TYPED[name], (name, value)
-            assert math.isfinite(value)
+    """LineConfig checks its fields with the mechanism of TampingEnvConfig."""
+    _refuses_or_stores_canonical_values(LineConfig, kw)
 
 
 ENV_CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=0.5)  # 2 steps
