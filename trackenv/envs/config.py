@@ -62,6 +62,17 @@ class ConfigBase:
             d[k] = dict(getattr(self, k))
         return d
 
+    def _check_models(self) -> None:
+        """Check the fields that build the physics objects both problems have (the settlement law and its
+        parameters, the tamping model, the quality limits at the config's speed), storing the mappings as
+        sorted item tuples; each model's own validation names the field at fault."""
+        check_choice("law", self.law, sorted(LAWS))
+        for name in self._MAPPING_FIELDS:
+            object.__setattr__(self, name, _as_items(name, getattr(self, name)))
+        _ = self.settlement_law  # validates law_params
+        _ = self.tamping_model
+        self.quality_limits.for_speed(self.speed)
+
     @classmethod
     def cost_keys(cls) -> tuple[str, ...]:
         """The names of a step's cost parts (``info["costs"]``), in order: the interventions', the geometry, the
@@ -197,13 +208,7 @@ class TampingEnvConfig(ConfigBase):
         c("axle_passes_per_year", low=1.0, high=1e8)
         ci("steps_per_year", low=1, high=52)
         c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
-        check_choice("law", self.law, sorted(LAWS))
-        object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
-        object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
-        object.__setattr__(self, "limits", _as_items("limits", self.limits))
-        _ = self.settlement_law  # validates law_params
-        _ = self.tamping_model
-        self.quality_limits.for_speed(self.speed_kmh / 3.6)
+        self._check_models()
         for name in (
             "mobilisation_cost",
             "section_tamping_cost",

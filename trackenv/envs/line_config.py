@@ -18,10 +18,9 @@ from typing import Any
 import numpy as np
 
 from ..physics._checks import check_bool, check_choice, check_field, check_int_field
-from ..physics.settlement import LAWS
 from ..physics.timestep import check_dt_option
 from ..physics.vehicle import GRAVITY, Car, Wheelset
-from .config import ConfigBase, _as_items, bounded_by, check_range_field
+from .config import ConfigBase, bounded_by, check_range_field
 
 SLEEPER_SPACING_M = 0.6
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
@@ -176,13 +175,7 @@ class LineConfig(ConfigBase):
         c("initial_age_years", low=0.0, high=50.0)
         ci("initial_max_tampings", low=0, high=100)
         check_range_field(self, "initial_scale", low=0.0, high=10.0)
-        check_choice("law", self.law, sorted(LAWS))
-        object.__setattr__(self, "law_params", _as_items("law_params", self.law_params))
-        object.__setattr__(self, "tamping", _as_items("tamping", self.tamping))
-        object.__setattr__(self, "limits", _as_items("limits", self.limits))
-        _ = self.settlement_law
-        _ = self.tamping_model
-        self.quality_limits.for_speed(self.speed)
+        self._check_models()
         for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
                      "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
             c(name, low=0.0, high=1e9)
