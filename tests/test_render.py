@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -19,6 +21,37 @@ def _check_frame(frame) -> None:
     assert frame.shape[0] >= 100 and frame.shape[1] >= 100
     assert frame.dtype == np.uint8
     assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 10  # a picture, not a blank canvas
+
+
+def _checked_render(env) -> np.ndarray:
+    """``env.render()`` through Gymnasium's passive render checker, whose findings are warnings: any warning it
+    gives fails here, and what it checks is asserted too (declared modes and fps, an rgb_array frame)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        frame = env_render_passive_checker(env)
+    assert [str(w.message) for w in caught] == []
+    modes = env.metadata["render_modes"]
+    assert isinstance(modes, (list, tuple)) and all(isinstance(m, str) for m in modes) and "rgb_array" in modes
+    fps = env.metadata["render_fps"]
+    assert isinstance(fps, (int, float)) and not isinstance(fps, bool) and fps > 0
+    assert env.render_mode == "rgb_array"
+    _check_frame(frame)
+    return frame
+
+
+class _FloatFrames(gym.Env):
+    """Renders a float picture: what the checker must flag."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+    render_mode = "rgb_array"
+
+    def render(self):
+        return np.random.default_rng(0).random((120, 120, 3))
+
+
+def test_the_render_check_can_fail() -> None:
+    with pytest.raises(AssertionError, match="uint8"):
+        _checked_render(_FloatFrames())
 
 
 @pytest.mark.parametrize("env_id", ["trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0"])
@@ -45,7 +78,12 @@ def test_rgb_array_after_reset_and_after_steps(env_id: str, small_config) -> Non
 def test_render_passes_gymnasiums_passive_checker(small_config) -> None:
     env = TampingEnv(small_config, render_mode="rgb_array")
     env.reset(seed=1)
-    env_render_passive_checker(env)
+    first = _checked_render(env)
+    env.step(np.array([1, 0, 0], dtype=np.int8))
+    assert _checked_render(env).shape == first.shape
+    wrapped = gym.make("trackenv/Tamping-v0", config=small_config, render_mode="rgb_array")  # through the wrappers
+    wrapped.reset(seed=1)
+    np.testing.assert_array_equal(_checked_render(wrapped), first)
 
 
 def test_no_render_mode_or_no_episode_renders_nothing(small_config) -> None:
@@ -83,7 +121,12 @@ def test_line_render_passes_gymnasiums_checkers() -> None:
     """check_env without skip_render_check: the passive render check, and each declared render mode made from
     the spec, reset and rendered."""
     env = gym.make("trackenv/TampingLineSmall-v0", render_mode="rgb_array", **LINE_SHORT)
-    check_env(env.unwrapped)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)  # fails by assertion where it must, warns where it doubts
+    assert [str(w.message) for w in caught] == []
+    env.reset(seed=0)
+    _checked_render(env.unwrapped)
 
 
 def test_line_vector_env_renders_the_first_line() -> None:

@@ -1,8 +1,8 @@
 """The learners: PPO on Tamping-v0 (:mod:`.tamping`), the per-section policy of TampingLine (:mod:`.line_policy`)
 trained by counterfactual policy iteration (:mod:`.line`, :mod:`.line_counterfactual`), imitation of the rules
-(:mod:`.imitation`), stable-baselines3's view of the native vector envs (:mod:`.sb3_vec`) and the action
-parameterisations (:mod:`.actions`). The hyper-parameters (``hyperparams/ppo.yml``) and the shipped models
-(``pretrained/``) live beside them.
+(:mod:`.imitation`), stable-baselines3's view of the native vector envs (:mod:`.sb3_vec`), the action
+parameterisations (:mod:`.actions`) and the training settings (:mod:`.settings`). The hyper-parameters
+(``hyperparams/ppo.yml``) and the shipped models (``pretrained/``) live beside them.
 
 The names below load on first use: most of these modules import stable-baselines3 and torch, which take
 seconds to import and are an optional extra (``trackenv[rl]``), so importing this package imports neither.
@@ -28,20 +28,21 @@ _EXPORTS: dict[str, str] = {
                      "DEFAULT_TRAIN_SEED", "NormalizedPolicy", "ZooSchema", "export_policy", "from_zoo",
                      "load_hyperparams", "load_trained", "make_progress_callback", "single_torch_thread",
                      "stats_path", "train"], "tamping"),
+    **dict.fromkeys(["AlgoSettings", "LineSettings", "TampingSettings", "TrainingSettings"], "settings"),
     **dict.fromkeys(["DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy", "line_meta_path",
                      "load_line_trained", "train_line"], "line"),
 }
 
 __all__ = [  # = sorted(_EXPORTS) (a test keeps them equal), written out for linters and editors
-    "ACTION_TYPES", "ADVISOR_FEATURES", "DEFAULT_ENV_ID", "DEFAULT_EVAL_SEEDS", "DEFAULT_HYPERPARAMS",
+    "ACTION_TYPES", "ADVISOR_FEATURES", "AlgoSettings", "DEFAULT_ENV_ID", "DEFAULT_EVAL_SEEDS", "DEFAULT_HYPERPARAMS",
     "DEFAULT_LINE_PRETRAINED", "DEFAULT_PRETRAINED", "DEFAULT_TRAIN_SEED", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM",
-    "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "NormalizedPolicy", "RANKED", "SectionAgentsVecEnv", "TampingSB3VecEnv",
-    "VecScaleReward", "ZooSchema", "agent_action_space", "check_action_type", "collect_demonstrations",
-    "env_action_type", "export_line_policy", "export_policy", "filter_observation", "fit_choices", "fit_policy",
-    "from_zoo", "line_meta_path", "load_hyperparams", "load_line_trained", "load_trained", "make_progress_callback",
-    "make_vec_env", "n_features", "observation_keys", "ranked_to_sections", "return_scale", "section_counterfactuals",
-    "section_features", "single_torch_thread", "stats_path", "teacher_policy", "teacher_to_agent_actions", "train",
-    "train_line", "warm_start",
+    "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "LineSettings", "NormalizedPolicy", "RANKED", "SectionAgentsVecEnv",
+    "TampingSB3VecEnv", "TampingSettings", "TrainingSettings", "VecScaleReward", "ZooSchema", "agent_action_space",
+    "check_action_type", "collect_demonstrations", "env_action_type", "export_line_policy", "export_policy",
+    "filter_observation", "fit_choices", "fit_policy", "from_zoo", "line_meta_path", "load_hyperparams",
+    "load_line_trained", "load_trained", "make_progress_callback", "make_vec_env", "n_features", "observation_keys",
+    "ranked_to_sections", "return_scale", "section_counterfactuals", "section_features", "single_torch_thread",
+    "stats_path", "teacher_policy", "teacher_to_agent_actions", "train", "train_line", "warm_start",
 ]
 
 

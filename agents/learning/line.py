@@ -41,8 +41,8 @@ import numpy as np
 from trackenv.envs.line_config import LineConfig
 
 from .line_policy import ADVISOR_FEATURES, FEATURES, LineAgent
+from .settings import LineSettings
 from .tamping import (
-    _ALGO_KEYS,
     DEFAULT_EVAL_SEEDS,
     DEFAULT_TRAIN_SEED,
     HERE,
@@ -61,12 +61,9 @@ __all__ = ["DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_po
 LINE_ENV_ID = "trackenv/TampingLine-v0"
 DEFAULT_LINE_PRETRAINED = HERE / "pretrained" / "ppo_tamping_line.zip"
 META_SUFFIX = "_meta.json"
-_LINE_TRAIN_KEYS = ("algo", "n_envs", "total_timesteps", "net_arch", "reward_scale", "eval_freq",
-                    "checkpoint_every", "advisor", "advisor_params", "iterations", "episodes_per_iteration",
-                    "focus_rate", "other_rate", "fit_epochs", "fit_margin")
 #: what :func:`train_line` reads from an RL Zoo entry (see :class:`trackenv_agents.learning.tamping.ZooSchema`)
 LINE_ZOO = ZooSchema("MlpPolicy", "one network decides for every section from its features", ("net_arch",), False,
-                     _ALGO_KEYS + _LINE_TRAIN_KEYS)
+                     LineSettings)
 
 
 def _feature_names(advisor: bool) -> list[str]:
@@ -96,18 +93,9 @@ def _save_line_policy(model: Any, zip_path: Path, meta: dict) -> Path:
     return Path(zip_path)
 
 
-def _check(name: str, value: Any, low: float, high: float, integer: bool = False) -> Any:
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool) if integer else \
-        isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value)
-    if not ok or not low <= value <= high:
-        kind = "an integer" if integer else "a number"
-        raise ValueError(f"{name} must be {kind} in [{low}, {high}], got {value!r}")
-    return int(value) if integer else float(value)
-
-
 def train_line(config: LineConfig | dict | str | None = None, total_timesteps: int | None = None,
                n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED, out_dir: str | Path = "runs/ppo_line",
-               hyperparams: dict | str | Path | None = None, progress: bool = True,
+               hyperparams: LineSettings | dict | str | Path | None = None, progress: bool = True,
                eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, iterations: int | None = None,
                episodes_per_iteration: int | None = None, verbose: int = 1) -> Path:
     """Train on a TampingLine ``config`` (a LineConfig, its fields as a dict, or a scenario name; default the
@@ -115,8 +103,10 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     default); save ``out_dir/model.zip`` (+ ``model_meta.json``) and return its path.
 
     ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/TampingLine-v0`` entry)
-    overriding the shipped entry of ``agents/learning/hyperparams/ppo.yml`` key by key; explicit arguments override
-    both. ``eval_seeds=None`` disables the held-out evaluation (then the last iteration is the model).
+    overriding the shipped entry of ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole
+    :class:`LineSettings`; explicit arguments that are not None override both. Unknown keys and values out of
+    range raise ValueError (:class:`LineSettings` lists the fields, their defaults and ranges).
+    ``eval_seeds=None`` disables the held-out evaluation (then the last iteration is the model).
     ``out_dir`` gets ``summary.json`` (wall times, line-steps and fork steps per second, every iteration's
     samples, fit and evaluation), ``train_meta.json``, ``best_model.zip``, ``checkpoints/``, TensorBoard logs."""
     from stable_baselines3.common.logger import configure
@@ -128,28 +118,19 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     from .line_counterfactual import section_counterfactuals
     from .sb3_vec import SectionAgentsVecEnv
 
-    hp = load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO)
-    if isinstance(hyperparams, (str, Path)):
-        hyperparams = load_hyperparams(hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO)
-    unknown = set(hyperparams or {}) - set(LINE_ZOO.keys)
-    if unknown:
-        raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
-    hp.update(hyperparams or {})
-    for key, value in (("total_timesteps", total_timesteps), ("n_envs", n_envs), ("iterations", iterations),
-                       ("episodes_per_iteration", episodes_per_iteration)):
-        if value is not None:
-            hp[key] = value
-    algo = hp.get("algo", "maskable_ppo")
-    n_envs = _check("n_envs", hp.get("n_envs", 4), 1, 4096, integer=True)
-    total_timesteps = _check("total_timesteps", hp.get("total_timesteps", 0), 0, 10**9, integer=True)
-    n_iter = _check("iterations", hp.get("iterations", 6), 0, 1000, integer=True)
-    n_episodes = _check("episodes_per_iteration", hp.get("episodes_per_iteration", 16), 1, 4096, integer=True)
-    reward_scale = _check("reward_scale", hp.get("reward_scale", 20.0), 1e-6, 1e9)
-    fit_epochs = _check("fit_epochs", hp.get("fit_epochs", 40), 1, 100_000, integer=True)
-    margin = _check("fit_margin", hp.get("fit_margin", 1.0), 0.0, 1e9)
-    focus_rate = _check("focus_rate", hp.get("focus_rate", 0.5), 1e-6, 1.0)
-    other_rate = _check("other_rate", hp.get("other_rate", 0.1), 1e-6, 1.0)
-    eval_freq = _check("eval_freq", hp.get("eval_freq", 0), 0, 10**9, integer=True)
+    if isinstance(hyperparams, LineSettings):
+        s = hyperparams
+    else:
+        if isinstance(hyperparams, (str, Path)):
+            hyperparams = load_hyperparams(hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO)
+        s = LineSettings.from_dict(load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO)).updated(hyperparams or {})
+    explicit = {"total_timesteps": total_timesteps, "n_envs": n_envs, "iterations": iterations,
+                "episodes_per_iteration": episodes_per_iteration}
+    s = s.updated({k: v for k, v in explicit.items() if v is not None})
+    algo, n_envs, total_timesteps, n_iter, n_episodes = (s.algo, s.n_envs, s.total_timesteps, s.iterations,
+                                                         s.episodes_per_iteration)
+    reward_scale, fit_epochs, margin, focus_rate, other_rate, eval_freq = (
+        s.reward_scale, s.fit_epochs, s.fit_margin, s.focus_rate, s.other_rate, s.eval_freq)
     config = LineConfig.coerce("default" if config is None else config)
     out_dir = Path(out_dir)
     (out_dir / "checkpoints").mkdir(parents=True, exist_ok=True)
@@ -157,16 +138,15 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
 
     single_torch_thread()  # the physics (numba) wants the cores; the small network does not
     set_random_seed(seed)
-    advisor = teacher_policy(hp.get("advisor", "grouped-threshold"), config, hp.get("advisor_params"))
+    advisor = teacher_policy(s.advisor, config, None if s.advisor_params is None else dict(s.advisor_params))
     env = SectionAgentsVecEnv(n_envs, config, seed=seed + 1_000_000, reward_scale=reward_scale, advisor=advisor)
-    algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
     model = AlgoClass("MlpPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=0, device="cpu",
-                      policy_kwargs={"net_arch": list(hp.get("net_arch", [64, 64]))}, **algo_kw)
+                      policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
     logger = configure(str(out_dir / "policy_iteration"), ["csv", "tensorboard"])
-    meta = {"env_id": LINE_ENV_ID, "net_arch": list(hp.get("net_arch", [64, 64])),
+    meta = {"env_id": LINE_ENV_ID, "net_arch": list(s.net_arch),
             "features": _feature_names(True), "advisor": advisor.name, "advisor_params": dict(advisor.params),
             "reward_scale": reward_scale, "config": config.to_dict(), "seed": seed}
-    (out_dir / "train_meta.json").write_text(json.dumps({"algo": algo, "hyperparams": hp, **meta}, indent=1,
+    (out_dir / "train_meta.json").write_text(json.dumps({"algo": algo, "hyperparams": s.to_dict(), **meta}, indent=1,
                                                         default=str))
 
     baseline = None

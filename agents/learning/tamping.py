@@ -30,6 +30,7 @@ from trackenv.envs.config import TampingEnvConfig
 from ..evaluation.harness import evaluate_one
 from .actions import RANKED, env_action_type, ranked_to_sections
 from .sb3_vec import TampingSB3VecEnv, filter_observation
+from .settings import AlgoSettings, TampingSettings, TrainingSettings
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_HYPERPARAMS = HERE / "hyperparams" / "ppo.yml"
@@ -42,36 +43,37 @@ DEFAULT_TRAIN_SEED = 20_000
 STATS_SUFFIX = "_obs_stats.json"
 
 # keys of the flat hyper-parameters that go to the algorithm's constructor (the rest configure train() itself)
-_ALGO_KEYS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate", "ent_coef",
-              "clip_range", "vf_coef", "max_grad_norm", "target_kl", "normalize_advantage")
-_TRAIN_KEYS = ("algo", "action_type", "keep_per_sleeper", "n_envs", "total_timesteps", "net_arch", "clip_obs",
-               "eval_freq", "checkpoint_every", "initial_tamp_logit", "warm_start_rule", "warm_start_episodes",
-               "warm_start_epochs", "warm_start_label_smoothing", "warm_start_params",
-               "bootstrap_at_horizon")
+_ALGO_KEYS = AlgoSettings.ALGO_KEYS
 
 
 @dataclass(frozen=True)
 class ZooSchema:
     """What one trainer reads from an RL Zoo entry: the ``policy`` it builds (and why that one), the
     ``policy_kwargs`` it honours (flattened into the hyper-parameters), whether it trains under VecNormalize
-    (``normalize``) and every flat key it reads (``keys``; others raise ValueError)."""
+    (``normalize``) and its ``settings`` class, whose fields are every flat key it reads (``keys``; others
+    raise ValueError)."""
 
     policy: str
     policy_note: str
     policy_keys: tuple[str, ...]
     normalize: bool
-    keys: tuple[str, ...]
+    settings: type[TrainingSettings]
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return self.settings.field_names()
 
 
 #: the schema of :func:`train` (Tamping-v0); TampingLine's is ``trackenv_agents.learning.line.LINE_ZOO``
-TAMPING_ZOO = ZooSchema("MultiInputPolicy", "the observation is a Dict", ("net_arch",), True, _ALGO_KEYS + _TRAIN_KEYS)
+TAMPING_ZOO = ZooSchema("MultiInputPolicy", "the observation is a Dict", ("net_arch",), True, TampingSettings)
 
 
 def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID,
                      schema: ZooSchema = TAMPING_ZOO) -> dict[str, Any]:
     """The flat hyper-parameters that a trainer (:func:`train`, or the line's with its ``schema``) reads, from
     ``path`` (default ``agents/learning/hyperparams/ppo.yml``): a YAML file in RL Zoo's form (its entry for ``env_id``,
-    see :func:`from_zoo`) or a flat JSON object of the same keys. Unknown keys raise ValueError."""
+    see :func:`from_zoo`) or a flat JSON object of the same keys: those the file sets, to override settings key
+    by key. Unknown keys, and values out of their range (see ``schema.settings``), raise ValueError."""
     path = Path(path) if path is not None else DEFAULT_HYPERPARAMS
     if path.suffix in (".yml", ".yaml"):
         import yaml
@@ -82,9 +84,9 @@ def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_I
         hp = from_zoo(table[env_id], schema)
     else:
         hp = json.loads(path.read_text())
-    unknown = set(hp) - set(schema.keys)
-    if unknown:
-        raise ValueError(f"unknown hyper-parameter(s) {sorted(unknown)}")
+    if not isinstance(hp, dict):
+        raise ValueError(f"{path}: hyper-parameters must be a mapping of names to values, got {hp!r}")
+    schema.settings.from_dict(hp)  # unknown keys and values out of range raise here, naming the file's key
     return hp
 
 
@@ -302,7 +304,7 @@ def stats_path(zip_path: str | Path) -> Path:
 # --- training ---
 def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
           total_timesteps: int | None = None, n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED,
-          out_dir: str | Path = "runs/ppo", hyperparams: dict | str | Path | None = None,
+          out_dir: str | Path = "runs/ppo", hyperparams: TampingSettings | dict | str | Path | None = None,
           progress: bool = True,
           eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
           eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
@@ -310,8 +312,10 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
     ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
-    overriding ``agents/learning/hyperparams/ppo.yml`` key by key. Explicit
-    arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) override both. ``eval_seeds=None``
+    overriding ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole :class:`TampingSettings`. Explicit
+    arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) that are not None override both.
+    Unknown keys and values out of range raise ValueError (:class:`TampingSettings` lists the fields, their
+    defaults and ranges). ``eval_seeds=None``
     or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
     (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
     ``workers`` > 1 steps the training envs in that many processes (the same episodes; see
@@ -326,27 +330,26 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    hp = load_hyperparams()
+    settings = TampingSettings.from_dict(load_hyperparams())
     if resume is not None:
         resume = Path(resume)
         if not (resume / "model.zip").exists() or not (resume / "vecnormalize.pkl").exists():
             raise FileNotFoundError(f"resume: no model.zip and vecnormalize.pkl in {resume}")
         earlier = json.loads((resume / "train_meta.json").read_text())
-        hp.update(earlier["hyperparams"])
+        settings = settings.updated(earlier["hyperparams"])
         if config is None:
             config = earlier["config"]
-    if isinstance(hyperparams, (str, Path)):
-        hyperparams = load_hyperparams(hyperparams)
-    hp.update(hyperparams or {})
-    algo = algo or hp.get("algo", "ppo")
-    n_envs = int(n_envs or hp.get("n_envs", 8))
-    total_timesteps = int(total_timesteps or hp.get("total_timesteps", 8000))
-    if checkpoint_every is None:
-        checkpoint_every = hp.get("checkpoint_every", 0)
-    checkpoint_every = int(checkpoint_every)
-    eval_freq = int(eval_freq if eval_freq is not None else hp.get("eval_freq", 0))
-    action_type = hp.get("action_type", "multibinary")
-    keep = bool(hp.get("keep_per_sleeper", True))
+    if isinstance(hyperparams, TampingSettings):
+        settings = hyperparams
+    else:
+        if isinstance(hyperparams, (str, Path)):
+            hyperparams = load_hyperparams(hyperparams)
+        settings = settings.updated(hyperparams or {})
+    explicit = {"algo": algo, "n_envs": n_envs, "total_timesteps": total_timesteps,
+                "checkpoint_every": checkpoint_every, "eval_freq": eval_freq}
+    s = settings = settings.updated({k: v for k, v in explicit.items() if v is not None})
+    algo, n_envs, total_timesteps = s.algo, s.n_envs, s.total_timesteps
+    checkpoint_every, eval_freq, action_type, keep = s.checkpoint_every, s.eval_freq, s.action_type, s.keep_per_sleeper
     config = TampingEnvConfig.coerce(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -355,7 +358,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
     set_random_seed(seed)
     raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
-                           bootstrap_at_horizon=bool(hp.get("bootstrap_at_horizon", False)), workers=workers)
+                           bootstrap_at_horizon=s.bootstrap_at_horizon, workers=workers)
     if resume is not None:
         env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
         env.training = True
@@ -363,24 +366,20 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
                                verbose=verbose)
         model.set_random_seed(seed)
     else:
-        env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True,
-                           clip_obs=float(hp.get("clip_obs", 10.0)), gamma=float(hp.get("gamma", 0.99)))
-        algo_kw = {k: hp[k] for k in _ALGO_KEYS if k in hp}
-        policy_kwargs = {"net_arch": list(hp.get("net_arch", [64, 64]))}
+        env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=s.clip_obs, gamma=s.gamma)
+        policy_kwargs = {"net_arch": list(s.net_arch)}
         model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
-                          policy_kwargs=policy_kwargs, device="cpu", **algo_kw)
-        if "initial_tamp_logit" in hp:
-            _set_initial_tamp_logit(model, float(hp["initial_tamp_logit"]), action_type)
+                          policy_kwargs=policy_kwargs, device="cpu", **s.algo_kwargs())
+        if s.initial_tamp_logit is not None:
+            _set_initial_tamp_logit(model, s.initial_tamp_logit, action_type)
     warm = None
-    if resume is None and hp.get("warm_start_rule"):
+    if resume is None and s.warm_start_rule:
         from .imitation import warm_start
 
         t_warm = time.time()
-        warm = warm_start(model, env, config, action_type, hp["warm_start_rule"],
-                          n_episodes=int(hp.get("warm_start_episodes", 64)),
-                          epochs=int(hp.get("warm_start_epochs", 300)), gamma=float(hp.get("gamma", 0.99)),
-                          label_smoothing=float(hp.get("warm_start_label_smoothing", 0.02)),
-                          params=hp.get("warm_start_params"), seed=seed)
+        warm = warm_start(model, env, config, action_type, s.warm_start_rule, n_episodes=s.warm_start_episodes,
+                          epochs=s.warm_start_epochs, gamma=s.gamma, label_smoothing=s.warm_start_label_smoothing,
+                          params=None if s.warm_start_params is None else dict(s.warm_start_params), seed=seed)
         warm["wall_seconds"] = time.time() - t_warm
         if verbose:
             print(f"[warm start] {warm}", flush=True)
@@ -401,7 +400,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
                                       on_evaluation=on_evaluation)
         callbacks.append(eval_cb)
     meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
-            "n_envs": n_envs, "hyperparams": hp, "config": config.to_dict(),
+            "n_envs": n_envs, "hyperparams": s.to_dict(), "config": config.to_dict(),
             "resumed_from": str(resume) if resume is not None else None, "warm_start": warm}
     (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
 
