@@ -1,4 +1,4 @@
-"""One harness to score tamping policies: heuristics (:mod:`agents.heuristics`) and trained agents alike.
+"""One harness to score tamping policies: rules (:mod:`trackenv_agents.rules`) and trained agents alike.
 
 A policy is anything with SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)
 -> (action, state)`` that accepts a batched observation dict. Each episode is identified by its seed: the

@@ -1,6 +1,6 @@
 """Train PPO / MaskablePPO on the tamping environment, and load the shipped policy.
 
-* :func:`train` — SB3 PPO (or sb3-contrib MaskablePPO) on :class:`agents.sb3_vec.TampingSB3VecEnv` with
+* :func:`train` — SB3 PPO (or sb3-contrib MaskablePPO) on :class:`~.sb3_vec.TampingSB3VecEnv` with
   VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
   evaluation callback and reproducible seeding. Hyper-parameters: ``agents/learning/hyperparams/ppo.yml`` (RL Zoo's
   form, one entry per env id), read by :func:`load_hyperparams`.
@@ -153,7 +153,7 @@ class NormalizedPolicy:
     """An SB3 model plus frozen VecNormalize observation statistics: ``predict`` on raw env observations
     (one observation dict, or a batched one), the interface of SB3's ``model.predict``.
 
-    A model trained in the ``ranked`` parameterisation (:mod:`agents.actions`) answers with the env's
+    A model trained in the ``ranked`` parameterisation (:mod:`trackenv_agents.learning.actions`) answers with the env's
     MultiBinary actions (its count of worst sections translated on the observation's SD)."""
 
     def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
