@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from gymnasium import spaces
 
+from trackenv.envs.common import action_space
 from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.tamping import action_space
 from trackenv.envs.wrappers import ranked_to_sections
 
 RANKED = "ranked"

@@ -7,9 +7,10 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
+from gymnasium import spaces
 from scipy.ndimage import gaussian_filter1d
 
-from ..degradation import TrackDegradation, settle_batch
+from ..degradation import TrackDegradation, settle_batch, simulate_batch
 from ..physics.dynamics import PassResult
 from ..physics.geometry import (
     classify,
@@ -22,6 +23,7 @@ from ..physics.geometry import (
 )
 from ..physics.track import Track
 from .common import SHARED_BOUNDS, clip_observation
+from .common import observation_space as common_observation_space
 from .config import TampingEnvConfig
 from .costs import section_quality_costs
 from .info import step_info
@@ -172,12 +174,6 @@ def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Gene
     return c.mobilisation_cost + c.section_tamping_cost * int(tamped.sum()), tamped
 
 
-def traffic(ep: Episode, result: PassResult) -> None:
-    """The period's traffic: settle every sleeper under the forces of ``result`` (the pass over the current
-    geometry) for the step's axle passes."""
-    traffic_batch([ep], [result])
-
-
 def traffic_batch(eps: list[Episode], results: list[PassResult]) -> None:
     """:func:`traffic` for many episodes of one config, their settlement steps in one batched call (each
     episode ends exactly as with :func:`traffic` alone)."""
@@ -214,6 +210,14 @@ def observation_bounds(config: TampingEnvConfig) -> dict[str, tuple[float, float
         "years_since_tamping": (0.0, config.horizon_years + 1.0),
         "time": shared["time"],
     }
+
+
+def observation_space(config: TampingEnvConfig) -> spaces.Dict:
+    """The Dict space of the observation table (its bounds: :func:`~trackenv.envs.episode.observation_bounds`)."""
+    n, s = config.n_sleepers, config.n_sections
+    bounds = observation_bounds(config)
+    size = {"level": n, "contact_force": n, "time": 1}
+    return common_observation_space(bounds, {key: (size.get(key, s),) for key in bounds})
 
 
 def raw_observation(ep: Episode) -> dict[str, np.ndarray]:
@@ -269,6 +273,91 @@ def info(ep: Episode, parts: dict[str, float], tamped: np.ndarray, section_costs
                      ep.contact_force.max(), section_costs=own, observation_clipped=clipped_values(ep))
 
 
-def traffic_free_pass(ep: Episode) -> None:
-    """A pass without settlement: what the contact force looks like on the initial geometry."""
-    ep.contact_force = ep.sim.evaluated(ep.sim.simulate().contact_force_profile())
+class TrackEpisodes:
+    """The episode engine of the 60 m track: ``n_rows`` episodes of one config, each an :class:`Episode`, their
+    passes in one batched call of the dynamics (:func:`~trackenv.degradation.simulate_batch`, which the compiled
+    kernel spreads over the cores). The rules of a step are the functions of this module; the engine is what
+    every env of the 60 m track (single or vector) steps, with the interface of the line's engine
+    (:class:`~trackenv.envs.line_episode.LineBatch`): :meth:`start`, :meth:`advance` (a step), :meth:`observation`,
+    :meth:`observations`, :meth:`reset_info`, :meth:`allowed`, :meth:`check_not_truncated`, :meth:`get_state`,
+    :meth:`set_state`, :meth:`frame`.
+
+    Each row draws from its own generator (``rngs[i]``, the env's): its track at :meth:`start` and the tamping
+    residuals as it steps, so a row's numbers depend on its seed and actions only."""
+
+    def __init__(self, config: TampingEnvConfig, n_rows: int) -> None:
+        self.config = config
+        self.episodes: list[Episode] = [None] * int(n_rows)  # type: ignore[list-item]  # filled by start()
+
+    def _new_episodes(self, idx: list[int], rngs: list[np.random.Generator],
+                      others: list[Episode] = ()) -> list[PassResult]:  # type: ignore[assignment]
+        """Start new episodes in rows ``idx`` (a traffic-free pass each); the passes of ``others`` (episodes about
+        to take their traffic step) run in the same batched call, and their results are returned."""
+        eps = [new_episode(self.config, rngs[i]) for i in idx]
+        results = simulate_batch([ep.sim for ep in others] + [ep.sim for ep in eps])
+        for i, ep, res in zip(idx, eps, results[len(others):]):
+            ep.contact_force = ep.sim.evaluated(res.contact_force_profile())
+            self.episodes[i] = ep
+        return results[:len(others)]
+
+    def start(self, idx: list[int], rngs: list[np.random.Generator]) -> None:
+        """New episodes in rows ``idx``, drawn from their generators ``rngs[i]``."""
+        self._new_episodes(idx, rngs)
+        refresh_geometry([self.episodes[i] for i in idx])
+
+    def advance(self, want: np.ndarray, stepping: list[int], rngs: list[np.random.Generator],
+                resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
+        """One step of the rows ``stepping``, which ask to tamp ``want`` (rows, n_sections) bool, and new episodes
+        in ``resetting``, their passes in one batch: the rewards and truncation flags (rows,; 0 and False
+        elsewhere) and the info of each stepped row."""
+        n = len(self.episodes)
+        tamping = {i: apply_tamping(self.episodes[i], want[i], rngs[i]) for i in stepping}
+        results = self._new_episodes(list(resetting), rngs, [self.episodes[i] for i in stepping])
+        if stepping:
+            traffic_batch([self.episodes[i] for i in stepping], results)
+        refresh_geometry(self.episodes)  # the new levels' D1 (stepped and new episodes), for costs, info, obs
+        rewards = np.zeros(n)
+        truncated = np.zeros(n, dtype=bool)
+        infos: dict[int, dict] = {}
+        for i in stepping:
+            ep = self.episodes[i]
+            cost, tamped = tamping[i]
+            parts, section_costs = costs(ep, cost, tamped)
+            rewards[i] = -sum(parts.values())
+            truncated[i] = ep.step_count >= self.config.horizon_steps
+            infos[i] = info(ep, parts, tamped, section_costs)
+        return rewards, truncated, infos
+
+    def observation(self, i: int) -> dict[str, np.ndarray]:
+        return observation(self.episodes[i])
+
+    def observations(self, keys) -> dict[str, np.ndarray]:
+        return observations(self.episodes, keys)
+
+    def reset_info(self, i: int) -> dict:
+        return info(self.episodes[i], dict.fromkeys(COST_KEYS, 0.0), np.zeros(self.config.n_sections, dtype=bool))
+
+    def allowed(self) -> np.ndarray:
+        """(rows, n_sections) the sections that may be tamped now."""
+        return np.array([ep.mask() for ep in self.episodes])
+
+    def check_not_truncated(self, i: int) -> None:
+        """RuntimeError if row ``i`` has reached its horizon (it must be reset before the next step)."""
+        c = self.config
+        if self.episodes[i].step_count >= c.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({c.horizon_steps} steps, {c.horizon_years:g} years): "
+                "call reset() before step()")
+
+    def get_state(self, i: int) -> Episode:
+        """A copy of row ``i``'s episode that :meth:`set_state` restores exactly."""
+        return copy_episode(self.episodes[i])
+
+    def set_state(self, i: int, state: Episode) -> None:
+        self.episodes[i] = copy_episode(state)
+
+    def frame(self, i: int, last_info: dict) -> np.ndarray:
+        """An RGB picture of row ``i`` (:func:`trackenv.render.episode_frame`)."""
+        from ..render import episode_frame
+
+        return episode_frame(self.episodes[i], last_info)

@@ -1,36 +1,23 @@
 """TampingLine: when and where to tamp a railway line of 200 m sections, with the physics in every step.
 
-One class does the work, :class:`TampingLineVectorEnv` (natively batched over lines: every segment of every
-line runs in one batched pass per vehicle type); :class:`TampingLine` is its batch of one behind the
-``gymnasium.Env`` API. The rules live in :mod:`trackenv.envs.line_episode`, the parameters and the scenario
-suite in :mod:`trackenv.envs.line_config`.
+:class:`TampingLine` (one line) and :class:`TampingLineVectorEnv` (many, every segment of every line in one
+batched pass per vehicle type) are :class:`~trackenv.envs.env.TrackEnv` and
+:class:`~trackenv.envs.env.TrackVectorEnv`, the Gymnasium layer of every problem, over the line's engine
+(:class:`~trackenv.envs.line_episode.LineBatch`, which holds the rules); the parameters and the scenario suite
+are in :mod:`trackenv.envs.line_config`.
 """
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
-import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from .batched import BatchedVectorEnv
-from .common import action_mask, check_render_mode, check_reset_arguments, decode_action, observation_space
+from .env import TrackEnv, TrackVectorEnv
 from .line_config import LineConfig
-from .line_episode import LineBatch, line_observation_bounds
-from .state import EnvState, checked, snapshot
+from .line_episode import LineBatch, line_observation_space
 
 __all__ = ["TampingLine", "TampingLineVectorEnv", "line_observation_space"]
-
-
-def line_observation_space(config: LineConfig) -> spaces.Dict:
-    """The Dict space of TampingLine's observation table (its bounds: :func:`line_observation_bounds`)."""
-    bounds = line_observation_bounds(config)
-    per_line = {"measurement_age": (1,), "time": (1,), "budget_left": (1,),
-                "level": (config.n_sections, config.n_sleepers)}
-    return observation_space(bounds, {key: per_line.get(key, (config.n_sections,)) for key in bounds})
 
 
 def line_config(config: LineConfig | dict | str | None, scenario: str | None, overrides: dict[str, Any]) -> LineConfig:
@@ -42,7 +29,7 @@ def line_config(config: LineConfig | dict | str | None, scenario: str | None, ov
     return out.replace(**overrides) if overrides else out
 
 
-class TampingLineVectorEnv(BatchedVectorEnv):
+class TampingLineVectorEnv(TrackVectorEnv):
     """``num_envs`` TampingLine episodes (same config), stepped together: every segment of every line in one
     batched pass per vehicle type. See :class:`TampingLine` for the spec.
 
@@ -57,68 +44,17 @@ class TampingLineVectorEnv(BatchedVectorEnv):
     def __init__(self, num_envs: int = 4, config: LineConfig | dict | str | None = None, *,
                  scenario: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        self.config = config = line_config(config, scenario, overrides)
-        super().__init__(num_envs, line_observation_space(config), spaces.MultiBinary(config.n_sections),
-                         autoreset_mode=autoreset_mode, render_mode=render_mode)
-        self.batch: LineBatch | None = None
+        super().__init__(num_envs, line_config(config, scenario, overrides), autoreset_mode=autoreset_mode,
+                         render_mode=render_mode)
 
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        self.batch = LineBatch(self.config, self.num_envs)
-        return super().reset(seed=seed, options=options)
-
-    def _lines(self) -> LineBatch:
-        if self.batch is None:
-            raise RuntimeError("call reset() before step()")
-        return self.batch
-
-    def _start(self, idx: list[int]) -> None:
-        self._lines().reset_lines(idx, self._rngs)
-
-    def _observation(self, i: int) -> dict[str, np.ndarray]:
-        return self._lines().observation(i)
-
-    def _reset_info(self, i: int) -> dict:
-        return self._lines().reset_info(i)
-
-    def _step_envs(self, actions: np.ndarray, stepping: list[int],
-                   resetting: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, dict]]:
-        S = self.config.n_sections
-        want = np.zeros((self.num_envs, S), dtype=bool)
-        for b in stepping:
-            want[b] = decode_action(actions[b], "multibinary", S)
-        rewards, truncated, infos = self._lines().step_lines(want, stepping)
-        if resetting:
-            self._start(resetting)
-        return rewards, np.zeros(self.num_envs, dtype=bool), truncated, infos
-
-    def get_state(self, index: int) -> EnvState:
-        """A snapshot of line ``index`` (:mod:`trackenv.envs.state`), the same as :meth:`TampingLine.get_state`
-        gives: it can be restored here, in another row, or in a single env of this config."""
-        i = self._env_index(index)
-        return snapshot(self.config, self._lines().get_state(i), self._rngs[i], self._infos[i])
-
-    def set_state(self, index: int, state: EnvState) -> None:
-        """Continue line ``index`` from ``state`` (a snapshot of this config); a pending NEXT_STEP reset of that
-        line is dropped."""
-        i = self._env_index(index)
-        state = checked(state, self.config)
-        self._lines().set_state(i, state.episode)
-        self._restore_row(i, state)
-
-    def _frame(self, info: dict) -> np.ndarray:
-        from ..render import line_frame
-
-        return line_frame(self._lines(), 0, info)
-
-    def action_masks(self) -> np.ndarray:
-        """(num_envs, 2·S) [may-not-tamp, may-tamp] pairs per section (sb3-contrib's MultiBinary convention).
-        The capacity (at most ``capacity`` sections per campaign) is a cardinality limit that per-section masks
-        cannot express: see ``over_capacity``."""
-        shape = (self.num_envs, self.config.n_sections)
-        return action_mask(self.batch.allowed() if self.batch is not None else np.ones(shape, bool), "multibinary")
+    @property
+    def batch(self) -> LineBatch | None:
+        """The engine: every line's segments as rows (:class:`~trackenv.envs.line_episode.LineBatch`), or None
+        before the first reset."""
+        return self.engine
 
 
-class TampingLine(gym.Env):
+class TampingLine(TrackEnv):
     """Plan tamping of a railway line: which 200 m sections to tamp, and when, from recording-car data.
 
     **Description.** A line of ``n_sections`` sections of 200 m (default 12: 2.4 km) at 100 km/h carrying
@@ -209,61 +145,12 @@ class TampingLine(gym.Env):
     ``info["section_costs"]``.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
-
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        self.config = line_config(config, scenario, overrides)
-        self.render_mode = check_render_mode(render_mode)
-        self.observation_space = line_observation_space(self.config)
-        self.action_space = spaces.MultiBinary(self.config.n_sections)
-        self.batch: LineBatch | None = None  # the engine, a batch of one line, made by reset()
-        self._last_info: dict = {}
+        super().__init__(line_config(config, scenario, overrides), render_mode=render_mode)
 
-    def _line(self) -> LineBatch:
-        if self.batch is None:
-            raise RuntimeError("call reset() before step()")
-        return self.batch
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=check_reset_arguments(seed, options))
-        self.batch = LineBatch(self.config, 1)
-        self.batch.reset_lines([0], [self.np_random])  # drawn from this env's generator (reset() continues it)
-        self._last_info = self.batch.reset_info(0)
-        return self.batch.observation(0), self._last_info
-
-    def step(self, action):
-        bt = self._line()
-        bt.check_not_truncated(0)
-        want = decode_action(action, "multibinary", self.config.n_sections)[None, :]
-        rewards, truncated, infos = bt.step_lines(want, [0])
-        self._last_info = infos[0]
-        return bt.observation(0), float(rewards[0]), False, bool(truncated[0]), self._last_info
-
-    def action_masks(self) -> np.ndarray:
-        """(2·S,) [may-not-tamp, may-tamp] pairs per section, as :meth:`TampingLineVectorEnv.action_masks`."""
-        allowed = self.batch.allowed()[0] if self.batch is not None else np.ones(self.config.n_sections, bool)
-        return action_mask(allowed, "multibinary")
-
-    def get_state(self) -> EnvState:
-        """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, on any env of
-        the same config or on a row of its vector env continues it bit for bit."""
-        return snapshot(self.config, self._line().get_state(0), self.np_random, self._last_info)
-
-    def set_state(self, state: EnvState) -> None:
-        """Continue from ``state`` (from ``get_state`` of an env of this config); the snapshot is not changed."""
-        state = checked(state, self.config)
-        if self.batch is None:
-            self.batch = LineBatch(self.config, 1)
-        self.batch.set_state(0, state.episode)
-        self.np_random.bit_generator.state = copy.deepcopy(state.rng_state)
-        self._last_info = copy.deepcopy(state.last_info)
-
-    def render(self):
-        """The line's state as an RGB array (``render_mode="rgb_array"``; :func:`trackenv.render.line_frame`),
-        else None."""
-        if self.render_mode != "rgb_array" or self.batch is None:
-            return None
-        from ..render import line_frame
-
-        return line_frame(self.batch, 0, self._last_info)
+    @property
+    def batch(self) -> LineBatch | None:
+        """The engine: a batch of this one line (:class:`~trackenv.envs.line_episode.LineBatch`), or None before
+        the first reset."""
+        return self.engine

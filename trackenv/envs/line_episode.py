@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
+from gymnasium import spaces
 from scipy.ndimage import gaussian_filter1d
 
 from ..degradation import TrackDegradation
@@ -21,6 +22,7 @@ from ..physics.geometry import classify, d1_filter, german_psd, synthesize_profi
 from ..physics.settlement import implicit_settlement_step
 from ..physics.track import Track
 from .common import SHARED_BOUNDS, clip_observation
+from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
 from .info import step_info
 from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
@@ -94,6 +96,14 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
     if config.profiles:
         bounds["level"] = shared["level"]
     return bounds
+
+
+def line_observation_space(config: LineConfig) -> spaces.Dict:
+    """The Dict space of TampingLine's observation table (its bounds: :func:`line_observation_bounds`)."""
+    bounds = line_observation_bounds(config)
+    per_line = {"measurement_age": (1,), "time": (1,), "budget_left": (1,),
+                "level": (config.n_sections, config.n_sleepers)}
+    return common_observation_space(bounds, {key: per_line.get(key, (config.n_sections,)) for key in bounds})
 
 
 class LineBatch:
@@ -522,6 +532,30 @@ class LineBatch:
         infos = {b: self.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
                               section[self.rows(b)]) for b in lines}
         return rewards, truncated, infos
+
+    def start(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
+        """The engine interface's name of :meth:`reset_lines` (every env's engine starts episodes so)."""
+        self.reset_lines(lines, rngs)
+
+    def advance(self, want: np.ndarray, lines: list[int], rngs: list[np.random.Generator],
+                resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
+        """The engine interface's step: :meth:`step_lines` of ``lines``, then new episodes in ``resetting``
+        drawn from their generators ``rngs[b]`` (everything random in a line is drawn at its reset)."""
+        out = self.step_lines(want, lines)
+        if resetting:
+            self.reset_lines(list(resetting), rngs)
+        return out
+
+    def observations(self, keys) -> dict[str, np.ndarray]:
+        """Every line's :meth:`observation`, stacked (n_lines, ...) under ``keys``."""
+        obs = [self.observation(b) for b in range(self.n_lines)]
+        return {k: np.stack([o[k] for o in obs]) for k in keys}
+
+    def frame(self, b: int, last_info: dict) -> np.ndarray:
+        """An RGB picture of line ``b`` (:func:`trackenv.render.line_frame`)."""
+        from ..render import line_frame
+
+        return line_frame(self, b, last_info)
 
     def reset_info(self, b: int) -> dict:
         """Line ``b``'s info at the start of its episode (no costs, nothing tamped)."""

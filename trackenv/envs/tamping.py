@@ -2,34 +2,22 @@
 
 Every step is physics: a vehicle pass over the standing track with its current level (implicit Newmark, Hertz
 contact), the per-sleeper forces through a settlement law with curve shifting for a quarter-year of traffic,
-and the new level fed back for the next pass (:class:`trackenv.TrackDegradation`).
+and the new level fed back for the next pass (:class:`trackenv.TrackDegradation`). The Gymnasium layer is
+:class:`~trackenv.envs.env.TrackEnv` over the 60 m track's engine (:class:`~trackenv.envs.episode.TrackEpisodes`).
 """
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
-import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
-
-from . import episode as E
-from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
-from .common import observation_space as common_space
 from .config import TampingEnvConfig
-from .state import EnvState, checked, snapshot
+from .env import TrackEnv
+from .episode import Episode, observation_space
+
+__all__ = ["TampingEnv", "observation_space"]
 
 
-def observation_space(config: TampingEnvConfig) -> spaces.Dict:
-    """The Dict space of the observation table (its bounds: :func:`~trackenv.envs.episode.observation_bounds`)."""
-    n, s = config.n_sleepers, config.n_sections
-    bounds = E.observation_bounds(config)
-    size = {"level": n, "contact_force": n, "time": 1}
-    return common_space(bounds, {key: (size.get(key, s),) for key in bounds})
-
-
-class TampingEnv(gym.Env):
+class TampingEnv(TrackEnv):
     """Plan tamping of a ballasted track over a horizon of years.
 
     **Description.** The track (default 60 m of UIC60 on concrete sleepers, 6 sections of 10 m) settles under
@@ -116,8 +104,6 @@ class TampingEnv(gym.Env):
     residual support) became config fields with the values they had.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
-
     def __init__(
         self,
         config: TampingEnvConfig | dict | None = None,
@@ -127,67 +113,10 @@ class TampingEnv(gym.Env):
         **overrides: Any,
     ) -> None:
         config = TampingEnvConfig.coerce(config)
-        if overrides:
-            config = config.replace(**overrides)
-        self.config = config
-        self.action_type = action_type
-        self.render_mode = check_render_mode(render_mode)
-        self.observation_space = observation_space(config)
-        self.action_space = action_space(config, action_type)
-        self.episode: E.Episode | None = None
-        self._last_info: dict = {}
+        super().__init__(config.replace(**overrides) if overrides else config, action_type=action_type,
+                         render_mode=render_mode)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=check_reset_arguments(seed, options))
-        self.episode = E.new_episode(self.config, self.np_random)
-        E.traffic_free_pass(self.episode)
-        self._last_info = E.info(
-            self.episode, dict.fromkeys(E.COST_KEYS, 0.0), np.zeros(self.config.n_sections, dtype=bool)
-        )
-        return E.observation(self.episode), self._last_info
-
-    def step(self, action):
-        if self.episode is None:
-            raise RuntimeError("call reset() before step()")
-        ep = self.episode
-        if ep.step_count >= self.config.horizon_steps:
-            raise RuntimeError(
-                f"the episode was truncated at its horizon ({self.config.horizon_steps} steps, "
-                f"{self.config.horizon_years:g} years): call reset() before step()"
-            )
-        want = decode_action(action, self.action_type, self.config.n_sections)
-        tamping_cost, tamped = E.apply_tamping(ep, want, self.np_random)
-        E.traffic(ep, ep.sim.simulate())
-        parts, section_costs = E.costs(ep, tamping_cost, tamped)
-        reward = -float(sum(parts.values()))
-        truncated = ep.step_count >= self.config.horizon_steps
-        self._last_info = E.info(ep, parts, tamped, section_costs)
-        return E.observation(ep), reward, False, truncated, self._last_info
-
-    def get_state(self) -> EnvState:
-        """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, or on any env of
-        the same config, continues it bit for bit."""
-        if self.episode is None:
-            raise RuntimeError("call reset() before get_state()")
-        return snapshot(self.config, E.copy_episode(self.episode), self.np_random, self._last_info)
-
-    def set_state(self, state: EnvState) -> None:
-        """Continue from ``state`` (from :meth:`get_state` of an env of this config); the snapshot itself is not
-        changed, so it can be restored again."""
-        state = checked(state, self.config)
-        self.episode = E.copy_episode(state.episode)
-        self.np_random.bit_generator.state = copy.deepcopy(state.rng_state)
-        self._last_info = copy.deepcopy(state.last_info)
-
-    def action_masks(self) -> np.ndarray:
-        """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): for MultiBinary, (2·n_sections,)
-        pairs [may-not-tamp, may-tamp] per section; for Discrete, (n_sections + 1,)."""
-        allowed = np.ones(self.config.n_sections, bool) if self.episode is None else self.episode.mask()
-        return action_mask(allowed, self.action_type)
-
-    def render(self):
-        if self.render_mode != "rgb_array" or self.episode is None:
-            return None
-        from ..render import episode_frame
-
-        return episode_frame(self.episode, self._last_info)
+    @property
+    def episode(self) -> Episode | None:
+        """The current episode (its simulator, level, counts), or None before the first reset."""
+        return None if self.engine is None else self.engine.episodes[0]

@@ -1,0 +1,178 @@
+"""The Gymnasium layer of every trackenv problem, written once: :class:`TrackEnv` (one episode) and
+:class:`TrackVectorEnv` (many, stepped together), both thin layers over the problem's episode engine.
+
+An engine (:class:`~trackenv.envs.episode.TrackEpisodes` for the 60 m track,
+:class:`~trackenv.envs.line_episode.LineBatch` for the line; :func:`~trackenv.envs.problems.problem_of` says
+which) holds the episodes of its rows and knows the rules of a step; the env layer owns what Gymnasium asks:
+spaces, seeding, decoding and checking actions, masks, the episode's end, rendering and the planning state
+API. The single env is an engine of one row driven by the env's own generator; the vector env
+(:class:`~trackenv.envs.batched.BatchedVectorEnv`'s conventions: both autoreset modes, Gymnasium's info layout)
+one row per env, its physics in one batched call. So a row of the vector env gives bit for bit what the single
+env gives for the same seed and actions, whatever the problem.
+
+The registered ids use the named subclasses, which carry each problem's spec in their docstrings:
+:class:`~trackenv.envs.tamping.TampingEnv` and :class:`~trackenv.envs.vector.TampingVectorEnv` (the 60 m
+track), :class:`~trackenv.envs.line.TampingLine` and :class:`~trackenv.envs.line.TampingLineVectorEnv`.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+from .batched import BatchedVectorEnv
+from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
+from .problems import ProblemConfig, problem_of
+from .state import EnvState, checked, snapshot
+
+
+def _checked_action_type(config: ProblemConfig, action_type: str) -> str:
+    allowed = problem_of(config).action_types
+    if action_type not in allowed:
+        raise ValueError(f"action_type must be one of {list(allowed)} for {type(config).__name__}, "
+                         f"got {action_type!r}")
+    return action_type
+
+
+class TrackEnv(gym.Env):
+    """One episode of the problem that ``config`` poses (see the module docstring); ``action_type`` one of the
+    problem's, ``render_mode`` None or "rgb_array"."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, config: ProblemConfig, *, action_type: str = "multibinary",
+                 render_mode: str | None = None) -> None:
+        self.config = config
+        self.action_type = _checked_action_type(config, action_type)
+        self.render_mode = check_render_mode(render_mode)
+        self.observation_space = problem_of(config).observation_space(config)
+        self.action_space = action_space(config, action_type)
+        self.engine: Any = None  # the problem's engine with one row, made by reset() or set_state()
+        self._last_info: dict = {}
+
+    def _engine(self) -> Any:
+        if self.engine is None:
+            raise RuntimeError("call reset() before step()")
+        return self.engine
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=check_reset_arguments(seed, options))
+        if self.engine is None:
+            self.engine = problem_of(self.config).engine(self.config, 1)
+        self.engine.start([0], [self.np_random])  # drawn from this env's generator (reset() continues it)
+        self._last_info = self.engine.reset_info(0)
+        return self.engine.observation(0), self._last_info
+
+    def step(self, action):
+        engine = self._engine()
+        engine.check_not_truncated(0)
+        want = decode_action(action, self.action_type, self.config.n_sections)[None, :]
+        rewards, truncated, infos = engine.advance(want, [0], [self.np_random])
+        self._last_info = infos[0]
+        return engine.observation(0), float(rewards[0]), False, bool(truncated[0]), self._last_info
+
+    def action_masks(self) -> np.ndarray:
+        """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): MultiBinary, (2·n_sections,) pairs
+        [may-not-tamp, may-tamp] per section; Discrete, (n_sections + 1,). A section tamped within the last
+        ``min_steps_between_tampings`` steps may not be tamped."""
+        allowed = self.engine.allowed()[0] if self.engine is not None else np.ones(self.config.n_sections, bool)
+        return action_mask(allowed, self.action_type)
+
+    def get_state(self) -> EnvState:
+        """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, on any env of the
+        same config or on a row of its vector env continues it bit for bit."""
+        if self.engine is None:
+            raise RuntimeError("call reset() before get_state()")
+        return snapshot(self.config, self.engine.get_state(0), self.np_random, self._last_info)
+
+    def set_state(self, state: EnvState) -> None:
+        """Continue from ``state`` (from ``get_state`` of an env of this config); the snapshot is not changed, so
+        it can be restored again."""
+        state = checked(state, self.config)
+        if self.engine is None:
+            self.engine = problem_of(self.config).engine(self.config, 1)
+        self.engine.set_state(0, state.episode)
+        self.np_random.bit_generator.state = copy.deepcopy(state.rng_state)
+        self._last_info = copy.deepcopy(state.last_info)
+
+    def render(self):
+        """The episode's state as an RGB array (``render_mode="rgb_array"``), else None."""
+        if self.render_mode != "rgb_array" or self.engine is None:
+            return None
+        return self.engine.frame(0, self._last_info)
+
+
+class TrackVectorEnv(BatchedVectorEnv):
+    """``num_envs`` episodes of the problem that ``config`` poses, stepped together: one row of the problem's
+    engine per env, the physics of all of them in one batched call (see the module docstring and
+    :class:`~trackenv.envs.batched.BatchedVectorEnv` for the Gymnasium conventions)."""
+
+    def __init__(self, num_envs: int, config: ProblemConfig, *, action_type: str = "multibinary",
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+                 render_mode: str | None = None) -> None:
+        self.config = config
+        self.action_type = _checked_action_type(config, action_type)
+        obs_space = problem_of(config).observation_space(config)
+        self._observation_keys = list(obs_space.spaces)
+        super().__init__(num_envs, obs_space, action_space(config, action_type),
+                         autoreset_mode=autoreset_mode, render_mode=render_mode)
+        self.engine: Any = None  # the problem's engine with num_envs rows, made by the first reset()
+
+    def _rows(self) -> Any:
+        if self.engine is None:
+            raise RuntimeError("call reset() before step()")
+        return self.engine
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        check_reset_arguments(None, options)
+        if self.engine is None:
+            self.engine = problem_of(self.config).engine(self.config, self.num_envs)
+        return super().reset(seed=seed, options=options)
+
+    def _start(self, idx: list[int]) -> None:
+        self._rows().start(idx, self._rngs)
+
+    def _step_envs(self, actions: np.ndarray, stepping: list[int],
+                   resetting: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, dict]]:
+        n_sections = self.config.n_sections
+        want = np.zeros((self.num_envs, n_sections), dtype=bool)
+        for i in stepping:
+            want[i] = decode_action(actions[i], self.action_type, n_sections)
+        rewards, truncated, infos = self._rows().advance(want, stepping, self._rngs, resetting)
+        return rewards, np.zeros(self.num_envs, dtype=bool), truncated, infos
+
+    def _observation(self, i: int) -> dict[str, np.ndarray]:
+        return self._rows().observation(i)
+
+    def _observations(self) -> dict:
+        return self._rows().observations(self._observation_keys)
+
+    def _reset_info(self, i: int) -> dict:
+        return self._rows().reset_info(i)
+
+    def _frame(self, info: dict) -> np.ndarray:
+        return self._rows().frame(0, info)
+
+    def action_masks(self) -> np.ndarray:
+        """(num_envs, ...) the masks of :meth:`TrackEnv.action_masks`, one row per env."""
+        shape = (self.num_envs, self.config.n_sections)
+        return action_mask(self.engine.allowed() if self.engine is not None else np.ones(shape, bool),
+                           self.action_type)
+
+    def get_state(self, index: int) -> EnvState:
+        """A snapshot of env ``index`` (:mod:`trackenv.envs.state`), the same as :meth:`TrackEnv.get_state`
+        gives: it can be restored here, in another row, or in a single env of this config."""
+        i = self._env_index(index)
+        return snapshot(self.config, self._rows().get_state(i), self._rngs[i], self._infos[i])
+
+    def set_state(self, index: int, state: EnvState) -> None:
+        """Continue env ``index`` from ``state`` (a snapshot of this config); a pending NEXT_STEP reset of that
+        env is dropped."""
+        i = self._env_index(index)
+        state = checked(state, self.config)
+        self._rows().set_state(i, state.episode)
+        self._restore_row(i, state)
