@@ -35,6 +35,8 @@ class ConfigBase:
     agent_action_types: ClassVar[tuple[str, ...]] = ("multibinary",)
     #: the cost parts of a step that interventions make, in the order of ``info["costs"]``
     _INTERVENTION_COST_KEYS: ClassVar[tuple[str, ...]] = ()
+    #: the config field of the fixed cost of a campaign (a step with any intervention)
+    _CAMPAIGN_COST_FIELD: ClassVar[str] = ""
     #: (cost part, quality class, config field of its cost per section and step) for each class that costs
     _CLASS_COST_FIELDS: ClassVar[tuple[tuple[str, int, str], ...]] = ()
     speed_kmh: float
@@ -78,6 +80,12 @@ class ConfigBase:
         """The names of a step's cost parts (``info["costs"]``), in order: the interventions', the geometry, the
         quality classes'."""
         return cls._INTERVENTION_COST_KEYS + ("geometry",) + tuple(name for name, _, _ in cls._CLASS_COST_FIELDS)
+
+    @property
+    def campaign_cost(self) -> float:
+        """The fixed cost of a step with any intervention (k€: the mobilisation of the machine, the possession of
+        the line), which belongs to the campaign rather than to any section."""
+        return getattr(self, self._CAMPAIGN_COST_FIELD)
 
     @property
     def class_costs(self) -> dict[str, tuple[int, float]]:
@@ -180,6 +188,7 @@ class TampingEnvConfig(ConfigBase):
 
     agent_action_types = ("multibinary", "discrete", "ranked")
     _INTERVENTION_COST_KEYS = ("tamping",)
+    _CAMPAIGN_COST_FIELD = "mobilisation_cost"
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("intervention", 2, "intervention_cost"),
                           ("immediate_action", 3, "immediate_action_cost"))
 

@@ -142,6 +142,7 @@ class LineConfig(ConfigBase):
     dt: float | str = "auto"
 
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
+    _CAMPAIGN_COST_FIELD = "possession_cost"
     _CLASS_COST_FIELDS = (("speed_restriction", 2, "speed_restriction_cost"),
                           ("immediate_action", 3, "immediate_action_cost"))
 
