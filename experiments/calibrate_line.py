@@ -18,7 +18,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--seeds", default="2000:2004")
     ap.add_argument("--threshold", type=float, default=2.0)
     ap.add_argument("--out", default="results/line_calibration")
-    ap.add_argument("--docs", default="docs/line_calibration.png", help="copy of the plot for the README")
+    ap.add_argument("--docs", default="docs/line_calibration.png", help="copy of the plot for the documentation")
     args = ap.parse_args(argv)
     res = run_calibration(args.scenario, parse_seeds(args.seeds), args.threshold, out_dir=args.out)
     print(format_calibration(res))

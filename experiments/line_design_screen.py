@@ -8,7 +8,7 @@ For one variant of the default line (``--set name=value`` overrides, validated b
 2. the per-section hindsight search (:func:`trackenv_agents.evaluation.line_hindsight.hindsight_bound`, ``--rounds``
    local-search rounds) from the best state-aware rule's schedule on the same episodes, with the three rules'
    schedules under the other recording designs as candidates, as ``line_room.py`` does (``--no-recorded``: without
-   them, as in the first screen of the README).
+   them, as in the first screen of the results).
 
 Prints and writes (``--out``) the mean costs, the state-aware vs uniform gap and the hindsight vs rule gap per
 episode. A variant worth a full run shows a hindsight gap clearly above 10 % here.

@@ -3,7 +3,8 @@ MaskablePPO for ``--timesteps`` line-steps, none by default).
 
 Example: ``python experiments/train_line.py --out runs/ppo_line`` (the default line, the shipped
 hyper-parameters: 6 iterations of 16 training episodes, each run and forked, a held-out evaluation of 16 episodes
-after each; see the README for its wall time). ``--scenario small`` for the small line; ``--export`` copies
+after each; the documentation's agents page gives its wall time). ``--scenario small`` for the small line;
+``--export`` copies
 the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamping_line.zip``, which
 ``trackenv evaluate --env trackenv/TampingLine-v0`` then scores next to the rules.
 ``trackenv train --env trackenv/TampingLine-v0`` runs the same training.

@@ -1,4 +1,5 @@
-"""Library code changes no global state (STYLE.md point 13): matplotlib's backend stays the user's."""
+"""Library code changes no global state (a library that users import must not): matplotlib's backend stays the
+user's."""
 
 from __future__ import annotations
 

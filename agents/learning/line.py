@@ -16,7 +16,8 @@
      (each section an agent paid its own costs) from the best iteration, with the same held-out evaluation.
 
   Why not PPO alone: a default line makes ~10 line-steps a second on 2 cores, a few hundred episodes an hour,
-  and PPO from the rule's clone stayed where it started or got worse over the first 80 episodes (README). A
+  and PPO from the rule's clone stayed where it started or got worse over the first 80 episodes (the
+  documentation's results page). A
   counterfactual fork measures the value of one choice without the noise of the other sections and of the
   future (both branches see the same draws), so an hour buys an improvement of the whole policy.
 * :func:`load_line_trained` — a saved policy (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``

@@ -36,7 +36,7 @@ __all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineA
            "section_features"]
 
 #: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
-#: β = 0.24 (README, calibration) at a 3 mm SD before.
+#: β = 0.24 (the documentation's line-problem page, calibration) at a 3 mm SD before.
 FRESH_SD_MM = 0.9
 #: Features are clipped to [0, FEATURE_CLIP] after scaling: typical values are O(1), and a rare extreme (a wet
 #: spot at 19 mm of SD, a section untended for 12 years) must not drive the network far beyond its training data.

@@ -1,8 +1,8 @@
 """Rule-based tamping policies for the MultiBinary action space of ``trackenv/Tamping-v0``.
 
 Every policy speaks stable-baselines3's ``predict(obs, state=None, episode_start=None, deterministic=True)
--> (action, state)`` (STYLE.md point 10), so one harness (:mod:`trackenv_agents.evaluation`) scores heuristics and
-trained agents alike. ``obs`` is one observation dict (action shape ``(n_sections,)``) or a batched dict with
+-> (action, state)``, as its models do, so one harness (:mod:`trackenv_agents.evaluation`) scores heuristics
+and trained agents alike. ``obs`` is one observation dict (action shape ``(n_sections,)``) or a batched dict with
 a leading env axis (``obs["time"].ndim == 2``; action shape ``(n_envs, n_sections)``). Actions are int8 0/1.
 
 The policies are stateless: anything time-dependent is read from the observation (``time`` x horizon,

@@ -27,7 +27,7 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
 * every env figure carries ``profile``: the shares of its wall time spent in the compiled kernel, the pass set-up
   around it (irregularity, matrices, static start), the settlement step, the D1/quality computation and the rest
-  (:data:`PROFILE_STAGES`; :func:`format_profile` renders them as the README's table).
+  (:data:`PROFILE_STAGES`; :func:`format_profile` renders them as the documentation's performance table).
 
 Every figure carries ``load_average_1min``, the machine's load when it was taken: other work on the machine
 slows every figure, so compare figures taken at a similar load.
@@ -392,7 +392,7 @@ PROFILE_LABELS = (("kernel", "kernel"), ("pass_setup", "pass set-up"), ("settlem
 
 def format_profile(d: dict) -> str:
     """Where the env steps' wall time went (shares of :func:`_StageTimer.profile`), one column per env
-    benchmark: the README's profile table, as Markdown."""
+    benchmark: the documentation's performance table, as Markdown."""
     found: list[tuple[str, Any]] = [("Tamping-v0, 1 env", d.get("env"))]
     found += [(f"Tamping-v0, {n} envs", v) for n, v in d.get("vector_env", {}).items()]
     found += [("TampingLine-v0, 1 line", d.get("line_env"))]

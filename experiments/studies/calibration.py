@@ -23,10 +23,11 @@ from gymnasium.vector import AutoresetMode
 from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
 
-#: Published ranges the figures are compared with (low, high, source). [unverified] as in PHYSICS-NOTES.md.
+#: Published ranges the figures are compared with (low, high, source); [unverified] where the figure could not be
+#: traced to its primary source (the documentation's line-problem page lists them).
 PUBLISHED = {
-    "plain_growth_mm_per_100mgt": (0.5, 1.5, "SD growth of plain track, 0.5-1.5 mm per 100 MGT (PHYSICS-NOTES, "
-                                              "[unverified]); lognormal between sections (Andrade & Teixeira 2011)"),
+    "plain_growth_mm_per_100mgt": (0.5, 1.5, "SD growth of plain track, of the order of 0.5-1.5 mm per 100 MGT "
+                                              "[unverified]; lognormal between sections (Andrade & Teixeira 2011)"),
     "transition_ratio": (4.0, 8.0, "transition zones need 4-8x the maintenance of open track "
                                    "(Wang & Markine 2018, doi 10.1177/0954409717748789)"),
     "switch_ratio": (3.0, 7.0, "switches and crossings ~5x the maintenance per length (GB: 24 % of the budget "

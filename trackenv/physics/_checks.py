@@ -7,7 +7,8 @@ right below their fields, so a field's bound is written once, next to the field;
 (the env's config to the dynamics) reads the bound of the layer below (e.g. :data:`MAX_TIME_STEPS`) instead of
 writing its own.
 
-Not to be confused with :mod:`trackenv.validation`, which checks the *physics* against closed forms.
+Not to be confused with :mod:`trackenv_studies.validation` (``trackenv validate``), which checks the *physics*
+against closed forms.
 """
 
 from __future__ import annotations
