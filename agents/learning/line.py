@@ -17,9 +17,9 @@
 
   Why not PPO alone: a default line makes ~10 line-steps a second on 2 cores, a few hundred episodes an hour,
   and PPO from the rule's clone stayed where it started or got worse over the first 80 episodes (the
-  documentation's results page). A
-  counterfactual fork measures the value of one choice without the noise of the other sections and of the
-  future (both branches see the same draws), so an hour buys an improvement of the whole policy.
+  documentation's results page). A counterfactual fork measures the value of one choice without the noise of
+  the other sections and of the future (both branches see the same draws), so an hour buys an improvement of
+  the whole policy.
 * :func:`load_line_trained` — a saved policy (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``
   with its ``ppo_tamping_line_meta.json``) as a :class:`~trackenv_agents.learning.line_policy.LineAgent`: SB3-style
   ``predict`` on raw observations of any TampingLine scenario.
