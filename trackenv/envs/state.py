@@ -50,10 +50,3 @@ def checked(state: Any, config: Any) -> EnvState:
     if state.config is not config and state.config != config:
         raise ValueError("state comes from an env of another config; set_state needs the config it was taken with")
     return state
-
-
-def restored_rng(state: EnvState) -> np.random.Generator:
-    """A generator in the state of the snapshot's (of the same bit generator type)."""
-    rng = np.random.default_rng()
-    rng.bit_generator.state = copy.deepcopy(state.rng_state)
-    return rng
