@@ -18,7 +18,7 @@ import numpy as np
 import scipy.interpolate
 import scipy.linalg
 
-from . import _kernel
+from . import _kernel, _step
 from ._checks import check_array, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
@@ -343,20 +343,20 @@ def _track_window_factors(track: Track, windows: tuple) -> list[tuple[int, int, 
     return _window_factors(_track_stiffness(track), windows)
 
 
-_NO_REUSE = _kernel.Reuse(np.zeros((0, 2 * _kernel.B + 3, 0)), np.zeros((0, 2), dtype=np.int64),
+_NO_REUSE = _step.Reuse(np.zeros((0, 2 * _step.B + 3, 0)), np.zeros((0, 2), dtype=np.int64),
                           np.zeros((0, 2, 0)), np.zeros((0, 2), dtype=np.int64))
-"""What a batch of several rows passes the kernel: nothing kept (see :class:`_kernel.Reuse`)."""
+"""What a batch of several rows passes the kernel: nothing kept (see :class:`_step.Reuse`)."""
 
 
 def _store_shapes(track: Track, m_cap: int) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
-    """Shapes of a store's factors and bay columns (:class:`_kernel.Reuse`) for ``track``, windows of up to
+    """Shapes of a store's factors and bay columns (:class:`_step.Reuse`) for ``track``, windows of up to
     ``m_cap`` DOFs."""
     n = track.n_sleepers
-    return (n, 2 * _kernel.B + 3, m_cap), (n, 2 * (track.elements_per_bay + 1), m_cap)
+    return (n, 2 * _step.B + 3, m_cap), (n, 2 * (track.elements_per_bay + 1), m_cap)
 
 
 @functools.lru_cache(maxsize=16)
-def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
+def _kept_factors(track: Track, dt: float, m_cap: int) -> _step.Reuse:
     """The kernel's store of window factors and bay columns for one-row passes over ``track`` at ``dt`` (windows
     of up to ``m_cap`` DOFs), kept per track object, dt and window size: the effective stiffness K + a0 M + a1 C
     is the same in every such pass, so each window's factor and each bay's columns are computed once, by the
@@ -364,7 +364,7 @@ def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
     over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each."""
     factor_shape, columns_shape = _store_shapes(track, m_cap)
     n = track.n_sleepers
-    return _kernel.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
+    return _step.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
                          np.zeros(columns_shape), np.full((n, 2), -1, dtype=np.int64))
 
 
@@ -385,7 +385,7 @@ _REUSE_MAX_BYTES = 8 * 2**20
 
 
 def _one_row_reuse(track: Track, dt: float, axle_offsets: np.ndarray, cluster: np.ndarray,
-                   margin: int) -> _kernel.Reuse:
+                   margin: int) -> _step.Reuse:
     """What a one-row pass over ``track`` keeps for the next one (:func:`_kept_factors`), or nothing
     (``_NO_REUSE``) where its windows or its store would exceed the bounds above."""
     m_cap = _window_dof_bound(track, axle_offsets, cluster, margin)
@@ -697,7 +697,7 @@ def simulate_passes(
     pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
     for b in range(nb, n_chunks * width):  # the padding rows copy the last row, as _pack pads
         row(z_packed, b)[...] = z_rows[-1]
-    mesh = _kernel.Mesh(
+    mesh = _step.Mesh(
         lay.node_w.astype(np.int64),
         lay.sleeper.astype(np.int64),
         lay.sleeper_node.astype(np.int64),
@@ -707,7 +707,7 @@ def simulate_passes(
         int(margin),
         _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]),
     )
-    drive = _kernel.Drive(
+    drive = _step.Drive(
         np.ascontiguousarray(x_axle),
         consts,
         int(law.code),
@@ -720,7 +720,7 @@ def simulate_passes(
         cluster,
         n_clusters,
     )
-    rows = _kernel.Rows(
+    rows = _step.Rows(
         pack(mb[:, :, 0]),  # the diagonal of each row's mass matrix (Mesh holds the rail's off-diagonals)
         pack(keff),
         pack(pad_k),
@@ -737,7 +737,7 @@ def simulate_passes(
         pack(qdd),
     )
     history = functools.partial(_packed_history, n_steps=n_steps, n_chunks=n_chunks, width=width)
-    peaks = _kernel.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
+    peaks = _step.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
     # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
     one_row = n_chunks == 1 and width == 1
     reuse = _one_row_reuse(t0, dt, sys_.axle_offsets, cluster, margin) if one_row else _NO_REUSE
