@@ -4,6 +4,8 @@
   them (:class:`_WideLower`): the loops across a chunk's rows then issue half the instructions.
 * :class:`_NoAliasCompiler` marks the pointers among a function's arguments ``noalias``: LLVM may then drop the
   run-time overlap checks it puts around every short loop across a chunk's rows.
+* :class:`_InlineCompiler` marks a function ``alwaysinline``: the time step's sections are functions of their
+  own, inlined by LLVM, without the reference counting that numba's own inlining adds.
 
 Neither changes the arithmetic (see :data:`FASTMATH`). :func:`kernel_jit` compiles a kernel function with numba's
 on-disk cache keyed by the source of *every* kernel module, not only the function's own file: numba's cache
@@ -109,6 +111,82 @@ class _NoAliasCompiler(CompilerBase):
     def define_pipelines(self):
         self.state.flags.noalias = True
         return [_wide_pipeline(self.state)]
+
+
+class _InlineLower(_WideLower):
+    """:class:`_WideLower`, with the function marked ``alwaysinline`` for LLVM: the caller's machine code is then
+    the same as with the function's body written out in it. numba's own inlining (``inline="always"``) works on its
+    IR, where each array handed to the inlined function is a new reference: atomic reference-count updates at every
+    call, which in the time-step loop cost more than the arithmetic. A call between compiled functions borrows its
+    array arguments (no update), and LLVM then removes the call itself."""
+
+    def lower_normal_function(self, fndesc):
+        super().lower_normal_function(fndesc)
+        self.function.attributes.add("alwaysinline")
+
+
+@register_pass(mutates_CFG=True, analysis_only=False)
+class _InlineNativeLowering(NativeLowering):
+    """numba's lowering pass, through :class:`_InlineLower`."""
+
+    _name = "trackenv_inline_native_lowering"
+
+    @property
+    def lowering_class(self):
+        return _InlineLower
+
+
+def _inline_pipeline(state):
+    """numba's nopython pipeline with its lowering pass replaced by :class:`_InlineNativeLowering`."""
+    pm = DefaultPassBuilder.define_nopython_pipeline(state)
+    pm.passes = [(_InlineNativeLowering if p is NativeLowering else p, d) for p, d in pm.passes]
+    return pm
+
+
+class _InlineCompiler(CompilerBase):
+    """numba's nopython pipeline, lowered by :class:`_InlineLower`: for the time step's sections, compiled apart
+    (each for a literal width) and inlined by LLVM into the chunk integrator."""
+
+    def define_pipelines(self):
+        return [_inline_pipeline(self.state)]
+
+
+class _NoAliasInlineCompiler(CompilerBase):
+    """:class:`_NoAliasCompiler`'s promise of distinct arrays, lowered by :class:`_InlineLower` (LLVM keeps the
+    promise as alias metadata where it inlines the function)."""
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        return [_inline_pipeline(self.state)]
+
+
+class _CalledLower(_WideLower):
+    """:class:`_WideLower`, with the function marked ``noinline``: for code that runs rarely, kept out of the time
+    step's loop (LLVM inlines a function called from one place, which enlarged the loop and slowed every step)."""
+
+    def lower_normal_function(self, fndesc):
+        super().lower_normal_function(fndesc)
+        self.function.attributes.add("noinline")
+
+
+@register_pass(mutates_CFG=True, analysis_only=False)
+class _CalledNativeLowering(NativeLowering):
+    """numba's lowering pass, through :class:`_CalledLower`."""
+
+    _name = "trackenv_called_native_lowering"
+
+    @property
+    def lowering_class(self):
+        return _CalledLower
+
+
+class _CalledCompiler(CompilerBase):
+    """numba's nopython pipeline, lowered by :class:`_CalledLower`."""
+
+    def define_pipelines(self):
+        pm = DefaultPassBuilder.define_nopython_pipeline(self.state)
+        pm.passes = [(_CalledNativeLowering if p is NativeLowering else p, d) for p, d in pm.passes]
+        return [pm]
 
 
 class _KernelStamp:

@@ -40,7 +40,7 @@ import numpy as np
 from numba import literally, njit
 
 from ._lanes import correct_lanes, damp_lanes, fma, mass_lanes, peak_lanes, sweep_lanes
-from ._pipeline import FASTMATH, _NoAliasCompiler, kernel_jit
+from ._pipeline import FASTMATH, _CalledCompiler, _InlineCompiler, _NoAliasCompiler, _NoAliasInlineCompiler, kernel_jit
 from .track import HALF_BANDWIDTH
 
 B = HALF_BANDWIDTH  # half-bandwidth of the track matrices (see track.DofLayout)
@@ -345,7 +345,16 @@ def _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_
     _solve_rows(fw, bw, inv_diag, m, pred[lo * W : hi * W], W)
 
 
-@njit(inline="always", fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_NoAliasInlineCompiler)
+def _predict_window_rows(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
+    """:func:`_predict_window` compiled for a literal width with distinct arrays
+    (:class:`_pipeline._NoAliasInlineCompiler`: no overlap checks around its loops across a chunk's rows), inlined
+    by LLVM. One row inlines :func:`_predict_window` directly, which measured faster."""
+    literally(W)
+    _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
+
+
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_NoAliasInlineCompiler)
 def _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
     """Correct the track on the window [lo, hi) of axle group c, u = pred + Σ_j F_j K⁻¹ N_j (cols[j, loc[j, k]]:
     the solved column of axle j's element DOF k, fsh[j, k]: its contact force times shape function), then its
@@ -398,23 +407,6 @@ def _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs,
             peak_lanes(u, v, kp[g], cp[g], kb[g], cb[g], pb[g], pt[g], w_at, w_at + sleeper_shift * W, W)
 
 
-@kernel_jit(fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
-def _predict_window_rows(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
-    """:func:`_predict_window` for a chunk of several rows, compiled on its own with distinct arrays
-    (:class:`_NoAliasCompiler`): its loops across the rows then run without overlap checks. One row inlines
-    :func:`_predict_window` instead: a call per step with the window's arrays costs its short loops more."""
-    literally(W)
-    _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
-
-
-@kernel_jit(fastmath=FASTMATH, pipeline_class=_NoAliasCompiler)
-def _correct_window_rows(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W):
-    """:func:`_correct_window` for a chunk of several rows, compiled on its own with distinct arrays (as
-    :func:`_predict_window_rows`)."""
-    literally(W)
-    _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
-
-
 Work = namedtuple(
     "Work",
     "Ls Fw Bw invd lo_c hi_c s_lo_c s_hi_c bay_cache cols tmp cols_t scratch shape edofs elem_of loc wpred ypred "
@@ -465,12 +457,11 @@ def _workspaces(n, nv, n_axles, n_clusters, epb, W):
     )
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _place_axles(mesh, x_axle, step, z_axle, sag, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _place_axles(x_axle, step, node_w, elem_len, z_axle, sag, elem_of, shape, edofs, W):
     """Element, Hermite shape functions and element DOFs of every axle at step ``step`` (shared by the rows), and
     the static sag of settled supports added to each row's rail level under the wheel."""
-    node_w, elem_len = mesh.node_w, mesh.elem_len
-    shape, edofs = wk.shape, wk.edofs
+    literally(W)
     for j in range(x_axle.shape[1]):
         x = x_axle[step, j]
         e = int(x / elem_len)
@@ -479,7 +470,7 @@ def _place_axles(mesh, x_axle, step, z_axle, sag, wk, W):
         if e < 0:
             e = 0
         xi = x / elem_len - e
-        wk.elem_of[j] = e
+        elem_of[j] = e
         xi2 = xi * xi
         xi3 = xi2 * xi
         shape[j, 0] = 1.0 - 3.0 * xi2 + 2.0 * xi3
@@ -497,6 +488,25 @@ def _place_axles(mesh, x_axle, step, z_axle, sag, wk, W):
                 + shape[j, 2] * sag[edofs[j, 2], b]
                 + shape[j, 3] * sag[edofs[j, 3], b]
             )
+
+
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _group_bays(c, cluster_of_axle, elem_of, bay_cache, epb, n_sleepers, W):
+    """(first bay, last bay, whether any axle of group ``c`` entered a new bay); the bay of an axle is that of its
+    element, so that element and bay always agree."""
+    literally(W)
+    changed = False
+    bay_min = n_sleepers
+    bay_max = -1
+    for j in range(cluster_of_axle.shape[0]):
+        if cluster_of_axle[j] != c:
+            continue
+        bay = elem_of[j] // epb
+        if bay != bay_cache[j]:
+            changed = True
+        bay_min = min(bay_min, bay)
+        bay_max = max(bay_max, bay)
+    return bay_min, bay_max, changed
 
 
 @njit(inline="always", fastmath=FASTMATH)
@@ -572,73 +582,47 @@ def _bay_columns_rows(mesh, wk, c, j, bay, lo, hi, W):
             colk[f] = tmp[f]
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _move_windows(mesh, drive, keff, reuse, u, v, a, m_cap, wk, W):
-    """Move the window of every axle group whose axles entered a new bay: the DOFs left behind come to rest, and
-    the new window's factor and its axles' bay columns are built (or read back). A window spans ``margin_bays``
-    sleepers beyond the group's first and last bay."""
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_CalledCompiler)
+def _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W):
+    """Move group ``c``'s window to span ``margin_bays`` sleepers beyond its bays [bay_min, bay_max]: the DOFs
+    left behind come to rest, and the new window's factor and its axles' bay columns are built (or read back).
+    Runs only when a group enters a new bay: called, not inlined, so that the step loop stays small."""
+    literally(W)
     node_w, sleeper_dof, sleeper_node = mesh.node_w, mesh.sleeper_dof, mesh.sleeper_node
     n_sleepers, margin_bays, epb = mesh.n_sleepers, mesh.margin_bays, mesh.epb
-    cluster_of_axle = drive.cluster_of_axle
-    lo_c, hi_c = wk.lo_c, wk.hi_c
-    for c in range(drive.n_clusters):
-        changed = False
-        bay_min = n_sleepers
-        bay_max = -1
-        for j in range(cluster_of_axle.shape[0]):
-            if cluster_of_axle[j] != c:
-                continue
-            bay = wk.elem_of[j] // epb  # the bay of the axle's element, so element and bay always agree
-            if bay != wk.bay_cache[j]:
-                changed = True
-            bay_min = min(bay_min, bay)
-            bay_max = max(bay_max, bay)
-        if not changed:
+    cluster_of_axle, lo_c, hi_c = drive.cluster_of_axle, wk.lo_c, wk.hi_c
+    s_lo = max(0, bay_min - margin_bays)
+    s_hi = min(n_sleepers - 1, bay_max + 1 + margin_bays)
+    lo = node_w[sleeper_node[s_lo]]
+    hi = sleeper_dof[s_hi] + 1
+    if lo_c[c] >= 0:  # DOFs left behind come to rest
+        for f in range(lo_c[c] * W, min(lo, hi_c[c]) * W):
+            u[f] = 0.0
+            v[f] = 0.0
+            a[f] = 0.0
+    lo_c[c] = lo
+    hi_c[c] = hi
+    wk.s_lo_c[c] = s_lo
+    wk.s_hi_c[c] = s_hi
+    keep = W == 1 and hi - lo <= m_cap  # one row: this window's factor and columns are kept across passes
+    _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W)
+    for j in range(cluster_of_axle.shape[0]):
+        if cluster_of_axle[j] != c:
             continue
-        s_lo = max(0, bay_min - margin_bays)
-        s_hi = min(n_sleepers - 1, bay_max + 1 + margin_bays)
-        lo = node_w[sleeper_node[s_lo]]
-        hi = sleeper_dof[s_hi] + 1
-        if lo_c[c] >= 0:  # DOFs left behind come to rest
-            for f in range(lo_c[c] * W, min(lo, hi_c[c]) * W):
-                u[f] = 0.0
-                v[f] = 0.0
-                a[f] = 0.0
-        lo_c[c] = lo
-        hi_c[c] = hi
-        wk.s_lo_c[c] = s_lo
-        wk.s_hi_c[c] = s_hi
-        keep = W == 1 and hi - lo <= m_cap  # one row: this window's factor and columns are kept across passes
-        _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W)
-        for j in range(cluster_of_axle.shape[0]):
-            if cluster_of_axle[j] != c:
-                continue
-            bay = wk.elem_of[j] // epb
-            wk.bay_cache[j] = bay
-            if W == 1:
-                _bay_columns_one(mesh, reuse, wk, c, j, bay, lo, hi, keep)
-            else:
-                _bay_columns_rows(mesh, wk, c, j, bay, lo, hi, W)
+        bay = wk.elem_of[j] // epb
+        wk.bay_cache[j] = bay
+        if W == 1:
+            _bay_columns_one(mesh, reuse, wk, c, j, bay, lo, hi, keep)
+        else:
+            _bay_columns_rows(mesh, wk, c, j, bay, lo, hi, W)
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _locate(mesh, wk):
-    """Where each axle's element DOFs sit among its bay's columns (-1: not a column)."""
-    node_w, sleeper_node = mesh.node_w, mesh.sleeper_node
-    for j in range(wk.loc.shape[0]):
-        basej = node_w[sleeper_node[wk.bay_cache[j]]]
-        for k in range(4):
-            wk.loc[j, k] = _local(wk.edofs[j, k], basej, mesh.epb)
-
-
-@njit(inline="always", fastmath=FASTMATH)
-def _predict_vehicle(drive, q, qd, qdd, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _predict_vehicle(consts, mv, cv, kv_inv, fv, q, qd, qdd, rv, qpred, W):
     """Vehicle predictor (no contact force): K_eff q = f + M p + C r with p = a0 q + a2 qd + a3 qdd and
     r = a1 q + a4 qd + a5 qdd, through the vehicle's K_eff⁻¹."""
-    consts = drive.consts
+    literally(W)
     a0, a1, a2, a3, a4, a5 = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
-    mv, cv, kv_inv, fv = drive.mass, drive.damping, drive.kv_inv, drive.force
-    rv, qpred = wk.rv, wk.qpred
     nv = q.shape[0]
     for i in range(nv):
         for b in range(W):
@@ -659,24 +643,24 @@ def _predict_vehicle(drive, q, qd, qdd, wk, W):
                 qpred[i, b] += kik * rv[k, b]
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _wheel_flexibilities(drive, pred, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _wheel_flexibilities(cluster_of_axle, wheel_dofs, kv_inv, lo_c, pred, qpred, shape, edofs, loc, cols, wpred,
+                         ypred, H, W):
     """The predicted rail and wheel under each wheel, and the flexibility H[j, i] of wheel j to a unit contact
     force at wheel i: the vehicle's (K_eff⁻¹ at the wheels) plus the track's where both axles share a window."""
-    cluster_of_axle, wheel_dofs, kv_inv = drive.cluster_of_axle, drive.wheel_dofs, drive.kv_inv
-    shape, edofs, loc, cols, H = wk.shape, wk.edofs, wk.loc, wk.cols, wk.H
+    literally(W)
     n_axles = shape.shape[0]
     for j in range(n_axles):
         c = cluster_of_axle[j]
-        lo = wk.lo_c[c]
+        lo = lo_c[c]
         for b in range(W):
-            wk.wpred[j, b] = (
+            wpred[j, b] = (
                 shape[j, 0] * pred[edofs[j, 0] * W + b]
                 + shape[j, 1] * pred[edofs[j, 1] * W + b]
                 + shape[j, 2] * pred[edofs[j, 2] * W + b]
                 + shape[j, 3] * pred[edofs[j, 3] * W + b]
             )
-            wk.ypred[j, b] = wk.qpred[wheel_dofs[j], b]
+            ypred[j, b] = qpred[wheel_dofs[j], b]
         for i in range(n_axles):
             hv = kv_inv[wheel_dofs[j], wheel_dofs[i]]
             for b in range(W):
@@ -699,15 +683,15 @@ def _wheel_flexibilities(drive, pred, wk, W):
                     H[j, i, b] += shape[i, k] * acc
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _newton_one_axle(law, param, z_now, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _newton_one_axle(law, param, z_axle, step, wpred, ypred, H, delta, force, shape, fsh, res_w, done_w, W):
     """One axle, several rows: the rows' scalar Newton iterations on the compression d = d_pred - H f(d) side by
     side (SIMD); a row that has converged keeps its compression while the others go on, so each row takes exactly
-    the steps it takes alone. Leaves the contact force and its shape-function loads in ``wk``."""
-    d0, f0, h0 = wk.delta[0], wk.force[0], wk.H[0, 0]
-    res_w, done_w = wk.res_w, wk.done_w
+    the steps it takes alone. Leaves the contact force and its shape-function loads (``fsh``)."""
+    literally(W)
+    d0, f0, h0, z0 = delta[0], force[0], H[0, 0], z_axle[step, 0]
     for b in range(W):
-        res_w[b] = wk.ypred[0, b] - wk.wpred[0, b] - z_now[0, b]
+        res_w[b] = ypred[0, b] - wpred[0, b] - z0[b]
         if f0[b] <= 0.0:
             d0[b] = res_w[b]
         done_w[b] = 0.0
@@ -727,56 +711,17 @@ def _newton_one_axle(law, param, z_now, wk, W):
     for b in range(W):
         f0[b], fpb = _contact_lane(law, param, d0[b])
         for k in range(4):
-            wk.fsh[0, k, b] = f0[b] * wk.shape[0, k]
+            fsh[0, k, b] = f0[b] * shape[0, k]
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _newton_rows(law, param, z_now, wk, W):
-    """Newton's method on the compressions of every axle, d = d_pred - H f(d), one row at a time (a wheel off the
-    rail starts from its free compression). Leaves the contact forces and their shape-function loads in ``wk``."""
-    delta, force, fprime, res, rj, J, H = wk.delta, wk.force, wk.fprime, wk.res, wk.rj, wk.J, wk.H
-    n_axles = delta.shape[0]
-    for b in range(W):
-        for j in range(n_axles):
-            res[j] = wk.ypred[j, b] - wk.wpred[j, b] - z_now[j, b]
-            if force[j, b] <= 0.0:
-                delta[j, b] = res[j]
-        for _it in range(60):
-            for j in range(n_axles):
-                force[j, b], fprime[j] = _contact(law, param, delta[j, b])
-            err = 0.0
-            for j in range(n_axles):
-                r = delta[j, b] - res[j]
-                for i in range(n_axles):
-                    r += H[j, i, b] * force[i, b]
-                rj[j] = -r
-                for i in range(n_axles):
-                    J[j, i] = H[j, i, b] * fprime[i] + (1.0 if i == j else 0.0)
-                err = max(err, abs(r))
-            if err < 1e-15:
-                break
-            if n_axles == 1:
-                delta[0, b] += rj[0] / J[0, 0]
-            else:
-                dx = np.linalg.solve(J, rj)
-                for j in range(n_axles):
-                    delta[j, b] += dx[j]
-        for j in range(n_axles):
-            force[j, b], fprime[j] = _contact(law, param, delta[j, b])
-        for j in range(n_axles):
-            for k in range(4):
-                wk.fsh[j, k, b] = force[j, b] * wk.shape[j, k]
-
-
-@njit(inline="always", fastmath=FASTMATH)
-def _correct_vehicle(drive, q, qd, qdd, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _correct_vehicle(consts, kv_inv, wheel_dofs, q, qd, qdd, qpred, rv, force, W):
     """Vehicle corrector: q = q_pred - K_eff⁻¹ Σ_j F_j e_wheel(j), then its Newmark update."""
-    consts, kv_inv, wheel_dofs = drive.consts, drive.kv_inv, drive.wheel_dofs
+    literally(W)
     a0, a2, a3, a6, a7 = consts[0], consts[2], consts[3], consts[6], consts[7]
-    rv, force = wk.rv, wk.force
     for i in range(q.shape[0]):
         for b in range(W):
-            rv[i, b] = wk.qpred[i, b]
+            rv[i, b] = qpred[i, b]
         for j in range(wheel_dofs.shape[0]):
             kij = kv_inv[i, wheel_dofs[j]]
             for b in range(W):
@@ -788,13 +733,13 @@ def _correct_vehicle(drive, q, qd, qdd, wk, W):
             q[i, b] = rv[i, b]
 
 
-@njit(inline="always", fastmath=FASTMATH)
-def _record(step, u, q, wheel_dofs, out_force, out_rail, out_wheel, wk, W):
+@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
+def _record(step, u, q, wheel_dofs, shape, edofs, force, out_force, out_rail, out_wheel, W):
     """Contact force, rail and wheel displacement under each wheel at step ``step``."""
-    shape, edofs = wk.shape, wk.edofs
+    literally(W)
     for j in range(shape.shape[0]):
         for b in range(W):
-            out_force[step, j, b] = wk.force[j, b]
+            out_force[step, j, b] = force[j, b]
             out_rail[step, j, b] = (
                 shape[j, 0] * u[edofs[j, 0] * W + b]
                 + shape[j, 1] * u[edofs[j, 1] * W + b]
@@ -805,78 +750,120 @@ def _record(step, u, q, wheel_dofs, out_force, out_rail, out_wheel, wk, W):
 
 
 @njit(inline="always", fastmath=FASTMATH)
-def _initial_compressions(law, param, force_history, wk, W):
+def _initial_compressions(law, param, force_history, force, delta, W):
     """The contact forces at the start (step 0 of ``force_history``) and the compressions that carry them."""
-    for j in range(wk.force.shape[0]):
+    for j in range(force.shape[0]):
         for b in range(W):
-            wk.force[j, b] = force_history[0, j, b]
+            force[j, b] = force_history[0, j, b]
             if law == 0:
-                wk.delta[j, b] = param * wk.force[j, b] ** (2.0 / 3.0)
+                delta[j, b] = param * force[j, b] ** (2.0 / 3.0)
             else:
-                wk.delta[j, b] = wk.force[j, b] / param
+                delta[j, b] = force[j, b] / param
 
 
 @njit(inline="always", fastmath=FASTMATH)
 def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
-    """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass, in place.
+    """Integrate chunk ``ch`` of the batch (its rows in lockstep) over the whole pass, in place, from the state in
+    ``rows`` and the contact forces in ``peaks.force[ch, 0]``.
 
-    The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): loops over
-    a whole window's DOFs and rows are one unit-stride loop at any width. The pass starts from the state in
-    ``rows`` and the contact forces in ``peaks.force[ch, 0]``."""
+    The track's state vectors are used flat, DOF i of row b at i*W + b (W a compile-time constant): loops over a
+    whole window's DOFs and rows are one unit-stride loop at any width. The step's sections are functions compiled
+    apart and inlined by LLVM (:class:`_pipeline._InlineCompiler`); their arrays are taken out of the argument
+    tuples once, here, so that the step loop updates no reference count."""
     n = rows.u.shape[1]
-    u = rows.u[ch].reshape(n * W)
-    v = rows.v[ch].reshape(n * W)
-    a = rows.a[ch].reshape(n * W)
+    u, v, a = rows.u[ch].reshape(n * W), rows.v[ch].reshape(n * W), rows.a[ch].reshape(n * W)
     q, qd, qdd = rows.q[ch], rows.qd[ch], rows.qdd[ch]
     z_axle, sag, keff = rows.z[ch], rows.sag[ch], rows.keff[ch]
+    out_force, out_rail, out_wheel = peaks.force[ch], peaks.rail[ch], peaks.wheel[ch]
     win = Window(u, v, a, np.zeros(n * W), np.zeros((n + 2 * B) * W), np.zeros(n * W),
                  rows.mass_diag[ch].reshape(n * W), rows.pad_k[ch], rows.pad_c[ch], rows.bal_k[ch], rows.bal_c[ch],
                  peaks.ballast[ch], peaks.total[ch])  # rhs padded by B DOFs each side (see _mass_times)
-    x_axle, n_clusters = drive.x_axle, drive.n_clusters
+    node_w, sleeper_node, epb = mesh.node_w, mesh.sleeper_node, mesh.epb
+    n_sleepers, elem_len = mesh.n_sleepers, mesh.elem_len
+    x_axle, consts, law, param, n_clusters = drive.x_axle, drive.consts, drive.law, drive.param, drive.n_clusters
+    cluster_of_axle, wheel_dofs, kv_inv = drive.cluster_of_axle, drive.wheel_dofs, drive.kv_inv
+    mv, cv, fv = drive.mass, drive.damping, drive.force
     n_axles = x_axle.shape[1]
-    wk = _workspaces(n, q.shape[0], n_axles, n_clusters, mesh.epb, W)
+    wk = _workspaces(n, q.shape[0], n_axles, n_clusters, epb, W)
+    Fw, Bw, invd, lo_c, hi_c, s_lo_c, s_hi_c = wk.Fw, wk.Bw, wk.invd, wk.lo_c, wk.hi_c, wk.s_lo_c, wk.s_hi_c
+    bay_cache, cols, shape, edofs, elem_of, loc = wk.bay_cache, wk.cols, wk.shape, wk.edofs, wk.elem_of, wk.loc
+    wpred, ypred, H, delta, force, fsh = wk.wpred, wk.ypred, wk.H, wk.delta, wk.force, wk.fsh
+    rv, qpred, fprime, res, rj, J, res_w, done_w = wk.rv, wk.qpred, wk.fprime, wk.res, wk.rj, wk.J, wk.res_w, wk.done_w
+    pred = win.pred
     # the DOF layout is regular (track.DofLayout): a bay is bay_dofs DOFs, and a sleeper's DOF follows its rail
     # node's deflection by sleeper_shift; a window starts at a sleeper's rail node
     bay_dofs = mesh.sleeper_dof[1] - mesh.sleeper_dof[0]
-    sleeper_shift = mesh.sleeper_dof[0] - mesh.node_w[mesh.sleeper_node[0]]
+    sleeper_shift = mesh.sleeper_dof[0] - node_w[mesh.sleeper_node[0]]
     m_cap = reuse.factor.shape[2] if reuse.factor.shape[0] == mesh.n_sleepers else 0  # no sleepers kept: 0
-    _initial_compressions(drive.law, drive.param, peaks.force[ch], wk, W)
+    _initial_compressions(law, param, out_force, force, delta, W)
 
     for step in range(1, x_axle.shape[0]):
         # ---- element, shape functions and window of every axle at t_{n+1} (shared by the rows)
-        _place_axles(mesh, x_axle, step, z_axle, sag, wk, W)
+        _place_axles(x_axle, step, node_w, elem_len, z_axle, sag, elem_of, shape, edofs, W)
         # ---- move the window of every axle group that has entered a new bay: factor, columns of its bay
-        _move_windows(mesh, drive, keff, reuse, u, v, a, m_cap, wk, W)
+        for c in range(n_clusters):
+            bay_min, bay_max, changed = _group_bays(c, cluster_of_axle, elem_of, bay_cache, epb, n_sleepers, W)
+            if changed:
+                _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W)
         # ---- where the axles' element DOFs sit among their bay's columns
-        _locate(mesh, wk)
+        for j in range(n_axles):
+            basej = node_w[sleeper_node[bay_cache[j]]]
+            for k in range(4):
+                loc[j, k] = _local(edofs[j, k], basej, epb)
         # ---- track predictor (no contact force) in every window: K_eff u = M p + C q
         for c in range(n_clusters):
-            lo, hi, s_lo, s_hi = wk.lo_c[c], wk.hi_c[c], wk.s_lo_c[c], wk.s_hi_c[c]
-            fw, bw, inv_diag = wk.Fw[c], wk.Bw[c], wk.invd[c]
-            if W == 1:  # one row: inlined (a call per step with the window's arrays costs the short loops more)
-                _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
-            else:
-                _predict_window_rows(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
-        # ---- vehicle predictor
-        _predict_vehicle(drive, q, qd, qdd, wk, W)
-        # ---- flexibilities at the wheels and contact predictor
-        _wheel_flexibilities(drive, win.pred, wk, W)
-        # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
-        if W > 1 and n_axles == 1:  # compile-time W: the one-row entry has only the general loop
-            _newton_one_axle(drive.law, drive.param, z_axle[step], wk, W)
-        else:
-            _newton_rows(drive.law, drive.param, z_axle[step], wk, W)
-        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, its Newmark update and peak sleeper forces
-        for c in range(n_clusters):
-            lo, hi, s_lo, s_hi = wk.lo_c[c], wk.hi_c[c], wk.s_lo_c[c], wk.s_hi_c[c]
+            lo, hi, s_lo, s_hi = lo_c[c], hi_c[c], s_lo_c[c], s_hi_c[c]
             if W == 1:
-                _correct_window(win, drive, wk.cols, wk.fsh, wk.loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift,
+                _predict_window(win, mesh, drive, Fw[c], Bw[c], invd[c], lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift,
                                 W)
             else:
-                _correct_window_rows(win, drive, wk.cols, wk.fsh, wk.loc, c, lo, hi, s_lo, s_hi, bay_dofs,
+                _predict_window_rows(win, mesh, drive, Fw[c], Bw[c], invd[c], lo, hi, s_lo, s_hi, bay_dofs,
                                      sleeper_shift, W)
+        # ---- vehicle predictor
+        _predict_vehicle(consts, mv, cv, kv_inv, fv, q, qd, qdd, rv, qpred, W)
+        # ---- flexibilities at the wheels and contact predictor
+        _wheel_flexibilities(cluster_of_axle, wheel_dofs, kv_inv, lo_c, pred, qpred, shape, edofs, loc, cols, wpred,
+                             ypred, H, W)
+        # ---- Newton on the compressions, row by row: d = d_pred - H f(d) (a wheel off the rail starts from its
+        # free compression; written out here: as a function of its own the one-row pass measured slower)
+        if W > 1 and n_axles == 1:  # compile-time W: the one-row entry has only the general loop
+            _newton_one_axle(law, param, z_axle, step, wpred, ypred, H, delta, force, shape, fsh, res_w, done_w, W)
+        else:
+            for b in range(W):
+                for j in range(n_axles):
+                    res[j] = ypred[j, b] - wpred[j, b] - z_axle[step, j, b]
+                    if force[j, b] <= 0.0:
+                        delta[j, b] = res[j]
+                for _it in range(60):
+                    for j in range(n_axles):
+                        force[j, b], fprime[j] = _contact(law, param, delta[j, b])
+                    err = 0.0
+                    for j in range(n_axles):
+                        r = delta[j, b] - res[j]
+                        for i in range(n_axles):
+                            r += H[j, i, b] * force[i, b]
+                        rj[j] = -r
+                        for i in range(n_axles):
+                            J[j, i] = H[j, i, b] * fprime[i] + (1.0 if i == j else 0.0)
+                        err = max(err, abs(r))
+                    if err < 1e-15:
+                        break
+                    if n_axles == 1:
+                        delta[0, b] += rj[0] / J[0, 0]
+                    else:
+                        dx = np.linalg.solve(J, rj)
+                        for j in range(n_axles):
+                            delta[j, b] += dx[j]
+                for j in range(n_axles):
+                    force[j, b], fprime[j] = _contact(law, param, delta[j, b])
+                for j in range(n_axles):
+                    for k in range(4):
+                        fsh[j, k, b] = force[j, b] * shape[j, k]
+        # ---- correct the track, u = pred + Σ_j F_j K⁻¹ N_j, its Newmark update and peak sleeper forces
+        for c in range(n_clusters):
+            lo, hi, s_lo, s_hi = lo_c[c], hi_c[c], s_lo_c[c], s_hi_c[c]
+            _correct_window(win, drive, cols, fsh, loc, c, lo, hi, s_lo, s_hi, bay_dofs, sleeper_shift, W)
         # ---- correct the vehicle
-        _correct_vehicle(drive, q, qd, qdd, wk, W)
+        _correct_vehicle(consts, kv_inv, wheel_dofs, q, qd, qdd, qpred, rv, force, W)
         # ---- outputs under the wheels
-        _record(step, u, q, drive.wheel_dofs, peaks.force[ch], peaks.rail[ch], peaks.wheel[ch], wk, W)
-
+        _record(step, u, q, wheel_dofs, shape, edofs, force, out_force, out_rail, out_wheel, W)
