@@ -2,26 +2,27 @@
 
 Sampling profilers do not help here: the kernel is one JIT-compiled function with everything inlined, this VM
 has no hardware performance counters, and ``perf`` sees the JIT code without symbols. So this script makes a copy
-of ``trackenv/physics/_kernel.py`` with a cycle counter (LLVM's ``readcyclecounter``, the x86 TSC) read at
+of ``trackenv/physics/_step.py`` (the time step) with a cycle counter (LLVM's ``readcyclecounter``, the x86 TSC) read at
 every section header of the time-step loop — the comment lines ``# ---- <name>`` of ``_run_chunk`` — and adds up
 the cycles between consecutive headers. The track's predictor and corrector on a window (mass product, damping,
 triangular sweeps; correction, Newmark update, peak sleeper forces) are functions of their own, each one section.
 Reading the counter costs a few cycles per section (the totals come out ~1-3 % above the plain kernel's); it does
 not change the arithmetic, so the copy's results are the kernel's.
 
-Give several kernel files (``--kernel A --kernel B``, e.g. an older commit's ``_kernel.py`` from ``git show``) to
+Give several time-step files (``--kernel A --kernel B``, e.g. an older commit's ``_step.py`` from ``git show``) to
 compare them: their passes alternate in one process, so a drifting machine moves both alike, which is what makes
 the comparison fair on a shared machine (whole-process timings of this VM drift by ±15 % within minutes).
 
     python experiments/kernel_profile.py                       # one row: the env's 60 m pass at the auto dt
     python experiments/kernel_profile.py --rows 16 --repeats 3  # a 16-row chunk in lockstep (per row)
-    python experiments/kernel_profile.py --kernel old_kernel.py --kernel trackenv/physics/_kernel.py
+    python experiments/kernel_profile.py --kernel old_step.py --kernel trackenv/physics/_step.py
 
 Workload: the passes of ``Tamping-v0``'s first step (``rows`` new episodes of the default config: 60 m with
 approach and exit zones, 100 km/h, dt 4e-4, one wheelset), on one thread. Cycles are TSC cycles, which tick at
 the processor's nominal clock, not its actual one (2.0 GHz on the Zen 1 VM of the earlier rounds, 2.6 GHz on the
 Xeon VM of the fifth): compare figures taken on one machine. Each copy compiles on its own (~40-60 s cold; no
-on-disk cache).
+on-disk cache). A copy is imported as a module of ``trackenv.physics``, so that its relative imports (the lane
+intrinsics, the compile pipeline) resolve to this tree's.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-KERNEL = ROOT / "trackenv" / "physics" / "_kernel.py"
+KERNEL = ROOT / "trackenv" / "physics" / "_step.py"
 HEADER = re.compile(r"^(\s+)# ---- (.*)$")
 COUNTER = '''
 from llvmlite import ir as _ir
@@ -93,9 +94,10 @@ def load(path: Path, tag: str, workdir: Path):
     text, names = instrument(path.read_text())
     copy = workdir / f"{tag}.py"
     copy.write_text(text)
-    spec = importlib.util.spec_from_file_location(tag, copy)
+    name = f"trackenv.physics.{tag}"  # a module of the package: its relative imports resolve
+    spec = importlib.util.spec_from_file_location(name, copy)
     module = importlib.util.module_from_spec(spec)
-    sys.modules[tag] = module
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module, names
 
@@ -104,11 +106,12 @@ def runner(module, width: int):
     """A compiled entry that runs every chunk of the batch through ``module``'s instrumented chunk integrator."""
     from numba import njit
 
+    from trackenv.physics._pipeline import _WideCompiler
+
     chunk = module._run_chunk
-    # compiled as the kernel compiles its chunk integrator: several rows through the kernel's wide-vector pipeline
-    # where it has one, one row (the single pass's entry) by numba's default
-    wide = width > 1 and hasattr(module, "_WideCompiler")
-    options = {"pipeline_class": module._WideCompiler} if wide else {}
+    # compiled as the kernel compiles its chunk integrator: several rows through the kernel's wide-vector pipeline,
+    # one row (the single pass's entry) by numba's default
+    options = {"pipeline_class": getattr(module, "_WideCompiler", _WideCompiler)} if width > 1 else {}
 
     if hasattr(module, "Reuse"):  # a kernel that keeps window factors across passes
 

@@ -571,7 +571,7 @@ def test_a_vehicles_system_is_assembled_once_and_cannot_be_changed_by_a_pass():
 @pytest.mark.parametrize("n_rows", [1, 3, 17])
 def test_the_kernel_gets_arrays_that_do_not_overlap(monkeypatch, n_rows):
     """The kernel's window functions are compiled with the promise that their arrays do not overlap
-    (``_kernel._NoAliasCompiler``): no two of a pass's per-row arrays (inputs, state, outputs) may share memory,
+    (``_pipeline._NoAliasCompiler``): no two of a pass's per-row arrays (inputs, state, outputs) may share memory,
     nor any of them with the shared mesh and vehicle arrays, at any chunk width and for a train of several axles."""
     from trackenv.physics import _kernel
 

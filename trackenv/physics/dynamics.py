@@ -9,6 +9,7 @@ whole track.
 
 from __future__ import annotations
 
+import collections
 import functools
 import math
 from collections.abc import Callable, Sequence
@@ -18,8 +19,8 @@ import numpy as np
 import scipy.interpolate
 import scipy.linalg
 
-from . import _kernel
-from ._checks import check_array, check_instance, check_scalar, check_speed, check_time_steps
+from . import _kernel, _step
+from ._checks import check_array, check_choice, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
@@ -343,20 +344,20 @@ def _track_window_factors(track: Track, windows: tuple) -> list[tuple[int, int, 
     return _window_factors(_track_stiffness(track), windows)
 
 
-_NO_REUSE = _kernel.Reuse(np.zeros((0, 2 * _kernel.B + 3, 0)), np.zeros((0, 2), dtype=np.int64),
+_NO_REUSE = _step.Reuse(np.zeros((0, 2 * _step.B + 3, 0)), np.zeros((0, 2), dtype=np.int64),
                           np.zeros((0, 2, 0)), np.zeros((0, 2), dtype=np.int64))
-"""What a batch of several rows passes the kernel: nothing kept (see :class:`_kernel.Reuse`)."""
+"""What a batch of several rows passes the kernel: nothing kept (see :class:`_step.Reuse`)."""
 
 
 def _store_shapes(track: Track, m_cap: int) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
-    """Shapes of a store's factors and bay columns (:class:`_kernel.Reuse`) for ``track``, windows of up to
+    """Shapes of a store's factors and bay columns (:class:`_step.Reuse`) for ``track``, windows of up to
     ``m_cap`` DOFs."""
     n = track.n_sleepers
-    return (n, 2 * _kernel.B + 3, m_cap), (n, 2 * (track.elements_per_bay + 1), m_cap)
+    return (n, 2 * _step.B + 3, m_cap), (n, 2 * (track.elements_per_bay + 1), m_cap)
 
 
 @functools.lru_cache(maxsize=16)
-def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
+def _kept_factors(track: Track, dt: float, m_cap: int) -> _step.Reuse:
     """The kernel's store of window factors and bay columns for one-row passes over ``track`` at ``dt`` (windows
     of up to ``m_cap`` DOFs), kept per track object, dt and window size: the effective stiffness K + a0 M + a1 C
     is the same in every such pass, so each window's factor and each bay's columns are computed once, by the
@@ -364,7 +365,7 @@ def _kept_factors(track: Track, dt: float, m_cap: int) -> _kernel.Reuse:
     over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each."""
     factor_shape, columns_shape = _store_shapes(track, m_cap)
     n = track.n_sleepers
-    return _kernel.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
+    return _step.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
                          np.zeros(columns_shape), np.full((n, 2), -1, dtype=np.int64))
 
 
@@ -385,7 +386,7 @@ _REUSE_MAX_BYTES = 8 * 2**20
 
 
 def _one_row_reuse(track: Track, dt: float, axle_offsets: np.ndarray, cluster: np.ndarray,
-                   margin: int) -> _kernel.Reuse:
+                   margin: int) -> _step.Reuse:
     """What a one-row pass over ``track`` keeps for the next one (:func:`_kept_factors`), or nothing
     (``_NO_REUSE``) where its windows or its store would exceed the bounds above."""
     m_cap = _window_dof_bound(track, axle_offsets, cluster, margin)
@@ -516,6 +517,11 @@ def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
     return out
 
 
+START_OPTIONS = ("static", "rest", "steady")
+STEADY_RUN_BAYS = 40  # sleeper bays the steady state is integrated over, from a static start (see _steady_states)
+_STEADY_CACHE_SIZE = 256  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase)
+
+
 def simulate_passes(
     tracks: Track | Sequence[Track],
     vehicle,
@@ -537,9 +543,13 @@ def simulate_passes(
     n_sleepers or n_nodes) of rail level [m] (downward positive), or a list of such rows or callables z(x).
     ``speed`` [m/s] > 0; ``dt`` [s] within the bounds of :mod:`trackenv.physics.timestep`, or "auto": the
     coarsest step that keeps peak forces within 0.5 % of the reference step (that module's contract; a row whose
-    wheel loses contact is rerun at the reference step, so rows of one batch may differ in dt);
-    ``start``: "static" (vehicle and track in static equilibrium at the start)
-    or "rest" (the paper's transient: the vehicle is set on the unloaded track and drops in).
+    wheel loses contact is rerun at the reference step, so rows of one batch may differ in dt).
+    ``start``: "static" (vehicle and track in static equilibrium at the start), "rest" (the paper's transient: the
+    vehicle is set on the unloaded track and drops in) or "steady": the periodic steady state of the vehicle
+    running at ``speed`` over a track that continues the row's first sleeper (the track's entry) for ever, at the
+    rail level under the vehicle at the start. The steady start needs a moving window that lies inside the track
+    at the start: its default ``x_start`` is the vehicle's span plus ``window_bays + 1`` bays; a pass that starts
+    it there converges on the entry's track without integrating an approach from rest (see :func:`_steady_states`).
     ``x_start``/``x_end``: leading-axle positions [m] where the pass starts/ends (default: the whole vehicle
     on the rail from the first to the last sleeper). ``window_bays``: sleeper bays of track integrated ahead of
     the leading and behind the trailing axle of each axle group; "auto" (default): sized per row from the
@@ -553,39 +563,86 @@ def simulate_passes(
     real sleeper would lift off its ballast).
     """
     tracks = _as_tracks(tracks)
-    sys_ = _vehicle_system(vehicle)
-    law = _contact_law(contact)
-    speed = check_speed(speed)
+    system, law, speed = _vehicle_system(vehicle), _contact_law(contact), check_speed(speed)
     auto = isinstance(dt, str)
     check_dt_option(dt)
-    if sleeper_force_measure not in SLEEPER_FORCE_MEASURES:
-        raise ValueError(
-            f"sleeper_force_measure must be one of {SLEEPER_FORCE_MEASURES}, got {sleeper_force_measure!r}"
-        )
-    if start not in ("static", "rest"):
-        raise ValueError(f"start must be 'static' or 'rest', got {start!r}")
-    t0 = tracks[0]
-    dt = auto_time_step(t0, sys_, speed, law) if auto else check_time_step(dt, contact_period(sys_, law))
-    if sys_.span >= t0.length:
-        raise ValueError(f"vehicle (axle span {sys_.span:.2f} m) is longer than the track ({t0.length:.2f} m)")
-    x_start = sys_.span if x_start is None else check_scalar("x_start", x_start, low=sys_.span, high=t0.length)
-    x_end = (
-        t0.length if x_end is None else check_scalar("x_end", x_end, low=x_start, high=t0.length, low_inclusive=False)
-    )
+    check_choice("sleeper_force_measure", sleeper_force_measure, SLEEPER_FORCE_MEASURES)
+    check_choice("start", start, START_OPTIONS)
+    dt = auto_time_step(tracks[0], system, speed, law) if auto else check_time_step(dt, contact_period(system, law))
     check_window_bays(window_bays)
+    tracks, irr_rows = _batch_rows(tracks, irregularities)
+    settlement = None if support_settlement is None else _settlement_rows(support_settlement, len(tracks), tracks[0])
+    margins = _row_margins(tracks, window_bays)
+    x_start, x_end = _pass_range(tracks[0], system, start, margins, x_start, x_end)
+    options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure)
+    groups: dict = {}
+    for b, margin in enumerate(margins):
+        groups.setdefault(margin, []).append(b)
+    if len(groups) > 1:  # rows that need different windows run as batches of their own
+        results: list = [None] * len(tracks)
+        for margin, rows in groups.items():
+            _rerun_rows(results, rows, tracks, irr_rows, settlement, system, speed,
+                        dt="auto" if auto else dt, window_bays=margin, **options)
+        return results
+    batch = _Batch(tracks, irr_rows, settlement, system, law, speed, dt, start, x_start, x_end, margins[0],
+                   sleeper_force_measure)
+    results, lost = _simulate_batch(batch)
+    if auto and dt > DT_REFERENCE_S and lost:
+        # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
+        _rerun_rows(results, lost, tracks, irr_rows, settlement, system, speed, dt=DT_REFERENCE_S,
+                    window_bays=margins[0], **options)
+    return results
 
-    # rows
+
+@dataclass(frozen=True, eq=False)
+class _Batch:
+    """A validated batch: each row's track, irregularity and settled supports (or None), and the pass every row
+    runs: vehicle, contact law, speed [m/s], dt [s], start, leading-axle range [m], window margin in bays (None:
+    the whole track) and the sleeper-force measure."""
+
+    tracks: list[Track]
+    irregularities: list
+    settlement: np.ndarray | None
+    system: VehicleSystem
+    law: HertzContact | LinearContact
+    speed: float
+    dt: float
+    start: str
+    x_start: float
+    x_end: float
+    margin: int | None
+    measure: str
+    keep_factors: bool = True  # a one-row pass keeps its window factors for the next pass over its track
+
+    @property
+    def margin_bays(self) -> int:
+        return self.tracks[0].n_sleepers if self.margin is None else int(self.margin)
+
+
+@dataclass(frozen=True, eq=False)
+class _State:
+    """A batch's state at the start, one row per row: track u, v, a (rows, n_dof), vehicle q, qd, qdd (rows, nv),
+    and the contact forces (rows, n_axles)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    force: np.ndarray
+
+
+def _batch_rows(tracks: list[Track], irregularities) -> tuple[list[Track], list[Irregularity]]:
+    """One track and one irregularity per row: a single track or irregularity is shared by every row."""
     if irregularities is None:
         irr_rows: list[Irregularity] = [None] * len(tracks)
-    elif callable(irregularities):
+    elif callable(irregularities) or (isinstance(irregularities, np.ndarray) and irregularities.ndim == 1):
         irr_rows = [irregularities]
     else:
-        if isinstance(irregularities, np.ndarray) and irregularities.ndim == 1:
-            irr_rows = [irregularities]
-        else:
-            if not (isinstance(irregularities, (list, tuple)) or getattr(irregularities, "ndim", 0) >= 1):
-                raise ValueError(f"irregularities must be None, an array, a callable or a list, got {irregularities!r}")
-            irr_rows = list(irregularities)
+        if not (isinstance(irregularities, (list, tuple)) or getattr(irregularities, "ndim", 0) >= 1):
+            raise ValueError(f"irregularities must be None, an array, a callable or a list, got {irregularities!r}")
+        irr_rows = list(irregularities)
     n_rows = max(len(tracks), len(irr_rows))
     if len(tracks) == 1:
         tracks = tracks * n_rows
@@ -593,200 +650,384 @@ def simulate_passes(
         irr_rows = irr_rows * n_rows
     if len(tracks) != n_rows or len(irr_rows) != n_rows:
         raise ValueError(f"irregularities has {len(irr_rows)} rows but there are {len(tracks)} tracks")
-
-    if isinstance(window_bays, str):  # "auto": each row's window from its own track
-        margins = [window_margin(t) for t in tracks]
-        groups: dict = {}
-        for b, m in enumerate(margins):
-            groups.setdefault(m, []).append(b)
-        if len(groups) > 1:
-            g_all = None if support_settlement is None else _settlement_rows(support_settlement, n_rows, t0)
-            results: list = [None] * n_rows
-            for m, idx in groups.items():
-                _rerun_rows(results, idx, tracks, irr_rows, g_all, vehicle, speed, dt="auto" if auto else dt,
-                            contact=contact, start=start, x_start=x_start, x_end=x_end, window_bays=m,
-                            sleeper_force_measure=sleeper_force_measure)
-            return results
-        window_bays = margins[0]
-    n_steps = check_time_steps(x_end - x_start, speed, dt, rows=n_rows, axles=sys_.n_axles)  # before allocating
-    time = np.arange(n_steps + 1) * dt
-    x_lead = np.minimum(x_start + speed * time, t0.length)
-    x_axle = x_lead[:, None] - sys_.axle_offsets[None, :]
-    # per-row arrays the kernel reads or writes over time are allocated in its layout (chunks, ..., width) and used
-    # through one view per row (``_row``): no stacking, transposing or copying of time histories around the kernel
-    n_chunks, width = _chunking(n_rows)
-    row = functools.partial(_row, width=width)
-    z_packed = np.zeros((n_chunks, n_steps + 1, sys_.n_axles, width))
-    z_rows = [row(z_packed, b) for b in range(n_rows)]
-    for b, level in enumerate(_irregularity_levels(irr_rows, t0, x_axle, "irregularity")):
-        if level is not None:
-            z_rows[b][...] = level
-    # matrices
-    consts = newmark_constants(dt)
-    mb, cb, kb = batched_bands(tracks)
-    keff = kb + consts[0] * mb + consts[1] * cb
-    lay = t0.dof_layout
-    static_ballast = np.zeros((n_rows, t0.n_sleepers))
-    static_total = np.zeros((n_rows, t0.n_sleepers))
-    sag = np.zeros((n_rows, t0.n_dof))  # static rail sag over settled supports (the kernel adds it to z)
-    start_points = [_point_load_vector(t0, x) for x in x_axle[0]]  # DOFs and weights of each axle at t = 0
-    if support_settlement is not None:
-        g = settlement_rows = _settlement_rows(support_settlement, n_rows, t0)
-        for b, t in enumerate(tracks):
-            f = np.zeros(t0.n_dof)
-            f[lay.sleeper] = t.ballast_stiffness * g[b]
-            u0, info = _PBTRS(_stiffness_factor(t), f, lower=1)
-            _lapack_info("pbtrs", info)
-            sag[b] = u0
-            z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
-            us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
-            static_ballast[b] = t.ballast_stiffness * (us - g[b])
-            static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
-    kv_eff = sys_.stiffness + consts[0] * sys_.mass + consts[1] * sys_.damping
-    kv_inv = np.linalg.inv(kv_eff)
-    n_axles = sys_.n_axles
-    margin = t0.n_sleepers if window_bays is None else int(window_bays)
-    cluster = _clusters(sys_.axle_offsets, 2 * (margin + 1) * t0.sleeper_spacing)
-    n_clusters = int(cluster.max()) + 1
-
-    # initial state: static equilibrium on the same windows the integration starts with
-    windows = [_window_dofs(t0, x_axle[0][cluster == c], margin) for c in range(n_clusters)]
-    nb = n_rows
-    u = np.zeros((nb, t0.n_dof))
-    v = np.zeros_like(u)
-    a = np.zeros_like(u)
-    q = np.zeros((nb, sys_.n_dof))
-    qd = np.zeros_like(q)
-    qdd = np.zeros_like(q)
-    f0 = np.zeros((nb, n_axles))
-    for b in range(nb):
-        z0 = z_rows[b][0]
-        if start == "static":
-            loads = sys_.static_wheel_loads.copy()
-            factors = _track_window_factors(tracks[b], tuple(windows))
-            for _ in range(4):  # loads on a compliant, uneven rail: a few fixed-point sweeps
-                f = np.zeros(t0.n_dof)
-                for (dofs, shp), p in zip(start_points, loads):
-                    f[dofs] += shp * p
-                u[b] = _static_in_windows(factors, f)
-                w = np.array([shp @ u[b][dofs] for dofs, shp in start_points])
-                q[b] = sys_.static_displacements(w + z0 + law.compression(loads))
-                new = sys_.force[sys_.wheel_dofs] - sys_.stiffness[sys_.wheel_dofs] @ q[b]
-                if np.all(np.abs(new - loads) <= 1e-9 + 1e-12 * np.abs(loads)):  # np.allclose's test
-                    break
-                loads = new
-            f0[b] = loads
-        else:
-            q[b] = sys_.static_displacements(z0)
-            qdd[b] = np.linalg.solve(sys_.mass, sys_.force - sys_.stiffness @ q[b])
-
-    rail0 = np.zeros((nb, n_axles))  # rail and wheel under each wheel at t = 0
-    wheel0 = np.zeros((nb, n_axles))
-    for b in range(nb):
-        for j, (dofs, shp) in enumerate(start_points):
-            rail0[b, j] = shp @ u[b][dofs]
-        wheel0[b] = q[b][sys_.wheel_dofs]
-    pad_k = np.stack([t.pad_stiffness for t in tracks])
-    pad_c = np.stack([t.pad_damping for t in tracks])
-    bal_k = np.stack([t.ballast_stiffness for t in tracks])
-    bal_c = np.stack([t.ballast_damping for t in tracks])
-    ws, ds = lay.node_w[lay.sleeper_node], lay.sleeper
-    peak_ballast = bal_k * u[:, ds]
-    peak_total = peak_ballast + pad_k * (u[:, ws] - u[:, ds])
-
-    pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
-    for b in range(nb, n_chunks * width):  # the padding rows copy the last row, as _pack pads
-        row(z_packed, b)[...] = z_rows[-1]
-    mesh = _kernel.Mesh(
-        lay.node_w.astype(np.int64),
-        lay.sleeper.astype(np.int64),
-        lay.sleeper_node.astype(np.int64),
-        float(t0.element_length),
-        int(t0.elements_per_bay),
-        int(t0.n_sleepers),
-        int(margin),
-        _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]),
-    )
-    drive = _kernel.Drive(
-        np.ascontiguousarray(x_axle),
-        consts,
-        int(law.code),
-        float(law.parameter),
-        np.ascontiguousarray(sys_.mass, dtype=float),
-        np.ascontiguousarray(sys_.damping, dtype=float),
-        np.ascontiguousarray(kv_inv),
-        sys_.force.astype(float),
-        sys_.wheel_dofs.astype(np.int64),
-        cluster,
-        n_clusters,
-    )
-    rows = _kernel.Rows(
-        pack(mb[:, :, 0]),  # the diagonal of each row's mass matrix (Mesh holds the rail's off-diagonals)
-        pack(keff),
-        pack(pad_k),
-        pack(pad_c),
-        pack(bal_k),
-        pack(bal_c),
-        z_packed,
-        pack(sag),
-        pack(u),
-        pack(v),
-        pack(a),
-        pack(q),
-        pack(qd),
-        pack(qdd),
-    )
-    history = functools.partial(_packed_history, n_steps=n_steps, n_chunks=n_chunks, width=width)
-    peaks = _kernel.Peaks(history(f0), history(rail0), history(wheel0), pack(peak_ballast), pack(peak_total))
-    # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
-    one_row = n_chunks == 1 and width == 1
-    reuse = _one_row_reuse(t0, dt, sys_.axle_offsets, cluster, margin) if one_row else _NO_REUSE
-    _kernel.run(mesh, drive, rows, peaks, reuse, width)
-    unpack = functools.partial(_unpack, n_rows=nb)
-    peak_ballast, peak_total = unpack(peaks.ballast), unpack(peaks.total)
-
-    peak_ballast += static_ballast
-    peak_total += static_total
-    bay_force = _bay_peaks(peaks.force, x_axle, t0.sleeper_positions)
-    results = []
-    for b in range(nb):
-        sf = peak_ballast[b] if sleeper_force_measure == "ballast" else peak_total[b]
-        results.append(
-            PassResult(
-                time=time,
-                wheel_position=x_axle,
-                contact_force=row(peaks.force, b),
-                rail_displacement=row(peaks.rail, b),
-                wheel_displacement=row(peaks.wheel, b),
-                irregularity=z_rows[b],
-                sleeper_force=sf,
-                ballast_force=peak_ballast[b],
-                pad_plus_ballast_force=peak_total[b],
-                static_wheel_load=sys_.static_wheel_loads.copy(),
-                sleeper_positions=t0.sleeper_positions,
-                speed=speed,
-                dt=dt,
-                bay_contact_force=row(bay_force, b),
-            )
-        )
-    if auto and dt > DT_REFERENCE_S:
-        # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
-        lost = np.flatnonzero(peaks.force[:, 1:].min(axis=(1, 2)).reshape(-1)[:nb] <= 0.0).tolist()
-        if lost:
-            _rerun_rows(results, lost, tracks, irr_rows, None if support_settlement is None else settlement_rows,
-                        vehicle, speed, dt=DT_REFERENCE_S, contact=contact, start=start, x_start=x_start,
-                        x_end=x_end, window_bays=window_bays, sleeper_force_measure=sleeper_force_measure)
-    return results
+    return tracks, irr_rows
 
 
-def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: list, settlement_rows, vehicle,
+def _row_margins(tracks: list[Track], window_bays) -> list[int | None]:
+    """Each row's window margin in bays (None: the whole track): ``window_bays``, or with "auto" its track's own."""
+    if isinstance(window_bays, str):
+        return [window_margin(t) for t in tracks]
+    return [None if window_bays is None else int(window_bays)] * len(tracks)
+
+
+def _pass_range(track: Track, system: VehicleSystem, start: str, margins: list, x_start, x_end) -> tuple[float, float]:
+    """The leading axle's start and end [m], validated; the default start puts the whole vehicle on the rail, and
+    for the steady start its windows inside the track as well (see :func:`_check_steady_start`)."""
+    if system.span >= track.length:
+        raise ValueError(f"vehicle (axle span {system.span:.2f} m) is longer than the track ({track.length:.2f} m)")
+    if start == "steady":
+        if any(m is None for m in margins):
+            raise ValueError("start='steady' needs a moving window: window_bays must not be None (and 'auto' gives "
+                             "None on track too soft for one: use start='static' there)")
+        default = system.span + (max(margins) + 1.5) * track.sleeper_spacing  # half a bay clear of the limit
+    else:
+        default = system.span
+    x_start = default if x_start is None else check_scalar("x_start", x_start, low=system.span, high=track.length)
+    if x_end is None:
+        return x_start, track.length
+    return x_start, check_scalar("x_end", x_end, low=x_start, high=track.length, low_inclusive=False)
+
+
+def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: list, settlement, vehicle,
                 speed: float, **options) -> None:
     """Simulate ``rows`` of a batch again as a batch of their own (other window or time step in ``options``)
-    and put their results in place in ``results``; ``settlement_rows``: the batch's settled supports or None."""
+    and put their results in place in ``results``; ``settlement``: the batch's settled supports or None."""
     again = simulate_passes([tracks[b] for b in rows], vehicle, speed, [irr_rows[b] for b in rows],
-                            support_settlement=None if settlement_rows is None else settlement_rows[rows], **options)
+                            support_settlement=None if settlement is None else settlement[rows], **options)
     for b, res in zip(rows, again):
         results[b] = res
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """What a batch's integration produced: the time grid and axle positions, each row's rail level under the
+    wheels, the kernel's outputs and final state (its layout: chunks, ..., width), and the settled supports'
+    static forces per row (rows, n_sleepers)."""
+
+    time: np.ndarray
+    x_axle: np.ndarray
+    z_rows: list[np.ndarray]
+    peaks: _step.Peaks
+    final: _step.Rows
+    width: int
+    static_ballast: np.ndarray
+    static_total: np.ndarray
+
+
+def _simulate_batch(batch: _Batch) -> tuple[list[PassResult], list[int]]:
+    """Integrate every row of ``batch``; its results, and the rows where a wheel lost contact."""
+    run = _integrate(batch)
+    n_rows = len(batch.tracks)
+    lost = np.flatnonzero(run.peaks.force[:, 1:].min(axis=(1, 2)).reshape(-1)[:n_rows] <= 0.0).tolist()
+    return _results(batch, run), lost
+
+
+def _integrate(batch: _Batch) -> _Run:
+    """The batch's pass through the kernel (:func:`_prepare`)."""
+    run, arguments = _prepare(batch)
+    _kernel.run(*arguments)
+    return run
+
+
+def _prepare(batch: _Batch) -> tuple[_Run, tuple]:
+    """Rail levels, settled supports' statics and the start of the batch's pass, and the kernel's arguments; the
+    run's outputs and final state are filled in place by the kernel."""
+    t0, system = batch.tracks[0], batch.system
+    n_rows = len(batch.tracks)
+    # the time grid, checked before anything is allocated
+    n_steps = check_time_steps(batch.x_end - batch.x_start, batch.speed, batch.dt, rows=n_rows, axles=system.n_axles)
+    time = np.arange(n_steps + 1) * batch.dt
+    x_lead = np.minimum(batch.x_start + batch.speed * time, t0.length)
+    x_axle = x_lead[:, None] - system.axle_offsets[None, :]
+    n_chunks, width = _chunking(n_rows)
+    z_packed, z_all = _rail_levels(batch, x_axle, n_chunks, width)
+    z_rows = z_all[:n_rows]
+    start_points = [_point_load_vector(t0, x) for x in x_axle[0]]  # DOFs and weights of each axle at t = 0
+    sag, static_ballast, static_total = _settled_statics(batch, start_points, z_rows)
+    for z in z_all[n_rows:]:  # the padding rows copy the last row
+        z[...] = z_rows[-1]
+    cluster = _clusters(system.axle_offsets, 2 * (batch.margin_bays + 1) * t0.sleeper_spacing)
+    state = _start_state(batch, x_axle[0], cluster, start_points, [z[0] for z in z_rows])
+    arguments = _kernel_arguments(batch, state, x_axle, z_packed, sag, cluster, start_points, n_chunks, width)
+    _, _, rows, peaks, _, _ = arguments
+    return _Run(time, x_axle, z_rows, peaks, rows, width, static_ballast, static_total), arguments
+
+
+def kernel_arguments() -> tuple:
+    """The kernel's arguments (mesh, drive, rows, peaks, reuse) for half a metre of a wheelset's pass over the seed
+    track: every pass gives its entry arguments of these types (see :mod:`trackenv.physics.kernels`)."""
+    track = Track.seed()
+    system = _vehicle_system(Wheelset.seed())
+    batch = _Batch([track], [None], None, system, HertzContact(), 20.0, DT_REFERENCE_S, "static", 10.0, 10.5,
+                   window_margin(track), "ballast", keep_factors=False)
+    return _prepare(batch)[1][:5]
+
+
+def _rail_levels(batch: _Batch, x_axle: np.ndarray, n_chunks: int, width: int) -> tuple[np.ndarray, list]:
+    """Each row's rail level under each axle over the pass, allocated in the kernel's layout (chunks, n_steps + 1,
+    n_axles, width) and seen through one view per row, padding rows included (no stacking or copying of time
+    histories around the kernel)."""
+    z_packed = np.zeros((n_chunks,) + x_axle.shape + (width,))
+    rows = [_row(z_packed, b, width) for b in range(n_chunks * width)]
+    for b, level in enumerate(_irregularity_levels(batch.irregularities, batch.tracks[0], x_axle, "irregularity")):
+        if level is not None:
+            rows[b][...] = level
+    return z_packed, rows
+
+
+def _settled_statics(batch: _Batch, start_points: list, z_rows: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rail's static sag over settled supports (rows, n_dof), which the kernel adds to the rail level under
+    the wheels (and which is added here at t = 0), and the supports' static ballast and pad + ballast forces
+    (rows, n_sleepers) that are added to the peak forces; zeros without settlement."""
+    t0 = batch.tracks[0]
+    n_rows, lay = len(batch.tracks), t0.dof_layout
+    sag = np.zeros((n_rows, t0.n_dof))
+    static_ballast = np.zeros((n_rows, t0.n_sleepers))
+    static_total = np.zeros((n_rows, t0.n_sleepers))
+    if batch.settlement is None:
+        return sag, static_ballast, static_total
+    g = batch.settlement
+    for b, t in enumerate(batch.tracks):
+        f = np.zeros(t0.n_dof)
+        f[lay.sleeper] = t.ballast_stiffness * g[b]
+        u0, info = _PBTRS(_stiffness_factor(t), f, lower=1)
+        _lapack_info("pbtrs", info)
+        sag[b] = u0
+        z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
+        us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
+        static_ballast[b] = t.ballast_stiffness * (us - g[b])
+        static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
+    return sag, static_ballast, static_total
+
+
+def _start_state(batch: _Batch, x0: np.ndarray, cluster: np.ndarray, start_points: list, z0: list) -> _State:
+    """The state every row starts from (``batch.start``); ``x0``: the axles' positions at t = 0, ``z0``: each
+    row's rail level under them."""
+    if batch.start == "steady":
+        return _steady_start(batch, x0, z0)
+    n_rows, t0, system = len(batch.tracks), batch.tracks[0], batch.system
+    state = _State(*(np.zeros((n_rows, n)) for n in (t0.n_dof,) * 3 + (system.n_dof,) * 3 + (system.n_axles,)))
+    if batch.start == "rest":
+        for b in range(n_rows):
+            state.q[b] = system.static_displacements(z0[b])
+            state.qdd[b] = np.linalg.solve(system.mass, system.force - system.stiffness @ state.q[b])
+        return state
+    windows = tuple(_window_dofs(t0, x0[cluster == c], batch.margin_bays) for c in range(int(cluster.max()) + 1))
+    for b in range(n_rows):
+        state.u[b], state.q[b], state.force[b] = _static_start(batch, batch.tracks[b], windows, start_points, z0[b])
+    return state
+
+
+def _static_start(batch: _Batch, track: Track, windows: tuple, start_points: list, z0: np.ndarray):
+    """Static equilibrium of the vehicle on one row's track at the start, the track outside the windows at rest:
+    the loads on a compliant, uneven rail by a few fixed-point sweeps. Returns the track's and the vehicle's
+    displacements and the wheel loads."""
+    system, law = batch.system, batch.law
+    loads = system.static_wheel_loads.copy()
+    factors = _track_window_factors(track, windows)
+    for _ in range(4):
+        f = np.zeros(track.n_dof)
+        for (dofs, shp), p in zip(start_points, loads):
+            f[dofs] += shp * p
+        u = _static_in_windows(factors, f)
+        w = np.array([shp @ u[dofs] for dofs, shp in start_points])
+        q = system.static_displacements(w + z0 + law.compression(loads))
+        new = system.force[system.wheel_dofs] - system.stiffness[system.wheel_dofs] @ q
+        if np.all(np.abs(new - loads) <= 1e-9 + 1e-12 * np.abs(loads)):  # np.allclose's test
+            break
+        loads = new
+    return u, q, loads
+
+
+def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed: np.ndarray, sag: np.ndarray,
+                      cluster: np.ndarray, start_points: list, n_chunks: int, width: int) -> tuple:
+    """The batch packed for the kernel (its layout: chunks, ..., width; padding rows copy the last row): the
+    arguments of :func:`_kernel.run`, (mesh, drive, rows, peaks, reuse, width)."""
+    t0, system, lay = batch.tracks[0], batch.system, batch.tracks[0].dof_layout
+    consts = newmark_constants(batch.dt)
+    mb, cb, kb = batched_bands(batch.tracks)
+    supports = {name: np.stack([getattr(t, name) for t in batch.tracks])
+                for name in ("pad_stiffness", "pad_damping", "ballast_stiffness", "ballast_damping")}
+    ws, ds = lay.node_w[lay.sleeper_node], lay.sleeper
+    bal_k, bal_c, pad_k = supports["ballast_stiffness"], supports["ballast_damping"], supports["pad_stiffness"]
+    peak_ballast = bal_k * state.u[:, ds]
+    if batch.start == "steady":  # the supports move at the start: their dampers carry force too
+        peak_ballast = peak_ballast + bal_c * state.v[:, ds]
+    peak_total = peak_ballast + pad_k * (state.u[:, ws] - state.u[:, ds])
+    rail0 = np.stack([[shp @ u[dofs] for dofs, shp in start_points] for u in state.u])
+    pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    history = functools.partial(_packed_history, n_steps=x_axle.shape[0] - 1, n_chunks=n_chunks, width=width)
+    mesh = _step.Mesh(lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
+                      float(t0.element_length), int(t0.elements_per_bay), int(t0.n_sleepers), batch.margin_bays,
+                      _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness,
+                                                  t0.rail_mass)[0]))
+    drive = _step.Drive(np.ascontiguousarray(x_axle), consts, int(batch.law.code), float(batch.law.parameter),
+                        np.array(system.mass, dtype=float), np.array(system.damping, dtype=float),
+                        np.linalg.inv(system.stiffness + consts[0] * system.mass + consts[1] * system.damping),
+                        system.force.astype(float), system.wheel_dofs.astype(np.int64), cluster,
+                        int(cluster.max()) + 1)
+    rows = _step.Rows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(pad_k),
+                      pack(supports["pad_damping"]), pack(bal_k), pack(bal_c), z_packed, pack(sag),
+                      *(pack(x) for x in (state.u, state.v, state.a, state.q, state.qd, state.qdd)))
+    peaks = _step.Peaks(history(state.force), history(rail0), history(state.q[:, system.wheel_dofs]),
+                        pack(peak_ballast), pack(peak_total))
+    # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
+    one_row = n_chunks == 1 and width == 1
+    keep = one_row and batch.keep_factors
+    reuse = _one_row_reuse(t0, batch.dt, system.axle_offsets, cluster, batch.margin_bays) if keep else _NO_REUSE
+    return mesh, drive, rows, peaks, reuse, width
+
+
+def _results(batch: _Batch, run: _Run) -> list[PassResult]:
+    """One PassResult per row, its time histories views into the kernel's outputs."""
+    n_rows, t0, peaks = len(batch.tracks), batch.tracks[0], run.peaks
+    peak_ballast = _unpack(peaks.ballast, n_rows) + run.static_ballast
+    peak_total = _unpack(peaks.total, n_rows) + run.static_total
+    bay_force = _bay_peaks(peaks.force, run.x_axle, t0.sleeper_positions)
+    row = functools.partial(_row, width=run.width)
+    return [
+        PassResult(
+            time=run.time,
+            wheel_position=run.x_axle,
+            contact_force=row(peaks.force, b),
+            rail_displacement=row(peaks.rail, b),
+            wheel_displacement=row(peaks.wheel, b),
+            irregularity=run.z_rows[b],
+            sleeper_force=peak_ballast[b] if batch.measure == "ballast" else peak_total[b],
+            ballast_force=peak_ballast[b],
+            pad_plus_ballast_force=peak_total[b],
+            static_wheel_load=batch.system.static_wheel_loads.copy(),
+            sleeper_positions=t0.sleeper_positions,
+            speed=batch.speed,
+            dt=batch.dt,
+            bay_contact_force=row(bay_force, b),
+        )
+        for b in range(n_rows)
+    ]
+
+
+# ------------------------------------------------------------------------------------------ the steady start
+@dataclass(frozen=True, eq=False)
+class _SteadyState:
+    """The steady state of one track entry: the track's u, v, a on a uniform track (n_dof,) with the leading
+    axle at ``x_lead`` [m], the vehicle's q, qd, qdd on a level rail, and the contact forces (n_axles,)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    force: np.ndarray
+    x_lead: float
+
+
+_STEADY_STATES: collections.OrderedDict = collections.OrderedDict()  # key -> _SteadyState, least recent first
+
+
+def _steady_start(batch: _Batch, x0: np.ndarray, z0: list) -> _State:
+    """Each row's steady state (:func:`_steady_states`) moved onto its track: the track's state shifted by whole
+    bays to the axles' position, the vehicle's displaced statically by the rail level under its wheels."""
+    t0, system = batch.tracks[0], batch.system
+    _check_steady_start(t0, x0, batch.margin_bays)
+    steady = _steady_states(batch)
+    n_rows, lay = len(batch.tracks), t0.dof_layout
+    bay_dofs = int(lay.sleeper[1] - lay.sleeper[0])
+    state = _State(*(np.zeros((n_rows, n)) for n in (t0.n_dof,) * 3 + (system.n_dof,) * 3 + (system.n_axles,)))
+    level = system.static_displacements(np.zeros(system.n_axles))
+    for b, s in enumerate(steady):
+        shift = int(round((s.x_lead - batch.x_start) / t0.sleeper_spacing)) * bay_dofs  # DOF i here is i + shift there
+        lo, hi = max(0, -shift), min(t0.n_dof, s.u.size - shift)
+        for mine, theirs in ((state.u, s.u), (state.v, s.v), (state.a, s.a)):
+            mine[b, lo:hi] = theirs[lo + shift : hi + shift]
+        state.q[b] = s.q + (system.static_displacements(z0[b]) - level)
+        state.qd[b], state.qdd[b], state.force[b] = s.qd, s.qdd, s.force
+    return state
+
+
+STEADY_LEAD_BAYS = 3  # bays a steady start's leading axle runs before the evaluated track (0.03 % from converged)
+
+
+def steady_approach_sleepers(tracks: Track | Sequence[Track], vehicle, lead_bays: float = STEADY_LEAD_BAYS) -> int:
+    """Sleepers of approach to add before an evaluated track (copies of its first sleeper, as
+    ``Track.extended``) for passes with ``start="steady"`` at their default ``x_start``: the vehicle's span, the
+    window behind its trailing axle (:func:`window_margin` + 1.5 bays) and ``lead_bays`` bays that the leading
+    axle runs before the evaluated track, so that the first evaluated sleeper's peak force is that of a converged
+    approach. With the default lead the peak forces are within 0.03 % of 40 sleepers of approach on the cases of
+    ``tests/physics/test_steady_start.py`` (today's 10 sleepers from static equilibrium: up to 0.65 %, and 5.9 %
+    at 200 km/h). For a batch, the most its tracks need; the model track also needs 4 sleepers or more after the
+    evaluated track (the window's margin is then the one computed here)."""
+    tracks = _as_tracks(tracks)
+    lead = check_scalar("lead_bays", lead_bays, low=0.0, high=1000.0)
+    margins = [window_margin(t.extended(20, 20)) for t in tracks]
+    widest = max((m for m in margins if m is not None), default=None)
+    if widest is None or None in margins:
+        raise ValueError("track too soft for a moving window: the steady start needs one (use start='static')")
+    span = _vehicle_system(vehicle).span
+    return math.ceil(span / tracks[0].sleeper_spacing + widest + 1.5 + lead - 1e-9)
+
+
+def _check_steady_start(track: Track, x0: np.ndarray, margin: int) -> None:
+    """The steady start moves a state computed on a longer, uniform track onto this one: every window must lie
+    inside the track at the start, clear of its free rail ends."""
+    elements = np.clip((x0 / track.element_length).astype(int), 0, track.n_nodes - 2)
+    bays = elements // track.elements_per_bay
+    if bays.min() - margin < 1 or bays.max() + 2 + margin > track.n_sleepers - 1:
+        raise ValueError(
+            f"start='steady' needs the windows ({margin} bays either side of the axles) inside the track at the "
+            f"start: x_start must be at least the vehicle's span + {margin + 1} bays, and the track "
+            f"{margin + 3} bays longer than that"
+        )
+
+
+def _steady_key(batch: _Batch, track: Track) -> tuple:
+    """What a row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
+    law, speed, dt, the window and where the leading axle stands in its bay at the start."""
+    entry = tuple(float(getattr(track, name)[0]) for name in _SUPPORT_FIELDS)
+    rail = (track.sleeper_spacing, track.rail_bending_stiffness, track.rail_mass, track.elements_per_bay)
+    system = batch.system
+    vehicle = tuple(np.asarray(x).tobytes() for x in (system.mass, system.damping, system.stiffness, system.force,
+                                                       system.wheel_dofs, system.axle_offsets))
+    phase = batch.x_start - math.floor(batch.x_start / track.sleeper_spacing) * track.sleeper_spacing
+    return entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase
+
+
+_SUPPORT_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
+
+
+def _steady_states(batch: _Batch) -> list[_SteadyState]:
+    """Each row's steady state, computed once per key (:func:`_steady_key`) and kept.
+
+    The steady state is the periodic response of the vehicle running over a track that continues the row's first
+    sleeper for ever. It is found by integrating: the vehicle starts in static equilibrium on a uniform track of
+    the entry's supports, clear of its ends, and runs ``STEADY_RUN_BAYS`` bays (with the row's window, dt and
+    contact law), ending with its leading axle where the row's pass starts in its bay. The keys missing are
+    integrated as one batch."""
+    keys = [_steady_key(batch, t) for t in batch.tracks]
+    missing = {k: t for k, t in zip(keys, batch.tracks) if k not in _STEADY_STATES}
+    if missing:
+        for key, state in zip(missing, _integrate_steady(batch, list(missing.values()))):
+            _STEADY_STATES[key] = state
+    for key in keys:
+        _STEADY_STATES.move_to_end(key)
+    while len(_STEADY_STATES) > _STEADY_CACHE_SIZE:
+        _STEADY_STATES.popitem(last=False)
+    return [_STEADY_STATES[k] for k in keys]
+
+
+def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
+    """The steady runs of :func:`_steady_states` for the entries of ``tracks``, as one batch."""
+    t0, system = batch.tracks[0], batch.system
+    s, margin = t0.sleeper_spacing, batch.margin_bays
+    n_steps = math.ceil(STEADY_RUN_BAYS * s / (batch.speed * batch.dt))
+    travel = batch.speed * (n_steps * batch.dt)
+    # the run ends where the pass starts in its bay, K bays on, with the start's windows clear of the rail's end
+    bays_on = math.ceil((system.span + (margin + 2) * s + travel - batch.x_start) / s)
+    x_start = batch.x_start + bays_on * s - travel
+    n_sleepers = int((x_start + travel) / s) + margin + 4
+    scalars = dict(sleeper_spacing=s, rail_bending_stiffness=t0.rail_bending_stiffness, rail_mass=t0.rail_mass,
+                   elements_per_bay=t0.elements_per_bay)
+    uniform = [Track.uniform(n_sleepers, **{name: float(getattr(t, name)[0]) for name in _SUPPORT_FIELDS}, **scalars)
+               for t in tracks]
+    runs = _Batch(uniform, [None] * len(uniform), None, system, batch.law, batch.speed, batch.dt, "static",
+                  x_start, x_start + batch.speed * (n_steps * batch.dt), margin, "ballast", keep_factors=False)
+    run = _integrate(runs)
+    n = len(uniform)
+    u, v, a, q, qd, qdd = (_unpack(x, n) for x in (run.final.u, run.final.v, run.final.a, run.final.q,
+                                                    run.final.qd, run.final.qdd))
+    force = _unpack(run.peaks.force[:, -1], n)
+    x_lead = float(run.x_axle[-1, 0] + system.axle_offsets[0])
+    return [_SteadyState(u[b], v[b], a[b], q[b], qd[b], qdd[b], force[b], x_lead) for b in range(n)]
 
 
 def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
@@ -807,24 +1048,13 @@ KERNEL_ENTRIES = tuple(_kernel._RUNNERS)
 
 def warm_kernel(entries=KERNEL_ENTRIES) -> None:
     """Compile now, or load from numba's on-disk cache, the kernel's ``entries`` (pairs of
-    :data:`KERNEL_ENTRIES`) by a pass of half a metre with a batch that :func:`simulate_passes` runs on each
-    entry. On a fresh install the single pass's entry compiles in ~50-70 s of one core, each other width's chunk
-    integrator in ~50-60 s, shared by that width's serial and parallel entries (~2-15 s each on top); processes
-    that warm different widths at once share the cache, so two cores warm them in about half the time."""
-    import numba
+    :data:`KERNEL_ENTRIES`); parallel ones only where numba may run two threads. Processes that warm different
+    widths at once share the cache. :func:`trackenv.physics.kernels.compile_kernels` does the same by width, with
+    progress."""
+    from .kernels import KernelEntry, build_entries, kernel_entries
 
     unknown = [e for e in entries if e not in KERNEL_ENTRIES]
     if unknown:
         raise ValueError(f"entries must be among {KERNEL_ENTRIES}, got {unknown}")
-    track, wheel = Track.seed(), Wheelset.seed()
-    threads = numba.get_num_threads()
-    try:
-        for parallel, width in entries:
-            if parallel and numba.config.NUMBA_NUM_THREADS < 2:  # type: ignore[attr-defined]
-                continue  # one thread can never reach a parallel entry
-            # one chunk of `width` rows on one thread; two chunks of `width` rows on two threads
-            numba.set_num_threads(2 if parallel else 1)
-            rows = 2 * width if parallel else width
-            simulate_passes(track, wheel, 20.0, np.zeros((rows, track.n_sleepers)), x_start=10.0, x_end=10.5)
-    finally:
-        numba.set_num_threads(threads)
+    reachable = kernel_entries()
+    build_entries([KernelEntry(p, w) for p, w in entries if KernelEntry(p, w) in reachable], load=True)

@@ -1,0 +1,95 @@
+"""The compiled kernel's entries: what is compiled can be asked cheaply, built up front with progress, and the
+on-disk cache follows every kernel module's source."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+from trackenv.physics import _kernel, _pipeline, kernels
+from trackenv.physics.dynamics import simulate_pass
+from trackenv.physics.kernels import CompileProgress, KernelEntry
+from trackenv.physics.track import Track
+from trackenv.physics.vehicle import Wheelset
+
+PHYSICS = Path(_pipeline.__file__).parent
+
+
+def test_every_reachable_entry_is_compiled_after_the_session_warm_up():
+    """The session fixture builds every entry: none is missing, every width reports compiled, and building again
+    compiles nothing and reports nothing."""
+    assert kernels.missing_kernels() == []
+    assert all(kernels.kernel_is_compiled(w) for w in kernels.WIDTHS)
+    events = []
+    assert kernels.compile_kernels(progress=events.append) == []
+    assert events == []
+
+
+def test_the_queried_signature_is_the_one_a_pass_compiles():
+    """The query asks about the argument types a pass gives the kernel: after a one-row pass, the serial one-row
+    entry holds code for exactly that signature (so a query cannot say compiled while a call would compile)."""
+    simulate_pass(Track.seed(), Wheelset.seed(), 20.0, x_start=10.0, x_end=10.5)
+    assert kernels._signature() in _kernel._RUNNERS[(False, 1)].overloads
+    assert kernels.is_compiled(KernelEntry(False, 1))
+
+
+def test_entries_and_progress():
+    assert [e.width for e in kernels.kernel_entries([6])] == [6] * (2 if numba.config.NUMBA_NUM_THREADS >= 2 else 1)
+    assert kernels.entry_for_rows(1) == KernelEntry(False, 1)
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert kernels.entry_for_rows(12) == KernelEntry(False, 16)
+    finally:
+        numba.set_num_threads(threads)
+    with pytest.raises(ValueError, match="width"):
+        KernelEntry(False, 3)
+    with pytest.raises(ValueError, match="n_rows"):
+        kernels.entry_for_rows(0)
+    start = CompileProgress(KernelEntry(True, 6), 2, 5, from_cache=False)
+    assert str(start) == "[2/5] compiling the pass kernel for parallel chunks of 6 rows"
+    done = CompileProgress(KernelEntry(False, 1), 1, 1, from_cache=True, seconds=0.42)
+    assert str(done) == "[1/1] loading the pass kernel for serial chunks of 1 row done in 0.4 s"
+
+
+def test_loading_reports_each_entry_it_loads(monkeypatch):
+    """With ``load`` an entry on disk but not in this process is loaded, with a start and a done event, and is not
+    counted as compiled."""
+    entry = KernelEntry(False, 4)
+    monkeypatch.setattr(_kernel, "is_loaded", lambda key, sig: key != (entry.parallel, entry.width))
+    monkeypatch.setattr(_kernel, "is_cached", lambda key, sig: True)
+    built = []
+    monkeypatch.setattr(_kernel, "build", lambda key, sig: built.append(key))
+    events = []
+    assert kernels.compile_kernels([4], progress=events.append, load=True) == []
+    assert built == [(False, 4)] and [e.seconds is None for e in events] == [True, False]
+    assert all(e.from_cache and e.entry == entry for e in events)
+    assert kernels.compile_kernels([4], progress=events.append) == [] and len(events) == 2  # not loaded without load
+
+
+def test_the_cache_stamp_covers_every_kernel_module():
+    """numba's cache checks only a function's own file; the kernel's functions are stamped with the digest of all
+    its modules, so that a change in one module invalidates the entries that inline it. Every module that
+    compiles kernel code (kernel_jit or a lane intrinsic) is among them, and the digest is that of their source."""
+    compiling = {
+        path.name
+        for path in PHYSICS.glob("*.py")
+        if any(isinstance(node, ast.Name) and node.id in ("kernel_jit", "intrinsic") for node in
+               ast.walk(ast.parse(path.read_text())))
+    }
+    assert compiling <= set(_pipeline.KERNEL_MODULES) and "_implicit.py" not in _pipeline.KERNEL_MODULES
+    assert _pipeline.SOURCE_DIGEST == _pipeline._source_digest()
+    for dispatcher in [*_kernel._RUNNERS.values(), _kernel._run_chunk_shared]:
+        stamp = dispatcher._cache._impl.locator.get_source_stamp()
+        assert isinstance(dispatcher._cache, _pipeline._KernelCache) and stamp[1] == _pipeline.SOURCE_DIGEST
+
+
+def test_physics_compiles_without_printing(capsys):
+    kernels.compile_kernels([1])
+    kernels.missing_kernels()
+    assert capsys.readouterr() == ("", "")
+    assert np.isfinite(simulate_pass(Track.seed(), Wheelset.seed(), 20.0, x_start=10.0, x_end=10.5).contact_force).all()
