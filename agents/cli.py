@@ -1,4 +1,4 @@
-"""The ``trackenv`` command: validate, paper, bench, evaluate, train, calibrate.
+"""The ``trackenv`` command: validate, paper, compile, bench, evaluate, train, calibrate.
 
 Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
 to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
@@ -107,6 +107,30 @@ def cmd_bench(args: argparse.Namespace) -> int:
         bar.update(bar.total - bar.n)
     _emit(args, result, format_benchmarks(result))
     return 0
+
+
+def cmd_compile(args: argparse.Namespace) -> int:
+    """Build every compiled entry of the pass kernel that a call would otherwise compile on first use (numba keeps
+    them in its on-disk cache beside the package), one line per entry on stderr."""
+    from trackenv.physics.kernels import compile_kernels, kernel_entries, missing_kernels
+
+    t0 = time.perf_counter()
+    todo = missing_kernels(args.widths)
+    if not args.json:
+        print(f"trackenv compile: {len(todo)} of {len(kernel_entries(args.widths))} pass-kernel entries to compile"
+              + (" (once per install; a few minutes of one core)" if todo else ""), file=sys.stderr)
+
+    def report(p: Any) -> None:
+        if p.seconds is not None and not args.json:
+            print(f"  {p}", file=sys.stderr)
+
+    built = compile_kernels(args.widths, progress=report)
+    payload = {"compiled": [str(e) for e in built], "entries": [str(e) for e in kernel_entries(args.widths)],
+               "missing_after": [str(e) for e in missing_kernels(args.widths)],
+               "wall_time_s": time.perf_counter() - t0}
+    _emit(args, payload, f"every pass-kernel entry is compiled ({len(built)} built now, "
+                         f"{payload['wall_time_s']:.0f} s)")
+    return 0 if not payload["missing_after"] else 1
 
 
 def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
@@ -326,6 +350,14 @@ def _hyperparam_defaults() -> dict[str, Any]:
         return {}
 
 
+def _widths(text: str) -> list[int]:
+    """``--widths``: comma-separated kernel widths, each one of the kernel's (checked when the command runs)."""
+    try:
+        return [int(w) for w in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="trackenv", formatter_class=_HelpFormatter,
@@ -357,6 +389,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="axle passes (load cycles) per iteration")
     sp.add_argument("--no-plots", action="store_true", help="write paper.json only, no PNG figures")
     sp.set_defaults(func=cmd_paper)
+
+    sp = command("compile", "build every compiled entry of the physics kernel up front (make setup runs it)")
+    sp.add_argument("--widths", type=_widths, default=None, metavar="W,W",
+                    help="only these batch widths (rows per chunk; default: all)")
+    sp.set_defaults(func=cmd_compile)
 
     sp = command("bench", "speed of the dynamics, the settlement loop and the env")
     sp.add_argument("--quick", action="store_true", help="fewer repeats: rougher figures in a few seconds")

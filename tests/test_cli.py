@@ -242,3 +242,17 @@ def test_periodic_all_sections_shows_no_n_worst():
            "ci_low": 1.0, "ci_high": 1.0, "tampings_per_km_year": 0.1, "immediate_action_exceedances": 0,
            "mean_final_sd_mm": 1.0}
     assert "n_worst" not in format_table([row])
+
+
+def test_compile_builds_what_is_missing_and_then_has_nothing_to_do(capsys):
+    """`trackenv compile` (run by `make setup`) leaves no entry of the asked widths to compile; a second run
+    builds nothing; a width the kernel has no entry for is refused in one line."""
+    from trackenv.physics.kernels import missing_kernels
+
+    assert main(["compile", "--widths", "1", "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["missing_after"] == [] and missing_kernels([1]) == []
+    assert main(["compile", "--widths", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["compiled"] == []
+    assert main(["compile", "--widths", "7"]) == 2
+    assert "width must be one of" in capsys.readouterr().err
