@@ -715,6 +715,9 @@ def _simulate_batch(batch: _Batch) -> tuple[list[PassResult], list[int]]:
 def _integrate(batch: _Batch) -> _Run:
     """The batch's pass through the kernel (:func:`_prepare`)."""
     run, arguments = _prepare(batch)
+    from .kernels import announce_compile  # (kernels imports this module's helpers)
+
+    announce_compile(arguments[2].u.shape[0] > 1, arguments[-1])
     _kernel.run(*arguments)
     return run
 

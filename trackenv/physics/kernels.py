@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -62,6 +63,22 @@ class CompileProgress:
         verb = "loading" if self.from_cache else "compiling"
         done = "" if self.seconds is None else f" done in {self.seconds:.1f} s"
         return f"[{self.index}/{self.total}] {verb} the pass kernel for {self.entry}{done}"
+
+
+class KernelCompileWarning(UserWarning):
+    """A pass is about to compile an entry of the kernel (tens of seconds, once per install and processor):
+    raised so that the wait is never silent; ``trackenv compile`` (``make setup``) builds every entry up front."""
+
+
+def announce_compile(parallel: bool, width: int) -> None:
+    """Warn (:class:`KernelCompileWarning`) if the entry a pass is about to run on must be compiled, neither in
+    this process nor in numba's on-disk cache; nothing (a dictionary lookup) once it is loaded."""
+    key, signature = (bool(parallel), int(width)), _signature()
+    if _kernel.is_loaded(key, signature) or _kernel.is_cached(key, signature):
+        return
+    warnings.warn(f"trackenv: compiling the physics kernel for {KernelEntry(*key)} first (once per install, about "
+                  "15-30 s); `trackenv compile` (run by `make setup`) builds every entry up front",
+                  KernelCompileWarning, stacklevel=2)
 
 
 def kernel_entries(widths: Iterable[int] | None = None) -> list[KernelEntry]:
