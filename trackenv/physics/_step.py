@@ -810,8 +810,8 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
         # ---- flexibilities at the wheels and contact predictor
         _wheel_flexibilities(cluster_of_axle, wheel_dofs, kv_inv, lo_c, pred, qpred, shape, edofs, loc, cols, wpred,
                              ypred, H, W)
-        # ---- Newton on the compressions, row by row: d = d_pred - H f(d) (a wheel off the rail starts from its
-        # free compression; written out here: as a function of its own the one-row pass measured slower)
+        # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
+        # (a wheel off the rail starts from its free compression; written out: as a function the pass was slower)
         if W > 1 and n_axles == 1:  # compile-time W: the one-row entry has only the general loop
             _newton_one_axle(law, param, z_axle, step, wpred, ypred, H, delta, force, shape, fsh, res_w, done_w, W)
         else:
