@@ -490,25 +490,6 @@ def _place_axles(x_axle, step, node_w, elem_len, z_axle, sag, elem_of, shape, ed
             )
 
 
-@kernel_jit(fastmath=FASTMATH, pipeline_class=_InlineCompiler)
-def _group_bays(c, cluster_of_axle, elem_of, bay_cache, epb, n_sleepers, W):
-    """(first bay, last bay, whether any axle of group ``c`` entered a new bay); the bay of an axle is that of its
-    element, so that element and bay always agree."""
-    literally(W)
-    changed = False
-    bay_min = n_sleepers
-    bay_max = -1
-    for j in range(cluster_of_axle.shape[0]):
-        if cluster_of_axle[j] != c:
-            continue
-        bay = elem_of[j] // epb
-        if bay != bay_cache[j]:
-            changed = True
-        bay_min = min(bay_min, bay)
-        bay_max = max(bay_max, bay)
-    return bay_min, bay_max, changed
-
-
 @njit(inline="always", fastmath=FASTMATH)
 def _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W):
     """The pre-scaled factor of group ``c``'s window [lo, hi): read back from ``reuse`` where a one-row pass kept
@@ -802,7 +783,12 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
         _place_axles(x_axle, step, node_w, elem_len, z_axle, sag, elem_of, shape, edofs, W)
         # ---- move the window of every axle group that has entered a new bay: factor, columns of its bay
         for c in range(n_clusters):
-            bay_min, bay_max, changed = _group_bays(c, cluster_of_axle, elem_of, bay_cache, epb, n_sleepers, W)
+            changed, bay_min, bay_max = False, n_sleepers, -1
+            for j in range(n_axles):
+                if cluster_of_axle[j] == c:  # the bay of the axle's element, so element and bay always agree
+                    bay = elem_of[j] // epb
+                    changed = changed or bay != bay_cache[j]
+                    bay_min, bay_max = min(bay_min, bay), max(bay_max, bay)
             if changed:
                 _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W)
         # ---- where the axles' element DOFs sit among their bay's columns
@@ -824,8 +810,8 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
         # ---- flexibilities at the wheels and contact predictor
         _wheel_flexibilities(cluster_of_axle, wheel_dofs, kv_inv, lo_c, pred, qpred, shape, edofs, loc, cols, wpred,
                              ypred, H, W)
-        # ---- Newton on the compressions, row by row: d = d_pred - H f(d) (a wheel off the rail starts from its
-        # free compression; written out here: as a function of its own the one-row pass measured slower)
+        # ---- Newton on the compressions, row by row: d = d_pred - H f(d)
+        # (a wheel off the rail starts from its free compression; written out: as a function the pass was slower)
         if W > 1 and n_axles == 1:  # compile-time W: the one-row entry has only the general loop
             _newton_one_axle(law, param, z_axle, step, wpred, ypred, H, delta, force, shape, fsh, res_w, done_w, W)
         else:

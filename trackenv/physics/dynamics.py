@@ -257,8 +257,8 @@ def _irregularity_levels(irrs: list, track: Track, x: np.ndarray, name: str) -> 
     callable of x, or a per-sleeper or per-node profile (natural cubic spline through it). The profiles on one
     grid are interpolated by one spline through all of them (its columns), evaluated once: the same numbers as
     one spline per row (bit-identical; scipy solves and evaluates each column alike) at a fraction of the cost,
-    since finding each position's interval and building the spline's system are shared (64 rows of the seed
-    pass: 21 -> 5 ms). A row whose irregularity is the same object as an earlier row's shares its levels."""
+    since finding each position's interval and building the spline's system are shared. A row whose irregularity
+    is the same object as an earlier row's shares its levels."""
     out: list[np.ndarray | None] = [None] * len(irrs)
     first: dict[int, int] = {}  # id of an irregularity -> the first row that has it
     profiles: dict[str, list[tuple[int, np.ndarray]]] = {"sleeper": [], "node": []}
