@@ -70,10 +70,19 @@ class KernelCompileWarning(UserWarning):
     raised so that the wait is never silent; ``trackenv compile`` (``make setup``) builds every entry up front."""
 
 
+#: The entries a pass has found loaded or cached in this process (checking again would hash the signature's
+#: numba types at every pass).
+_ANNOUNCED: set[tuple[bool, int]] = set()
+
+
 def announce_compile(parallel: bool, width: int) -> None:
     """Warn (:class:`KernelCompileWarning`) if the entry a pass is about to run on must be compiled, neither in
-    this process nor in numba's on-disk cache; nothing (a dictionary lookup) once it is loaded."""
-    key, signature = (bool(parallel), int(width)), _signature()
+    this process nor in numba's on-disk cache; a set lookup once it was found (or announced)."""
+    key = (bool(parallel), int(width))
+    if key in _ANNOUNCED:
+        return
+    _ANNOUNCED.add(key)
+    signature = _signature()
     if _kernel.is_loaded(key, signature) or _kernel.is_cached(key, signature):
         return
     warnings.warn(f"trackenv: compiling the physics kernel for {KernelEntry(*key)} first (once per install, about "
