@@ -901,17 +901,11 @@ def _results(batch: _Batch, run: _Run) -> list[PassResult]:
 
 # ------------------------------------------------------------------------------------------ the steady start
 @dataclass(frozen=True, eq=False)
-class _SteadyState:
-    """The steady state of one track entry: the track's u, v, a on a uniform track (n_dof,) with the leading
-    axle at ``x_lead`` [m], the vehicle's q, qd, qdd on a level rail, and the contact forces (n_axles,)."""
+class _SteadyState(_State):
+    """The steady state of one track entry: a :class:`_State` of one row (the track's u, v, a on a uniform track
+    (n_dof,), the vehicle's q, qd, qdd on a level rail, the contact forces (n_axles,)) with the leading axle at
+    ``x_lead`` [m]."""
 
-    u: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    force: np.ndarray
     x_lead: float
 
 
