@@ -42,5 +42,5 @@ validate: setup
 	$(BIN)/trackenv validate
 
 clean:  # also numba's on-disk cache of the compiled kernel (its index files pile up as the kernel's source changes)
-	rm -rf $(VENV) results runs .pytest_cache .mypy_cache
+	rm -rf $(VENV) results runs build .pytest_cache .mypy_cache
 	find trackenv agents -path '*/__pycache__/*.nb[ic]' -delete
