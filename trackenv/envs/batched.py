@@ -1,8 +1,7 @@
 """BatchedVectorEnv: the Gymnasium side of trackenv's native vector envs, written once for every problem.
 
-A native vector env (:class:`~trackenv.envs.vector.TampingVectorEnv`,
-:class:`~trackenv.envs.line.TampingLineVectorEnv`) steps all its envs in one batched call of the physics. What it
-owes Gymnasium does not depend on the problem and lives here, so the problems cannot drift apart:
+A native vector env (:class:`~trackenv.envs.env.TrackVectorEnv`, whatever the problem) steps all its envs in one
+batched call of the physics. What it owes Gymnasium does not depend on the problem and lives here:
 
 * seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i``, or give a list of one seed per env
   (:func:`~trackenv.envs._seeding.vector_rngs`); later episodes of env ``i`` draw from the same generator;
@@ -15,10 +14,12 @@ owes Gymnasium does not depend on the problem and lives here, so the problems ca
   - ``NEXT_STEP`` (Gymnasium's own default, RLlib's convention): the step that ends an episode returns its last
     observation and info; the next step resets that env (its action is ignored, reward 0, both flags False);
 
-* ``render_mode="rgb_array"``: :meth:`render` draws the first env.
+* ``render_mode="rgb_array"``: :meth:`render` draws the first env;
+* the planning state API's bookkeeping per row (each env's generator and last info).
 
-A subclass says what its problem is: :meth:`_start` (new episodes), :meth:`_step_envs` (one batched step),
-:meth:`_observation`, :meth:`_reset_info` and :meth:`_frame`.
+The subclass (:class:`~trackenv.envs.env.TrackVectorEnv`) connects it to the problem's engine: :meth:`_start`
+(new episodes), :meth:`_step_envs` (one batched step), :meth:`_observation`, :meth:`_reset_info` and
+:meth:`_frame`.
 """
 
 from __future__ import annotations
