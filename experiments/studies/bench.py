@@ -35,6 +35,7 @@ slows every figure, so compare figures taken at a similar load.
 
 from __future__ import annotations
 
+import functools
 import os
 import platform
 import statistics
@@ -322,6 +323,26 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: boo
         venv.close()
 
 
+def _bench_state(repeats: int) -> dict:
+    """The planning state API on the default line and the 60 m track, a few steps into an episode: the median
+    wall time of ``get_state`` and of ``set_state`` [s], and the size of a pickled snapshot [bytes]."""
+    import pickle
+
+    import gymnasium as gym
+
+    out = {}
+    for name, env_id in (("line", "trackenv/TampingLine-v0"), ("tamping", "trackenv/Tamping-v0")):
+        env: Any = gym.make(env_id).unwrapped  # a TrackEnv: get_state / set_state
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(np.zeros(env.action_space.shape, dtype=np.int8))
+        state = env.get_state()
+        restore = functools.partial(env.set_state, state)
+        out[name] = {"get_state": _time(env.get_state, repeats * 20), "set_state": _time(restore, repeats * 20),
+                     "pickled_bytes": len(pickle.dumps(state))}
+    return out
+
+
 def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
     """Run every benchmark and return the figures with the machine they ran on (JSON-ready).
 
@@ -362,13 +383,15 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
         tell(f"line_vector_env_{n}")
         out["line_vector_env"][str(n)] = _bench_vector_env(n, 2 if quick else 10, 10.0 if quick else 60.0,
                                                            line=True)
+    tell("state")
+    out["state"] = _bench_state(rep)
     out["machine"]["numba_threading_layer"] = _threading_layer()
     out["total_wall_s"] = time.perf_counter() - t0
     return out
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "vector_env_32_sharded", "line_env", "line_vector_env_8")
+          "vector_env_32_sharded", "line_env", "line_vector_env_8", "state")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -460,6 +483,9 @@ def format_benchmarks(d: dict) -> str:
         if e is not None:
             rows.append(_env_row(env_id, e))
         rows += [_vector_row(label, v) for label, v in vector_rows]
+    for name, s in d.get("state", {}).items():
+        rows.append((f"state API, {name}: get_state", f"{s['get_state']['median_s'] * 1e3:.3f} ms",
+                     f"set_state {s['set_state']['median_s'] * 1e3:.3f} ms, pickled {s['pickled_bytes'] / 1e3:.0f} kB"))
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines += [f"{r[0]:<{w0}}  {r[1]:>{w1}}  {r[2]}" for r in rows]

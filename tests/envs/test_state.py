@@ -120,3 +120,28 @@ def test_state_of_another_config_or_kind_is_refused():
     with pytest.raises(ValueError, match="index"):
         vec.unwrapped.get_state(2)
     vec.close()
+
+
+def test_set_state_drops_a_pending_next_step_reset():
+    """In NEXT_STEP autoreset, an env whose episode just ended is reset at its next step; restoring a state into
+    it first continues the restored episode instead (and its action is no longer ignored)."""
+    from gymnasium.vector import AutoresetMode
+
+    kwargs = {"horizon_years": 0.5}  # 2 steps
+    single = gym.make("trackenv/TampingLineSmall-v0", **kwargs)
+    single.reset(seed=11)
+    state = single.unwrapped.get_state()
+    tamp = np.ones(6, dtype=np.int8)
+    expected = single.step(tamp)[1]
+    vec = gym.make_vec("trackenv/TampingLineSmall-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                       autoreset_mode=AutoresetMode.NEXT_STEP, **kwargs)
+    vec.reset(seed=0)
+    zero = np.zeros((2, 6), dtype=np.int8)
+    for _ in range(2):
+        *_, trunc, _ = vec.step(zero)
+    assert trunc.all()  # both ended: the next step would reset them and ignore the actions
+    vec.unwrapped.set_state(0, state)
+    _, rew, _, trunc, _ = vec.step(np.stack([tamp, np.zeros(6, dtype=np.int8)]))
+    assert rew[0] == expected and not trunc[0]  # row 0 stepped the restored episode with its action
+    assert rew[1] == 0.0  # row 1 was reset, as NEXT_STEP does
+    vec.close()

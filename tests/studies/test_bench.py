@@ -53,3 +53,13 @@ def test_batch_gains_compare_the_largest_batch_with_single_passes():
     assert out["batch_gain"] == two["all_threads"]["passes_per_s"] / one["all_threads"]["passes_per_s"]
     assert out["lockstep_gain"] == two["one_thread"]["passes_per_s"] / one["one_thread"]["passes_per_s"]
     assert out["batch_gain"] > 0.0 and out["lockstep_gain"] > 0.0
+
+
+def test_state_benchmark_times_both_problems_snapshots():
+    from trackenv_studies.bench import STAGES, _bench_state
+
+    out = _bench_state(1)
+    assert set(out) == {"line", "tamping"} and STAGES[-1] == "state"
+    for figures in out.values():
+        assert figures["get_state"]["median_s"] > 0 and figures["set_state"]["median_s"] > 0
+        assert figures["pickled_bytes"] > 10_000  # the arrays of an episode, not an empty shell
