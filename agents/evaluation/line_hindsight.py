@@ -115,7 +115,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     starts = [i for i in range(N) if parent[i] in (-1, i)]  # the nodes replayed from the first step
     bt = LineBatch(config, -(-N // S))
     ref = LineBatch(config, len(seeds))
-    ref.reset_lines(list(range(len(seeds))), [np.random.default_rng(e) for e in seeds])
+    ref.start(list(range(len(seeds))), [np.random.default_rng(e) for e in seeds])
     row = np.full(N, -1)
     row[starts] = np.arange(len(starts))
     bt.copy_rows(row[starts], ref, np.array(key)[starts])

@@ -69,7 +69,11 @@ class TrackEnv(gym.Env):
 
     def step(self, action):
         engine = self._engine()
-        engine.check_not_truncated(0)
+        c = self.config
+        if engine.step_count(0) >= c.horizon_steps:
+            raise RuntimeError(
+                f"the episode was truncated at its horizon ({c.horizon_steps} steps, {c.horizon_years:g} years): "
+                "call reset() before step()")
         want = decode_action(action, self.action_type, self.config.n_sections)[None, :]
         rewards, truncated, infos = engine.advance(want, [0], [self.np_random])
         self._last_info = infos[0]

@@ -175,8 +175,9 @@ def apply_tamping(ep: Episode, sections_to_tamp: np.ndarray, rng: np.random.Gene
 
 
 def traffic_batch(eps: list[Episode], results: list[PassResult]) -> None:
-    """:func:`traffic` for many episodes of one config, their settlement steps in one batched call (each
-    episode ends exactly as with :func:`traffic` alone)."""
+    """The period's traffic for many episodes of one config: settle every sleeper under the forces of its
+    episode's pass in ``results`` for the step's axle passes, the settlement steps in one batched call (each
+    episode ends exactly as it would alone)."""
     for ep, result in zip(eps, results, strict=True):
         ep.contact_force = ep.sim.evaluated(result.contact_force_profile())
     settle_batch([ep.sim for ep in eps], results, eps[0].config.cycles_per_step)
@@ -279,7 +280,7 @@ class TrackEpisodes:
     kernel spreads over the cores). The rules of a step are the functions of this module; the engine is what
     every env of the 60 m track (single or vector) steps, with the interface of the line's engine
     (:class:`~trackenv.envs.line_episode.LineBatch`): :meth:`start`, :meth:`advance` (a step), :meth:`observation`,
-    :meth:`observations`, :meth:`reset_info`, :meth:`allowed`, :meth:`check_not_truncated`, :meth:`get_state`,
+    :meth:`observations`, :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state`,
     :meth:`set_state`, :meth:`frame`.
 
     Each row draws from its own generator (``rngs[i]``, the env's): its track at :meth:`start` and the tamping
@@ -341,13 +342,9 @@ class TrackEpisodes:
         """(rows, n_sections) the sections that may be tamped now."""
         return np.array([ep.mask() for ep in self.episodes])
 
-    def check_not_truncated(self, i: int) -> None:
-        """RuntimeError if row ``i`` has reached its horizon (it must be reset before the next step)."""
-        c = self.config
-        if self.episodes[i].step_count >= c.horizon_steps:
-            raise RuntimeError(
-                f"the episode was truncated at its horizon ({c.horizon_steps} steps, {c.horizon_years:g} years): "
-                "call reset() before step()")
+    def step_count(self, i: int) -> int:
+        """Steps row ``i`` has taken in its episode."""
+        return self.episodes[i].step_count
 
     def get_state(self, i: int) -> Episode:
         """A copy of row ``i``'s episode that :meth:`set_state` restores exactly."""

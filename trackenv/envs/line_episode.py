@@ -108,12 +108,13 @@ def line_observation_space(config: LineConfig) -> spaces.Dict:
 
 class LineBatch:
     """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
-    of line b. Per-line resets (:meth:`reset_lines`) leave the other lines untouched.
+    of line b. Per-line resets (:meth:`start`) leave the other lines untouched.
 
     **The engine's public API** (what envs, searches and planning code may call; everything else is internal):
 
-    * lines: :meth:`reset_lines`, :meth:`step_lines` (one step of the env), :meth:`observation`,
-      :meth:`reset_info`, :meth:`allowed`, :meth:`get_state` / :meth:`set_state` (a line's episode, exactly);
+    * lines: :meth:`start` (new episodes), :meth:`advance` (one step of the env), :meth:`observation`,
+      :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state` / :meth:`set_state` (a line's
+      episode, exactly);
     * rows (one section each), for searches that fork single sections, which evolve independently of each
       other but for the line's possession: :meth:`copy_rows` (fork), :meth:`allowed_rows`,
       :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`, :meth:`measure_rows`,
@@ -204,7 +205,7 @@ class LineBatch:
         self.measured_level[seg] = self.level[seg]
 
     # ------------------------------------------------------------------ reset
-    def reset_lines(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
+    def start(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
         """Draw new episodes for ``lines`` from their generators and run their traffic-free first pass."""
         for b in lines:
             self._draw(b, rngs[b])
@@ -514,11 +515,14 @@ class LineBatch:
         the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
         return sum(self._quality_costs().values(), np.zeros(self.sd.shape))
 
-    def step_lines(self, want: np.ndarray, lines: list[int]) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
+    def advance(self, want: np.ndarray, lines: list[int], rngs: list[np.random.Generator],
+                resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
         """One step of ``lines``, which ask to tamp ``want`` (n_lines, S) bool (rows of other lines: ignored): the
-        campaign resolved against masks, capacity and budget, the tamping, the period's traffic, the costs.
-        Returns the rewards and truncation flags (n_lines,; 0 and False for lines not stepped) and the info of
-        each stepped line. Lines not in ``lines`` are left as they are. Every TampingLine env steps here."""
+        campaign resolved against masks, capacity and budget, the tamping, the period's traffic, the costs; then
+        new episodes in ``resetting``, drawn from their generators ``rngs[b]`` (everything random in a line is
+        drawn at its reset). Returns the rewards and truncation flags (n_lines,; 0 and False for lines not
+        stepped) and the info of each stepped line. Other lines are left as they are. Every TampingLine env steps
+        here."""
         stepped = np.zeros(self.n_lines, dtype=bool)
         stepped[lines] = True
         tamped, clipped = self.resolve(want & stepped[:, None])
@@ -531,20 +535,9 @@ class LineBatch:
         truncated = stepped & (self.step >= self.config.horizon_steps)
         infos = {b: self.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
                               section[self.rows(b)]) for b in lines}
-        return rewards, truncated, infos
-
-    def start(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
-        """The engine interface's name of :meth:`reset_lines` (every env's engine starts episodes so)."""
-        self.reset_lines(lines, rngs)
-
-    def advance(self, want: np.ndarray, lines: list[int], rngs: list[np.random.Generator],
-                resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
-        """The engine interface's step: :meth:`step_lines` of ``lines``, then new episodes in ``resetting``
-        drawn from their generators ``rngs[b]`` (everything random in a line is drawn at its reset)."""
-        out = self.step_lines(want, lines)
         if resetting:
-            self.reset_lines(list(resetting), rngs)
-        return out
+            self.start(list(resetting), rngs)
+        return rewards, truncated, infos
 
     def observations(self, keys) -> dict[str, np.ndarray]:
         """Every line's :meth:`observation`, stacked (n_lines, ...) under ``keys``."""
@@ -562,13 +555,9 @@ class LineBatch:
         S = self.S
         return self.info(b, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False, np.zeros(S))
 
-    def check_not_truncated(self, b: int) -> None:
-        """RuntimeError if line ``b`` has reached its horizon (it must be reset before the next step)."""
-        c = self.config
-        if self.step[b] >= c.horizon_steps:
-            raise RuntimeError(
-                f"the episode was truncated at its horizon ({c.horizon_steps} steps, {c.horizon_years:g} years): "
-                "call reset() before step()")
+    def step_count(self, b: int) -> int:
+        """Steps line ``b`` has taken in its episode."""
+        return int(self.step[b])
 
     # ------------------------------------------------------------------ observation and info
     def section_entries(self, rows, step) -> dict[str, np.ndarray]:
