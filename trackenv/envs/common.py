@@ -19,6 +19,7 @@ SHARED_BOUNDS: dict[str, tuple[float, float]] = {
     "section_peak": (0.0, 200.0),
     "tampings": (0.0, 1000.0),
     "time": (0.0, 1.0),
+    "contact_force": (0.0, 2000.0),  # kN: wheel/rail force over each sleeper bay (static ~100 kN)
 }
 
 

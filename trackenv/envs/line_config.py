@@ -98,6 +98,7 @@ class LineConfig(ConfigBase):
     n_sections: int = 12
     section_length_m: float = 200.0
     segment_length_m: float = 30.0
+    sections_per_segment: int = 1
     speed_kmh: float = 100.0
     annual_mgt: float = 15.0
     freight_share: float = 0.4
@@ -120,6 +121,8 @@ class LineConfig(ConfigBase):
     wet_spot_probability: float = 0.1
     wet_spot_rate_factor: float = 5.0
     wet_spot_length_m: float = 6.0
+    voided_sleepers_mean: float = 0.0
+    voided_residual_support: float = 0.05
     rate_scale: float = 1.0
     initial_age_years: float = 3.0
     initial_max_tampings: int = 4
@@ -131,6 +134,7 @@ class LineConfig(ConfigBase):
     tamping_cost_per_m: float = 0.01
     renewal_cost_per_m: float = 0.15
     geometry_cost_per_section_year: float = 4.0
+    alert_cost: float = 0.0
     speed_restriction_cost: float = 20.0
     immediate_action_cost: float = 50.0
     capacity: int = 6
@@ -143,7 +147,7 @@ class LineConfig(ConfigBase):
 
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
     _CAMPAIGN_COST_FIELD = "possession_cost"
-    _CLASS_COST_FIELDS = (("speed_restriction", 2, "speed_restriction_cost"),
+    _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("speed_restriction", 2, "speed_restriction_cost"),
                           ("immediate_action", 3, "immediate_action_cost"))
 
     def __post_init__(self) -> None:
@@ -151,7 +155,22 @@ class LineConfig(ConfigBase):
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
         c("section_length_m", low=30.0, high=1000.0)
-        bounded_by(self, "section_length_m", c, "segment_length_m", low=12.0, high=self.section_length_m)
+        ci("sections_per_segment", low=1, high=64)
+        K = self.sections_per_segment
+        if K == 1:
+            bounded_by(self, "section_length_m", c, "segment_length_m", low=12.0, high=self.section_length_m)
+        else:  # the segment is its sections, end to end
+            c("segment_length_m", low=12.0, high=2000.0)
+            if abs(self.segment_length_m - K * self.section_length_m) > 1e-9 * self.segment_length_m:
+                raise ValueError(f"segment_length_m must be sections_per_segment x section_length_m = "
+                                 f"{K * self.section_length_m:g} when a segment carries several sections, "
+                                 f"got {self.segment_length_m:g}")
+            if self.n_sections % K:
+                raise ValueError(f"n_sections must be a multiple of sections_per_segment = {K}, "
+                                 f"got {self.n_sections}")
+            if self.n_sleepers < 3 * K:
+                raise ValueError("sections_per_segment must leave at least 3 sleepers per section, got "
+                                 f"{K} sections on {self.n_sleepers} sleepers")
         c("speed_kmh", low=5.0, high=300.0)
         c("annual_mgt", low=0.1, high=200.0)
         c("freight_share", low=0.0, high=1.0)
@@ -172,13 +191,15 @@ class LineConfig(ConfigBase):
         for name in ("transition_rate_factor", "switch_rate_factor", "wet_spot_rate_factor"):
             c(name, low=0.1, high=100.0)
         bounded_by(self, "segment_length_m", c, "wet_spot_length_m", low=0.6, high=self.segment_length_m)
+        c("voided_sleepers_mean", low=0.0, high=10.0)
+        c("voided_residual_support", low=0.0, high=1.0)
         c("rate_scale", low=1e-3, high=1e3)
         c("initial_age_years", low=0.0, high=50.0)
         ci("initial_max_tampings", low=0, high=100)
         check_range_field(self, "initial_scale", low=0.0, high=10.0)
         self._check_models()
         for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
-                     "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
+                     "alert_cost", "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
             c(name, low=0.0, high=1e9)
         bounded_by(self, "n_sections", ci, "capacity", low=1, high=self.n_sections)
         check_choice("over_capacity", self.over_capacity, OVER_CAPACITY)
@@ -210,6 +231,11 @@ class LineConfig(ConfigBase):
     def n_sleepers(self) -> int:
         """Sleepers per segment."""
         return int(round(self.segment_length_m / SLEEPER_SPACING_M)) + 1
+
+    @property
+    def n_segments(self) -> int:
+        """Physics segments per line (``n_sections / sections_per_segment``)."""
+        return self.n_sections // self.sections_per_segment
 
     @property
     def horizon_steps(self) -> int:

@@ -1,5 +1,10 @@
-"""The state and the rules of TampingLine episodes, batched over lines: plain arrays with a leading axis of
-segments (``n_lines × n_sections`` rows), so a step is array code and one batched pass per vehicle type.
+"""The episode engine of every trackenv problem: the state and the rules of its episodes, batched over lines,
+as plain arrays with a leading axis of physics *segments* (``n_lines × n_segments`` rows) or of decision
+*sections* (``n_lines × n_sections``), so a step is array code and one batched pass per vehicle type.
+
+A segment carries ``sections_per_segment`` sections: one on the line presets (each 200 m section is
+represented by a 30 m segment of its own), several on the 60 m track (one 60 m segment of six 10 m sections,
+so the sections share one pass and feel each other through the rail).
 
 Everything random in an episode is drawn at its reset from the line's own generator (track, rates, register,
 wet spots with their onset step, every tamping residual and every measurement error, indexed by step and
@@ -18,8 +23,17 @@ from scipy.ndimage import gaussian_filter1d
 
 from ..degradation import TrackDegradation
 from ..physics.dynamics import simulate_passes
-from ..physics.geometry import classify, d1_filter, german_psd, synthesize_profile
+from ..physics.geometry import (
+    classify,
+    d1_filter,
+    german_psd,
+    section_index,
+    section_peak,
+    section_sd,
+    synthesize_profile,
+)
 from ..physics.settlement import implicit_settlement_step
+from ..physics.tamping import restored_level
 from ..physics.track import Track
 from .common import SHARED_BOUNDS, clip_observation
 from .common import observation_space as common_observation_space
@@ -47,28 +61,22 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
     return np.exp(sigma * z - sigma * sigma / 2)
 
 
-def _lsq_line(z: np.ndarray) -> np.ndarray:
-    """Least-squares straight line of each row of z (row by row: a matrix product's rounding depends on the
-    number of rows, and a line's numbers must not depend on its batch)."""
-    n = z.shape[-1]
-    t = np.arange(n) - 0.5 * (n - 1)
-    slope = (z * t).sum(axis=-1) / float(t @ t)
-    return z.mean(axis=-1, keepdims=True) + slope[..., None] * t
-
-
-#: The per-segment arrays of :class:`LineBatch` (leading axis: segment), and those indexed (step, segment).
-_ROW_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "count", "tampings", "register", "wet_onset",
-               "wet_mask", "wet_active", "last_tamped", "measured_sd", "measured_peak", "measured_level",
-               "contact_force", "d1", "sd", "peak", "sd_after_tamping")
-_ROW_NOISE = ("tamp_noise", "meas_noise")
+#: The arrays of :class:`LineBatch` with a leading axis of segments, and those indexed (step, segment).
+_SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", "wet_mask", "wet_active",
+                   "measured_level", "contact_profile", "d1")
+_SEGMENT_NOISE = ("tamp_noise",)
+#: The arrays with a leading axis of sections, and those indexed (step, section).
+_SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
+                   "sd", "peak", "sd_after_tamping")
+_SECTION_NOISE = ("meas_noise",)
 
 
 @dataclass(frozen=True, eq=False)
 class LineState:
-    """One line's episode, copied out of a :class:`LineBatch` (:meth:`LineBatch.get_state`): its segments'
-    arrays (``rows``: name -> (S, ...); ``noise``: name -> (H + 1, S, ...), the pre-drawn residuals and
-    measurement errors), its segments' model tracks (shared: immutable), and the line's step, last recording
-    run and remaining annual budget."""
+    """One line's episode, copied out of a :class:`LineBatch` (:meth:`LineBatch.get_state`): its segments' and
+    sections' arrays (``rows``: name -> (segments or sections, ...); ``noise``: name -> (H + 1, ...), the
+    pre-drawn residuals and measurement errors), its segments' model tracks (shared: immutable), and the line's
+    step, last recording run and remaining annual budget."""
 
     rows: dict[str, np.ndarray]
     noise: dict[str, np.ndarray]
@@ -80,7 +88,7 @@ class LineState:
 
 def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]]:
     """Bounds of each key of TampingLine's observation (its space is built from these and the observation is
-    clipped to them, so the two cannot drift apart); ``level`` only with ``profiles``."""
+    clipped to them, so the two cannot drift apart); ``level`` and ``contact_force`` only with ``profiles``."""
     shared = SHARED_BOUNDS
     bounds = {
         "section_sd": shared["section_sd"],
@@ -95,32 +103,36 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
     }
     if config.profiles:
         bounds["level"] = shared["level"]
+        bounds["contact_force"] = shared["contact_force"]
     return bounds
 
 
 def line_observation_space(config: LineConfig) -> spaces.Dict:
     """The Dict space of TampingLine's observation table (its bounds: :func:`line_observation_bounds`)."""
     bounds = line_observation_bounds(config)
-    per_line = {"measurement_age": (1,), "time": (1,), "budget_left": (1,),
-                "level": (config.n_sections, config.n_sleepers)}
+    profile = (config.n_segments, config.n_sleepers)
+    per_line = {"measurement_age": (1,), "time": (1,), "budget_left": (1,), "level": profile,
+                "contact_force": profile}
     return common_observation_space(bounds, {key: per_line.get(key, (config.n_sections,)) for key in bounds})
 
 
 class LineBatch:
-    """``n_lines`` TampingLine episodes (same config), their segments stacked: row ``b·S + j`` is section j
-    of line b. Per-line resets (:meth:`start`) leave the other lines untouched.
+    """``n_lines`` episodes of one config, stacked: segment row ``b·R + i`` is segment i of line b (R =
+    ``n_segments``), section row ``b·S + j`` section j (S = ``n_sections``); segment i carries sections
+    ``i·K .. i·K + K − 1`` (K = ``sections_per_segment``; on the line presets K = 1 and the two coincide).
+    Per-line resets (:meth:`start`) leave the other lines untouched.
 
     **The engine's public API** (what envs, searches and planning code may call; everything else is internal):
 
     * lines: :meth:`start` (new episodes), :meth:`advance` (one step of the env), :meth:`observation`,
       :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state` / :meth:`set_state` (a line's
       episode, exactly);
-    * rows (one section each), for searches that fork single sections, which evolve independently of each
-      other but for the line's possession: :meth:`copy_rows` (fork), :meth:`allowed_rows`,
-      :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`, :meth:`measure_rows`,
-      :meth:`section_costs`, :meth:`section_entries` (what a planner sees of a section), :meth:`true_quality`;
+    * sections: :meth:`allowed_rows`, :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`,
+      :meth:`measure_rows`, :meth:`section_costs`, :meth:`section_entries` (what a planner sees of a section),
+      :meth:`true_quality`; and, where every segment carries one section (so that sections evolve independently
+      of each other but for the line's possession), :meth:`copy_rows` to fork single sections in a search;
     * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band), ``step``
-      (per line), ``register`` (per row).
+      (per line), ``register`` (per section).
 
     Rows of other lines and the arrays behind them are the engine's; code outside this module reads the state
     through the methods above."""
@@ -129,62 +141,106 @@ class LineBatch:
         self.config = c = config
         self.bounds = line_observation_bounds(c)
         self.n_lines = int(n_lines)
-        S, n, H = c.n_sections, c.n_sleepers, c.horizon_steps
-        G = self.n_lines * S
+        S, R, K, n, H = c.n_sections, c.n_segments, c.sections_per_segment, c.n_sleepers, c.horizon_steps
+        G, GR = self.n_lines * S, self.n_lines * R
+        self.K = K
+        self.section_of_sleeper = section_index(n, K)  # (n,) section (within its segment) of each sleeper
         self.law = c.settlement_law
         self.tm = c.tamping_model
         self.limits = c.quality_limits.for_speed(c.speed)
         self.vehicles = c.vehicles()
         self.passes = c.axle_passes_per_step()
         self.p_exp = float(dict(c.law_params).get("force_exponent", 1.0))
-        self.model_tracks: list[Track | None] = [None] * G
+        self.model_tracks: list[Track | None] = [None] * GR
         self.n_extra = APPROACH_SLEEPERS
-        self.influence = np.zeros((G, n, n))
-        self.offset = np.zeros((G, n))
-        self.u = np.zeros((G, n))
-        self.cyc = np.zeros((G, n))
-        self.base_rate = np.ones((G, n))
+        # per segment
+        self.influence = np.zeros((GR, n, n))
+        self.offset = np.zeros((GR, n))
+        self.u = np.zeros((GR, n))
+        self.cyc = np.zeros((GR, n))
+        self.base_rate = np.ones((GR, n))
+        self.wet_onset = np.full(GR, -1, dtype=np.int64)
+        self.wet_mask = np.zeros((GR, n), dtype=bool)
+        self.wet_active = np.zeros(GR, dtype=bool)
+        self.measured_level = np.zeros((GR, n))
+        self.contact_profile = np.zeros((GR, n))  # largest wheel/rail force over each sleeper bay [N]
+        self.d1 = np.zeros((GR, n))
+        self.tamp_noise = np.zeros((H + 1, GR, n))
+        # per section
         self.count = np.zeros(G, dtype=np.int64)  # tampings since renewal
         self.tampings = np.zeros(G, dtype=np.int64)  # tampings this episode
         self.register = np.zeros(G, dtype=np.int64)
-        self.wet_onset = np.full(G, -1, dtype=np.int64)
-        self.wet_mask = np.zeros((G, n), dtype=bool)
-        self.wet_active = np.zeros(G, dtype=bool)
         self.last_tamped = np.zeros(G)  # step of the last tamping (negative: before the episode)
-        self.tamp_noise = np.zeros((H + 1, G, n))
-        self.meas_noise = np.zeros((H + 1, G, 2))
-        self.step = np.zeros(self.n_lines, dtype=np.int64)
-        self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
         self.measured_sd = np.zeros(G)
         self.measured_peak = np.zeros(G)
-        self.measured_level = np.zeros((G, n))
-        self.budget_left = np.zeros(self.n_lines)
         self.contact_force = np.zeros(G)
-        self.d1 = np.zeros((G, n))
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
         self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
+        self.meas_noise = np.zeros((H + 1, G, 2))
+        # per line
+        self.step = np.zeros(self.n_lines, dtype=np.int64)
+        self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
+        self.budget_left = np.zeros(self.n_lines)
 
     # ------------------------------------------------------------------ helpers
     @property
     def S(self) -> int:
         return self.config.n_sections
 
+    @property
+    def R(self) -> int:
+        return self.config.n_segments
+
     def rows(self, line: int) -> slice:
+        """The section rows of line ``line``."""
         return slice(line * self.S, (line + 1) * self.S)
+
+    def segments(self, line: int) -> slice:
+        """The segment rows of line ``line``."""
+        return slice(line * self.R, (line + 1) * self.R)
 
     @property
     def level(self) -> np.ndarray:
         return self.offset + self.u
 
-    def rate(self) -> np.ndarray:
-        """Current settlement-rate factor per sleeper: base (section, zone, wet spot) × ballast damage."""
-        return self.base_rate * (1.0 + self.tm.damage_per_tamping) ** self.count[:, None]
+    def _on_sleepers(self, per_section: np.ndarray) -> np.ndarray:
+        """A per-section array (sections,) spread over the sleepers of their segments: (segments, n)."""
+        return per_section.reshape(-1, self.K)[:, self.section_of_sleeper]
 
-    def _quality(self, rows=slice(None)) -> None:
-        self.d1[rows] = d1_filter(self.level[rows], SLEEPER_SPACING_M)
-        self.sd[rows] = self.d1[rows].std(axis=1)
-        self.peak[rows] = np.abs(self.d1[rows]).max(axis=1)
+    def _segments_of(self, sections: np.ndarray) -> np.ndarray:
+        """(segments,) bool: the segments that carry any of the sections ``sections`` (sections,) bool."""
+        return sections.reshape(-1, self.K).any(axis=1)
+
+    def _sections_of(self, segs: np.ndarray) -> np.ndarray:
+        """The section rows (indices) of the segment rows ``segs`` (indices)."""
+        return (np.asarray(segs)[:, None] * self.K + np.arange(self.K)).ravel()
+
+    def _per_section(self, values: np.ndarray, reduce: str) -> np.ndarray:
+        """Per-sleeper ``values`` (segments, n) reduced ("max" or "mean") over each section's sleepers:
+        (segments · K,)."""
+        if self.K == 1:
+            return values.max(axis=1) if reduce == "max" else values.mean(axis=1)
+        parts = [values[:, self.section_of_sleeper == k] for k in range(self.K)]
+        out = [p.max(axis=1) if reduce == "max" else p.mean(axis=1) for p in parts]
+        return np.stack(out, axis=1).ravel()
+
+    def rate(self) -> np.ndarray:
+        """Current settlement-rate factor per sleeper (segments, n): base (section, zone, wet spot) × ballast
+        damage of its section's tampings since renewal."""
+        return self.base_rate * (1.0 + self.tm.damage_per_tamping) ** self._on_sleepers(self.count)
+
+    def _quality(self, segs: np.ndarray) -> None:
+        """The true D1 level of the segments ``segs`` (indices) and the SD and mean-to-peak of their sections."""
+        self.d1[segs] = d1_filter(self.level[segs], SLEEPER_SPACING_M)
+        d1 = self.d1[segs]
+        secs = self._sections_of(segs)
+        if self.K == 1:
+            self.sd[secs] = d1.std(axis=1)
+            self.peak[secs] = np.abs(d1).max(axis=1)
+        else:
+            self.sd[secs] = section_sd(d1, self.section_of_sleeper, self.K).ravel()
+            self.peak[secs] = section_peak(d1, self.section_of_sleeper, self.K).ravel()
 
     def _measure(self, lines: np.ndarray) -> None:
         """A recording-car run on ``lines`` (bool over lines), with the pre-drawn errors of this step."""
@@ -192,9 +248,10 @@ class LineBatch:
         self.last_measured = np.where(lines, self.step, self.last_measured)
 
     def measure_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
-        """A recording-car run on the segments ``seg`` (segments,) bool at their step ``seg_step`` (per segment or
-        one), with the pre-drawn errors of that step: the measured SD, mean-to-peak and level. No calendar:
-        :meth:`_measure` is the line-level run; a per-section fork is measured through this directly."""
+        """A measurement of the sections ``seg`` (sections,) bool at their step ``seg_step`` (per section or one),
+        with the pre-drawn errors of that step: the measured SD and mean-to-peak, and the level of their
+        segments. No calendar: :meth:`_measure` is the line-level run; a per-section fork is measured through
+        this directly."""
         c = self.config
         step = np.broadcast_to(np.asarray(seg_step), seg.shape)
         e = self.meas_noise[np.minimum(step, c.horizon_steps), np.arange(seg.size)]
@@ -202,25 +259,26 @@ class LineBatch:
         pk = np.maximum(self.peak + c.peak_noise_mm * 1e-3 * e[:, 1], 0.0)
         self.measured_sd = np.where(seg, sd, self.measured_sd)
         self.measured_peak = np.where(seg, pk, self.measured_peak)
-        self.measured_level[seg] = self.level[seg]
+        segs = self._segments_of(seg)
+        self.measured_level[segs] = self.level[segs]
 
     # ------------------------------------------------------------------ reset
     def start(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
         """Draw new episodes for ``lines`` from their generators and run their traffic-free first pass."""
         for b in lines:
             self._draw(b, rngs[b])
-        rows = np.concatenate([np.arange(self.rows(b).start, self.rows(b).stop) for b in lines])
-        self._quality(rows)
+        segs = np.concatenate([np.arange(self.segments(b).start, self.segments(b).stop) for b in lines])
+        self._quality(segs)
         mask = np.zeros(self.n_lines, dtype=bool)
         mask[lines] = True
         self._measure(mask)
-        forces = self._passes(rows)[1]
-        self.contact_force[rows] = forces
+        _, contact, bays = self._passes(segs)
+        self._contact(segs, contact, bays)
 
     def _draw(self, b: int, rng: np.random.Generator) -> None:
         c = self.config
-        S, n, H = c.n_sections, c.n_sleepers, c.horizon_steps
-        r = self.rows(b)
+        S, R, n, H = c.n_sections, c.n_segments, c.n_sleepers, c.horizon_steps
+        r, rs = self.rows(b), self.segments(b)
         # section rate factors: lognormal, AR(1) along the line
         rho = np.exp(-c.section_length_m / c.rate_correlation_m) if c.rate_correlation_m > 0 else 0.0
         e = rng.standard_normal(S)
@@ -229,14 +287,14 @@ class LineBatch:
         for j in range(1, S):  # the AR(1) recursion (drawn once per episode, at reset)
             z[j] = rho * z[j - 1] + np.sqrt(1 - rho * rho) * e[j]
         section_rate = np.exp(c.rate_sigma * z - c.rate_sigma**2 / 2)
-        # register: transition zones and switches/crossings
-        u = rng.random(S)
+        # register (per segment): transition zones and switches/crossings, in the middle of the segment
+        u = rng.random(R)
         p_t, p_s = c.transition_probability, c.switch_probability
         reg = np.where(u < p_t, 1, np.where(u < p_t + p_s, 2, 0))
-        sleeper_rate = _lognormal(_correlated_normal(rng, (S, n), c.sleeper_rate_correlation_m / SLEEPER_SPACING_M),
+        sleeper_rate = _lognormal(_correlated_normal(rng, (R, n), c.sleeper_rate_correlation_m / SLEEPER_SPACING_M),
                                   c.sleeper_rate_cv)
-        kfield = _lognormal(_correlated_normal(rng, (S, n), 2.0), c.ballast_stiffness_cv)
-        rate = c.rate_scale * section_rate[:, None] * sleeper_rate
+        kfield = _lognormal(_correlated_normal(rng, (R, n), 2.0), c.ballast_stiffness_cv)
+        rate = c.rate_scale * section_rate.reshape(R, self.K)[:, self.section_of_sleeper] * sleeper_rate
         mid = n // 2
         soft = np.arange(n) < mid
         rate[reg == 1] *= np.where(soft, c.transition_rate_factor, 1.0)
@@ -245,48 +303,62 @@ class LineBatch:
         rate[reg == 2] *= c.switch_rate_factor
         kfield[reg == 2] *= np.where(patch, 2.0, 1.0)
         # hidden wet spots
-        wet = rng.random(S) < c.wet_spot_probability
-        onset = rng.integers(1, max(H, 2), size=S)
+        wet = rng.random(R) < c.wet_spot_probability
+        onset = rng.integers(1, max(H, 2), size=R)
         wl = max(int(round(c.wet_spot_length_m / SLEEPER_SPACING_M)), 1)
-        start = rng.integers(0, n - wl + 1, size=S)
+        start = rng.integers(0, n - wl + 1, size=R)
         wmask = (np.arange(n)[None, :] >= start[:, None]) & (np.arange(n)[None, :] < (start + wl)[:, None])
         # initial state: level from the PSD, scaled; age and tampings since renewal
-        scale = rng.uniform(c.initial_scale[0], c.initial_scale[1], size=S)
+        scale = rng.uniform(c.initial_scale[0], c.initial_scale[1], size=R)
         base = Track.realistic(c.segment_length_m)
         x = base.sleeper_positions
-        level = np.stack([synthesize_profile(x, partial(german_psd, quality="low"), rng) for _ in range(S)])
+        level = np.stack([synthesize_profile(x, partial(german_psd, quality="low"), rng) for _ in range(R)])
         level *= scale[:, None]
-        age = rng.uniform(0.0, c.initial_age_years, size=S)
-        count = rng.integers(0, c.initial_max_tampings + 1, size=S)
-        self.tamp_noise[:, r] = rng.standard_normal((H + 1, S, n))
+        age = rng.uniform(0.0, c.initial_age_years, size=R)
+        count = rng.integers(0, c.initial_max_tampings + 1, size=R)
+        self.tamp_noise[:, rs] = rng.standard_normal((H + 1, R, n))
         self.meas_noise[:, r] = rng.standard_normal((H + 1, S, 2))
+        voided = self._voided_sleepers(rng, R, n)  # drawn last: configs without voids draw as before
         self.sd_after_tamping[r] = 0.0
-        self.base_rate[r] = rate
-        self.register[r] = reg
-        self.wet_onset[r] = np.where(wet, onset, -1)
-        self.wet_mask[r] = wmask
-        self.wet_active[r] = False
-        self.offset[r] = level
-        self.u[r] = 0.0
-        self.cyc[r] = 0.0
-        self.count[r] = count
+        # a segment's zone belongs to the sections over its middle (all of it where a segment is one section)
+        zone = np.zeros(self.K, dtype=np.int64)
+        zone[np.unique(self.section_of_sleeper[[max(mid - 1, 0), mid]])] = 1
+        self.base_rate[rs] = rate
+        self.register[r] = (reg[:, None] * zone).ravel()
+        self.wet_onset[rs] = np.where(wet, onset, -1)
+        self.wet_mask[rs] = wmask
+        self.wet_active[rs] = False
+        self.offset[rs] = level
+        self.u[rs] = 0.0
+        self.cyc[rs] = 0.0
+        self.count[r] = np.repeat(count, self.K)
         self.tampings[r] = 0
-        self.last_tamped[r] = -np.round(age * c.steps_per_year)
+        self.last_tamped[r] = np.repeat(-np.round(age * c.steps_per_year), self.K)
         self.step[b] = 0
         self.budget_left[b] = c.annual_budget
         p_vehicle = self.vehicles[0]
-        for j in range(S):  # per-segment track statics, once per episode
+        for j in range(R):  # per-segment track statics, once per episode
             track = base.replace(ballast_stiffness=base.ballast_stiffness * kfield[j])
+            for i in voided[j]:
+                track = track.with_voided_sleeper(int(i), residual_support=c.voided_residual_support)
             sim = TrackDegradation(track, p_vehicle, law=self.law, feedback="support",
                                    approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
-            self.model_tracks[r.start + j] = sim.model_track
-            self.influence[r.start + j] = sim.support_influence
+            self.model_tracks[rs.start + j] = sim.model_track
+            self.influence[rs.start + j] = sim.support_influence
         # the settlement since the last tamping: advance the fresh state over its age at the mean load
         cycles = age * c.steps_per_year * self.passes.sum()
         f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # static, Winkler
-        u0 = self.rate()[r] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
-        self.u[r] = u0
-        self.cyc[r] = np.broadcast_to(cycles[:, None], (S, n))
+        u0 = self.rate()[rs] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (R, n)))
+        self.u[rs] = u0
+        self.cyc[rs] = np.broadcast_to(cycles[:, None], (R, n))
+
+    def _voided_sleepers(self, rng: np.random.Generator, R: int, n: int) -> list[np.ndarray]:
+        """Per segment, the sleepers that hang (a Poisson number, mean ``voided_sleepers_mean``, never the two at
+        either end); nothing is drawn when the mean is 0."""
+        mean = self.config.voided_sleepers_mean
+        if mean == 0:
+            return [np.zeros(0, dtype=np.int64)] * R
+        return [rng.integers(2, n - 2, size=int(rng.poisson(mean))) for _ in range(R)]
 
     def _equivalent(self, forces: np.ndarray) -> np.ndarray:
         """Equivalent force of the traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, ...)."""
@@ -294,23 +366,42 @@ class LineBatch:
         return (np.sum(w * np.maximum(forces, 0.0) ** self.p_exp, axis=0)) ** (1.0 / self.p_exp)
 
     # ------------------------------------------------------------------ physics
-    def _passes(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One batched pass per vehicle type over the segments ``rows``: the equivalent sleeper force (rows, n)
-        and the largest contact force per segment [N]."""
+    @property
+    def _profiles_needed(self) -> bool:
+        """Whether a pass reports the contact force per sleeper bay (sections inside a segment, or observed)."""
+        return self.K > 1 or self.config.profiles
+
+    def _passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One batched pass per vehicle type with traffic over the segments ``segs``: the equivalent sleeper force
+        (segs, n), the largest contact force per segment [N] and, where needed (:attr:`_profiles_needed`; else
+        zeros), the largest over each sleeper bay (segs, n) [N]."""
         c = self.config
         n, ne = c.n_sleepers, self.n_extra
-        lv = self.level[rows]
+        lv = self.level[segs]
         prof = np.concatenate([np.repeat(lv[:, :1], ne, 1), lv, np.repeat(lv[:, -1:], ne, 1)], axis=1)
-        tracks = [self.model_tracks[i] for i in rows]
-        forces, contact = [], np.zeros(len(rows))
-        for v in self.vehicles:
+        tracks = [self.model_tracks[i] for i in segs]
+        forces, contact = [], np.zeros(len(segs))
+        bays = np.zeros((len(segs), n))
+        for v, passes in zip(self.vehicles, self.passes, strict=True):
+            if passes == 0:  # no traffic of this type: no pass (its weight in the mix is 0)
+                forces.append(np.zeros((len(segs), n)))
+                continue
             res = simulate_passes(tracks, v, c.speed, None, support_settlement=prof, dt=c.dt)
             forces.append(np.stack([r.sleeper_force[ne : ne + n] for r in res]))
             contact = np.maximum(contact, [r.contact_force.max() for r in res])
-        return self._equivalent(np.stack(forces)), contact
+            if self._profiles_needed:
+                bays = np.maximum(bays, np.stack([r.contact_force_profile()[ne : ne + n] for r in res]))
+        return self._equivalent(np.stack(forces)), contact, bays
 
-    def _advance(self, rows: np.ndarray, force: np.ndarray, cycles: float) -> None:
-        """Advance the segments ``rows`` by ``cycles`` axle passes under the equivalent forces ``force`` (rows, n),
+    def _contact(self, segs: np.ndarray, contact: np.ndarray, bays: np.ndarray) -> None:
+        """Keep the contact forces of a pass over ``segs``: per sleeper bay, and per section (the segment's largest
+        where a segment is one section, else the largest over the section's sleeper bays) [N]."""
+        self.contact_profile[segs] = bays
+        secs = self._sections_of(segs)
+        self.contact_force[secs] = contact if self.K == 1 else self._per_section(bays, "max")
+
+    def _advance(self, segs: np.ndarray, force: np.ndarray, cycles: float) -> None:
+        """Advance the segments ``segs`` by ``cycles`` axle passes under the equivalent forces ``force`` (segs, n),
         with the static load redistribution taken implicitly (backward Euler, as TrackDegradation's support
         feedback): :func:`~trackenv.physics.settlement.implicit_settlement_step`, batched over the segments.
 
@@ -318,8 +409,8 @@ class LineBatch:
         depend on the other segments of the batch: a line gives the same numbers alone (``TampingLine``) and
         among others (:class:`~trackenv.envs.line.TampingLineVectorEnv`), and a section's cost depends only on
         its own schedule (the hindsight search relies on that)."""
-        self.u[rows], self.cyc[rows] = implicit_settlement_step(
-            self.law, self.u[rows], self.cyc[rows], self.rate()[rows], force, self.influence[rows], cycles,
+        self.u[segs], self.cyc[segs] = implicit_settlement_step(
+            self.law, self.u[segs], self.cyc[segs], self.rate()[segs], force, self.influence[segs], cycles,
             band=force.shape[1],  # segments are short: the full Jacobian, as the line's calibration was run
         )
 
@@ -329,11 +420,11 @@ class LineBatch:
         return self.allowed_rows(np.repeat(self.step, self.S)).reshape(self.n_lines, self.S)
 
     def allowed_rows(self, seg_step: np.ndarray | int) -> np.ndarray:
-        """(segments,) bool: the segments that may be tamped at their step ``seg_step`` (per segment or one)."""
+        """(sections,) bool: the sections that may be tamped at their step ``seg_step`` (per section or one)."""
         return (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
 
     def renewing(self) -> np.ndarray:
-        """(segments,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
+        """(sections,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
         has had ``max_tampings_before_renewal`` tampings and the model renews)."""
         return (self.count >= self.tm.max_tampings_before_renewal) & bool(self.tm.renewal_resets)
 
@@ -391,27 +482,38 @@ class LineBatch:
         return parts
 
     def tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
-        """Tamp (or renew, where due) the segments ``t`` (segments,) bool at their step ``seg_step`` (per
-        segment or one): the level lifted to its least-squares line keeping the residual fraction of its shape
-        plus the pre-drawn residual of that step, consolidation restarted. No costs, no budget: :meth:`apply`
-        is the line-level step; a search over per-section schedules calls this directly."""
+        """Tamp (or renew, where due) the sections ``t`` (sections,) bool at their step ``seg_step`` (per section
+        or one): :func:`~trackenv.physics.tamping.restored_level` with the pre-drawn residuals of that step (a
+        segment tamped whole is lifted to its least-squares line; sections of a longer segment to the chord
+        through their untamped neighbours, ramped in and out), consolidation restarted on the tamped sleepers.
+        No costs, no budget: :meth:`apply` is the line-level step; a search over per-section schedules calls
+        this directly."""
         c = self.config
         renew = t & self.renewing()
         self.sd_after_tamping[:] = 0.0
         if not t.any():
             return
-        z = self.level[t]
-        f = _lsq_line(z)
-        beta = np.where(renew[t], 0.0, self.tm.residual_fraction)[:, None]
-        step_t = np.broadcast_to(np.asarray(seg_step), t.shape)[t]
-        e = self.tamp_noise[np.minimum(step_t, c.horizon_steps), np.flatnonzero(t)]
-        self.offset[t] = f + beta * (z - f) + self.tm.residual_sd_m * e
-        self.sd_after_tamping[t] = d1_filter(self.offset[t], SLEEPER_SPACING_M).std(axis=1)
-        self.u[t] = 0.0
-        self.cyc[t] = 0.0
+        step_t = np.broadcast_to(np.asarray(seg_step), t.shape)
+        segs = np.flatnonzero(self._segments_of(t))
+        seg_step = step_t.reshape(-1, self.K)[segs, 0]  # the sections of a segment share their line's step
+        sleepers = self._on_sleepers(t)[segs]
+        e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), segs]
+        new = restored_level(self.level[segs], sleepers, self.tm, e, self._on_sleepers(renew)[segs])
+        if self.K == 1:
+            self.offset[segs] = new
+            self.sd_after_tamping[segs] = d1_filter(new, SLEEPER_SPACING_M).std(axis=1)
+            self.u[segs] = 0.0
+            self.cyc[segs] = 0.0
+        else:
+            self.offset[segs] = np.where(sleepers, new, self.offset[segs])
+            self.u[segs] = np.where(sleepers, 0.0, self.u[segs])
+            self.cyc[segs] = np.where(sleepers, 0.0, self.cyc[segs])
+            after = section_sd(d1_filter(self.level[segs], SLEEPER_SPACING_M), self.section_of_sleeper, self.K)
+            secs = self._sections_of(segs)
+            self.sd_after_tamping[secs] = np.where(t[secs], after.ravel(), 0.0)
         self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
         self.tampings[t] += 1
-        self.last_tamped[t] = step_t
+        self.last_tamped[t] = step_t[t]
 
     def traffic(self, lines: np.ndarray | None = None) -> None:
         """The period's traffic on ``lines`` (bool over lines; None: every line): wet spots that start now, the
@@ -429,42 +531,49 @@ class LineBatch:
         self._measure(lines & (self.step % c.measurement_interval == 0))
 
     def traffic_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
-        """The period's traffic on the segments ``seg`` (segments,) bool at their step ``seg_step`` (per segment
-        or one): wet spots whose onset it is, one batched pass per vehicle type, the settlement, the true
-        quality. No step count, no measurement: :meth:`traffic` is the line-level step."""
+        """The period's traffic on the segments of the sections ``seg`` (sections,) bool at their step
+        ``seg_step`` (per section or one): wet spots whose onset it is, one batched pass per vehicle type, the
+        settlement, the true quality. No step count, no measurement: :meth:`traffic` is the line-level step."""
         c = self.config
-        start = seg & (self.wet_onset == seg_step) & ~self.wet_active
+        on = self._segments_of(seg)
+        step = np.broadcast_to(np.asarray(seg_step), seg.shape).reshape(-1, self.K)[:, 0]
+        start = on & (self.wet_onset == step) & ~self.wet_active
         if start.any():
             factor = np.where(self.wet_mask[start], c.wet_spot_rate_factor, 1.0)
             self.base_rate[start] = self.base_rate[start] * factor
             self.wet_active |= start
-        rows = np.flatnonzero(seg)
-        force, contact = self._passes(rows)
-        self.contact_force[rows] = contact
-        self._advance(rows, force, float(self.passes.sum()))
-        self._quality(rows)
+        segs = np.flatnonzero(on)
+        force, contact, bays = self._passes(segs)
+        self._contact(segs, contact, bays)
+        self._advance(segs, force, float(self.passes.sum()))
+        self._quality(segs)
 
     def copy_rows(self, dst: np.ndarray, source: LineBatch, src: np.ndarray) -> None:
-        """Make segments ``dst`` of this batch exact copies of segments ``src`` of ``source`` (the same config):
-        every per-segment array (state, statics, pre-drawn noise). A search forks a section's trajectory this
-        way where two schedules part, instead of replaying their common past."""
+        """Make sections ``dst`` of this batch exact copies of sections ``src`` of ``source`` (the same config, one
+        section per segment): every per-section and per-segment array (state, statics, pre-drawn noise). A search
+        forks a section's trajectory this way where two schedules part, instead of replaying their common past."""
+        if self.K != 1:
+            raise ValueError("copy_rows forks single sections: it needs one section per segment "
+                             f"(sections_per_segment = 1, got {self.K})")
         dst, src = np.atleast_1d(dst), np.atleast_1d(src)
-        for name in _ROW_FIELDS:
+        for name in _SEGMENT_FIELDS + _SECTION_FIELDS:
             getattr(self, name)[dst] = getattr(source, name)[src]
-        for name in _ROW_NOISE:
+        for name in _SEGMENT_NOISE + _SECTION_NOISE:
             getattr(self, name)[:, dst] = getattr(source, name)[:, src]
         for d, s_ in zip(dst, src, strict=True):
             self.model_tracks[d] = source.model_tracks[s_]
 
     def get_state(self, line: int) -> LineState:
-        """A copy of line ``line``'s episode (every per-segment array, the pre-drawn noise, the line's step,
-        recording-car calendar and budget): :meth:`set_state` restores it exactly, here or in another batch
-        of the same config."""
-        r = self.rows(line)
+        """A copy of line ``line``'s episode (every per-segment and per-section array, the pre-drawn noise, the
+        line's step, recording-car calendar and budget): :meth:`set_state` restores it exactly, here or in
+        another batch of the same config."""
+        r, rs = self.rows(line), self.segments(line)
         return LineState(
-            rows={name: getattr(self, name)[r].copy() for name in _ROW_FIELDS},
-            noise={name: getattr(self, name)[:, r].copy() for name in _ROW_NOISE},
-            model_tracks=tuple(self.model_tracks[r]),
+            rows={**{name: getattr(self, name)[rs].copy() for name in _SEGMENT_FIELDS},
+                  **{name: getattr(self, name)[r].copy() for name in _SECTION_FIELDS}},
+            noise={**{name: getattr(self, name)[:, rs].copy() for name in _SEGMENT_NOISE},
+                   **{name: getattr(self, name)[:, r].copy() for name in _SECTION_NOISE}},
+            model_tracks=tuple(self.model_tracks[rs]),
             step=int(self.step[line]),
             last_measured=int(self.last_measured[line]),
             budget_left=float(self.budget_left[line]),
@@ -473,12 +582,14 @@ class LineBatch:
     def set_state(self, line: int, state: LineState) -> None:
         """Make line ``line`` continue from ``state`` (:meth:`get_state` of a batch of this config); the state
         itself is not changed."""
-        r = self.rows(line)
-        for name in _ROW_FIELDS:
-            getattr(self, name)[r] = state.rows[name]
-        for name in _ROW_NOISE:
-            getattr(self, name)[:, r] = state.noise[name]
-        self.model_tracks[r] = list(state.model_tracks)
+        r, rs = self.rows(line), self.segments(line)
+        for names, rows in ((_SEGMENT_FIELDS, rs), (_SECTION_FIELDS, r)):
+            for name in names:
+                getattr(self, name)[rows] = state.rows[name]
+        for names, rows in ((_SEGMENT_NOISE, rs), (_SECTION_NOISE, r)):
+            for name in names:
+                getattr(self, name)[:, rows] = state.noise[name]
+        self.model_tracks[rs] = list(state.model_tracks)
         self.step[line] = state.step
         self.last_measured[line] = state.last_measured
         self.budget_left[line] = state.budget_left
@@ -576,15 +687,15 @@ class LineBatch:
     def observation(self, b: int) -> dict[str, np.ndarray]:
         """Line ``b``'s observation (the table of ``TampingLine``), clipped to :func:`line_observation_bounds`."""
         c = self.config
-        r = self.rows(b)
         line = {
             "measurement_age": np.array([(self.step[b] - self.last_measured[b]) / c.steps_per_year]),
             "time": np.array([self.step[b] / c.horizon_steps]),
             "budget_left": np.array([self.budget_left[b] / c.annual_budget if c.annual_budget > 0 else 1.0]),
         }
         if c.profiles:
-            line["level"] = self.measured_level[r] * 1e3
-        return {**self.section_entries(r, self.step[b]), **clip_observation(line, self.bounds)}
+            line["level"] = self.measured_level[self.segments(b)] * 1e3
+            line["contact_force"] = self.contact_profile[self.segments(b)] / 1e3
+        return {**self.section_entries(self.rows(b), self.step[b]), **clip_observation(line, self.bounds)}
 
     def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool,
              section_costs: np.ndarray) -> dict:
@@ -595,8 +706,16 @@ class LineBatch:
             parts, tamped, self.sd[r], self.peak[r], classify(self.peak[r], self.limits),
             self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
             section_costs=np.asarray(section_costs, dtype=float).copy(), clipped=bool(clipped),
-            section_sd_after_tamping_m=self.sd_after_tamping[r].copy(), wet_spot_active=self.wet_active[r].copy(),
-            rate_factor=self.rate()[r].mean(axis=1))
+            section_sd_after_tamping_m=self.sd_after_tamping[r].copy(),
+            wet_spot_active=self._wet_sections(b), rate_factor=self._per_section(self.rate()[self.segments(b)], "mean"))
+
+    def _wet_sections(self, b: int) -> np.ndarray:
+        """(S,) bool: line ``b``'s sections with an active wet spot (on a segment of several sections, those
+        whose sleepers it covers)."""
+        rs = self.segments(b)
+        if self.K == 1:
+            return self.wet_active[rs].copy()
+        return self._per_section(self.wet_mask[rs] & self.wet_active[rs, None], "max").astype(bool)
 
 
 def keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:

@@ -69,7 +69,7 @@ from trackenv.physics._checks import (
     dataclass_from_dict,
 )
 
-__all__ = ["TampingModel", "TampingResult", "tamp", "sd_after_tamping", "tamped_runs"]
+__all__ = ["TampingModel", "TampingResult", "tamp", "restored_level", "sd_after_tamping", "tamped_runs"]
 
 
 @dataclass(frozen=True)
@@ -200,14 +200,20 @@ def tamped_runs(mask) -> np.ndarray:
     return edges.reshape(-1, 2).astype(np.int64)
 
 
+def line_fit_rows(z: np.ndarray) -> np.ndarray:
+    """Least-squares straight line of each row of ``z`` (..., n) against the sample index, row by row (a matrix
+    product's rounding would depend on the number of rows, and a row's numbers must not depend on its batch)."""
+    n = z.shape[-1]
+    t = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
+    slope = (z * t).sum(axis=-1) / float(t @ t)
+    return z.mean(axis=-1, keepdims=True) + slope[..., None] * t
+
+
 def _line_fit(y: np.ndarray) -> np.ndarray:
     """Least-squares straight line through ``y`` against its index (the mean when fewer than 2 points)."""
-    n = y.size
-    if n < 2:
+    if y.size < 2:
         return np.full_like(y, y.mean())
-    t = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
-    slope = float(t @ (y - y.mean())) / float(t @ t)
-    return y.mean() + slope * t
+    return line_fit_rows(y)
 
 
 def _anchored_line(z: np.ndarray, start: int, stop: int) -> np.ndarray:
@@ -224,6 +230,45 @@ def _anchored_line(z: np.ndarray, start: int, stop: int) -> np.ndarray:
     t = i - a
     slope = float(t @ (z[start:stop] - z[a])) / float(t @ t)
     return z[a] + slope * t
+
+
+def restored_level(level: np.ndarray, mask: np.ndarray, model: TampingModel, noise: np.ndarray,
+                   renewed: np.ndarray) -> np.ndarray:
+    """The level after tamping, row by row: the model of the module docstring on each row of ``level`` (rows, n)
+    [m] for the sleepers in ``mask`` (rows, n) bool, with the machine's residual ``model.residual_sd_m * noise``
+    (``noise`` (rows, n): standard normals, given so that a caller can draw them in advance) and no memory of
+    the old shape where ``renewed`` (rows, n). The one implementation of the restoration (:func:`tamp` and the
+    episode engine call it). Rows tamped over their whole length (the reference line is the least-squares line
+    of the row, no run-out) are computed together; the others run by run. Inputs are trusted (callers check)."""
+    beta = np.where(renewed, 0.0, model.residual_fraction)
+    new = np.array(level, dtype=np.float64, copy=True)
+    full = mask.all(axis=1)
+    if full.any():
+        z = level[full]
+        ref = line_fit_rows(z) if z.shape[1] >= 2 else z.copy()
+        base = ref - np.minimum(ref, model.max_lift_m) if model.reference == "design" else ref
+        new[full] = base + beta[full] * (z - ref) + model.residual_sd_m * noise[full]
+    r = model.runout_sleepers
+    n = level.shape[1]
+    for b in np.flatnonzero(~full & mask.any(axis=1)):
+        z, row = level[b], new[b]
+        for start, stop in tamped_runs(mask[b]).tolist():
+            seg = z[start:stop]
+            base_b: float | np.ndarray
+            if model.reference == "design":
+                # the line is lifted to the design level (0), by at most max_lift_m where it lies below it
+                ref = _line_fit(seg)
+                base_b = ref - np.minimum(ref, model.max_lift_m)
+            else:
+                ref = _anchored_line(z, start, stop)
+                base_b = ref
+            target = base_b + beta[b, start:stop] * (seg - ref) + model.residual_sd_m * noise[b, start:stop]
+            k = np.arange(stop - start, dtype=np.float64)
+            d_left = k + 1.0 if start > 0 else np.full_like(k, math.inf)
+            d_right = (stop - start) - k if stop < n else np.full_like(k, math.inf)
+            w = np.minimum(1.0, np.minimum(d_left, d_right) / (r + 1.0))
+            row[start:stop] = (1.0 - w) * seg + w * target
+    return new
 
 
 def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -> TampingResult:
@@ -268,26 +313,7 @@ def tamp(level, mask, model: TampingModel, rng: np.random.Generator, tampings) -
     noise = rng.standard_normal(n)
 
     renewed = m & (count >= model.max_tampings_before_renewal) if model.renewal_resets else np.zeros(n, bool)
-    beta = np.where(renewed, 0.0, model.residual_fraction)
-
-    new = z.copy()
-    r = model.runout_sleepers
-    for start, stop in tamped_runs(m).tolist():
-        seg = z[start:stop]
-        base: float | np.ndarray
-        if model.reference == "design":
-            # the line is lifted to the design level (0), by at most max_lift_m where it lies below it
-            ref = _line_fit(seg)
-            base = ref - np.minimum(ref, model.max_lift_m)
-        else:
-            ref = _anchored_line(z, start, stop)
-            base = ref
-        target = base + beta[start:stop] * (seg - ref) + model.residual_sd_m * noise[start:stop]
-        k = np.arange(stop - start, dtype=np.float64)
-        d_left = k + 1.0 if start > 0 else np.full_like(k, math.inf)
-        d_right = (stop - start) - k if stop < n else np.full_like(k, math.inf)
-        w = np.minimum(1.0, np.minimum(d_left, d_right) / (r + 1.0))
-        new[start:stop] = (1.0 - w) * seg + w * target
+    new = restored_level(z[None], m[None], model, noise[None], renewed[None])[0]
 
     count_after = np.where(m, count + 1, count)
     count_after = np.where(renewed, 0, count_after).astype(np.int64)
