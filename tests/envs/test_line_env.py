@@ -19,7 +19,7 @@ SHORT = {"horizon_years": 0.75}  # 3 steps
 
 
 @pytest.mark.parametrize("env_id", ["trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
-                                    "trackenv/TampingLineHard-v0"])
+                                    "trackenv/TampingLineHard-v0", "trackenv/Tamping-v1"])
 def test_checkers(env_id):
     from stable_baselines3.common.env_checker import check_env as sb3_check
 
@@ -30,7 +30,7 @@ def test_checkers(env_id):
 
 def env_id_scenario(env_id):
     return {"trackenv/TampingLineSmall-v0": "small", "trackenv/TampingLine-v0": "default",
-            "trackenv/TampingLineHard-v0": "hard"}[env_id]
+            "trackenv/TampingLineHard-v0": "hard", "trackenv/Tamping-v1": "track60"}[env_id]
 
 
 def _rollout(env, seed, actions):
@@ -238,7 +238,7 @@ def test_config_validation_and_scenarios():
         LineConfig(n_sections=4, capacity=5)
     with pytest.raises(ValueError, match="scenario"):
         scenario("nope")
-    assert set(SCENARIOS) == {"small", "default", "hard"}
+    assert set(SCENARIOS) == {"small", "default", "hard", "track60"}
     with pytest.raises(ValueError, match="shape"):
         env = TampingLine(scenario="small", **SHORT)
         env.reset(seed=0)

@@ -18,6 +18,7 @@ SHORT = {
     "trackenv/Tamping-v0": {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0,
                             "transition_probability": 1.0, "voided_sleepers_mean": 2.0},
     "trackenv/TampingLineSmall-v0": {"horizon_years": 2.0},
+    "trackenv/Tamping-v1": {"horizon_years": 2.0, "transition_probability": 1.0, "voided_sleepers_mean": 2.0},
 }
 IDS = sorted(SHORT)
 

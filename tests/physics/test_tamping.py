@@ -287,3 +287,36 @@ def test_repeated_limited_lifts_reach_the_design_line():
 def test_max_lift_is_checked(bad):
     with pytest.raises(ValueError, match="^max_lift_m must"):
         TampingModel(max_lift_m=bad)
+
+
+def test_restored_level_rows_match_the_model_row_by_row():
+    """The engine's batched restoration: a row tamped whole is lifted to its least-squares line (numpy.polyfit
+    here) keeping beta of its shape plus the given residual; a partly tamped row is the run-by-run model of
+    :func:`tamp` (same noise), its untamped sleepers unchanged; a row of the batch does not depend on the others."""
+    from trackenv.physics.tamping import restored_level
+
+    rng = np.random.default_rng(7)
+    n = 40
+    level = rng.normal(0.0, 2e-3, (3, n)).cumsum(axis=1) * 0.2
+    noise = rng.standard_normal((3, n))
+    mask = np.ones((3, n), bool)
+    mask[1, :] = False
+    mask[1, 10:25] = True
+    mask[2, :] = False
+    model = TampingModel()
+    renewed = np.zeros((3, n), bool)
+    new = restored_level(level, mask, model, noise, renewed)
+    x = np.arange(n)
+    line = np.polyval(np.polyfit(x, level[0], 1), x)
+    expected = line + model.residual_fraction * (level[0] - line) + model.residual_sd_m * noise[0]
+    np.testing.assert_allclose(new[0], expected, rtol=0, atol=1e-15)
+
+    class Given(np.random.Generator):  # tamp draws its residual from rng: give it the same one
+        def standard_normal(self, size=None, dtype=np.float64, out=None):
+            return noise[1].copy()
+
+    given_noise = Given(np.random.PCG64(0))
+    np.testing.assert_array_equal(new[1], tamp(level[1], mask[1], model, given_noise, np.zeros(n, int)).level)
+    assert np.array_equal(new[1, ~mask[1]], level[1, ~mask[1]]) and np.array_equal(new[2], level[2])
+    alone = restored_level(level[1:2], mask[1:2], model, noise[1:2], renewed[1:2])
+    np.testing.assert_array_equal(alone[0], new[1])

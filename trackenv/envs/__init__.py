@@ -47,6 +47,7 @@ for _id, _scenario in (
     ("trackenv/TampingLine-v0", "default"),
     ("trackenv/TampingLineSmall-v0", "small"),
     ("trackenv/TampingLineHard-v0", "hard"),
+    ("trackenv/Tamping-v1", "track60"),
 ):
     if _id not in registry:
         register(

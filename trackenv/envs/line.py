@@ -78,7 +78,23 @@ class TampingLine(TrackEnv):
     ``trackenv/TampingLineSmall-v0``    6         3         tests and quick studies
     ``trackenv/TampingLine-v0``         12        6         the default line
     ``trackenv/TampingLineHard-v0``     24        4         more zones and hidden spots, budget 60 k€/year
+    ``trackenv/Tamping-v1``             6         6         the 60 m track (below)
     ==================================  ========  ========  ================================================
+
+    **The 60 m track** (``trackenv/Tamping-v1``, scenario ``"track60"``) is the same engine with one physics
+    segment of 60 m that carries six 10 m sections (``sections_per_segment=6``): the sections share one pass,
+    so a section feels its neighbours through the rail; tamping a section lifts its sleepers to the chord
+    through the untamped neighbours, ramped in and out over 3 sleepers, and restarts consolidation on them only.
+    One wheelset type (20 t axles, 2 million axle passes a year = 40 MGT), a stiffness transition (ratio 2, in
+    the middle) on 30 % of the tracks, on average 0.3 hanging sleepers, no switches or wet spots; the track is
+    measured without error after every step, and the observation adds the level and the wheel/rail force over
+    every sleeper bay (``profiles``: ``level`` and ``contact_force``, shape (1, 101)). Costs per 10 m section:
+    10 k€ per campaign, 2 k€ per section tamped, 0.5 / 3 / 50 k€ per section-step in the alert class, at the
+    intervention limit and at the immediate-action limit, 4 k€ per section-year at the alert SD. It supersedes
+    ``trackenv/Tamping-v0`` (its own engine, kept while the agents of the 60 m track move over): same track,
+    traffic, costs and horizon, but a section-level rate factor of its own draw, the line's random fields
+    and tamping model, the transition in the middle instead of anywhere in 20-80 % of the track, and sections
+    last tamped 0-2 years before the start.
 
     **Action space.** ``MultiBinary(n_sections)``: 1 = tamp this section in this step's campaign (one
     possession per step). Sections tamped within ``min_steps_between_tampings`` steps are masked

@@ -154,7 +154,7 @@ class LineConfig(ConfigBase):
         # each check stores the value back in its canonical type, as TampingEnvConfig does
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
-        c("section_length_m", low=30.0, high=1000.0)
+        c("section_length_m", low=5.0, high=1000.0)
         ci("sections_per_segment", low=1, high=64)
         K = self.sections_per_segment
         if K == 1:
@@ -272,6 +272,17 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "default": {},
     "hard": {"n_sections": 24, "capacity": 4, "wet_spot_probability": 0.25, "transition_probability": 0.2,
              "switch_probability": 0.12, "annual_budget": 60.0},
+    # the 60 m track (trackenv/Tamping-v1): one 60 m segment of six 10 m sections, one wheelset type (20 t
+    # axles, 2 million axle passes a year), measured without error after every step, with the level and the
+    # wheel/rail force per sleeper in the observation; its costs per 10 m section
+    "track60": {"n_sections": 6, "section_length_m": 10.0, "segment_length_m": 60.0, "sections_per_segment": 6,
+                "annual_mgt": 40.0, "freight_share": 1.0, "freight_axle_load_t": 20.0,
+                "measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0, "rate_sigma": 0.0,
+                "transition_probability": 0.3, "transition_stiffness_ratio": 2.0, "transition_rate_factor": 1.0,
+                "switch_probability": 0.0, "wet_spot_probability": 0.0, "voided_sleepers_mean": 0.3,
+                "initial_age_years": 2.0, "initial_max_tampings": 0, "initial_scale": (1.0, 1.0),
+                "possession_cost": 10.0, "tamping_cost_per_m": 0.2, "alert_cost": 0.5,
+                "speed_restriction_cost": 3.0, "capacity": 6, "profiles": True},
 }
 
 

@@ -210,7 +210,7 @@ class LineBatch:
 
     def _segments_of(self, sections: np.ndarray) -> np.ndarray:
         """(segments,) bool: the segments that carry any of the sections ``sections`` (sections,) bool."""
-        return sections.reshape(-1, self.K).any(axis=1)
+        return np.asarray(sections.reshape(-1, self.K).any(axis=1))
 
     def _sections_of(self, segs: np.ndarray) -> np.ndarray:
         """The section rows (indices) of the segment rows ``segs`` (indices)."""
@@ -586,8 +586,8 @@ class LineBatch:
         for names, rows in ((_SEGMENT_FIELDS, rs), (_SECTION_FIELDS, r)):
             for name in names:
                 getattr(self, name)[rows] = state.rows[name]
-        for names, rows in ((_SEGMENT_NOISE, rs), (_SECTION_NOISE, r)):
-            for name in names:
+        for noise, rows in ((_SEGMENT_NOISE, rs), (_SECTION_NOISE, r)):
+            for name in noise:
                 getattr(self, name)[:, rows] = state.noise[name]
         self.model_tracks[rs] = list(state.model_tracks)
         self.step[line] = state.step
