@@ -22,6 +22,7 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   the reason when the environment cannot be made; ``vector_env``: env steps per second (steps × envs) of the
   native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs; ``vector_env_sharded``: the
   32 envs split over 2 processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`; machines with >= 2 cores);
+* ``track_env``: the same for ``trackenv/Tamping-v1`` (the 60 m track on the line's engine);
 * ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
   30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
   ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
@@ -376,6 +377,8 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
         tell(f"vector_env_{SHARDED_ENVS}_sharded")
         out["vector_env_sharded"][str(SHARDED_ENVS)] = _bench_vector_env(
             SHARDED_ENVS, 3 if quick else VECTOR_STEPS, 10.0 if quick else 60.0, workers=SHARDED_WORKERS)
+    tell("track_env")
+    out["track_env"] = _bench_env(20 if quick else 200, 10.0 if quick else 60.0, env_id="trackenv/Tamping-v1")
     tell("line_env")
     out["line_env"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0")
     out["line_vector_env"] = {}
@@ -391,7 +394,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "vector_env_32_sharded", "line_env", "line_vector_env_8", "state")
+          "vector_env_32_sharded", "track_env", "line_env", "line_vector_env_8", "state")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -479,6 +482,7 @@ def format_benchmarks(d: dict) -> str:
                 for n, v in d.get("vector_env_sharded", {}).items()]
     lines_ = [(f"native line vector env, {n} lines", v) for n, v in d.get("line_vector_env", {}).items()]
     for env_id, e, vector_rows in (("trackenv/Tamping-v0", d["env"], vectors),
+                                   ("trackenv/Tamping-v1", d.get("track_env"), []),
                                    ("trackenv/TampingLine-v0", d.get("line_env"), lines_)):
         if e is not None:
             rows.append(_env_row(env_id, e))
