@@ -151,7 +151,7 @@ class LineConfig(ConfigBase):
                           ("immediate_action", 3, "immediate_action_cost"))
 
     def __post_init__(self) -> None:
-        # each check stores the value back in its canonical type, as TampingEnvConfig does
+        # each check stores the value back in its canonical type
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
         c("section_length_m", low=5.0, high=1000.0)

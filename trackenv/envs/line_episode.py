@@ -656,10 +656,11 @@ class LineBatch:
         return {k: np.stack([o[k] for o in obs]) for k in keys}
 
     def frame(self, b: int, last_info: dict) -> np.ndarray:
-        """An RGB picture of line ``b`` (:func:`trackenv.render.line_frame`)."""
-        from ..render import line_frame
+        """An RGB picture of line ``b``: its sections (:func:`trackenv.render.line_frame`), or, where a segment
+        carries several sections, the profiles along it (:func:`trackenv.render.segment_frame`)."""
+        from ..render import line_frame, segment_frame
 
-        return line_frame(self, b, last_info)
+        return (segment_frame if self.K > 1 else line_frame)(self, b, last_info)
 
     def reset_info(self, b: int) -> dict:
         """Line ``b``'s info at the start of its episode (no costs, nothing tamped)."""

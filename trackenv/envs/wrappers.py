@@ -210,7 +210,7 @@ def _mask_size(space: spaces.Space) -> int:
     raise TypeError(f"no action mask for {space}")
 
 
-def make_ranked(env_id: str = "trackenv/Tamping-v0", *, flat: bool = False, **kwargs: Any) -> gym.Env:
+def make_ranked(env_id: str = "trackenv/Tamping-v1", *, flat: bool = False, **kwargs: Any) -> gym.Env:
     """A MultiBinary env (``gym.make(env_id, **kwargs)``, the tamping env by default) learnt in ranked actions
     on the section-level observation; ``flat=True`` flattens that to one ``Box`` (default encoders of RLlib
     and CleanRL). The entry point of ``trackenv/TampingRanked-v0`` and ``trackenv/TampingRankedFlat-v0``."""
@@ -281,7 +281,7 @@ class SectionVectorObservation(VectorWrapper):
         return _vector_masks(self.env)
 
 
-def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v0", flat: bool = False,
+def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v1", flat: bool = False,
                        **kwargs: Any) -> VectorEnv:
     """The native vector env of ``env_id`` (batched physics; Gymnasium's SyncVectorEnv for an id without a
     vector entry point, or whose vector env does not take the ``autoreset_mode`` asked for) in ranked actions
