@@ -345,6 +345,51 @@ def _new_run_settings(algo: str | None, total_timesteps: int | None, n_envs: int
     return settings.updated({k: v for k, v in explicit.items() if v is not None})
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What a training run trains with: its folder, settings, env config, seed and held-out seeds, its
+    ``train_meta.json`` (as written or read) and, resumed, the checkpoint it continues from."""
+
+    run_dir: Path
+    settings: TampingSettings
+    config: TampingEnvConfig
+    seed: int
+    eval_seeds: list[int] | None
+    meta: dict[str, Any]
+    checkpoint: Checkpoint | None = None
+
+
+def _new_run(out_dir: str | Path | None, settings: TampingSettings, config: Any, seed: int | None,
+             eval_seeds: Sequence[int] | None) -> _Run:
+    """A new run in ``out_dir`` (default ``runs/ppo``; refused if it holds an unfinished run)."""
+    run_dir = Path(out_dir) if out_dir is not None else Path("runs/ppo")
+    start_run_folder(run_dir)
+    config = TampingEnvConfig.coerce(config)
+    seed = DEFAULT_TRAIN_SEED if seed is None else int(seed)
+    seeds = None if eval_seeds is None else [int(x) for x in eval_seeds]
+    s = settings
+    meta = {"trainer": "sb3", "env_id": DEFAULT_ENV_ID, "algo": s.algo, "action_type": s.action_type,
+            "keep_per_sleeper": s.keep_per_sleeper, "seed": seed, "n_envs": s.n_envs, "hyperparams": s.to_dict(),
+            "config": config.to_dict(), "eval_seeds": seeds, "warm_start": None}
+    return _Run(run_dir, settings, config, seed, seeds, meta)
+
+
+def _resumed_run(resume: str | Path, out_dir: str | Path | None, total_timesteps: int | None,
+                 checkpoint_every_s: float | None) -> _Run:
+    """The run in ``resume`` as its ``train_meta.json`` and checkpoint describe it, to ``total_timesteps`` (its
+    own total if None) and with ``checkpoint_every_s`` if given."""
+    run_dir = resume_folder(resume, out_dir)
+    meta = read_run_meta(run_dir)
+    ckpt = read_checkpoint(run_dir)
+    total = int(total_timesteps) if total_timesteps is not None else int(ckpt.info["total"])
+    changes: dict[str, Any] = {"total_timesteps": total}
+    if checkpoint_every_s is not None:
+        changes["checkpoint_every_s"] = checkpoint_every_s
+    s = TampingSettings.from_dict(meta["hyperparams"]).updated(changes)
+    return _Run(run_dir, s, TampingEnvConfig.coerce(meta["config"]), int(meta["seed"]), meta["eval_seeds"], meta,
+                ckpt)
+
+
 def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
           total_timesteps: int | None = None, n_envs: int | None = None, seed: int | None = None,
           out_dir: str | Path | None = None, hyperparams: TampingSettings | dict | str | Path | None = None,
@@ -375,75 +420,61 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
     would have; with ``workers`` > 1 the envs' episodes in progress are out of reach, so the resumed run starts
     new ones (seeded from ``seed`` and the step count). A new run refuses a folder that holds an unfinished run.
     """
+    if resume is not None:
+        refuse_on_resume(Path(resume), algo=algo, config=config, n_envs=n_envs, seed=seed, hyperparams=hyperparams,
+                         eval_freq=eval_freq)
+        run = _resumed_run(resume, out_dir, total_timesteps, checkpoint_every_s)
+        assert run.checkpoint is not None
+        info, total = run.checkpoint.info, run.settings.total_timesteps
+        finished = finished_run(run.run_dir, info, total)
+        if finished is not None:
+            if verbose:
+                print(f"[resume] {run.run_dir} is finished ({info['done']} of {total} timesteps): {finished}",
+                      flush=True)
+            return finished
+        if total < info["done"]:
+            raise ValueError(f"total_timesteps must be at least the {info['done']} timesteps {run.run_dir} has "
+                             f"done, got {total}")
+    else:
+        settings = _new_run_settings(algo, total_timesteps, n_envs, hyperparams, checkpoint_every_s, eval_freq)
+        run = _new_run(out_dir, settings, config, seed, eval_seeds)
+    return _train_run(run, progress, verbose, on_evaluation, workers)
+
+
+def _train_run(run: _Run, progress: bool, verbose: int, on_evaluation: Callable[[dict], None] | None,
+               workers: int) -> Path:
+    """Build the envs and the model (new, or from the run's checkpoint), train to the total with the held-out
+    evaluation and the checkpoints, save the final artefacts (see :func:`train`)."""
     from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    ckpt = None
-    if resume is not None:
-        run_dir = resume_folder(resume, out_dir)
-        refuse_on_resume(run_dir, algo=algo, config=config, n_envs=n_envs, seed=seed, hyperparams=hyperparams,
-                         eval_freq=eval_freq)
-        meta = read_run_meta(run_dir)
-        ckpt = read_checkpoint(run_dir)
-        s = TampingSettings.from_dict(meta["hyperparams"])
-        total = int(total_timesteps) if total_timesteps is not None else int(ckpt.info["total"])
-        s = s.updated({"total_timesteps": total} if checkpoint_every_s is None else
-                      {"total_timesteps": total, "checkpoint_every_s": checkpoint_every_s})
-        done = finished_run(run_dir, ckpt.info, total)
-        if done is not None:
-            if verbose:
-                print(f"[resume] {run_dir} is finished ({ckpt.info['done']} of {total} timesteps): {done}", flush=True)
-            return done
-        if total < ckpt.info["done"]:
-            raise ValueError(f"total_timesteps must be at least the {ckpt.info['done']} timesteps {run_dir} has "
-                             f"done, got {total}")
-        config, seed, eval_seeds = meta["config"], int(meta["seed"]), meta["eval_seeds"]
-    else:
-        s = _new_run_settings(algo, total_timesteps, n_envs, hyperparams, checkpoint_every_s, eval_freq)
-        seed = DEFAULT_TRAIN_SEED if seed is None else int(seed)
-        run_dir = Path(out_dir) if out_dir is not None else Path("runs/ppo")
-        start_run_folder(run_dir)
-    algo, n_envs, total_timesteps, eval_freq = s.algo, s.n_envs, s.total_timesteps, s.eval_freq
-    action_type, keep = s.action_type, s.keep_per_sleeper
-    config = TampingEnvConfig.coerce(config)
-    AlgoClass = _algo_class(algo)
-    if ckpt is None:
-        meta = {"trainer": "sb3", "env_id": DEFAULT_ENV_ID, "algo": algo, "action_type": action_type,
-                "keep_per_sleeper": keep, "seed": seed, "n_envs": n_envs, "hyperparams": s.to_dict(),
-                "config": config.to_dict(), "eval_seeds": None if eval_seeds is None else [int(x) for x in eval_seeds],
-                "warm_start": None}
-
+    s, run_dir, ckpt = run.settings, run.run_dir, run.checkpoint
     single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
-    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep,
-                           seed=None if ckpt is not None else seed, bootstrap_at_horizon=s.bootstrap_at_horizon,
+    raw = TampingSB3VecEnv(s.n_envs, run.config, action_type=s.action_type, keep_per_sleeper=s.keep_per_sleeper,
+                           seed=None if ckpt is not None else run.seed, bootstrap_at_horizon=s.bootstrap_at_horizon,
                            workers=workers)
     env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=s.clip_obs, gamma=s.gamma)
-    warm = None
     if ckpt is not None:
-        model = AlgoClass.load(ckpt.model_file(), env=env, device="cpu", force_reset=False,
-                               tensorboard_log=str(run_dir), verbose=verbose)
-        _restore_training_state(model, env, raw, ckpt, seed)
+        model = _algo_class(s.algo).load(ckpt.model_file(), env=env, device="cpu", force_reset=False,
+                                         tensorboard_log=str(run_dir), verbose=verbose)
+        _restore_training_state(model, env, raw, ckpt, run.seed)
+        warm = None
     else:
-        set_random_seed(seed)
-        model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(run_dir), verbose=verbose,
-                          policy_kwargs={"net_arch": list(s.net_arch)}, device="cpu", **s.algo_kwargs())
-        if s.initial_tamp_logit is not None:
-            _set_initial_tamp_logit(model, s.initial_tamp_logit, action_type)
-        write_json_atomic(run_dir / META_FILE, meta)
-        warm = _warm_start(model, env, config, s, seed, verbose)
+        model = _new_model(run, env, verbose)
+        write_json_atomic(run_dir / META_FILE, run.meta)
+        warm = _warm_start(model, env, run.config, s, run.seed, verbose)
         if warm is not None:
-            write_json_atomic(run_dir / META_FILE, {**meta, "warm_start": warm})
+            write_json_atomic(run_dir / META_FILE, {**run.meta, "warm_start": warm})
 
     callbacks: list[Any] = []
     eval_cb = None
-    if eval_seeds and eval_freq > 0:
+    if run.eval_seeds and s.eval_freq > 0:
         def make_policy(model) -> NormalizedPolicy:
             return NormalizedPolicy.from_vecnormalize(model, model.get_vec_normalize_env(), raw.obs_keys,
-                                                      algo=algo, action_type=action_type)
+                                                      algo=s.algo, action_type=s.action_type)
 
-        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, run_dir, make_policy, _save_policy,
-                                      action_type, verbose, evaluate_at_start=warm is not None,
+        eval_cb = _make_eval_callback(run.config, run.eval_seeds, s.eval_freq, run_dir, make_policy, _save_policy,
+                                      s.action_type, verbose, evaluate_at_start=warm is not None,
                                       on_evaluation=on_evaluation)
         if ckpt is not None and ckpt.state["evaluation"] is not None:
             eval_cb.set_state(ckpt.state["evaluation"])
@@ -453,24 +484,24 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
         state = {"random": capture_random_states(), "env": vec_env_state(env),
                  "evaluation": eval_cb.get_state() if eval_cb is not None else None}
         write_checkpoint(run_dir, {"trainer": "sb3", "unit": "timesteps", "done": int(model.num_timesteps),
-                                   "total": int(total_timesteps), "finished": finished}, state, model)
+                                   "total": s.total_timesteps, "finished": finished}, state, model)
 
     ckpt_cb = None
     if s.checkpoint_every_s > 0:
         ckpt_cb = make_checkpoint_callback(s.checkpoint_every_s, save_checkpoint, at_start=ckpt is None)
         callbacks.append(ckpt_cb)
     if progress:
-        callbacks.append(make_progress_callback(f"train {algo}"))
+        callbacks.append(make_progress_callback(f"train {s.algo}"))
 
     t0 = time.time()
     start_steps = int(model.num_timesteps)
-    model.learn(total_timesteps=max(total_timesteps - start_steps, 0), callback=CallbackList(callbacks),
-                tb_log_name=algo, reset_num_timesteps=ckpt is None)
+    model.learn(total_timesteps=max(s.total_timesteps - start_steps, 0), callback=CallbackList(callbacks),
+                tb_log_name=s.algo, reset_num_timesteps=ckpt is None)
     wall = time.time() - t0
     env.save(str(run_dir / "vecnormalize.pkl"))
-    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo, action_type=action_type)
+    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=s.algo, action_type=s.action_type)
     path = _save_policy(model, policy, run_dir / "model.zip",
-                        {"action_type": action_type, "config": config.to_dict()})
+                        {"action_type": s.action_type, "config": run.config.to_dict()})
     checkpoints = None
     if ckpt_cb is not None:
         t_final = time.monotonic()
@@ -478,14 +509,29 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
         checkpoints = {"every_s": s.checkpoint_every_s, "count": ckpt_cb.count + 1,
                        "seconds": ckpt_cb.seconds + time.monotonic() - t_final,
                        "bytes": (run_dir / CHECKPOINT_FILE).stat().st_size}
-    summary = {"timesteps": int(model.num_timesteps), "timesteps_this_run": int(model.num_timesteps) - start_steps,
+    steps = int(model.num_timesteps)
+    summary = {"timesteps": steps, "timesteps_this_run": steps - start_steps,
                "resumed_from_timesteps": start_steps if ckpt is not None else None, "wall_seconds": wall,
-               "steps_per_second": (model.num_timesteps - start_steps) / max(wall, 1e-9),
-               "warm_start": warm if ckpt is None else meta.get("warm_start"),
+               "steps_per_second": (steps - start_steps) / max(wall, 1e-9),
+               "warm_start": warm if ckpt is None else run.meta.get("warm_start"),
                "evaluations": eval_cb.history if eval_cb is not None else [], "checkpoints": checkpoints}
     write_json_atomic(run_dir / "summary.json", summary)
     env.close()
     return path
+
+
+def _new_model(run: _Run, env, verbose: int):
+    """A new run's model, seeded from the run's seed (and the global generators with it, as SB3 does)."""
+    from stable_baselines3.common.utils import set_random_seed
+
+    s = run.settings
+    set_random_seed(run.seed)
+    model = _algo_class(s.algo)("MultiInputPolicy", env, seed=run.seed, tensorboard_log=str(run.run_dir),
+                                verbose=verbose, policy_kwargs={"net_arch": list(s.net_arch)}, device="cpu",
+                                **s.algo_kwargs())
+    if s.initial_tamp_logit is not None:
+        _set_initial_tamp_logit(model, s.initial_tamp_logit, s.action_type)
+    return model
 
 
 def _warm_start(model, env, config: TampingEnvConfig, s: TampingSettings, seed: int, verbose: int) -> dict | None:
