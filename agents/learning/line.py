@@ -151,8 +151,9 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     history, the best evaluation and the random generators; in the PPO stage, every ``checkpoint_every_s``
     seconds as :func:`~trackenv_agents.learning.tamping.train` keeps them. ``resume``: the folder of a run to
     continue in place from its last complete iteration (or PPO checkpoint), with the settings, config, seeds
-    and held-out seeds it was started with (the other arguments but ``progress``, ``verbose`` and
-    ``checkpoint_every_s`` must be None); a finished run returns its model at once."""
+    and held-out seeds it was started with (``eval_seeds`` is the run's own; the other arguments but
+    ``progress``, ``verbose`` and ``checkpoint_every_s`` must be None); a finished run returns its model at
+    once."""
     if resume is not None:
         run_dir = resume_folder(resume, out_dir)
         refuse_on_resume(run_dir, config=config, total_timesteps=total_timesteps, n_envs=n_envs, seed=seed,
