@@ -218,22 +218,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return cmd_evaluate_line(args)
 
 
-def cmd_train_line(args: argparse.Namespace) -> int:
-    """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
-    --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
-    if args.resume or args.algo:
-        raise UsageError("--resume and --algo are for Tamping-v0; the line's learner reads its algorithm from "
-                         "the hyper-parameter file")
-    from .evaluation.line_compare import scenario_of
-    from .learning.line import train_line
-
-    t0 = time.perf_counter()
-    out = args.out or "runs/ppo_line"
-    path = train_line(scenario_of(args.env), total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
-                      out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
-                      iterations=args.iterations, verbose=0 if args.json else 1)
-    wall = time.perf_counter() - t0
-    summary = json.loads((Path(out) / "summary.json").read_text())
+def _line_payload(path: Path, wall: float, out: Path) -> tuple[dict[str, Any], str]:
+    """The JSON payload and the human summary of a line training run (from its summary.json)."""
+    summary = json.loads((out / "summary.json").read_text())
     payload = {"model": str(path), "wall_time_s": wall, **summary}
     evals = [it["evaluation"] for it in summary["iterations"] if "evaluation" in it]
     best = min(evals, key=lambda e: e["mean_cost"]) if evals else None
@@ -243,13 +230,78 @@ def cmd_train_line(args: argparse.Namespace) -> int:
         human += (f"\nbest held-out iteration: {best['mean_cost']:.1f} k€, vs {d['b']} {d['mean_difference']:+.1f} k€ "
                   f"[{d['ci_low']:+.1f}, {d['ci_high']:+.1f}] on {d['n_episodes']} paired episodes "
                   f"(best_model.zip; export it with experiments/train_line.py --export)")
-    _emit(args, payload, human)
+    return payload, human
+
+
+def cmd_train_line(args: argparse.Namespace) -> int:
+    """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
+    --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
+    if args.algo:
+        raise UsageError("--algo is for Tamping-v0; the line's learner reads its algorithm from the hyper-parameter "
+                         "file")
+    from .evaluation.line_compare import scenario_of
+    from .learning.line import train_line
+
+    t0 = time.perf_counter()
+    out = Path(args.out or "runs/ppo_line")
+    path = train_line(scenario_of(args.env), total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
+                      out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
+                      iterations=args.iterations, verbose=0 if args.json else 1,
+                      checkpoint_every_s=args.checkpoint_every)
+    _emit(args, *_line_payload(path, time.perf_counter() - t0, out))
+    return 0
+
+
+def cmd_train_resume(args: argparse.Namespace) -> int:
+    """`trackenv train --resume DIR`: continue the run in DIR (either trainer) from its last checkpoint, with the
+    settings it was started with; a finished run says so and is left as it is."""
+    run_dir = Path(args.resume)
+    given = {"--algo": args.algo, "--n-envs": args.n_envs, "--hyperparams": args.hyperparams, "--env": args.env,
+             "--iterations": args.iterations,
+             "--seed": None if args.seed == DEFAULT_TRAIN_SEED else args.seed,
+             "--out": None if args.out is None or Path(args.out).resolve() == run_dir.resolve() else args.out}
+    for flag, value in given.items():
+        if value is not None:
+            raise UsageError(f"--resume continues {run_dir} with the settings it was started with; drop {flag}")
+    from .learning.checkpoint import read_checkpoint_info, read_run_meta
+
+    meta = read_run_meta(run_dir)  # FileNotFoundError naming what is missing: one line, status 2
+    info = read_checkpoint_info(run_dir)
+    line = meta.get("trainer") == "line"
+    if line and args.timesteps is not None:
+        raise UsageError(f"--resume continues the line's run in {run_dir} to the totals it was started with; drop "
+                         "--timesteps")
+    total = info["total"] if line or args.timesteps is None else args.timesteps
+    if info.get("finished") and info["done"] >= total:
+        model = run_dir / "model.zip"
+        payload = {"model": str(model), "finished": True, "done": info["done"], "total": total, "unit": info["unit"]}
+        _emit(args, payload, f"{run_dir} is finished ({info['done']} of {total} {info['unit']}); nothing to resume. "
+                             f"Its model: {model}")
+        return 0
+    t0 = time.perf_counter()
+    common = {"resume": run_dir, "progress": not args.json, "verbose": 0 if args.json else 1,
+              "checkpoint_every_s": args.checkpoint_every}
+    if line:
+        from .learning.line import train_line
+
+        path = train_line(**common)
+        _emit(args, *_line_payload(path, time.perf_counter() - t0, run_dir))
+        return 0
+    from .learning.tamping import train
+
+    path = train(total_timesteps=args.timesteps, workers=args.workers, **common)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    payload = {"model": str(path), "wall_time_s": time.perf_counter() - t0, **summary}
+    _emit(args, payload, f"resumed at {summary['resumed_from_timesteps']} timesteps, trained to "
+                         f"{summary['timesteps']} -> {path} in {payload['wall_time_s']:.0f} s")
     return 0
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     _existing(args.hyperparams, "--hyperparams")
     _existing(args.resume, "--resume", folder=True)
+    if args.resume is not None:
+        return cmd_train_resume(args)
     if args.env is not None and args.env != "trackenv/Tamping-v0":
         return cmd_train_line(args)
     if args.iterations is not None:
@@ -265,9 +317,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         out_dir=args.out or "runs/ppo",
         progress=not args.json,
         verbose=0 if args.json else 1,  # --json: one JSON object on stdout, no training log
-        resume=args.resume,
         hyperparams=args.hyperparams,
         workers=args.workers,
+        checkpoint_every_s=args.checkpoint_every,
     )
     wall = time.perf_counter() - t0
     payload = {"model": str(path), "wall_time_s": wall}
@@ -418,8 +470,12 @@ def build_parser() -> argparse.ArgumentParser:
                          "parallel; 2 on a 2-core machine: +10-20 %% env steps/s at 32 envs)")
     sp.add_argument("--seed", type=_positive(int, zero=True), default=DEFAULT_TRAIN_SEED, metavar="N",
                     help="env i starts with seed + i, apart from the test, tuning and evaluation seeds")
+    sp.add_argument("--checkpoint-every", type=_positive(float, zero=True), default=None, metavar="SECONDS",
+                    help="seconds of wall clock between checkpoints (DIR/checkpoint.zip; 0: none; default: the "
+                         "hyper-parameter file's, 300); the line's policy iteration keeps one after each iteration")
     sp.add_argument("--resume", default=None, metavar="DIR",
-                    help="output folder of an earlier run to continue for --timesteps more steps")
+                    help="continue the run in DIR (killed, or finished) from its last checkpoint with the settings it "
+                         "was started with; Tamping-v0: --timesteps sets a new total")
     sp.add_argument("--hyperparams", default=None, metavar="FILE",
                     help="YAML (RL Zoo form) or flat JSON overriding agents/learning/hyperparams/ppo.yml key by key")
     sp.add_argument("--env", default=None, metavar="ID",

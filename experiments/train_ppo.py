@@ -1,7 +1,8 @@
 """Train PPO / MaskablePPO on the tamping environment.
 
 Example: ``python experiments/train_ppo.py --timesteps 8000 --n-envs 8 --out runs/ppo --export``;
-continue a run for more steps: ``--resume runs/ppo --seed 20100 --timesteps 8000 --out runs/ppo_more``.
+continue a killed run from its last checkpoint: ``--resume runs/ppo`` (or a finished one to a new total:
+``--resume runs/ppo --timesteps 16000``).
 """
 
 from __future__ import annotations
@@ -21,15 +22,16 @@ def main(argv=None) -> None:
     p.add_argument("--timesteps", type=int, default=None,
                    help="total env steps (default: agents/learning/hyperparams/ppo.yml)")
     p.add_argument("--n-envs", type=int, default=None)
-    p.add_argument("--seed", type=int, default=DEFAULT_TRAIN_SEED,
-                   help="env i starts with seed + i (default: apart from the test, tuning and evaluation seeds)")
-    p.add_argument("--out", default="runs/ppo")
+    p.add_argument("--seed", type=int, default=None,
+                   help=f"env i starts with seed + i (default {DEFAULT_TRAIN_SEED}: apart from the test, tuning and "
+                        f"evaluation seeds)")
+    p.add_argument("--out", default=None, help="default: runs/ppo (with --resume: the resumed folder)")
     p.add_argument("--config-json", default=None, help="JSON file of TampingEnvConfig fields")
     p.add_argument("--hyperparams", default=None,
                    help="YAML (RL Zoo form) or JSON overriding agents/learning/hyperparams/ppo.yml")
     p.add_argument("--eval-freq", type=int, default=None)
-    p.add_argument("--checkpoint-every", type=int, default=None)
-    p.add_argument("--resume", default=None, help="output folder of an earlier run to continue (--timesteps more)")
+    p.add_argument("--checkpoint-every", type=float, default=None, help="seconds between checkpoints (0: none)")
+    p.add_argument("--resume", default=None, help="folder of a run to continue in place from its last checkpoint")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--export", action="store_true", help=f"copy the result to {DEFAULT_PRETRAINED}")
     a = p.parse_args(argv)
@@ -40,7 +42,7 @@ def main(argv=None) -> None:
     t0 = time.time()
     path = train(algo=a.algo, config=config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed,
                  out_dir=a.out, hyperparams=a.hyperparams, progress=not a.no_progress,
-                 eval_freq=a.eval_freq, checkpoint_every=a.checkpoint_every, resume=a.resume)
+                 eval_freq=a.eval_freq, checkpoint_every_s=a.checkpoint_every, resume=a.resume)
     wall = time.time() - t0
     with open(path.parent / "summary.json") as f:
         summary = json.load(f)

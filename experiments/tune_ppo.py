@@ -52,7 +52,7 @@ def trainable(params: dict[str, Any], *, config: dict | None, timesteps: int, ev
     with tempfile.TemporaryDirectory() as out:
         train(config=config, total_timesteps=timesteps, n_envs=extra.get("n_envs"), out_dir=out,
               hyperparams={**extra, **params}, progress=False, eval_seeds=eval_seeds, eval_freq=eval_freq,
-              checkpoint_every=0, verbose=0, on_evaluation=report)
+              checkpoint_every_s=0, verbose=0, on_evaluation=report)
 
 
 def run(num_samples: int, timesteps: int, eval_freq: int, eval_seeds: list[int], config: dict | None = None,

@@ -48,6 +48,21 @@ def test_one_ppo_iteration(tmp_path) -> None:
 
 
 @pytest.mark.slow
+def test_one_ppo_iteration_one_agent_per_section(tmp_path) -> None:
+    pytest.importorskip("pettingzoo")
+    rl = _script()
+    env = rl.make_env({"env_id": "trackenv/TampingLineSmall-v0", "multi_agent": True, "horizon_years": 1.0})
+    assert sorted(env.observation_space) == [f"section_{j}" for j in range(6)]
+    summary = rl.main(["--multi-agent", "--env-id", "trackenv/TampingLineSmall-v0", "--iterations", "1",
+                       "--train-batch", "16", "--minibatch", "8", "--epochs", "1", "--num-cpus", "2",
+                       "--env-config", json.dumps({"horizon_years": 1.0}), "--out", str(tmp_path)])
+    (rec,) = summary["history"]
+    assert rec["env_steps"] >= 16
+    assert rec["episode_len_mean"] == 4.0  # the line's steps: every agent truncated together at the horizon
+    assert np.isfinite(rec["episode_return_mean"]) and rec["episode_return_mean"] < 0
+
+
+@pytest.mark.slow
 def test_tune_ppo_quick(tmp_path) -> None:
     pytest.importorskip("stable_baselines3")
     rows = _script("tune_ppo").main(["--quick", "--num-cpus", "2", "--out", str(tmp_path)])

@@ -1,8 +1,9 @@
 """The learners: PPO on Tamping-v0 (:mod:`.tamping`), the per-section policy of TampingLine (:mod:`.line_policy`)
 trained by counterfactual policy iteration (:mod:`.line`, :mod:`.line_counterfactual`), imitation of the rules
 (:mod:`.imitation`), stable-baselines3's view of the native vector envs (:mod:`.sb3_vec`), the action
-parameterisations (:mod:`.actions`) and the training settings (:mod:`.settings`). The hyper-parameters
-(``hyperparams/ppo.yml``) and the shipped models (``pretrained/``) live beside them.
+parameterisations (:mod:`.actions`), the training settings (:mod:`.settings`) and the checkpoints a killed run
+resumes from (:mod:`.checkpoint`). The hyper-parameters (``hyperparams/ppo.yml``) and the shipped models
+(``pretrained/``) live beside them.
 
 The names below load on first use: most of these modules import stable-baselines3 and torch, which take
 seconds to import and are an optional extra (``trackenv[rl]``), so importing this package imports neither.

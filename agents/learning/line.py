@@ -41,6 +41,25 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig
 
+from .checkpoint import (
+    CHECKPOINT_FILE,
+    META_FILE,
+    Checkpoint,
+    capture_random_states,
+    finished_run,
+    make_checkpoint_callback,
+    read_checkpoint,
+    read_run_meta,
+    refuse_on_resume,
+    restore_random_states,
+    restore_vec_env_state,
+    resume_folder,
+    save_model_atomic,
+    start_run_folder,
+    vec_env_state,
+    write_checkpoint,
+    write_json_atomic,
+)
 from .line_policy import ADVISOR_FEATURES, FEATURES, LineAgent
 from .settings import LineSettings
 from .tamping import (
@@ -79,26 +98,40 @@ def line_meta_path(zip_path: str | Path) -> Path:
 
 
 def _save_line_policy(model: Any, zip_path: Path, meta: dict) -> Path:
-    """``model`` at ``zip_path`` and its JSON (:func:`line_meta_path`). The optimiser's state is left out (a fresh
-    one is saved): the file is the policy, a few tens of kB, not a run to continue."""
+    """``model`` at ``zip_path`` and its JSON (:func:`line_meta_path`), each replaced atomically (a run killed
+    while saving leaves the previous file). The optimiser's state is left out (a fresh one is saved): the file
+    is the policy, a few tens of kB, not a run to continue (that is the checkpoint's job)."""
     policy = model.policy
     state = policy.optimizer
     policy.optimizer = policy.optimizer_class(policy.parameters(), **state.defaults)
     try:  # nor the last roll-out's observations and episode records
-        model.save(zip_path, exclude=["_last_obs", "_last_episode_starts", "_last_original_obs", "ep_info_buffer",
-                                      "ep_success_buffer"])
+        save_model_atomic(model, zip_path, exclude=["_last_obs", "_last_episode_starts", "_last_original_obs",
+                                                    "ep_info_buffer", "ep_success_buffer"])
     finally:
         policy.optimizer = state
     algo = "maskable_ppo" if type(model).__name__ == "MaskablePPO" else "ppo"
-    line_meta_path(zip_path).write_text(json.dumps({"algo": algo, **meta}, indent=1, default=str))
+    write_json_atomic(line_meta_path(zip_path), {"algo": algo, **meta})
     return Path(zip_path)
 
 
+def _new_line_settings(hyperparams: LineSettings | dict | str | Path | None, **explicit: Any) -> LineSettings:
+    """A new run's settings: the shipped entry, ``hyperparams`` over it key by key (or a whole
+    :class:`LineSettings`), then the ``explicit`` arguments that are not None."""
+    if isinstance(hyperparams, LineSettings):
+        s = hyperparams
+    else:
+        if isinstance(hyperparams, (str, Path)):
+            hyperparams = load_hyperparams(hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO)
+        s = LineSettings.from_dict(load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO)).updated(hyperparams or {})
+    return s.updated({k: v for k, v in explicit.items() if v is not None})
+
+
 def train_line(config: LineConfig | dict | str | None = None, total_timesteps: int | None = None,
-               n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED, out_dir: str | Path = "runs/ppo_line",
+               n_envs: int | None = None, seed: int | None = None, out_dir: str | Path | None = None,
                hyperparams: LineSettings | dict | str | Path | None = None, progress: bool = True,
                eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, iterations: int | None = None,
-               episodes_per_iteration: int | None = None, verbose: int = 1) -> Path:
+               episodes_per_iteration: int | None = None, verbose: int = 1, resume: str | Path | None = None,
+               checkpoint_every_s: float | None = None) -> Path:
     """Train on a TampingLine ``config`` (a LineConfig, its fields as a dict, or a scenario name; default the
     default line) by counterfactual policy iteration (then MaskablePPO for ``total_timesteps`` line-steps, 0 by
     default); save ``out_dir/model.zip`` (+ ``model_meta.json``) and return its path.
@@ -106,156 +139,291 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/TampingLine-v0`` entry)
     overriding the shipped entry of ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole
     :class:`LineSettings`; explicit arguments that are not None override both. Unknown keys and values out of
-    range raise ValueError (:class:`LineSettings` lists the fields, their defaults and ranges).
-    ``eval_seeds=None`` disables the held-out evaluation (then the last iteration is the model).
-    ``out_dir`` gets ``summary.json`` (wall times, line-steps and fork steps per second, every iteration's
-    samples, fit and evaluation), ``train_meta.json``, ``best_model.zip``, ``checkpoints/``, TensorBoard logs."""
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.utils import set_random_seed
+    range raise ValueError (:class:`LineSettings` lists the fields, their defaults and ranges). ``seed``
+    (default :data:`DEFAULT_TRAIN_SEED`): the first training episode. ``eval_seeds=None`` disables the held-out
+    evaluation (then the last iteration is the model). ``out_dir`` (default ``runs/ppo_line``) gets
+    ``summary.json`` (wall times, line-steps and fork steps per second, every iteration's samples, fit and
+    evaluation), ``train_meta.json``, ``best_model.zip``, ``checkpoints/iteration_<i>.zip`` (each iteration's
+    policy), TensorBoard logs and ``checkpoint.zip``.
 
-    from ..evaluation.harness import evaluate_one
-    from ..evaluation.statistics import paired_difference
-    from .imitation import fit_choices, teacher_policy
-    from .line_counterfactual import section_counterfactuals
-    from .sb3_vec import SectionAgentsVecEnv
+    Checkpoints (:mod:`.checkpoint`; none if ``checkpoint_every_s`` is 0): after the baseline's evaluation and
+    after every iteration, the policy, the data of every iteration so far (the next fit pools them), the
+    history, the best evaluation and the random generators; in the PPO stage, every ``checkpoint_every_s``
+    seconds as :func:`~trackenv_agents.learning.tamping.train` keeps them. ``resume``: the folder of a run to
+    continue in place from its last complete iteration (or PPO checkpoint), with the settings, config, seeds
+    and held-out seeds it was started with (``eval_seeds`` is the run's own; the other arguments but
+    ``progress``, ``verbose`` and ``checkpoint_every_s`` must be None); a finished run returns its model at
+    once."""
+    if resume is not None:
+        run_dir = resume_folder(resume, out_dir)
+        refuse_on_resume(run_dir, config=config, total_timesteps=total_timesteps, n_envs=n_envs, seed=seed,
+                         hyperparams=hyperparams, iterations=iterations, episodes_per_iteration=episodes_per_iteration)
+        run_meta = read_run_meta(run_dir)
+        ckpt = read_checkpoint(run_dir)
+        done = finished_run(run_dir, ckpt.info, int(ckpt.info["total"]))
+        if done is not None:
+            if verbose:
+                print(f"[resume] {run_dir} is finished ({ckpt.info['done']} of {ckpt.info['total']} "
+                      f"{ckpt.info['unit']}): {done}", flush=True)
+            return done
+        s = LineSettings.from_dict(run_meta["hyperparams"])
+        if checkpoint_every_s is not None:
+            s = s.updated({"checkpoint_every_s": checkpoint_every_s})
+        trainer = _LineTrainer(s, LineConfig.coerce(run_meta["config"]), int(run_meta["seed"]), run_dir,
+                               run_meta["eval_seeds"], progress, verbose)
+        return trainer.run(ckpt)
+    s = _new_line_settings(hyperparams, total_timesteps=total_timesteps, n_envs=n_envs, iterations=iterations,
+                           episodes_per_iteration=episodes_per_iteration, checkpoint_every_s=checkpoint_every_s)
+    run_dir = Path(out_dir) if out_dir is not None else Path("runs/ppo_line")
+    start_run_folder(run_dir)
+    trainer = _LineTrainer(s, LineConfig.coerce("default" if config is None else config),
+                           DEFAULT_TRAIN_SEED if seed is None else int(seed), run_dir,
+                           None if eval_seeds is None else [int(x) for x in eval_seeds], progress, verbose)
+    return trainer.run(None)
 
-    if isinstance(hyperparams, LineSettings):
-        s = hyperparams
-    else:
-        if isinstance(hyperparams, (str, Path)):
-            hyperparams = load_hyperparams(hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO)
-        s = LineSettings.from_dict(load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO)).updated(hyperparams or {})
-    explicit = {"total_timesteps": total_timesteps, "n_envs": n_envs, "iterations": iterations,
-                "episodes_per_iteration": episodes_per_iteration}
-    s = s.updated({k: v for k, v in explicit.items() if v is not None})
-    algo, n_envs, total_timesteps, n_iter, n_episodes = (s.algo, s.n_envs, s.total_timesteps, s.iterations,
-                                                         s.episodes_per_iteration)
-    reward_scale, fit_epochs, margin, focus_rate, other_rate, eval_freq = (
-        s.reward_scale, s.fit_epochs, s.fit_margin, s.focus_rate, s.other_rate, s.eval_freq)
-    config = LineConfig.coerce("default" if config is None else config)
-    out_dir = Path(out_dir)
-    (out_dir / "checkpoints").mkdir(parents=True, exist_ok=True)
-    AlgoClass = _algo_class(algo)
 
-    single_torch_thread()  # the physics (numba) wants the cores; the small network does not
-    set_random_seed(seed)
-    advisor = teacher_policy(s.advisor, config, None if s.advisor_params is None else dict(s.advisor_params))
-    env = SectionAgentsVecEnv(n_envs, config, seed=seed + 1_000_000, reward_scale=reward_scale, advisor=advisor)
-    model = AlgoClass("MlpPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=0, device="cpu",
-                      policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
-    logger = configure(str(out_dir / "policy_iteration"), ["csv", "tensorboard"])
-    meta = {"env_id": LINE_ENV_ID, "net_arch": list(s.net_arch),
-            "features": _feature_names(True), "advisor": advisor.name, "advisor_params": dict(advisor.params),
-            "reward_scale": reward_scale, "config": config.to_dict(), "seed": seed}
-    (out_dir / "train_meta.json").write_text(json.dumps({"algo": algo, "hyperparams": s.to_dict(), **meta}, indent=1,
-                                                        default=str))
+class _LineTrainer:
+    """One run of :func:`train_line`: the policy iteration, then the PPO stage, each resumable from its
+    checkpoint. Built the same way for a new run and a resumed one (the advisor, the section agents' env, a
+    model of the settings' network), so that a resumed run replaces only what the checkpoint holds."""
 
-    baseline = None
-    if eval_seeds:
-        t_base = time.time()  # the rule on the held-out episodes: every evaluation is paired with it
-        baseline = evaluate_one(advisor, config, list(eval_seeds), batch_size=len(eval_seeds))
-        if verbose:
-            print(f"[baseline] {baseline.policy}: {baseline.cost.mean():.1f} k€ on {baseline.n_episodes} held-out "
-                  f"episodes ({time.time() - t_base:.0f} s)", flush=True)
+    def __init__(self, s: LineSettings, config: LineConfig, seed: int, run_dir: Path,
+                 eval_seeds: list[int] | None, progress: bool, verbose: int) -> None:
+        from stable_baselines3.common.utils import set_random_seed
 
-    def evaluate(agent: LineAgent) -> dict[str, Any]:
+        from .imitation import teacher_policy
+        from .sb3_vec import SectionAgentsVecEnv
+
+        self.s, self.config, self.seed, self.run_dir = s, config, seed, run_dir
+        self.eval_seeds, self.progress, self.verbose = eval_seeds, progress, verbose
+        (run_dir / "checkpoints").mkdir(parents=True, exist_ok=True)
+        self.AlgoClass = _algo_class(s.algo)
+        single_torch_thread()  # the physics (numba) wants the cores; the small network does not
+        set_random_seed(seed)
+        self.advisor = teacher_policy(s.advisor, config, None if s.advisor_params is None else dict(s.advisor_params))
+        self.env = SectionAgentsVecEnv(s.n_envs, config, seed=seed + 1_000_000, reward_scale=s.reward_scale,
+                                       advisor=self.advisor)
+        self.model = self.AlgoClass("MlpPolicy", self.env, seed=seed, tensorboard_log=str(run_dir), verbose=0,
+                                    device="cpu", policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
+        #: what is saved with every policy (line_meta_path)
+        self.meta = {"env_id": LINE_ENV_ID, "net_arch": list(s.net_arch), "features": _feature_names(True),
+                     "advisor": self.advisor.name, "advisor_params": dict(self.advisor.params),
+                     "reward_scale": s.reward_scale, "config": config.to_dict(), "seed": seed}
+        self.baseline: Any = None
+        self.checkpoint_seconds = 0.0
+        self.checkpoint_count = 0
+
+    # --- checkpoints ---
+    def _checkpoint(self, info: dict[str, Any], state: dict[str, Any]) -> None:
+        if self.s.checkpoint_every_s <= 0:
+            return
+        t0 = time.monotonic()
+        write_checkpoint(self.run_dir, {"trainer": "line", **info},
+                         {"random": capture_random_states(), "baseline": self.baseline, **state}, self.model)
+        self.checkpoint_seconds += time.monotonic() - t0
+        self.checkpoint_count += 1
+
+    def _pi_checkpoint(self, pi: dict[str, Any]) -> None:
+        self._checkpoint({"phase": "policy_iteration", "unit": "iterations", "done": pi["done"],
+                          "total": self.s.iterations, "finished": False}, {"policy_iteration": pi})
+
+    # --- the run ---
+    def run(self, ckpt: Checkpoint | None) -> Path:
+        if ckpt is None:
+            write_json_atomic(self.run_dir / META_FILE, {"trainer": "line", "algo": self.s.algo,
+                                                         "hyperparams": self.s.to_dict(), **self.meta,
+                                                         "eval_seeds": self.eval_seeds})
+            self._evaluate_baseline()
+            pi = {"done": 0, "data": [], "history": [], "best": -np.inf, "line_steps": 0, "fork_steps": 0,
+                  "seconds": 0.0}
+            self._pi_checkpoint(pi)
+        else:
+            self.baseline = ckpt.state["baseline"]
+            pi = ckpt.state["policy_iteration"]
+            if ckpt.info["phase"] == "policy_iteration":
+                self.model = self.AlgoClass.load(ckpt.model_file(), env=self.env, device="cpu",
+                                                 tensorboard_log=str(self.run_dir))
+            restore_random_states(ckpt.state["random"])
+            if self.verbose:
+                print(f"[resume] {self.run_dir}: {ckpt.info['phase']}, {ckpt.info['done']} of "
+                      f"{ckpt.info['total']} {ckpt.info['unit']} done", flush=True)
+        if ckpt is None or ckpt.info["phase"] == "policy_iteration":
+            self._policy_iteration(pi)
+            ppo_ckpt = None
+        else:
+            ppo_ckpt = ckpt
+        ppo = self._ppo_stage(pi, ppo_ckpt) if self.s.total_timesteps > 0 else None
+        path = _save_line_policy(self.model, self.run_dir / "model.zip", self.meta)
+        self._checkpoint({"phase": "finished", "unit": "iterations", "done": pi["done"], "total": self.s.iterations,
+                          "finished": True}, {"policy_iteration": pi})
+        write_json_atomic(self.run_dir / "summary.json", self._summary(pi, ppo))
+        self.env.close()
+        return path
+
+    def _evaluate_baseline(self) -> None:
+        """The advisor on the held-out episodes: every evaluation is paired with it."""
+        from ..evaluation.harness import evaluate_one
+
+        if not self.eval_seeds:
+            return
+        t_base = time.time()
+        self.baseline = evaluate_one(self.advisor, self.config, self.eval_seeds, batch_size=len(self.eval_seeds))
+        if self.verbose:
+            b = self.baseline
+            print(f"[baseline] {b.policy}: {b.cost.mean():.1f} k€ on {b.n_episodes} held-out episodes "
+                  f"({time.time() - t_base:.0f} s)", flush=True)
+
+    def _evaluate(self, agent: LineAgent) -> dict[str, Any]:
+        from ..evaluation.harness import evaluate_one
+        from ..evaluation.statistics import paired_difference
+
+        assert self.eval_seeds  # only called with a baseline
         t_eval = time.time()
-        res = evaluate_one(agent, config, list(eval_seeds), batch_size=len(eval_seeds))
+        res = evaluate_one(agent, self.config, self.eval_seeds, batch_size=len(self.eval_seeds))
         return {"mean_cost": float(res.cost.mean()), "mean_return": float(res.sum_rewards.mean()),
-                "vs_baseline": paired_difference(res, baseline), "eval_seconds": time.time() - t_eval,
+                "vs_baseline": paired_difference(res, self.baseline), "eval_seconds": time.time() - t_eval,
                 "cost_parts": {k: float(v.mean()) for k, v in res.cost_parts.items()}}
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    def _logger(self, history: list[dict[str, Any]]) -> Any:
+        """The policy iteration's CSV and TensorBoard logger. A resumed run writes the earlier iterations' rows
+        into the CSV again (stable-baselines3's CSV output starts its file afresh); TensorBoard keeps them."""
+        from stable_baselines3.common.logger import Logger, make_output_format
 
-        bar = tqdm(total=n_iter * config.horizon_steps, desc="policy iteration", unit="step")
-    history: list[dict[str, Any]] = []
-    data: list[dict[str, np.ndarray]] = []
-    behaviour: Any = advisor
-    best = -np.inf
-    t0 = time.time()
-    line_steps = fork_steps = 0
-    for it in range(n_iter):
-        t_it = time.time()
-        seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
-        d = section_counterfactuals(config, seeds, behaviour, advisor=advisor,
-                                    focus_rate=focus_rate, other_rate=other_rate, seed=seed + it,
-                                    progress=bar.update if bar is not None else None)
-        t_forks = time.time() - t_it
-        data.append(d)
-        pooled = {k: np.concatenate([x[k] for x in data]) for k in d}
-        fit = fit_choices(model, pooled, reward_scale, epochs=fit_epochs, margin=margin, seed=seed + it)
-        line_steps += n_episodes * config.horizon_steps
-        fork_steps += int(np.sum(config.horizon_steps - d["step"]))
-        rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
-                               "other_choice_cheaper": float(np.mean((d["q_tamp"] < d["q_wait"]) != d["acted"])),
-                               "fork_seconds": t_forks, "fit_seconds": time.time() - t_it - t_forks, "fit": fit}
-        agent = LineAgent(model.policy, advisor=advisor)
-        _save_line_policy(model, out_dir / "checkpoints" / f"iteration_{it}.zip", meta)
-        if baseline is not None:
-            rec["evaluation"] = evaluate(agent)
-            if rec["evaluation"]["mean_return"] > best:
-                best = rec["evaluation"]["mean_return"]
-                _save_line_policy(model, out_dir / "best_model.zip", meta)
-            logger.record("eval/mean_cost", rec["evaluation"]["mean_cost"])
-            logger.record("eval/vs_baseline", rec["evaluation"]["vs_baseline"]["mean_difference"])
-        for k in ("samples", "other_choice_cheaper"):
-            logger.record(f"policy_iteration/{k}", rec[k])
-        logger.record("policy_iteration/target_share", fit["target_share"])
-        logger.record("policy_iteration/value_mse", fit["value_mse"])
-        logger.dump(it)
-        history.append(rec)
-        if verbose:
-            ev = rec.get("evaluation")
-            vs = "" if ev is None else (f"; held-out {ev['mean_cost']:.1f} k€, vs {baseline.policy} "
-                                        f"{ev['vs_baseline']['mean_difference']:+.1f} "
-                                        f"[{ev['vs_baseline']['ci_low']:+.1f}, {ev['vs_baseline']['ci_high']:+.1f}]")
-            print(f"[iteration {it}] {rec['samples']} decisions priced ({rec['other_choice_cheaper']:.1%} cheaper "
-                  f"the other way), fit {fit['weighted_target_share']:.3f}{vs} ({time.time() - t_it:.0f} s)",
-                  flush=True)
-        (out_dir / "summary.json").write_text(json.dumps({"iterations": history}, indent=1, default=float))
-        behaviour = agent
-    if bar is not None:
-        bar.close()
-    wall_pi = time.time() - t0
-    if baseline is not None and history and (out_dir / "best_model.zip").exists():
-        model = AlgoClass.load(str(out_dir / "best_model.zip"), env=env, device="cpu", tensorboard_log=str(out_dir))
+        folder = str(self.run_dir / "policy_iteration")
+        logger = Logger(folder, [make_output_format("csv", folder)])
+        for rec in history:
+            _log_iteration(logger, rec)
+        logger.output_formats.append(make_output_format("tensorboard", folder))
+        return logger
 
-    ppo: dict[str, Any] | None = None
-    if total_timesteps > 0:
+    def _policy_iteration(self, pi: dict[str, Any]) -> None:
+        """Iterations ``pi["done"]`` to the settings' last, each checkpointed (``pi`` is updated in place)."""
+        from .imitation import fit_choices
+        from .line_counterfactual import section_counterfactuals
+
+        s, config, seed = self.s, self.config, self.seed
+        n_episodes, H = s.episodes_per_iteration, config.horizon_steps
+        logger = self._logger(pi["history"])
+        bar = None
+        if self.progress:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=s.iterations * H, initial=pi["done"] * H, desc="policy iteration", unit="step")
+        behaviour: Any = self.advisor if pi["done"] == 0 else LineAgent(self.model.policy, advisor=self.advisor)
+        for it in range(pi["done"], s.iterations):
+            t_it = time.time()
+            seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
+            d = section_counterfactuals(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
+                                        other_rate=s.other_rate, seed=seed + it,
+                                        progress=bar.update if bar is not None else None)
+            t_forks = time.time() - t_it
+            pi["data"].append(d)
+            pooled = {k: np.concatenate([x[k] for x in pi["data"]]) for k in d}
+            fit = fit_choices(self.model, pooled, s.reward_scale, epochs=s.fit_epochs, margin=s.fit_margin,
+                              seed=seed + it)
+            pi["line_steps"] += n_episodes * H
+            pi["fork_steps"] += int(np.sum(H - d["step"]))
+            rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
+                                   "other_choice_cheaper": float(np.mean((d["q_tamp"] < d["q_wait"]) != d["acted"])),
+                                   "fork_seconds": t_forks, "fit_seconds": time.time() - t_it - t_forks, "fit": fit}
+            behaviour = LineAgent(self.model.policy, advisor=self.advisor)
+            _save_line_policy(self.model, self.run_dir / "checkpoints" / f"iteration_{it}.zip", self.meta)
+            if self.baseline is not None:
+                rec["evaluation"] = self._evaluate(behaviour)
+                if rec["evaluation"]["mean_return"] > pi["best"]:
+                    pi["best"] = rec["evaluation"]["mean_return"]
+                    _save_line_policy(self.model, self.run_dir / "best_model.zip", self.meta)
+            _log_iteration(logger, rec)
+            pi["history"].append(rec)
+            pi["done"] = it + 1
+            pi["seconds"] += time.time() - t_it
+            if self.verbose:
+                self._print_iteration(rec, time.time() - t_it)
+            write_json_atomic(self.run_dir / "summary.json", {"iterations": pi["history"]})
+            self._pi_checkpoint(pi)
+        if bar is not None:
+            bar.close()
+        logger.close()
+        if self.baseline is not None and pi["history"] and (self.run_dir / "best_model.zip").exists():
+            self.model = self.AlgoClass.load(str(self.run_dir / "best_model.zip"), env=self.env, device="cpu",
+                                             tensorboard_log=str(self.run_dir))
+
+    def _print_iteration(self, rec: dict[str, Any], seconds: float) -> None:
+        ev, fit = rec.get("evaluation"), rec["fit"]
+        vs = "" if ev is None else (f"; held-out {ev['mean_cost']:.1f} k€, vs {self.baseline.policy} "
+                                    f"{ev['vs_baseline']['mean_difference']:+.1f} "
+                                    f"[{ev['vs_baseline']['ci_low']:+.1f}, {ev['vs_baseline']['ci_high']:+.1f}]")
+        print(f"[iteration {rec['iteration']}] {rec['samples']} decisions priced ({rec['other_choice_cheaper']:.1%} "
+              f"cheaper the other way), fit {fit['weighted_target_share']:.3f}{vs} ({seconds:.0f} s)", flush=True)
+
+    def _ppo_stage(self, pi: dict[str, Any], ckpt: Checkpoint | None) -> dict[str, Any]:
+        """MaskablePPO on the section agents from the best iteration for the settings' line-steps, with the
+        held-out evaluation and periodic checkpoints; continued from ``ckpt`` (a PPO checkpoint) if given."""
         from stable_baselines3.common.callbacks import CallbackList
 
+        s, config = self.s, self.config
+        total = s.total_timesteps * config.n_sections  # SB3 counts a step of every section agent
+        if ckpt is not None:
+            self.model = self.AlgoClass.load(ckpt.model_file(), env=self.env, device="cpu", force_reset=False,
+                                             tensorboard_log=str(self.run_dir))
+            restore_vec_env_state(self.env, ckpt.state["env"])
+            restore_random_states(ckpt.state["random"])  # last: loading the model reseeded them
         callbacks: list[Any] = []
         eval_cb = None
-        if baseline is not None and eval_freq > 0:
+        if self.baseline is not None and s.eval_freq > 0:
             eval_cb = _make_eval_callback(
-                config, list(eval_seeds), eval_freq * config.n_sections, out_dir,
-                lambda m: LineAgent(m.policy, advisor=advisor),
-                lambda m, agent, path: _save_line_policy(m, path, meta), "multibinary", verbose,
-                evaluate_at_start=True, baseline=baseline)
+                config, list(self.eval_seeds or []), s.eval_freq * config.n_sections, self.run_dir,
+                lambda m: LineAgent(m.policy, advisor=self.advisor),
+                lambda m, agent, path: _save_line_policy(m, path, self.meta), "multibinary", self.verbose,
+                evaluate_at_start=ckpt is None, baseline=self.baseline)
+            if ckpt is not None and ckpt.state["evaluation"] is not None:
+                eval_cb.set_state(ckpt.state["evaluation"])
             callbacks.append(eval_cb)
+
+        def save(model: Any) -> None:
+            self._checkpoint({"phase": "ppo", "unit": "iterations", "done": pi["done"], "total": s.iterations,
+                              "ppo_timesteps": int(model.num_timesteps), "ppo_total": total, "finished": False},
+                             {"policy_iteration": pi, "env": vec_env_state(self.env),
+                              "evaluation": eval_cb.get_state() if eval_cb is not None else None})
+
+        if s.checkpoint_every_s > 0:
+            callbacks.append(make_checkpoint_callback(s.checkpoint_every_s, save, at_start=ckpt is None))
+        if self.progress:
+            callbacks.append(make_progress_callback(f"train {s.algo}", unit="section-step"))
         t_ppo = time.time()
-        # SB3 counts a step of every section agent: n_sections per line-step
-        if progress:
-            callbacks.append(make_progress_callback(f"train {algo}", unit="section-step"))
-        model.learn(total_timesteps=total_timesteps * config.n_sections, callback=CallbackList(callbacks),
-                    tb_log_name=algo)
-        ppo = {"line_steps": total_timesteps, "wall_seconds": time.time() - t_ppo,
-               "evaluations": eval_cb.history if eval_cb is not None else []}
-    path = _save_line_policy(model, out_dir / "model.zip", meta)
-    summary = {"iterations": history, "policy_iteration_seconds": wall_pi,
-               "policy_runs_line_steps": line_steps, "fork_segment_steps": fork_steps,
-               # what the physics did per second of the policy iteration: line-steps of the policies' own runs, and
-               # the forks' section-steps counted as line-steps (a line-step is n_sections section-steps)
-               "line_steps_per_second": (line_steps + fork_steps / config.n_sections) / max(wall_pi, 1e-9),
-               "baseline": None if baseline is None else {"policy": baseline.policy, "params": baseline.params,
-                                                          "mean_cost": float(baseline.cost.mean()),
-                                                          "seeds": baseline.seeds.tolist()},
-               "ppo": ppo}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
-    env.close()
-    return path
+        start = int(self.model.num_timesteps) if ckpt is not None else 0
+        self.model.learn(total_timesteps=max(total - start, 0), callback=CallbackList(callbacks), tb_log_name=s.algo,
+                         reset_num_timesteps=ckpt is None)
+        return {"line_steps": s.total_timesteps, "wall_seconds": time.time() - t_ppo,
+                "resumed_from_line_steps": None if ckpt is None else start // config.n_sections,
+                "evaluations": eval_cb.history if eval_cb is not None else []}
+
+    def _summary(self, pi: dict[str, Any], ppo: dict[str, Any] | None) -> dict[str, Any]:
+        b, config = self.baseline, self.config
+        return {"iterations": pi["history"], "policy_iteration_seconds": pi["seconds"],
+                "policy_runs_line_steps": pi["line_steps"], "fork_segment_steps": pi["fork_steps"],
+                # what the physics did per second of the policy iteration: line-steps of the policies' own runs,
+                # and the forks' section-steps counted as line-steps (a line-step is n_sections section-steps)
+                "line_steps_per_second": (pi["line_steps"] + pi["fork_steps"] / config.n_sections)
+                / max(pi["seconds"], 1e-9),
+                "baseline": None if b is None else {"policy": b.policy, "params": b.params,
+                                                    "mean_cost": float(b.cost.mean()), "seeds": b.seeds.tolist()},
+                "ppo": ppo,
+                "checkpoints": {"count": self.checkpoint_count, "seconds": self.checkpoint_seconds,
+                                "bytes": (self.run_dir / CHECKPOINT_FILE).stat().st_size}
+                if self.checkpoint_count else None}
+
+
+def _log_iteration(logger: Any, rec: dict[str, Any]) -> None:
+    """One iteration's record in the policy iteration's logs (step: the iteration)."""
+    if "evaluation" in rec:
+        logger.record("eval/mean_cost", rec["evaluation"]["mean_cost"])
+        logger.record("eval/vs_baseline", rec["evaluation"]["vs_baseline"]["mean_difference"])
+    for k in ("samples", "other_choice_cheaper"):
+        logger.record(f"policy_iteration/{k}", rec[k])
+    logger.record("policy_iteration/target_share", rec["fit"]["target_share"])
+    logger.record("policy_iteration/value_mse", rec["fit"]["value_mse"])
+    logger.dump(rec["iteration"])
 
 
 def export_line_policy(model_zip: str | Path, dest: str | Path = DEFAULT_LINE_PRETRAINED) -> Path:

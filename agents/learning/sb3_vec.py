@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import VectorWrapper
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from trackenv.envs.config import TampingEnvConfig
@@ -188,6 +189,45 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
             return getattr(self, name)
         return getattr(self.venv, name)  # raises AttributeError if neither has it
 
+    # --- checkpoints ---
+    def _ranked_wrapper(self) -> RankedVectorActions | None:
+        env = self.venv
+        while isinstance(env, VectorWrapper):
+            if isinstance(env, RankedVectorActions):
+                return env
+            env = env.env
+        return None
+
+    def get_state(self) -> dict[str, Any] | None:
+        """What a checkpoint needs to continue these envs exactly: each env's snapshot (its episode, generator
+        and last info; :mod:`trackenv.envs.state`) and the ranked actions' section SDs (the wrapper decodes the
+        next counts on them). None where the envs live in worker processes (``workers`` > 1), out of reach of
+        the planning state API. Call after :meth:`reset`."""
+        base = self.venv.unwrapped
+        if not hasattr(base, "get_state"):
+            return None
+        ranked = self._ranked_wrapper()
+        return {"envs": [base.get_state(i) for i in range(self.num_envs)],
+                # the wrapper keeps the last observation's SDs privately; there is no public way to set them
+                "ranked_sd": None if ranked is None else np.array(ranked._sd, copy=True)}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Continue the envs from :meth:`get_state`'s ``state`` (taken from envs of the same config and
+        count): every env resumes its episode where it was, and draws its later episodes from its restored
+        generator."""
+        if len(state["envs"]) != self.num_envs:
+            raise ValueError(f"the state holds {len(state['envs'])} envs, this adapter {self.num_envs}")
+        self.venv.reset()  # the rows and their generators exist; their episodes are replaced below
+        base = self.venv.unwrapped
+        for i, env_state in enumerate(state["envs"]):
+            base.set_state(i, env_state)
+        ranked = self._ranked_wrapper()
+        if (ranked is None) != (state["ranked_sd"] is None):
+            raise ValueError("the state comes from an adapter of another action type")
+        if ranked is not None:
+            ranked._sd = np.array(state["ranked_sd"], copy=True)
+        self._reset_seeds()  # a seed set before would reseed the restored generators at the next reset
+
 
 class VecScaleReward(VecEnvWrapper):
     """Rewards divided by a fixed ``scale`` (> 0) for the learner; :meth:`get_original_reward` gives the last
@@ -294,6 +334,19 @@ class SectionAgentsVecEnv(_OneObjectVecEnv):
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         self.lines.seed(seed)
         return [seed]
+
+    def get_state(self) -> dict[str, Any] | None:
+        """The lines' state (:meth:`TampingSB3VecEnv.get_state`) and their last observation, for a checkpoint;
+        None where the lines' state is out of reach."""
+        lines = self.lines.get_state()
+        if lines is None:
+            return None
+        return {"lines": lines, "line_obs": {k: np.array(v, copy=True) for k, v in self.line_obs.items()}}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Continue the lines from :meth:`get_state`'s ``state``."""
+        self.lines.set_state(state["lines"])
+        self.line_obs = {k: np.array(v, copy=True) for k, v in state["line_obs"].items()}
 
 
 def _unstack_infos(infos: dict, n: int) -> list[dict]:

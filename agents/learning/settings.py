@@ -237,7 +237,8 @@ class TampingSettings(AlgoSettings):
     net_arch: tuple[int, ...] = _layers((64, 64), "hidden layers of the policy and value networks")
     clip_obs: float = _num(10.0, 0.0, open_low=True, doc="VecNormalize's clipping of the normalised observation")
     eval_freq: int = _num(0, 0, 10**12, integer=True, doc="env steps between held-out evaluations (0: none)")
-    checkpoint_every: int = _num(0, 0, 10**12, integer=True, doc="env steps between checkpoints (0: none)")
+    checkpoint_every_s: float = _num(300.0, 0.0, 10**7, doc="seconds of wall clock between checkpoints, taken at "
+                                                            "a roll-out's start (0: none; see checkpoint.py)")
     initial_tamp_logit: float | None = _num(None, -50.0, 50.0, optional=True,
                                             doc="initial log-odds of tamping (None: the network's own)")
     warm_start_rule: str | None = _choice(None, "RULES", optional=True,
@@ -263,9 +264,9 @@ class LineSettings(AlgoSettings):
     net_arch: tuple[int, ...] = _layers((64, 64), "hidden layers of the per-section network")
     reward_scale: float = _num(20.0, 1e-6, 1e9, doc="k€ per section: the value head's and PPO's reward unit")
     eval_freq: int = _num(0, 0, 10**9, integer=True, doc="line-steps between PPO's held-out evaluations")
-    checkpoint_every: int = _num(0, 0, 10**12, integer=True,
-                                 doc="accepted for symmetry with Tamping-v0; the policy iteration saves each "
-                                     "iteration")
+    checkpoint_every_s: float = _num(300.0, 0.0, 10**7,
+                                     doc="the policy iteration's checkpoint follows each iteration; the PPO "
+                                         "stage's comes every this many seconds of wall clock (0: none at all)")
     advisor: str = _choice("grouped-threshold", "RULES", doc="the rule the policy starts from (its choice is a "
                                                              "feature)")
     advisor_params: Mapping[str, Any] | None = _params("the advisor's parameters (None: its tuned ones)")

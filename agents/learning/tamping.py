@@ -15,6 +15,7 @@ training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 import time
@@ -29,6 +30,25 @@ from trackenv.envs.config import TampingEnvConfig
 
 from ..evaluation.harness import evaluate_one
 from .actions import RANKED, env_action_type, ranked_to_sections
+from .checkpoint import (
+    CHECKPOINT_FILE,
+    META_FILE,
+    Checkpoint,
+    capture_random_states,
+    finished_run,
+    make_checkpoint_callback,
+    read_checkpoint,
+    read_run_meta,
+    refuse_on_resume,
+    restore_random_states,
+    restore_vec_env_state,
+    resume_folder,
+    save_model_atomic,
+    start_run_folder,
+    vec_env_state,
+    write_checkpoint,
+    write_json_atomic,
+)
 from .sb3_vec import TampingSB3VecEnv, filter_observation
 from .settings import AlgoSettings, TampingSettings, TrainingSettings
 
@@ -266,10 +286,19 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_polic
                 self.logger.record("eval/vs_baseline", rec["vs_baseline"]["mean_difference"])
             if verbose:
                 print(f"[eval] {rec}", flush=True)
-            (out_dir / "evaluations.json").write_text(json.dumps(self.history, indent=1))
+            write_json_atomic(out_dir / "evaluations.json", self.history)
             if rec["mean_return"] > self.best:
                 self.best = rec["mean_return"]
                 save_policy(self.model, policy, out_dir / "best_model.zip")
+
+        def get_state(self) -> dict[str, Any]:
+            """The bookkeeping a resumed run continues from (for its checkpoint): when it last evaluated, the
+            best mean return so far (its model is ``best_model.zip``) and every evaluation's record."""
+            return {"last_eval": int(self.last_eval), "best": float(self.best), "history": copy.deepcopy(self.history)}
+
+        def set_state(self, state: dict[str, Any]) -> None:
+            self.last_eval, self.best = int(state["last_eval"]), float(state["best"])
+            self.history = copy.deepcopy(state["history"])
 
         def _on_training_start(self) -> None:
             if evaluate_at_start:  # the warm-started policy is a candidate like every later one
@@ -288,10 +317,8 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_polic
 
 
 def _save_policy(model, policy: NormalizedPolicy, zip_path: Path, extra: dict | None = None) -> Path:
-    zip_path = Path(zip_path)
-    model.save(zip_path)
-    stats = {**policy.stats_dict(), **(extra or {})}
-    stats_path(zip_path).write_text(json.dumps(stats))
+    zip_path = save_model_atomic(model, zip_path)  # the best model survives a run killed while saving it
+    write_json_atomic(stats_path(zip_path), {**policy.stats_dict(), **(extra or {})})
     return zip_path
 
 
@@ -302,126 +329,236 @@ def stats_path(zip_path: str | Path) -> Path:
 
 
 # --- training ---
-def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
-          total_timesteps: int | None = None, n_envs: int | None = None, seed: int = DEFAULT_TRAIN_SEED,
-          out_dir: str | Path = "runs/ppo", hyperparams: TampingSettings | dict | str | Path | None = None,
-          progress: bool = True,
-          eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, checkpoint_every: int | None = None,
-          eval_freq: int | None = None, verbose: int = 1, resume: str | Path | None = None,
-          on_evaluation: Callable[[dict], None] | None = None, workers: int = 1) -> Path:
-    """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
-
-    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
-    overriding ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole :class:`TampingSettings`. Explicit
-    arguments (algo, total_timesteps, n_envs, checkpoint_every, eval_freq) that are not None override both.
-    Unknown keys and values out of range raise ValueError (:class:`TampingSettings` lists the fields, their
-    defaults and ranges). ``eval_seeds=None``
-    or ``eval_freq=0`` disables the periodic held-out evaluation; ``on_evaluation(record)`` is called after each
-    (``{"timesteps", "mean_return", "std_return", "eval_seconds"}``; Ray Tune reports it in tune_ppo.py).
-    ``workers`` > 1 steps the training envs in that many processes (the same episodes; see
-    :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
-
-    ``resume``: the output folder of an earlier run: its model, normalisation statistics and hyper-parameters
-    are loaded and trained for ``total_timesteps`` more steps (the step counter continues); use a different
-    ``seed`` so that the continued run sees new episodes. The algorithm's own hyper-parameters (learning rate,
-    n_steps, ...) are those saved with the model; ``hyperparams`` then only changes train()'s keys.
-    """
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    settings = TampingSettings.from_dict(load_hyperparams())
-    if resume is not None:
-        resume = Path(resume)
-        if not (resume / "model.zip").exists() or not (resume / "vecnormalize.pkl").exists():
-            raise FileNotFoundError(f"resume: no model.zip and vecnormalize.pkl in {resume}")
-        earlier = json.loads((resume / "train_meta.json").read_text())
-        settings = settings.updated(earlier["hyperparams"])
-        if config is None:
-            config = earlier["config"]
+def _new_run_settings(algo: str | None, total_timesteps: int | None, n_envs: int | None,
+                      hyperparams: TampingSettings | dict | str | Path | None, checkpoint_every_s: float | None,
+                      eval_freq: int | None) -> TampingSettings:
+    """A new run's settings: the shipped hyper-parameters, ``hyperparams`` over them key by key (or a whole
+    :class:`TampingSettings`), then the explicit arguments that are not None."""
     if isinstance(hyperparams, TampingSettings):
         settings = hyperparams
     else:
         if isinstance(hyperparams, (str, Path)):
             hyperparams = load_hyperparams(hyperparams)
-        settings = settings.updated(hyperparams or {})
+        settings = TampingSettings.from_dict(load_hyperparams()).updated(hyperparams or {})
     explicit = {"algo": algo, "n_envs": n_envs, "total_timesteps": total_timesteps,
-                "checkpoint_every": checkpoint_every, "eval_freq": eval_freq}
-    s = settings = settings.updated({k: v for k, v in explicit.items() if v is not None})
-    algo, n_envs, total_timesteps = s.algo, s.n_envs, s.total_timesteps
-    checkpoint_every, eval_freq, action_type, keep = s.checkpoint_every, s.eval_freq, s.action_type, s.keep_per_sleeper
+                "checkpoint_every_s": checkpoint_every_s, "eval_freq": eval_freq}
+    return settings.updated({k: v for k, v in explicit.items() if v is not None})
+
+
+@dataclass(frozen=True)
+class _Run:
+    """What a training run trains with: its folder, settings, env config, seed and held-out seeds, its
+    ``train_meta.json`` (as written or read) and, resumed, the checkpoint it continues from."""
+
+    run_dir: Path
+    settings: TampingSettings
+    config: TampingEnvConfig
+    seed: int
+    eval_seeds: list[int] | None
+    meta: dict[str, Any]
+    checkpoint: Checkpoint | None = None
+
+
+def _new_run(out_dir: str | Path | None, settings: TampingSettings, config: Any, seed: int | None,
+             eval_seeds: Sequence[int] | None) -> _Run:
+    """A new run in ``out_dir`` (default ``runs/ppo``; refused if it holds an unfinished run)."""
+    run_dir = Path(out_dir) if out_dir is not None else Path("runs/ppo")
+    start_run_folder(run_dir)
     config = TampingEnvConfig.coerce(config)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    AlgoClass = _algo_class(algo)
+    seed = DEFAULT_TRAIN_SEED if seed is None else int(seed)
+    seeds = None if eval_seeds is None else [int(x) for x in eval_seeds]
+    s = settings
+    meta = {"trainer": "sb3", "env_id": DEFAULT_ENV_ID, "algo": s.algo, "action_type": s.action_type,
+            "keep_per_sleeper": s.keep_per_sleeper, "seed": seed, "n_envs": s.n_envs, "hyperparams": s.to_dict(),
+            "config": config.to_dict(), "eval_seeds": seeds, "warm_start": None}
+    return _Run(run_dir, settings, config, seed, seeds, meta)
 
-    single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
-    set_random_seed(seed)
-    raw = TampingSB3VecEnv(n_envs, config, action_type=action_type, keep_per_sleeper=keep, seed=seed,
-                           bootstrap_at_horizon=s.bootstrap_at_horizon, workers=workers)
+
+def _resumed_run(resume: str | Path, out_dir: str | Path | None, total_timesteps: int | None,
+                 checkpoint_every_s: float | None) -> _Run:
+    """The run in ``resume`` as its ``train_meta.json`` and checkpoint describe it, to ``total_timesteps`` (its
+    own total if None) and with ``checkpoint_every_s`` if given."""
+    run_dir = resume_folder(resume, out_dir)
+    meta = read_run_meta(run_dir)
+    ckpt = read_checkpoint(run_dir)
+    total = int(total_timesteps) if total_timesteps is not None else int(ckpt.info["total"])
+    changes: dict[str, Any] = {"total_timesteps": total}
+    if checkpoint_every_s is not None:
+        changes["checkpoint_every_s"] = checkpoint_every_s
+    s = TampingSettings.from_dict(meta["hyperparams"]).updated(changes)
+    return _Run(run_dir, s, TampingEnvConfig.coerce(meta["config"]), int(meta["seed"]), meta["eval_seeds"], meta,
+                ckpt)
+
+
+def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
+          total_timesteps: int | None = None, n_envs: int | None = None, seed: int | None = None,
+          out_dir: str | Path | None = None, hyperparams: TampingSettings | dict | str | Path | None = None,
+          progress: bool = True, eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS,
+          checkpoint_every_s: float | None = None, eval_freq: int | None = None, verbose: int = 1,
+          resume: str | Path | None = None, on_evaluation: Callable[[dict], None] | None = None,
+          workers: int = 1) -> Path:
+    """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
+
+    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
+    overriding ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole :class:`TampingSettings`. Explicit
+    arguments (algo, total_timesteps, n_envs, checkpoint_every_s, eval_freq) that are not None override both.
+    Unknown keys and values out of range raise ValueError (:class:`TampingSettings` lists the fields, their
+    defaults and ranges). ``seed`` (default :data:`DEFAULT_TRAIN_SEED`): env i starts with ``seed + i``.
+    ``out_dir`` defaults to ``runs/ppo``. ``eval_seeds=None`` or ``eval_freq=0`` disables the periodic held-out
+    evaluation; ``on_evaluation(record)`` is called after each (``{"timesteps", "mean_return", "std_return",
+    "eval_seconds"}``; Ray Tune reports it in tune_ppo.py). ``workers`` > 1 steps the training envs in that
+    many processes (the same episodes; see :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+
+    Checkpoints (:mod:`.checkpoint`): every ``checkpoint_every_s`` seconds of wall clock (default 300; 0: none)
+    at the start of a roll-out, when training starts and when it ends, ``out_dir/checkpoint.zip`` holds the
+    model, the VecNormalize statistics, the envs' states, the random generators, the step count and the
+    best-model bookkeeping. ``resume``: the folder of a run (killed, or finished) to continue *in place* from
+    its checkpoint, with the settings, config, seeds and held-out seeds it was started with (so algo, config,
+    n_envs, seed, hyperparams and eval_freq must be None; ``eval_seeds`` is the run's own), up to its own total
+    or to ``total_timesteps`` if given (a new total: a finished run goes on). A finished run with nothing left
+    returns its model at once. With ``workers`` == 1 the resumed run takes the very steps the uninterrupted run
+    would have; with ``workers`` > 1 the envs' episodes in progress are out of reach, so the resumed run starts
+    new ones (seeded from ``seed`` and the step count). A new run refuses a folder that holds an unfinished run.
+    """
     if resume is not None:
-        env = VecNormalize.load(str(resume / "vecnormalize.pkl"), VecMonitor(raw))
-        env.training = True
-        model = AlgoClass.load(str(resume / "model.zip"), env=env, device="cpu", tensorboard_log=str(out_dir),
-                               verbose=verbose)
-        model.set_random_seed(seed)
+        refuse_on_resume(Path(resume), algo=algo, config=config, n_envs=n_envs, seed=seed, hyperparams=hyperparams,
+                         eval_freq=eval_freq)
+        run = _resumed_run(resume, out_dir, total_timesteps, checkpoint_every_s)
+        assert run.checkpoint is not None
+        info, total = run.checkpoint.info, run.settings.total_timesteps
+        finished = finished_run(run.run_dir, info, total)
+        if finished is not None:
+            if verbose:
+                print(f"[resume] {run.run_dir} is finished ({info['done']} of {total} timesteps): {finished}",
+                      flush=True)
+            return finished
+        if total < info["done"]:
+            raise ValueError(f"total_timesteps must be at least the {info['done']} timesteps {run.run_dir} has "
+                             f"done, got {total}")
     else:
-        env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=s.clip_obs, gamma=s.gamma)
-        policy_kwargs = {"net_arch": list(s.net_arch)}
-        model = AlgoClass("MultiInputPolicy", env, seed=seed, tensorboard_log=str(out_dir), verbose=verbose,
-                          policy_kwargs=policy_kwargs, device="cpu", **s.algo_kwargs())
-        if s.initial_tamp_logit is not None:
-            _set_initial_tamp_logit(model, s.initial_tamp_logit, action_type)
-    warm = None
-    if resume is None and s.warm_start_rule:
-        from .imitation import warm_start
+        settings = _new_run_settings(algo, total_timesteps, n_envs, hyperparams, checkpoint_every_s, eval_freq)
+        run = _new_run(out_dir, settings, config, seed, eval_seeds)
+    return _train_run(run, progress, verbose, on_evaluation, workers)
 
-        t_warm = time.time()
-        warm = warm_start(model, env, config, action_type, s.warm_start_rule, n_episodes=s.warm_start_episodes,
-                          epochs=s.warm_start_epochs, gamma=s.gamma, label_smoothing=s.warm_start_label_smoothing,
-                          params=None if s.warm_start_params is None else dict(s.warm_start_params), seed=seed)
-        warm["wall_seconds"] = time.time() - t_warm
-        if verbose:
-            print(f"[warm start] {warm}", flush=True)
 
-    callbacks = []
-    if checkpoint_every > 0:
-        callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // n_envs, 1),
-                                            save_path=str(out_dir / "checkpoints"), name_prefix="model",
-                                            save_vecnormalize=True))
+def _train_run(run: _Run, progress: bool, verbose: int, on_evaluation: Callable[[dict], None] | None,
+               workers: int) -> Path:
+    """Build the envs and the model (new, or from the run's checkpoint), train to the total with the held-out
+    evaluation and the checkpoints, save the final artefacts (see :func:`train`)."""
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    s, run_dir, ckpt = run.settings, run.run_dir, run.checkpoint
+    single_torch_thread()  # the physics (numba) wants the cores; the small MLP does not
+    raw = TampingSB3VecEnv(s.n_envs, run.config, action_type=s.action_type, keep_per_sleeper=s.keep_per_sleeper,
+                           seed=None if ckpt is not None else run.seed, bootstrap_at_horizon=s.bootstrap_at_horizon,
+                           workers=workers)
+    env = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=s.clip_obs, gamma=s.gamma)
+    if ckpt is not None:
+        model = _algo_class(s.algo).load(ckpt.model_file(), env=env, device="cpu", force_reset=False,
+                                         tensorboard_log=str(run_dir), verbose=verbose)
+        _restore_training_state(model, env, raw, ckpt, run.seed)
+        warm = None
+    else:
+        model = _new_model(run, env, verbose)
+        write_json_atomic(run_dir / META_FILE, run.meta)
+        warm = _warm_start(model, env, run.config, s, run.seed, verbose)
+        if warm is not None:
+            write_json_atomic(run_dir / META_FILE, {**run.meta, "warm_start": warm})
+
+    callbacks: list[Any] = []
     eval_cb = None
-    if eval_seeds and eval_freq > 0:
+    if run.eval_seeds and s.eval_freq > 0:
         def make_policy(model) -> NormalizedPolicy:
             return NormalizedPolicy.from_vecnormalize(model, model.get_vec_normalize_env(), raw.obs_keys,
-                                                      algo=algo, action_type=action_type)
+                                                      algo=s.algo, action_type=s.action_type)
 
-        eval_cb = _make_eval_callback(config, list(eval_seeds), eval_freq, out_dir, make_policy, _save_policy,
-                                      action_type, verbose, evaluate_at_start=warm is not None,
+        eval_cb = _make_eval_callback(run.config, run.eval_seeds, s.eval_freq, run_dir, make_policy, _save_policy,
+                                      s.action_type, verbose, evaluate_at_start=warm is not None,
                                       on_evaluation=on_evaluation)
+        if ckpt is not None and ckpt.state["evaluation"] is not None:
+            eval_cb.set_state(ckpt.state["evaluation"])
         callbacks.append(eval_cb)
-    meta = {"algo": algo, "action_type": action_type, "keep_per_sleeper": keep, "seed": seed,
-            "n_envs": n_envs, "hyperparams": s.to_dict(), "config": config.to_dict(),
-            "resumed_from": str(resume) if resume is not None else None, "warm_start": warm}
-    (out_dir / "train_meta.json").write_text(json.dumps(meta, indent=1, default=str))
+
+    def save_checkpoint(model, finished: bool = False) -> None:
+        state = {"random": capture_random_states(), "env": vec_env_state(env),
+                 "evaluation": eval_cb.get_state() if eval_cb is not None else None}
+        write_checkpoint(run_dir, {"trainer": "sb3", "unit": "timesteps", "done": int(model.num_timesteps),
+                                   "total": s.total_timesteps, "finished": finished}, state, model)
+
+    ckpt_cb = None
+    if s.checkpoint_every_s > 0:
+        ckpt_cb = make_checkpoint_callback(s.checkpoint_every_s, save_checkpoint, at_start=ckpt is None)
+        callbacks.append(ckpt_cb)
+    if progress:
+        callbacks.append(make_progress_callback(f"train {s.algo}"))
 
     t0 = time.time()
     start_steps = int(model.num_timesteps)
-    if progress:
-        callbacks.append(make_progress_callback(f"train {algo}"))
-    model.learn(total_timesteps=total_timesteps, callback=CallbackList(callbacks), tb_log_name=algo,
-                reset_num_timesteps=resume is None)
+    model.learn(total_timesteps=max(s.total_timesteps - start_steps, 0), callback=CallbackList(callbacks),
+                tb_log_name=s.algo, reset_num_timesteps=ckpt is None)
     wall = time.time() - t0
-    env.save(str(out_dir / "vecnormalize.pkl"))
-    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=algo, action_type=action_type)
-    path = _save_policy(model, policy, out_dir / "model.zip",
-                        {"action_type": action_type, "config": config.to_dict()})
-    summary = {"timesteps": int(model.num_timesteps), "timesteps_this_run": int(model.num_timesteps) - start_steps,
-               "wall_seconds": wall,
-               "steps_per_second": (model.num_timesteps - start_steps) / max(wall, 1e-9),
-               "warm_start": warm, "evaluations": eval_cb.history if eval_cb is not None else []}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
+    env.save(str(run_dir / "vecnormalize.pkl"))
+    policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=s.algo, action_type=s.action_type)
+    path = _save_policy(model, policy, run_dir / "model.zip",
+                        {"action_type": s.action_type, "config": run.config.to_dict()})
+    checkpoints = None
+    if ckpt_cb is not None:
+        t_final = time.monotonic()
+        save_checkpoint(model, finished=True)  # last: a resume of this folder finds the run finished
+        checkpoints = {"every_s": s.checkpoint_every_s, "count": ckpt_cb.count + 1,
+                       "seconds": ckpt_cb.seconds + time.monotonic() - t_final,
+                       "bytes": (run_dir / CHECKPOINT_FILE).stat().st_size}
+    steps = int(model.num_timesteps)
+    summary = {"timesteps": steps, "timesteps_this_run": steps - start_steps,
+               "resumed_from_timesteps": start_steps if ckpt is not None else None, "wall_seconds": wall,
+               "steps_per_second": (steps - start_steps) / max(wall, 1e-9),
+               "warm_start": warm if ckpt is None else run.meta.get("warm_start"),
+               "evaluations": eval_cb.history if eval_cb is not None else [], "checkpoints": checkpoints}
+    write_json_atomic(run_dir / "summary.json", summary)
     env.close()
     return path
+
+
+def _new_model(run: _Run, env, verbose: int):
+    """A new run's model, seeded from the run's seed (and the global generators with it, as SB3 does)."""
+    from stable_baselines3.common.utils import set_random_seed
+
+    s = run.settings
+    set_random_seed(run.seed)
+    model = _algo_class(s.algo)("MultiInputPolicy", env, seed=run.seed, tensorboard_log=str(run.run_dir),
+                                verbose=verbose, policy_kwargs={"net_arch": list(s.net_arch)}, device="cpu",
+                                **s.algo_kwargs())
+    if s.initial_tamp_logit is not None:
+        _set_initial_tamp_logit(model, s.initial_tamp_logit, s.action_type)
+    return model
+
+
+def _warm_start(model, env, config: TampingEnvConfig, s: TampingSettings, seed: int, verbose: int) -> dict | None:
+    """The behaviour-cloning warm start of a new run (:func:`~.imitation.warm_start`), if the settings ask for
+    one; its summary with its wall time."""
+    if not s.warm_start_rule:
+        return None
+    from .imitation import warm_start
+
+    t_warm = time.time()
+    warm = warm_start(model, env, config, s.action_type, s.warm_start_rule, n_episodes=s.warm_start_episodes,
+                      epochs=s.warm_start_epochs, gamma=s.gamma, label_smoothing=s.warm_start_label_smoothing,
+                      params=None if s.warm_start_params is None else dict(s.warm_start_params), seed=seed)
+    warm["wall_seconds"] = time.time() - t_warm
+    if verbose:
+        print(f"[warm start] {warm}", flush=True)
+    return warm
+
+
+def _restore_training_state(model, env, raw: TampingSB3VecEnv, ckpt: Checkpoint, seed: int) -> None:
+    """Put a checkpoint's envs, statistics and random generators back under a model loaded from it, so that the
+    next roll-out starts where the checkpointed run's did. Where the envs' states were out of reach (workers >
+    1), new episodes start instead, seeded from ``seed`` and the step count, apart from the run's first ones."""
+    if not restore_vec_env_state(env, ckpt.state["env"]):
+        raw.seed(seed + raw.num_envs + int(model.num_timesteps))
+        model._last_obs = None  # learn() resets the envs, with these seeds
+    restore_random_states(ckpt.state["random"])  # last: loading the model reseeded them
 
 
 def _set_initial_tamp_logit(model, logit: float, action_type: str) -> None:

@@ -13,6 +13,8 @@ section-level Dict observation) and ``trackenv/TampingRankedFlat-v1`` (the same 
 observation: RLlib's and CleanRL's default encoders). Each has a native vector entry point
 (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add ``workers=N`` for the same envs in N
 processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+:func:`~trackenv.envs.multiagent.line_parallel_env` poses any of them as a PettingZoo ``ParallelEnv`` with one
+agent per section (the ``multiagent`` extra).
 
 Every env has the planning state API (:mod:`trackenv.envs.state`): ``get_state()`` / ``set_state(state)``, and
 per row on the native vector envs.
@@ -22,6 +24,7 @@ from gymnasium.envs.registration import register, registry
 
 from .line import TampingLine, TampingLineVectorEnv
 from .line_config import SCENARIOS, LineConfig, scenario
+from .multiagent import line_parallel_env
 from .problems import make_vector_env, problem_config
 from .state import EnvState
 from .tamping import TampingEnv
@@ -48,4 +51,4 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
 __all__ = ["SCENARIOS", "EnvState", "LineConfig", "TampingEnv", "TampingLine", "TampingLineVectorEnv",
-           "TampingVectorEnv", "make_vector_env", "problem_config", "scenario"]
+           "TampingVectorEnv", "line_parallel_env", "make_vector_env", "problem_config", "scenario"]

@@ -55,7 +55,7 @@ def test_warm_started_policy_acts_like_its_teacher(tmp_path, action_type, small_
           "warm_start_label_smoothing": 0.1}
     path = train("ppo", small_coarse_config, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run",
                  hyperparams=hp,
-                 progress=False, eval_seeds=[5, 6], eval_freq=1000, checkpoint_every=0, verbose=0)
+                 progress=False, eval_seeds=[5, 6], eval_freq=1000, checkpoint_every_s=0, verbose=0)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     warm = summary["warm_start"]
     assert warm["episodes"] >= 8 and warm["accuracy"] == 1.0

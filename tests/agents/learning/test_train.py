@@ -151,7 +151,7 @@ def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path, small_config):
           "net_arch": [32, 32], "gamma": 0.5, "action_type": "discrete", "keep_per_sleeper": False,
           "warm_start_rule": None}  # learning from scratch, not from a rule
     path = train("ppo", cfg, total_timesteps=384, n_envs=8, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
-                 progress=False, eval_seeds=None, checkpoint_every=0, eval_freq=0, verbose=0)
+                 progress=False, eval_seeds=None, checkpoint_every_s=0, eval_freq=0, verbose=0)
     assert path.exists() and stats_path(path).exists()
     assert (tmp_path / "run" / "vecnormalize.pkl").exists()
     seeds = list(range(100, 108))
@@ -170,7 +170,7 @@ def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config, 
     hp = {"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16], "action_type": "ranked",
           "keep_per_sleeper": False, "initial_tamp_logit": -2.0, "warm_start_rule": None}
     path = train("ppo", cfg, total_timesteps=16, n_envs=2, seed=0, out_dir=tmp_path / "run", hyperparams=hp,
-                 progress=True, eval_seeds=[5], eval_freq=8, checkpoint_every=0, verbose=0)
+                 progress=True, eval_seeds=[5], eval_freq=8, verbose=0)
     # the progress bar (tqdm; stable-baselines3's own needs rich, which is not installed) ran to its end
     assert "16/16" in capsys.readouterr().err
     policy = load_trained(path)
@@ -183,16 +183,18 @@ def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config, 
     assert not np.any(action)
     evaluations = json.loads((tmp_path / "run" / "evaluations.json").read_text())
     assert evaluations and evaluations[-1]["timesteps"] >= 16
-    # continue the run: same hyper-parameters and config, the step counter goes on
-    more = train(total_timesteps=16, seed=1, out_dir=tmp_path / "more", progress=False, eval_seeds=None,
-                 checkpoint_every=0, verbose=0, resume=tmp_path / "run")
-    summary = json.loads((tmp_path / "more" / "summary.json").read_text())
-    assert summary["timesteps"] >= 32 and summary["timesteps_this_run"] >= 16
+    # the finished run goes on in place to a new total: same hyper-parameters, config and held-out seeds, the step
+    # counter continues from the run's final checkpoint
+    more = train(total_timesteps=32, progress=False, verbose=0, resume=tmp_path / "run")
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert more == path and summary["resumed_from_timesteps"] == 16
+    assert summary["timesteps"] == 32 and summary["timesteps_this_run"] == 16
+    assert [e["timesteps"] for e in json.loads((tmp_path / "run" / "evaluations.json").read_text())] == [8, 16, 24, 32]
     assert load_trained(more).action_type == "ranked"
-    meta = json.loads((tmp_path / "more" / "train_meta.json").read_text())
+    meta = json.loads((tmp_path / "run" / "train_meta.json").read_text())
     assert meta["config"]["track_length_m"] == cfg.track_length_m and meta["hyperparams"]["n_steps"] == 8
     with pytest.raises(FileNotFoundError, match="resume"):
-        train(total_timesteps=8, out_dir=tmp_path / "x", resume=tmp_path / "missing", progress=False)
+        train(total_timesteps=8, resume=tmp_path / "missing", progress=False)
 
 
 @pytest.mark.skipif(not DEFAULT_PRETRAINED.exists(), reason="no shipped policy")
