@@ -18,10 +18,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
+DEFAULT_ENV_ID = "trackenv/Tamping-v1"  # the SB3 trainer's env (= trackenv_agents.learning.tamping.DEFAULT_ENV_ID)
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
 # = trackenv_agents.learning.line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
 LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "ppo_tamping_line.zip"
@@ -142,10 +142,9 @@ def _one_step_of_each_problem() -> None:
     kernel (the settlement solver, the D1 filter) is compiled, or loaded from numba's cache, by the same types."""
     import numpy as np
 
-    from trackenv.envs import TampingEnvConfig, make_vector_env, scenario
+    from trackenv.envs import make_vector_env, scenario
 
-    for config in (TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=0.25),
-                   scenario("small", horizon_years=0.25)):
+    for config in (scenario("track60", horizon_years=0.25), scenario("small", horizon_years=0.25)):
         env = make_vector_env(config, 1)
         env.reset(seed=0)
         env.step(np.ones((1, config.n_sections), dtype=np.int8))
@@ -237,8 +236,8 @@ def cmd_train_line(args: argparse.Namespace) -> int:
     """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
     --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
     if args.algo:
-        raise UsageError("--algo is for Tamping-v0; the line's learner reads its algorithm from the hyper-parameter "
-                         "file")
+        raise UsageError("--algo is for the 60 m track (Tamping-v1); the line's learner reads its algorithm from the "
+                         "hyper-parameter file")
     from .evaluation.line_compare import scenario_of
     from .learning.line import train_line
 
@@ -302,7 +301,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     _existing(args.resume, "--resume", folder=True)
     if args.resume is not None:
         return cmd_train_resume(args)
-    if args.env is not None and args.env != "trackenv/Tamping-v0":
+    if args.env is not None and args.env != DEFAULT_ENV_ID:
         return cmd_train_line(args)
     if args.iterations is not None:
         raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
@@ -364,7 +363,7 @@ def _hyperparam_defaults() -> dict[str, Any]:
     try:
         import yaml
 
-        entry = yaml.safe_load(HYPERPARAMS_FILE.read_text())["trackenv/Tamping-v0"]
+        entry = yaml.safe_load(HYPERPARAMS_FILE.read_text())[DEFAULT_ENV_ID]
         return {"algo": (entry.get("trackenv") or {}).get("algo", "ppo"),
                 "total_timesteps": entry.get("n_timesteps", "n/a"), "n_envs": entry.get("n_envs", "n/a")}
     except Exception:  # pragma: no cover - a broken install; the help still answers
@@ -475,7 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "hyper-parameter file's, 300); the line's policy iteration keeps one after each iteration")
     sp.add_argument("--resume", default=None, metavar="DIR",
                     help="continue the run in DIR (killed, or finished) from its last checkpoint with the settings it "
-                         "was started with; Tamping-v0: --timesteps sets a new total")
+                         "was started with; the 60 m track: --timesteps sets a new total")
     sp.add_argument("--hyperparams", default=None, metavar="FILE",
                     help="YAML (RL Zoo form) or flat JSON overriding agents/learning/hyperparams/ppo.yml key by key")
     sp.add_argument("--env", default=None, metavar="ID",

@@ -210,9 +210,9 @@ def _action_types() -> tuple[str, ...]:
 
 
 def _tamping_rules() -> tuple[str, ...]:
-    from ..rules.tamping import HEURISTICS
+    from ..rules.line import LINE_HEURISTICS
 
-    return tuple(sorted(HEURISTICS))
+    return tuple(sorted(LINE_HEURISTICS))
 
 
 def _line_rules() -> tuple[str, ...]:
