@@ -234,6 +234,7 @@ def test_other_law_runs() -> None:
     assert np.all(h.settlement[1] > h.settlement[0])
 
 
+@pytest.mark.parametrize("vehicle", ["wheelset", "car"])
 def test_pass_ending_after_the_evaluated_zone_gives_the_full_pass_forces(vehicle: str) -> None:
     """A pass ends EXIT_RUN_OUT_BAYS bays after the last axle left the evaluated zone: every evaluated
     sleeper's peak force and the contact-force profile are those of a pass to the end of the track, bit for
