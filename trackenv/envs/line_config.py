@@ -17,12 +17,16 @@ from typing import Any
 
 import numpy as np
 
-from ..physics._checks import check_bool, check_choice, check_field, check_int_field
-from ..physics.timestep import check_dt_option
+from ..physics._checks import check_bool, check_choice, check_field, check_int_field, check_time_steps
+from ..physics.contact import HertzContact
+from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
+from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 from .config import ConfigBase, bounded_by, check_range_field
 
 SLEEPER_SPACING_M = 0.6
+#: sleepers of the approach (and of the exit) zone added to each end of a segment in its passes
+APPROACH_SLEEPERS = 10
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
 
@@ -206,6 +210,22 @@ class LineConfig(ConfigBase):
         ci("min_steps_between_tampings", low=0, high=100)
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
         object.__setattr__(self, "dt", check_dt_option(self.dt))
+        self._check_pass_time_steps()
+
+    def _check_pass_time_steps(self) -> None:
+        """The dynamics' own bound on the time steps of a pass (``MAX_TIME_STEPS``), read here so that the config
+        refuses what a step could not simulate: each vehicle type's pass over a segment runs from the vehicle's
+        span to the end of the modelled track (:meth:`pass_length_m`); with dt="auto" a pass that loses contact
+        is rerun at the reference step, so the finer of the two counts."""
+        track = Track.realistic(30.0)  # the sleeper spacing and supports the auto step reads
+        for vehicle in self.vehicles():
+            system = vehicle.system()
+            finest = (min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+                      if isinstance(self.dt, str) else self.dt)
+            try:
+                check_time_steps(self.pass_length_m(system.span), self.speed, finest)
+            except ValueError as e:
+                raise ValueError(f"segment_length_m, speed_kmh and dt: {e}") from None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -240,6 +260,12 @@ class LineConfig(ConfigBase):
     @property
     def horizon_steps(self) -> int:
         return int(round(self.horizon_years * self.steps_per_year))
+
+    def pass_length_m(self, span_m: float = 0.0) -> float:
+        """How far the leading axle of a vehicle of axle span ``span_m`` [m] travels in a pass over a segment [m]:
+        from the span to the end of the modelled track, the segment with :data:`APPROACH_SLEEPERS` sleepers
+        more at each end (a wheelset has no span)."""
+        return (self.n_sleepers - 1 + 2 * APPROACH_SLEEPERS) * SLEEPER_SPACING_M - span_m
 
     @property
     def section_tamping_cost(self) -> float:

@@ -39,10 +39,9 @@ from .common import SHARED_BOUNDS, clip_observation
 from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
 from .info import step_info
-from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
+from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
-APPROACH_SLEEPERS = 10
 
 
 def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
