@@ -109,6 +109,8 @@ class TampingLine(TrackEnv):
 
     The true state is in ``info``: ``section_sd_m``, ``section_peak_m``, ``section_class`` (0 OK, 1 alert,
     2 intervention, 3 immediate action, EN 13848-5 style at 100 km/h), ``wet_spot_active``, ``rate_factor``.
+    A value beyond its bound is clipped in the observation, never silently: ``info["observation_clipped"]``
+    counts them.
     ``info["section_costs"]``: each section's own costs of the step (k€: its tamping or renewal, geometry,
     speed restriction, immediate action); with the line's possession they add up to the step's cost (a
     learner can credit each section's choice with its own costs).
@@ -145,7 +147,7 @@ class TampingLine(TrackEnv):
     arrays, as ``SyncVectorEnv`` gives it, where it was an object array of per-line dicts); the settlement's
     Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
     no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance);
-    ``info["section_costs"]``.
+    ``info["section_costs"]``; ``info["observation_clipped"]``.
     """
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
