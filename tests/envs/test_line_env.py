@@ -256,15 +256,17 @@ def test_config_validation_and_scenarios():
     ("law", "linear", r"law must be one of"),
 ])
 def test_line_config_refuses_bad_values_by_name(field, value, message):
-    """LineConfig checks its fields with the same mechanism as TampingEnvConfig: one line naming the field and
-    what is allowed."""
+    """LineConfig checks its fields with the one mechanism of trackenv.physics._checks: one line naming the field
+    and what is allowed."""
     with pytest.raises(ValueError, match=message):
         LineConfig(**{field: value})
 
 
 def test_line_config_stores_fields_in_their_canonical_types():
-    c = LineConfig(n_sections=np.int64(6), capacity=3, annual_mgt=15, initial_scale=[0.5, 1])
+    c = LineConfig(n_sections=np.int64(6), capacity=3, annual_mgt=15, initial_scale=[0.5, 1],
+                   speed_kmh=np.float32(80.0))
     assert type(c.n_sections) is int and type(c.annual_mgt) is float and c.initial_scale == (0.5, 1.0)
+    assert type(c.speed_kmh) is float and c.speed_kmh == 80.0
 
 
 def test_episode_end_and_reset_arguments_are_enforced():
