@@ -149,6 +149,7 @@ class LineConfig(ConfigBase):
     limits: tuple = ()
     dt: float | str = "auto"
 
+    agent_action_types = ("multibinary", "discrete", "ranked")
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
     _CAMPAIGN_COST_FIELD = "possession_cost"
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("speed_restriction", 2, "speed_restriction_cost"),
