@@ -108,7 +108,8 @@ class UniformPeriodic(LineHeuristic):
 
     def _act(self, obs):
         S = obs["section_sd"].shape[1]
-        t = self._step(obs) - self._steps(self.params["offset_years"]) + 1
+        # steps since the offset; not _steps, whose floor of one step is for intervals (an offset may be 0)
+        t = self._step(obs) - int(round(self.params["offset_years"] * self.steps_per_year))
         phase = np.mod(t, self._steps(self.params["interval_years"]))
         chunk = np.arange(S) // self.capacity
         return (t[:, None] >= 0) & (chunk[None, :] == phase[:, None])
