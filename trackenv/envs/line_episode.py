@@ -59,7 +59,7 @@ def _lsq_line(z: np.ndarray) -> np.ndarray:
 #: The per-segment arrays of :class:`LineBatch` (leading axis: segment), and those indexed (step, segment).
 _ROW_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "count", "tampings", "register", "wet_onset",
                "wet_mask", "wet_active", "last_tamped", "measured_sd", "measured_peak", "measured_level",
-               "contact_force", "d1", "sd", "peak", "sd_after_tamping")
+               "contact_force", "d1", "sd", "peak", "sd_after_tamping", "traffic_factor")
 _ROW_NOISE = ("tamp_noise", "meas_noise")
 
 
@@ -164,6 +164,7 @@ class LineBatch:
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
         self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
+        self.traffic_factor = np.ones(G)  # factor on the axle passes per row (a line file's per-section traffic)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -287,6 +288,53 @@ class LineBatch:
         u0 = self.rate()[r] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
         self.u[r] = u0
         self.cyc[r] = np.broadcast_to(cycles[:, None], (S, n))
+        self._apply_line_file(b)
+
+    def _apply_line_file(self, b: int) -> None:
+        """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
+        the drawn values (:func:`~trackenv.envs.line_fit.line_overrides`): the register, with its zones' rate
+        and stiffness (the statics rebuilt where they change); known wet zones (the drawn patch, wet from the
+        start instead of hidden); the per-section traffic factor, tampings since renewal and years since tamping
+        with the settlement since (as above); the rate factor the file gives or its history fits, in place of
+        the drawn section factor; and the SD the history gives at the start (the drawn shape and settlement
+        scaled to it: :func:`~trackenv.envs.line_fit.start_levels`).
+        Everything is drawn first, as without a file, so the draws and their order do not change."""
+        c = self.config
+        if c.line is None:
+            return
+        from .line_fit import drawn_section_factor, line_overrides, start_levels, zone_factors
+
+        o, r, S, n = line_overrides(c), self.rows(b), c.n_sections, c.n_sleepers
+        old_rate, old_k = zone_factors(self.register[r], n, c)
+        new_rate, new_k = zone_factors(o.register, n, c)
+        drawn = drawn_section_factor(self.base_rate[r] / old_rate, c)
+        factor = np.where(np.isnan(o.rate_factor), drawn, o.rate_factor)
+        rate = self.base_rate[r] / old_rate * new_rate * (factor / drawn)[:, None]
+        rate[o.wet] *= np.where(self.wet_mask[r][o.wet], c.wet_spot_rate_factor, 1.0)
+        self.base_rate[r] = rate
+        self.wet_onset[r] = np.where(o.wet, -1, self.wet_onset[r])
+        self.wet_active[r] = o.wet
+        base = Track.realistic(c.segment_length_m)
+        for j in np.flatnonzero((old_k != new_k).any(axis=1)):
+            model = self.model_tracks[r.start + j]
+            first = (model.n_sleepers - n) // 2
+            stiffness = model.ballast_stiffness[first : first + n] / old_k[j] * new_k[j]
+            sim = TrackDegradation(base.replace(ballast_stiffness=stiffness), self.vehicles[0], law=self.law,
+                                   feedback="support", approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
+            self.model_tracks[r.start + j] = sim.model_track
+            self.influence[r.start + j] = sim.support_influence
+        self.register[r] = o.register
+        self.traffic_factor[r] = o.traffic_factor
+        self.count[r] = o.tampings_since_renewal
+        self.last_tamped[r] = -np.round(o.years_since_tamping * c.steps_per_year)
+        cycles = o.years_since_tamping * c.steps_per_year * self.passes.sum() * o.traffic_factor
+        f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # as above
+        self.u[r] = self.rate()[r] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
+        self.cyc[r] = np.broadcast_to(cycles[:, None], (S, n))
+        known = np.flatnonzero(~np.isnan(o.start_sd_m))
+        rows = r.start + known
+        self.offset[rows], self.u[rows] = start_levels(self.offset[rows], self.u[rows],
+                                                       o.sd_after_tamping_m[known], o.start_sd_m[known])
 
     def _equivalent(self, forces: np.ndarray) -> np.ndarray:
         """Equivalent force of the traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, ...)."""
@@ -319,7 +367,8 @@ class LineBatch:
         among others (:class:`~trackenv.envs.line.TampingLineVectorEnv`), and a section's cost depends only on
         its own schedule (the hindsight search relies on that)."""
         self.u[rows], self.cyc[rows] = implicit_settlement_step(
-            self.law, self.u[rows], self.cyc[rows], self.rate()[rows], force, self.influence[rows], cycles,
+            self.law, self.u[rows], self.cyc[rows], self.rate()[rows], force, self.influence[rows],
+            cycles * self.traffic_factor[rows],
             band=force.shape[1],  # segments are short: the full Jacobian, as the line's calibration was run
         )
 
