@@ -295,23 +295,23 @@ class LineBatch:
         the drawn values (:func:`~trackenv.envs.line_fit.line_overrides`): the register, with its zones' rate
         and stiffness (the statics rebuilt where they change); known wet zones (the drawn patch, wet from the
         start instead of hidden); the per-section traffic factor, tampings since renewal and years since tamping
-        with the settlement since (as above); the rate factor the file gives or its history fits, in place of
-        the drawn section factor; and the SD the history gives at the start (the drawn shape and settlement
-        scaled to it: :func:`~trackenv.envs.line_fit.start_levels`).
+        with the settlement since (as above); the rate factor the file gives, or a draw from its posterior given
+        the history (:func:`~trackenv.envs.line_fit.rate_multipliers`), in place of the drawn one; and the SD the
+        history gives at the start (the drawn shape and settlement scaled to it:
+        :func:`~trackenv.envs.line_fit.start_levels`).
         Everything is drawn first, as without a file, so the draws and their order do not change."""
         c = self.config
         if c.line is None:
             return
-        from .line_fit import drawn_section_factor, line_overrides, start_levels, zone_factors
+        from .line_fit import drawn_section_factor, line_overrides, rate_multipliers, start_levels, zone_factors
 
         o, r, S, n = line_overrides(c), self.rows(b), c.n_sections, c.n_sleepers
         old_rate, old_k = zone_factors(self.register[r], n, c)
         new_rate, new_k = zone_factors(o.register, n, c)
         drawn = drawn_section_factor(self.base_rate[r] / old_rate, c)
-        factor = np.where(np.isnan(o.rate_factor), drawn, o.rate_factor)
-        rate = self.base_rate[r] / old_rate * new_rate * (factor / drawn)[:, None]
+        rate = self.base_rate[r] / old_rate * new_rate
         rate[o.wet] *= np.where(self.wet_mask[r][o.wet], c.wet_spot_rate_factor, 1.0)
-        self.base_rate[r] = rate
+        self.base_rate[r] = rate * rate_multipliers(o, drawn, rate, c)[:, None]
         self.wet_onset[r] = np.where(o.wet, -1, self.wet_onset[r])
         self.wet_active[r] = o.wet
         base = Track.realistic(c.segment_length_m)

@@ -9,11 +9,11 @@ hashable (tuples), so a :class:`~trackenv.envs.line_config.LineConfig` carries i
 keep working. The schema, with units, is on the documentation's page "Lines from files" and in
 :data:`LINE_KEYS`, :data:`SECTION_COLUMNS` and :data:`HISTORY_COLUMNS`.
 
-The files are in the units a railway uses (m, mm, MGT a year, km/h, years); the description holds SI values
-where the unit is not in the name (``sd_m``). Every fault in a file raises :class:`LineFileError`, a
-``ValueError`` whose text is one line naming the file, the row and the field, and what is allowed: a command
-line prints it and exits with status 2. A misspelled key or column is an error (with the closest known name),
-never a silent default; YAML is read with ``yaml.safe_load`` only.
+The files are in the units a railway uses (m, mm, MGT a year, km/h, years); the description keeps the file's
+values with the unit in each name, and gives the SD and mean-to-peak in SI too (``sd_m``). Every fault in a
+file raises :class:`LineFileError`, a ``ValueError`` whose text is one line naming the file, the row and the
+field, and what is allowed: a command line prints it and exits with status 2. A misspelled key or column is an
+error (with the closest known name), never a silent default; YAML is read with ``yaml.safe_load`` only.
 
 Bounds: the line's own fields (section length, number of sections, speed, traffic) are checked by
 :class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges live, and its refusal is reported
@@ -136,12 +136,22 @@ class Section:
 
 @dataclass(frozen=True)
 class Measurement:
-    """One recording-car run over one section: its ``date`` (ISO), SD and mean-to-peak of the D1 level [m]."""
+    """One recording-car run over one section: its ``date`` (ISO), SD and mean-to-peak of the D1 level as the
+    file gives them [mm] (so a description round-trips through its dict exactly), in SI as ``sd_m``,
+    ``peak_m``."""
 
     section: str
     date: str
-    sd_m: float
-    peak_m: float | None = None
+    sd_mm: float
+    peak_mm: float | None = None
+
+    @property
+    def sd_m(self) -> float:
+        return self.sd_mm * 1e-3
+
+    @property
+    def peak_m(self) -> float | None:
+        return None if self.peak_mm is None else self.peak_mm * 1e-3
 
 
 @dataclass(frozen=True)
@@ -205,9 +215,9 @@ class LineDescription:
             sections.append(row)
         history = []
         for m in self.history:
-            h: dict[str, Any] = {"section": m.section, "date": m.date, "sd_mm": m.sd_m * 1e3}
-            if m.peak_m is not None:
-                h["peak_mm"] = m.peak_m * 1e3
+            h: dict[str, Any] = {"section": m.section, "date": m.date, "sd_mm": m.sd_mm}
+            if m.peak_mm is not None:
+                h["peak_mm"] = m.peak_mm
             history.append(h)
         out: dict[str, Any] = {"name": self.name, "as_of": self.as_of, "traffic": traffic, "sections": sections,
                                "history": history}
@@ -320,10 +330,10 @@ def _check_keys(source: str, prefix: str, d: Mapping[str, Any], known: dict[str,
         if name not in known:
             hint = difflib.get_close_matches(str(name), list(known), n=1)
             did = f"; did you mean {hint[0]!r}?" if hint else ""
-            raise LineFileError(f"{at}: unknown {what} {prefix}{name!r}{did} (known: {_names(known)})")
+            raise LineFileError(f"{at}: unknown {what} '{prefix}{name}'{did} (known: {_names(known)})")
     for name, f in known.items():
         if f.required and name not in d:
-            raise LineFileError(f"{at}: missing {what} {prefix}{name!r} ({f.meaning}; unit {f.unit})")
+            raise LineFileError(f"{at}: missing {what} '{prefix}{name}' ({f.meaning}; unit {f.unit})")
 
 
 def _names(known: Iterable[str]) -> str:
@@ -453,10 +463,9 @@ def _build(source: str, doc: Mapping[str, Any], section_rows: Sequence[tuple[str
     for key, value in line_traffic.items():
         _config_check(source, f"traffic.{key}", key, value, TRAFFIC_KEYS[key].unit)
     sections = _sections(section_rows, line_traffic)
-    ids = {s.id for s in sections}
-    history = _history(history_rows, ids, as_of)
     _config_check(section_rows[0][0], "length_m", "section_length_m", sections[0].length_m, "m")
     _config_check(source, f"sections ({len(sections)} rows)", "n_sections", len(sections), "sections")
+    history = _history(history_rows, {s.id for s in sections}, as_of)
     return LineDescription(name=name, as_of=as_of, sections=tuple(sections), history=tuple(history),
                            description=description, source=source, **line_traffic)
 
@@ -532,7 +541,7 @@ def _history(rows: Sequence[tuple[str, Mapping[str, Any]]], ids: set[str], as_of
             if peak < sd:
                 raise LineFileError(f"{at}, peak_mm: {peak:g} mm is below the SD {sd:g} mm; a mean-to-peak is "
                                     "at least the SD (columns swapped?)")
-        out.append(Measurement(section=sid, date=date, sd_m=sd * 1e-3, peak_m=None if peak is None else peak * 1e-3))
+        out.append(Measurement(section=sid, date=date, sd_mm=sd, peak_mm=peak))
     return out
 
 

@@ -1,31 +1,44 @@
-"""What a line file knows, applied to its episodes; and each section's settlement rate fitted to its measured
+"""What a line file knows, applied to its episodes; and each section's settlement rate conditioned on its measured
 history.
 
 :func:`line_overrides` turns a config's line file (:class:`~trackenv.envs.line_file.LineDescription`) into
 per-section arrays that the line engine applies over an episode's draws (``LineBatch._apply_line_file``): the
-register, the known wet zones, the traffic factor, years since tamping and tampings since renewal, a rate
-factor where the file gives one or the history fits one, and the SD the section starts from where its history
-tells it. Everything else (the within-section fields, hidden wet spots, the rates of sections without
+register, the known wet zones, the traffic factor, years since tamping and tampings since renewal, the rate
+factor where the file gives one, the posterior of the rate where the history gives one, and the SD the section
+starts from. Everything else (the within-section fields, hidden wet spots, the rates of sections without
 history) is drawn per episode as on a line without a file.
 
-**The history fit** (:func:`history_fit`). A section's D1 level after its last tamping is its post-tamping
-shape plus the settlement since, and the settlement grows with the section's rate factor k while the shape
-does not; the two are independent at first order, so its SD obeys
+**The history fit** (:func:`history_fit`). After its last tamping a section's D1 level is its post-tamping
+shape plus the settlement since. The shape does not change; the settlement grows in proportion to the
+section's rate factor k with a fixed pattern (its per-sleeper rates and stiffness), so with a, b the D1 of the
+shape and of the settlement of a section with k = 1,
 
-    SD(t)² ≈ SD₀² + k_eff²·G²(t),    k_eff = k·(1 + damage_per_tamping)^(tampings since renewal − 1),
+    SD(t)² = SD₀² + 2ρ·SD₀·κ·φ(t) + κ²·φ(t)²,    κ = k·(1 + damage_per_tamping)^(tampings since renewal − 1),
 
-with t the time since the last tamping, SD₀ the SD right after it, and G²(t) the engine's own mean growth of
-SD² of a section of the same class (register, known wet zone, traffic) with k = 1 and one tamping since
-renewal. G² comes from a few short simulations in the engine itself: :data:`FIT_DRAWS` draws of such a
-section, tamped by the engine's tamping and run without tamping for the span needed (the draws' mean of
-SD²(t) − SD²(0)). Per section, the measurements since its last tamping (t_i, SD_i) give SD₀² and k_eff² by
-least squares on SD_i² = SD₀² + k_eff²·G²(t_i) (both non-negative), so the fitted rate makes the engine's
-expected SD growth reproduce the measured series; the fit reports k, SD₀, the residual (RMS of the fitted
-SD against the measured, mm) and the SD the fitted curve gives at ``as_of``, which the section starts from
-(its drawn post-tamping shape scaled to it). The fit needs two measurements since the last tamping; with one,
-that measurement sets the start SD and the rate is drawn. With a ``rate_factor`` in the file, k is given and
-only SD₀ is fitted. How well the fit recovers a known rate from histories the engine generated is on the
-documentation's page "Lines from files" (``python experiments/line_example.py``).
+where t is the time since the last tamping, SD₀ the SD right after it, φ(t) the SD of b and ρ the correlation of
+a and b. φ(t) and the spread of ρ are the engine's own: a few short simulations of a section of the same class
+(register, known wet zone, traffic) with k = 1 and one tamping since renewal, :data:`FIT_DRAWS` draws of it,
+tamped by the engine's tamping and run without tamping for the span needed (φ: the draws' RMS; ρ: their mean
+and SD). Checked on those simulations: φ scales with k within 10 % for k from 0.5 to 4, and ρ of a section
+stays within a few hundredths over three years.
+
+The measurements since the last tamping (t_i, SD_i) then condition k by Bayes' rule on a grid of (k, ρ, SD₀):
+the prior of k is the engine's own (lognormal with log-SD ``rate_sigma``), that of ρ the simulations' spread,
+SD₀ flat; the likelihood Gaussian with the recording car's error ``sd_noise_mm`` and a model error of
+:data:`FIT_MODEL_ERROR_MM`. Why a posterior and not a least-squares value: while the settlement is small
+against the post-tamping shape, the series fixes ρ·k (the first-order slope) much better than k itself, and a
+least-squares k then runs to the bounds; the posterior says how much the history tells and falls back on the
+prior where it tells little. The fit reports per section the posterior median of k and its 10-90 % interval,
+the most probable (k, ρ, SD₀), the RMS residual of its curve against the measured SD, and that curve's SD at
+``as_of``, where the section starts (its drawn shape scaled to SD₀ and its settlement to the start SD).
+
+In an episode a fitted section's rate factor is a draw from its posterior, made from the episode's own draw of
+the section's factor (its quantile under the prior is taken to the same quantile of the posterior), so nothing
+more is drawn and neighbouring sections keep their correlation. The fit needs two measurements since the last
+tamping; with one, that measurement sets the start SD and the rate is drawn. With a ``rate_factor`` in the
+file, k is given and only ρ and SD₀ are fitted. How well the fit recovers rates the engine itself generated
+histories with, and how well it predicts, is on the documentation's page "Lines from files" (``python
+experiments/line_example.py``).
 
 A section's simulated growth in an episode still scatters around the fitted one: its within-section fields
 (per-sleeper rate and stiffness) are hidden and drawn per episode, and a segment is a 30 m sample of them.
@@ -36,46 +49,68 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
+from scipy.special import ndtr
 
 from ..physics.geometry import d1_filter
 from .line_config import SLEEPER_SPACING_M, LineConfig
-from .line_file import LineDescription, Section
+from .line_file import DAYS_PER_YEAR, LineDescription, Section
 
-#: Draws of each class's section in the growth simulations of the fit, and their seeds ([FIT_SEED, i]).
+#: Draws of each class's section in the simulations of the fit, and their seeds ([FIT_SEED, i]).
 FIT_DRAWS = 8
 FIT_SEED = 38
+#: How long the simulated sections had settled before the tamping they are followed from [years]: a tamping
+#: keeps part of the old shape, and where that shape is the section's own settlement it grows again with it
+#: (ρ > 0), so the simulated sections start one cycle into their life, as track in service is **[assumption:
+#: a 3-year cycle; the engine's sections start up to 3 years after their last tamping]**.
+FIT_PREVIOUS_CYCLE_YEARS = 3.0
+#: A recording-car run this many days or fewer after a section's last tamping counts as before it.
+FIT_SAME_DAYS = 15
 #: The fit's window: a section last tamped longer ago than this is not fitted (the simulations run this long
 #: at most).
 FIT_MAX_YEARS = 10.0
-#: The range a fitted rate factor is clipped to (as the file's ``rate_factor`` column allows more: a fit
-#: beyond this says more about the data than the section).
-FIT_RATE_RANGE = (0.05, 20.0)
+#: The model error of the fit's SD curve [mm], added in quadrature to the recording car's error **[assumption:
+#: the curve fits the engine's own noise-free series within ~0.01-0.03 mm; 0.05 mm leaves room]**.
+FIT_MODEL_ERROR_MM = 0.05
+#: The grid of the rate factor's posterior (log-spaced), of ρ and the number of SD₀ values.
+RATE_GRID = np.exp(np.linspace(math.log(0.02), math.log(50.0), 81))
+RHO_GRID = np.linspace(-1.0, 1.0, 25)
+SD0_POINTS = 40
 
 
 @dataclass(frozen=True)
 class SectionFit:
-    """One section's fit (:func:`history_fit`): ``status`` says what was done ("fitted", "given": the file's
-    rate factor with SD₀ fitted, "start SD only": one measurement since the last tamping, "not fitted": none
-    since, or last tamped more than :data:`FIT_MAX_YEARS` ago, "no history"); ``points`` the measurements
-    used; ``rate_factor`` k; ``sd_after_tamping_mm`` SD₀; ``residual_mm`` the RMS of the fitted SD against the
-    measured; ``start_sd_mm`` the SD the section starts from at ``as_of`` (NaN where drawn)."""
+    """One section's fit (:func:`history_fit`): ``status`` says what was done ("fitted"; "given": the file's
+    rate factor, ρ and SD₀ fitted; "start SD only": one measurement since the last tamping; "not fitted": none
+    since, or last tamped more than :data:`FIT_MAX_YEARS` ago; "no history"); ``points`` the measurements
+    used; ``rate_factor`` the posterior median of k and ``rate_p10`` / ``rate_p90`` its 10-90 % interval;
+    ``rho`` and ``sd_after_tamping_mm`` (SD₀) of the most probable curve, ``residual_mm`` the RMS of that
+    curve against the measured SD, ``start_sd_mm`` its SD at ``as_of``, where the section starts (NaN where
+    drawn)."""
 
     section: str
     status: str
     points: int = 0
     rate_factor: float = math.nan
+    rate_p10: float = math.nan
+    rate_p90: float = math.nan
+    rho: float = math.nan
     sd_after_tamping_mm: float = math.nan
     residual_mm: float = math.nan
     start_sd_mm: float = math.nan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class HistoryFit:
-    """The fit of a line's measured history, one :class:`SectionFit` per section in line order."""
+    """The fit of a line's measured history: one :class:`SectionFit` per section in line order, and per
+    section the posterior CDF of its rate factor on :data:`RATE_GRID` (``rate_cdf``, (S, grid); NaN rows where
+    the rate is not fitted) and the typical roughness of its class's rate field (``roughness``, (S,))."""
 
     sections: tuple[SectionFit, ...]
+    rate_cdf: np.ndarray
+    roughness: np.ndarray
 
     @property
     def fitted(self) -> tuple[SectionFit, ...]:
@@ -89,12 +124,13 @@ class HistoryFit:
 
     def table(self) -> str:
         """A text table of the sections with a history."""
-        lines = [f"{'section':<10} {'status':<15} {'points':>6} {'rate':>6} {'SD0 mm':>7} {'resid mm':>8} "
-                 f"{'start SD mm':>11}"]
+        lines = [f"{'section':<10} {'status':<14} {'points':>6} {'rate':>5} {'10-90 %':>11} {'SD0 mm':>6} "
+                 f"{'resid mm':>8} {'start SD mm':>11}"]
         for s in self.sections:
             if s.status != "no history":
-                lines.append(f"{s.section:<10} {s.status:<15} {s.points:>6d} {s.rate_factor:>6.2f} "
-                             f"{s.sd_after_tamping_mm:>7.2f} {s.residual_mm:>8.3f} {s.start_sd_mm:>11.2f}")
+                lines.append(f"{s.section:<10} {s.status:<14} {s.points:>6d} {s.rate_factor:>5.2f} "
+                             f"{s.rate_p10:>5.2f}-{s.rate_p90:<5.2f} {s.sd_after_tamping_mm:>6.2f} "
+                             f"{s.residual_mm:>8.3f} {s.start_sd_mm:>11.2f}")
         return "\n".join(lines)
 
 
@@ -102,7 +138,8 @@ class HistoryFit:
 class LineOverrides:
     """Per section (line order), what the line file sets over an episode's draws: ``register`` (codes),
     ``wet`` (known wet zones), ``traffic_factor`` (on the axle passes), ``years_since_tamping``,
-    ``tampings_since_renewal``, ``rate_factor`` (NaN: drawn), ``start_sd_m`` (the SD at the start; NaN: as
+    ``tampings_since_renewal``, ``rate_factor`` (the file's; NaN: none), ``rate_cdf`` (the posterior CDF of a
+    fitted rate on :data:`RATE_GRID`; NaN rows: not fitted), ``start_sd_m`` (the SD at the start; NaN: as
     drawn) and ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn)."""
 
     register: np.ndarray
@@ -111,6 +148,8 @@ class LineOverrides:
     years_since_tamping: np.ndarray
     tampings_since_renewal: np.ndarray
     rate_factor: np.ndarray
+    rate_cdf: np.ndarray
+    roughness: np.ndarray
     start_sd_m: np.ndarray
     sd_after_tamping_m: np.ndarray
 
@@ -127,15 +166,43 @@ def line_overrides(config: LineConfig) -> LineOverrides:
         traffic_factor=np.array(line.traffic_factors()),
         years_since_tamping=np.array([s.years_since_tamping for s in secs]),
         tampings_since_renewal=np.array([s.tampings_since_renewal for s in secs], dtype=np.int64),
-        rate_factor=np.array([f.rate_factor if f.status in ("fitted", "given") else
-                              (s.rate_factor if s.rate_factor is not None else math.nan)
-                              for s, f in zip(secs, fit.sections, strict=True)]),
+        rate_factor=np.array([math.nan if s.rate_factor is None else s.rate_factor for s in secs]),
+        rate_cdf=fit.rate_cdf,
+        roughness=fit.roughness,
         start_sd_m=np.array([f.start_sd_mm * 1e-3 for f in fit.sections]),
         sd_after_tamping_m=np.array([f.sd_after_tamping_mm * 1e-3 for f in fit.sections]),
     )
     for a in vars(arrays).values():
         a.flags.writeable = False
     return arrays
+
+
+def rate_multipliers(overrides: LineOverrides, drawn: np.ndarray, rate: np.ndarray,
+                     config: LineConfig) -> np.ndarray:
+    """(S,) what each section's drawn per-sleeper rates (S, n) (its register's and known wet zone's factors in,
+    tamping damage out) are multiplied by, given the section factors ``drawn`` of the episode's draw: the
+    file's factor over the drawn one where the file gives one; where the history is fitted, a draw from the
+    posterior (the quantile of the drawn factor under the prior, lognormal with log-SD ``rate_sigma``, taken to
+    the same quantile of the posterior) times the class's typical rate-field roughness over this draw's, so
+    that the draw's settlement grows as the history says whatever its hidden field; else 1."""
+    o = overrides
+    out = np.where(np.isnan(o.rate_factor), 1.0, o.rate_factor / drawn)
+    fitted = np.flatnonzero(~np.isnan(o.rate_cdf[:, 0]))
+    if fitted.size:
+        sigma = config.rate_sigma
+        z = (np.log(drawn[fitted]) + sigma**2 / 2) / sigma if sigma > 0 else np.zeros(fitted.size)
+        k = np.array([math.exp(float(np.interp(ndtr(zj), o.rate_cdf[j], np.log(RATE_GRID))))
+                      for zj, j in zip(z, fitted, strict=True)])
+        out[fitted] = k * o.roughness[fitted] / roughness(rate[fitted])
+    return out
+
+
+def roughness(rate: np.ndarray) -> np.ndarray:
+    """(rows,) the SD of the D1 of per-sleeper rate factors (rows, n): how unevenly a segment settles. The
+    settlement's D1 SD in the engine follows it closely (its log correlates at 0.97 with the dynamic
+    settlement's after three years over 48 draws of a plain section), so it carries a history's growth into an
+    episode's draw of the hidden field."""
+    return _centred_d1(rate).std(axis=1)
 
 
 def _line(config: LineConfig) -> LineDescription:
@@ -145,40 +212,57 @@ def _line(config: LineConfig) -> LineDescription:
 
 
 # ---------------------------------------------------------------------- the fit
+@dataclass(frozen=True, eq=False)
+class _Growth:
+    """A class's growth from the simulations: φ(t) [m] on the step grid for the class's typical rate-field
+    ``roughness`` (k = 1), the log-SD of that roughness between draws, and the mean and SD of ρ."""
+
+    phi: np.ndarray
+    roughness: float
+    roughness_sd: float
+    rho_mean: float
+    rho_sd: float
+
+
 @lru_cache(maxsize=16)
 def history_fit(config: LineConfig) -> HistoryFit:
-    """Each section's rate factor fitted to its measured history (see the module docstring); cached per
-    config. A line without history gives every section the status "no history" and runs nothing."""
+    """Each section's rate factor conditioned on its measured history (see the module docstring); cached per
+    config. A line without history gives every section the status "no history" and simulates nothing."""
     line = _line(config)
-    damage = 1.0 + config.tamping_model.damage_per_tamping
-    plans = {s.id: _points(line, s) for s in line.sections}
+    points = {s.id: _points(line, s) for s in line.sections}
     need = {s.id for s in line.sections if s.years_since_tamping <= FIT_MAX_YEARS
-            and (len(plans[s.id][1]) >= 2 or (len(plans[s.id][1]) == 1 and s.rate_factor is not None))}
+            and (len(points[s.id][1]) >= 2 or (len(points[s.id][1]) == 1 and s.rate_factor is not None))}
     classes = sorted({_class_of(line, s) for s in line.sections if s.id in need})
     years = max((s.years_since_tamping for s in line.sections if s.id in need), default=0.0)
-    growth = _growth(config, tuple(classes), years) if classes else None
-    out = []
-    for s in line.sections:
-        t, sd = plans[s.id]
+    growth = _growth(config, tuple(classes), years) if classes else []
+    out, cdf = [], np.full((line.n_sections, RATE_GRID.size), np.nan)
+    rough = np.full(line.n_sections, np.nan)
+    for j, s in enumerate(line.sections):
+        t, sd = points[s.id]
         if not line.measurements(s.id):
             out.append(SectionFit(s.id, "no history"))
-        elif s.id in need and growth is not None:
+        elif s.id in need:
             g = growth[classes.index(_class_of(line, s))]
-            out.append(_fit_section(s, t, sd, g, config.steps_per_year, damage))
+            fit, cdf_j = _fit_section(s, t, sd, g, config)
+            out.append(fit)
+            if cdf_j is not None:
+                cdf[j], rough[j] = cdf_j, g.roughness
         elif len(sd) >= 1:
             out.append(SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3))
         else:
             out.append(SectionFit(s.id, "not fitted"))
-    return HistoryFit(tuple(out))
+    return HistoryFit(tuple(out), cdf, rough)
 
 
 def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
-    """A section's measurements since its last tamping: (years since that tamping, SD [m])."""
+    """A section's measurements after its last tamping: (years since that tamping, SD [m]). A run less than
+    :data:`FIT_SAME_DAYS` days after it counts as before it (the tamping may be that run's reason, and years
+    since tamping are often rounded)."""
     ms = line.measurements(s.id)
     t = np.array([s.years_since_tamping - line.years_before(m.date) for m in ms])
     sd = np.array([m.sd_m for m in ms])
-    keep = t >= -1e-9
-    return np.maximum(t[keep], 0.0), sd[keep]
+    keep = t > FIT_SAME_DAYS / DAYS_PER_YEAR
+    return t[keep], sd[keep]
 
 
 def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float]:
@@ -186,59 +270,99 @@ def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float]:
     return (s.register, s.wet, s.annual_mgt / line.annual_mgt)
 
 
-def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: np.ndarray, steps_per_year: int,
-                 damage: float) -> SectionFit:
-    """Least squares of SD_i² = SD₀² + k_eff²·G²(t_i), both non-negative (k_eff given where the file gives k)."""
-    grid = np.arange(growth.size) / steps_per_year
-    x, y = np.interp(t, grid, growth), sd**2
-    to_k = damage ** (1 - s.tampings_since_renewal)  # k = k_eff · to_k
-    status = "given" if s.rate_factor is not None else "fitted"
-    if s.rate_factor is not None:
-        q = (s.rate_factor / to_k) ** 2
-    elif np.ptp(x) > 0:
-        q = float(np.cov(x, y, bias=True)[0, 1] / np.var(x))
-        if y.mean() - q * x.mean() < 0:  # SD₀² would be negative: the line through the origin
-            q = float(x @ y / (x @ x))
-        q = min(max(q, (FIT_RATE_RANGE[0] / to_k) ** 2), (FIT_RATE_RANGE[1] / to_k) ** 2)
-    else:  # all the points at one time since tamping: the rate cannot be told
-        return SectionFit(s.id, "start SD only", points=len(sd), start_sd_mm=float(sd[-1]) * 1e3)
-    a = max(float(np.mean(y - q * x)), 0.0)
-    fitted_sd = np.sqrt(a + q * x)
-    start = math.sqrt(a + q * float(np.interp(s.years_since_tamping, grid, growth)))
-    return SectionFit(s.id, status, points=len(sd), rate_factor=math.sqrt(q) * to_k,
-                      sd_after_tamping_mm=math.sqrt(a) * 1e3,
-                      residual_mm=float(np.sqrt(np.mean((fitted_sd - sd) ** 2))) * 1e3, start_sd_mm=start * 1e3)
+def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
+                 config: LineConfig) -> tuple[SectionFit, np.ndarray | None]:
+    """The posterior of (k, ρ, SD₀) on the grid (k fixed where the file gives it): the section's fit and the
+    CDF of k (None where k is given)."""
+    grid_t = np.arange(growth.phi.size) / config.steps_per_year
+    phi = np.interp(t, grid_t, growth.phi)
+    phi_now = float(np.interp(s.years_since_tamping, grid_t, growth.phi))
+    damage = (1.0 + config.tamping_model.damage_per_tamping) ** (s.tampings_since_renewal - 1)
+    given = s.rate_factor is not None
+    rates = np.array([s.rate_factor]) if given else RATE_GRID
+    kappa = rates * damage
+    # the prior of k: the section factor's (lognormal) times the spread of the hidden field's roughness
+    sigma_k = math.hypot(max(config.rate_sigma, 0.05), growth.roughness_sd)
+    mean_k = -config.rate_sigma**2 / 2
+    sigma_e = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM) * 1e-3
+    log_prior = (-(np.log(rates) - mean_k) ** 2 / (2 * sigma_k**2))[:, None] \
+        - ((RHO_GRID - growth.rho_mean) ** 2 / (2 * max(growth.rho_sd, 0.05) ** 2))[None, :]
+    kp = kappa[:, None, None] * phi[None, None, :]  # (k, 1, points)
+    rho = RHO_GRID[None, :, None]
+    sd0_grid = np.linspace(0.0, 1.5 * float(sd.max()), SD0_POINTS)
+    log_post = np.empty((rates.size, RHO_GRID.size, sd0_grid.size))
+    for i, s0 in enumerate(sd0_grid):
+        model = np.sqrt(np.maximum(s0 * s0 + 2 * rho * s0 * kp + kp * kp, 0.0))
+        log_post[:, :, i] = log_prior - ((model - sd) ** 2).sum(axis=-1) / (2 * sigma_e**2)
+    ik, ir, i0 = np.unravel_index(int(np.argmax(log_post)), log_post.shape)
+    k_map, rho_map, s0 = kappa[ik], RHO_GRID[ir], sd0_grid[i0]
+    curve = np.sqrt(np.maximum(s0 * s0 + 2 * rho_map * s0 * k_map * phi + (k_map * phi) ** 2, 0.0))
+    start = math.sqrt(max(s0 * s0 + 2 * rho_map * s0 * k_map * phi_now + (k_map * phi_now) ** 2, 0.0))
+    common: dict[str, Any] = {"points": len(sd), "rho": float(rho_map), "sd_after_tamping_mm": float(s0) * 1e3,
+              "residual_mm": float(np.sqrt(np.mean((curve - sd) ** 2))) * 1e3, "start_sd_mm": start * 1e3}
+    if given:
+        return SectionFit(s.id, "given", rate_factor=float(rates[0]), rate_p10=float(rates[0]),
+                          rate_p90=float(rates[0]), **common), None
+    weight = np.exp(log_post - log_post.max()).sum(axis=(1, 2))
+    cdf = np.cumsum(weight + 1e-12 * weight.sum())
+    cdf /= cdf[-1]
+    log_k = np.log(RATE_GRID)
+    p10, p50, p90 = (math.exp(float(np.interp(q, cdf, log_k))) for q in (0.1, 0.5, 0.9))
+    return SectionFit(s.id, "fitted", rate_factor=p50, rate_p10=p10, rate_p90=p90, **common), cdf
 
 
-def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float], ...], years: float) -> np.ndarray:
-    """(classes, steps + 1): the engine's mean growth of SD² [m²] of each class's section (k = 1, one tamping
-    since renewal) from its tamping, every step up to ``years``."""
+def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float], ...], years: float) -> list[_Growth]:
+    """Each class's :class:`_Growth` from the engine (k = 1, one tamping since renewal), every step from the
+    tamping up to ``years``."""
     line = _line(config)
     steps = max(int(math.ceil(years * config.steps_per_year - 1e-9)), 1)
     protos = tuple(Section(id=f"class{i}", length_m=line.section_length_m, register=reg, wet=wet,
                            annual_mgt=line.annual_mgt * factor, speed_kmh=line.speed_kmh,
-                           freight_share=line.freight_share, years_since_tamping=0.0, tampings_since_renewal=0,
-                           rate_factor=1.0)
+                           freight_share=line.freight_share, years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS,
+                           tampings_since_renewal=0, rate_factor=1.0)
                    for i, (reg, wet, factor) in enumerate(classes))
     proto_line = replace(line, sections=protos, history=(), source=f"{line.source} (fit)")
     proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year)
-    return _simulated_growth(proto, steps)
+    phi, rough, rough_sd, rho_mean, rho_sd = _simulated_growth(proto, steps)
+    return [_Growth(phi[i], float(rough[i]), float(rough_sd[i]), float(rho_mean[i]), float(rho_sd[i]))
+            for i in range(len(classes))]
 
 
 @lru_cache(maxsize=16)
-def _simulated_growth(proto: LineConfig, steps: int) -> np.ndarray:
+def _simulated_growth(proto: LineConfig, steps: int) -> tuple[np.ndarray, ...]:
+    """Run :data:`FIT_DRAWS` lines of ``proto`` (one section per class): tamp every section, then ``steps`` steps
+    of traffic. Per class: φ (classes, steps + 1) [m], the settlement's D1 SD per unit of the rate field's
+    roughness averaged over the draws, times the draws' typical (geometric mean) roughness; the log-SD of the
+    roughness; the mean and SD of ρ (over draws and steps)."""
     from .line_episode import LineBatch  # the engine builds on this module's overrides
 
+    S = proto.n_sections
     batch = LineBatch(proto, FIT_DRAWS)
     batch.start(list(range(FIT_DRAWS)), [np.random.default_rng([FIT_SEED, i]) for i in range(FIT_DRAWS)])
-    every = np.ones(FIT_DRAWS * proto.n_sections, dtype=bool)
+    every = np.ones(FIT_DRAWS * S, dtype=bool)
     batch.tamp_rows(every, 0)
-    sd = [batch.sd_after_tamping.copy()]
+
+    def rows(name: str) -> np.ndarray:
+        return np.concatenate([batch.get_state(b).rows[name] for b in range(FIT_DRAWS)])
+
+    shape, rough = _centred_d1(rows("offset")), roughness(rows("base_rate"))
+    per_rough, rho = [np.zeros(FIT_DRAWS * S)], []
     for step in range(steps):
         batch.traffic_rows(every, step)
-        sd.append(batch.true_quality()[0])
-    sq = np.array(sd).reshape(steps + 1, FIT_DRAWS, proto.n_sections) ** 2
-    return (sq - sq[:1]).mean(axis=1).T
+        settled = _centred_d1(rows("u"))
+        sd = settled.std(axis=1)
+        per_rough.append(sd / rough)
+        rho.append((shape * settled).mean(axis=1) / (shape.std(axis=1) * sd + 1e-300))
+    log_rough = np.log(rough).reshape(FIT_DRAWS, S)
+    typical = np.exp(log_rough.mean(axis=0))
+    phi = np.array(per_rough).reshape(steps + 1, FIT_DRAWS, S).mean(axis=1).T * typical[:, None]
+    rho_all = np.array(rho).reshape(steps, FIT_DRAWS, S)
+    return phi, typical, log_rough.std(axis=0), rho_all.mean(axis=(0, 1)), rho_all.std(axis=(0, 1))
+
+
+def _centred_d1(level: np.ndarray) -> np.ndarray:
+    d1 = d1_filter(level, SLEEPER_SPACING_M)
+    return d1 - d1.mean(axis=1, keepdims=True)
 
 
 # ---------------------------------------------------------------------- the engine's side
