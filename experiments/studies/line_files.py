@@ -130,6 +130,10 @@ def write_line(line: LineDescription, folder: Path, stem: str, *, header: str = 
     folder.mkdir(parents=True, exist_ok=True)
     d = line.to_dict()
     sections_file, history_file = f"{stem}_sections.csv", f"{stem}_history.csv"
+    for key in ("speed_kmh", "freight_share"):  # a column that only repeats the line's is left out
+        if all(row[key] == d["traffic"][key] for row in d["sections"]):
+            for row in d["sections"]:
+                del row[key]
     _write_csv(folder / sections_file, SECTION_COLUMNS, d["sections"])
     lines = [f"# {row}" if row else "#" for row in header.splitlines()]
     lines += [f"name: {d['name']}"]

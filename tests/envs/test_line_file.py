@@ -342,3 +342,20 @@ def test_the_example_line_runs_an_episode():
     assert truncated and np.isfinite(total)
     fit = history_fit(env.unwrapped.config)
     assert len(fit.fitted) > 50
+
+
+def test_the_documented_schema_is_the_loaders():
+    """The schema tables of the documentation's page list every key and column the loader knows, with its
+    unit and whether it is required."""
+    from trackenv.envs.line_file import HISTORY_COLUMNS, LINE_KEYS, SECTION_COLUMNS, TRAFFIC_KEYS
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "line-files.md").read_text()
+    rows = {}
+    for line in page.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("| `") and len(cells) >= 3:
+            rows.setdefault(cells[0].strip("`"), []).append((cells[1], cells[2]))
+    tables = [(LINE_KEYS, ""), (TRAFFIC_KEYS, "traffic."), (SECTION_COLUMNS, ""), (HISTORY_COLUMNS, "")]
+    for known, prefix in tables:
+        for name, field in known.items():
+            assert (field.unit, "yes" if field.required else "no") in rows[prefix + name], name

@@ -10,7 +10,8 @@ Ids: ``trackenv/Tamping-v0`` (MultiBinary actions, the full Dict observation), `
 encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add
 ``workers=N`` for the same envs in N processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
 The line problem (:mod:`trackenv.envs.line`): ``trackenv/TampingLine-v0`` (the default line),
-``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``.
+``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``; each takes a line
+file (``line="my_line.yaml"``: :mod:`trackenv.envs.line_file`; the example in :mod:`trackenv.lines`).
 
 Every env has the planning state API (:mod:`trackenv.envs.state`): ``get_state()`` / ``set_state(state)``, and
 per row on the native vector envs.
@@ -21,6 +22,8 @@ from gymnasium.envs.registration import register, registry
 from .config import TampingEnvConfig
 from .line import TampingLine, TampingLineVectorEnv
 from .line_config import SCENARIOS, LineConfig, scenario
+from .line_file import LineDescription, LineFileError, load_line
+from .line_fit import history_fit
 from .problems import make_vector_env, problem_config
 from .state import EnvState
 from .tamping import TampingEnv
@@ -40,8 +43,9 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
-__all__ = ["SCENARIOS", "EnvState", "LineConfig", "TampingEnv", "TampingEnvConfig", "TampingLine",
-           "TampingLineVectorEnv", "TampingVectorEnv", "make_vector_env", "problem_config", "scenario"]
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "TampingEnv",
+           "TampingEnvConfig", "TampingLine", "TampingLineVectorEnv", "TampingVectorEnv", "history_fit",
+           "load_line", "make_vector_env", "problem_config", "scenario"]
 
 for _id, _scenario in (
     ("trackenv/TampingLine-v0", "default"),

@@ -9,39 +9,44 @@ starts from. Everything else (the within-section fields, hidden wet spots, the r
 history) is drawn per episode as on a line without a file.
 
 **The history fit** (:func:`history_fit`). After its last tamping a section's D1 level is its post-tamping
-shape plus the settlement since. The shape does not change; the settlement grows in proportion to the
-section's rate factor k with a fixed pattern (its per-sleeper rates and stiffness), so with a, b the D1 of the
-shape and of the settlement of a section with k = 1,
+shape plus the settlement since. The shape does not change; the settlement grows with a fixed pattern (the
+section's per-sleeper rates and stiffness) in proportion to its rate, so with a, b the D1 of the shape and of
+the settlement,
 
     SD(t)² = SD₀² + 2ρ·SD₀·κ·φ(t) + κ²·φ(t)²,    κ = k·(1 + damage_per_tamping)^(tampings since renewal − 1),
 
-where t is the time since the last tamping, SD₀ the SD right after it, φ(t) the SD of b and ρ the correlation of
-a and b. φ(t) and the spread of ρ are the engine's own: a few short simulations of a section of the same class
-(register, known wet zone, traffic) with k = 1 and one tamping since renewal, :data:`FIT_DRAWS` draws of it,
-tamped by the engine's tamping and run without tamping for the span needed (φ: the draws' RMS; ρ: their mean
-and SD). Checked on those simulations: φ scales with k within 10 % for k from 0.5 to 4, and ρ of a section
-stays within a few hundredths over three years.
+where t is the time since the last tamping, SD₀ the SD right after it, ρ the correlation of a and b, φ(t) the SD
+of b for k = 1 and k the section's *effective* rate factor: its factor times how unevenly its hidden field
+makes it settle (:func:`roughness`, over the typical one of its class). φ(t) and the spread of ρ are the
+engine's own: short simulations of a section of the same class (register, known wet zone, traffic), one
+tamping since renewal, :data:`FIT_DRAWS` draws of it settled for :data:`FIT_PREVIOUS_CYCLE_YEARS`, tamped by the
+engine's tamping and run without tamping for the span needed. Checked on those simulations: φ scales with k
+within 10 % for k from 0.5 to 4, ρ of a section stays within a few hundredths over three years, and the log of
+the settlement's D1 SD correlates at 0.97 with that of the rate field's roughness.
 
-The measurements since the last tamping (t_i, SD_i) then condition k by Bayes' rule on a grid of (k, ρ, SD₀):
-the prior of k is the engine's own (lognormal with log-SD ``rate_sigma``), that of ρ the simulations' spread,
-SD₀ flat; the likelihood Gaussian with the recording car's error ``sd_noise_mm`` and a model error of
-:data:`FIT_MODEL_ERROR_MM`. Why a posterior and not a least-squares value: while the settlement is small
-against the post-tamping shape, the series fixes ρ·k (the first-order slope) much better than k itself, and a
-least-squares k then runs to the bounds; the posterior says how much the history tells and falls back on the
-prior where it tells little. The fit reports per section the posterior median of k and its 10-90 % interval,
-the most probable (k, ρ, SD₀), the RMS residual of its curve against the measured SD, and that curve's SD at
-``as_of``, where the section starts (its drawn shape scaled to SD₀ and its settlement to the start SD).
+The measurements after the last tamping (t_i, SD_i) then condition k by Bayes' rule on a grid of (k, ρ, SD₀):
+the prior of k is the engine's own (lognormal with log-SD ``rate_sigma``, widened by the spread of the
+roughness between draws), that of ρ the simulations' spread, SD₀ flat; the likelihood Gaussian with the
+recording car's error ``sd_noise_mm`` and a model error of :data:`FIT_MODEL_ERROR_MM`. Why a posterior and not
+a least-squares value: while the settlement is small against the post-tamping shape, the series fixes ρ·k (the
+first-order slope) much better than k itself, and a least-squares k then runs to its bounds; the posterior says
+how much the history tells and falls back on the prior where it tells little. The fit reports per section the
+posterior median of k and its 10-90 % interval, the most probable (k, ρ, SD₀), the RMS residual of its curve
+against the measured SD, and that curve's SD at ``as_of``, where the section starts (its drawn shape scaled to
+SD₀ and its settlement to the start SD: :func:`start_levels`).
 
-In an episode a fitted section's rate factor is a draw from its posterior, made from the episode's own draw of
-the section's factor (its quantile under the prior is taken to the same quantile of the posterior), so nothing
-more is drawn and neighbouring sections keep their correlation. The fit needs two measurements since the last
-tamping; with one, that measurement sets the start SD and the rate is drawn. With a ``rate_factor`` in the
-file, k is given and only ρ and SD₀ are fitted. How well the fit recovers rates the engine itself generated
-histories with, and how well it predicts, is on the documentation's page "Lines from files" (``python
-experiments/line_example.py``).
+In an episode a fitted section's effective rate is a draw from its posterior, made from the episode's own draw
+of the section's factor (its quantile under the prior is taken to the same quantile of the posterior), so
+nothing more is drawn and neighbouring sections keep their correlation; the section's rates are then scaled so
+that the drawn field's roughness gives that effective rate (:func:`rate_multipliers`). The fit needs two
+measurements after the last tamping; with one, that measurement sets the start SD and the rate is drawn as
+without a file. With a ``rate_factor`` in the file, k is given (the drawn field's roughness then varies as
+usual) and only ρ and SD₀ are fitted. How well the fit recovers rates the engine generated histories with is on
+the documentation's page "Lines from files" (``python experiments/line_example.py``).
 
-A section's simulated growth in an episode still scatters around the fitted one: its within-section fields
-(per-sleeper rate and stiffness) are hidden and drawn per episode, and a segment is a 30 m sample of them.
+A fitted section's simulated growth in an episode scatters around its measured one by what remains: the
+posterior's spread, the rest of the hidden field (its stiffness, the pattern beyond its roughness) and the
+dynamics.
 """
 
 from __future__ import annotations
