@@ -1,4 +1,4 @@
-"""The ``trackenv`` command: validate, paper, compile, bench, evaluate, train, calibrate.
+"""The ``trackenv`` command: validate, paper, compile, bench, evaluate, train, calibrate, plan.
 
 Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
 to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
@@ -196,6 +196,33 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     result["wall_time_s"] = time.perf_counter() - t0
     result["ray"] = args.ray_address or ("local" if args.ray else None)
     _emit(args, result, format_line_table(result))
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Load the line first (a fault in it: one line, exit 2, before anything slow), then plan and write."""
+    from trackenv.envs.line_file import load_line
+
+    from .planning import line_policy, plan_line
+
+    line = load_line(args.line)
+    from trackenv.envs.line_config import LineConfig
+
+    line_policy(args.policy, LineConfig(line=line))  # an unknown policy before the fit and the futures
+    t0 = time.perf_counter()
+    progress = None
+    if not args.json:
+        from tqdm import tqdm
+
+        bar = tqdm(total=int(round(args.years * 4)), desc="plan (quarters)", file=sys.stderr, leave=False)
+        progress = bar.update
+    plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
+                     progress=progress)
+    if progress is not None:
+        bar.close()
+    files = plan.write(Path(args.out or "results/plan"))
+    payload = {**plan.to_dict(), "files": files, "wall_time_s": time.perf_counter() - t0}
+    _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
     return 0
 
 
@@ -444,6 +471,19 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--ray-address", default=None, metavar="ADDR",
                     help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_evaluate)
+
+    sp = command("plan", "what to tamp on a line from a line file, quarter by quarter, with the cost forecast")
+    out(sp, "results/plan")
+    sp.add_argument("line", metavar="LINE.yaml", help="a line file (the documentation's page Lines from files)")
+    sp.add_argument("--policy", default="grouped-threshold", metavar="NAME",
+                    help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
+                         "register-periodic, budgeted-worst-first (with its tuned parameters)")
+    sp.add_argument("--years", type=_positive(float), default=3.0, metavar="N", help="years to plan")
+    sp.add_argument("--futures", type=_positive(int), default=8, metavar="K",
+                    help="sampled futures (what the file does not know drawn again in each)")
+    sp.add_argument("--seed", type=_positive(int, zero=True), default=0, metavar="N",
+                    help="future i is the episode of seed N + i")
+    sp.set_defaults(func=cmd_plan)
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")
     out(sp, "results/line_calibration")

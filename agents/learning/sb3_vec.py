@@ -107,12 +107,11 @@ class _OneObjectVecEnv(VecEnv):
 class TampingSB3VecEnv(_OneObjectVecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
-    ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults), or a TampingLine
-    :class:`LineConfig` or scenario name ("small", "default", "hard"); ``action_type`` is "multibinary",
-    "discrete" or "ranked" (the line: "multibinary" only); ``seed`` (optional) seeds the first reset (env ``i``
-    gets ``seed + i``); ``workers`` > 1 splits the envs over that many processes
-    (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps in parallel;
-    call :meth:`close` when done).
+    ``config`` is a :class:`LineConfig`, a preset name ("small", "default", "hard", "track60"), a dict of its
+    fields, or None (the 60 m track); ``action_type`` is "multibinary", "discrete" or "ranked"; ``seed``
+    (optional) seeds the first reset (env ``i`` gets ``seed + i``); ``workers`` > 1 splits the envs over that
+    many processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps
+    in parallel; call :meth:`close` when done).
     """
 
     def __init__(self, num_envs: int = 8, config: LineConfig | dict | str | None = None, *,

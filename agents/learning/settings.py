@@ -2,7 +2,7 @@
 
 * :class:`AlgoSettings` — the algorithm's constructor arguments (stable-baselines3's PPO, sb3-contrib's
   MaskablePPO); the defaults are theirs (a test keeps them equal);
-* :class:`TampingSettings` — what :func:`~trackenv_agents.learning.tamping.train` reads (Tamping-v0): the
+* :class:`TampingSettings` — what :func:`~trackenv_agents.learning.tamping.train` reads (the 60 m track): the
   algorithm's arguments and the trainer's own options;
 * :class:`LineSettings` — what :func:`~trackenv_agents.learning.line.train_line` reads (TampingLine).
 

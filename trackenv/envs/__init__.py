@@ -13,6 +13,8 @@ section-level Dict observation) and ``trackenv/TampingRankedFlat-v1`` (the same 
 observation: RLlib's and CleanRL's default encoders). Each has a native vector entry point
 (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add ``workers=N`` for the same envs in N
 processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+The line ids take a line file (``line="my_line.yaml"``: :mod:`trackenv.envs.line_file`; the example in
+:mod:`trackenv.lines`).
 :func:`~trackenv.envs.multiagent.line_parallel_env` poses any of them as a PettingZoo ``ParallelEnv`` with one
 agent per section (the ``multiagent`` extra).
 
@@ -24,6 +26,8 @@ from gymnasium.envs.registration import register, registry
 
 from .line import TampingLine, TampingLineVectorEnv
 from .line_config import SCENARIOS, LineConfig, scenario
+from .line_file import LineDescription, LineFileError, load_line
+from .line_fit import history_fit
 from .multiagent import line_parallel_env
 from .problems import make_vector_env, problem_config
 from .state import EnvState
@@ -50,5 +54,6 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
-__all__ = ["SCENARIOS", "EnvState", "LineConfig", "TampingEnv", "TampingLine", "TampingLineVectorEnv",
-           "TampingVectorEnv", "line_parallel_env", "make_vector_env", "problem_config", "scenario"]
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "TampingEnv", "TampingLine",
+           "TampingLineVectorEnv", "TampingVectorEnv", "history_fit", "line_parallel_env", "load_line",
+           "make_vector_env", "problem_config", "scenario"]

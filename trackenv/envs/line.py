@@ -139,15 +139,18 @@ class TampingLine(TrackEnv):
     against their limits, the sections tamped this step shaded (the vector env draws its first line).
 
     **Arguments.** ``config`` (:class:`LineConfig`, dict or scenario name), ``scenario``, or fields as
-    keywords; ``render_mode`` (None or "rgb_array"). **Randomness**: everything is drawn at reset from
-    ``self.np_random`` (see :mod:`~trackenv.envs.line_episode`).
+    keywords; ``line``: a line file (``gym.make(id, line="my_line.yaml")``: its sections, register, wet zones,
+    traffic, state and measured history; :mod:`trackenv.envs.line_file`), which sets the number of sections, their
+    length, the speed and the traffic; ``render_mode`` (None or "rgb_array"). **Randomness**: everything is
+    drawn at reset from ``self.np_random`` (see :mod:`~trackenv.envs.line_episode`).
 
     **Versions.** v0: first release. Since then, without a change of dynamics or reward: ``render_mode=
     "rgb_array"``; the vector env's two autoreset modes and Gymnasium's info layout (``final_info`` a dict of
     arrays, as ``SyncVectorEnv`` gives it, where it was an object array of per-line dicts); the settlement's
     Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
     no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance);
-    ``info["section_costs"]``; ``info["observation_clipped"]``.
+    ``info["section_costs"]``; ``info["observation_clipped"]``; lines from files (``line=``; a line without one is
+    drawn as before, bit for bit).
     """
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,

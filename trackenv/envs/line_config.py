@@ -11,9 +11,10 @@ switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 time
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, fields
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,11 +25,17 @@ from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 from .config import ConfigBase, bounded_by, check_range_field
 
+if TYPE_CHECKING:
+    from .line_file import LineDescription
+
 SLEEPER_SPACING_M = 0.6
 #: sleepers of the approach (and of the exit) zone added to each end of a segment in its passes
 APPROACH_SLEEPERS = 10
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
+#: The fields a line file sets (``line``): its number of sections, their length and the line's traffic.
+LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt", "freight_share",
+                    "freight_axle_load_t")
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,15 @@ class LineConfig(ConfigBase):
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type, the coarsest step that keeps the
     peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s for the
     coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
+
+    **A line from a file** (``line``: the path of a line file, or a
+    :class:`~trackenv.envs.line_file.LineDescription`; the documentation's page "Lines from files"): the file
+    sets :data:`LINE_FILE_FIELDS` (the number of sections, their length, the line's speed and traffic; giving
+    one of them as well is an error unless it equals the file's) and, per section, the register, known wet
+    zones, traffic (a factor on the axle passes), years since tamping and tampings since renewal; where it
+    gives a measured history the section's rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
+    the file does not know is drawn per episode as without one. ``capacity`` is at most the file's number of
+    sections.
     """
 
     n_sections: int = 12
@@ -148,6 +164,7 @@ class LineConfig(ConfigBase):
     profiles: bool = False
     limits: tuple = ()
     dt: float | str = "auto"
+    line: LineDescription | None = None
 
     agent_action_types = ("multibinary", "discrete", "ranked")
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
@@ -156,6 +173,7 @@ class LineConfig(ConfigBase):
                           ("immediate_action", 3, "immediate_action_cost"))
 
     def __post_init__(self) -> None:
+        self._take_line()
         # each check stores the value back in its canonical type
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
@@ -245,7 +263,51 @@ class LineConfig(ConfigBase):
     def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d["initial_scale"] = tuple(self.initial_scale)
+        d["line"] = None if self.line is None else self.line.to_dict()
         return d
+
+    def replace(self, **changes: Any) -> LineConfig:
+        """A copy with some fields changed (validated; unknown keys raise ValueError). With a line file, the
+        fields it sets (:data:`LINE_FILE_FIELDS`) are the file's: changing one is an error, and a new ``line``
+        replaces them all."""
+        line = changes.get("line", self.line)
+        given = [name for name in LINE_FILE_FIELDS if name in changes]
+        if line is not None and given:
+            raise ValueError(f"{', '.join(given)} come(s) from the line file: change the file, or leave "
+                             f"{'them' if len(given) > 1 else 'it'} out")
+        base = self.to_dict()
+        if "line" in changes:  # the old line's values (or the scenario's) give way to the new file's
+            for name in LINE_FILE_FIELDS:
+                del base[name]
+        return self.from_dict({**base, **changes})
+
+    def _take_line(self) -> None:
+        """Read ``line`` (a path, a dict of a line's keys, or a description) and set the fields it owns."""
+        if self.line is None:
+            return
+        from .line_file import LineDescription, load_line
+
+        line = self.line
+        if isinstance(line, (str, os.PathLike)):
+            line = load_line(line)
+        elif isinstance(line, dict):
+            line = LineDescription.from_dict(line)
+        elif not isinstance(line, LineDescription):
+            raise ValueError(f"line must be the path of a line file, a LineDescription or a dict, got "
+                             f"{type(line).__name__}")
+        object.__setattr__(self, "line", line)
+        if self.sections_per_segment != 1:
+            raise ValueError(f"sections_per_segment must be 1 with a line file (each of its sections is a segment of "
+                             f"its own), got {self.sections_per_segment!r}")
+        defaults = {f.name: f.default for f in fields(self)}
+        for name in LINE_FILE_FIELDS:
+            value, theirs = getattr(self, name), getattr(line, name)
+            if value != defaults[name] and value != theirs:
+                raise ValueError(f"{name}={value!r} conflicts with the line file {line.source}, which sets it to "
+                                 f"{theirs!r}: leave it out")
+            object.__setattr__(self, name, theirs)
+        if isinstance(self.capacity, int) and not isinstance(self.capacity, bool):
+            object.__setattr__(self, "capacity", min(self.capacity, line.n_sections))
 
     # ------------------------------------------------------------------ derived
     @property

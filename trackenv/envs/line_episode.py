@@ -62,7 +62,7 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
 
 #: The arrays of :class:`LineBatch` with a leading axis of segments, and those indexed (step, segment).
 _SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", "wet_mask", "wet_active",
-                   "measured_level", "contact_profile", "d1")
+                   "measured_level", "contact_profile", "d1", "traffic_factor")
 _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
@@ -165,6 +165,7 @@ class LineBatch:
         self.contact_profile = np.zeros((GR, n))  # largest wheel/rail force over each sleeper bay [N]
         self.d1 = np.zeros((GR, n))
         self.tamp_noise = np.zeros((H + 1, GR, n))
+        self.traffic_factor = np.ones(GR)  # factor on the axle passes per segment (a line file's per-section traffic)
         # per section
         self.count = np.zeros(G, dtype=np.int64)  # tampings since renewal
         self.tampings = np.zeros(G, dtype=np.int64)  # tampings this episode
@@ -350,6 +351,7 @@ class LineBatch:
         u0 = self.rate()[rs] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (R, n)))
         self.u[rs] = u0
         self.cyc[rs] = np.broadcast_to(cycles[:, None], (R, n))
+        self._apply_line_file(b)
 
     def _voided_sleepers(self, rng: np.random.Generator, R: int, n: int) -> list[np.ndarray]:
         """Per segment, the sleepers that hang (a Poisson number, mean ``voided_sleepers_mean``, never the two at
@@ -358,6 +360,54 @@ class LineBatch:
         if mean == 0:
             return [np.zeros(0, dtype=np.int64)] * R
         return [rng.integers(2, n - 2, size=int(rng.poisson(mean))) for _ in range(R)]
+
+    def _apply_line_file(self, b: int) -> None:
+        """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
+        the drawn values (:func:`~trackenv.envs.line_fit.line_overrides`): the register, with its zones' rate
+        and stiffness (the statics rebuilt where they change); known wet zones (the drawn patch, wet from the
+        start instead of hidden); the per-section traffic factor, tampings since renewal and years since tamping
+        with the settlement since (as above); the rate factor the file gives, or a draw from its posterior given
+        the history (:func:`~trackenv.envs.line_fit.rate_multipliers`), in place of the drawn one; and the SD the
+        history gives at the start (the drawn shape and settlement scaled to it:
+        :func:`~trackenv.envs.line_fit.start_levels`).
+        Everything is drawn first, as without a file, so the draws and their order do not change."""
+        c = self.config
+        if c.line is None:
+            return
+        from .line_fit import drawn_section_factor, line_overrides, rate_multipliers, start_levels, zone_factors
+
+        # a line file's config has one section per segment (LineConfig refuses more): section j is segment j
+        o, r, rs, S, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sections, c.n_sleepers
+        old_rate, old_k = zone_factors(self.register[r], n, c)
+        new_rate, new_k = zone_factors(o.register, n, c)
+        drawn = drawn_section_factor(self.base_rate[rs] / old_rate, c)
+        rate = self.base_rate[rs] / old_rate * new_rate
+        rate[o.wet] *= np.where(self.wet_mask[rs][o.wet], c.wet_spot_rate_factor, 1.0)
+        self.base_rate[rs] = rate * rate_multipliers(o, drawn, rate, c)[:, None]
+        self.wet_onset[rs] = np.where(o.wet, -1, self.wet_onset[rs])
+        self.wet_active[rs] = o.wet
+        base = Track.realistic(c.segment_length_m)
+        for j in np.flatnonzero((old_k != new_k).any(axis=1)):
+            model = self.model_tracks[rs.start + j]
+            own = slice((model.n_sleepers - n) // 2, (model.n_sleepers - n) // 2 + n)  # voided sleepers kept
+            track = base.replace(ballast_stiffness=model.ballast_stiffness[own] / old_k[j] * new_k[j],
+                                 ballast_damping=model.ballast_damping[own])
+            sim = TrackDegradation(track, self.vehicles[0], law=self.law, feedback="support",
+                                   approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
+            self.model_tracks[rs.start + j] = sim.model_track
+            self.influence[rs.start + j] = sim.support_influence
+        self.register[r] = o.register
+        self.traffic_factor[rs] = o.traffic_factor
+        self.count[r] = o.tampings_since_renewal
+        self.last_tamped[r] = -np.round(o.years_since_tamping * c.steps_per_year)
+        cycles = o.years_since_tamping * c.steps_per_year * self.passes.sum() * o.traffic_factor
+        f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # as above
+        self.u[rs] = self.rate()[rs] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
+        self.cyc[rs] = np.broadcast_to(cycles[:, None], (S, n))
+        known = np.flatnonzero(~np.isnan(o.start_sd_m))
+        rows = rs.start + known
+        self.offset[rows], self.u[rows] = start_levels(self.offset[rows], self.u[rows],
+                                                       o.sd_after_tamping_m[known], o.start_sd_m[known])
 
     def _equivalent(self, forces: np.ndarray) -> np.ndarray:
         """Equivalent force of the traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, ...)."""
@@ -409,7 +459,8 @@ class LineBatch:
         among others (:class:`~trackenv.envs.line.TampingLineVectorEnv`), and a section's cost depends only on
         its own schedule (the hindsight search relies on that)."""
         self.u[segs], self.cyc[segs] = implicit_settlement_step(
-            self.law, self.u[segs], self.cyc[segs], self.rate()[segs], force, self.influence[segs], cycles,
+            self.law, self.u[segs], self.cyc[segs], self.rate()[segs], force, self.influence[segs],
+            cycles * self.traffic_factor[segs],
             band=force.shape[1],  # segments are short: the full Jacobian, as the line's calibration was run
         )
 

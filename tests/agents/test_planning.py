@@ -1,0 +1,78 @@
+"""``trackenv plan``: a plan from a line file (table, JSON, CSV and plot), and every malformed file one line on
+stderr with exit status 2."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv_agents.cli import main
+from trackenv_agents.planning import plan_line
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "envs"))
+from test_line_file import FAULTS, write  # noqa: E402  (the malformed files of the loader's tests)
+
+
+def test_plan_writes_its_table_csv_and_plot(tmp_path, capsys):
+    line = write(tmp_path)
+    out = tmp_path / "plan"
+    assert main(["plan", str(line), "--years", "0.5", "--futures", "2", "--json", "--out", str(out)]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["policy"] == "grouped-threshold" and len(payload["quarters"]) == 2
+    assert payload["quarters"][0]["from"] == "2026-01-01" and payload["quarters"][1]["from"] == "2026-04-02"
+    assert payload["cost_keur"]["p10"] <= payload["cost_keur"]["mean"] <= payload["cost_keur"]["p90"]
+    assert payload["fit"]["fitted"] == 2
+    with open(payload["files"]["costs_csv"]) as f:
+        rows = list(csv.DictReader(f))
+    assert [r["quarter"] for r in rows] == ["1", "2"]
+    assert Path(payload["files"]["plot"]).stat().st_size > 10_000
+    assert Path(payload["files"]["plan_csv"]).exists()
+
+
+def test_the_plan_is_what_the_policy_does_in_the_futures(tmp_path):
+    """The shares are those of the futures (multiples of 1/2 for two), and each future's quarters cost what its
+    cost parts add up to."""
+    plan = plan_line(write(tmp_path), policy="section-threshold", years=0.5, futures=2, capacity=4)
+    assert plan.share.shape == (2, 4) and plan.costs.shape == (2, 2)
+    rule_tamps = plan.share[0]
+    assert set(np.unique(rule_tamps)) <= {0.0, 0.5, 1.0}
+    total = sum(v for v in plan.parts.values())
+    assert np.allclose(total, plan.costs.sum(axis=1))
+    assert "Q1" in plan.table() and "k€" in plan.table()
+
+
+@pytest.mark.parametrize("kind", list(FAULTS))
+def test_a_malformed_file_is_one_line_and_exit_2(tmp_path, capsys, kind):
+    files, expected = FAULTS[kind]
+    line = write(tmp_path, **files)
+    assert main(["plan", str(line), "--out", str(tmp_path / "plan")]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert err.startswith("trackenv plan: ") and "\n" not in err and captured.out == ""
+    assert expected[-1] in err
+    assert not (tmp_path / "plan").exists()
+
+
+def test_plan_refuses_an_unknown_policy_and_a_missing_file(tmp_path, capsys):
+    assert main(["plan", str(write(tmp_path)), "--policy", "greedy"]) == 2
+    assert "unknown policy 'greedy'" in capsys.readouterr().err
+    assert main(["plan", str(tmp_path / "none.yaml")]) == 2
+    assert "no such line file" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_example_line_round_trips_through_plan(tmp_path, capsys):
+    """file -> env -> plan -> CSV and plot, on the example line that ships (a short plan)."""
+    from trackenv.lines import EXAMPLE
+
+    assert main(["plan", str(EXAMPLE), "--years", "0.5", "--futures", "2", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Plan for Example Valley Line (synthetic) from 2026-01-01")
+    assert "80 sections' rates fitted" in out
+    for name in ("plan.csv", "costs.csv", "plan.png"):
+        assert (tmp_path / name).stat().st_size > 0

@@ -1,0 +1,361 @@
+"""Lines from files: the loader and its one-line errors (one test per kind of fault), the config that carries a
+line, the engine applying it over the draws, the history fit, and the example line that ships."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import trackenv  # noqa: F401  (registers the ids)
+from trackenv.envs.line import TampingLine, TampingLineVectorEnv
+from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_episode import LineBatch
+from trackenv.envs.line_file import LineDescription, LineFileError, load_line
+from trackenv.envs.line_fit import drawn_section_factor, history_fit, line_overrides, zone_factors
+from trackenv.lines import EXAMPLE
+
+LINE = """\
+name: Test line
+as_of: 2026-01-01
+traffic:
+  annual_mgt: 15
+  speed_kmh: 100
+  freight_share: 0.4
+sections: sections.csv
+history: history.csv
+"""
+SECTIONS = """\
+# a comment line, as the example's units line
+section,length_m,register,wet,annual_mgt,years_since_tamping,tampings_since_renewal
+A,200,plain,no,,2,1
+B,200,transition,no,,3,2
+C,200,switch_or_crossing,no,30,1.5,0
+D,200,plain,yes,,0.5,3
+"""
+HISTORY = """\
+section,date,sd_mm,peak_mm
+A,2024-03-01,0.6,2.0
+A,2025-01-05,0.8,2.5
+A,2025-12-01,1.0,3.1
+B,2023-06-01,1.2,4
+B,2024-06-01,1.5,5
+B,2025-06-01,1.9,6
+C,2025-01-01,0.9,3
+"""
+
+
+def write(folder: Path, line: str = LINE, sections: str = SECTIONS, history: str | None = HISTORY) -> Path:
+    (folder / "sections.csv").write_text(sections)
+    if history is not None:
+        (folder / "history.csv").write_text(history)
+    path = folder / "line.yaml"
+    path.write_text(line)
+    return path
+
+
+@pytest.fixture
+def line_file(tmp_path: Path) -> Path:
+    return write(tmp_path)
+
+
+# ---------------------------------------------------------------------- loading
+def test_a_line_file_loads_in_si(line_file):
+    line = load_line(line_file)
+    assert line.n_sections == 4 and line.length_m == 800.0 and line.as_of == "2026-01-01"
+    assert [s.register for s in line.sections] == ["plain", "transition", "switch_or_crossing", "plain"]
+    assert [s.wet for s in line.sections] == [False, False, False, True]
+    assert line.traffic_factors() == (1.0, 1.0, 2.0, 1.0)  # blank: the line's 15 MGT
+    assert line.sections[0].speed_kmh == 100.0 and line.freight_axle_load_t == 22.5  # the default
+    a = line.measurements("A")
+    assert [m.sd_m for m in a] == pytest.approx([0.6e-3, 0.8e-3, 1.0e-3]) and a[0].peak_m == pytest.approx(2e-3)
+    assert line.years_before("2025-01-01") == pytest.approx(1.0, abs=1e-3)
+
+
+def test_the_description_round_trips_and_is_hashable(line_file):
+    line = load_line(line_file)
+    again = LineDescription.from_dict(line.to_dict())
+    assert again == line and hash(again) == hash(line)
+    assert pickle.loads(pickle.dumps(line)) == line
+
+
+# One case per kind of fault: (what the files say, what the one line must name). Each gives a LineFileError
+# (a ValueError) of one line naming the file, and for a CSV the row, and the field with what is allowed.
+FAULTS = {
+    "missing field (column)": (dict(sections=SECTIONS.replace(",tampings_since_renewal", "").replace(",1\n", "\n")
+                                    .replace(",2\n", "\n").replace(",0\n", "\n").replace(",3\n", "\n")),
+                               ["sections.csv, header", "missing column 'tampings_since_renewal'"]),
+    "missing field (key)": (dict(line=LINE.replace("  speed_kmh: 100\n", "")),
+                            ["line.yaml", "missing key 'traffic.speed_kmh'", "km/h"]),
+    "empty cell": (dict(sections=SECTIONS.replace("B,200,transition,no,,3,2", "B,200,transition,no,,,2")),
+                   ["sections.csv, row 4 (section B)", "years_since_tamping: empty"]),
+    "negative length": (dict(sections=SECTIONS.replace("B,200", "B,-200")),
+                        ["row 4 (section B)", "length_m: must be a positive length [m], got -200"]),
+    "zero length": (dict(sections=SECTIONS.replace("A,200", "A,0")), ["row 3 (section A)", "length_m", "got 0"]),
+    "unknown register class": (dict(sections=SECTIONS.replace("switch_or_crossing", "swich")),
+                               ["row 5 (section C)", "register: 'swich' is not one of plain, transition, "
+                                "switch_or_crossing"]),
+    "misspelled register class": (dict(sections=SECTIONS.replace("transition", "transtion")),
+                                  ["row 4 (section B)", "did you mean 'transition'?"]),
+    "history out of order": (dict(history=HISTORY.replace("B,2024-06-01", "B,2023-01-01")),
+                             ["history.csv, row 6 (section B)", "date: 2023-01-01 is not after", "date order"]),
+    "SD in m, not mm": (dict(history=HISTORY.replace("A,2025-01-05,0.8", "A,2025-01-05,0.0008")),
+                        ["history.csv, row 3 (section A)", "sd_mm", "outside [0.05, 15] mm",
+                         "it looks like m: give it in mm"]),
+    "length in km": (dict(sections=SECTIONS.replace(",200,", ",0.2,")),
+                     ["length_m", "it looks like km: give it in m"]),
+    "freight share in per cent": (dict(line=LINE.replace("freight_share: 0.4", "freight_share: 40")),
+                                  ["traffic.freight_share", "per cent: give a fraction"]),
+    "empty line file": (dict(line=""), ["line.yaml: empty file"]),
+    "empty sections file": (dict(sections=""), ["sections.csv: empty file", "expected a header row"]),
+    "no section rows": (dict(sections=SECTIONS.splitlines()[1] + "\n"), ["sections.csv: a header and no rows"]),
+    "misspelled key": (dict(line=LINE.replace("annual_mgt", "anual_mgt")),
+                       ["line.yaml", "unknown key 'traffic.anual_mgt'; did you mean 'annual_mgt'?"]),
+    "misspelled column": (dict(sections=SECTIONS.replace("years_since_tamping", "years_since_tamp")),
+                          ["sections.csv, header", "unknown column 'years_since_tamp'"]),
+    "bad number": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,,2.5.1,1")),
+                   ["row 3 (section A)", "years_since_tamping: '2.5.1' is not a number [year]"]),
+    "decimal comma": (dict(history=HISTORY.replace("B,2023-06-01,1.2,4", 'B,2023-06-01,"1,2",4')),
+                      ["row 5 (section B)", "is not a number [mm]; use a decimal point"]),
+    "missing sections file": (dict(line=LINE.replace("sections: sections.csv", "sections: sectoins.csv")),
+                              ["line.yaml, key sections: no such sections file", "sectoins.csv"]),
+    "duplicate section ids": (dict(sections=SECTIONS.replace("\nC,", "\nA,")),
+                              ["sections.csv, row 5", "id 'A' repeats row 3", "unique"]),
+    "unknown section in history": (dict(history=HISTORY + "E,2025-01-01,1.0,3\n"),
+                                   ["history.csv, row 9", "'E' is not a section of the sections file"]),
+    "varying speed": (dict(sections=SECTIONS.replace("annual_mgt,", "speed_kmh,").replace("no,30,", "no,80,")),
+                      ["row 5 (section C)", "speed_kmh: 80 differs from the line's 100", "one speed per line"]),
+    "varying length": (dict(sections=SECTIONS.replace("D,200", "D,150")),
+                       ["row 6 (section D)", "150 m differs", "same length"]),
+    "invalid YAML": (dict(line=LINE.replace("traffic:", "traffic: [")), ["line.yaml, line", "not valid YAML"]),
+    "bad date": (dict(history=HISTORY.replace("2024-03-01", "01/03/2024")),
+                 ["row 2 (section A)", "'01/03/2024' is not a date; write YYYY-MM-DD"]),
+    "history after as_of": (dict(history=HISTORY.replace("2025-12-01", "2026-02-01")),
+                            ["row 4 (section A)", "is after as_of 2026-01-01"]),
+    "peak below SD (swapped columns)": (dict(history=HISTORY.replace("B,2024-06-01,1.5,5", "B,2024-06-01,5,1.5")),
+                                        ["row 6 (section B)", "peak_mm: 1.5 mm is below the SD 5 mm"]),
+    "tampings not whole": (dict(sections=SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.5,2.5")),
+                           ["row 6 (section D)", "tampings_since_renewal: must be a whole number"]),
+    "wet not yes/no": (dict(sections=SECTIONS.replace("D,200,plain,yes", "D,200,plain,maybe")),
+                       ["row 6 (section D)", "wet: 'maybe' is not yes or no"]),
+    "cells missing in a row": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,2,1")),
+                               ["row 3", "6 cells where the header has 7 columns"]),
+    "too many sections": (dict(sections=SECTIONS.splitlines()[1] + "\n"
+                               + "".join(f"X{i},200,plain,no,,1,0\n" for i in range(300))),
+                          ["sections (300 rows)", "n_sections must be an integer in [1, 256], got 300"]),
+    "unsupported schema": (dict(line="schema: 2\n" + LINE), ["line.yaml, schema: version 2 is not supported"]),
+    "a list, not a mapping": (dict(line="- name\n- as_of\n"), ["line.yaml: a line file is a YAML mapping"]),
+}
+
+
+@pytest.mark.parametrize("kind", list(FAULTS))
+def test_every_fault_is_one_line_naming_file_row_and_field(tmp_path, kind):
+    files, expected = FAULTS[kind]
+    path = write(tmp_path, **files)
+    with pytest.raises(LineFileError) as err:
+        load_line(path)
+    text = str(err.value)
+    assert isinstance(err.value, ValueError)
+    assert "\n" not in text and text.startswith(str(tmp_path))
+    for part in expected:
+        assert part in text, f"{part!r} not in {text!r}"
+
+
+def test_a_missing_line_file_is_one_line(tmp_path):
+    with pytest.raises(LineFileError, match=r"^no such line file: .*nowhere\.yaml$"):
+        load_line(tmp_path / "nowhere.yaml")
+
+
+def test_a_line_dict_is_checked_as_a_file(line_file):
+    d = load_line(line_file).to_dict()
+    d["sections"][1]["register"] = "bridge"
+    with pytest.raises(LineFileError, match=r"^<line dict>, sections\[1\] \(section B\), register: 'bridge'"):
+        LineDescription.from_dict(d)
+    d = load_line(line_file).to_dict()
+    d["sections"][0]["lenght_m"] = d["sections"][0].pop("length_m")
+    with pytest.raises(LineFileError, match="unknown column 'lenght_m'; did you mean 'length_m'"):
+        LineDescription.from_dict(d)
+
+
+# ---------------------------------------------------------------------- the config
+def test_the_config_takes_the_files_fields(line_file):
+    c = LineConfig(line=str(line_file), capacity=3)
+    assert (c.n_sections, c.section_length_m, c.speed_kmh, c.annual_mgt, c.freight_share) == (4, 200.0, 100.0,
+                                                                                               15.0, 0.4)
+    assert c.line == load_line(line_file) and c.capacity == 3
+    assert LineConfig(line=line_file).capacity == 4  # at most the line's sections
+    # the round trip through to_dict keeps the line (a JSON-ready dict), and the config stays hashable
+    assert LineConfig.from_dict(c.to_dict()) == c and hash(c.replace(horizon_years=2.0)) != hash(c)
+    assert c.replace(horizon_years=2.0).line == c.line
+    assert pickle.loads(pickle.dumps(c)) == c
+    small = LineConfig.coerce("small").replace(line=line_file)  # the scenario's capacity, the file's sections
+    assert (small.n_sections, small.capacity) == (4, 3)
+    assert small.replace(line=None).n_sections == 12  # without the file, the defaults again
+
+
+@pytest.mark.parametrize("make", [
+    lambda p: LineConfig(line=p, n_sections=7),
+    lambda p: LineConfig(line=p).replace(speed_kmh=80.0),
+    lambda p: gym.make("trackenv/TampingLine-v0", line=p, annual_mgt=20.0),
+])
+def test_a_field_the_file_sets_cannot_be_given_as_well(line_file, make):
+    with pytest.raises(ValueError, match="line file"):
+        make(line_file)
+
+
+# ---------------------------------------------------------------------- the engine
+def test_the_zone_factors_are_the_engines():
+    """zone_factors (which the file's register applies) equals what the engine's draw puts on each class."""
+    base = LineConfig(n_sections=6, capacity=3)
+    plain = LineBatch(base.replace(transition_probability=0.0, switch_probability=0.0), 1)
+    plain.start([0], [np.random.default_rng(5)])
+    n = base.n_sleepers
+    for cls, probs in ((1, dict(transition_probability=1.0, switch_probability=0.0)),
+                       (2, dict(transition_probability=0.0, switch_probability=1.0))):
+        zoned = LineBatch(base.replace(**probs), 1)
+        zoned.start([0], [np.random.default_rng(5)])  # the same draws: the register only multiplies
+        rate, stiff = zone_factors(np.full(6, cls), n, base)
+        assert np.allclose(zoned.base_rate / plain.base_rate, rate, rtol=1e-12)
+        for j in range(6):
+            k_z, k_p = zoned.model_tracks[j].ballast_stiffness, plain.model_tracks[j].ballast_stiffness
+            first = (k_z.size - n) // 2
+            assert np.allclose((k_z / k_p)[first : first + n], stiff[j], rtol=1e-12)
+
+
+def test_the_drawn_section_factor_is_recovered():
+    c = LineConfig(n_sections=6, capacity=3, transition_probability=0.0, switch_probability=0.0)
+    batch = LineBatch(c, 1)
+    batch.start([0], [np.random.default_rng(9)])
+    rng = np.random.default_rng(9)  # the draw's first numbers: the AR(1) of the section factors
+    e = rng.standard_normal(6)
+    rho = np.exp(-c.section_length_m / c.rate_correlation_m)
+    z = [e[0]]
+    for j in range(1, 6):
+        z.append(rho * z[-1] + np.sqrt(1 - rho * rho) * e[j])
+    expected = np.exp(c.rate_sigma * np.array(z) - c.rate_sigma**2 / 2)
+    assert np.allclose(drawn_section_factor(batch.base_rate, c), expected, rtol=1e-9)
+
+
+def test_the_engine_applies_the_file(line_file):
+    env = TampingLine(line=line_file, horizon_years=1.0)
+    obs, info = env.reset(seed=3)
+    assert obs["register"].tolist() == [0, 1, 2, 0]
+    assert obs["years_since_tamping"].tolist() == [2.0, 3.0, 1.5, 0.5]
+    assert obs["tampings_since_renewal"].tolist() == [1, 2, 0, 3]
+    assert info["wet_spot_active"].tolist() == [False, False, False, True]  # known, wet from the start
+    rows = env.engine.get_state(0).rows
+    assert rows["traffic_factor"].tolist() == [1.0, 1.0, 2.0, 1.0]
+    assert rows["wet_onset"][3] == -1  # not hidden: no onset to come
+    # the sections with a fitted history start at the SD the fit gives
+    fit = history_fit(env.config)
+    for j, f in enumerate(fit.sections):
+        if not np.isnan(f.start_sd_mm):
+            assert info["section_sd_m"][j] * 1e3 == pytest.approx(f.start_sd_mm, rel=2e-3)
+
+
+def test_a_sections_traffic_drives_its_settlement(tmp_path):
+    """Two draws of the same line, one with section B at twice the traffic: B settles more in a step (by
+    (2N)^0.2 / N^0.2 = 1.15 in the consolidation phase of Shenton's law, up to 2 in its linear phase), A as before."""
+    one_traffic = SECTIONS.replace(",30,", ",,")
+    settled = []
+    for mgt in ("", "30"):
+        sections = one_traffic.replace("B,200,transition,no,,3,2", f"B,200,transition,no,{mgt},0,2")
+        line = LINE.replace("history: history.csv\n", "")
+        env = TampingLine(line=write(tmp_path, line=line, sections=sections, history=None), horizon_years=1.0)
+        env.reset(seed=1)
+        env.step(np.zeros(4, np.int8))
+        settled.append(env.engine.get_state(0).rows["u"].mean(axis=1))
+    ratio = settled[1] / settled[0]
+    assert 1.1 < ratio[1] < 2.0 and ratio[0] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_a_file_line_is_the_same_alone_and_in_the_vector_env(line_file):
+    single = TampingLine(line=line_file, horizon_years=0.5)
+    vec = TampingLineVectorEnv(2, line=line_file, horizon_years=0.5)
+    obs, _ = single.reset(seed=4)
+    vobs, _ = vec.reset(seed=4)
+    assert np.array_equal(vobs["section_sd"][0], obs["section_sd"])
+    action = np.array([1, 0, 0, 1], np.int8)
+    obs, r, *_ = single.step(action)
+    vobs, vr, *_ = vec.step(np.stack([action, action]))
+    assert vr[0] == r and np.array_equal(vobs["section_sd"][0], obs["section_sd"])
+    via_make = gym.make_vec("trackenv/TampingLine-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                            line=str(line_file), horizon_years=0.5)
+    assert via_make.unwrapped.config == vec.config
+
+
+def test_state_and_pickle_with_a_file(line_file):
+    env = TampingLine(line=line_file, horizon_years=1.0)
+    env.reset(seed=2)
+    state = env.get_state()
+    clone = pickle.loads(pickle.dumps(env))
+    a = env.step(np.ones(4, np.int8))[1]
+    assert clone.step(np.ones(4, np.int8))[1] == a
+    other = TampingLine(line=load_line(line_file), horizon_years=1.0)  # an equal config
+    other.set_state(state)
+    assert other.step(np.ones(4, np.int8))[1] == a
+
+
+# ---------------------------------------------------------------------- the history fit
+def test_the_fit_reports_every_section(line_file):
+    fit = history_fit(LineConfig(line=line_file))
+    status = [f.status for f in fit.sections]
+    assert status == ["fitted", "fitted", "start SD only", "no history"]
+    a = fit.sections[0]
+    assert a.points == 3 and a.rate_p10 < a.rate_factor < a.rate_p90 and a.residual_mm < 0.2
+    assert fit.sections[2].start_sd_mm == pytest.approx(0.9)
+    assert "A" in fit.table() and fit.to_dict()["fitted"] == 2
+    o = line_overrides(LineConfig(line=line_file))
+    assert np.isnan(o.rate_cdf[2:]).all() and np.all(np.diff(o.rate_cdf[0]) >= 0)
+
+
+def test_the_fit_recovers_rates_the_engine_generated():
+    """24 plain sections with rates drawn from the engine's prior, five years of noise-free recording-car runs
+    generated by the engine: the fitted rates follow the true ones, far better than the prior does."""
+    from trackenv_studies.line_files import fit_recovery
+
+    r = fit_recovery(n_sections=24, seeds=(2,), years=5.0, truth_seed=1, sd_noise_mm=0.0)
+    assert r["correlation_log"] > 0.85
+    assert r["rms_log_error"] < 0.5 * r["rms_log_error_prior"]
+    assert 0.8 < r["median_ratio"] < 1.25
+    assert r["median_residual_mm"] < 0.03
+
+
+# ---------------------------------------------------------------------- the example line
+@pytest.mark.slow
+def test_the_example_line_runs_an_episode():
+    line = load_line(EXAMPLE)
+    assert line.n_sections == 100 and line.length_m == 20_000.0
+    registers = [s.register for s in line.sections]
+    assert registers.count("transition") == 4 and registers.count("switch_or_crossing") == 5
+    assert sum(s.wet for s in line.sections) == 8 and len(line.history) > 1000
+    env = gym.make("trackenv/TampingLine-v0", line=EXAMPLE, horizon_years=0.5)
+    obs, info = env.reset(seed=0)
+    assert obs["section_sd"].shape == (100,)
+    total = 0.0
+    for _ in range(2):
+        obs, r, _, truncated, info = env.step(env.action_space.sample() * 0)
+        total += r
+    assert truncated and np.isfinite(total)
+    fit = history_fit(env.unwrapped.config)
+    assert len(fit.fitted) > 50
+
+
+def test_the_documented_schema_is_the_loaders():
+    """The schema tables of the documentation's page list every key and column the loader knows, with its
+    unit and whether it is required."""
+    from trackenv.envs.line_file import HISTORY_COLUMNS, LINE_KEYS, SECTION_COLUMNS, TRAFFIC_KEYS
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "line-files.md").read_text()
+    rows = {}
+    for line in page.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("| `") and len(cells) >= 3:
+            rows.setdefault(cells[0].strip("`"), []).append((cells[1], cells[2]))
+    tables = [(LINE_KEYS, ""), (TRAFFIC_KEYS, "traffic."), (SECTION_COLUMNS, ""), (HISTORY_COLUMNS, "")]
+    for known, prefix in tables:
+        for name, field in known.items():
+            assert (field.unit, "yes" if field.required else "no") in rows[prefix + name], name

@@ -1,0 +1,573 @@
+"""Lines from files: the schema of a line file, its loader and its checks.
+
+A line is described by a YAML file (the line: its name, the date its state describes, its traffic) that names
+a CSV file of its sections (one row per section: length, register class, known wet zone, traffic, years since
+tamping, tampings since renewal) and, optionally, a CSV file of its measured history (recording-car runs:
+section, date, SD, mean-to-peak). :func:`load_line` reads them into a :class:`LineDescription`: frozen and
+hashable (tuples), so a :class:`~trackenv.envs.line_config.LineConfig` carries it (``LineConfig(line=...)``,
+``gym.make("trackenv/TampingLine-v0", line="my_line.yaml")``) and snapshots, pickling and config comparison
+keep working. The schema, with units, is on the documentation's page "Lines from files" and in
+:data:`LINE_KEYS`, :data:`SECTION_COLUMNS` and :data:`HISTORY_COLUMNS`.
+
+The files are in the units a railway uses (m, mm, MGT a year, km/h, years); the description keeps the file's
+values with the unit in each name, and gives the SD and mean-to-peak in SI too (``sd_m``). Every fault in a
+file raises :class:`LineFileError`, a ``ValueError`` whose text is one line naming the file, the row and the
+field, and what is allowed: a command line prints it and exits with status 2. A misspelled key or column is an
+error (with the closest known name), never a silent default; YAML is read with ``yaml.safe_load`` only.
+
+Bounds: the line's own fields (section length, number of sections, speed, traffic) are checked by
+:class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges live, and its refusal is reported
+against the file; the per-section and history fields have theirs in the column tables below. Values that fit
+another unit (an SD given in m where mm is expected, a length in km, a share in per cent) are named as such.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import difflib
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .line_config import REGISTER_CLASSES
+
+#: The schema version this trackenv reads (the optional ``schema`` key of a line file).
+SCHEMA_VERSION = 1
+DAYS_PER_YEAR = 365.25
+
+
+class LineFileError(ValueError):
+    """A fault in a line file (or a line given as a dict): its text is one line naming the file, the row and the
+    field, and what is allowed."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of a line file or one column of its CSV files: its unit, whether it is required, the range a
+    value must lie in (in the file's unit; None: checked elsewhere or unbounded) and what it means."""
+
+    unit: str
+    required: bool
+    meaning: str
+    low: float | None = None
+    high: float | None = None
+
+
+#: The keys of a line file (YAML). ``traffic`` is a mapping of :data:`TRAFFIC_KEYS`.
+LINE_KEYS: dict[str, Field] = {
+    "schema": Field("-", False, f"version of this schema (default {SCHEMA_VERSION})"),
+    "name": Field("-", True, "the line's name"),
+    "description": Field("-", False, "free text"),
+    "as_of": Field("YYYY-MM-DD", True, "the date the sections' state describes: years since tamping count to it, "
+                                       "no measurement is later, and an episode starts there"),
+    "traffic": Field("-", True, "the line's traffic (keys below); a section's own columns override it"),
+    "sections": Field("path", True, "the sections CSV file, relative to this file"),
+    "history": Field("path", False, "the measured-history CSV file, relative to this file"),
+}
+
+#: The keys of a line file's ``traffic`` mapping; their ranges are :class:`LineConfig`'s.
+TRAFFIC_KEYS: dict[str, Field] = {
+    "annual_mgt": Field("MGT/year", True, "million gross tonnes a year"),
+    "speed_kmh": Field("km/h", True, "line speed"),
+    "freight_share": Field("-", True, "share of the tonnage that is freight, a fraction in [0, 1]"),
+    "freight_axle_load_t": Field("t", False, "freight axle load (default 22.5 t: EN 15528 line category D)"),
+}
+DEFAULT_FREIGHT_AXLE_LOAD_T = 22.5
+
+#: The columns of the sections CSV, one row per section in line order.
+SECTION_COLUMNS: dict[str, Field] = {
+    "section": Field("-", True, "the section's id: unique, any text (a kilometre post, an asset number)"),
+    "length_m": Field("m", True, "section length; every section of a line has the same length today"),
+    "register": Field("-", True, "asset-register class: " + ", ".join(REGISTER_CLASSES) + " (transition: a "
+                      "bridge or culvert approach; switch_or_crossing: switches and crossings, level crossings)"),
+    "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage); blank: no"),
+    "annual_mgt": Field("MGT/year", False, "the section's traffic; blank: the line's"),
+    "speed_kmh": Field("km/h", False, "the section's speed; blank: the line's, which it must equal today"),
+    "freight_share": Field("-", False, "the section's freight share; blank: the line's, which it must equal today"),
+    "years_since_tamping": Field("year", True, "time from the section's last tamping (or renewal) to as_of",
+                                 0.0, 50.0),
+    "tampings_since_renewal": Field("-", True, "tampings since the last ballast renewal (a whole number)",
+                                    0, 100),
+    "rate_factor": Field("-", False, "the section's settlement-rate factor where it is known (1: typical plain "
+                         "track); blank: drawn per episode, or fitted to the measured history", 0.01, 100.0),
+}
+
+#: The columns of the history CSV: one row per recording-car run and section, in date order per section.
+#: The SD range is a plausibility window (good track ~0.5 mm, poor ~3-5 mm over 200 m; EN 13848-6): a value
+#: outside it is taken for a wrong unit.
+HISTORY_COLUMNS: dict[str, Field] = {
+    "section": Field("-", True, "a section id of the sections file"),
+    "date": Field("YYYY-MM-DD", True, "date of the run; increasing per section, not after as_of"),
+    "sd_mm": Field("mm", True, "standard deviation of the D1 (3-25 m) longitudinal level over the section",
+                   0.05, 15.0),
+    "peak_mm": Field("mm", False, "D1 mean-to-peak over the section (not below its SD); not used by the fit",
+                     0.1, 60.0),
+}
+
+_YES, _NO = ("yes", "true", "1"), ("no", "false", "0", "")
+
+
+@dataclass(frozen=True)
+class Section:
+    """One section of a line file, in line order (SI where the unit is not in the name)."""
+
+    id: str
+    length_m: float
+    register: str
+    wet: bool
+    annual_mgt: float
+    speed_kmh: float
+    freight_share: float
+    years_since_tamping: float
+    tampings_since_renewal: int
+    rate_factor: float | None = None
+
+    @property
+    def register_index(self) -> int:
+        """The register class as the observation codes it (0 plain, 1 transition, 2 switch or crossing)."""
+        return REGISTER_CLASSES.index(self.register)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One recording-car run over one section: its ``date`` (ISO), SD and mean-to-peak of the D1 level as the
+    file gives them [mm] (so a description round-trips through its dict exactly), in SI as ``sd_m``,
+    ``peak_m``."""
+
+    section: str
+    date: str
+    sd_mm: float
+    peak_mm: float | None = None
+
+    @property
+    def sd_m(self) -> float:
+        return self.sd_mm * 1e-3
+
+    @property
+    def peak_m(self) -> float | None:
+        return None if self.peak_mm is None else self.peak_mm * 1e-3
+
+
+@dataclass(frozen=True)
+class LineDescription:
+    """A line as its files describe it (:func:`load_line`); frozen and hashable, so a config can carry it.
+
+    ``as_of`` (ISO date) is the date the sections' state describes; ``speed_kmh``, ``annual_mgt``,
+    ``freight_share`` and ``freight_axle_load_t`` are the line's traffic; ``sections`` in line order;
+    ``history`` in date order per section. ``source`` names the file it was read from (not compared)."""
+
+    name: str
+    as_of: str
+    speed_kmh: float
+    annual_mgt: float
+    freight_share: float
+    freight_axle_load_t: float
+    sections: tuple[Section, ...]
+    history: tuple[Measurement, ...] = ()
+    description: str = ""
+    source: str = field(default="<dict>", compare=False)
+
+    @property
+    def n_sections(self) -> int:
+        return len(self.sections)
+
+    @property
+    def section_length_m(self) -> float:
+        """The one length of the line's sections [m]."""
+        return self.sections[0].length_m
+
+    @property
+    def length_m(self) -> float:
+        return sum(s.length_m for s in self.sections)
+
+    def traffic_factors(self) -> tuple[float, ...]:
+        """Per section, its traffic over the line's (its axle passes are the line's times this)."""
+        return tuple(s.annual_mgt / self.annual_mgt for s in self.sections)
+
+    def measurements(self, section: str) -> tuple[Measurement, ...]:
+        """The history of one section, in date order."""
+        return tuple(m for m in self.history if m.section == section)
+
+    def years_before(self, date: str) -> float:
+        """Years from ``date`` (ISO) to ``as_of``."""
+        return (dt.date.fromisoformat(self.as_of) - dt.date.fromisoformat(date)).days / DAYS_PER_YEAR
+
+    # ------------------------------------------------------------------ the dict form (the files' units)
+    def to_dict(self) -> dict[str, Any]:
+        """The line as plain data in the files' keys and units (JSON-ready); :meth:`from_dict` reads it back."""
+        traffic = {"annual_mgt": self.annual_mgt, "speed_kmh": self.speed_kmh, "freight_share": self.freight_share,
+                   "freight_axle_load_t": self.freight_axle_load_t}
+        sections = []
+        for s in self.sections:
+            row: dict[str, Any] = {"section": s.id, "length_m": s.length_m, "register": s.register,
+                                   "wet": "yes" if s.wet else "no", "annual_mgt": s.annual_mgt,
+                                   "speed_kmh": s.speed_kmh, "freight_share": s.freight_share,
+                                   "years_since_tamping": s.years_since_tamping,
+                                   "tampings_since_renewal": s.tampings_since_renewal}
+            if s.rate_factor is not None:
+                row["rate_factor"] = s.rate_factor
+            sections.append(row)
+        history = []
+        for m in self.history:
+            h: dict[str, Any] = {"section": m.section, "date": m.date, "sd_mm": m.sd_mm}
+            if m.peak_mm is not None:
+                h["peak_mm"] = m.peak_mm
+            history.append(h)
+        out: dict[str, Any] = {"name": self.name, "as_of": self.as_of, "traffic": traffic, "sections": sections,
+                               "history": history}
+        if self.description:
+            out["description"] = self.description
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], source: str = "<line dict>") -> LineDescription:
+        """A line from plain data with a line file's keys, whose ``sections`` and ``history`` are lists of rows
+        (mappings of the CSV columns): checked as a file is, faults reported against ``source``."""
+        if not isinstance(d, Mapping):
+            raise LineFileError(f"{source}: a line must be a mapping of {_names(LINE_KEYS)}, got {type(d).__name__}")
+        keys = {**LINE_KEYS, "sections": Field("-", True, "rows"), "history": Field("-", False, "rows")}
+        _check_keys(source, "", d, keys)
+        rows = {}
+        for key, columns in (("sections", SECTION_COLUMNS), ("history", HISTORY_COLUMNS)):
+            value = d.get(key, [])
+            if not isinstance(value, (list, tuple)) or not all(isinstance(r, Mapping) for r in value):
+                raise LineFileError(f"{source}, {key}: must be a list of rows (mappings of its columns)")
+            rows[key] = [(f"{source}, {key}[{i}]", r) for i, r in enumerate(value)]
+            for where, r in rows[key]:
+                _check_keys(where, "", r, columns, what="column")
+        return _build(source, d, rows["sections"], rows["history"])
+
+
+# ---------------------------------------------------------------------- loading
+def load_line(path: str | os.PathLike[str]) -> LineDescription:
+    """Read a line file (YAML) and the CSV files it names into a checked :class:`LineDescription`.
+
+    Raises :class:`LineFileError` (one line: the file, the row, the field and what is allowed) for anything
+    wrong in them: a missing or empty file, invalid YAML, an unknown key or column, a missing field, a bad
+    number, date or class, a value out of its range or in another unit, duplicate section ids, a history out of
+    date order or naming an unknown section, traffic the engine cannot take."""
+    path = Path(path)
+    text = _read_text(path, "line file")
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f", line {mark.line + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or "syntax error"
+        raise LineFileError(f"{path}{where}: not valid YAML ({problem})") from None
+    if doc is None:
+        raise LineFileError(f"{path}: empty file; a line file is a YAML mapping of {_names(LINE_KEYS)}")
+    if not isinstance(doc, dict):
+        raise LineFileError(f"{path}: a line file is a YAML mapping of {_names(LINE_KEYS)}, "
+                            f"got a {type(doc).__name__}")
+    _check_keys(str(path), "", doc, LINE_KEYS)
+    sections = _csv_rows(path, doc, "sections", SECTION_COLUMNS)
+    history = _csv_rows(path, doc, "history", HISTORY_COLUMNS) if doc.get("history") is not None else []
+    return _build(str(path), doc, sections, history)
+
+
+def _read_text(path: Path, what: str, named_by: str = "") -> str:
+    if not path.is_file():
+        raise LineFileError(f"{named_by}no such {what}: {path}")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as e:
+        raise LineFileError(f"{path}: cannot be read as UTF-8 text ({e.__class__.__name__})") from None
+    return text
+
+
+def _csv_rows(line_path: Path, doc: dict, key: str, columns: dict[str, Field]) -> list[tuple[str, dict[str, str]]]:
+    """The data rows of the CSV file that key ``key`` of the line file names: (where, {column: text}) with
+    ``where`` naming the file and its line; blank lines and lines starting with ``#`` are skipped."""
+    value = doc[key]
+    if not isinstance(value, str) or not value.strip():
+        raise LineFileError(f"{line_path}, key {key}: must be the path of a CSV file, got {value!r}")
+    path = line_path.parent / value
+    text = _read_text(path, f"{key} file", f"{line_path}, key {key}: ")
+    reader = csv.reader(text.splitlines())
+    header: list[str] | None = None
+    rows = []
+    for cells in reader:
+        if not cells or all(not c.strip() for c in cells) or cells[0].lstrip().startswith("#"):
+            continue
+        cells = [c.strip() for c in cells]
+        if header is None:
+            header = cells
+            _check_header(path, header, columns)
+            continue
+        where = f"{path}, row {reader.line_num}"
+        if len(cells) != len(header):
+            raise LineFileError(f"{where}: {len(cells)} cells where the header has {len(header)} columns")
+        rows.append((where, dict(zip(header, cells))))
+    if header is None:
+        raise LineFileError(f"{path}: empty file; expected a header row with the columns {_names(columns)}")
+    if not rows:
+        raise LineFileError(f"{path}: a header and no rows; the {key} file needs one row per "
+                            + ("section" if key == "sections" else "measurement"))
+    return rows
+
+
+def _check_header(path: Path, header: list[str], columns: dict[str, Field]) -> None:
+    seen = set()
+    for name in header:
+        if name in seen:
+            raise LineFileError(f"{path}, header: column {name!r} appears twice")
+        seen.add(name)
+    _check_keys(str(path), "", dict.fromkeys(header, ""), columns, what="column", where="header")
+
+
+def _check_keys(source: str, prefix: str, d: Mapping[str, Any], known: dict[str, Field], what: str = "key",
+                where: str = "") -> None:
+    """Unknown keys (with the closest known name) and missing required ones, as :class:`LineFileError`."""
+    at = f"{source}, {where}" if where else source
+    for name in d:
+        if name not in known:
+            hint = difflib.get_close_matches(str(name), list(known), n=1)
+            did = f"; did you mean {hint[0]!r}?" if hint else ""
+            raise LineFileError(f"{at}: unknown {what} '{prefix}{name}'{did} (known: {_names(known)})")
+    for name, f in known.items():
+        if f.required and name not in d:
+            raise LineFileError(f"{at}: missing {what} '{prefix}{name}' ({f.meaning}; unit {f.unit})")
+
+
+def _names(known: Iterable[str]) -> str:
+    return ", ".join(known)
+
+
+# ---------------------------------------------------------------------- values
+def _text(where: str, name: str, value: Any) -> str:
+    if isinstance(value, (dt.date, bool)) or value is None or isinstance(value, (list, dict)):
+        raise LineFileError(f"{where}, {name}: must be text, got {value!r}")
+    return str(value).strip()
+
+
+def _number(where: str, name: str, value: Any, unit: str) -> float:
+    """A finite number from a cell's text or a YAML/dict value; a bool, a decimal comma or text is refused."""
+    if isinstance(value, bool) or value is None:
+        raise LineFileError(f"{where}, {name}: must be a number [{unit}], got {value!r}")
+    if isinstance(value, (int, float)):
+        v = float(value)
+    else:
+        text = str(value).strip()
+        if text == "":
+            raise LineFileError(f"{where}, {name}: empty; a number [{unit}] is required")
+        try:
+            v = float(text)
+        except ValueError:
+            comma = "; use a decimal point" if "," in text and _is_float(text.replace(",", ".")) else ""
+            raise LineFileError(f"{where}, {name}: {text!r} is not a number [{unit}]{comma}") from None
+    if not math.isfinite(v):
+        raise LineFileError(f"{where}, {name}: must be a finite number [{unit}], got {value!r}")
+    return v
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _in_range(where: str, name: str, v: float, f: Field) -> float:
+    lo, hi = f.low, f.high
+    if (lo is None or v >= lo) and (hi is None or v <= hi):
+        return v
+    raise LineFileError(f"{where}, {name}: {v:g} {f.unit} is outside [{lo:g}, {hi:g}] {f.unit}"
+                        + _unit_hint(v, lo, hi, f.unit))
+
+
+def _unit_hint(v: float, lo: float | None, hi: float | None, unit: str) -> str:
+    """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %)."""
+    others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),), "MGT/year": ((1e-6, "t/year"),),
+              "-": ((1e-2, "per cent"),)}.get(unit, ())
+    for scale, name in others:
+        w = v * scale
+        if (lo is None or w >= lo) and (hi is None or w <= hi):
+            return f"; it looks like {name}: give it in {unit}" if unit != "-" else f"; it looks like {name}: " \
+                                                                                   "give a fraction"
+    return ""
+
+
+def _integer(where: str, name: str, value: Any) -> int:
+    v = _number(where, name, value, "-")
+    if v != int(v):
+        raise LineFileError(f"{where}, {name}: must be a whole number, got {value!r}")
+    return int(v)
+
+
+def _date(where: str, name: str, value: Any) -> str:
+    if isinstance(value, dt.datetime):
+        value = value.date()
+    if isinstance(value, dt.date):
+        return value.isoformat()
+    text = "" if value is None else str(value).strip()
+    try:
+        if len(text) != 10:
+            raise ValueError
+        return dt.date.fromisoformat(text).isoformat()
+    except ValueError:
+        raise LineFileError(f"{where}, {name}: {text!r} is not a date; write YYYY-MM-DD") from None
+
+
+def _choice(where: str, name: str, value: Any, choices: tuple[str, ...]) -> str:
+    text = _text(where, name, value)
+    if text in choices:
+        return text
+    hint = difflib.get_close_matches(text, choices, n=1)
+    did = f"; did you mean {hint[0]!r}?" if hint else ""
+    raise LineFileError(f"{where}, {name}: {text!r} is not one of {', '.join(choices)}{did}")
+
+
+def _yes_no(where: str, name: str, value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    text = "" if value is None else str(value).strip().lower()
+    if text in _YES:
+        return True
+    if text in _NO:
+        return False
+    raise LineFileError(f"{where}, {name}: {value!r} is not yes or no (blank: no)")
+
+
+def _blank(value: Any) -> bool:
+    return value is None or (isinstance(value, str) and value.strip() == "")
+
+
+# ---------------------------------------------------------------------- the description
+def _build(source: str, doc: Mapping[str, Any], section_rows: Sequence[tuple[str, Mapping[str, Any]]],
+           history_rows: Sequence[tuple[str, Mapping[str, Any]]]) -> LineDescription:
+    """Check the line's keys and rows and build the description."""
+    schema = doc.get("schema", SCHEMA_VERSION)
+    if schema != SCHEMA_VERSION or isinstance(schema, bool):
+        raise LineFileError(f"{source}, schema: version {schema!r} is not supported; this trackenv reads "
+                            f"version {SCHEMA_VERSION}")
+    name = _text(source, "name", doc["name"])
+    if not name:
+        raise LineFileError(f"{source}, name: must not be empty")
+    description = _text(source, "description", doc.get("description", ""))
+    as_of = _date(source, "as_of", doc["as_of"])
+    traffic = doc["traffic"]
+    if not isinstance(traffic, Mapping):
+        raise LineFileError(f"{source}, traffic: must be a mapping of {_names(TRAFFIC_KEYS)}, got {traffic!r}")
+    _check_keys(source, "traffic.", traffic, TRAFFIC_KEYS)
+    line_traffic = {k: _number(source, f"traffic.{k}", traffic[k], f.unit) for k, f in TRAFFIC_KEYS.items()
+                    if k in traffic}
+    line_traffic.setdefault("freight_axle_load_t", DEFAULT_FREIGHT_AXLE_LOAD_T)
+    for key, value in line_traffic.items():
+        _config_check(source, f"traffic.{key}", key, value, TRAFFIC_KEYS[key].unit)
+    sections = _sections(section_rows, line_traffic)
+    _config_check(section_rows[0][0], "length_m", "section_length_m", sections[0].length_m, "m")
+    _config_check(source, f"sections ({len(sections)} rows)", "n_sections", len(sections), "sections")
+    history = _history(history_rows, {s.id for s in sections}, as_of)
+    return LineDescription(name=name, as_of=as_of, sections=tuple(sections), history=tuple(history),
+                           description=description, source=source, **line_traffic)
+
+
+def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, float]) -> list[Section]:
+    out: list[Section] = []
+    seen: dict[str, str] = {}
+    cols = SECTION_COLUMNS
+    for where, row in rows:
+        sid = _text(where, "section", row["section"])
+        if not sid:
+            raise LineFileError(f"{where}, section: empty; every section needs an id")
+        if sid in seen:
+            raise LineFileError(f"{where}, section: id {sid!r} repeats {seen[sid]}; section ids must be unique")
+        seen[sid] = where.rsplit(", ", 1)[-1]
+        at = f"{where} (section {sid})"
+        length = _number(at, "length_m", row["length_m"], "m")
+        if length <= 0:
+            raise LineFileError(f"{at}, length_m: must be a positive length [m], got {length:g}")
+        if out and length != out[0].length_m:
+            raise LineFileError(f"{at}, length_m: {length:g} m differs from the first section's "
+                                f"{out[0].length_m:g} m; every section of a line has the same length today "
+                                "(split or merge sections to the line's section length)")
+        traffic = {}
+        for key in ("annual_mgt", "speed_kmh", "freight_share"):
+            value = row.get(key)
+            traffic[key] = line[key] if _blank(value) else _number(at, key, value, cols[key].unit)
+        for key, what in (("speed_kmh", "one speed"), ("freight_share", "one freight share")):
+            if traffic[key] != line[key]:
+                raise LineFileError(
+                    f"{at}, {key}: {traffic[key]:g} differs from the line's {line[key]:g}; the engine runs "
+                    f"{what} per line today (per-section traffic is supported as annual_mgt)")
+        if traffic["annual_mgt"] != line["annual_mgt"]:
+            _config_check(at, "annual_mgt", "annual_mgt", traffic["annual_mgt"], "MGT/year")
+        years = _in_range(at, "years_since_tamping",
+                          _number(at, "years_since_tamping", row["years_since_tamping"], "year"),
+                          cols["years_since_tamping"])
+        count = _integer(at, "tampings_since_renewal", row["tampings_since_renewal"])
+        _in_range(at, "tampings_since_renewal", count, cols["tampings_since_renewal"])
+        rate = row.get("rate_factor")
+        rate_factor = None if _blank(rate) else _in_range(at, "rate_factor", _number(at, "rate_factor", rate, "-"),
+                                                          cols["rate_factor"])
+        out.append(Section(id=sid, length_m=length, register=_choice(at, "register", row["register"],
+                                                                     REGISTER_CLASSES),
+                           wet=_yes_no(at, "wet", row.get("wet")), years_since_tamping=years,
+                           tampings_since_renewal=count, rate_factor=rate_factor, **traffic))
+    return out
+
+
+def _history(rows: Sequence[tuple[str, Mapping[str, Any]]], ids: set[str], as_of: str) -> list[Measurement]:
+    out: list[Measurement] = []
+    last: dict[str, tuple[str, str]] = {}
+    cols = HISTORY_COLUMNS
+    for where, row in rows:
+        sid = _text(where, "section", row["section"])
+        if sid not in ids:
+            hint = difflib.get_close_matches(sid, sorted(ids), n=1)
+            did = f"; did you mean {hint[0]!r}?" if hint else ""
+            raise LineFileError(f"{where}, section: {sid!r} is not a section of the sections file{did}")
+        at = f"{where} (section {sid})"
+        date = _date(at, "date", row["date"])
+        if date > as_of:
+            raise LineFileError(f"{at}, date: {date} is after as_of {as_of}; the history ends at the line's as_of")
+        if sid in last and date <= last[sid][0]:
+            raise LineFileError(f"{at}, date: {date} is not after this section's previous run {last[sid][0]} "
+                                f"({last[sid][1]}); the history must be in date order per section")
+        last[sid] = (date, where.rsplit(", ", 1)[-1])
+        sd = _in_range(at, "sd_mm", _number(at, "sd_mm", row["sd_mm"], "mm"), cols["sd_mm"])
+        peak_value = row.get("peak_mm")
+        peak = None
+        if not _blank(peak_value):
+            peak = _in_range(at, "peak_mm", _number(at, "peak_mm", peak_value, "mm"), cols["peak_mm"])
+            if peak < sd:
+                raise LineFileError(f"{at}, peak_mm: {peak:g} mm is below the SD {sd:g} mm; a mean-to-peak is "
+                                    "at least the SD (columns swapped?)")
+        out.append(Measurement(section=sid, date=date, sd_mm=sd, peak_mm=peak))
+    return out
+
+
+def _config_check(where: str, key: str, config_field: str, value: float, unit: str) -> None:
+    """Check a line-level value against :class:`LineConfig`'s range for ``config_field`` (the one place it
+    lives), reported against the file."""
+    from .line_config import LineConfig
+
+    kwargs: dict[str, Any] = {config_field: value, "capacity": 1}
+    if config_field == "n_sections":
+        kwargs[config_field] = int(value)
+    try:
+        LineConfig(**kwargs)
+    except ValueError as e:
+        lo_hi = _config_range(str(e))
+        hint = _unit_hint(value, *lo_hi, unit) if lo_hi else ""
+        raise LineFileError(f"{where}, {key}: {e}{hint}") from None
+
+
+def _config_range(message: str) -> tuple[float, float] | None:
+    """The [low, high] a config check's message states, for the unit hint."""
+    start, end = message.find("["), message.find("]")
+    if start < 0 or end < start:
+        return None
+    try:
+        lo, hi = (float(x) for x in message[start + 1 : end].split(","))
+    except ValueError:
+        return None
+    return lo, hi

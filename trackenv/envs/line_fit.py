@@ -1,0 +1,454 @@
+"""What a line file knows, applied to its episodes; and each section's settlement rate conditioned on its measured
+history.
+
+:func:`line_overrides` turns a config's line file (:class:`~trackenv.envs.line_file.LineDescription`) into
+per-section arrays that the line engine applies over an episode's draws (``LineBatch._apply_line_file``): the
+register, the known wet zones, the traffic factor, years since tamping and tampings since renewal, the rate
+factor where the file gives one, the posterior of the rate where the history gives one, and the SD the section
+starts from. Everything else (the within-section fields, hidden wet spots, the rates of sections without
+history) is drawn per episode as on a line without a file.
+
+**The history fit** (:func:`history_fit`). After its last tamping a section's D1 level is its post-tamping
+shape plus the settlement since. The shape does not change; the settlement grows with a fixed pattern (the
+section's per-sleeper rates and stiffness) in proportion to its rate, so with a, b the D1 of the shape and of
+the settlement,
+
+    SD(t)² = SD₀² + 2ρ·SD₀·κ·φ(t) + κ²·φ(t)²,    κ = k·(1 + damage_per_tamping)^(tampings since renewal − 1),
+
+where t is the time since the last tamping, SD₀ the SD right after it, ρ the correlation of a and b, φ(t) the SD
+of b for k = 1 and k the section's *effective* rate factor: its factor times how unevenly its hidden field
+makes it settle (:func:`roughness`, over the typical one of its class). φ(t) and the spread of ρ are the
+engine's own: short simulations of a section of the same class (register, known wet zone, traffic), one
+tamping since renewal, :data:`FIT_DRAWS` draws of it settled for :data:`FIT_PREVIOUS_CYCLE_YEARS`, tamped by the
+engine's tamping and run without tamping for the span needed. Checked on those simulations: φ scales with k
+within 10 % for k from 0.5 to 4, ρ of a section stays within a few hundredths over three years, and the log of
+the settlement's D1 SD correlates at 0.97 with that of the rate field's roughness.
+
+The measurements after the last tamping (t_i, SD_i) then condition k by Bayes' rule on a grid of (k, ρ, SD₀):
+the prior of k is the engine's own (lognormal with log-SD ``rate_sigma``, widened by the spread of the
+roughness between draws), that of ρ the simulations' spread, SD₀ flat; the likelihood Gaussian with the
+recording car's error ``sd_noise_mm`` and a model error of :data:`FIT_MODEL_ERROR_MM`. Why a posterior and not
+a least-squares value: while the settlement is small against the post-tamping shape, the series fixes ρ·k (the
+first-order slope) much better than k itself, and a least-squares k then runs to its bounds; the posterior says
+how much the history tells and falls back on the prior where it tells little. The fit reports per section the
+posterior median of k and its 10-90 % interval, the most probable (k, ρ, SD₀), the RMS residual of its curve
+against the measured SD, and that curve's SD at ``as_of``, where the section starts (its drawn shape scaled to
+SD₀ and its settlement to the start SD: :func:`start_levels`).
+
+In an episode a fitted section's effective rate is a draw from its posterior, made from the episode's own draw
+of the section's factor (its quantile under the prior is taken to the same quantile of the posterior), so
+nothing more is drawn and neighbouring sections keep their correlation; the section's rates are then scaled so
+that the drawn field's roughness gives that effective rate (:func:`rate_multipliers`). The fit needs two
+measurements after the last tamping; with one, that measurement sets the start SD and the rate is drawn as
+without a file. With a ``rate_factor`` in the file, k is given (the drawn field's roughness then varies as
+usual) and only ρ and SD₀ are fitted. How well the fit recovers rates the engine generated histories with is on
+the documentation's page "Lines from files" (``python experiments/line_example.py``).
+
+A fitted section's simulated growth in an episode scatters around its measured one by what remains: the
+posterior's spread, the rest of the hidden field (its stiffness, the pattern beyond its roughness) and the
+dynamics.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from scipy.special import ndtr
+
+from ..physics.geometry import d1_filter
+from .line_config import SLEEPER_SPACING_M, LineConfig
+from .line_file import DAYS_PER_YEAR, LineDescription, Section
+
+#: Draws of each class's section in the simulations of the fit, and their seeds ([FIT_SEED, i]).
+FIT_DRAWS = 8
+FIT_SEED = 38
+#: How long the simulated sections had settled before the tamping they are followed from [years]: a tamping
+#: keeps part of the old shape, and where that shape is the section's own settlement it grows again with it
+#: (ρ > 0), so the simulated sections start one cycle into their life, as track in service is **[assumption:
+#: a 3-year cycle; the engine's sections start up to 3 years after their last tamping]**.
+FIT_PREVIOUS_CYCLE_YEARS = 3.0
+#: A recording-car run this many days or fewer after a section's last tamping counts as before it.
+FIT_SAME_DAYS = 15
+#: The fit's window: a section last tamped longer ago than this is not fitted (the simulations run this long
+#: at most).
+FIT_MAX_YEARS = 10.0
+#: The model error of the fit's SD curve [mm], added in quadrature to the recording car's error **[assumption:
+#: the curve fits the engine's own noise-free series within ~0.01-0.03 mm; 0.05 mm leaves room]**.
+FIT_MODEL_ERROR_MM = 0.05
+#: The grid of the rate factor's posterior (log-spaced), of ρ and the number of SD₀ values.
+RATE_GRID = np.exp(np.linspace(math.log(0.02), math.log(50.0), 81))
+RHO_GRID = np.linspace(-1.0, 1.0, 25)
+SD0_POINTS = 40
+
+
+@dataclass(frozen=True)
+class SectionFit:
+    """One section's fit (:func:`history_fit`): ``status`` says what was done ("fitted"; "given": the file's
+    rate factor, ρ and SD₀ fitted; "start SD only": one measurement since the last tamping; "not fitted": none
+    since, or last tamped more than :data:`FIT_MAX_YEARS` ago; "no history"); ``points`` the measurements
+    used; ``rate_factor`` the posterior median of k and ``rate_p10`` / ``rate_p90`` its 10-90 % interval;
+    ``rho`` and ``sd_after_tamping_mm`` (SD₀) of the most probable curve, ``residual_mm`` the RMS of that
+    curve against the measured SD, ``start_sd_mm`` its SD at ``as_of``, where the section starts (NaN where
+    drawn)."""
+
+    section: str
+    status: str
+    points: int = 0
+    rate_factor: float = math.nan
+    rate_p10: float = math.nan
+    rate_p90: float = math.nan
+    rho: float = math.nan
+    sd_after_tamping_mm: float = math.nan
+    residual_mm: float = math.nan
+    start_sd_mm: float = math.nan
+
+
+@dataclass(frozen=True, eq=False)
+class HistoryFit:
+    """The fit of a line's measured history: one :class:`SectionFit` per section in line order, and per
+    section the posterior CDF of its rate factor on :data:`RATE_GRID` (``rate_cdf``, (S, grid); NaN rows where
+    the rate is not fitted) and the typical roughness of its class's rate field (``roughness``, (S,))."""
+
+    sections: tuple[SectionFit, ...]
+    rate_cdf: np.ndarray
+    roughness: np.ndarray
+
+    @property
+    def fitted(self) -> tuple[SectionFit, ...]:
+        return tuple(s for s in self.sections if s.status == "fitted")
+
+    def to_dict(self) -> dict:
+        """JSON-ready: per section its fit, and the median residual of the fitted sections."""
+        fitted = self.fitted
+        return {"sections": [vars(s) for s in self.sections], "fitted": len(fitted),
+                "median_residual_mm": float(np.median([s.residual_mm for s in fitted])) if fitted else None}
+
+    def table(self) -> str:
+        """A text table of the sections with a history."""
+        lines = [f"{'section':<10} {'status':<14} {'points':>6} {'rate':>5} {'10-90 %':>11} {'SD0 mm':>6} "
+                 f"{'resid mm':>8} {'start SD mm':>11}"]
+        for s in self.sections:
+            if s.status != "no history":
+                lines.append(f"{s.section:<10} {s.status:<14} {s.points:>6d} {s.rate_factor:>5.2f} "
+                             f"{s.rate_p10:>5.2f}-{s.rate_p90:<5.2f} {s.sd_after_tamping_mm:>6.2f} "
+                             f"{s.residual_mm:>8.3f} {s.start_sd_mm:>11.2f}")
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True, eq=False)
+class LineOverrides:
+    """Per section (line order), what the line file sets over an episode's draws: ``register`` (codes),
+    ``wet`` (known wet zones), ``traffic_factor`` (on the axle passes), ``years_since_tamping``,
+    ``tampings_since_renewal``, ``rate_factor`` (the file's; NaN: none), ``rate_cdf`` (the posterior CDF of a
+    fitted rate on :data:`RATE_GRID`; NaN rows: not fitted), ``start_sd_m`` (the SD at the start; NaN: as
+    drawn) and ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn)."""
+
+    register: np.ndarray
+    wet: np.ndarray
+    traffic_factor: np.ndarray
+    years_since_tamping: np.ndarray
+    tampings_since_renewal: np.ndarray
+    rate_factor: np.ndarray
+    rate_cdf: np.ndarray
+    roughness: np.ndarray
+    start_sd_m: np.ndarray
+    sd_after_tamping_m: np.ndarray
+
+
+@lru_cache(maxsize=16)
+def line_overrides(config: LineConfig) -> LineOverrides:
+    """What ``config.line`` sets over each episode's draws (cached per config: the fit runs once)."""
+    line = _line(config)
+    fit = history_fit(config)
+    secs = line.sections
+    arrays = LineOverrides(
+        register=np.array([s.register_index for s in secs], dtype=np.int64),
+        wet=np.array([s.wet for s in secs], dtype=bool),
+        traffic_factor=np.array(line.traffic_factors()),
+        years_since_tamping=np.array([s.years_since_tamping for s in secs]),
+        tampings_since_renewal=np.array([s.tampings_since_renewal for s in secs], dtype=np.int64),
+        rate_factor=np.array([math.nan if s.rate_factor is None else s.rate_factor for s in secs]),
+        rate_cdf=fit.rate_cdf,
+        roughness=fit.roughness,
+        start_sd_m=np.array([f.start_sd_mm * 1e-3 for f in fit.sections]),
+        sd_after_tamping_m=np.array([f.sd_after_tamping_mm * 1e-3 for f in fit.sections]),
+    )
+    for a in vars(arrays).values():
+        a.flags.writeable = False
+    return arrays
+
+
+def rate_multipliers(overrides: LineOverrides, drawn: np.ndarray, rate: np.ndarray,
+                     config: LineConfig) -> np.ndarray:
+    """(S,) what each section's drawn per-sleeper rates (S, n) (its register's and known wet zone's factors in,
+    tamping damage out) are multiplied by, given the section factors ``drawn`` of the episode's draw: the
+    file's factor over the drawn one where the file gives one; where the history is fitted, a draw from the
+    posterior (the quantile of the drawn factor under the prior, lognormal with log-SD ``rate_sigma``, taken to
+    the same quantile of the posterior) times the class's typical rate-field roughness over this draw's, so
+    that the draw's settlement grows as the history says whatever its hidden field; else 1."""
+    o = overrides
+    out = np.where(np.isnan(o.rate_factor), 1.0, o.rate_factor / drawn)
+    fitted = np.flatnonzero(~np.isnan(o.rate_cdf[:, 0]))
+    if fitted.size:
+        sigma = config.rate_sigma
+        z = (np.log(drawn[fitted]) + sigma**2 / 2) / sigma if sigma > 0 else np.zeros(fitted.size)
+        k = np.array([math.exp(float(np.interp(ndtr(zj), o.rate_cdf[j], np.log(RATE_GRID))))
+                      for zj, j in zip(z, fitted, strict=True)])
+        out[fitted] = k * o.roughness[fitted] / roughness(rate[fitted])
+    return out
+
+
+def roughness(rate: np.ndarray) -> np.ndarray:
+    """(rows,) the SD of the D1 of per-sleeper rate factors (rows, n): how unevenly a segment settles. The
+    settlement's D1 SD in the engine follows it closely (its log correlates at 0.97 with the dynamic
+    settlement's after three years over 48 draws of a plain section), so it carries a history's growth into an
+    episode's draw of the hidden field."""
+    return _centred_d1(rate).std(axis=1)
+
+
+def _line(config: LineConfig) -> LineDescription:
+    if config.line is None:
+        raise ValueError("the config has no line file (LineConfig(line=...))")
+    return config.line
+
+
+# ---------------------------------------------------------------------- the fit
+@dataclass(frozen=True, eq=False)
+class _Growth:
+    """A class's growth from the simulations: φ(t) [m] on the step grid for the class's typical rate-field
+    ``roughness`` (k = 1), the log-SD of that roughness between draws, and the mean and SD of ρ."""
+
+    phi: np.ndarray
+    roughness: float
+    roughness_sd: float
+    rho_mean: float
+    rho_sd: float
+
+
+@lru_cache(maxsize=16)
+def history_fit(config: LineConfig) -> HistoryFit:
+    """Each section's rate factor conditioned on its measured history (see the module docstring); cached per
+    config. A line without history gives every section the status "no history" and simulates nothing."""
+    line = _line(config)
+    points = {s.id: _points(line, s) for s in line.sections}
+    need = {s.id for s in line.sections if s.years_since_tamping <= FIT_MAX_YEARS
+            and (len(points[s.id][1]) >= 2 or (len(points[s.id][1]) == 1 and s.rate_factor is not None))}
+    classes = sorted({_class_of(line, s) for s in line.sections if s.id in need})
+    years = max((s.years_since_tamping for s in line.sections if s.id in need), default=0.0)
+    growth = _growth(config, tuple(classes), years) if classes else []
+    out, cdf = [], np.full((line.n_sections, RATE_GRID.size), np.nan)
+    rough = np.full(line.n_sections, np.nan)
+    for j, s in enumerate(line.sections):
+        t, sd = points[s.id]
+        if not line.measurements(s.id):
+            out.append(SectionFit(s.id, "no history"))
+        elif s.id in need:
+            g = growth[classes.index(_class_of(line, s))]
+            fit, cdf_j = _fit_section(s, t, sd, g, config)
+            out.append(fit)
+            if cdf_j is not None:
+                cdf[j], rough[j] = cdf_j, g.roughness
+        elif len(sd) >= 1:
+            out.append(SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3))
+        else:
+            out.append(SectionFit(s.id, "not fitted"))
+    return HistoryFit(tuple(out), cdf, rough)
+
+
+def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
+    """A section's measurements after its last tamping: (years since that tamping, SD [m]). A run less than
+    :data:`FIT_SAME_DAYS` days after it counts as before it (the tamping may be that run's reason, and years
+    since tamping are often rounded)."""
+    ms = line.measurements(s.id)
+    t = np.array([s.years_since_tamping - line.years_before(m.date) for m in ms])
+    sd = np.array([m.sd_m for m in ms])
+    keep = t > FIT_SAME_DAYS / DAYS_PER_YEAR
+    return t[keep], sd[keep]
+
+
+def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float]:
+    """What the growth of a section's SD depends on besides its rate: register, known wet zone, traffic."""
+    return (s.register, s.wet, s.annual_mgt / line.annual_mgt)
+
+
+def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
+                 config: LineConfig) -> tuple[SectionFit, np.ndarray | None]:
+    """The posterior of (k, ρ, SD₀) on the grid (k fixed where the file gives it): the section's fit and the
+    CDF of k (None where k is given)."""
+    grid_t = np.arange(growth.phi.size) / config.steps_per_year
+    phi = np.interp(t, grid_t, growth.phi)
+    phi_now = float(np.interp(s.years_since_tamping, grid_t, growth.phi))
+    damage = (1.0 + config.tamping_model.damage_per_tamping) ** (s.tampings_since_renewal - 1)
+    given = s.rate_factor is not None
+    rates = np.array([s.rate_factor]) if given else RATE_GRID
+    kappa = rates * damage
+    # the prior of k: the section factor's (lognormal) times the spread of the hidden field's roughness
+    sigma_k = math.hypot(max(config.rate_sigma, 0.05), growth.roughness_sd)
+    mean_k = -config.rate_sigma**2 / 2
+    sigma_e = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM) * 1e-3
+    log_prior = (-(np.log(rates) - mean_k) ** 2 / (2 * sigma_k**2))[:, None] \
+        - ((RHO_GRID - growth.rho_mean) ** 2 / (2 * max(growth.rho_sd, 0.05) ** 2))[None, :]
+    kp = kappa[:, None, None] * phi[None, None, :]  # (k, 1, points)
+    rho = RHO_GRID[None, :, None]
+    sd0_grid = np.linspace(0.0, 1.5 * float(sd.max()), SD0_POINTS)
+    log_post = np.empty((rates.size, RHO_GRID.size, sd0_grid.size))
+    for i, s0 in enumerate(sd0_grid):
+        model = np.sqrt(np.maximum(s0 * s0 + 2 * rho * s0 * kp + kp * kp, 0.0))
+        log_post[:, :, i] = log_prior - ((model - sd) ** 2).sum(axis=-1) / (2 * sigma_e**2)
+    ik, ir, i0 = np.unravel_index(int(np.argmax(log_post)), log_post.shape)
+    k_map, rho_map, s0 = kappa[ik], RHO_GRID[ir], sd0_grid[i0]
+    curve = np.sqrt(np.maximum(s0 * s0 + 2 * rho_map * s0 * k_map * phi + (k_map * phi) ** 2, 0.0))
+    start = math.sqrt(max(s0 * s0 + 2 * rho_map * s0 * k_map * phi_now + (k_map * phi_now) ** 2, 0.0))
+    common: dict[str, Any] = {"points": len(sd), "rho": float(rho_map), "sd_after_tamping_mm": float(s0) * 1e3,
+              "residual_mm": float(np.sqrt(np.mean((curve - sd) ** 2))) * 1e3, "start_sd_mm": start * 1e3}
+    if given:
+        return SectionFit(s.id, "given", rate_factor=float(rates[0]), rate_p10=float(rates[0]),
+                          rate_p90=float(rates[0]), **common), None
+    weight = np.exp(log_post - log_post.max()).sum(axis=(1, 2))
+    cdf = np.cumsum(weight + 1e-12 * weight.sum())
+    cdf /= cdf[-1]
+    log_k = np.log(RATE_GRID)
+    p10, p50, p90 = (math.exp(float(np.interp(q, cdf, log_k))) for q in (0.1, 0.5, 0.9))
+    return SectionFit(s.id, "fitted", rate_factor=p50, rate_p10=p10, rate_p90=p90, **common), cdf
+
+
+def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float], ...], years: float) -> list[_Growth]:
+    """Each class's :class:`_Growth` from the engine (k = 1, one tamping since renewal), every step from the
+    tamping up to ``years``."""
+    line = _line(config)
+    steps = max(int(math.ceil(years * config.steps_per_year - 1e-9)), 1)
+    protos = tuple(Section(id=f"class{i}", length_m=line.section_length_m, register=reg, wet=wet,
+                           annual_mgt=line.annual_mgt * factor, speed_kmh=line.speed_kmh,
+                           freight_share=line.freight_share, years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS,
+                           tampings_since_renewal=0, rate_factor=1.0)
+                   for i, (reg, wet, factor) in enumerate(classes))
+    proto_line = replace(line, sections=protos, history=(), source=f"{line.source} (fit)")
+    proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year)
+    phi, rough, rough_sd, rho_mean, rho_sd = _simulated_growth(proto, steps)
+    return [_Growth(phi[i], float(rough[i]), float(rough_sd[i]), float(rho_mean[i]), float(rho_sd[i]))
+            for i in range(len(classes))]
+
+
+@lru_cache(maxsize=16)
+def _simulated_growth(proto: LineConfig, steps: int) -> tuple[np.ndarray, ...]:
+    """Run :data:`FIT_DRAWS` lines of ``proto`` (one section per class): tamp every section, then ``steps`` steps
+    of traffic. Per class: φ (classes, steps + 1) [m], the settlement's D1 SD per unit of the rate field's
+    roughness averaged over the draws, times the draws' typical (geometric mean) roughness; the log-SD of the
+    roughness; the mean and SD of ρ (over draws and steps)."""
+    from .line_episode import LineBatch  # the engine builds on this module's overrides
+
+    S = proto.n_sections
+    batch = LineBatch(proto, FIT_DRAWS)
+    batch.start(list(range(FIT_DRAWS)), [np.random.default_rng([FIT_SEED, i]) for i in range(FIT_DRAWS)])
+    every = np.ones(FIT_DRAWS * S, dtype=bool)
+    batch.tamp_rows(every, 0)
+
+    def rows(name: str) -> np.ndarray:
+        return np.concatenate([batch.get_state(b).rows[name] for b in range(FIT_DRAWS)])
+
+    shape, rough = _centred_d1(rows("offset")), roughness(rows("base_rate"))
+    per_rough, rho = [np.zeros(FIT_DRAWS * S)], []
+    for step in range(steps):
+        batch.traffic_rows(every, step)
+        settled = _centred_d1(rows("u"))
+        sd = settled.std(axis=1)
+        per_rough.append(sd / rough)
+        rho.append((shape * settled).mean(axis=1) / (shape.std(axis=1) * sd + 1e-300))
+    log_rough = np.log(rough).reshape(FIT_DRAWS, S)
+    typical = np.exp(log_rough.mean(axis=0))
+    phi = np.array(per_rough).reshape(steps + 1, FIT_DRAWS, S).mean(axis=1).T * typical[:, None]
+    rho_all = np.array(rho).reshape(steps, FIT_DRAWS, S)
+    return phi, typical, log_rough.std(axis=0), rho_all.mean(axis=(0, 1)), rho_all.std(axis=(0, 1))
+
+
+def _centred_d1(level: np.ndarray) -> np.ndarray:
+    d1 = d1_filter(level, SLEEPER_SPACING_M)
+    return d1 - d1.mean(axis=1, keepdims=True)
+
+
+# ---------------------------------------------------------------------- the engine's side
+def zone_factors(register: np.ndarray, n: int, config: LineConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(rate, ballast stiffness) factors (S, n) that each section's register class puts on its segment of
+    ``n`` sleepers, as the line engine draws them: a transition zone settles ``transition_rate_factor`` times
+    faster on its soft half and is ``transition_stiffness_ratio`` times stiffer on the other; a switch or
+    crossing settles ``switch_rate_factor`` times faster with a stiff 3 m patch (twice the stiffness) in the
+    middle. (A test checks them against the engine's draws.)"""
+    c = config
+    register = np.asarray(register)
+    mid = n // 2
+    soft = np.arange(n) < mid
+    patch = np.abs(np.arange(n) - mid) <= 2
+    rate = np.ones((register.size, n))
+    stiff = np.ones((register.size, n))
+    rate[register == 1] = np.where(soft, c.transition_rate_factor, 1.0)
+    stiff[register == 1] = np.where(soft, 1.0, c.transition_stiffness_ratio)
+    rate[register == 2] = c.switch_rate_factor
+    stiff[register == 2] = np.where(patch, 2.0, 1.0)
+    return rate, stiff
+
+
+def drawn_section_factor(plain_rate: np.ndarray, config: LineConfig) -> np.ndarray:
+    """(S,) the section rate factors of an episode's draw from its per-sleeper rates without zone factors
+    (S, n): the engine draws them as ``rate_scale × section factor × sleeper factor`` with log sleeper factors
+    of mean exactly −σ²/2 along the segment (σ² = log(1 + sleeper_rate_cv²): a normalised field), so the
+    section factor is the geometric mean divided by ``rate_scale`` and exp(−σ²/2)."""
+    sigma2 = math.log1p(config.sleeper_rate_cv**2)
+    return np.exp(np.log(plain_rate).mean(axis=1) + sigma2 / 2) / config.rate_scale
+
+
+def start_levels(shape: np.ndarray, settled: np.ndarray, sd_after_tamping: np.ndarray,
+                 start_sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A section's post-tamping ``shape`` and its ``settled`` level since (rows, n) [m] scaled so that it starts
+    at the SD its history gives, ``start_sd`` [m] per row: the shape to the fitted SD right after tamping
+    ``sd_after_tamping`` (where fitted; NaN: as drawn), then the settlement to the start SD; where the shape
+    is rougher than that on its own, the shape instead (with the settlement at its least rough scale).
+    Returns the new (shape, settled)."""
+    shape, settled = shape.copy(), settled.copy()
+    sd0 = np.asarray(sd_after_tamping, dtype=float)
+    fitted = ~np.isnan(sd0)
+    if fitted.any():  # the D1 filter is homogeneous (D1(s·z) = s·D1(z)): a ratio of SDs scales it exactly
+        own = d1_filter(shape[fitted], SLEEPER_SPACING_M).std(axis=1)
+        shape[fitted] *= (sd0[fitted] / np.maximum(own, 1e-12))[:, None]
+    s, reached = scale_to(settled, shape, start_sd)
+    settled *= s[:, None]
+    if not reached.all():
+        rest = ~reached
+        s_shape, _ = scale_to(shape[rest], settled[rest], np.asarray(start_sd)[rest])
+        shape[rest] *= s_shape[:, None]
+    return shape, settled
+
+
+def scale_to(x: np.ndarray, y: np.ndarray, target_sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows,) the factor s ≥ 0 per row with SD of D1(s·x + y) = ``target_sd`` [m], and whether it was reached.
+    Were the D1 filter linear, SD² = s²·var(a) + 2s·cov(a, b) + var(b) with a, b the D1 of x and y, a quadratic
+    in s: its root starts a secant iteration on the filter itself (whose end padding is fitted to the record,
+    so it is additive only nearly) to 0.1 % of the target. Where no s reaches the target, the s of the least
+    SD."""
+    target = np.asarray(target_sd, dtype=float)
+    a = d1_filter(x, SLEEPER_SPACING_M)
+    b = d1_filter(y, SLEEPER_SPACING_M)
+    a = a - a.mean(axis=1, keepdims=True)
+    b = b - b.mean(axis=1, keepdims=True)
+    va, cab, vb = (a * a).mean(axis=1), (a * b).mean(axis=1), (b * b).mean(axis=1)
+    va = np.maximum(va, 1e-30)
+    disc = cab * cab - va * (vb - target**2)
+    s = np.maximum(np.where(disc >= 0, (-cab + np.sqrt(np.maximum(disc, 0.0))) / va, -cab / va), 0.0)
+
+    def miss(scale: np.ndarray) -> np.ndarray:
+        return d1_filter(scale[:, None] * x + y, SLEEPER_SPACING_M).std(axis=1) - target
+
+    prev = s * 1.02 + 1e-3
+    f_prev, f = miss(prev), miss(s)
+    for _ in range(8):
+        todo = (disc >= 0) & (np.abs(f) > 1e-3 * target)
+        if not todo.any():
+            break
+        slope = (f - f_prev) / np.where(s != prev, s - prev, 1.0)
+        new = np.where(todo & (slope > 0), np.maximum(s - f / np.where(slope > 0, slope, 1.0), 0.0), s)
+        prev, f_prev, s = s, f, new
+        f = np.where(todo, miss(s), f)
+    return s, np.abs(f) <= 1e-3 * target
