@@ -29,9 +29,8 @@ from .actions import RANKED
 
 
 def teacher_policy(rule: str, config: ProblemConfig, params: dict[str, Any] | None = None):
-    """The heuristic ``rule`` with ``params`` (default: its tuned parameters in
-    ``agents/rules/tuned_heuristics.json``, or ``agents/rules/line_tuned_heuristics.json`` for a TampingLine
-    config), bound to ``config``'s planning calendar."""
+    """The heuristic ``rule`` with ``params`` (default: the tuned parameters of ``config``'s preset,
+    :func:`~trackenv_agents.rules.tuned_params_for`), bound to ``config``'s planning calendar."""
     rules = rules_for(config)
     if rule not in rules:
         raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
