@@ -42,6 +42,10 @@ class TampingEnv(TampingLine):
     **Version history.** v1: the 60 m track moved onto the one engine (above). v0 had an engine of its own
     (gone): a vehicle pass per step over a ``TrackDegradation``, tamping residuals drawn at the tamping, no
     renewal cost, the transition anywhere in 20-80 % of the track, and no tamping history before the start.
+    What that moved, measured with the rules on 16 held-out episodes (seeds 0-15): no maintenance cost 185.9 k€
+    on v0 and 259.2 k€ on v1 (the 0-2 years of settlement since the last tamping that v1 starts with, and the
+    renewal cost); the best tuned rule 115.1 k€ on v0 (periodic, every 3.5 years) and 138.0 k€ on v1 (grouped
+    threshold; 200 episodes).
     """
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
