@@ -238,7 +238,7 @@ def test_config_validation_and_scenarios():
         LineConfig(n_sections=4, capacity=5)
     with pytest.raises(ValueError, match="scenario"):
         scenario("nope")
-    assert set(SCENARIOS) == {"small", "default", "hard", "track60"}
+    assert set(SCENARIOS) == {"small", "default", "hard", "long", "track60"}
     with pytest.raises(ValueError, match="shape"):
         env = TampingLine(scenario="small", **SHORT)
         env.reset(seed=0)
@@ -282,3 +282,17 @@ def test_episode_end_and_reset_arguments_are_enforced():
         env.reset(seed=-1)
     env.reset(seed=3)  # a valid reset starts a new episode
     env.step(np.zeros(6, dtype=np.int8))
+
+
+@pytest.mark.slow
+def test_the_50_km_line_runs_a_step():
+    """trackenv/TampingLineLong-v0: 250 sections of 200 m, capacity 25, one step on one machine (the scale the
+    planning of a real line needs; experiments/scale.py times it)."""
+    env = gym.make("trackenv/TampingLineLong-v0", horizon_years=0.5)
+    obs, _ = env.reset(seed=0)
+    assert obs["section_sd"].shape == (250,) and env.unwrapped.config.capacity == 25
+    action = np.zeros(250, np.int8)
+    action[:40] = 1  # over capacity: the 25 worst measured of the allowed ones are kept
+    obs, reward, _, _, info = env.step(action)
+    assert info["tamped_sections"].sum() <= 25 and info["clipped"]
+    assert -reward == pytest.approx(info["cost"]) and np.isfinite(obs["section_sd"]).all()

@@ -79,6 +79,7 @@ class TampingLine(TrackEnv):
     ``trackenv/TampingLineSmall-v0``    6         3         tests and quick studies
     ``trackenv/TampingLine-v0``         12        6         the default line
     ``trackenv/TampingLineHard-v0``     24        4         more zones and hidden spots, budget 60 k€/year
+    ``trackenv/TampingLineLong-v0``     250       25        50 km
     ``trackenv/Tamping-v1``             6         6         the 60 m track: :class:`~trackenv.envs.tamping.TampingEnv`
     ==================================  ========  ========  ================================================
 

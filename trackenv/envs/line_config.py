@@ -361,6 +361,9 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "default": {},
     "hard": {"n_sections": 24, "capacity": 4, "wet_spot_probability": 0.25, "transition_probability": 0.2,
              "switch_probability": 0.12, "annual_budget": 60.0},
+    # 50 km: 250 sections of 200 m; a quarter's possessions cover 25 sections (5 km, e.g. a few nights at a
+    # tamper's 0.5-2.2 km/h) [assumption]; otherwise the default line's distributions and economics
+    "long": {"n_sections": 250, "capacity": 25},
     # the 60 m track (trackenv/Tamping-v1): one 60 m segment of six 10 m sections, one wheelset type (20 t
     # axles, 2 million axle passes a year), measured without error after every step, with the level and the
     # wheel/rail force per sleeper in the observation; its costs per 10 m section
