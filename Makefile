@@ -20,7 +20,7 @@ setup: $(BIN)/trackenv
 # then the 60 m track (the same rules and agent on the same engine), the paper's scenarios and the validation
 demo: setup
 	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:32 --rules grouped-threshold,uniform-periodic
-	$(BIN)/trackenv evaluate --env trackenv/Tamping-v1 --seeds 0:32
+	$(BIN)/trackenv evaluate --env trackenv/Tamping-v1 --seeds 0:32 --out results/track60_compare
 	$(BIN)/trackenv paper
 	$(BIN)/trackenv validate
 

@@ -4,9 +4,9 @@
   VecMonitor + VecNormalize (observations and rewards), TensorBoard logs, checkpoints, a held-out-seed
   evaluation callback and reproducible seeding. Hyper-parameters: ``agents/learning/hyperparams/ppo.yml`` (RL Zoo's
   form, one entry per env id), read by :func:`load_hyperparams`.
-* :func:`load_trained` — the shipped policy (``agents/learning/pretrained/ppo_tamping.zip`` + its observation
-  statistics ``ppo_tamping_obs_stats.json``) as an object with SB3-style ``predict`` on *raw* env
-  observations.
+* :func:`load_trained` — a trained policy (a run's ``model.zip``, or one exported with :func:`export_policy` to
+  ``agents/learning/pretrained/ppo_tamping.zip``, where none ships today, + its observation statistics) as an
+  object with SB3-style ``predict`` on *raw* env observations.
 
 Policies are scored by :func:`trackenv_agents.evaluation.harness.evaluate_one` (the held-out evaluation during
 training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.line.LineNoMaintenance`,
@@ -590,7 +590,8 @@ def export_policy(model_zip: str | Path, dest: str | Path = DEFAULT_PRETRAINED,
 
 
 def load_trained(path: str | Path | None = None, name: str = "ppo") -> NormalizedPolicy:
-    """The trained policy at ``path`` (default ``agents/learning/pretrained/ppo_tamping.zip``) with its observation
+    """The trained policy at ``path`` (default ``agents/learning/pretrained/ppo_tamping.zip``, the export path;
+    none ships today) with its observation
     statistics (``<stem>_obs_stats.json`` beside it): ``predict(obs, state=None, episode_start=None,
     deterministic=True)`` on raw env observations (single or batched dict)."""
     path = Path(path) if path is not None else DEFAULT_PRETRAINED
