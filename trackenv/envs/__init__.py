@@ -5,9 +5,10 @@ only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` 
 
 Every id is the one environment (:class:`~trackenv.envs.line.TampingLine` over the one engine) with a preset of
 :class:`~trackenv.envs.line_config.LineConfig`: the line problem (:mod:`trackenv.envs.line`),
-``trackenv/TampingLine-v0`` (the default line), ``trackenv/TampingLineSmall-v0`` (tests, quick studies) and
-``trackenv/TampingLineHard-v0``, ``trackenv/TampingLineLong-v0`` (50 km); the 60 m track (:mod:`trackenv.envs.tamping`), ``trackenv/Tamping-v1``
-(MultiBinary actions), ``trackenv/TampingDiscrete-v1`` (one section or none per step), and for learners
+``trackenv/TampingLine-v0`` (the default line), ``trackenv/TampingLineSmall-v0`` (tests, quick studies),
+``trackenv/TampingLineHard-v0`` and ``trackenv/TampingLineLong-v0`` (50 km); the 60 m track
+(:mod:`trackenv.envs.tamping`), ``trackenv/Tamping-v1`` (MultiBinary actions), ``trackenv/TampingDiscrete-v1``
+(one section or none per step), and for learners
 (:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v1`` (``Discrete(n_sections + 1)`` ranked actions,
 section-level Dict observation) and ``trackenv/TampingRankedFlat-v1`` (the same with one flat ``Box``
 observation: RLlib's and CleanRL's default encoders). Each has a native vector entry point
