@@ -106,6 +106,11 @@ class TampingLine(TrackEnv):
     time                    fraction of the horizon elapsed                                  -      [0, 1]
     budget_left             remaining share of the annual budget (1 without a budget)        -      [0, 1]
     level (``profiles``)    measured rail level per sleeper of each segment                  mm     [-100, 200]
+    contact_force (same)    largest wheel/rail force over each sleeper bay, this step        kN     [0, 2000]
+    section_contact_peak    peak wheel/rail force per section, as an instrumented vehicle    kN     [0, 2000]
+    (``contact_sensor``)    reads it (relative error ``contact_sensor_noise``)
+    section_dynamic_share   that peak over the static wheel load, minus 1                    -      [-1, 20]
+    (``contact_sensor``)
     ======================  ===============================================================  =====  ========
 
     The true state is in ``info``: ``section_sd_m``, ``section_peak_m``, ``section_class`` (0 OK, 1 alert,

@@ -100,7 +100,11 @@ class LineConfig(ConfigBase):
     at a tamper's 0.5-2.2 km/h); ``annual_budget`` (0: none) for tamping costs per calendar year;
     ``over_capacity``: "clip" (keep the allowed sections with the worst measured SD, documented in the env)
     or "raise" (ValueError). ``min_steps_between_tampings``: a section tamped in the last k steps is masked.
-    ``profiles``: also observe the measured per-sleeper level of every segment.
+    ``profiles``: also observe the measured per-sleeper level and wheel/rail force of every segment.
+    ``contact_sensor``: also observe, every step, each section's wheel/rail force as an instrumented in-service
+    vehicle reads it (axle-box accelerations): the peak of the step's passes and its dynamic share above the
+    static wheel load, with a relative error of SD ``contact_sensor_noise`` (default 5 % **[assumption]**: the
+    order of force estimates from axle-box accelerations), drawn at the reset like every other error.
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type, the coarsest step that keeps the
     peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s for the
     coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
@@ -162,6 +166,8 @@ class LineConfig(ConfigBase):
     over_capacity: str = "clip"
     min_steps_between_tampings: int = 1
     profiles: bool = False
+    contact_sensor: bool = False
+    contact_sensor_noise: float = 0.05
     limits: tuple = ()
     dt: float | str = "auto"
     line: LineDescription | None = None
@@ -228,6 +234,8 @@ class LineConfig(ConfigBase):
         check_choice("over_capacity", self.over_capacity, OVER_CAPACITY)
         ci("min_steps_between_tampings", low=0, high=100)
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
+        object.__setattr__(self, "contact_sensor", check_bool("contact_sensor", self.contact_sensor))
+        c("contact_sensor_noise", low=0.0, high=1.0)
         object.__setattr__(self, "dt", check_dt_option(self.dt))
         self._check_pass_time_steps()
 

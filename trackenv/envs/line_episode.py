@@ -67,7 +67,7 @@ _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
                    "sd", "peak", "sd_after_tamping")
-_SECTION_NOISE = ("meas_noise",)
+_SECTION_NOISE = ("meas_noise", "sensor_noise")
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,6 +103,9 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
     if config.profiles:
         bounds["level"] = shared["level"]
         bounds["contact_force"] = shared["contact_force"]
+    if config.contact_sensor:
+        bounds["section_contact_peak"] = shared["contact_force"]
+        bounds["section_dynamic_share"] = (-1.0, 20.0)
     return bounds
 
 
@@ -149,6 +152,8 @@ class LineBatch:
         self.limits = c.quality_limits.for_speed(c.speed)
         self.vehicles = c.vehicles()
         self.passes = c.axle_passes_per_step()
+        #: the largest static wheel load of the traffic [N]: the contact sensor's dynamic share is above it
+        self.static_wheel_load = max(v.wheel_load for v, k in zip(self.vehicles, self.passes, strict=True) if k > 0)
         self.p_exp = float(dict(c.law_params).get("force_exponent", 1.0))
         self.model_tracks: list[Track | None] = [None] * GR
         self.n_extra = APPROACH_SLEEPERS
@@ -178,6 +183,7 @@ class LineBatch:
         self.peak = np.zeros(G)
         self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
         self.meas_noise = np.zeros((H + 1, G, 2))
+        self.sensor_noise = np.zeros((H + 1, G))  # the contact sensor's errors (``contact_sensor``), per step
         # per line
         self.step = np.zeros(self.n_lines, dtype=np.int64)
         self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
@@ -319,6 +325,8 @@ class LineBatch:
         self.tamp_noise[:, rs] = rng.standard_normal((H + 1, R, n))
         self.meas_noise[:, r] = rng.standard_normal((H + 1, S, 2))
         voided = self._voided_sleepers(rng, R, n)  # drawn last: configs without voids draw as before
+        if c.contact_sensor:  # after that: configs without the sensor draw as before
+            self.sensor_noise[:, r] = rng.standard_normal((H + 1, S))
         self.sd_after_tamping[r] = 0.0
         # a segment's zone belongs to the sections over its middle (all of it where a segment is one section)
         zone = np.zeros(self.K, dtype=np.int64)
@@ -725,8 +733,14 @@ class LineBatch:
     def _section_values(self, rows, step) -> dict[str, np.ndarray]:
         """The per-section keys of the observation for the sections ``rows`` (a slice or indices) at step
         ``step`` (per section or one), unclipped."""
-        years = (np.asarray(step) - self.last_tamped[rows]) / self.config.steps_per_year
-        return {
+        c = self.config
+        years = (np.asarray(step) - self.last_tamped[rows]) / c.steps_per_year
+        sensed = {}
+        if c.contact_sensor:
+            e = self.sensor_noise[np.minimum(np.asarray(step), c.horizon_steps), np.arange(self.sd.size)[rows]]
+            peak = np.maximum(self.contact_force[rows] * (1.0 + c.contact_sensor_noise * e), 0.0)
+            sensed = {"section_contact_peak": peak / 1e3, "section_dynamic_share": peak / self.static_wheel_load - 1.0}
+        return {**sensed,
             "section_sd": self.measured_sd[rows] * 1e3,
             "section_peak": self.measured_peak[rows] * 1e3,
             "register": self.register[rows],
