@@ -131,7 +131,8 @@ def _saved_bounds(config: Any, scenario_name: str, seeds: list[int], searches: P
     they were saved with; a search of another engine version is left out, not trusted."""
     from .line_hindsight import replay_schedules, saved_schedules, schedule_rows
 
-    paths = [p for p in sorted(searches.glob("*.json")) if json.loads(p.read_text()).get("scenario") == scenario_name]
+    paths: list[str | Path] = [p for p in sorted(searches.glob("*.json"))
+                               if json.loads(p.read_text()).get("scenario") == scenario_name]
     if not paths:
         return {}
     try:
@@ -168,8 +169,11 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     todo = [s for s in seeds if s not in found]
     seconds: list[float] = []
     if todo:
+        if any(r.tamped is None for r in rules):
+            raise ValueError("the bound's search starts from the rules' schedules: results without them (tamped)")
+        plans = [np.asarray(r.tamped) for r in rules]  # (episodes, H, S) each, the best rule's first
         row = {s: k for k, s in enumerate(seeds)}
-        episodes = [(s, best.tamped[row[s]], tuple(r.tamped[row[s]] for r in rules[1:])) for s in todo]
+        episodes = [(s, plans[0][row[s]], tuple(p[row[s]] for p in plans[1:])) for s in todo]
         chunks = [episodes[i:i + BOUND_CHUNK] for i in range(0, len(episodes), BOUND_CHUNK)]
         run: Callable = functools.partial(_search_chunk, config)
         for out in (executor.map(run, chunks) if executor is not None else map(run, chunks)):
