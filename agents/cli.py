@@ -231,12 +231,10 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
 
 
 @contextlib.contextmanager
-def _stdout_to_stderr(active: bool) -> Iterator[None]:
-    """While active, file descriptor 1 writes to stderr: the MIP solver behind the hindsight bound (HiGHS, C code)
-    prints lines on stdout that Python cannot catch, and ``--json`` promises one JSON object there."""
-    if not active:
-        yield
-        return
+def _stdout_to_stderr() -> Iterator[None]:
+    """Meanwhile file descriptor 1 writes to stderr: the MIP solver behind the hindsight bound (HiGHS, C code)
+    prints lines on stdout that Python cannot catch, and stdout carries the summary (``--json``: one JSON
+    object) only."""
     sys.stdout.flush()
     saved = os.dup(1)
     try:
@@ -269,7 +267,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()
     try:
-        with _stdout_to_stderr(args.json):
+        with _stdout_to_stderr():
             payload = leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
                                   out_dir=out, executor=executor, progress=not args.json)
     finally:
