@@ -17,10 +17,10 @@ setup: $(BIN)/trackenv
 	$(BIN)/trackenv compile
 
 # the line first: the shipped agent against the best tuned rule and the calendar on 32 held-out episodes, paired;
-# then the 60 m track (the shipped PPO and the tuned rules), the paper's scenarios and the validation
+# then the 60 m track (the same rules and agent on the same engine), the paper's scenarios and the validation
 demo: setup
 	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:32 --rules grouped-threshold,uniform-periodic
-	$(BIN)/trackenv evaluate
+	$(BIN)/trackenv evaluate --env trackenv/Tamping-v1 --seeds 0:32
 	$(BIN)/trackenv paper
 	$(BIN)/trackenv validate
 

@@ -21,10 +21,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-DEFAULT_N_TEST = 24  # held-out episodes `trackenv evaluate` scores by default (a few minutes on 2 cores)
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
+DEFAULT_ENV_ID = "trackenv/Tamping-v1"  # the SB3 trainer's env (= trackenv_agents.learning.tamping.DEFAULT_ENV_ID)
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
 # = trackenv_agents.learning.line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
 LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "ppo_tamping_line.zip"
@@ -145,10 +145,9 @@ def _one_step_of_each_problem() -> None:
     kernel (the settlement solver, the D1 filter) is compiled, or loaded from numba's cache, by the same types."""
     import numpy as np
 
-    from trackenv.envs import TampingEnvConfig, make_vector_env, scenario
+    from trackenv.envs import make_vector_env, scenario
 
-    for config in (TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=0.25),
-                   scenario("small", horizon_years=0.25)):
+    for config in (scenario("track60", horizon_years=0.25), scenario("small", horizon_years=0.25)):
         env = make_vector_env(config, 1)
         env.reset(seed=0)
         env.step(np.ones((1, config.n_sections), dtype=np.int8))
@@ -158,12 +157,12 @@ def _one_step_of_each_problem() -> None:
 def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
     """The trained line policy scored next to the line rules: ``--model``, else the shipped one if there is one
     (the same policy on every scenario: its network is shared over sections)."""
-    if args.policy == "heuristics":
+    if args.policy == "rules":
         return {}
     _existing(args.model, "--model")
     path = Path(args.model) if args.model else LINE_PRETRAINED_FILE
     if not path.exists():
-        if args.policy == "ppo":
+        if args.policy == "agent":
             raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass "
                              "--model")
         return {}
@@ -328,58 +327,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    if args.env is not None and args.env != "trackenv/Tamping-v0":
-        return cmd_evaluate_line(args)
-    if args.rules is not None:
-        raise UsageError("--rules selects line rules: use it with a line --env")
-    if args.quick and args.policy == "ppo":
-        raise SystemExit("trackenv evaluate: --quick uses a small track; the trained policy needs the default one")
-    _existing(args.model, "--model")
-    from .evaluation.tamping_compare import run_comparison
-
-    extra = {}
-    if args.policy in ("ppo", "all") and not args.quick:  # the shipped policy knows the default track only
-        try:
-            from .learning.tamping import load_trained
-
-            extra["ppo"] = load_trained(args.model)
-        except Exception as exc:  # a missing or broken model must not hide the heuristics' results
-            if args.policy == "ppo":
-                raise SystemExit(f"trackenv evaluate: cannot load the trained policy: {exc}") from exc
-            print(f"warning: trained policy unavailable ({exc}); scoring heuristics only", file=sys.stderr)
-    from .rules.tamping import TUNED_PARAMS_FILE as shipped
-
-    tuned = None
-    if not (args.retune or args.quick) and shipped.exists():
-        tuned = shipped  # parameters tuned by `trackenv evaluate --retune` on the training seeds
-    n_test = args.n_test if args.n_test is not None else (None if args.quick else DEFAULT_N_TEST)
-    executor = _executor(args)
-    t0 = time.perf_counter()
-    out = args.out or "results/compare"
-    try:
-        result = run_comparison(
-            out_dir=out,
-            n_test=n_test,
-            n_train=args.n_train,
-            quick=args.quick,
-            progress=not args.json,
-            extra_policies=extra,
-            tuned=tuned,
-            batch_size=args.batch_size,
-            executor=executor,
-        )
-    finally:
-        if executor is not None:
-            executor.close()
-    result["tuned_from"] = str(tuned) if tuned else "tuned now on the training seeds"
-    result["wall_time_s"] = time.perf_counter() - t0
-    result["ray"] = args.ray_address or ("local" if args.ray else None)
-    from .evaluation.reporting import format_table
-
-    names = [Path(f).name for f in result.get("files", {}).values()]
-    human = f"{format_table(result['results'])}\nwrote {', '.join(names)} to {out}"
-    _emit(args, result, human)
-    return 0
+    """`trackenv evaluate`: the tuned rules and the trained agent on held-out episodes of one preset, paired."""
+    return cmd_evaluate_line(args)
 
 
 def _line_payload(path: Path, wall: float, out: Path) -> tuple[dict[str, Any], str]:
@@ -401,8 +350,8 @@ def cmd_train_line(args: argparse.Namespace) -> int:
     """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
     --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
     if args.algo:
-        raise UsageError("--algo is for Tamping-v0; the line's learner reads its algorithm from the hyper-parameter "
-                         "file")
+        raise UsageError("--algo is for the 60 m track (Tamping-v1); the line's learner reads its algorithm from the "
+                         "hyper-parameter file")
     from .evaluation.line_compare import scenario_of
     from .learning.line import train_line
 
@@ -466,7 +415,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     _existing(args.resume, "--resume", folder=True)
     if args.resume is not None:
         return cmd_train_resume(args)
-    if args.env is not None and args.env != "trackenv/Tamping-v0":
+    if args.env is not None and args.env != DEFAULT_ENV_ID:
         return cmd_train_line(args)
     if args.iterations is not None:
         raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
@@ -528,7 +477,7 @@ def _hyperparam_defaults() -> dict[str, Any]:
     try:
         import yaml
 
-        entry = yaml.safe_load(HYPERPARAMS_FILE.read_text())["trackenv/Tamping-v0"]
+        entry = yaml.safe_load(HYPERPARAMS_FILE.read_text())[DEFAULT_ENV_ID]
         return {"algo": (entry.get("trackenv") or {}).get("algo", "ppo"),
                 "total_timesteps": entry.get("n_timesteps", "n/a"), "n_envs": entry.get("n_envs", "n/a")}
     except Exception:  # pragma: no cover - a broken install; the help still answers
@@ -584,33 +533,30 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quick", action="store_true", help="fewer repeats: rougher figures in a few seconds")
     sp.set_defaults(func=cmd_bench)
 
-    sp = command("evaluate", "score the trained policy and the tuned heuristics on held-out seeds")
-    out(sp, "results/compare")
-    sp.add_argument("--policy", choices=("all", "ppo", "heuristics"), default="all", help="which policies to score")
+    sp = command("evaluate", "score the tuned rules and the trained agent on held-out episodes, paired")
+    out(sp, "results/line_compare")
+    sp.add_argument("--env", default="trackenv/TampingLine-v0", metavar="ID",
+                    help="the preset: trackenv/TampingLine-v0 (default), ...Small-v0, ...Hard-v0, or the 60 m track "
+                         "trackenv/Tamping-v1")
+    sp.add_argument("--seeds", default=None, metavar="A:B",
+                    help="held-out episodes: A:B (seeds A..B-1) or a,b,c (default 0:8)")
+    sp.add_argument("--policy", choices=("all", "agent", "rules"), default="all",
+                    help="which policies to score: the rules and the trained agent (default), or one of them")
     sp.add_argument("--model", default=None, metavar="ZIP",
-                    help="a trained model (default: the shipped agents/learning/pretrained/ppo_tamping.zip; with a "
-                         "line --env, agents/learning/pretrained/ppo_tamping_line.zip if it exists)")
-    sp.add_argument("--n-test", type=_positive(int), default=None, metavar="N",
-                    help=f"held-out episodes (default: {DEFAULT_N_TEST} of the 200 test seeds; 6 with --quick)")
-    sp.add_argument("--n-train", type=_positive(int), default=None, metavar="N",
-                    help="episodes for tuning the heuristics, with --retune or --quick (default: all 100; 2 with "
-                         "--quick)")
-    sp.add_argument("--quick", action="store_true", help="a small, fast configuration (about a minute)")
+                    help=f"a trained per-section policy (default: the shipped {LINE_AGENT_NAME}, "
+                         "agents/learning/pretrained/ppo_tamping_line.zip)")
+    sp.add_argument("--rules", default=None, metavar="NAMES",
+                    help="score only these rules, comma-separated (e.g. grouped-threshold,uniform-periodic; "
+                         "default: all)")
     sp.add_argument("--retune", action="store_true",
-                    help="tune the heuristics again instead of using the shipped parameters")
+                    help="tune the rules again on the training seeds instead of using the shipped parameters")
+    sp.add_argument("--n-train", type=_positive(int), default=None, metavar="N",
+                    help="training episodes for --retune (seeds 1000..1000+N-1; default 2)")
     sp.add_argument("--batch-size", type=_positive(int), default=32, metavar="N",
                     help="episodes per batch (one vector env, one task)")
     sp.add_argument("--ray", action="store_true", help="run the batches as tasks on a local Ray (trackenv[ray])")
     sp.add_argument("--ray-address", default=None, metavar="ADDR",
                     help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
-    sp.add_argument("--env", default=None, metavar="ID",
-                    help="a TampingLine id (trackenv/TampingLine-v0, ...Small-v0, ...Hard-v0): score the line rules "
-                         "and the trained line policy")
-    sp.add_argument("--seeds", default=None, metavar="A:B",
-                    help="held-out episodes of the line: A:B (seeds A..B-1) or a,b,c")
-    sp.add_argument("--rules", default=None, metavar="NAMES",
-                    help="with a line --env: score only these line rules, comma-separated (e.g. "
-                         "grouped-threshold,uniform-periodic; default: all)")
     sp.set_defaults(func=cmd_evaluate)
 
     sp = command("leaderboard", "every policy on every scenario of the suite on fixed held-out seeds, scored "
@@ -675,7 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "hyper-parameter file's, 300); the line's policy iteration keeps one after each iteration")
     sp.add_argument("--resume", default=None, metavar="DIR",
                     help="continue the run in DIR (killed, or finished) from its last checkpoint with the settings it "
-                         "was started with; Tamping-v0: --timesteps sets a new total")
+                         "was started with; the 60 m track: --timesteps sets a new total")
     sp.add_argument("--hyperparams", default=None, metavar="FILE",
                     help="YAML (RL Zoo form) or flat JSON overriding agents/learning/hyperparams/ppo.yml key by key")
     sp.add_argument("--env", default=None, metavar="ID",

@@ -36,12 +36,13 @@ DEFAULT_POLICY = "grouped-threshold"
 
 
 def line_policy(name: str, config: Any) -> Any:
-    """The line rule ``name`` with its shipped tuned parameters, bound to ``config``; ValueError for another."""
-    from .rules.line import LINE_HEURISTICS, line_tuned_params
+    """The line rule ``name`` with its shipped tuned parameters (:func:`~trackenv_agents.rules.tuned_params_for`:
+    a line from a file takes the default line's), bound to ``config``; ValueError for another."""
+    from .rules import LINE_HEURISTICS, tuned_params_for
 
     if name not in LINE_HEURISTICS:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(LINE_HEURISTICS)}")
-    return LINE_HEURISTICS[name](**line_tuned_params().get(name, {})).bind(config)
+    return LINE_HEURISTICS[name](**tuned_params_for(config).get(name, {})).bind(config)
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,7 +15,7 @@ minutes, untimed), and is removed at the end. Figures (``--figure``):
 
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
-* ``env``: env steps per second of ``trackenv/Tamping-v0`` (random actions);
+* ``env``: env steps per second of ``trackenv/Tamping-v1`` (random actions);
 * ``line``: line-steps per second of ``trackenv/TampingLine-v0`` (random actions);
 * ``seed``: passes per second of the seed pass at dt = 1e-4 (the benchmark's ``seed_pass``).
 """
@@ -70,7 +70,7 @@ if __name__ == "__main__":
     print({envs} * {steps} / (time.perf_counter() - t))
     env.close()
 """,
-    "env": _GYM_STEPS.replace("ENV_ID", "trackenv/Tamping-v0").replace("WARM", "5"),
+    "env": _GYM_STEPS.replace("ENV_ID", "trackenv/Tamping-v1").replace("WARM", "5"),
     "line": _GYM_STEPS.replace("ENV_ID", "trackenv/TampingLine-v0").replace("WARM", "3"),
     "seed": """
 import time

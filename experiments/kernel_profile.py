@@ -17,7 +17,7 @@ the comparison fair on a shared machine (whole-process timings of this VM drift 
     python experiments/kernel_profile.py --rows 16 --repeats 3  # a 16-row chunk in lockstep (per row)
     python experiments/kernel_profile.py --kernel old_step.py --kernel trackenv/physics/_step.py
 
-Workload: the passes of ``Tamping-v0``'s first step (``rows`` new episodes of the default config: 60 m with
+Workload: the passes of the 60 m track's steps (``rows`` episodes of ``trackenv/Tamping-v1``: 60 m with
 approach and exit zones, 100 km/h, dt 4e-4, one wheelset), on one thread. Cycles are TSC cycles, which tick at
 the processor's nominal clock, not its actual one (2.0 GHz on the Zen 1 VM of the earlier rounds, 2.6 GHz on the
 Xeon VM of the fifth): compare figures taken on one machine. Each copy compiles on its own (~40-60 s cold; no
@@ -153,10 +153,9 @@ def main(argv: list[str] | None = None) -> None:
 
     import numba
 
-    import trackenv.envs.episode as E
     import trackenv.physics._kernel as K
-    from trackenv.degradation import simulate_batch
-    from trackenv.envs.config import TampingEnvConfig
+    from trackenv.envs import scenario
+    from trackenv.envs.line_episode import LineBatch
 
     numba.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
@@ -178,17 +177,16 @@ def main(argv: list[str] | None = None) -> None:
             runs[k](mesh, drive, rows, peaks, own_store(reuse, stores[k]), counts[k])
 
         K.run = run  # simulate_passes calls _kernel.run at run time
-        config = TampingEnvConfig()
-        rng = np.random.default_rng(0)
-        sims = [E.new_episode(config, rng).sim for _ in range(args.rows)]
-        for k in range(len(kernels)):  # compile (not counted)
+        engine = LineBatch(scenario("track60"), args.rows)
+        every = np.ones(args.rows * engine.config.n_sections, dtype=bool)
+        for k in range(len(kernels)):  # compile, and the episodes' first passes (not counted)
             current[0] = k
-            simulate_batch(sims)
+            engine.start(list(range(args.rows)), [np.random.default_rng(i) for i in range(args.rows)])
             counts[k][:] = 0
         for _ in range(args.repeats):
             for k in range(len(kernels)):
                 current[0] = k
-                simulate_batch(sims)
+                engine.traffic_rows(every, 0)  # a step's pass (and its settlement, which is not the kernel's)
     per = [c.astype(float) / (args.repeats * steps["n"] * args.rows) for c in counts]
     labels = [str(p) if len(str(p)) < 28 else "…" + str(p)[-27:] for p in kernels]
     print(f"cycles per time step and row, {args.rows} row(s) in lockstep, {steps['n']} steps per pass, "

@@ -7,7 +7,7 @@ Each run is a fresh process with ``PYTHONPATH`` set to one tree, in the order A 
 machine favours neither); it warms up (each tree compiles its kernel on its first run, untimed: run once before
 timing a cold tree) and reports passes per second. Workloads (``--workload``):
 
-* ``single``: the pass of ``Tamping-v0`` (60 m of realistic track with 10 sleepers of approach and exit, a 20 t
+* ``single``: the pass of the 60 m track (60 m of realistic track with 10 sleepers of approach and exit, a 20 t
   wheelset at 100 km/h, dt 4e-4, the level as settled supports), one row;
 * ``line``: the line's passes for one step (12 segments of 30 m in one batch, the passenger and the freight
   wheelset at 100 km/h, dt "auto", settled supports): line-steps per second;

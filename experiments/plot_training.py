@@ -14,9 +14,10 @@ import argparse
 import json
 from pathlib import Path
 
+from trackenv.envs import scenario
 from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.learning.tamping import DEFAULT_EVAL_SEEDS
-from trackenv_agents.rules.tamping import HEURISTICS, tuned_params
+from trackenv_agents.rules import LINE_HEURISTICS, tuned_params_for
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -24,7 +25,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("runs", nargs="+", help="training output folders, in training order")
     parser.add_argument("--labels", nargs="*", default=None, help="legend label per run (default: folder names)")
     parser.add_argument("--out", default="results/training_curve.png")
-    parser.add_argument("--references", nargs="*", default=["periodic", "campaign", "no_maintenance"],
+    parser.add_argument("--references", nargs="*", default=["uniform-periodic", "grouped-threshold", "no-maintenance"],
                         help="tuned heuristics drawn as lines")
     args = parser.parse_args(argv)
     labels = args.labels or [f"PPO {Path(run).name}" for run in args.runs]
@@ -35,9 +36,10 @@ def main(argv: list[str] | None = None) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tuned = tuned_params()
-    policies = [HEURISTICS[name](**tuned.get(name, {})) for name in args.references]
-    refs = evaluate_many(policies, None, DEFAULT_EVAL_SEEDS, batch_size=len(DEFAULT_EVAL_SEEDS) * len(policies))
+    config = scenario("track60")
+    tuned = tuned_params_for(config)
+    policies = [LINE_HEURISTICS[name](**tuned.get(name, {})) for name in args.references]
+    refs = evaluate_many(policies, config, DEFAULT_EVAL_SEEDS, batch_size=len(DEFAULT_EVAL_SEEDS) * len(policies))
     fig, ax = plt.subplots(figsize=(7, 4))
     curves = {}
     for run, label in zip(args.runs, labels, strict=True):

@@ -11,7 +11,7 @@ import argparse
 import json
 import time
 
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv_agents.learning.tamping import DEFAULT_PRETRAINED, DEFAULT_TRAIN_SEED, export_policy, train
 
 
@@ -26,7 +26,7 @@ def main(argv=None) -> None:
                    help=f"env i starts with seed + i (default {DEFAULT_TRAIN_SEED}: apart from the test, tuning and "
                         f"evaluation seeds)")
     p.add_argument("--out", default=None, help="default: runs/ppo (with --resume: the resumed folder)")
-    p.add_argument("--config-json", default=None, help="JSON file of TampingEnvConfig fields")
+    p.add_argument("--config-json", default=None, help="JSON file of LineConfig fields (the 60 m preset's changed)")
     p.add_argument("--hyperparams", default=None,
                    help="YAML (RL Zoo form) or JSON overriding agents/learning/hyperparams/ppo.yml")
     p.add_argument("--eval-freq", type=int, default=None)
@@ -38,7 +38,7 @@ def main(argv=None) -> None:
     config = None
     if a.config_json:
         with open(a.config_json) as f:
-            config = TampingEnvConfig.from_dict(json.load(f))
+            config = LineConfig.coerce("track60").replace(**json.load(f))
     t0 = time.time()
     path = train(algo=a.algo, config=config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed,
                  out_dir=a.out, hyperparams=a.hyperparams, progress=not a.no_progress,

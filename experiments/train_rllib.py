@@ -1,6 +1,6 @@
 """Train PPO with RLlib (Ray 2.60, new API stack) on a trackenv env, registered with ``register_env``.
 
-The env is ``--env-id`` (default ``trackenv/Tamping-v0``; any id with MultiBinary section actions and a Dict
+The env is ``--env-id`` (default ``trackenv/Tamping-v1``; any id with MultiBinary section actions and a Dict
 observation with ``section_sd`` works, e.g. the line env's) seen through :mod:`trackenv.envs.wrappers`: ranked
 actions (``Discrete(n_sections + 1)``) and the section-level observation flattened to one ``Box``, which
 RLlib's default encoders take (a Dict observation or MultiBinary actions they do not). With ``--num-envs`` > 1
@@ -14,7 +14,7 @@ to one vector by RLlib's ``FlattenObservations`` connector.
 Examples::
 
     python experiments/train_rllib.py --iterations 20 --out results/rllib
-    python experiments/train_rllib.py --env-id trackenv/Tamping-v0 --env-config '{"horizon_years": 5}' \\
+    python experiments/train_rllib.py --env-id trackenv/Tamping-v1 --env-config '{"horizon_years": 5}' \\
         --num-env-runners 2 --num-envs 8
     python experiments/train_rllib.py --address auto ...     # on a Ray cluster (ray start --head first)
     python experiments/train_rllib.py --multi-agent --env-id trackenv/TampingLineSmall-v0
@@ -34,14 +34,14 @@ ENV_NAME = "trackenv-rllib"
 
 
 def make_env(env_config: dict[str, Any]):
-    """RLlib's env creator: ``env_id`` (default ``trackenv/Tamping-v0``) in ranked actions with a flat
+    """RLlib's env creator: ``env_id`` (default ``trackenv/Tamping-v1``) in ranked actions with a flat
     section-level observation; with ``num_envs`` (RLlib's ``vector_entry_point`` mode) the native vector env;
     with ``multi_agent`` (a line id) one agent per section, as RLlib's ``ParallelPettingZooEnv``."""
     import trackenv.envs  # noqa: F401  (registers the ids in this worker)
     from trackenv.envs.wrappers import make_ranked, make_ranked_vector
 
     kwargs = dict(env_config)
-    env_id = kwargs.pop("env_id", "trackenv/Tamping-v0")
+    env_id = kwargs.pop("env_id", "trackenv/Tamping-v1")
     num_envs = kwargs.pop("num_envs", None)
     if kwargs.pop("multi_agent", False):
         from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
@@ -100,8 +100,8 @@ def iteration_record(i: int, result: dict, seconds: float) -> dict[str, Any]:
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--env-id", default=None,
-                   help="default trackenv/Tamping-v0; with --multi-agent trackenv/TampingLine-v0")
-    p.add_argument("--env-config", default="{}", help="JSON of env keyword arguments (TampingEnvConfig fields)")
+                   help="default trackenv/Tamping-v1; with --multi-agent trackenv/TampingLine-v0")
+    p.add_argument("--env-config", default="{}", help="JSON of env keyword arguments (LineConfig fields)")
     p.add_argument("--iterations", type=int, default=10)
     p.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0: sample in the driver)")
     p.add_argument("--num-envs", type=int, default=None,
@@ -122,7 +122,7 @@ def main(argv=None) -> dict:
     import ray
 
     ray.init(address=a.address, num_cpus=None if a.address else a.num_cpus, include_dashboard=False)
-    env_id = a.env_id or ("trackenv/TampingLine-v0" if a.multi_agent else "trackenv/Tamping-v0")
+    env_id = a.env_id or ("trackenv/TampingLine-v0" if a.multi_agent else "trackenv/Tamping-v1")
     env_config = {"env_id": env_id, **json.loads(a.env_config), **({"multi_agent": True} if a.multi_agent else {})}
     num_envs = a.num_envs if a.num_envs is not None else (1 if a.multi_agent else 8)
     algo = build_config(env_config, num_env_runners=a.num_env_runners, num_envs=num_envs,

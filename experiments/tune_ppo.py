@@ -24,7 +24,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-QUICK_CONFIG = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.0}
+# --quick: the 60 m track (the trainer's preset, "track60") cut to 30 m in 3 sections over 1 year (4 steps)
+QUICK_OVERRIDES = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3,
+                   "horizon_years": 1.0}
 
 
 def search_space() -> dict[str, Any]:
@@ -112,7 +114,9 @@ def main(argv=None) -> list[dict[str, Any]]:
     if a.no_warm_start or a.quick:
         extra["warm_start_rule"] = None
     if a.quick:
-        config = QUICK_CONFIG
+        from trackenv.envs.line_config import scenario
+
+        config = scenario("track60", **QUICK_OVERRIDES).to_dict()
         a.num_samples, a.timesteps, a.eval_freq, a.n_eval = 2, 256, 128, 1
         extra.update(n_envs=1, batch_size=64)  # one env: batches of one, the kernel entry compiled first
     rows = run(a.num_samples, a.timesteps, a.eval_freq, list(range(10_000, 10_000 + a.n_eval)), config, extra,

@@ -13,40 +13,55 @@ from trackenv_agents.cli import main
 
 
 @pytest.mark.slow
-def test_evaluate_quick_prints_one_json_object(tmp_path, capsys):
-    assert main(["evaluate", "--quick", "--json", "--out", str(tmp_path)]) == 0
+def test_evaluate_on_the_60m_track_prints_one_json_object(tmp_path, capsys):
+    """`trackenv evaluate --env trackenv/Tamping-v1`: two rules with their shipped parameters and the shipped
+    per-section agent (the same network on every preset) on two held-out episodes of the 60 m track, paired."""
+    argv = ["evaluate", "--env", "trackenv/Tamping-v1", "--seeds", "0:2", "--rules", "uniform-periodic,no-maintenance",
+            "--batch-size", "6", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
+    assert out["env"] == "trackenv/Tamping-v1" and out["scenario"] == "track60" and out["seeds"] == [0, 1]
     rows = out["results"]
-    names = {row["policy"] for row in rows}
-    assert {"periodic", "campaign", "no_maintenance", "random"} <= names
+    assert {row["policy"] for row in rows} == {"uniform-periodic", "no-maintenance", "cpi-agent"}
     for row in rows:
-        assert row["ci_low"] <= row["mean_cost"] <= row["ci_high"]
+        assert row["n_episodes"] == 2 and row["ci_low"] <= row["mean_cost"] <= row["ci_high"]
     costs = [row["mean_cost"] for row in rows]
     assert costs == sorted(costs)
-    assert (tmp_path / "comparison.json").exists() and (tmp_path / "costs.png").exists()
+    assert out["extra"] == ["cpi-agent"] and out["best_rule"] in {"uniform-periodic", "no-maintenance"}
+    for name in ("line_compare.json", "line_compare.png", "line_episode.png"):
+        assert (tmp_path / name).exists(), name
 
 
-def test_evaluate_says_where_it_wrote(tmp_path, capsys, monkeypatch):
-    """The comparison itself is stubbed (it runs end to end in the test above): the printing is under test."""
-    import trackenv_agents.evaluation.tamping_compare as compare
+def test_evaluate_prints_the_table_and_where_the_plots_are(tmp_path, capsys, monkeypatch):
+    """The comparison itself is stubbed (it runs end to end in the test above): the printing is under test, and
+    what reaches the comparison (the default env is the default line)."""
+    import trackenv_agents.evaluation.line_compare as lc
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.rules.line import UniformPeriodic
 
-    row = {"policy": "periodic", "params": {"interval_years": 3.5, "sections": "all"}, "n_episodes": 2,
-           "mean_cost": 10.0, "ci_low": 9.0, "ci_high": 11.0, "tampings_per_km_year": 0.3,
-           "immediate_action_exceedances": 0, "mean_final_sd_mm": 1.5}
+    params = UniformPeriodic(interval_years=3.5).bind(scenario("track60")).params
+    row = {"policy": "uniform-periodic", "params": params, "n_episodes": 2, "mean_cost": 10.0, "ci_low": 9.0,
+           "ci_high": 11.0, "immediate_action_exceedances": 0, "vs_best": None}
+    seen = {}
 
-    def fake(out_dir, **kw):
-        return {"results": [row], "files": {"json": f"{out_dir}/comparison.json", "costs": f"{out_dir}/costs.png"}}
+    def fake(env_id, out_dir, **kw):
+        seen.update(env_id=env_id, out_dir=out_dir, **kw)
+        return {"env": env_id, "scenario": "track60", "seeds": [0, 1], "tuned_from": "shipped",
+                "best_rule": "uniform-periodic", "extra": [], "results": [row],
+                "plot": f"{out_dir}/line_compare.png", "episode_plot": f"{out_dir}/line_episode.png"}
 
-    monkeypatch.setattr(compare, "run_comparison", fake)
-    assert main(["evaluate", "--quick", "--out", str(tmp_path)]) == 0
+    monkeypatch.setattr(lc, "line_comparison", fake)
+    assert main(["evaluate", "--env", "trackenv/Tamping-v1", "--policy", "rules", "--out", str(tmp_path)]) == 0
+    assert seen["env_id"] == "trackenv/Tamping-v1" and seen["out_dir"] == str(tmp_path) and seen["extra"] == {}
+    assert seen["seeds"] is None and seen["rules"] is None and not seen["retune"]
     out = capsys.readouterr().out.splitlines()
-    assert out[-1] == f"wrote comparison.json, costs.png to {tmp_path}"
-    assert "n_worst" not in out[2]  # the periodic row shows only the parameters that apply
-
-
-def test_evaluate_rejects_quick_with_the_trained_policy(capsys):
-    with pytest.raises(SystemExit, match="default one"):
-        main(["evaluate", "--quick", "--policy", "ppo"])
+    assert out[0].startswith("trackenv/Tamping-v1 (track60), 2 held-out episodes")
+    shown = next(line for line in out if line.startswith("uniform-periodic"))
+    assert shown.endswith("interval_years=3.5, offset_years=0.0")  # its parameters, not the calendar it is bound to
+    assert out[-1].startswith(f"plots: {tmp_path}/line_compare.png, {tmp_path}/line_episode.png (episode 0 under "
+                              "uniform-periodic")
+    assert main(["evaluate", "--policy", "rules", "--out", str(tmp_path)]) == 0
+    assert seen["env_id"] == "trackenv/TampingLine-v0"
 
 
 def test_train_seed_default_is_the_training_seed_of_agents_train():
@@ -70,8 +85,9 @@ def test_train_json_prints_one_json_object(tmp_path, capsys):
 
 
 def test_train_line_options_are_refused_where_they_do_not_apply(capsys):
-    assert main(["train", "--iterations", "2"]) == 2  # Tamping-v0 has no policy iteration
-    assert "--iterations" in capsys.readouterr().err
+    for env in ([], ["--env", "trackenv/Tamping-v1"]):  # the 60 m track's trainer has no policy iteration
+        assert main(["train", *env, "--iterations", "2"]) == 2
+        assert "--iterations" in capsys.readouterr().err
     assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--algo", "ppo"]) == 2
     assert "hyper-parameter file" in capsys.readouterr().err
     assert main(["train", "--env", "trackenv/Tamping-v9"]) == 2  # not a registered id
@@ -108,8 +124,8 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
 
 
 def test_evaluate_line_rules_option(monkeypatch, capsys):
-    """`--rules a,b` reaches the line comparison as a list; it is a usage error without a line --env, and an
-    unknown rule name is refused by the comparison, naming the rules there are."""
+    """`--rules a,b` reaches the comparison as a list, on any preset; an unknown rule name is refused by the
+    comparison, naming the rules there are, and an id without per-section actions in one line."""
     import trackenv_agents.evaluation.line_compare as lc
 
     seen = {}
@@ -120,15 +136,20 @@ def test_evaluate_line_rules_option(monkeypatch, capsys):
         return {"env": env_id, "scenario": "small", "seeds": [0, 1], "tuned_from": "-", "results": []}
 
     monkeypatch.setattr(lc, "line_comparison", fake)
-    args = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--json", "--policy", "heuristics"]
+    args = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:2", "--json", "--policy", "rules"]
     assert main(args + ["--rules", "grouped-threshold, uniform-periodic"]) == 0
     assert seen["rules"] == ["grouped-threshold", "uniform-periodic"]
     assert main(args) == 0 and seen["rules"] is None
+    assert main(["evaluate", "--env", "trackenv/Tamping-v1", "--policy", "rules", "--json",
+                 "--rules", "section-threshold"]) == 0
+    assert seen["rules"] == ["section-threshold"]
     capsys.readouterr()
-    assert main(["evaluate", "--rules", "grouped-threshold"]) == 2
-    assert "--rules" in capsys.readouterr().err
     with pytest.raises(ValueError, match="rules must name line rules among"):
         real("trackenv/TampingLineSmall-v0", rules=["grouped", "uniform-periodic"])
+    monkeypatch.setattr(lc, "line_comparison", real)
+    assert main(["evaluate", "--env", "trackenv/TampingDiscrete-v1", "--policy", "rules"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "per-section actions" in err
 
 
 def test_hyperparams_file_is_the_one_agents_train_reads():
@@ -178,7 +199,8 @@ def test_every_option_has_help_text(command):
 
 @pytest.mark.parametrize("argv", [["train", "--timesteps", "-5"], ["train", "--n-envs", "0"],
                                   ["train", "--timesteps", "1.5"], ["paper", "--iterations", "0"],
-                                  ["paper", "--cycles", "nan"], ["evaluate", "--n-test", "-1"],
+                                  ["paper", "--cycles", "nan"], ["evaluate", "--n-train", "-1"],
+                                  ["evaluate", "--batch-size", "0"],
                                   ["train", "--seed", "-1"]])
 def test_non_positive_counts_are_refused(argv, capsys):
     with pytest.raises(SystemExit) as exc:
@@ -230,18 +252,6 @@ def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys
     assert "3 of 4 checks pass" in out
     assert f"wrote summary.json to {tmp_path}" in out
     assert "148148148.148" not in out  # numbers are rounded
-
-
-def test_periodic_all_sections_shows_no_n_worst():
-    from trackenv_agents.evaluation.reporting import format_table
-    from trackenv_agents.rules.tamping import Periodic
-
-    assert Periodic(3.5, sections="all").params == {"interval_years": 3.5, "sections": "all"}
-    assert Periodic(2.0, sections="worst", n_worst=2).params["n_worst"] == 2
-    row = {"policy": "periodic", "params": Periodic(3.5).params, "n_episodes": 1, "mean_cost": 1.0,
-           "ci_low": 1.0, "ci_high": 1.0, "tampings_per_km_year": 0.1, "immediate_action_exceedances": 0,
-           "mean_final_sd_mm": 1.0}
-    assert "n_worst" not in format_table([row])
 
 
 def test_compile_builds_what_is_missing_and_then_has_nothing_to_do(capsys):

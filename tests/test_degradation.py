@@ -234,33 +234,6 @@ def test_other_law_runs() -> None:
     assert np.all(h.settlement[1] > h.settlement[0])
 
 
-def test_settle_batch_equals_settling_one_by_one():
-    """The env's batched settlement step: every simulator ends exactly where settling alone takes it."""
-    from trackenv.degradation import settle_batch, simulate_batch
-
-    levels = np.abs(1e-3 * np.random.default_rng(5).standard_normal((3, 51)))
-
-    def sims():
-        return [
-            te.TrackDegradation(
-                track_a().scaled(ballast_stiffness=f),
-                loaded_wheelset(),
-                initial_level=lv,
-                feedback="support",
-                law=te.make_law("shenton", K1=0.5e-4, force_exponent=1.6),
-            )
-            for f, lv in zip((0.8, 1.0, 1.3), levels, strict=True)
-        ]
-
-    batch, alone = sims(), sims()
-    results = simulate_batch(batch)
-    settle_batch(batch, results, 2e5)
-    for s, res, b in zip(alone, results, batch, strict=True):
-        s.settle(res, 2e5)
-        np.testing.assert_array_equal(s.level, b.level)
-        assert s.cycles == b.cycles
-
-
 @pytest.mark.parametrize("vehicle", ["wheelset", "car"])
 def test_pass_ending_after_the_evaluated_zone_gives_the_full_pass_forces(vehicle: str) -> None:
     """A pass ends EXIT_RUN_OUT_BAYS bays after the last axle left the evaluated zone: every evaluated

@@ -8,9 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackenv_agents.evaluation.harness import evaluate_one
-from trackenv_agents.rules.tamping import Periodic
-
 
 def _script(name: str):
     path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
@@ -18,20 +15,6 @@ def _script(name: str):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
-
-
-def test_hindsight_moves_stay_valid_and_schedules_cost_what_the_rule_costs(small_coarse_config):
-    hs = _script("hindsight_schedules")
-    assert hs.periodic_schedule(14, 40) == (14, 28)
-    moves = hs.neighbours((14, 28), 40)
-    assert (15, 28) in moves and (14,) in moves and (14, 21, 28) in moves and (14, 28) not in moves
-    for m in moves:
-        assert all(1 <= s < 40 for s in m) and all(b - a >= 2 for a, b in zip(m[:-1], m[1:], strict=False))
-    # an open-loop schedule of whole-track campaigns costs exactly what the periodic rule costs
-    costs = hs.schedule_costs(small_coarse_config, 11, [hs.periodic_schedule(3, small_coarse_config.horizon_steps), ()])
-    rule = Periodic(interval_years=0.75, sections="all").bind(small_coarse_config)
-    np.testing.assert_allclose(costs[0], evaluate_one(rule, small_coarse_config, [11]).cost[0])
-    assert costs[1] != costs[0]
 
 
 def test_room_summary_takes_each_episodes_cheapest_search_and_never_more_than_the_rule():

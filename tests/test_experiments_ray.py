@@ -14,7 +14,8 @@ import pytest
 pytest.importorskip("ray.rllib")
 pytest.importorskip("torch")
 
-TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 1.0}  # 4 steps
+# the 60 m track (trackenv/Tamping-v1, the default env) cut to 30 m in 3 sections over 1 year: 4 steps
+TINY = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3, "horizon_years": 1.0}
 
 
 def _script(name: str = "train_rllib"):
@@ -27,7 +28,7 @@ def _script(name: str = "train_rllib"):
 
 def test_env_creator_single_and_vector() -> None:
     rl = _script()
-    env = rl.make_env({"env_id": "trackenv/Tamping-v0", **TINY})
+    env = rl.make_env({"env_id": "trackenv/Tamping-v1", **TINY})
     assert env.action_space.n == 4 and len(env.observation_space.shape) == 1
     venv = rl.make_env({**TINY, "num_envs": 2})
     assert venv.single_observation_space == env.observation_space

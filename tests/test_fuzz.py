@@ -13,6 +13,8 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import pytest
@@ -20,8 +22,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import trackenv as te
-from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_config import LineConfig, scenario
 from trackenv.envs.tamping import TampingEnv
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.physics.settlement import LAWS, make_law
@@ -57,7 +58,7 @@ def mostly(valid: st.SearchStrategy, junk_share: int = 4) -> st.SearchStrategy:
     return st.integers(0, junk_share - 1).flatmap(lambda k: junk if k == 0 else valid)
 
 
-CONFIG_FIELDS = [f.name for f in dataclasses.fields(TampingEnvConfig)]
+CONFIG_FIELDS = [f.name for f in dataclasses.fields(LineConfig)]
 
 
 def _assert_names(err: Exception, names) -> None:
@@ -70,15 +71,15 @@ def _fast(t0: float, what: str) -> None:
     assert time.perf_counter() - t0 < 1.0, f"{what} took more than a second to refuse"
 
 
-def _refuses_or_stores_canonical_values(cls: type, kw: dict) -> None:
-    """``cls(**kw)`` refuses quickly, naming a field it was given (a bound may follow another given field), or
+def _refuses_or_stores_canonical_values(make: Callable[..., LineConfig], kw: dict) -> None:
+    """``make(**kw)`` refuses quickly, naming a field it was given (a bound may follow another given field), or
     stores every given numeric field in the type of its default, finite."""
-    typed = {f.name: type(f.default) for f in dataclasses.fields(cls)}
+    typed = {f.name: type(f.default) for f in dataclasses.fields(LineConfig)}
     t0 = time.perf_counter()
     try:
-        cfg = cls(**kw)
+        cfg = make(**kw)
     except (ValueError, TypeError) as e:
-        _fast(t0, cls.__name__)
+        _fast(t0, "LineConfig")
         _assert_names(e, kw)
         return
     for name in kw:
@@ -91,19 +92,22 @@ def _refuses_or_stores_canonical_values(cls: type, kw: dict) -> None:
 @FUZZ
 @given(st.dictionaries(st.sampled_from(CONFIG_FIELDS), mostly(st.one_of(st.floats(0, 100), st.integers(0, 60)), 2),
                        min_size=1, max_size=3))
-def test_config_refuses_or_stores_canonical_values(kw: dict) -> None:
-    _refuses_or_stores_canonical_values(TampingEnvConfig, kw)
+def test_track60_config_refuses_or_stores_canonical_values(kw: dict) -> None:
+    """The 60 m track's preset with fields changed: a segment of several sections ties its length, its sections'
+    length and their number together, and a refusal names one of the fields given."""
+    _refuses_or_stores_canonical_values(partial(scenario, "track60"), kw)
 
 
 @FUZZ
-@given(st.dictionaries(st.sampled_from([f.name for f in dataclasses.fields(LineConfig)]),
-                       mostly(st.one_of(st.floats(0, 300), st.integers(0, 300)), 2), min_size=1, max_size=3))
+@given(st.dictionaries(st.sampled_from(CONFIG_FIELDS), mostly(st.one_of(st.floats(0, 300), st.integers(0, 300)), 2),
+                       min_size=1, max_size=3))
 def test_line_config_refuses_or_stores_canonical_values(kw: dict) -> None:
-    """LineConfig checks its fields with the mechanism of TampingEnvConfig."""
     _refuses_or_stores_canonical_values(LineConfig, kw)
 
 
-ENV_CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=0.5)  # 2 steps
+# the 60 m track cut to 30 m (51 sleepers) in 3 sections of 10 m, 2 steps
+ENV_CFG = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+                   horizon_years=0.5)
 valid_action = st.lists(st.integers(0, 1), min_size=3, max_size=3)
 actions = st.one_of(
     mostly(st.one_of(valid_action, valid_action.map(np.array)), 3),

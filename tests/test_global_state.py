@@ -28,12 +28,12 @@ matplotlib.use("pdf")
 import gymnasium as gym
 import numpy as np
 import trackenv
-from trackenv.envs import TampingEnvConfig
+from trackenv.envs import scenario
 from trackenv_agents.evaluation.reporting import plot_comparison
 from trackenv_agents.evaluation import EvaluationResult
 
-cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)
-env = gym.make("trackenv/Tamping-v0", config=cfg, render_mode="rgb_array")
+cfg = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3, horizon_years=1.0)
+env = gym.make("trackenv/Tamping-v1", config=cfg, render_mode="rgb_array")
 env.reset(seed=0)
 frame = env.render()
 assert frame.ndim == 3 and frame.dtype == np.uint8, frame.shape

@@ -1,4 +1,5 @@
-"""Rendering: render_mode="rgb_array" gives an (H, W, 3) uint8 picture of the episode (Tamping and TampingLine)."""
+"""Rendering: render_mode="rgb_array" gives an (H, W, 3) uint8 picture of the episode: the profiles along the
+60 m track (a segment of several sections) and the sections of a line."""
 
 from __future__ import annotations
 
@@ -54,7 +55,7 @@ def test_the_render_check_can_fail() -> None:
         _checked_render(_FloatFrames())
 
 
-@pytest.mark.parametrize("env_id", ["trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0"])
+@pytest.mark.parametrize("env_id", ["trackenv/Tamping-v1", "trackenv/TampingDiscrete-v1"])
 def test_rgb_array_after_reset_and_after_steps(env_id: str, small_config) -> None:
     env = gym.make(env_id, config=small_config, render_mode="rgb_array")
     assert "rgb_array" in env.metadata["render_modes"]
@@ -67,7 +68,7 @@ def test_rgb_array_after_reset_and_after_steps(env_id: str, small_config) -> Non
     _check_frame(second)
     assert second.shape == first.shape
     assert not np.array_equal(first, second)  # the year and the profiles moved on
-    tamp = 1 if env_id.endswith("Discrete-v0") else np.array([1, 0, 0], dtype=np.int8)
+    tamp = 1 if env_id.endswith("Discrete-v1") else np.array([1, 0, 0], dtype=np.int8)
     env.step(tamp)
     third = env.render()
     _check_frame(third)
@@ -81,7 +82,7 @@ def test_render_passes_gymnasiums_passive_checker(small_config) -> None:
     first = _checked_render(env)
     env.step(np.array([1, 0, 0], dtype=np.int8))
     assert _checked_render(env).shape == first.shape
-    wrapped = gym.make("trackenv/Tamping-v0", config=small_config, render_mode="rgb_array")  # through the wrappers
+    wrapped = gym.make("trackenv/Tamping-v1", config=small_config, render_mode="rgb_array")  # through the wrappers
     wrapped.reset(seed=1)
     np.testing.assert_array_equal(_checked_render(wrapped), first)
 

@@ -1,7 +1,8 @@
 """trackenv: learn when and where to tamp a ballasted railway track, on real vehicle-track dynamics.
 
 The physics (``trackenv.physics``) runs on its own; :class:`TrackDegradation` is the paper's iterative
-settlement loop; ``trackenv/Tamping-v0`` (registered on import) is the Gymnasium environment on top of it.
+settlement loop; ``trackenv.envs`` (its ids registered on import: ``trackenv/TampingLine-v0``, the line, and
+``trackenv/Tamping-v1``, the 60 m track) is the Gymnasium environment on top of it.
 """
 
 from importlib import metadata as _metadata
@@ -61,6 +62,6 @@ __all__ = [
 ]
 
 try:  # the environment needs gymnasium; the physics does not
-    from . import envs as _envs  # noqa: F401  (registers trackenv/Tamping-v0)
+    from . import envs as _envs  # noqa: F401  (registers the ids)
 except ImportError:  # pragma: no cover
     pass

@@ -486,28 +486,6 @@ def _implicit_states(sims: list[TrackDegradation], force: np.ndarray, cycles: fl
     return [SettlementState(u[b], c[b], x.rate_factor) for b, x in enumerate(st)]
 
 
-def settle_batch(sims: list[TrackDegradation], results: list[PassResult], cycles: float) -> None:
-    """:meth:`TrackDegradation.settle` for many simulators at once: those with ``feedback="support"``, no
-    adaptive stepping and one law share one batched implicit step; the others settle one by one. Each
-    simulator ends exactly as if settled alone."""
-    cycles = check_scalar("cycles", cycles, low=0.0)
-    batched = [
-        b for b, s in enumerate(sims) if s.feedback == "support" and not s.adaptive and s.law == sims[0].law
-    ]
-    if batched and len({sims[b].track.n_sleepers for b in batched}) == 1:
-        force = np.stack([np.maximum(sims[b].evaluated(results[b].sleeper_force), 0.0) for b in batched])
-        for b, f in zip(batched, force):
-            sims[b].check_sleeper_forces(f)
-        for b, state in zip(batched, _implicit_states([sims[b] for b in batched], force, cycles)):
-            sims[b].state = state
-            sims[b].cycles += cycles
-    else:
-        batched = []
-    for b, s in enumerate(sims):
-        if b not in batched:
-            s.settle(results[b], cycles)
-
-
 def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
     """One pass for each simulator, all in one batched call of the dynamics (same vehicle, speed and options;
     tracks may differ in their supports)."""

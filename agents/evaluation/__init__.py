@@ -1,6 +1,6 @@
 """Scoring policies: the harness (:mod:`.harness`: episodes on the native vector envs), its statistics
-(:mod:`.statistics`), grid tuning of the rules (:mod:`.tuning`), the comparisons of both problems
-(:mod:`.tamping_compare`, :mod:`.line_compare`), tables and figures (:mod:`.reporting`), the per-section
+(:mod:`.statistics`), grid tuning of the rules (:mod:`.tuning`), the comparison of policies on any preset
+(:mod:`.line_compare`), figures (:mod:`.reporting`), the per-section
 hindsight bound of the line (:mod:`.line_hindsight`) and the Ray executor (:mod:`.distributed`)."""
 
 from .distributed import RayExecutor
@@ -40,9 +40,8 @@ from .line_hindsight import (
     schedule_from_rows,
     schedule_rows,
 )
-from .reporting import format_markdown, format_table, plot_comparison, plot_episode
+from .reporting import plot_comparison
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
-from .tamping_compare import compare, compare_results, run_comparison
 from .tuning import tune, tune_many
 
 __all__ = [
@@ -50,9 +49,9 @@ __all__ = [
     "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
     "policy_params", "record_episode", "run_episodes", "N_BOOTSTRAP", "bootstrap_ci", "paired_difference",
     # tuning, reports, the executor
-    "tune", "tune_many", "format_markdown", "format_table", "plot_comparison", "plot_episode", "RayExecutor",
-    # comparisons: Tamping-v0 (.tamping_compare), TampingLine (.line_compare)
-    "compare", "compare_results", "run_comparison", "SECTION_CLASSES", "class_breakdown", "format_line_table",
+    "tune", "tune_many", "plot_comparison", "RayExecutor",
+    # the comparison of policies on a preset (.line_compare)
+    "SECTION_CLASSES", "class_breakdown", "format_line_table",
     "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "scenario_of",
     # the line's hindsight bound (.line_hindsight)
     "RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",

@@ -20,8 +20,8 @@ Each batch is one call of :func:`run_episodes`; an ``executor`` (anything with `
 
 The neighbours: :mod:`trackenv_agents.evaluation.statistics` (bootstrap CIs, paired differences),
 :mod:`trackenv_agents.evaluation.tuning` (grid search of the heuristics),
-:mod:`trackenv_agents.evaluation.tamping_compare` (tune, then score on the test seeds) and
-:mod:`trackenv_agents.evaluation.reporting` (tables and figures).
+:mod:`trackenv_agents.evaluation.line_compare` (tune or load, then score on held-out seeds) and
+:mod:`trackenv_agents.evaluation.reporting` (figures).
 """
 
 from __future__ import annotations

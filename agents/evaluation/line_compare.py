@@ -11,14 +11,16 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig, scenario
 
-from ..rules.line import LINE_HEURISTICS, line_tuned_params
+from ..rules.line import LINE_HEURISTICS
+from ..rules.problems import tuned_file_for, tuned_params_for
 from .harness import _bound, evaluate_many, policy_name
 from .statistics import paired_difference
 from .tuning import tune_many
 
 
 def scenario_of(env_id: str) -> str:
-    """The scenario name registered for a TampingLine id."""
+    """The preset registered for an id of the one environment with the MultiBinary action (the TampingLine
+    ids, and ``trackenv/Tamping-v1``: the 60 m track, ``"track60"``)."""
     import gymnasium as gym
 
     import trackenv  # noqa: F401
@@ -27,9 +29,13 @@ def scenario_of(env_id: str) -> str:
         spec = gym.spec(env_id)
     except gym.error.Error as exc:  # an unknown name or version: the user's input, not a crash
         raise ValueError(f"{env_id!r} is not a registered env id ({exc})") from None
-    if not str(spec.entry_point).endswith(":TampingLine"):
-        raise ValueError(f"{env_id} is not a TampingLine id")
-    return spec.kwargs["scenario"]
+    entry, kwargs = str(spec.entry_point), dict(spec.kwargs)
+    if entry.endswith(":TampingEnv") and kwargs.get("action_type", "multibinary") == "multibinary":
+        return "track60"
+    if not entry.endswith(":TampingLine"):
+        raise ValueError(f"{env_id} is not an id of a preset with per-section actions (the TampingLine ids, "
+                         "trackenv/Tamping-v1)")
+    return kwargs["scenario"]
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -58,8 +64,9 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
         raise ValueError(f"rules must name line rules among {sorted(LINE_HEURISTICS)}, got {rules!r}")
     wanted = set(rules or LINE_HEURISTICS)
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance" and n in wanted]
-    params = {} if retune else {n: p for n, p in line_tuned_params().items() if n in wanted}
-    tuned_from = "shipped (agents/rules/line_tuned_heuristics.json)" if params else f"tuned now on {n_train} seeds"
+    params = {} if retune else {n: p for n, p in tuned_params_for(cfg).items() if n in wanted}
+    tuned_from = (f"shipped (agents/rules/{tuned_file_for(cfg).name})" if params
+                  else f"tuned now on {n_train} seeds")
     if not params and classes:
         t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor)
         params = {classes[i].name: v["best_params"] for i, v in t.items()}

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import problem_config
 
 from .harness import TRAIN_SEEDS, evaluate_many
@@ -17,7 +17,7 @@ from .harness import TRAIN_SEEDS, evaluate_many
 __all__ = ["tune", "tune_many"]
 
 
-def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
+def tune(policy_cls: type, config: LineConfig | dict | str | None = None,
          train_seeds: Iterable[int] = TRAIN_SEEDS, grid: Sequence[dict] | None = None, batch_size: int = 32,
          progress: bool = False, executor: Any = None) -> dict[str, Any]:
     """Grid search of ``policy_cls`` over ``grid`` (default ``policy_cls.param_grid()``) on ``train_seeds``.
@@ -32,7 +32,7 @@ def tune(policy_cls: type, config: TampingEnvConfig | dict | None = None,
                      grids=[grid], executor=executor)[0]
 
 
-def tune_many(classes: Sequence[type], cfg: TampingEnvConfig, train_seeds: Sequence[int], batch_size: int,
+def tune_many(classes: Sequence[type], cfg: LineConfig, train_seeds: Sequence[int], batch_size: int,
               progress: bool, grids: Sequence[Sequence[dict]] | None = None, executor: Any = None) -> dict[int, dict]:
     """:func:`tune` for several classes in one batched run, each over its grid (default its
     ``param_grid()``); table rows also hold the per-episode costs, in ``train_seeds`` order."""

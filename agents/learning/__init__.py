@@ -1,4 +1,5 @@
-"""The learners: PPO on Tamping-v0 (:mod:`.tamping`), the per-section policy of TampingLine (:mod:`.line_policy`)
+"""The learners: PPO on the 60 m track, Tamping-v1 (:mod:`.tamping`), the per-section policy of TampingLine
+(:mod:`.line_policy`)
 trained by counterfactual policy iteration (:mod:`.line`, :mod:`.line_counterfactual`), imitation of the rules
 (:mod:`.imitation`), stable-baselines3's view of the native vector envs (:mod:`.sb3_vec`), the action
 parameterisations (:mod:`.actions`), the training settings (:mod:`.settings`) and the checkpoints a killed run

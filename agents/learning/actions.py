@@ -1,6 +1,6 @@
 """Agent-side action parameterisations: the names the training code uses for what a learning agent chooses.
 
-The env speaks ``MultiBinary(n_sections)`` (Tamping-v0) or ``Discrete(n_sections + 1)`` (TampingDiscrete-v0).
+The env speaks ``MultiBinary(n_sections)`` (Tamping-v1) or ``Discrete(n_sections + 1)`` (TampingDiscrete-v1).
 Agents may also learn in the **ranked** parameterisation, ``Discrete(n_sections + 1)``: action ``k`` tamps the
 ``k`` sections with the largest SD of the D1 level (0 = nothing, ``n_sections`` = a full campaign). Why, and
 the decoding itself, live with the Gymnasium wrappers any library can use
@@ -14,7 +14,7 @@ from __future__ import annotations
 from gymnasium import spaces
 
 from trackenv.envs.common import action_space
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.wrappers import ranked_to_sections
 
 RANKED = "ranked"
@@ -35,7 +35,7 @@ def env_action_type(action_type: str) -> str:
     return "multibinary" if check_action_type(action_type) == RANKED else action_type
 
 
-def agent_action_space(config: TampingEnvConfig, action_type: str) -> spaces.Space:
+def agent_action_space(config: LineConfig, action_type: str) -> spaces.Space:
     """The action space the agent learns in."""
     if check_action_type(action_type) == RANKED:
         return spaces.Discrete(config.n_sections + 1)

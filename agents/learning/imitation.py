@@ -1,4 +1,4 @@
-"""Learning from a teacher: behaviour cloning of a tuned rule (Tamping-v0's warm start), and fitting a policy to
+"""Learning from a teacher: behaviour cloning of a tuned rule (the SB3 trainer's warm start), and fitting a policy to
 the cheaper of two priced choices (the line's counterfactual policy iteration).
 
 Why a warm start: exploration from a random (or never-tamping) policy spends most of a small training budget
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import ProblemConfig
 
 from ..rules import rules_for, tuned_params_for
@@ -29,9 +29,8 @@ from .actions import RANKED
 
 
 def teacher_policy(rule: str, config: ProblemConfig, params: dict[str, Any] | None = None):
-    """The heuristic ``rule`` with ``params`` (default: its tuned parameters in
-    ``agents/rules/tuned_heuristics.json``, or ``agents/rules/line_tuned_heuristics.json`` for a TampingLine
-    config), bound to ``config``'s planning calendar."""
+    """The heuristic ``rule`` with ``params`` (default: the tuned parameters of ``config``'s preset,
+    :func:`~trackenv_agents.rules.tuned_params_for`), bound to ``config``'s planning calendar."""
     rules = rules_for(config)
     if rule not in rules:
         raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
@@ -238,7 +237,7 @@ def fit_choices(model, samples: dict[str, np.ndarray], reward_scale: float, epoc
             "target_share": float(right.mean()), "weighted_target_share": float((right * w).sum() / w.sum())}
 
 
-def warm_start(model, env, config: TampingEnvConfig, action_type: str, rule: str, n_episodes: int = 64,
+def warm_start(model, env, config: LineConfig, action_type: str, rule: str, n_episodes: int = 64,
                epochs: int = 300, gamma: float = 0.99, label_smoothing: float = 0.02,
                params: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
     """Clone ``rule`` (with ``params``, default its tuned ones) into ``model`` (see the module docstring); return

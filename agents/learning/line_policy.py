@@ -29,8 +29,8 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig
 
+from ..rules.base import as_batch
 from ..rules.line import stale_measurement
-from ..rules.tamping import _as_batch
 
 __all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
            "section_features"]
@@ -153,7 +153,7 @@ class LineAgent:
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
-        b, batched = _as_batch(dict(observation))
+        b, batched = as_batch(dict(observation))
         p = self.tamp_probability(b)
         if deterministic:
             want = p > 0.5

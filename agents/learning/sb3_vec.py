@@ -1,5 +1,5 @@
 """SB3 ``VecEnv`` s over the native vector envs: :class:`TampingSB3VecEnv` over
-:class:`trackenv.envs.vector.TampingVectorEnv` (Tamping-v0) and :class:`trackenv.envs.line.TampingLineVectorEnv`
+:class:`trackenv.envs.vector.TampingVectorEnv` (Tamping-v1) and :class:`trackenv.envs.line.TampingLineVectorEnv`
 (TampingLine; chosen by a :class:`~trackenv.envs.line_config.LineConfig` or a scenario name as ``config``), and
 :class:`SectionAgentsVecEnv`, the sections of TampingLine lines as agents of their own.
 
@@ -38,7 +38,6 @@ from gymnasium import spaces
 from gymnasium.vector import VectorWrapper
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-from trackenv.envs.config import TampingEnvConfig
 from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import make_vector_env, problem_config
 from trackenv.envs.sharded import native_or_sharded
@@ -108,15 +107,14 @@ class _OneObjectVecEnv(VecEnv):
 class TampingSB3VecEnv(_OneObjectVecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
-    ``config`` is a :class:`TampingEnvConfig`, a dict of its fields, or None (defaults), or a TampingLine
-    :class:`LineConfig` or scenario name ("small", "default", "hard"); ``action_type`` is "multibinary",
-    "discrete" or "ranked" (the line: "multibinary" only); ``seed`` (optional) seeds the first reset (env ``i``
-    gets ``seed + i``); ``workers`` > 1 splits the envs over that many processes
-    (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps in parallel;
-    call :meth:`close` when done).
+    ``config`` is a :class:`LineConfig`, a preset name ("small", "default", "hard", "track60"), a dict of its
+    fields, or None (the 60 m track); ``action_type`` is "multibinary", "discrete" or "ranked"; ``seed``
+    (optional) seeds the first reset (env ``i`` gets ``seed + i``); ``workers`` > 1 splits the envs over that
+    many processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps
+    in parallel; call :meth:`close` when done).
     """
 
-    def __init__(self, num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict | str | None = None, *,
+    def __init__(self, num_envs: int = 8, config: LineConfig | dict | str | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  bootstrap_at_horizon: bool = False, seed: int | None = None, workers: int = 1) -> None:
         venv: Any
@@ -368,7 +366,7 @@ def _item(x):
     return x.item() if isinstance(x, np.generic) else x
 
 
-def make_vec_env(num_envs: int = 8, config: TampingEnvConfig | LineConfig | dict | str | None = None, *,
+def make_vec_env(num_envs: int = 8, config: LineConfig | dict | str | None = None, *,
                  seed: int | None = None, action_type: str = "multibinary",
                  keep_per_sleeper: bool = True) -> TampingSB3VecEnv:
     """Convenience constructor (same arguments as :class:`TampingSB3VecEnv`)."""

@@ -2,7 +2,7 @@
 
 * :class:`AlgoSettings` — the algorithm's constructor arguments (stable-baselines3's PPO, sb3-contrib's
   MaskablePPO); the defaults are theirs (a test keeps them equal);
-* :class:`TampingSettings` — what :func:`~trackenv_agents.learning.tamping.train` reads (Tamping-v0): the
+* :class:`TampingSettings` — what :func:`~trackenv_agents.learning.tamping.train` reads (the 60 m track): the
   algorithm's arguments and the trainer's own options;
 * :class:`LineSettings` — what :func:`~trackenv_agents.learning.line.train_line` reads (TampingLine).
 
@@ -209,13 +209,7 @@ def _action_types() -> tuple[str, ...]:
     return tuple(ACTION_TYPES)
 
 
-def _tamping_rules() -> tuple[str, ...]:
-    from ..rules.tamping import HEURISTICS
-
-    return tuple(sorted(HEURISTICS))
-
-
-def _line_rules() -> tuple[str, ...]:
+def _rules() -> tuple[str, ...]:
     from ..rules.line import LINE_HEURISTICS
 
     return tuple(sorted(LINE_HEURISTICS))
@@ -227,7 +221,7 @@ class TampingSettings(AlgoSettings):
 
     ALGOS: ClassVar[tuple[str, ...]] = ALGOS
     ACTION_TYPES: ClassVar[Any] = staticmethod(_action_types)
-    RULES: ClassVar[Any] = staticmethod(_tamping_rules)
+    RULES: ClassVar[Any] = staticmethod(_rules)
 
     algo: str = _choice("ppo", "ALGOS", doc="ppo (stable-baselines3) or maskable_ppo (sb3-contrib)")
     action_type: str = _choice("multibinary", "ACTION_TYPES", doc="the agent's action parameterisation")
@@ -256,7 +250,7 @@ class LineSettings(AlgoSettings):
     MaskablePPO stage) and these."""
 
     ALGOS: ClassVar[tuple[str, ...]] = ALGOS
-    RULES: ClassVar[Any] = staticmethod(_line_rules)
+    RULES: ClassVar[Any] = staticmethod(_rules)
 
     algo: str = _choice("maskable_ppo", "ALGOS", doc="the algorithm of the PPO stage")
     n_envs: int = _num(4, 1, 4096, integer=True, doc="lines of the PPO batch")

@@ -9,8 +9,8 @@
   observations.
 
 Policies are scored by :func:`trackenv_agents.evaluation.harness.evaluate_one` (the held-out evaluation during
-training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.tamping.NoMaintenance`,
-:class:`~trackenv_agents.rules.tamping.RandomPolicy`).
+training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.line.LineNoMaintenance`,
+:class:`~trackenv_agents.rules.base.RandomPolicy`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
+from trackenv.envs.problems import problem_config
 
 from ..evaluation.harness import evaluate_one
 from .actions import RANKED, env_action_type, ranked_to_sections
@@ -54,7 +55,7 @@ from .settings import AlgoSettings, TampingSettings, TrainingSettings
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_HYPERPARAMS = HERE / "hyperparams" / "ppo.yml"
-DEFAULT_ENV_ID = "trackenv/Tamping-v0"
+DEFAULT_ENV_ID = "trackenv/Tamping-v1"
 DEFAULT_PRETRAINED = HERE / "pretrained" / "ppo_tamping.zip"
 DEFAULT_EVAL_SEEDS = tuple(range(10_000, 10_016))
 # training env i starts with seed DEFAULT_TRAIN_SEED + i: apart from the test (0-199), tuning (1000-1099) and
@@ -84,7 +85,7 @@ class ZooSchema:
         return self.settings.field_names()
 
 
-#: the schema of :func:`train` (Tamping-v0); TampingLine's is ``trackenv_agents.learning.line.LINE_ZOO``
+#: the schema of :func:`train` (the 60 m track, Tamping-v1); TampingLine's is ``trackenv_agents.learning.line.LINE_ZOO``
 TAMPING_ZOO = ZooSchema("MultiInputPolicy", "the observation is a Dict", ("net_arch",), True, TampingSettings)
 
 
@@ -257,7 +258,7 @@ def _make_eval_callback(config, eval_seeds, eval_freq, out_dir: Path, make_polic
 
     class HeldOutEvalCallback(BaseCallback):
         """Every ``eval_freq`` timesteps (and at the end): deterministic returns on held-out seeds with the
-        current policy (and, Tamping-v0, its VecNormalize statistics); logs ``eval/mean_return`` (and
+        current policy (and its VecNormalize statistics); logs ``eval/mean_return`` (and
         ``eval/vs_baseline`` with a baseline), keeps ``best_model.zip``."""
 
         def __init__(self):
@@ -352,7 +353,7 @@ class _Run:
 
     run_dir: Path
     settings: TampingSettings
-    config: TampingEnvConfig
+    config: LineConfig
     seed: int
     eval_seeds: list[int] | None
     meta: dict[str, Any]
@@ -364,7 +365,7 @@ def _new_run(out_dir: str | Path | None, settings: TampingSettings, config: Any,
     """A new run in ``out_dir`` (default ``runs/ppo``; refused if it holds an unfinished run)."""
     run_dir = Path(out_dir) if out_dir is not None else Path("runs/ppo")
     start_run_folder(run_dir)
-    config = TampingEnvConfig.coerce(config)
+    config = problem_config(config)
     seed = DEFAULT_TRAIN_SEED if seed is None else int(seed)
     seeds = None if eval_seeds is None else [int(x) for x in eval_seeds]
     s = settings
@@ -386,11 +387,11 @@ def _resumed_run(resume: str | Path, out_dir: str | Path | None, total_timesteps
     if checkpoint_every_s is not None:
         changes["checkpoint_every_s"] = checkpoint_every_s
     s = TampingSettings.from_dict(meta["hyperparams"]).updated(changes)
-    return _Run(run_dir, s, TampingEnvConfig.coerce(meta["config"]), int(meta["seed"]), meta["eval_seeds"], meta,
+    return _Run(run_dir, s, LineConfig.coerce(meta["config"]), int(meta["seed"]), meta["eval_seeds"], meta,
                 ckpt)
 
 
-def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None,
+def train(algo: str | None = None, config: LineConfig | dict | str | None = None,
           total_timesteps: int | None = None, n_envs: int | None = None, seed: int | None = None,
           out_dir: str | Path | None = None, hyperparams: TampingSettings | dict | str | Path | None = None,
           progress: bool = True, eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS,
@@ -399,7 +400,7 @@ def train(algo: str | None = None, config: TampingEnvConfig | dict | None = None
           workers: int = 1) -> Path:
     """Train; save ``out_dir/model.zip`` (+ ``model_obs_stats.json``, ``vecnormalize.pkl``); return its path.
 
-    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v0`` entry)
+    ``hyperparams``: a dict, a flat JSON path or an RL Zoo YAML path (its ``trackenv/Tamping-v1`` entry)
     overriding ``agents/learning/hyperparams/ppo.yml`` key by key, or a whole :class:`TampingSettings`. Explicit
     arguments (algo, total_timesteps, n_envs, checkpoint_every_s, eval_freq) that are not None override both.
     Unknown keys and values out of range raise ValueError (:class:`TampingSettings` lists the fields, their
@@ -534,7 +535,7 @@ def _new_model(run: _Run, env, verbose: int):
     return model
 
 
-def _warm_start(model, env, config: TampingEnvConfig, s: TampingSettings, seed: int, verbose: int) -> dict | None:
+def _warm_start(model, env, config: LineConfig, s: TampingSettings, seed: int, verbose: int) -> dict | None:
     """The behaviour-cloning warm start of a new run (:func:`~.imitation.warm_start`), if the settings ask for
     one; its summary with its wall time."""
     if not s.warm_start_rule:

@@ -1,6 +1,8 @@
-"""The heuristic maintenance rules: :mod:`.tamping` for Tamping-v0 (the 60 m track), :mod:`.line` for TampingLine;
-their tuned parameters ship beside them (``tuned_heuristics.json``, ``line_tuned_heuristics.json``)."""
+"""The heuristic maintenance rules (:mod:`.line`; the base class and the random baseline in :mod:`.base`), and
+their tuned parameters per preset, shipped beside them (:mod:`.problems`: ``line_tuned_heuristics.json`` for the
+default line, ``track60_tuned_heuristics.json`` for the 60 m track)."""
 
+from .base import Heuristic, RandomPolicy, as_batch
 from .line import (
     LINE_HEURISTICS,
     LINE_TUNED_FILE,
@@ -14,30 +16,12 @@ from .line import (
     planner_view,
     stale_measurement,
 )
-from .problems import rules_for, tuned_params_for
-from .tamping import (
-    HEURISTICS,
-    TUNED_PARAMS_FILE,
-    Campaign,
-    DefectThreshold,
-    Heuristic,
-    NoMaintenance,
-    Periodic,
-    RandomPolicy,
-    SDThreshold,
-    WorstFirst,
-    make_policy,
-    tuned_params,
-)
+from .problems import TUNED_FILES, rules_for, tuned_params_for
 
 __all__ = [
-    # Tamping-v0 (.tamping)
-    "HEURISTICS", "TUNED_PARAMS_FILE", "Campaign", "DefectThreshold", "Heuristic", "NoMaintenance", "Periodic",
-    "RandomPolicy", "SDThreshold", "WorstFirst", "make_policy", "tuned_params",
-    # TampingLine (.line)
+    "Heuristic", "RandomPolicy", "as_batch",
     "LINE_HEURISTICS", "LINE_TUNED_FILE", "BudgetedWorstFirst", "GroupedThreshold", "LineNoMaintenance",
     "RegisterPeriodic", "SectionThreshold", "UniformPeriodic", "line_tuned_params", "planner_view",
     "stale_measurement",
-    # either problem, by its config
-    "rules_for", "tuned_params_for",
+    "TUNED_FILES", "rules_for", "tuned_params_for",
 ]

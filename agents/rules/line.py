@@ -1,4 +1,5 @@
-"""Rules a railway would use on TampingLine, with SB3's ``predict`` (batched observation dicts).
+"""Rules a railway would use, on every preset of the one environment (the lines and the 60 m track), with SB3's
+``predict`` (batched observation dicts).
 
 All act on what the planner observes (measured SD, register, years since tamping, time) and respect the
 possession capacity themselves, worst measured SD first, so the env never has to clip them. A section tamped
@@ -29,7 +30,7 @@ import numpy as np
 
 from trackenv.envs.line_episode import keep_worst
 
-from .tamping import Heuristic, _as_batch
+from .base import Heuristic, as_batch
 
 __all__ = ["BudgetedWorstFirst", "GroupedThreshold", "LINE_HEURISTICS", "RegisterPeriodic", "SectionThreshold",
            "UniformPeriodic", "LineNoMaintenance", "LINE_TUNED_FILE", "line_tuned_params", "planner_view",
@@ -83,7 +84,7 @@ class LineHeuristic(Heuristic):
         return keep_worst(want, obs["section_sd"], self.capacity)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
-        b, batched = _as_batch(obs)
+        b, batched = as_batch(obs)
         b = planner_view(b)
         act = np.asarray(self._cap(self._act(b), b), dtype=np.int8)
         return (act if batched else act[0]), state
@@ -107,7 +108,8 @@ class UniformPeriodic(LineHeuristic):
 
     def _act(self, obs):
         S = obs["section_sd"].shape[1]
-        t = self._step(obs) - self._steps(self.params["offset_years"]) + 1
+        # steps since the offset; not _steps, whose floor of one step is for intervals (an offset may be 0)
+        t = self._step(obs) - int(round(self.params["offset_years"] * self.steps_per_year))
         phase = np.mod(t, self._steps(self.params["interval_years"]))
         chunk = np.arange(S) // self.capacity
         return (t[:, None] >= 0) & (chunk[None, :] == phase[:, None])

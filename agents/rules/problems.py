@@ -1,37 +1,42 @@
-"""The rule family of each problem, looked up by its config's type: a harness asks for the rules of the config
-it has and never switches on which problem that is."""
+"""The rules of a config and their shipped tuned parameters: one rule family serves every preset; the tuned
+parameters are per preset (tuned on its training seeds by ``trackenv evaluate --env ID --retune``), and a config
+that is no shipped preset gets those of the default line."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+from pathlib import Path
 from typing import Any
 
-from trackenv.envs.config import TampingEnvConfig
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_config import LineConfig, scenario
 
-from .line import LINE_HEURISTICS, line_tuned_params
-from .tamping import HEURISTICS, tuned_params
+from .line import LINE_HEURISTICS, LINE_TUNED_FILE
 
-#: config type -> (rule classes by name, the shipped tuned parameters by rule name)
-_FAMILIES: dict[type, tuple[dict[str, Any], Callable[[], dict[str, dict[str, Any]]]]] = {
-    TampingEnvConfig: (HEURISTICS, tuned_params),
-    LineConfig: (LINE_HEURISTICS, line_tuned_params),
+#: preset name -> the file of its tuned parameters
+TUNED_FILES: dict[str, Path] = {
+    "default": LINE_TUNED_FILE,
+    "track60": Path(__file__).resolve().parent / "track60_tuned_heuristics.json",
 }
 
 
-def _family(config: Any) -> tuple[dict[str, Any], Callable[[], dict[str, dict[str, Any]]]]:
-    try:
-        return _FAMILIES[type(config)]
-    except KeyError:
-        known = [t.__name__ for t in _FAMILIES]
-        raise ValueError(f"config must be one of {known}, got {type(config).__name__}") from None
-
-
 def rules_for(config: Any) -> dict[str, Any]:
-    """The rule classes of ``config``'s problem, by name."""
-    return _family(config)[0]
+    """The rule classes by name (every config: one family)."""
+    if not isinstance(config, LineConfig):
+        raise ValueError(f"config must be a LineConfig, got {type(config).__name__}")
+    return LINE_HEURISTICS
+
+
+def tuned_file_for(config: LineConfig) -> Path:
+    """The tuned-parameter file of ``config``: its preset's where it is a shipped preset (any horizon), else the
+    default line's."""
+    for name, path in TUNED_FILES.items():
+        if config.replace(horizon_years=10.0) == scenario(name) and path.exists():
+            return path
+    return LINE_TUNED_FILE
 
 
 def tuned_params_for(config: Any) -> dict[str, dict[str, Any]]:
     """The shipped tuned parameters of ``config``'s rules, by rule name ({} where none ship)."""
-    return _family(config)[1]()
+    rules_for(config)
+    path = tuned_file_for(config)
+    return json.loads(path.read_text())["params"] if path.exists() else {}

@@ -18,11 +18,10 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
 * ``car``: the 10-DOF ``Car.manchester_coach()`` over ``Track.realistic(120.0)`` at 80 km/h;
 * ``paper_b``: the paper's scenario B, 6 iterations of 50 000 cycles (:class:`TrackDegradation`, dt = 1e-4 s as
   the paper's reproduction runs it);
-* ``env``: environment steps per second of ``trackenv/Tamping-v0`` with random actions, or "unavailable" and
-  the reason when the environment cannot be made; ``vector_env``: env steps per second (steps × envs) of the
-  native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs; ``vector_env_sharded``: the
+* ``env``: environment steps per second of ``trackenv/Tamping-v1`` (the 60 m track) with random actions, or
+  "unavailable" and the reason when the environment cannot be made; ``vector_env``: env steps per second (steps
+  × envs) of the native :class:`~trackenv.envs.vector.TampingVectorEnv` with 8 and 32 envs; ``vector_env_sharded``: the
   32 envs split over 2 processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`; machines with >= 2 cores);
-* ``track_env``: the same for ``trackenv/Tamping-v1`` (the 60 m track on the line's engine);
 * ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
   30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
   ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
@@ -194,7 +193,6 @@ PROFILE_STAGES = (
     ("passes", "trackenv.envs.line_episode", "simulate_passes"),
     ("settlement", "trackenv.degradation", "implicit_settlement_step"),
     ("settlement", "trackenv.envs.line_episode", "implicit_settlement_step"),
-    ("quality", "trackenv.envs.episode", "d1_filter"),
     ("quality", "trackenv.envs.line_episode", "d1_filter"),
 )
 
@@ -243,7 +241,7 @@ class _StageTimer:
         return {k: v / wall_s for k, v in parts.items()}
 
 
-def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v0") -> dict:
+def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v1") -> dict:
     """Random-action steps per second of the env ``env_id``, or why it is unavailable (line envs: with the share
     of the time spent in the passes)."""
     try:
@@ -290,7 +288,7 @@ def _bench_vector_env(num_envs: int, steps: int, time_budget_s: float, line: boo
         if line:
             from trackenv.envs.line import TampingLineVectorEnv as Vec
         else:
-            from trackenv.envs.vector import TampingVectorEnv as Vec  # type: ignore[assignment]
+            from trackenv.envs.vector import TampingVectorEnv as Vec
         from trackenv.envs.sharded import native_or_sharded
 
         t0 = time.perf_counter()
@@ -332,7 +330,7 @@ def _bench_state(repeats: int) -> dict:
     import gymnasium as gym
 
     out = {}
-    for name, env_id in (("line", "trackenv/TampingLine-v0"), ("tamping", "trackenv/Tamping-v0")):
+    for name, env_id in (("line", "trackenv/TampingLine-v0"), ("tamping", "trackenv/Tamping-v1")):
         env: Any = gym.make(env_id).unwrapped  # a TrackEnv: get_state / set_state
         env.reset(seed=0)
         for _ in range(3):
@@ -377,8 +375,6 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
         tell(f"vector_env_{SHARDED_ENVS}_sharded")
         out["vector_env_sharded"][str(SHARDED_ENVS)] = _bench_vector_env(
             SHARDED_ENVS, 3 if quick else VECTOR_STEPS, 10.0 if quick else 60.0, workers=SHARDED_WORKERS)
-    tell("track_env")
-    out["track_env"] = _bench_env(20 if quick else 200, 10.0 if quick else 60.0, env_id="trackenv/Tamping-v1")
     tell("line_env")
     out["line_env"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0")
     out["line_vector_env"] = {}
@@ -394,7 +390,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "vector_env_32_sharded", "track_env", "line_env", "line_vector_env_8", "state")
+          "vector_env_32_sharded", "line_env", "line_vector_env_8", "state")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -419,8 +415,8 @@ PROFILE_LABELS = (("kernel", "kernel"), ("pass_setup", "pass set-up"), ("settlem
 def format_profile(d: dict) -> str:
     """Where the env steps' wall time went (shares of :func:`_StageTimer.profile`), one column per env
     benchmark: the documentation's performance table, as Markdown."""
-    found: list[tuple[str, Any]] = [("Tamping-v0, 1 env", d.get("env"))]
-    found += [(f"Tamping-v0, {n} envs", v) for n, v in d.get("vector_env", {}).items()]
+    found: list[tuple[str, Any]] = [("Tamping-v1, 1 env", d.get("env"))]
+    found += [(f"Tamping-v1, {n} envs", v) for n, v in d.get("vector_env", {}).items()]
     found += [("TampingLine-v0, 1 line", d.get("line_env"))]
     found += [(f"TampingLine-v0, {n} lines", v) for n, v in d.get("line_vector_env", {}).items()]
     cols: list[tuple[str, dict]] = [(name, e) for name, e in found
@@ -481,8 +477,7 @@ def format_benchmarks(d: dict) -> str:
     vectors += [(f"native vector env, {n} envs in {v.get('workers', SHARDED_WORKERS)} processes", v)
                 for n, v in d.get("vector_env_sharded", {}).items()]
     lines_ = [(f"native line vector env, {n} lines", v) for n, v in d.get("line_vector_env", {}).items()]
-    for env_id, e, vector_rows in (("trackenv/Tamping-v0", d["env"], vectors),
-                                   ("trackenv/Tamping-v1", d.get("track_env"), []),
+    for env_id, e, vector_rows in (("trackenv/Tamping-v1", d["env"], vectors),
                                    ("trackenv/TampingLine-v0", d.get("line_env"), lines_)):
         if e is not None:
             rows.append(_env_row(env_id, e))

@@ -1,4 +1,7 @@
-"""TampingEnvConfig: frozen, validated, round-trips through dicts; bad input raises ValueError naming it."""
+"""The 60 m track's config: the preset "track60" of LineConfig, frozen, validated, round-trips through dicts and
+reaches the env as an object, a dict or keywords; bad input raises ValueError naming the field. (What every
+LineConfig shares with the line presets is in test_line_env.py; a segment of several sections in
+test_one_engine.py.)"""
 
 from __future__ import annotations
 
@@ -9,44 +12,50 @@ import numpy as np
 import pytest
 
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs import TampingEnv, TampingEnvConfig
+from trackenv.envs import LineConfig, TampingEnv, scenario
+from trackenv.envs.env import TrackEnv
 
-TINY = {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0}
+# the keywords of small_config: 30 m (51 sleepers) in 3 sections of 10 m, 2 years of quarters
+SMALL = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3, "horizon_years": 2.0}
 
 
 def test_defaults_and_derived_quantities(small_config) -> None:
-    c = TampingEnvConfig()
-    assert c.n_sleepers == 101  # 60 m at 0.6 m
+    c = scenario("track60")
+    assert c.n_sleepers == 101 and c.n_segments == 1  # one 60 m segment at 0.6 m
+    assert c.n_sections == 6 and c.section_length_m == 10.0
     assert c.horizon_steps == 40  # 10 years of quarters
-    assert c.cycles_per_step == pytest.approx(500_000)
+    np.testing.assert_allclose(c.axle_passes_per_step(), [0.0, 500_000])  # 2 million 20 t axles a year
     assert c.speed == pytest.approx(100 / 3.6)
-    assert small_config.n_sleepers == 51
+    assert small_config.n_sleepers == 51 and small_config.n_segments == 1
     assert small_config.horizon_steps == 8
 
 
 def test_frozen_hashable_and_round_trip() -> None:
-    c = TampingEnvConfig(**TINY, tamping={"damage_per_tamping": 0.2}, law_params={"force_exponent": 1.5})
+    c = scenario("track60", **SMALL, tamping={"damage_per_tamping": 0.2}, law_params={"force_exponent": 1.5})
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.n_sections = 4  # type: ignore[misc]
-    assert hash(c) == hash(TampingEnvConfig.from_dict(c.to_dict()))
-    assert TampingEnvConfig.from_dict(c.to_dict()) == c
+    assert hash(c) == hash(LineConfig.from_dict(c.to_dict()))
+    assert LineConfig.from_dict(c.to_dict()) == c
     d = c.to_dict()
     assert d["tamping"] == {"damage_per_tamping": 0.2}
     assert d["law_params"] == {"force_exponent": 1.5}
     assert c.tamping_model.damage_per_tamping == 0.2
-    r = c.replace(n_sections=5)
-    assert r.n_sections == 5 and c.n_sections == 3
-    assert r.replace(n_sections=3) == c
+    r = c.replace(horizon_years=3.0)
+    assert r.horizon_steps == 12 and c.horizon_steps == 8
+    assert r.replace(horizon_years=2.0) == c
 
 
 def test_config_reaches_the_env_by_object_dict_or_keywords() -> None:
-    cfg = TampingEnvConfig(**TINY)  # the keywords of small_config, to reach the env as a dict and as keywords
+    """TampingEnv's default is the preset "track60": keywords override its fields, a dict is a whole LineConfig
+    (as ``to_dict`` writes it)."""
+    cfg = scenario("track60", **SMALL)
     assert TampingEnv(cfg).config == cfg
-    assert TampingEnv(dict(TINY)).config == cfg
-    assert TampingEnv(**TINY).config == cfg
-    assert TampingEnv(TampingEnvConfig(), **TINY).config == cfg
-    for kwargs in ({"config": cfg}, {"config": dict(TINY)}, dict(TINY)):
-        env = gym.make("trackenv/Tamping-v0", **kwargs)
+    assert TampingEnv(cfg.to_dict()).config == cfg
+    assert TampingEnv(**SMALL).config == cfg
+    assert TampingEnv(scenario("track60"), **SMALL).config == cfg
+    assert TampingEnv().config == scenario("track60")
+    for kwargs in ({"config": cfg}, {"config": cfg.to_dict()}, dict(SMALL)):
+        env = gym.make("trackenv/Tamping-v1", **kwargs)
         assert env.unwrapped.config == cfg
         env.close()
     with pytest.raises(ValueError, match="config"):
@@ -55,52 +64,48 @@ def test_config_reaches_the_env_by_object_dict_or_keywords() -> None:
 
 @pytest.mark.parametrize("key", ["no_such_field", "horizon", "sections"])
 def test_unknown_key_raises_naming_it(key: str) -> None:
-    with pytest.raises(ValueError, match=key):
-        TampingEnvConfig.from_dict({**TINY, key: 1})
-    with pytest.raises(ValueError, match=key):
-        TampingEnvConfig(**TINY).replace(**{key: 1})
-    with pytest.raises(ValueError, match=key):
-        TampingEnv(**TINY, **{key: 1})
-    with pytest.raises(ValueError, match=key):
-        gym.make("trackenv/Tamping-v0", **TINY, **{key: 1})
+    named = rf"unknown LineConfig key\(s\) \['{key}'\]"
+    with pytest.raises(ValueError, match=named):
+        scenario("track60", **SMALL).replace(**{key: 1})
+    with pytest.raises(ValueError, match=named):
+        TampingEnv(**SMALL, **{key: 1})
+    with pytest.raises(ValueError, match=named):
+        gym.make("trackenv/Tamping-v1", **SMALL, **{key: 1})
 
 
 @pytest.mark.parametrize("field, value", [
-    ("track_length_m", 10.0),
-    ("track_length_m", float("nan")),
-    ("track_length_m", "long"),
+    ("segment_length_m", float("nan")),
+    ("segment_length_m", "long"),
+    ("section_length_m", 4.0),  # fewer than the 3 sleepers a section needs (D1 SD, peak)
     ("n_sections", 0),
-    ("n_sections", 2.5),
-    ("n_sections", 65),
+    ("n_sections", 257),
+    ("sections_per_segment", 65),
     ("ballast_stiffness_cv", -0.1),
     ("transition_probability", 1.5),
+    ("transition_stiffness_ratio", 20.0),
     ("voided_sleepers_mean", float("inf")),
-    ("initial_quality", "medium"),
-    ("vehicle", "tram"),
-    ("axle_load_t", 0.0),
+    ("voided_residual_support", 1.5),
+    ("freight_axle_load_t", 0.0),
+    ("freight_share", 1.5),
     ("speed_kmh", 1000.0),
-    ("axle_passes_per_year", -1.0),
+    ("annual_mgt", -1.0),
     ("steps_per_year", 0),
     ("steps_per_year", 4.0),
     ("horizon_years", 0.0),
+    ("initial_age_years", -1.0),
     ("law", "no_law"),
-    ("mobilisation_cost", -1.0),
+    ("possession_cost", -1.0),
     ("immediate_action_cost", float("nan")),
+    ("capacity", 7),
     ("min_steps_between_tampings", -1),
     ("dt", 1.0),
+    ("dt", "fine"),
 ])
 def test_out_of_range_value_raises_naming_the_field(field: str, value) -> None:
     with pytest.raises(ValueError, match=field):
-        TampingEnvConfig(**{**TINY, field: value})
+        scenario("track60", **{field: value})
     with pytest.raises(ValueError, match=field):
-        TampingEnvConfig.from_dict({**TINY, field: value})
-
-
-def test_too_many_sections_for_the_track() -> None:
-    # 30 m = 51 sleepers: 17 sections of 3 sleepers fit, 18 do not
-    TampingEnvConfig(track_length_m=30.0, n_sections=17)
-    with pytest.raises(ValueError, match="n_sections"):
-        TampingEnvConfig(track_length_m=30.0, n_sections=18)
+        scenario("track60").replace(**{field: value})
 
 
 @pytest.mark.parametrize("field, value, match", [
@@ -112,40 +117,31 @@ def test_too_many_sections_for_the_track() -> None:
 ])
 def test_nested_mappings_are_validated(field: str, value, match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        TampingEnvConfig(**{**TINY, field: value})
+        scenario("track60", **SMALL, **{field: value})
 
 
-def test_bad_env_arguments(small_config) -> None:
+def test_bad_action_type(small_config) -> None:
     with pytest.raises(ValueError, match="action_type"):
         TampingEnv(small_config, action_type="continuous")
-    with pytest.raises(ValueError, match="render_mode"):
-        TampingEnv(small_config, render_mode="human")
 
 
-def test_the_numbers_that_draw_a_track_are_fields(small_config) -> None:
-    """Sleeper spacing, ballast correlation, transition placement and voided support are config fields that
-    reach the track (defaults: the values the episode used to hard-code)."""
-    from trackenv.envs.episode import new_episode
-    from trackenv.physics.track import Track
-
-    c = small_config
-    assert (c.sleeper_spacing_m, c.ballast_stiffness_correlation_m) == (0.6, 1.2)
-    assert (c.transition_position, c.voided_residual_support) == ((0.2, 0.8), 0.05)
-    wide = TampingEnvConfig(**TINY, sleeper_spacing_m=0.75, transition_probability=1.0,
-                            transition_position=[0.5, 0.6])
-    assert wide.transition_position == (0.5, 0.6)
-    assert wide.n_sleepers == Track.realistic(30.0, sleeper_spacing=0.75).n_sleepers == 41
-    for seed in range(5):
-        ep = new_episode(wide, np.random.default_rng(seed))
-        assert ep.sim.track.sleeper_spacing == 0.75
-        assert int(0.5 * 41) <= ep.transition_sleeper < int(0.6 * 41)
-    assert TampingEnvConfig.from_dict(wide.to_dict()) == wide
-
-
-@pytest.mark.parametrize("field, value", [
-    ("sleeper_spacing_m", 0.1), ("ballast_stiffness_correlation_m", -1.0), ("voided_residual_support", 1.5),
-    ("transition_position", (0.8, 0.2)), ("transition_position", (0.1,)), ("transition_position", "middle"),
-])
-def test_track_drawing_fields_are_checked(field: str, value) -> None:
-    with pytest.raises(ValueError, match=field):
-        TampingEnvConfig(**TINY, **{field: value})
+def test_the_numbers_that_draw_a_track_reach_its_model(small_config) -> None:
+    """The transition's stiffness ratio (from the middle of the segment on), the voided sleepers and their
+    residual support are config fields that reach the track the passes run on (ballast stiffness CV 0: the
+    supports are otherwise uniform)."""
+    cfg = small_config.replace(ballast_stiffness_cv=0.0, transition_probability=1.0, transition_stiffness_ratio=2.5,
+                               voided_sleepers_mean=3.0, voided_residual_support=0.2)
+    n, mid, extra = cfg.n_sleepers, cfg.n_sleepers // 2, 10  # the engine's approach sleepers at each end
+    voided = 0
+    for seed in range(4):
+        env = TrackEnv(cfg)
+        env.reset(seed=seed)
+        kb = env.engine.model_tracks[0].ballast_stiffness[extra : extra + n]
+        plain = np.where(np.arange(n) < mid, 1.0, 2.5) * kb[0]
+        ratio = kb / plain
+        hanging = ~np.isclose(ratio, 1.0, rtol=1e-12)
+        assert not hanging[:2].any() and not hanging[-2:].any()  # never the two sleepers at either end
+        # a sleeper drawn twice hangs twice (0.2 of 0.2)
+        assert np.all(np.isclose(ratio[hanging], 0.2, rtol=1e-12) | np.isclose(ratio[hanging], 0.04, rtol=1e-12))
+        voided += int(hanging.sum())
+    assert voided > 0

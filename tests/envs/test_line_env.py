@@ -238,7 +238,7 @@ def test_config_validation_and_scenarios():
         LineConfig(n_sections=4, capacity=5)
     with pytest.raises(ValueError, match="scenario"):
         scenario("nope")
-    assert set(SCENARIOS) == {"small", "default", "hard", "track60"}
+    assert set(SCENARIOS) == {"small", "default", "hard", "long", "track60"}
     with pytest.raises(ValueError, match="shape"):
         env = TampingLine(scenario="small", **SHORT)
         env.reset(seed=0)
@@ -256,15 +256,17 @@ def test_config_validation_and_scenarios():
     ("law", "linear", r"law must be one of"),
 ])
 def test_line_config_refuses_bad_values_by_name(field, value, message):
-    """LineConfig checks its fields with the same mechanism as TampingEnvConfig: one line naming the field and
-    what is allowed."""
+    """LineConfig checks its fields with the one mechanism of trackenv.physics._checks: one line naming the field
+    and what is allowed."""
     with pytest.raises(ValueError, match=message):
         LineConfig(**{field: value})
 
 
 def test_line_config_stores_fields_in_their_canonical_types():
-    c = LineConfig(n_sections=np.int64(6), capacity=3, annual_mgt=15, initial_scale=[0.5, 1])
+    c = LineConfig(n_sections=np.int64(6), capacity=3, annual_mgt=15, initial_scale=[0.5, 1],
+                   speed_kmh=np.float32(80.0))
     assert type(c.n_sections) is int and type(c.annual_mgt) is float and c.initial_scale == (0.5, 1.0)
+    assert type(c.speed_kmh) is float and c.speed_kmh == 80.0
 
 
 def test_episode_end_and_reset_arguments_are_enforced():
@@ -280,3 +282,17 @@ def test_episode_end_and_reset_arguments_are_enforced():
         env.reset(seed=-1)
     env.reset(seed=3)  # a valid reset starts a new episode
     env.step(np.zeros(6, dtype=np.int8))
+
+
+@pytest.mark.slow
+def test_the_50_km_line_runs_a_step():
+    """trackenv/TampingLineLong-v0: 250 sections of 200 m, capacity 25, one step on one machine (the scale the
+    planning of a real line needs; experiments/scale.py times it)."""
+    env = gym.make("trackenv/TampingLineLong-v0", horizon_years=0.5)
+    obs, _ = env.reset(seed=0)
+    assert obs["section_sd"].shape == (250,) and env.unwrapped.config.capacity == 25
+    action = np.zeros(250, np.int8)
+    action[:40] = 1  # over capacity: the 25 worst measured of the allowed ones are kept
+    obs, reward, _, _, info = env.step(action)
+    assert info["tamped_sections"].sum() <= 25 and info["clipped"]
+    assert -reward == pytest.approx(info["cost"]) and np.isfinite(obs["section_sd"]).all()

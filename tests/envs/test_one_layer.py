@@ -1,20 +1,22 @@
-"""Both problems run through the one Gymnasium layer (TrackEnv, TrackVectorEnv) and the functions they share:
-the same info keys from one builder, costs whose named parts are the reward and whose per-section parts add up
-with the campaign's fixed cost, the shared observation bounds, one mask convention, one dispatch by config."""
+"""The 60 m track and the line (presets of LineConfig) run through the one Gymnasium layer (TrackEnv,
+TrackVectorEnv) and the functions they share: the same info keys from one builder, costs whose named parts are
+the reward and whose per-section parts add up with the campaign's fixed cost, the shared observation bounds,
+one mask convention, one dispatch by config."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from trackenv.envs import TampingEnvConfig, scenario
+from trackenv.envs import LineConfig, scenario
 from trackenv.envs.common import SHARED_BOUNDS
 from trackenv.envs.env import TrackEnv, TrackVectorEnv
 from trackenv.envs.info import step_info
 from trackenv.envs.problems import make_vector_env, problem_config, problem_of
 
 CONFIGS = {
-    "60 m track": TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0),
+    "60 m track": scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+                           horizon_years=1.0),
     "line": scenario("small", horizon_years=1.0),
 }
 SHARED_INFO_KEYS = set(step_info({}, np.zeros(1, bool), np.zeros(1), np.zeros(1), np.zeros(1, int), 0.0, 0.0))
@@ -58,10 +60,14 @@ def test_the_vector_env_of_each_problem_is_the_one_vector_layer(name):
 
 def test_dispatch_by_config_type():
     assert problem_config("small") == scenario("small")
-    assert problem_config(None) == TampingEnvConfig()
+    assert problem_config("track60") == scenario("track60")
+    assert problem_config(None) == scenario("track60")  # the default of the harnesses that take no env
+    assert problem_config({"n_sections": 3, "capacity": 3}) == LineConfig(n_sections=3, capacity=3)
     with pytest.raises(ValueError, match="scenario"):
         problem_config("tiny")
     with pytest.raises(ValueError, match="config must be one of"):
         problem_of({"n_sections": 3})
-    with pytest.raises(ValueError, match="action_type"):
-        TrackEnv(CONFIGS["line"], action_type="discrete")
+    for config in CONFIGS.values():  # every preset takes both action types
+        assert problem_of(config).action_types == ("multibinary", "discrete")
+        with pytest.raises(ValueError, match="action_type"):
+            TrackEnv(config, action_type="continuous")

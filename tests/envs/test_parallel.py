@@ -156,7 +156,9 @@ def test_render_passes_through():
 
 def test_errors():
     with pytest.raises(ValueError, match=r"env_id must name a TampingLine env \(one of .*TampingLineSmall-v0"):
-        line_parallel_env("trackenv/Tamping-v0")
+        line_parallel_env("CartPole-v1")
+    with pytest.raises(ValueError, match=r"action space must be MultiBinary\(n_sections\).*got Discrete\(7\)"):
+        line_parallel_env("trackenv/TampingDiscrete-v1")  # a TampingLine (the 60 m track), but Discrete actions
     env = line_parallel_env(SMALL, **SHORT)
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(_actions(JOINT[0]))

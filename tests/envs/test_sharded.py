@@ -16,7 +16,9 @@ from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.sharded import ShardedVectorEnv, merge_infos, shard_sizes
 from trackenv.envs.vector import TampingVectorEnv
 
-SHORT = {"horizon_years": 1.5}  # 6 steps an episode: both autoreset modes reset within the rollout
+# the 60 m track cut to 30 m (51 sleepers) in 3 sections of 10 m
+SMALL = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3}
+SHORT = {**SMALL, "horizon_years": 1.5}  # 6 steps an episode: both autoreset modes reset within the rollout
 
 
 def _rollout(env, steps: int, seed: int, n_sections: int) -> list:
@@ -32,7 +34,7 @@ def _rollout(env, steps: int, seed: int, n_sections: int) -> list:
 def test_sharded_tamping_env_is_the_native_vector_env_bit_for_bit(mode) -> None:
     """5 envs in shards of 3 and 2 against one process of 5: observations, rewards, flags, infos (with their
     masks, final observations and infos across the resets at the horizon) and action masks."""
-    make = partial(TampingVectorEnv, config=SHORT, autoreset_mode=mode)
+    make = partial(TampingVectorEnv, autoreset_mode=mode, **SHORT)
     one = make(5)
     want = _rollout(one, 8, 11, one.config.n_sections)
     with ShardedVectorEnv(make, 5, workers=2) as env:
@@ -56,7 +58,7 @@ def test_sharded_line_env_is_the_native_vector_env_bit_for_bit() -> None:
 
 
 def test_sharded_env_renders_the_first_env_and_raises_worker_errors_as_theirs() -> None:
-    make = partial(TampingVectorEnv, config={"track_length_m": 30.0, "n_sections": 3}, render_mode="rgb_array")
+    make = partial(TampingVectorEnv, render_mode="rgb_array", **SMALL)
     one = make(2)
     one.reset(seed=2)
     with ShardedVectorEnv(make, 2, workers=2) as env:
@@ -71,11 +73,11 @@ def test_make_vec_with_workers_gives_the_sharded_env() -> None:
     without workers the native vector env itself (tests/envs/test_vector_env.py)."""
     import gymnasium as gym
 
-    kwargs = {"vectorization_mode": "vector_entry_point", "track_length_m": 30.0, "n_sections": 3}
-    one = gym.make_vec("trackenv/Tamping-v0", num_envs=3, **kwargs)
+    kwargs = {"vectorization_mode": "vector_entry_point", **SMALL}
+    one = gym.make_vec("trackenv/Tamping-v1", num_envs=3, **kwargs)
     assert isinstance(one, TampingVectorEnv)
     want = _rollout(one, 2, 5, 3)
-    with gym.make_vec("trackenv/Tamping-v0", num_envs=3, workers=2, **kwargs) as env:
+    with gym.make_vec("trackenv/Tamping-v1", num_envs=3, workers=2, **kwargs) as env:
         assert isinstance(env, ShardedVectorEnv) and env.sizes == [2, 1]
         got = _rollout(env, 2, 5, 3)
     for i, (a, b) in enumerate(zip(want, got)):
@@ -100,7 +102,7 @@ def test_shard_sizes_and_info_merge() -> None:
 
 def _warning_shard(n: int) -> TampingVectorEnv:
     warnings.warn("built a shard", UserWarning, stacklevel=1)
-    return TampingVectorEnv(n)
+    return TampingVectorEnv(n, **SMALL)
 
 
 def test_sharded_env_errors_reach_the_caller() -> None:
@@ -118,7 +120,7 @@ def test_sharded_env_errors_reach_the_caller() -> None:
     try:
         env.reset(seed=0)
         with pytest.raises(ValueError, match="actions must have shape"):
-            env.step(np.zeros((3, 6), dtype=int))
+            env.step(np.zeros((3, 3), dtype=int))
         with pytest.raises(ValueError, match="(?s)unknown reset option.*raised in worker 0"):  # the worker's own error
             env.reset(seed=0, options={"bad": 1})
         obs, _ = env.reset(seed=0)  # still usable after a worker's error
@@ -126,7 +128,7 @@ def test_sharded_env_errors_reach_the_caller() -> None:
         os.kill(env._procs[1].pid, signal.SIGKILL)
         env._procs[1].join(timeout=10)
         with pytest.raises(RuntimeError, match="worker 1 .* died"):
-            env.step(np.zeros((2, 6), dtype=int))
+            env.step(np.zeros((2, 3), dtype=int))
     finally:
         env.close()
     env.close()  # idempotent

@@ -15,8 +15,6 @@ import trackenv  # noqa: F401  (registers the ids)
 from trackenv.envs.state import EnvState
 
 SHORT = {
-    "trackenv/Tamping-v0": {"track_length_m": 30.0, "n_sections": 3, "horizon_years": 2.0,
-                            "transition_probability": 1.0, "voided_sleepers_mean": 2.0},
     "trackenv/TampingLineSmall-v0": {"horizon_years": 2.0},
     "trackenv/Tamping-v1": {"horizon_years": 2.0, "transition_probability": 1.0, "voided_sleepers_mean": 2.0},
 }

@@ -1,6 +1,6 @@
-"""TampingEnv: the Gymnasium and stable-baselines3 API contracts, determinism, the reward and episode rules,
-actions and masks, and the behaviour the physics must show (tamping helps, neglect hurts, ballast damage,
-stiffness transitions)."""
+"""TampingEnv (the 60 m track, the preset "track60" of the one engine): the Gymnasium and stable-baselines3 API
+contracts, determinism, the reward and episode rules, actions and masks, and the behaviour the physics must show
+(tamping helps, neglect hurts, ballast damage, stiffness transitions)."""
 
 from __future__ import annotations
 
@@ -14,14 +14,16 @@ import pytest
 
 import trackenv as te
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs import TampingEnv, TampingEnvConfig
+from trackenv.envs import TampingEnv, scenario
+from trackenv.envs.line_episode import line_observation_bounds
 from trackenv.physics.tamping import TampingModel
 
-IDS = ("trackenv/Tamping-v0", "trackenv/TampingDiscrete-v0")
+IDS = ("trackenv/Tamping-v1", "trackenv/TampingDiscrete-v1")
 # the Tamping family with the learners' wrapped ids (the TampingLine ids are checked in test_line_env.py)
-ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping") and "TampingLine" not in i
-                       and gym.spec(i).entry_point != "trackenv.envs.line:TampingLine"))
-COST_KEYS = ("tamping", "geometry", "alert", "intervention", "immediate_action")
+ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping") and "TampingLine" not in i))
+COST_KEYS = ("possession", "tamping", "renewal", "geometry", "alert", "speed_restriction", "immediate_action")
+# the keywords of small_config: 30 m (51 sleepers) in 3 sections of 10 m, 2 years of quarters
+SMALL = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3, "horizon_years": 2.0}
 
 
 def one_hot(k: int | None, n: int = 3) -> np.ndarray:
@@ -77,13 +79,18 @@ def test_gymnasium_env_checker(small_config, env_id: str) -> None:
 def test_stable_baselines3_env_checker(env_id: str) -> None:
     """stable-baselines3's checker (Dict observation of Boxes, MultiBinary/Discrete actions). No warning is
     tolerated (bar unrelated deprecation notices): e.g. its warnings about unbounded or non-symmetric Box
-    bounds, non-float32 observations or missing reset seeding would all fail this test."""
+    bounds, non-float32 observations or missing reset seeding would all fail this test. The one note let
+    through is on the per-sleeper profiles of the unwrapped ids: they are observed per segment, shape
+    (n_segments, n_sleepers) = (1, 51), which SB3 calls an unconventional shape (its extractors flatten it);
+    the learners' ranked ids observe no profiles and get no such note."""
     sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
-    env = gym.make(env_id, track_length_m=30.0, n_sections=3, horizon_years=2.0)
+    env = gym.make(env_id, **SMALL)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sb3_checker.check_env(env, warn=True)
-    assert not _significant(caught), _significant(caught)
+    profiles = [f"observation {key} has an unconventional shape" for key in ("level", "contact_force")]
+    bad = [w for w in _significant(caught) if not (env_id in IDS and any(p in w for p in profiles))]
+    assert not bad, bad
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -92,21 +99,23 @@ def test_registration(env_id: str) -> None:
     assert spec.max_episode_steps is None  # the env truncates itself at its configured horizon
     assert spec.vector_entry_point == "trackenv.envs.sharded:tamping_vector_env"  # TampingVectorEnv, or sharded
     env = gym.make(env_id)
-    assert env.unwrapped.config == TampingEnvConfig()
-    expected = gym.spaces.MultiBinary(6) if env_id.endswith("Tamping-v0") else gym.spaces.Discrete(7)
+    assert type(env.unwrapped) is TampingEnv and env.unwrapped.config == scenario("track60")
+    expected = gym.spaces.MultiBinary(6) if env_id.endswith("Tamping-v1") else gym.spaces.Discrete(7)
     assert env.action_space == expected
     obs_space = env.observation_space
-    assert set(obs_space.spaces) == {"level", "contact_force", "section_sd", "section_peak", "tampings",
-                                     "years_since_tamping", "time"}
-    assert obs_space["level"].shape == (101,) and obs_space["section_sd"].shape == (6,)
+    assert set(obs_space.spaces) == {"level", "contact_force", "section_sd", "section_peak", "measurement_age",
+                                     "register", "tampings", "tampings_since_renewal", "years_since_tamping", "time",
+                                     "budget_left"}
+    assert obs_space["level"].shape == obs_space["contact_force"].shape == (1, 101)  # one segment of 101 sleepers
+    assert obs_space["section_sd"].shape == (6,)
     assert all(s.dtype == np.float32 and np.all(np.isfinite(s.low)) and np.all(np.isfinite(s.high))
                for s in obs_space.values())
 
 
 def test_registered_env_runs_a_longer_configured_horizon_to_its_end(small_config) -> None:
-    env = gym.make("trackenv/Tamping-v0", config=small_config.replace(horizon_years=12.0, dt=2e-4))
+    env = gym.make("trackenv/Tamping-v1", config=small_config.replace(horizon_years=12.0, dt=2e-4))
     horizon = env.unwrapped.config.horizon_steps
-    assert horizon == 48 > TampingEnvConfig().horizon_steps
+    assert horizon == 48 > scenario("track60").horizon_steps
     env.reset(seed=0)
     truncated_at = [t for t in range(1, horizon + 1) if env.step(np.zeros(3, dtype=np.int8))[3]]
     assert truncated_at == [horizon]
@@ -116,7 +125,7 @@ def test_registered_env_runs_a_longer_configured_horizon_to_its_end(small_config
 def test_same_seed_same_rollout_different_seed_differs(small_config) -> None:
     cfg = small_config
     a = rollout(TampingEnv(cfg), 7, ACTIONS_MB)
-    b = rollout(gym.make("trackenv/Tamping-v0", config=cfg), 7, ACTIONS_MB)  # fresh env, via the registry
+    b = rollout(gym.make("trackenv/Tamping-v1", config=cfg), 7, ACTIONS_MB)  # fresh env, via the registry
     np.testing.assert_equal(a, b)  # observations, infos, rewards, flags: all identical
     c = rollout(TampingEnv(cfg), 8, ACTIONS_MB[:2])
     assert not np.array_equal(a[0]["level"], c[0]["level"])
@@ -137,10 +146,10 @@ def test_env_pickles_mid_episode_and_both_copies_continue_identically(small_conf
     for a in ACTIONS_MB[:3]:
         env.step(a)
     clone = pickle.loads(pickle.dumps(env))
-    rest = [one_hot(None), one_hot(2), one_hot(0)]  # also draws the tamping residual from np_random
+    rest = [one_hot(None), one_hot(2), one_hot(0)]  # tamps with the residuals drawn at the reset
     np.testing.assert_equal([env.step(a) for a in rest], [clone.step(a) for a in rest])
     # the registered, wrapped env pickles too
-    wrapped = gym.make("trackenv/Tamping-v0", config=small_config)
+    wrapped = gym.make("trackenv/Tamping-v1", config=small_config)
     wrapped.reset(seed=1)
     wrapped.step(one_hot(1))
     wclone = pickle.loads(pickle.dumps(wrapped))
@@ -149,9 +158,9 @@ def test_env_pickles_mid_episode_and_both_copies_continue_identically(small_conf
 
 # ---------------------------------------------------------------------- reward, episode end
 @pytest.mark.parametrize("env_id, actions", [
-    ("trackenv/Tamping-v0", [one_hot(None), one_hot(0), np.array([0, 1, 1]), one_hot(None), one_hot(None),
+    ("trackenv/Tamping-v1", [one_hot(None), one_hot(0), np.array([0, 1, 1]), one_hot(None), one_hot(None),
                              np.array([1, 1, 1]), one_hot(None), one_hot(None)]),
-    ("trackenv/TampingDiscrete-v0", [0, 1, 3, 0, 0, 2, 0, 0]),
+    ("trackenv/TampingDiscrete-v1", [0, 1, 3, 0, 0, 2, 0, 0]),
 ])
 def test_reward_costs_and_truncation_over_a_whole_episode(small_config, env_id: str, actions) -> None:
     cfg = small_config
@@ -170,8 +179,9 @@ def test_reward_costs_and_truncation_over_a_whole_episode(small_config, env_id: 
         assert reward == pytest.approx(-sum(parts.values()), rel=1e-12, abs=1e-12)
         assert info["cost"] == pytest.approx(sum(parts.values()), rel=1e-12, abs=1e-12)
         n_tamped = int(np.sum(info["tamped_sections"]))
-        expected_tamping = cfg.mobilisation_cost + cfg.section_tamping_cost * n_tamped if n_tamped else 0.0
-        assert parts["tamping"] == pytest.approx(expected_tamping)
+        assert parts["possession"] == (cfg.possession_cost if n_tamped else 0.0)
+        assert parts["tamping"] == pytest.approx(cfg.section_tamping_cost * n_tamped)
+        assert parts["renewal"] == 0.0  # no section reaches its renewal within 8 steps
         assert parts["geometry"] > 0
         assert terminated is False
         assert truncated is (t == cfg.horizon_steps), t
@@ -185,17 +195,17 @@ def test_invalid_multibinary_actions_raise_and_change_nothing(small_config) -> N
     with pytest.raises(RuntimeError, match="reset"):
         env.step(one_hot(None))
     env.reset(seed=0)
-    before = env.episode.sim.level.copy()
+    before = env.engine.level.copy()
     bad = [np.zeros(2), np.zeros(4), np.zeros((3, 1)), 0, np.array([0, 2, 0]), np.array([0.5, 0, 0]),
            np.array([np.nan, 0, 0]), np.array([-1, 0, 0]), np.array([0, np.inf, 0]), ["a", "b", "c"], None]
     for a in bad:
         with pytest.raises(ValueError):
             env.step(a)
-    assert env.episode.step_count == 0
-    np.testing.assert_array_equal(env.episode.sim.level, before)
+    assert env.engine.step_count(0) == 0
+    np.testing.assert_array_equal(env.engine.level, before)
     for ok in ([0, 1, 0], np.array([True, False, False]), np.array([0.0, 0.0, 1.0])):
         env.step(ok)
-    assert env.episode.step_count == 3
+    assert env.engine.step_count(0) == 3
 
 
 def test_invalid_discrete_actions_raise(small_config) -> None:
@@ -204,17 +214,17 @@ def test_invalid_discrete_actions_raise(small_config) -> None:
     for a in (-1, 4, 100, np.nan, 1.5, np.array([1, 2]), np.inf):
         with pytest.raises(ValueError):
             env.step(a)
-    assert env.episode.step_count == 0
+    assert env.engine.step_count(0) == 0
     for ok in (0, np.int64(3), np.array(2), np.array([1])):
         env.step(ok)
-    assert env.episode.step_count == 4
+    assert env.engine.step_count(0) == 4
 
 
 @pytest.mark.parametrize("action_type", ["multibinary", "discrete"])
 def test_action_masks_block_a_section_tamped_last_step(small_config, action_type: str) -> None:
     env = TampingEnv(small_config.replace(min_steps_between_tampings=1), action_type=action_type)
     discrete = action_type == "discrete"
-    env.reset(seed=2)
+    env.reset(seed=2)  # its sections were last tamped 2 steps before the start: none masked
     mask = env.action_masks()
     assert mask.dtype == bool
     assert mask.shape == ((4,) if discrete else (6,))
@@ -246,7 +256,8 @@ def test_masked_section_is_ignored_but_others_in_the_same_action_are_tamped(smal
     _, _, _, _, info = env.step(np.array([1, 0, 1]))
     assert info["tamped_sections"].tolist() == [False, False, True]
     cfg = env.config
-    assert info["costs"]["tamping"] == pytest.approx(cfg.mobilisation_cost + cfg.section_tamping_cost)
+    assert info["costs"]["possession"] == cfg.possession_cost
+    assert info["costs"]["tamping"] == pytest.approx(cfg.section_tamping_cost)
 
 
 # -------------------------------------------------------------------------------- behaviour
@@ -294,7 +305,8 @@ def test_tamping_a_section_is_recorded_in_the_step(small_config, branches: list)
     for _, tamped in branches:
         for s, (o, r, _, _, info) in enumerate(tamped):
             assert info["tamped_sections"].tolist() == one_hot(s).astype(bool).tolist()
-            assert info["costs"]["tamping"] == pytest.approx(cfg.mobilisation_cost + cfg.section_tamping_cost)
+            assert info["costs"]["possession"] == cfg.possession_cost
+            assert info["costs"]["tamping"] == pytest.approx(cfg.section_tamping_cost)
             assert o["tampings"].tolist() == one_hot(s).tolist()
             assert o["years_since_tamping"][s] == pytest.approx(0.25)
             assert r == pytest.approx(-sum(info["costs"].values()))
@@ -318,6 +330,32 @@ def test_without_tamping_the_track_and_the_cost_get_worse(neglect: dict) -> None
     assert cost[:, -q:].mean() > 1.1 * cost[:, :q].mean(), cost
     # every seed: mean SD keeps growing (the level only settles, nothing is restored)
     assert np.all(sd[:, -1] > sd[:, 0]), sd
+
+
+def test_a_section_tamped_often_settles_faster_in_the_env(small_config) -> None:
+    """Ballast damage in the env: the same step from the same state, the middle section tamped for the 4th time
+    since renewal instead of the 1st (no tamping residual: the same level after tamping), settles about
+    (1 + damage_per_tamping)^3 times as much over the next period, and its neighbours as before."""
+    cfg = small_config.replace(tamping={"residual_fraction": 0.0, "residual_sd_m": 0.0})
+    env = TampingEnv(cfg)
+    env.reset(seed=0)
+    env.step(one_hot(None))
+    inside = env.engine.section_of_sleeper == 1
+    growth = {}
+    for count in (0, 3):
+        branch = copy.deepcopy(env)
+        branch.engine.count[1] = count  # tampings since renewal before this one
+        branch.step(one_hot(1))
+        assert branch.engine.count[:3].tolist() == [0, count + 1, 0]
+        u = branch.engine.u.copy()
+        branch.step(one_hot(None))
+        growth[count] = (branch.engine.u - u)[0]
+    assert np.all(growth[0] > 0)
+    expected = (1 + cfg.tamping_model.damage_per_tamping) ** 3
+    ratio = growth[3][inside].mean() / growth[0][inside].mean()
+    assert ratio > 1.2 and ratio == pytest.approx(expected, rel=0.15)
+    far = np.flatnonzero(~inside)[[0, -1]]  # the end sleepers of the other sections
+    np.testing.assert_allclose(growth[3][far], growth[0][far], rtol=0.05)
 
 
 def test_often_tamped_ballast_settles_faster_afterwards() -> None:
@@ -375,10 +413,10 @@ def test_step_after_the_horizon_raises_until_reset(small_config) -> None:
     env = TampingEnv(small_config.replace(horizon_years=0.5))  # 2 steps
     env.reset(seed=0)
     assert [env.step(np.zeros(3, dtype=np.int8))[3] for _ in range(2)] == [False, True]
-    level = env.episode.sim.level.copy()
+    level = env.engine.level.copy()
     with pytest.raises(RuntimeError, match="horizon.*reset"):
         env.step(np.zeros(3, dtype=np.int8))
-    np.testing.assert_array_equal(env.episode.sim.level, level)  # nothing simulated, nothing charged
+    np.testing.assert_array_equal(env.engine.level, level)  # nothing simulated, nothing charged
     env.reset(seed=0)
     env.step(np.zeros(3, dtype=np.int8))
 
@@ -400,31 +438,27 @@ def test_reset_accepts_numpy_integer_seeds_and_refuses_unknown_options(small_con
 
 # ------------------------------------------------------------------------ observation bounds
 def test_observation_space_and_clipping_share_one_table_of_bounds(small_config) -> None:
-    from trackenv.envs import episode as E
-
     cfg = small_config
     space = TampingEnv(cfg).observation_space
-    for key, (low, high) in E.observation_bounds(cfg).items():
+    bounds = line_observation_bounds(cfg)
+    assert set(bounds) == set(space.spaces)
+    for key, (low, high) in bounds.items():
         assert float(space[key].low.min()) == low and float(space[key].high.max()) == high
 
 
 def test_clipped_observations_are_reported_in_info(small_config) -> None:
-    from trackenv.envs import episode as E
-
     env = TampingEnv(small_config)
     _, info = env.reset(seed=0)
     assert info["observation_clipped"] == 0
-    ep = env.episode
-    ep.sim.offset = ep.sim.offset + 0.25  # 250 mm of settlement everywhere: past the 200 mm bound of "level"
-    obs = E.observation(ep)
+    n = small_config.n_sleepers
+    engine = env.engine
+    engine.measured_level += 0.25  # 250 mm of settlement everywhere: past the 200 mm bound of "level"
+    assert np.all(engine.observation(0)["level"] == 200.0)
+    assert engine.reset_info(0)["observation_clipped"] == n
+    engine.offset += 0.25  # and on the track itself: the next recording run sees it
+    obs, _, _, _, info = env.step(np.zeros(3, dtype=np.int8))
     assert np.all(obs["level"] == 200.0)
-    assert E.info(ep, dict.fromkeys(E.COST_KEYS, 0.0), np.zeros(3, bool))["observation_clipped"] == cfg_sleepers(ep)
-    _, _, _, _, info = env.step(np.zeros(3, dtype=np.int8))
-    assert info["observation_clipped"] >= cfg_sleepers(ep)
-
-
-def cfg_sleepers(ep) -> int:
-    return ep.config.n_sleepers
+    assert info["observation_clipped"] >= n
 
 
 def test_section_classes_follow_the_geometry_and_the_info_owns_its_copy(small_config) -> None:
@@ -435,29 +469,16 @@ def test_section_classes_follow_the_geometry_and_the_info_owns_its_copy(small_co
 
     env = TampingEnv(small_config)
     _, info = env.reset(seed=4)
+    limits = env.engine.limits
+    assert limits == small_config.quality_limits.for_speed(small_config.speed)
     rng = np.random.default_rng(4)
     for _ in range(small_config.horizon_steps):
-        expected = classify(info["section_peak_m"], small_config.band_limits)
+        expected = classify(info["section_peak_m"], limits)
         np.testing.assert_array_equal(info["section_class"], expected)
         assert info["immediate_action_exceedances"] == int(np.sum(expected == 3))
         info["section_class"][:] = 3  # the caller's copy
         _, _, _, truncated, info = env.step(rng.integers(0, 2, small_config.n_sections))
         if truncated:
             break
-    np.testing.assert_array_equal(env.episode.section_classes(),
-                                  classify(info["section_peak_m"], small_config.band_limits))
-
-
-def test_section_costs_add_up_to_the_step_cost_with_the_mobilisation():
-    """Each section's own costs (its tamping and its quality costs), as the line reports them, plus the
-    campaign's mobilisation make up the step's cost."""
-    cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)
-    env = TampingEnv(cfg)
-    _, info = env.reset(seed=2)
-    np.testing.assert_array_equal(info["section_costs"], np.zeros(3))
-    for action in ([1, 0, 1], [0, 0, 0], [0, 1, 0]):
-        _, reward, _, _, info = env.step(np.array(action))
-        mobilisation = cfg.mobilisation_cost * bool(info["tamped_sections"].any())
-        assert info["section_costs"].shape == (3,)
-        np.testing.assert_allclose(info["section_costs"].sum() + mobilisation, info["cost"], rtol=1e-12)
-        assert -reward == info["cost"]
+    np.testing.assert_array_equal(classify(env.engine.true_quality()[1], limits),
+                                  classify(info["section_peak_m"], limits))

@@ -9,11 +9,15 @@ import pytest
 from same_results import assert_same
 
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs import TampingEnv, TampingEnvConfig
+from trackenv.envs import TampingEnv, scenario
 from trackenv.envs.vector import TampingVectorEnv
 
-CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=2.0)  # 8 steps
-SEEDS = [3, 14, 15]
+# small_config: 30 m (51 sleepers) in 3 sections of 10 m, 8 steps
+SMALL = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3, "horizon_years": 2.0}
+CFG = scenario("track60", **SMALL)
+# seeds whose sections were last tamped 2 steps or more before the start (in the next episode too): none is
+# masked at the first step
+SEEDS = [2, 14, 15]
 # (steps, envs, sections): a different tamping pattern per env; masked repeats included
 ACTIONS = np.zeros((CFG.horizon_steps + 1, 3, 3), dtype=np.int8)
 ACTIONS[1, 0] = [1, 0, 0]
@@ -25,7 +29,7 @@ ACTIONS[8, 0] = [0, 0, 1]  # first step of the new episodes
 
 
 def make_vec(**kwargs) -> gym.vector.VectorEnv:
-    return gym.make_vec("trackenv/Tamping-v0", num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    return gym.make_vec("trackenv/Tamping-v1", num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -54,11 +58,12 @@ def test_make_vec_uses_the_vector_entry_point() -> None:
     assert venv.single_observation_space == single.observation_space
     assert venv.single_action_space == single.action_space == gym.spaces.MultiBinary(3)
     assert venv.action_space.shape == (3, 3)
-    assert venv.observation_space["level"].shape == (3, CFG.n_sleepers)
+    assert venv.observation_space["level"].shape == (3, 1, CFG.n_sleepers)
     assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
     # keywords instead of a config object
-    kw = make_vec(track_length_m=30.0, n_sections=3, horizon_years=2.0)
+    kw = make_vec(**SMALL)
     assert kw.unwrapped.config == CFG
+    assert TampingVectorEnv(2).config == scenario("track60")
 
 
 @pytest.mark.slow  # shares the 3 s module fixture
@@ -153,7 +158,7 @@ def test_reset_seeding_and_bad_input() -> None:
 
 
 def test_discrete_vector_env() -> None:
-    venv = gym.make_vec("trackenv/TampingDiscrete-v0", num_envs=2, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec("trackenv/TampingDiscrete-v1", num_envs=2, vectorization_mode="vector_entry_point",
                         config=CFG)
     assert venv.single_action_space == gym.spaces.Discrete(4)
     obs, _ = venv.reset(seed=[0, 1])

@@ -9,7 +9,7 @@ import pytest
 from gymnasium import spaces
 
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs import TampingEnv, TampingEnvConfig
+from trackenv.envs import TampingEnv, scenario
 from trackenv.envs.wrappers import (
     ActionMaskObservation,
     MultiDiscreteActions,
@@ -21,8 +21,13 @@ from trackenv.envs.wrappers import (
     section_keys,
 )
 
-CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)  # 4 steps
-SECTION_KEYS = ["section_peak", "section_sd", "tampings", "time", "years_since_tamping"]
+# 30 m (51 sleepers) in 3 sections of 10 m, 4 steps
+CFG = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3, horizon_years=1.0)
+# the section-level keys (the space's order): the per-sleeper profiles level and contact_force, of shape
+# (1, 51) on this one segment, are dropped
+SECTION_KEYS = ["budget_left", "measurement_age", "register", "section_peak", "section_sd", "tampings",
+                "tampings_since_renewal", "time", "years_since_tamping"]
+FLAT_SIZE = 3 + 6 * 3  # the 3 keys of shape (1,) and the 6 of shape (n_sections,)
 
 
 def test_ranked_tamps_the_k_worst_sections() -> None:
@@ -45,9 +50,11 @@ def test_section_keys_and_n_sections_are_generic() -> None:
     env = TampingEnv(CFG)
     assert n_sections_of(gym.wrappers.RecordEpisodeStatistics(env)) == 3
     assert section_keys(env.observation_space, 3) == SECTION_KEYS
-    # any Dict observation with per-section keys: e.g. a line env with 50 sections and per-sleeper arrays
-    space = spaces.Dict({"level": spaces.Box(0, 1, (334,)), "section_sd": spaces.Box(0, 1, (50,)),
-                         "speed_band": spaces.Box(0, 1, (50, 2)), "time": spaces.Box(0, 1, (1,))})
+    # any Dict observation with per-section keys: e.g. a line env with 50 sections and per-sleeper arrays, of
+    # the whole line or of one segment
+    space = spaces.Dict({"level": spaces.Box(0, 1, (334,)), "profile": spaces.Box(0, 1, (1, 334)),
+                         "section_sd": spaces.Box(0, 1, (50,)), "speed_band": spaces.Box(0, 1, (50, 2)),
+                         "time": spaces.Box(0, 1, (1,))})
     assert section_keys(space, 50) == ["section_sd", "speed_band", "time"]
 
 
@@ -73,19 +80,19 @@ def test_ranked_wrapper_is_the_env_driven_by_ranked_to_sections() -> None:
 
 
 def test_registered_ranked_ids_and_masks_through_gym_make() -> None:
-    env = gym.make("trackenv/TampingRanked-v0", config=CFG)
+    env = gym.make("trackenv/TampingRanked-v1", config=CFG)
     assert env.action_space == spaces.Discrete(4)
     assert list(env.observation_space.spaces) == SECTION_KEYS
     env.reset(seed=0)
     # gym.make's own wrappers forward no methods: get_wrapper_attr finds the nearest action_masks
     assert env.get_wrapper_attr("action_masks")().tolist() == [True] * 4
-    flat = gym.make("trackenv/TampingRankedFlat-v0", config=CFG)
-    assert isinstance(flat.observation_space, spaces.Box) and flat.observation_space.shape == (13,)
+    flat = gym.make("trackenv/TampingRankedFlat-v1", config=CFG)
+    assert isinstance(flat.observation_space, spaces.Box) and flat.observation_space.shape == (FLAT_SIZE,)
     obs, _ = flat.reset(seed=0)
     assert flat.observation_space.contains(obs)
     obs, reward, *_ = flat.step(3)
     assert flat.observation_space.contains(obs) and reward < 0
-    base = gym.make("trackenv/Tamping-v0", config=CFG)
+    base = gym.make("trackenv/Tamping-v1", config=CFG)
     base.reset(seed=0)
     assert base.get_wrapper_attr("action_masks")().shape == (6,)
 
@@ -95,10 +102,11 @@ def test_sb3_contrib_finds_the_masks_through_the_wrappers() -> None:
     from sb3_contrib.common.maskable.utils import get_action_masks
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    venv = DummyVecEnv([lambda: gym.make("trackenv/TampingRanked-v0", config=CFG)] * 2)
+    venv = DummyVecEnv([lambda: gym.make("trackenv/TampingRanked-v1", config=CFG)] * 2)
     venv.reset()
     assert get_action_masks(venv).shape == (2, 4)
     venv = DummyVecEnv([lambda: MultiDiscreteActions(SectionObservation(TampingEnv(CFG)))])
+    venv.seed(1)  # an episode whose sections were last tamped 2 steps or more before its start: none masked
     venv.reset()
     venv.step(np.array([[1, 0, 0]]))
     np.testing.assert_array_equal(get_action_masks(venv)[0].reshape(3, 2), [[1, 0], [1, 1], [1, 1]])
@@ -118,7 +126,7 @@ def test_multidiscrete_and_mask_observation() -> None:
 
 def test_vector_ranked_env_matches_the_single_wrapped_envs() -> None:
     seeds = [3, 4]
-    venv = gym.make_vec("trackenv/TampingRanked-v0", num_envs=2, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec("trackenv/TampingRanked-v1", num_envs=2, vectorization_mode="vector_entry_point",
                         config=CFG)
     singles = [make_ranked(config=CFG) for _ in seeds]
     assert venv.single_action_space == singles[0].action_space
@@ -145,7 +153,7 @@ def _same_step_only(num_envs: int, **kwargs):
     from trackenv.envs.vector import TampingVectorEnv
 
     if "autoreset_mode" in kwargs:
-        raise ValueError("unknown TampingEnvConfig key(s) ['autoreset_mode']")
+        raise ValueError("unknown LineConfig key(s) ['autoreset_mode']")
     return TampingVectorEnv(num_envs, **kwargs)
 
 
@@ -162,6 +170,6 @@ def test_ranked_flat_vector_falls_back_to_sync_vector_env(vector_entry_point) ->
     assert isinstance(venv.unwrapped, gym.vector.SyncVectorEnv)
     assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
     obs, _ = venv.reset(seed=[0, 1])
-    assert obs.shape == (2, 13)
+    assert obs.shape == (2, FLAT_SIZE)
     obs, rewards, *_ = venv.step(np.array([3, 0]))
     assert venv.observation_space.contains(obs) and np.all(rewards < 0)

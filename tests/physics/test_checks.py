@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import trackenv as te
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig, scenario
 from trackenv.physics._checks import MAX_TIME_STEPS, check_array, check_int, check_scalar, check_time_steps
 
 
@@ -77,22 +77,49 @@ def test_the_stiffest_allowed_rail_still_solves() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("section_tamping_cost", "1.5"), ("speed_kmh", "100"), ("voided_sleepers_mean", "1.5"),
+    [("tamping_cost_per_m", "1.5"), ("speed_kmh", "100"), ("voided_sleepers_mean", "1.5"),
      ("steps_per_year", True), ("n_sections", True), ("min_steps_between_tampings", 1.0)],
 )
 def test_config_refuses_strings_and_bools_at_construction(field, value) -> None:
     with pytest.raises(ValueError, match=f"^{field} must"):
-        TampingEnvConfig(**{field: value})
+        LineConfig(**{field: value})
 
 
-def test_config_stores_numbers_in_their_canonical_type() -> None:
-    c = TampingEnvConfig(speed_kmh=np.float32(80.0), steps_per_year=np.int64(12), section_tamping_cost=3)
-    assert type(c.speed_kmh) is float and type(c.steps_per_year) is int and type(c.section_tamping_cost) is float
+@pytest.mark.parametrize("changes", [
+    {"speed_kmh": 5.0, "dt": 1e-6},  # a 42 m pass: 30 million steps
+    {"speed_kmh": 10.0, "section_length_m": 1000.0, "segment_length_m": 1000.0},  # dt "auto": 1e-4 s at most
+])
+def test_config_reads_the_dynamics_time_step_bound(changes) -> None:
+    """A config the env would accept and then fail on at its first pass is refused at once, naming the fields
+    that set the pass's time steps."""
+    with pytest.raises(ValueError, match="segment_length_m, speed_kmh and dt.*MAX_TIME_STEPS"):
+        scenario("small", **changes)
+    scenario("small", **{**changes, "speed_kmh": 100.0})  # fast enough
 
 
-def test_config_reads_the_dynamics_time_step_bound() -> None:
-    with pytest.raises(ValueError, match="track_length_m, speed_kmh and dt.*MAX_TIME_STEPS"):
-        TampingEnvConfig(track_length_m=2000.0, speed_kmh=5.0, dt=1e-6)
+@pytest.mark.parametrize("name", ["small", "track60"])
+def test_config_counts_the_time_steps_of_the_pass_the_env_runs(name, monkeypatch) -> None:
+    """The config's check of MAX_TIME_STEPS measures the passes the env's dynamics integrate (each vehicle type
+    over a segment with its approach and exit zones)."""
+    from trackenv.envs import line_episode
+    from trackenv.envs.env import TrackEnv
+
+    cfg = scenario(name, speed_kmh=120.0, dt=2e-4)
+    if name == "track60":  # a segment of 30 m, as the line's
+        cfg = cfg.replace(n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3)
+    counted = []
+    original = line_episode.simulate_passes
+
+    def recording(tracks, vehicle, *args, **kwargs):
+        results = original(tracks, vehicle, *args, **kwargs)
+        counted.append((vehicle.system().span, {r.time.size - 1 for r in results}))
+        return results
+
+    monkeypatch.setattr(line_episode, "simulate_passes", recording)
+    TrackEnv(cfg).reset(seed=0)
+    assert len(counted) == (cfg.axle_passes_per_step() > 0).sum()  # one pass per vehicle type with traffic
+    for span, steps in counted:
+        assert steps == {check_time_steps(cfg.pass_length_m(span), cfg.speed, cfg.dt)}
 
 
 @pytest.mark.parametrize("fn", [te.static_deflection, te.receptance])
@@ -125,15 +152,3 @@ def test_simulate_passes_names_malformed_rows(kw, name) -> None:
 def test_simulate_pass_refuses_a_profile_that_is_not_numbers(profile) -> None:
     with pytest.raises(ValueError, match="^irregularity must be an array of real numbers"):
         te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), 20.0, profile)
-
-
-@pytest.mark.parametrize("vehicle", ["wheelset", "manchester_coach"])
-def test_config_counts_the_time_steps_of_the_pass_the_env_runs(vehicle) -> None:
-    """The config's check of MAX_TIME_STEPS measures the same pass the env's dynamics integrate."""
-    from trackenv.envs.episode import new_episode
-
-    cfg = TampingEnvConfig(track_length_m=30.0, n_sections=3, vehicle=vehicle, speed_kmh=120.0, dt=2e-4)
-    sim = new_episode(cfg, np.random.default_rng(0)).sim
-    span = sim.system.span
-    expected = check_time_steps(sim.pass_end_position(cfg.track_length_m, 0.6, span) - span, cfg.speed, cfg.dt)
-    assert sim.simulate().time.size - 1 == expected

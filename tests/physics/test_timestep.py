@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import trackenv as te
-from trackenv.envs.config import TampingEnvConfig
+from trackenv.envs.line_config import LineConfig
 from trackenv.physics.dynamics import simulate_pass
 from trackenv.physics.geometry import german_psd, synthesize_profile
 from trackenv.physics.timestep import (
@@ -91,15 +91,15 @@ def test_auto_step_values():
 def test_one_set_of_dt_bounds_in_every_layer():
     """A step the env accepts, the loop and the dynamics accept; one beyond the bound all three refuse."""
     ok, too_big = DT_MAX_S, DT_MAX_S * 1.01
-    TampingEnvConfig(dt=ok)
+    LineConfig(dt=ok)
     te.TrackDegradation(TRACK, WHEEL_20T, dt=ok)
     simulate_pass(TRACK, WHEEL_20T, 100 / 3.6, dt=ok, x_start=5.0, x_end=6.0)
     for make in (
-        lambda: TampingEnvConfig(dt=too_big),
+        lambda: LineConfig(dt=too_big),
         lambda: te.TrackDegradation(TRACK, WHEEL_20T, dt=too_big),
         lambda: simulate_pass(TRACK, WHEEL_20T, 100 / 3.6, dt=too_big),
-        lambda: TampingEnvConfig(dt="fine"),
+        lambda: LineConfig(dt="fine"),
     ):
         with pytest.raises(ValueError, match="dt"):
             make()
-    assert TampingEnvConfig().dt == "auto" and te.TrackDegradation(TRACK, WHEEL_20T).pass_options["dt"] == "auto"
+    assert LineConfig().dt == "auto" and te.TrackDegradation(TRACK, WHEEL_20T).pass_options["dt"] == "auto"

@@ -7,13 +7,19 @@ import numpy as np
 
 import trackenv.degradation
 import trackenv.envs  # noqa: F401  (registers the environments)
+import trackenv.envs.line_episode
 import trackenv.physics._kernel
 from trackenv_studies.bench import PROFILE_LABELS, _StageTimer, format_profile
 
 
 def test_stage_timer_profiles_env_steps_and_restores_the_functions():
-    before = (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step)
-    env = gymnasium.make("trackenv/Tamping-v0")
+    def wrapped():
+        episode = trackenv.envs.line_episode
+        return (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step,
+                episode.simulate_passes, episode.implicit_settlement_step, episode.d1_filter)
+
+    before = wrapped()
+    env = gymnasium.make("trackenv/Tamping-v1")
     env.reset(seed=0)
     env.action_space.seed(0)
     with _StageTimer() as timer:
@@ -21,8 +27,7 @@ def test_stage_timer_profiles_env_steps_and_restores_the_functions():
         for _ in range(2):
             env.step(env.action_space.sample())
         wall = time.perf_counter() - t0
-    after = (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step)
-    assert after == before  # unwrapped on exit
+    assert wrapped() == before  # unwrapped on exit
     for stage in ("kernel", "passes", "settlement", "quality"):
         assert timer.seconds.get(stage, 0.0) > 0.0, stage
     assert timer.seconds["passes"] >= timer.seconds["kernel"]  # the kernel runs inside the passes
@@ -38,7 +43,7 @@ def test_format_profile_is_a_markdown_table_of_every_env_benchmark():
     d = {"env": ok, "vector_env": {"8": ok, "32": {"status": "unavailable", "reason": "x"}}, "line_env": ok,
          "line_vector_env": {}}
     table = format_profile(d).splitlines()
-    assert table[0] == "| share of the step | Tamping-v0, 1 env | Tamping-v0, 8 envs | TampingLine-v0, 1 line |"
+    assert table[0] == "| share of the step | Tamping-v1, 1 env | Tamping-v1, 8 envs | TampingLine-v0, 1 line |"
     assert table[2] == "| kernel | 50 % | 50 % | 50 % |"
     assert len(table) == 2 + len(PROFILE_LABELS)
 

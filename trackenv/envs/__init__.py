@@ -3,15 +3,18 @@
 No ``max_episode_steps``: the env truncates itself at its configured horizon, so a registered TimeLimit could
 only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` runs its 80 steps).
 
-Ids: ``trackenv/Tamping-v0`` (MultiBinary actions, the full Dict observation), ``trackenv/TampingDiscrete-v0``
-(one section or none per step), and for learners (:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v0``
-(``Discrete(n_sections + 1)`` ranked actions, section-level Dict observation) and
-``trackenv/TampingRankedFlat-v0`` (the same with one flat ``Box`` observation: RLlib's and CleanRL's default
-encoders). Each has a native vector entry point (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add
-``workers=N`` for the same envs in N processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
-The line problem (:mod:`trackenv.envs.line`): ``trackenv/TampingLine-v0`` (the default line),
-``trackenv/TampingLineSmall-v0`` (tests, quick studies) and ``trackenv/TampingLineHard-v0``; each takes a line
-file (``line="my_line.yaml"``: :mod:`trackenv.envs.line_file`; the example in :mod:`trackenv.lines`);
+Every id is the one environment (:class:`~trackenv.envs.line.TampingLine` over the one engine) with a preset of
+:class:`~trackenv.envs.line_config.LineConfig`: the line problem (:mod:`trackenv.envs.line`),
+``trackenv/TampingLine-v0`` (the default line), ``trackenv/TampingLineSmall-v0`` (tests, quick studies) and
+``trackenv/TampingLineHard-v0``, ``trackenv/TampingLineLong-v0`` (50 km); the 60 m track (:mod:`trackenv.envs.tamping`), ``trackenv/Tamping-v1``
+(MultiBinary actions), ``trackenv/TampingDiscrete-v1`` (one section or none per step), and for learners
+(:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v1`` (``Discrete(n_sections + 1)`` ranked actions,
+section-level Dict observation) and ``trackenv/TampingRankedFlat-v1`` (the same with one flat ``Box``
+observation: RLlib's and CleanRL's default encoders). Each has a native vector entry point
+(``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add ``workers=N`` for the same envs in N
+processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+The line ids take a line file (``line="my_line.yaml"``: :mod:`trackenv.envs.line_file`; the example in
+:mod:`trackenv.lines`).
 :func:`~trackenv.envs.multiagent.line_parallel_env` poses any of them as a PettingZoo ``ParallelEnv`` with one
 agent per section (the ``multiagent`` extra).
 
@@ -21,7 +24,6 @@ per row on the native vector envs.
 
 from gymnasium.envs.registration import register, registry
 
-from .config import TampingEnvConfig
 from .line import TampingLine, TampingLineVectorEnv
 from .line_config import SCENARIOS, LineConfig, scenario
 from .line_file import LineDescription, LineFileError, load_line
@@ -33,33 +35,27 @@ from .tamping import TampingEnv
 from .vector import TampingVectorEnv
 
 _ENVS = (
-    ("trackenv/Tamping-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
+    ("trackenv/TampingLine-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "default"}),
+    ("trackenv/TampingLineSmall-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "small"}),
+    ("trackenv/TampingLineLong-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "long"}),
+    ("trackenv/TampingLineHard-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "hard"}),
+    ("trackenv/Tamping-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "multibinary"}),
-    ("trackenv/TampingDiscrete-v0", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
+    ("trackenv/TampingDiscrete-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "discrete"}),
-    ("trackenv/TampingRanked-v0", "trackenv.envs.wrappers:make_ranked", "trackenv.envs.wrappers:make_ranked_vector",
-     {"env_id": "trackenv/Tamping-v0"}),
-    ("trackenv/TampingRankedFlat-v0", "trackenv.envs.wrappers:make_ranked",
-     "trackenv.envs.wrappers:make_ranked_vector", {"env_id": "trackenv/Tamping-v0", "flat": True}),
+    ("trackenv/TampingRanked-v1", "trackenv.envs.wrappers:make_ranked", "trackenv.envs.wrappers:make_ranked_vector",
+     {"env_id": "trackenv/Tamping-v1"}),
+    ("trackenv/TampingRankedFlat-v1", "trackenv.envs.wrappers:make_ranked",
+     "trackenv.envs.wrappers:make_ranked_vector", {"env_id": "trackenv/Tamping-v1", "flat": True}),
 )
 for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
-__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "TampingEnv",
-           "TampingEnvConfig", "TampingLine", "TampingLineVectorEnv", "TampingVectorEnv", "history_fit",
-           "line_parallel_env", "load_line", "make_vector_env", "problem_config", "scenario"]
-
-for _id, _scenario in (
-    ("trackenv/TampingLine-v0", "default"),
-    ("trackenv/TampingLineSmall-v0", "small"),
-    ("trackenv/TampingLineHard-v0", "hard"),
-    ("trackenv/Tamping-v1", "track60"),
-):
-    if _id not in registry:
-        register(
-            id=_id,
-            entry_point="trackenv.envs.line:TampingLine",
-            kwargs={"scenario": _scenario},
-            vector_entry_point="trackenv.envs.sharded:line_vector_env",
-        )
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "TampingEnv", "TampingLine",
+           "TampingLineVectorEnv", "TampingVectorEnv", "history_fit", "line_parallel_env", "load_line",
+           "make_vector_env", "problem_config", "scenario"]

@@ -8,7 +8,7 @@ batched call of the physics. What it owes Gymnasium does not depend on the probl
 * both of Gymnasium's autoreset modes, with the results of ``gymnasium.vector.SyncVectorEnv`` over the problem's
   single env in the same mode (observations, rewards, flags and infos, each info key with its ``_key`` mask):
 
-  - ``SAME_STEP`` (default, as Tamping-v0 has always done): an episode resets in the step it ends; the returned
+  - ``SAME_STEP`` (default): an episode resets in the step it ends; the returned
     observation and info are the new episode's first, ``infos["final_obs"]`` (an object array) and
     ``infos["final_info"]`` (a dict of arrays) hold the last of the old one;
   - ``NEXT_STEP`` (Gymnasium's own default, RLlib's convention): the step that ends an episode returns its last

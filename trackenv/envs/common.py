@@ -28,6 +28,12 @@ def clip_observation(raw: dict[str, np.ndarray], bounds: dict[str, tuple[float, 
     return {k: np.clip(v, *bounds[k]).astype(np.float32) for k, v in raw.items()}
 
 
+def clipped_values(raw: dict[str, np.ndarray], bounds: dict[str, tuple[float, float]]) -> int:
+    """How many of the observed quantities ``raw`` lie beyond their ``bounds`` (and are clipped in the
+    observation): ``info["observation_clipped"]``, so that no value is clipped silently."""
+    return int(sum(np.count_nonzero((v < bounds[k][0]) | (v > bounds[k][1])) for k, v in raw.items()))
+
+
 def observation_space(bounds: dict[str, tuple[float, float]], shapes: dict[str, tuple[int, ...]]) -> spaces.Dict:
     """The Dict observation space of a bounds table, each key's Box of its shape in ``shapes``."""
     return spaces.Dict({k: spaces.Box(low, high, shapes[k], np.float32) for k, (low, high) in bounds.items()})

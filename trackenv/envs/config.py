@@ -1,29 +1,23 @@
-"""The configuration of the tamping environment: one frozen, validated dataclass with documented defaults."""
+"""What the environment configuration builds on: :class:`ConfigBase` (the dict round trip and the physics objects
+built from the fields) and the checks of fields whose range depends on another field. The configuration itself
+is :class:`~trackenv.envs.line_config.LineConfig`, one frozen, validated dataclass with named presets."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
-from functools import cached_property, partial
+from dataclasses import asdict, fields
+from functools import cached_property
 from typing import Any, ClassVar, TypeVar
 
-from ..degradation import TrackDegradation
-from ..physics._checks import check_choice, check_field, check_int_field, check_scalar, check_time_steps
-from ..physics.contact import HertzContact
+from ..physics._checks import check_choice, check_scalar
 from ..physics.geometry import QualityLimits
 from ..physics.settlement import LAWS, make_law
 from ..physics.tamping import TampingModel
-from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
-from ..physics.track import Track
-from ..physics.vehicle import GRAVITY, Car, Wheelset
-
-VEHICLES = ("wheelset", "manchester_coach", "zhai_coach", "freight_wagon")
-
 
 _C = TypeVar("_C", bound="ConfigBase")
 
 
 class ConfigBase:
-    """What the frozen env configs (:class:`TampingEnvConfig`, ``LineConfig``) share: the dict round trip
+    """What the frozen env config (``LineConfig``) is built on: the dict round trip
     (``from_dict`` refuses unknown keys by name, ``replace`` validates the changed copy, ``to_dict`` writes the
     mapping fields, stored as sorted item tuples so the config stays hashable, back as dicts) and the physics
     objects built from the fields both have (the settlement law, the tamping model, the quality limits). The
@@ -109,179 +103,6 @@ class ConfigBase:
     @cached_property
     def quality_limits(self) -> QualityLimits:
         return QualityLimits.from_dict(dict(self.limits)) if self.limits else QualityLimits.en13848()
-
-
-@dataclass(frozen=True)
-class TampingEnvConfig(ConfigBase):
-    """Everything that defines a tamping problem. SI units unless the name says otherwise.
-
-    Track: ``track_length_m`` (>= 30; default 60 m = 101 sleepers ``sleeper_spacing_m`` = 0.6 m apart) split
-    into ``n_sections`` equal tamping sections; supports from ``Track.realistic`` with per-sleeper ballast
-    stiffness drawn lognormal with coefficient of variation ``ballast_stiffness_cv``, correlated over
-    ``ballast_stiffness_correlation_m``; with probability ``transition_probability`` a transition zone (ballast
-    ``transition_stiffness_ratio`` times stiffer from a sleeper on, e.g. a bridge approach, drawn uniformly
-    within the fractions ``transition_position`` of the track, away from its ends);
-    ``voided_sleepers_mean`` hanging sleepers on average (Poisson), each keeping ``voided_residual_support``
-    of its ballast support. Ballast condition varies along the track: each sleeper's settlement rate is
-    lognormal with CV ``settlement_rate_cv``, correlated over ``settlement_rate_correlation_m``. The initial
-    level is drawn from the German vertical PSD of ``initial_quality`` ("low"/"high" disturbance).
-
-    Traffic: wheel load ``axle_load_t``·g/2 (a wheelset carrying it, or one of the car models in
-    ``vehicle``), ``speed_kmh``, ``axle_passes_per_year``, ``steps_per_year`` planning periods a year (each
-    step runs one dynamic pass and advances the settlement by axle_passes_per_year/steps_per_year cycles),
-    ``horizon_years`` (the episode is truncated there).
-
-    Settlement: ``law`` and ``law_params`` (see :data:`trackenv.physics.settlement.LAWS`). Default: Shenton's
-    power-plus-linear law with the force exponent of Hettler (1.6): a log law (the paper's) saturates and a
-    track following it would need almost no maintenance within a planning horizon, while real track keeps
-    degrading roughly linearly after consolidation; K1 = 0.05 mm (a third of the law's default) keeps the
-    consolidation after tamping to about 0.7 mm in the first quarter at 50 kN, so that the ballast-condition
-    variability does not rebuild a tamped section's irregularity within one period **[assumption]**.
-    Tamping: ``tamping`` (a dict of :class:`TampingModel` fields); default reference "smoothing": the
-    machine's chord rests on the neighbouring track, so a section is not lifted above its settled neighbours
-    (lifting it back to the design line would leave steps at its ends, which the D1 measure sees).
-
-    Costs (k€): ``mobilisation_cost`` per campaign (a step with any tamping), ``section_tamping_cost`` per
-    section tamped, ``geometry_cost_per_section_year`` times (SD/SD_alert)² per section and year (poor ride,
-    speed restrictions, faster wear), and per section and step at or above a limit ``alert_cost``,
-    ``intervention_cost``, ``immediate_action_cost`` (a large penalty: the line must be closed or slowed).
-    Quality limits: EN 13848-5 style table (``limits``, a dict of :class:`QualityLimits` fields, default
-    :meth:`QualityLimits.en13848`) at ``speed_kmh``; the SD alert value applies to our short sections as is.
-
-    ``min_steps_between_tampings``: a section tamped in the last k steps cannot be tamped again (masked).
-
-    ``dt``: time step of the passes [s], or "auto" (default): the coarsest step that keeps peak forces within
-    0.5 % of dt = 1e-4 s (the accuracy contract of :mod:`trackenv.physics.timestep`, whose bounds apply).
-    """
-
-    track_length_m: float = 60.0
-    n_sections: int = 6
-    sleeper_spacing_m: float = 0.6
-    ballast_stiffness_cv: float = 0.15
-    ballast_stiffness_correlation_m: float = 1.2
-    transition_probability: float = 0.3
-    transition_stiffness_ratio: float = 2.0
-    transition_position: tuple = (0.2, 0.8)
-    voided_sleepers_mean: float = 0.3
-    voided_residual_support: float = 0.05
-    settlement_rate_cv: float = 0.35
-    settlement_rate_correlation_m: float = 3.0
-    initial_quality: str = "low"
-    vehicle: str = "wheelset"
-    axle_load_t: float = 20.0
-    speed_kmh: float = 100.0
-    axle_passes_per_year: float = 2.0e6
-    steps_per_year: int = 4
-    horizon_years: float = 10.0
-    law: str = "shenton"
-    law_params: tuple = (("K1", 0.5e-4), ("force_exponent", 1.6))
-    tamping: tuple = (("reference", "smoothing"),)
-    mobilisation_cost: float = 10.0
-    section_tamping_cost: float = 2.0
-    geometry_cost_per_section_year: float = 4.0
-    alert_cost: float = 0.5
-    intervention_cost: float = 3.0
-    immediate_action_cost: float = 50.0
-    limits: tuple = ()
-    min_steps_between_tampings: int = 1
-    dt: float | str = "auto"
-
-    agent_action_types = ("multibinary", "discrete", "ranked")
-    _INTERVENTION_COST_KEYS = ("tamping",)
-    _CAMPAIGN_COST_FIELD = "mobilisation_cost"
-    _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("intervention", 2, "intervention_cost"),
-                          ("immediate_action", 3, "immediate_action_cost"))
-
-    def __post_init__(self) -> None:
-        # Each check stores the value back in its canonical type (a numeric string or a bool is refused).
-        c, ci = partial(check_field, self), partial(check_int_field, self)
-        c("track_length_m", low=30.0, high=2000.0)
-        # the sleeper spacings of ballasted track in service (the D1 filter and the sections assume one)
-        c("sleeper_spacing_m", low=0.3, high=1.0)
-        ci("n_sections", low=1, high=64)
-        if self.n_sleepers < 3 * self.n_sections:
-            raise ValueError("n_sections must leave at least 3 sleepers per section")
-        c("ballast_stiffness_cv", low=0.0, high=1.0)
-        c("ballast_stiffness_correlation_m", low=0.0, high=100.0)
-        c("transition_probability", low=0.0, high=1.0)
-        c("transition_stiffness_ratio", low=0.2, high=10.0)
-        check_range_field(self, "transition_position", low=0.0, high=1.0, strict=True)
-        c("voided_sleepers_mean", low=0.0, high=10.0)
-        c("voided_residual_support", low=0.0, high=1.0)
-        c("settlement_rate_cv", low=0.0, high=2.0)
-        c("settlement_rate_correlation_m", low=0.0, high=100.0)
-        check_choice("initial_quality", self.initial_quality, ("low", "high"))
-        check_choice("vehicle", self.vehicle, VEHICLES)
-        c("axle_load_t", low=1.0, high=40.0)
-        c("speed_kmh", low=5.0, high=300.0)
-        c("axle_passes_per_year", low=1.0, high=1e8)
-        ci("steps_per_year", low=1, high=52)
-        c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
-        self._check_models()
-        for name in (
-            "mobilisation_cost",
-            "section_tamping_cost",
-            "geometry_cost_per_section_year",
-            "alert_cost",
-            "intervention_cost",
-            "immediate_action_cost",
-        ):
-            c(name, low=0.0, high=1e9)
-        ci("min_steps_between_tampings", low=0, high=100)
-        dt = check_dt_option(self.dt)
-        object.__setattr__(self, "dt", dt)
-        # the dynamics' own bound on the time steps of a pass, read here so that the config refuses what a
-        # step could not simulate: the leading axle runs from the vehicle's span through the approach zone
-        # and the evaluated track to TrackDegradation.pass_end_position; with dt="auto" a pass that loses
-        # contact is rerun at the reference step, so the finer of the two counts
-        system = self.make_vehicle().system()
-        track = Track.realistic(30.0)
-        finest = (
-            min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
-            if isinstance(dt, str)
-            else dt
-        )
-        end = TrackDegradation.pass_end_position(self.track_length_m, track.sleeper_spacing, system.span)
-        try:
-            check_time_steps(end - system.span, self.speed, finest)
-        except ValueError as e:
-            raise ValueError(f"track_length_m, speed_kmh and dt: {e}") from None
-
-    @classmethod
-    def coerce(cls, config: TampingEnvConfig | dict | None) -> TampingEnvConfig:
-        """A config from None (the defaults), a dict (validated) or a config; anything else raises."""
-        if config is None:
-            return cls()
-        if isinstance(config, dict):
-            return cls.from_dict(config)
-        if not isinstance(config, cls):
-            raise ValueError(f"config must be a TampingEnvConfig or dict, got {type(config).__name__}")
-        return config
-
-    # derived
-    @property
-    def n_sleepers(self) -> int:
-        return int(round(self.track_length_m / self.sleeper_spacing_m)) + 1  # as Track.realistic counts them
-
-    @property
-    def horizon_steps(self) -> int:
-        return int(round(self.horizon_years * self.steps_per_year))
-
-    @property
-    def cycles_per_step(self) -> float:
-        return self.axle_passes_per_year / self.steps_per_year
-
-    # Derived objects are built once per config (it is frozen, so they cannot go stale), not once per step.
-    @cached_property
-    def band_limits(self):
-        """The quality limits of the speed band of ``speed_kmh``."""
-        return self.quality_limits.for_speed(self.speed)
-
-    def make_vehicle(self):
-        wheel_load = self.axle_load_t * 1000.0 * GRAVITY / 2
-        if self.vehicle == "wheelset":
-            return Wheelset(mass=1800.0, static_load=max(wheel_load - 900.0 * GRAVITY, 0.0))
-        return getattr(Car, self.vehicle)()
 
 
 def check_range_field(obj: object, name: str, *, low: float, high: float, strict: bool = False) -> tuple[float, float]:

@@ -1,18 +1,18 @@
 """The Gymnasium layer of every trackenv problem, written once: :class:`TrackEnv` (one episode) and
 :class:`TrackVectorEnv` (many, stepped together), both thin layers over the problem's episode engine.
 
-An engine (:class:`~trackenv.envs.episode.TrackEpisodes` for the 60 m track,
-:class:`~trackenv.envs.line_episode.LineBatch` for the line; :func:`~trackenv.envs.problems.problem_of` says
-which) holds the episodes of its rows and knows the rules of a step; the env layer owns what Gymnasium asks:
-spaces, seeding, decoding and checking actions, masks, the episode's end, rendering and the planning state
-API. The single env is an engine of one row driven by the env's own generator; the vector env
+The engine (:class:`~trackenv.envs.line_episode.LineBatch`, which :func:`~trackenv.envs.problems.problem_of`
+names for the config) holds the episodes of its rows and knows the rules of a step; the env layer owns what
+Gymnasium asks: spaces, seeding, decoding and checking actions, masks, the episode's end, rendering and the
+planning state API. The single env is an engine of one row driven by the env's own generator; the vector env
 (:class:`~trackenv.envs.batched.BatchedVectorEnv`'s conventions: both autoreset modes, Gymnasium's info layout)
 one row per env, its physics in one batched call. So a row of the vector env gives bit for bit what the single
 env gives for the same seed and actions, whatever the problem.
 
-The registered ids use the named subclasses, which carry each problem's spec in their docstrings:
-:class:`~trackenv.envs.tamping.TampingEnv` and :class:`~trackenv.envs.vector.TampingVectorEnv` (the 60 m
-track), :class:`~trackenv.envs.line.TampingLine` and :class:`~trackenv.envs.line.TampingLineVectorEnv`.
+The registered ids use the named subclasses, which carry the spec in their docstrings:
+:class:`~trackenv.envs.line.TampingLine` and :class:`~trackenv.envs.line.TampingLineVectorEnv` (the line and
+every preset), :class:`~trackenv.envs.tamping.TampingEnv` and :class:`~trackenv.envs.vector.TampingVectorEnv`
+(the 60 m track).
 """
 
 from __future__ import annotations

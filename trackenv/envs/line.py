@@ -42,10 +42,11 @@ class TampingLineVectorEnv(TrackVectorEnv):
     ``render_mode="rgb_array"``: :meth:`render` draws the first line."""
 
     def __init__(self, num_envs: int = 4, config: LineConfig | dict | str | None = None, *,
-                 scenario: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+                 scenario: str | None = None, action_type: str = "multibinary",
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
                  render_mode: str | None = None, **overrides: Any) -> None:
-        super().__init__(num_envs, line_config(config, scenario, overrides), autoreset_mode=autoreset_mode,
-                         render_mode=render_mode)
+        super().__init__(num_envs, line_config(config, scenario, overrides), action_type=action_type,
+                         autoreset_mode=autoreset_mode, render_mode=render_mode)
 
     @property
     def batch(self) -> LineBatch | None:
@@ -78,26 +79,13 @@ class TampingLine(TrackEnv):
     ``trackenv/TampingLineSmall-v0``    6         3         tests and quick studies
     ``trackenv/TampingLine-v0``         12        6         the default line
     ``trackenv/TampingLineHard-v0``     24        4         more zones and hidden spots, budget 60 k€/year
-    ``trackenv/Tamping-v1``             6         6         the 60 m track (below)
+    ``trackenv/TampingLineLong-v0``     250       25        50 km
+    ``trackenv/Tamping-v1``             6         6         the 60 m track: :class:`~trackenv.envs.tamping.TampingEnv`
     ==================================  ========  ========  ================================================
 
-    **The 60 m track** (``trackenv/Tamping-v1``, scenario ``"track60"``) is the same engine with one physics
-    segment of 60 m that carries six 10 m sections (``sections_per_segment=6``): the sections share one pass,
-    so a section feels its neighbours through the rail; tamping a section lifts its sleepers to the chord
-    through the untamped neighbours, ramped in and out over 3 sleepers, and restarts consolidation on them only.
-    One wheelset type (20 t axles, 2 million axle passes a year = 40 MGT), a stiffness transition (ratio 2, in
-    the middle) on 30 % of the tracks, on average 0.3 hanging sleepers, no switches or wet spots; the track is
-    measured without error after every step, and the observation adds the level and the wheel/rail force over
-    every sleeper bay (``profiles``: ``level`` and ``contact_force``, shape (1, 101)). Costs per 10 m section:
-    10 k€ per campaign, 2 k€ per section tamped, 0.5 / 3 / 50 k€ per section-step in the alert class, at the
-    intervention limit and at the immediate-action limit, 4 k€ per section-year at the alert SD. It supersedes
-    ``trackenv/Tamping-v0`` (its own engine, kept while the agents of the 60 m track move over): same track,
-    traffic, costs and horizon, but a section-level rate factor of its own draw, the line's random fields
-    and tamping model, the transition in the middle instead of anywhere in 20-80 % of the track, and sections
-    last tamped 0-2 years before the start.
-
     **Action space.** ``MultiBinary(n_sections)``: 1 = tamp this section in this step's campaign (one
-    possession per step). Sections tamped within ``min_steps_between_tampings`` steps are masked
+    possession per step); or, with ``action_type="discrete"``, ``Discrete(n_sections + 1)``: 0 = nothing,
+    k = tamp section k. Sections tamped within ``min_steps_between_tampings`` steps are masked
     (:meth:`action_masks`) and dropped. More than ``capacity`` sections, or a campaign over the remaining
     annual budget: with ``over_capacity="clip"`` (default; the checkers sample unconstrained actions) the
     allowed sections with the worst *measured* SD are kept and ``info["clipped"]`` is True; with
@@ -122,6 +110,8 @@ class TampingLine(TrackEnv):
 
     The true state is in ``info``: ``section_sd_m``, ``section_peak_m``, ``section_class`` (0 OK, 1 alert,
     2 intervention, 3 immediate action, EN 13848-5 style at 100 km/h), ``wet_spot_active``, ``rate_factor``.
+    A value beyond its bound is clipped in the observation, never silently: ``info["observation_clipped"]``
+    counts them.
     ``info["section_costs"]``: each section's own costs of the step (k€: its tamping or renewal, geometry,
     speed restriction, immediate action); with the line's possession they add up to the step's cost (a
     learner can credit each section's choice with its own costs).
@@ -134,7 +124,7 @@ class TampingLine(TrackEnv):
 
     **Episode end.** No terminal state; truncation at the horizon (default 10 years = 40 steps), enforced:
     ``step`` after the horizon raises RuntimeError until ``reset``; ``reset`` refuses a seed that is not a
-    non-negative integer and any ``options`` key (it takes none), as ``Tamping-v0`` does.
+    non-negative integer and any ``options`` key (it takes none).
 
     **Vector env.** ``gym.make_vec(id, num_envs=n, vectorization_mode="vector_entry_point")`` builds
     :class:`TampingLineVectorEnv` (every segment of every line in one batched pass per vehicle type), with the
@@ -160,12 +150,13 @@ class TampingLine(TrackEnv):
     arrays, as ``SyncVectorEnv`` gives it, where it was an object array of per-line dicts); the settlement's
     Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
     no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance);
-    ``info["section_costs"]``; lines from files (``line=``; a line without one is drawn as before, bit for bit).
+    ``info["section_costs"]``; ``info["observation_clipped"]``; lines from files (``line=``; a line without one is
+    drawn as before, bit for bit).
     """
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,
-                 render_mode: str | None = None, **overrides: Any) -> None:
-        super().__init__(line_config(config, scenario, overrides), render_mode=render_mode)
+                 action_type: str = "multibinary", render_mode: str | None = None, **overrides: Any) -> None:
+        super().__init__(line_config(config, scenario, overrides), action_type=action_type, render_mode=render_mode)
 
     @property
     def batch(self) -> LineBatch | None:

@@ -18,8 +18,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..physics._checks import check_bool, check_choice, check_field, check_int_field
-from ..physics.timestep import check_dt_option
+from ..physics._checks import check_bool, check_choice, check_field, check_int_field, check_time_steps
+from ..physics.contact import HertzContact
+from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
+from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
 from .config import ConfigBase, bounded_by, check_range_field
 
@@ -27,6 +29,8 @@ if TYPE_CHECKING:
     from .line_file import LineDescription
 
 SLEEPER_SPACING_M = 0.6
+#: sleepers of the approach (and of the exit) zone added to each end of a segment in its passes
+APPROACH_SLEEPERS = 10
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
 #: The fields a line file sets (``line``): its number of sections, their length and the line's traffic.
@@ -162,6 +166,7 @@ class LineConfig(ConfigBase):
     dt: float | str = "auto"
     line: LineDescription | None = None
 
+    agent_action_types = ("multibinary", "discrete", "ranked")
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
     _CAMPAIGN_COST_FIELD = "possession_cost"
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("speed_restriction", 2, "speed_restriction_cost"),
@@ -169,7 +174,7 @@ class LineConfig(ConfigBase):
 
     def __post_init__(self) -> None:
         self._take_line()
-        # each check stores the value back in its canonical type, as TampingEnvConfig does
+        # each check stores the value back in its canonical type
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
         c("section_length_m", low=5.0, high=1000.0)
@@ -224,6 +229,22 @@ class LineConfig(ConfigBase):
         ci("min_steps_between_tampings", low=0, high=100)
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
         object.__setattr__(self, "dt", check_dt_option(self.dt))
+        self._check_pass_time_steps()
+
+    def _check_pass_time_steps(self) -> None:
+        """The dynamics' own bound on the time steps of a pass (``MAX_TIME_STEPS``), read here so that the config
+        refuses what a step could not simulate: each vehicle type's pass over a segment runs from the vehicle's
+        span to the end of the modelled track (:meth:`pass_length_m`); with dt="auto" a pass that loses contact
+        is rerun at the reference step, so the finer of the two counts."""
+        track = Track.realistic(30.0)  # the sleeper spacing and supports the auto step reads
+        for vehicle in self.vehicles():
+            system = vehicle.system()
+            finest = (min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
+                      if isinstance(self.dt, str) else self.dt)
+            try:
+                check_time_steps(self.pass_length_m(system.span), self.speed, finest)
+            except ValueError as e:
+                raise ValueError(f"segment_length_m, speed_kmh and dt: {e}") from None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -303,6 +324,12 @@ class LineConfig(ConfigBase):
     def horizon_steps(self) -> int:
         return int(round(self.horizon_years * self.steps_per_year))
 
+    def pass_length_m(self, span_m: float = 0.0) -> float:
+        """How far the leading axle of a vehicle of axle span ``span_m`` [m] travels in a pass over a segment [m]:
+        from the span to the end of the modelled track, the segment with :data:`APPROACH_SLEEPERS` sleepers
+        more at each end (a wheelset has no span)."""
+        return (self.n_sleepers - 1 + 2 * APPROACH_SLEEPERS) * SLEEPER_SPACING_M - span_m
+
     @property
     def section_tamping_cost(self) -> float:
         return self.tamping_cost_per_m * self.section_length_m
@@ -334,6 +361,9 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "default": {},
     "hard": {"n_sections": 24, "capacity": 4, "wet_spot_probability": 0.25, "transition_probability": 0.2,
              "switch_probability": 0.12, "annual_budget": 60.0},
+    # 50 km: 250 sections of 200 m; a quarter's possessions cover 25 sections (5 km, e.g. a few nights at a
+    # tamper's 0.5-2.2 km/h) [assumption]; otherwise the default line's distributions and economics
+    "long": {"n_sections": 250, "capacity": 25},
     # the 60 m track (trackenv/Tamping-v1): one 60 m segment of six 10 m sections, one wheelset type (20 t
     # axles, 2 million axle passes a year), measured without error after every step, with the level and the
     # wheel/rail force per sleeper in the observation; its costs per 10 m section

@@ -35,14 +35,13 @@ from ..physics.geometry import (
 from ..physics.settlement import implicit_settlement_step
 from ..physics.tamping import restored_level
 from ..physics.track import Track
-from .common import SHARED_BOUNDS, clip_observation
+from .common import SHARED_BOUNDS, clip_observation, clipped_values
 from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
 from .info import step_info
-from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
+from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
-APPROACH_SLEEPERS = 10
 
 
 def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
@@ -707,10 +706,11 @@ class LineBatch:
         return {k: np.stack([o[k] for o in obs]) for k in keys}
 
     def frame(self, b: int, last_info: dict) -> np.ndarray:
-        """An RGB picture of line ``b`` (:func:`trackenv.render.line_frame`)."""
-        from ..render import line_frame
+        """An RGB picture of line ``b``: its sections (:func:`trackenv.render.line_frame`), or, where a segment
+        carries several sections, the profiles along it (:func:`trackenv.render.segment_frame`)."""
+        from ..render import line_frame, segment_frame
 
-        return line_frame(self, b, last_info)
+        return (segment_frame if self.K > 1 else line_frame)(self, b, last_info)
 
     def reset_info(self, b: int) -> dict:
         """Line ``b``'s info at the start of its episode (no costs, nothing tamped)."""
@@ -722,21 +722,27 @@ class LineBatch:
         return int(self.step[b])
 
     # ------------------------------------------------------------------ observation and info
-    def section_entries(self, rows, step) -> dict[str, np.ndarray]:
-        """The per-section keys of the observation for the segments ``rows`` (a slice or indices) at step
-        ``step`` (per segment or one): what a planner sees of each section, float32."""
+    def _section_values(self, rows, step) -> dict[str, np.ndarray]:
+        """The per-section keys of the observation for the sections ``rows`` (a slice or indices) at step
+        ``step`` (per section or one), unclipped."""
         years = (np.asarray(step) - self.last_tamped[rows]) / self.config.steps_per_year
-        return clip_observation({
+        return {
             "section_sd": self.measured_sd[rows] * 1e3,
             "section_peak": self.measured_peak[rows] * 1e3,
             "register": self.register[rows],
             "tampings": self.tampings[rows],
             "tampings_since_renewal": self.count[rows],
             "years_since_tamping": years,
-        }, self.bounds)
+        }
 
-    def observation(self, b: int) -> dict[str, np.ndarray]:
-        """Line ``b``'s observation (the table of ``TampingLine``), clipped to :func:`line_observation_bounds`."""
+    def section_entries(self, rows, step) -> dict[str, np.ndarray]:
+        """The per-section keys of the observation for the segments ``rows`` (a slice or indices) at step
+        ``step`` (per segment or one): what a planner sees of each section, float32."""
+        return clip_observation(self._section_values(rows, step), self.bounds)
+
+    def _observed(self, b: int) -> dict[str, np.ndarray]:
+        """Line ``b``'s observed quantities, unclipped: :meth:`observation` clips them, :meth:`info` counts what
+        lies beyond the bounds."""
         c = self.config
         line = {
             "measurement_age": np.array([(self.step[b] - self.last_measured[b]) / c.steps_per_year]),
@@ -746,7 +752,11 @@ class LineBatch:
         if c.profiles:
             line["level"] = self.measured_level[self.segments(b)] * 1e3
             line["contact_force"] = self.contact_profile[self.segments(b)] / 1e3
-        return {**self.section_entries(self.rows(b), self.step[b]), **clip_observation(line, self.bounds)}
+        return {**self._section_values(self.rows(b), self.step[b]), **line}
+
+    def observation(self, b: int) -> dict[str, np.ndarray]:
+        """Line ``b``'s observation (the table of ``TampingLine``), clipped to :func:`line_observation_bounds`."""
+        return clip_observation(self._observed(b), self.bounds)
 
     def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool,
              section_costs: np.ndarray) -> dict:
@@ -758,7 +768,8 @@ class LineBatch:
             self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
             section_costs=np.asarray(section_costs, dtype=float).copy(), clipped=bool(clipped),
             section_sd_after_tamping_m=self.sd_after_tamping[r].copy(),
-            wet_spot_active=self._wet_sections(b), rate_factor=self._per_section(self.rate()[self.segments(b)], "mean"))
+            wet_spot_active=self._wet_sections(b), rate_factor=self._per_section(self.rate()[self.segments(b)], "mean"),
+            observation_clipped=clipped_values(self._observed(b), self.bounds))
 
     def _wet_sections(self, b: int) -> np.ndarray:
         """(S,) bool: line ``b``'s sections with an active wet spot (on a segment of several sections, those

@@ -3,8 +3,8 @@ observation space and which action types a config's problem has. The env layer (
 every harness (evaluation, training, search) ask here and run every problem the same way, without switching on
 which one they have.
 
-Today there are two families: the 60 m track (:class:`~trackenv.envs.config.TampingEnvConfig`,
-``trackenv/Tamping-v0``) and the line (:class:`~trackenv.envs.line_config.LineConfig`, ``trackenv/TampingLine*``).
+Today there is one family, :class:`~trackenv.envs.line_config.LineConfig` (every registered id: the lines and
+the 60 m track are its presets) over the one engine :class:`~trackenv.envs.line_episode.LineBatch`.
 """
 
 from __future__ import annotations
@@ -16,16 +16,13 @@ from typing import TYPE_CHECKING, Any
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from .config import TampingEnvConfig
-from .episode import TrackEpisodes
-from .episode import observation_space as track_observation_space
 from .line_config import SCENARIOS, LineConfig
 from .line_episode import LineBatch, line_observation_space
 
 if TYPE_CHECKING:
     from .env import TrackVectorEnv
 
-ProblemConfig = TampingEnvConfig | LineConfig
+ProblemConfig = LineConfig
 
 
 @dataclass(frozen=True)
@@ -39,8 +36,7 @@ class Problem:
 
 
 _PROBLEMS: dict[type, Problem] = {
-    TampingEnvConfig: Problem(TrackEpisodes, track_observation_space, ("multibinary", "discrete")),
-    LineConfig: Problem(LineBatch, line_observation_space, ("multibinary",)),
+    LineConfig: Problem(LineBatch, line_observation_space, ("multibinary", "discrete")),
 }
 
 
@@ -54,15 +50,18 @@ def problem_of(config: Any) -> Problem:
 
 
 def problem_config(value: Any = None) -> ProblemConfig:
-    """A problem's config from a config of either family (returned as is), a line scenario name (``"small"``,
-    ``"default"``, ``"hard"``), a dict of :class:`TampingEnvConfig` fields, or None (the 60 m default)."""
+    """A problem's config from a config (returned as is), a preset name (``"small"``, ``"default"``, ``"hard"``,
+    ``"track60"``), a dict of :class:`~trackenv.envs.line_config.LineConfig` fields, or None (the 60 m track,
+    ``"track60"``: the default of the trainers and harnesses that take no env)."""
     if type(value) in _PROBLEMS:
         return value
     if isinstance(value, str):
         if value not in SCENARIOS:
             raise ValueError(f"unknown scenario {value!r}; known: {sorted(SCENARIOS)}")
         return LineConfig.coerce(value)
-    return TampingEnvConfig.coerce(value)
+    if value is None:
+        return LineConfig.coerce("track60")
+    return LineConfig.coerce(value)
 
 
 def make_vector_env(config: ProblemConfig, num_envs: int, *, action_type: str = "multibinary",

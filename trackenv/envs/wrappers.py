@@ -89,10 +89,11 @@ def n_sections_of(env: gym.Env | VectorEnv) -> int:
 
 def section_keys(space: spaces.Space, n_sections: int) -> list[str]:
     """The keys of a Dict observation space that describe sections (shape ``(n_sections, ...)``) or the whole
-    problem (shape ``(1,)``, e.g. ``time``), in the space's order; per-sleeper arrays are left out."""
+    problem (shape ``(1,)``, e.g. ``time``), in the space's order; per-sleeper arrays are left out, also those of
+    one segment that carries every section (``level`` of the 60 m track, shape ``(1, n_sleepers)``)."""
     if not isinstance(space, spaces.Dict):
         raise TypeError(f"need a Dict observation space, got {space}")
-    return [k for k, s in space.spaces.items() if s.shape and s.shape[0] in (n_sections, 1)]
+    return [k for k, s in space.spaces.items() if s.shape and (s.shape[0] == n_sections or s.shape == (1,))]
 
 
 def _masks(env) -> np.ndarray:
@@ -210,10 +211,10 @@ def _mask_size(space: spaces.Space) -> int:
     raise TypeError(f"no action mask for {space}")
 
 
-def make_ranked(env_id: str = "trackenv/Tamping-v0", *, flat: bool = False, **kwargs: Any) -> gym.Env:
+def make_ranked(env_id: str = "trackenv/Tamping-v1", *, flat: bool = False, **kwargs: Any) -> gym.Env:
     """A MultiBinary env (``gym.make(env_id, **kwargs)``, the tamping env by default) learnt in ranked actions
     on the section-level observation; ``flat=True`` flattens that to one ``Box`` (default encoders of RLlib
-    and CleanRL). The entry point of ``trackenv/TampingRanked-v0`` and ``trackenv/TampingRankedFlat-v0``."""
+    and CleanRL). The entry point of ``trackenv/TampingRanked-v1`` and ``trackenv/TampingRankedFlat-v1``."""
     env = SectionObservation(RankedActions(gym.make(env_id, **kwargs)))
     return gym.wrappers.FlattenObservation(env) if flat else env
 
@@ -281,7 +282,7 @@ class SectionVectorObservation(VectorWrapper):
         return _vector_masks(self.env)
 
 
-def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v0", flat: bool = False,
+def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v1", flat: bool = False,
                        **kwargs: Any) -> VectorEnv:
     """The native vector env of ``env_id`` (batched physics; Gymnasium's SyncVectorEnv for an id without a
     vector entry point, or whose vector env does not take the ``autoreset_mode`` asked for) in ranked actions

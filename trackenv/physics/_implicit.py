@@ -13,7 +13,7 @@ agree and that the inverse matches the numpy reference.
 **The implicit step.** :func:`trackenv.physics.settlement.implicit_settlement_step` solves, row by row,
 Δ = u(F0 + S·Δ, N + ΔN) − u_now by Newton's method. Each iteration evaluates the law (with curve shifting) on
 every sleeper twice and solves a banded system: in numpy that is ~40 calls on arrays of a hundred numbers, 4.1 ms
-per ``Tamping-v0`` step against 0.8 ms compiled. Here the whole step runs compiled, the rows of a batch spread
+per 60 m track step against 0.8 ms compiled. Here the whole step runs compiled, the rows of a batch spread
 over numba's threads, with the same iteration: the same forward-difference Jacobian, the same banded S, the same
 stopping rule, the same clipping.
 

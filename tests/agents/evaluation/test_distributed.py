@@ -1,5 +1,5 @@
 """Ray tasks for the evaluation harness: the same results as the single-process path (a local Ray, 2 CPUs), for
-the tamping problem and for the line's comparison (what `trackenv evaluate --env ... --ray` runs)."""
+the 60 m track and for the comparison of a preset (what `trackenv evaluate --env ... --ray` runs)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,16 @@ import pytest
 
 pytest.importorskip("ray")
 
-from trackenv.envs.config import TampingEnvConfig  # noqa: E402
+from trackenv.envs.line_config import scenario  # noqa: E402
 from trackenv_agents.evaluation.distributed import RayExecutor  # noqa: E402
 from trackenv_agents.evaluation.harness import evaluate_many  # noqa: E402
 from trackenv_agents.evaluation.line_compare import line_comparison  # noqa: E402
 from trackenv_agents.evaluation.tuning import tune  # noqa: E402
-from trackenv_agents.rules.tamping import NoMaintenance, Periodic, SDThreshold  # noqa: E402
+from trackenv_agents.rules.line import LineNoMaintenance, SectionThreshold, UniformPeriodic  # noqa: E402
 
-CFG = TampingEnvConfig(track_length_m=30.0, n_sections=3, horizon_years=1.0)  # 4 steps
+# the 60 m track cut to 30 m in 3 sections over 1 year: 4 steps
+CFG = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+               horizon_years=1.0)
 SEEDS = [0, 1, 2, 3, 4]
 # one episode per batch: the kernel entry that tests/conftest.py compiles, also in the one-thread Ray workers
 # (a wider batch there needs an entry of its own, minutes to compile on a fresh machine)
@@ -30,7 +32,7 @@ def executor():
 
 @pytest.mark.slow
 def test_ray_tasks_give_the_single_process_results(executor) -> None:
-    policies = [NoMaintenance(), SDThreshold(0.8)]
+    policies = [LineNoMaintenance(), SectionThreshold(threshold_mm=0.8)]
     here = evaluate_many(policies, CFG, SEEDS, batch_size=BATCH)
     there = evaluate_many(policies, CFG, SEEDS, batch_size=BATCH, executor=executor)
     for a, b in zip(here, there, strict=True):
@@ -44,8 +46,8 @@ def test_ray_tasks_give_the_single_process_results(executor) -> None:
 @pytest.mark.slow
 def test_tuning_over_ray_picks_the_same_parameters(executor) -> None:
     grid = [{"interval_years": 0.5}, {"interval_years": 0.75}]
-    here = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH)
-    there = tune(Periodic, CFG, [10, 11], grid=grid, batch_size=BATCH, executor=executor)
+    here = tune(UniformPeriodic, CFG, [10, 11], grid=grid, batch_size=BATCH)
+    there = tune(UniformPeriodic, CFG, [10, 11], grid=grid, batch_size=BATCH, executor=executor)
     assert here == there
 
 

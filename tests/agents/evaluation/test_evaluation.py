@@ -1,4 +1,4 @@
-"""The evaluation harness on a tiny config (30 m, 3 sections, 2 years = 8 steps)."""
+"""The evaluation harness on a tiny config (the 60 m track cut to 30 m, 3 sections, 2 years = 8 steps)."""
 
 from __future__ import annotations
 
@@ -9,19 +9,20 @@ import pytest
 
 from trackenv.envs.tamping import TampingEnv
 from trackenv_agents.evaluation.harness import EvaluationResult, evaluate_many, evaluate_one
-from trackenv_agents.evaluation.reporting import format_markdown, format_table
+from trackenv_agents.evaluation.line_compare import format_line_table, line_comparison
 from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_difference
-from trackenv_agents.evaluation.tamping_compare import compare
 from trackenv_agents.evaluation.tuning import tune, tune_many
-from trackenv_agents.rules.tamping import NoMaintenance, Periodic, SDThreshold
+from trackenv_agents.rules.line import LineNoMaintenance, SectionThreshold, UniformPeriodic
 
 SEEDS = [0, 1, 2, 3]
 
 
 @pytest.fixture(scope="module")
 def results(small_config) -> dict[str, EvaluationResult]:
-    """NoMaintenance and SDThreshold on SEEDS, in one batched run (chunks of 3 to exercise the chunking)."""
-    no, sd = evaluate_many([NoMaintenance(), SDThreshold(0.8)], small_config, SEEDS, batch_size=3)
+    """No maintenance and a section threshold on SEEDS, in one batched run (chunks of 3 to exercise the
+    chunking)."""
+    no, sd = evaluate_many([LineNoMaintenance(), SectionThreshold(threshold_mm=0.8)], small_config, SEEDS,
+                           batch_size=3)
     return {"no": no, "sd": sd}
 
 
@@ -36,7 +37,7 @@ def test_cost_is_minus_sum_of_rewards(results):
 
 @pytest.mark.slow
 def test_same_seeds_identical_results_whatever_the_batching(results, small_config):
-    again = evaluate_one(SDThreshold(0.8), small_config, SEEDS, batch_size=4)
+    again = evaluate_one(SectionThreshold(threshold_mm=0.8), small_config, SEEDS, batch_size=4)
     first = results["sd"]
     np.testing.assert_array_equal(again.cost, first.cost)
     np.testing.assert_array_equal(again.section_tampings, first.section_tampings)
@@ -48,7 +49,7 @@ def test_same_seeds_identical_results_whatever_the_batching(results, small_confi
 def test_matches_single_env_rollout(results, small_config):
     """The harness's episode for seed 2 is the one TampingEnv.reset(seed=2) plays."""
     env = TampingEnv(small_config)
-    policy = SDThreshold(0.8)
+    policy = SectionThreshold(threshold_mm=0.8).bind(small_config)
     obs, _ = env.reset(seed=2)
     total, tamped = 0.0, 0
     for _ in range(small_config.horizon_steps):
@@ -75,7 +76,7 @@ def test_summary_fields_and_ci(results, small_config):
     for key in ("policy", "params", "n_episodes", "mean_cost", "ci_low", "ci_high", "tampings_per_km_year",
                 "immediate_action_exceedances", "immediate_action_exceedances_mean", "mean_final_sd_mm"):
         assert key in s
-    assert s["policy"] == "sd_threshold" and s["params"] == {"threshold_mm": 0.8}
+    assert s["policy"] == "section-threshold" and s["params"] == {"threshold_mm": 0.8}
     assert s["ci_low"] <= s["mean_cost"] <= s["ci_high"]
     r = results["sd"]
     expected = r.section_tampings.mean() / (small_config.n_sections * small_config.horizon_years)
@@ -101,19 +102,10 @@ def test_paired_difference(results):
     assert z["mean_difference"] == z["ci_low"] == z["ci_high"] == 0.0
 
 
-@pytest.mark.slow  # uses the 5 s fixture
-def test_tables(results):
-    rows = [r.summary() for r in results.values()]
-    txt = format_table(rows)
-    assert "sd_threshold" in txt and "threshold_mm=0.8" in txt and len(txt.splitlines()) == 4
-    md = format_markdown(rows)
-    assert md.startswith("| policy") and len(md.splitlines()) == 4
-
-
 @pytest.mark.slow
 def test_tune_returns_grid_member(small_config):
     grid = [{"threshold_mm": 0.8}, {"threshold_mm": 50.0}]
-    out = tune(SDThreshold, small_config, train_seeds=[10, 11], grid=grid)
+    out = tune(SectionThreshold, small_config, train_seeds=[10, 11], grid=grid)
     assert out["best_params"] in grid
     assert [row["mean_cost"] for row in out["table"]] == sorted(row["mean_cost"] for row in out["table"])
     assert out["best_mean_cost"] == out["table"][0]["mean_cost"]
@@ -121,29 +113,48 @@ def test_tune_returns_grid_member(small_config):
 
 @pytest.mark.slow
 def test_tune_many_keeps_per_episode_costs(small_config):
-    out = tune_many([SDThreshold], small_config, [10, 11], batch_size=4, progress=False)
+    out = tune_many([SectionThreshold], small_config, [10, 11], batch_size=4, progress=False)
     table = out[0]["table"]
-    assert len(table) == len(SDThreshold.param_grid())
+    assert len(table) == len(SectionThreshold.param_grid())
     for row in table:
         assert len(row["episode_costs"]) == 2
         assert np.mean(row["episode_costs"]) == pytest.approx(row["mean_cost"])
 
 
 @pytest.mark.slow
-def test_compare_sorted_and_tunes(monkeypatch, small_config):
-    monkeypatch.setattr(Periodic, "param_grid", classmethod(lambda cls: [{"interval_years": 1.0},
-                                                                         {"interval_years": 0.5}]))
-    rows = compare([NoMaintenance, Periodic, SDThreshold(0.8)], small_config, test_seeds=[0, 1], train_seeds=[10])
+def test_comparison_on_the_60m_track_is_sorted_and_tunes(monkeypatch, tmp_path, small_coarse_config):
+    """`trackenv evaluate --env trackenv/Tamping-v1 --retune` on the cut track: the rules tuned now on the
+    training seeds (each over its grid, here two points), scored with no maintenance on the held-out seeds,
+    cheapest first, the table one row a policy."""
+    grids = {UniformPeriodic: [{"interval_years": 1.0, "offset_years": 0.0},
+                               {"interval_years": 0.5, "offset_years": 0.0}],
+             SectionThreshold: [{"threshold_mm": 0.8}, {"threshold_mm": 50.0}]}
+    for cls, grid in grids.items():
+        monkeypatch.setattr(cls, "param_grid", classmethod(lambda c, g=grid: g))
+    cut = {k: getattr(small_coarse_config, k) for k in ("n_sections", "segment_length_m", "sections_per_segment",
+                                                         "capacity", "horizon_years", "dt")}
+    out = line_comparison("trackenv/Tamping-v1", seeds=[0, 1], rules=["no-maintenance", "uniform-periodic",
+                                                                      "section-threshold"],
+                          n_train=1, retune=True, batch_size=4, progress=False, out_dir=str(tmp_path), **cut)
+    assert out["scenario"] == "track60" and out["config"] == small_coarse_config.to_dict()
+    assert out["tuned_from"] == "tuned now on 1 seeds"
+    rows = out["results"]
     costs = [r["mean_cost"] for r in rows]
     assert costs == sorted(costs)
-    assert {r["policy"] for r in rows} == {"no_maintenance", "periodic", "sd_threshold"}
-    periodic = next(r for r in rows if r["policy"] == "periodic")
-    assert periodic["params"]["interval_years"] in (1.0, 0.5)
+    assert {r["policy"] for r in rows} == {"no-maintenance", "uniform-periodic", "section-threshold"}
+    for r in rows:
+        assert r["n_episodes"] == 2 and r["ci_low"] <= r["mean_cost"] <= r["ci_high"]
+        assert r["params"] in [{}, *(p for g in grids.values() for p in g)]
+        assert (r["vs_best"] is None) == (r is rows[0])
+    table = format_line_table(out).splitlines()
+    assert sum(line.split()[0] in {r["policy"] for r in rows} for line in table[2:]) == 3
+    assert out["best_rule"] == rows[0]["policy"]
 
 
 def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
     from trackenv_agents import evaluation
 
     with pytest.warns(DeprecationWarning, match="evaluate_one"):
-        old = evaluation.evaluate_policy(SDThreshold(0.8), small_config, SEEDS[:1])
-    np.testing.assert_array_equal(old.cost, evaluate_one(SDThreshold(0.8), small_config, SEEDS[:1]).cost)
+        old = evaluation.evaluate_policy(SectionThreshold(threshold_mm=0.8), small_config, SEEDS[:1])
+    np.testing.assert_array_equal(old.cost,
+                                  evaluate_one(SectionThreshold(threshold_mm=0.8), small_config, SEEDS[:1]).cost)

@@ -230,7 +230,7 @@ def _without_timings(records: list[dict]) -> list[dict]:
 
 @pytest.mark.slow
 def test_sb3_run_killed_with_sigkill_resumes_from_its_checkpoint(tmp_path):
-    """`trackenv train` on the 60 m track (Tamping-v0, 2 envs, a roll-out of 16 steps, a checkpoint at every
+    """`trackenv train` on the 60 m track (Tamping-v1, 2 envs, a roll-out of 16 steps, a checkpoint at every
     roll-out's start, a held-out evaluation every 64 steps) is killed with SIGKILL once it has checkpointed past
     its first evaluation; `trackenv train --resume` continues from that checkpoint (not from 0) to the total
     and ends with the model, the evaluations and the best model of a run that was never interrupted (run

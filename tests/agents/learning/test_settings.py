@@ -28,7 +28,8 @@ def test_the_shipped_entries_are_valid_settings():
     from trackenv_agents.learning.tamping import load_hyperparams
 
     tamping = TampingSettings.from_dict(load_hyperparams())
-    assert tamping.action_type == "ranked" and tamping.net_arch == (64, 64) and tamping.warm_start_rule == "periodic"
+    assert tamping.action_type == "ranked" and tamping.net_arch == (64, 64)
+    assert tamping.warm_start_rule == "uniform-periodic"
     assert tamping.vf_coef == 0.5  # not in the file: the algorithm's default
     line = LineSettings.from_dict(load_hyperparams(env_id=LINE_ENV_ID, schema=LINE_ZOO))
     assert line.algo == "maskable_ppo" and line.advisor == "grouped-threshold" and line.iterations >= 1
@@ -94,7 +95,7 @@ def test_the_ranges_read_as_intervals():
     assert r["iterations"] == "an integer in [0, 1000]"
     assert TampingSettings.ranges()["clip_range"] == "a number in (0, inf)"
     assert TampingSettings.ranges()["target_kl"] == "a number in (0, inf) or None"
-    assert "periodic" in TampingSettings.ranges()["warm_start_rule"]
+    assert "uniform-periodic" in TampingSettings.ranges()["warm_start_rule"]
 
 
 def test_trainers_check_their_settings_before_any_work(tmp_path):

@@ -1,24 +1,21 @@
-"""The SB3 adapter, a learning smoke test and the shipped policy."""
+"""The SB3 adapter, learning smoke tests and a trained policy's answers."""
 
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
 
+from trackenv.envs.line_config import LineConfig  # noqa: E402
 from trackenv.envs.tamping import TampingEnv  # noqa: E402
 from trackenv_agents.evaluation.harness import evaluate_one  # noqa: E402
 from trackenv_agents.learning.sb3_vec import TampingSB3VecEnv  # noqa: E402
-from trackenv_agents.learning.tamping import (  # noqa: E402
-    DEFAULT_PRETRAINED,
-    load_trained,
-    stats_path,
-    train,
-)
-from trackenv_agents.rules.tamping import RandomPolicy  # noqa: E402
+from trackenv_agents.learning.tamping import load_trained, stats_path, train  # noqa: E402
+from trackenv_agents.rules.base import RandomPolicy  # noqa: E402
 
 
 @pytest.mark.parametrize("bootstrap_at_horizon", [False, True])
@@ -27,22 +24,27 @@ def test_adapter_reset_step_and_terminal_observation(bootstrap_at_horizon, small
     obs = env.reset()
     n, s = small_config.n_sleepers, small_config.n_sections
     assert set(obs) == set(env.observation_space.spaces)
-    assert obs["level"].shape == (2, n) and obs["contact_force"].shape == (2, n)
+    assert obs["level"].shape == (2, 1, n) and obs["contact_force"].shape == (2, 1, n)  # one segment of n sleepers
     assert obs["section_sd"].shape == (2, s) and obs["time"].shape == (2, 1)
     assert env.observation_space.contains({k: v[0] for k, v in obs.items()})
-    masks = env.env_method("action_masks")
-    assert len(masks) == 2 and masks[0].shape == (2 * s,) and masks[0].all()
+    masks = np.stack(env.env_method("action_masks")).reshape(2, s, 2)  # [may wait, may tamp] per section
     assert env.has_attr("action_masks")
+    assert masks[..., 0].all()
+    # a section tamped within min_steps_between_tampings steps (here: just before the episode) may not be tamped
+    recent = small_config.min_steps_between_tampings / small_config.steps_per_year
+    np.testing.assert_array_equal(masks[..., 1], obs["years_since_tamping"] > recent)
+    assert masks[..., 1].any()
+    i, j = np.argwhere(masks[..., 1])[0]
     for t in range(small_config.horizon_steps):
         action = np.zeros((2, s), dtype=np.int8)
         if t == 0:
-            action[0, 1] = 1
+            action[i, j] = 1
         obs, rewards, dones, infos = env.step(action)
         assert rewards.shape == (2,) and np.all(rewards <= 0) and len(infos) == 2
         assert isinstance(infos[0], dict) and "cost" in infos[0] and "costs" in infos[0]
         if t == 0:
-            assert infos[0]["tamped_sections"].tolist() == [False, True, False]
-            assert env.env_method("action_masks")[0].reshape(s, 2)[1].tolist() == [True, False]
+            assert infos[i]["tamped_sections"].tolist() == [k == j for k in range(s)]
+            assert env.env_method("action_masks")[i].reshape(s, 2)[j].tolist() == [True, False]
         if t < small_config.horizon_steps - 1:
             assert not dones.any() and "terminal_observation" not in infos[0]
     assert dones.all()
@@ -50,7 +52,7 @@ def test_adapter_reset_step_and_terminal_observation(bootstrap_at_horizon, small
         # the horizon ends the problem (no bootstrapping past it) unless asked to treat it as a time limit
         assert info["TimeLimit.truncated"] is bootstrap_at_horizon
         term = info["terminal_observation"]
-        assert term["time"][0] == pytest.approx(1.0) and term["level"].shape == (n,)
+        assert term["time"][0] == pytest.approx(1.0) and term["level"].shape == (1, n)
     assert np.all(obs["time"] == 0.0)  # already the next episode's first observation
     env.close()
 
@@ -79,8 +81,8 @@ def test_adapter_over_the_line_env_and_fixed_reward_scale():
     for info in infos:
         assert info["terminal_observation"]["time"][0] == pytest.approx(1.0)
         assert info["TimeLimit.truncated"] is False and "costs" in info
-    with pytest.raises(ValueError, match="multibinary"):
-        TampingSB3VecEnv(2, cfg, action_type="ranked")
+    with pytest.raises(ValueError, match="action_type must be one of"):
+        TampingSB3VecEnv(2, cfg, action_type="campaign")
     with pytest.raises(ValueError, match="scale"):
         VecScaleReward(raw, 0.0)
 
@@ -145,8 +147,8 @@ def test_maskable_ppo_runs_on_adapter(tmp_path, small_config):
 @pytest.mark.slow
 def test_ppo_learns_never_tamp_when_geometry_is_free(tmp_path, small_config):
     # Only tamping costs money: never tamping is optimal (return 0); a random policy tamps most steps.
-    cfg = small_config.replace(geometry_cost_per_section_year=0.0, alert_cost=0.0, intervention_cost=0.0,
-                       immediate_action_cost=0.0, dt=2e-4)
+    cfg = small_config.replace(geometry_cost_per_section_year=0.0, alert_cost=0.0, speed_restriction_cost=0.0,
+                               immediate_action_cost=0.0, dt=2e-4)
     hp = {"n_steps": 8, "batch_size": 32, "n_epochs": 10, "learning_rate": 3e-3, "ent_coef": 0.0,
           "net_arch": [32, 32], "gamma": 0.5, "action_type": "discrete", "keep_per_sleeper": False,
           "warm_start_rule": None}  # learning from scratch, not from a rule
@@ -174,13 +176,20 @@ def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config, 
     # the progress bar (tqdm; stable-baselines3's own needs rich, which is not installed) ran to its end
     assert "16/16" in capsys.readouterr().err
     policy = load_trained(path)
-    assert policy.action_type == "ranked"
+    assert policy.action_type == "ranked" and policy.name == "ppo"
     env = TampingEnv(cfg)
     obs, _ = env.reset(seed=0)
-    action, _ = policy.predict(obs)
+    action, state = policy.predict(obs, deterministic=True)
+    assert state is None and action.shape == (cfg.n_sections,)
     assert env.action_space.contains(np.asarray(action, dtype=np.int8))
     # the initial bias makes "tamp nothing" the likeliest choice: the deterministic answer tamps nothing
     assert not np.any(action)
+    # a batch of observations: one answer per row, each the single observation's
+    batched = {k: np.stack([v, v]) for k, v in obs.items()}
+    actions, _ = policy.predict(batched)
+    assert actions.shape == (2, cfg.n_sections)
+    np.testing.assert_array_equal(actions[0], action)
+    assert path.stat().st_size < 5 * 2**20
     evaluations = json.loads((tmp_path / "run" / "evaluations.json").read_text())
     assert evaluations and evaluations[-1]["timesteps"] >= 16
     # the finished run goes on in place to a new total: same hyper-parameters, config and held-out seeds, the step
@@ -192,25 +201,14 @@ def test_ranked_agent_trains_and_answers_in_env_actions(tmp_path, small_config, 
     assert [e["timesteps"] for e in json.loads((tmp_path / "run" / "evaluations.json").read_text())] == [8, 16, 24, 32]
     assert load_trained(more).action_type == "ranked"
     meta = json.loads((tmp_path / "run" / "train_meta.json").read_text())
-    assert meta["config"]["track_length_m"] == cfg.track_length_m and meta["hyperparams"]["n_steps"] == 8
+    assert LineConfig.coerce(meta["config"]) == cfg and meta["hyperparams"]["n_steps"] == 8
     with pytest.raises(FileNotFoundError, match="resume"):
         train(total_timesteps=8, resume=tmp_path / "missing", progress=False)
 
 
-@pytest.mark.skipif(not DEFAULT_PRETRAINED.exists(), reason="no shipped policy")
-def test_shipped_policy_predicts_valid_actions():
-    policy = load_trained()
-    assert policy.name == "ppo"
-    env = TampingEnv()
-    obs, _ = env.reset(seed=0)
-    action, state = policy.predict(obs, deterministic=True)
-    assert state is None
-    assert env.action_space.contains(np.asarray(action, dtype=np.int8))
-    batched = {k: np.stack([v, v]) for k, v in obs.items()}
-    actions, _ = policy.predict(batched)
-    assert actions.shape == (2, env.config.n_sections)
-    np.testing.assert_array_equal(actions[0], action)
-    assert DEFAULT_PRETRAINED.stat().st_size < 5 * 2**20
+def test_loading_a_missing_model_names_its_path(tmp_path):
+    with pytest.raises(FileNotFoundError, match=re.escape(f"no trained model at {tmp_path / 'model.zip'}")):
+        load_trained(tmp_path / "model.zip")
 
 
 def test_hyperparams_in_rl_zoo_form(tmp_path):
@@ -223,7 +221,7 @@ def test_hyperparams_in_rl_zoo_form(tmp_path):
     assert hp["action_type"] == "ranked" and hp["total_timesteps"] == 40960 and hp["net_arch"] == [64, 64]
     assert {k for k in hp if k in _ALGO_KEYS} >= {"n_steps", "batch_size", "learning_rate", "gamma"}
     mine = tmp_path / "mine.yml"
-    mine.write_text("trackenv/Tamping-v0:\n  learning_rate: 1.0e-4\n  n_timesteps: 512\n"
+    mine.write_text("trackenv/Tamping-v1:\n  learning_rate: 1.0e-4\n  n_timesteps: 512\n"
                     "  trackenv: {warm_start_rule: null}\n")
     assert load_hyperparams(mine) == {"learning_rate": 1e-4, "total_timesteps": 512, "warm_start_rule": None}
     with pytest.raises(ValueError, match="no entry"):

@@ -114,8 +114,8 @@ def test_cli_scores_the_given_line_policy_and_skips_a_missing_shipped_one(tmp_pa
     args = argparse.Namespace(policy="all", model=None)
     assert cli._line_policies(args) == {}
     with pytest.raises(cli.UsageError, match="no trained line policy"):
-        cli._line_policies(argparse.Namespace(policy="ppo", model=None))
-    assert cli._line_policies(argparse.Namespace(policy="heuristics", model="whatever.zip")) == {}
+        cli._line_policies(argparse.Namespace(policy="agent", model=None))
+    assert cli._line_policies(argparse.Namespace(policy="rules", model="whatever.zip")) == {}
 
 
 @pytest.mark.parametrize("name", ["small", "default", "hard"])

@@ -267,8 +267,12 @@ def test_hindsight_variants_move_drop_and_add_one_tamping():
 def test_cli_helpers():
     assert parse_seeds("3:6") == [3, 4, 5] and parse_seeds("1,4") == [1, 4]
     assert scenario_of("trackenv/TampingLineSmall-v0") == "small"
-    with pytest.raises(ValueError):
-        scenario_of("trackenv/Tamping-v0")
+    assert scenario_of("trackenv/Tamping-v1") == "track60"  # the 60 m track is a preset of the one env
+    for env_id in ("trackenv/TampingDiscrete-v1", "trackenv/TampingRanked-v1"):  # not per-section actions
+        with pytest.raises(ValueError, match="per-section actions"):
+            scenario_of(env_id)
+    with pytest.raises(ValueError, match="not a registered env id"):
+        scenario_of("trackenv/Tamping-v9")
 
 
 def test_line_comparison_of_chosen_rules_keeps_episode_costs_and_classes(tmp_path):
