@@ -219,7 +219,8 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             agents[LINE_AGENT_NAME] = str(LINE_PRETRAINED_FILE)
         elif item.endswith(".zip"):
             _existing(item, "--policies")
-            agents[Path(item).stem] = item
+            name = Path(item).stem  # its file name, or the path where that is taken
+            agents[item if name in agents or name in rule_names or name == LINE_AGENT_NAME else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
                              f"{LINE_AGENT_NAME} or the path of a trained per-section policy (.zip)")
