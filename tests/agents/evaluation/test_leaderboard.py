@@ -167,3 +167,21 @@ def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
     drop = ("seconds", "search_seconds_per_episode")
     assert ({k: v for k, v in there["bound"][ENV].items() if k not in drop}
             == {k: v for k, v in payload["bound"][ENV].items() if k not in drop})
+
+
+def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
+    """The documentation's tables are the committed leaderboard.md, which is the default command's rendering of the
+    committed leaderboard.json: its command, its default seeds and suite, and the page that includes it."""
+    from pathlib import Path
+
+    from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
+
+    root = Path(__file__).resolve().parents[3]
+    folder = root / "experiments" / "saved" / "leaderboard"
+    saved = json.loads((folder / "leaderboard.json").read_text())
+    command = "trackenv leaderboard --out experiments/saved/leaderboard"
+    assert saved["command"] == command
+    assert saved["seeds"] == {env: list(DEFAULT_SEEDS[env]) for env in DEFAULT_SUITE}
+    assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
+    page = (root / "docs" / "leaderboard.md").read_text()
+    assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page
