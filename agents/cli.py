@@ -249,7 +249,7 @@ def _stdout_to_stderr() -> Iterator[None]:
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     """`trackenv leaderboard`: every policy on every scenario of the suite, scored against the best tuned rule and
     the hindsight bound (agents/evaluation/leaderboard.py); writes DIR/leaderboard.json and DIR/leaderboard.md."""
-    from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, leaderboard
+    from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard
     from .evaluation.line_compare import parse_seeds, scenario_of
     from .rules.line import LINE_HEURISTICS
 
@@ -268,7 +268,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         with _stdout_to_stderr():
-            payload = leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
+            payload = run_leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
                                   out_dir=out, executor=executor, progress=not args.json)
     finally:
         if executor is not None:

@@ -313,7 +313,7 @@ def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):
         seen.update(kw, envs=envs)
         return {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
 
-    monkeypatch.setattr(lb, "leaderboard", fake)
+    monkeypatch.setattr(lb, "run_leaderboard", fake)
     monkeypatch.setattr(RayExecutor, "close", lambda self: None)
     assert main(["leaderboard", "--ray", "--policies", "rules", "--json", "--out", str(tmp_path)]) == 0
     assert isinstance(seen["executor"], RayExecutor) and seen["envs"] == list(lb.DEFAULT_SUITE)

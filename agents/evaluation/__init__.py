@@ -23,8 +23,8 @@ from .leaderboard import (
     bound_unavailable,
     episode_bounds,
     format_leaderboard,
-    leaderboard,
     normalised_score,
+    run_leaderboard,
 )
 from .line_compare import (
     SECTION_CLASSES,
@@ -68,6 +68,6 @@ __all__ = [
     "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
     "schedule_rows",
     # the leaderboard (.leaderboard)
-    "DEFAULT_SEEDS", "DEFAULT_SUITE", "bound_unavailable", "episode_bounds", "format_leaderboard", "leaderboard",
-    "normalised_score",
+    "DEFAULT_SEEDS", "DEFAULT_SUITE", "bound_unavailable", "episode_bounds", "format_leaderboard",
+    "normalised_score", "run_leaderboard",
 ]

@@ -46,7 +46,7 @@ from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
 __all__ = ["BOUND_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds",
-           "format_leaderboard", "leaderboard", "normalised_score"]
+           "format_leaderboard", "normalised_score", "run_leaderboard"]
 
 #: The scenarios of the default leaderboard: the three lines and the 60 m track.
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
@@ -211,7 +211,7 @@ def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: n
             "episode_costs": result.cost.tolist()}
 
 
-def leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | None = None,
+def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | None = None,
                 agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
                 out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
                 progress: bool = False, searches: Path | None = SAVED_SEARCHES, **overrides: Any) -> dict[str, Any]:

@@ -15,8 +15,8 @@ from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.leaderboard import (
     bound_unavailable,
     format_leaderboard,
-    leaderboard,
     normalised_score,
+    run_leaderboard,
 )
 from trackenv_agents.evaluation.line_hindsight import schedule_from_rows
 
@@ -76,7 +76,7 @@ def test_bound_applies_only_where_sections_are_priced_apart() -> None:
 def first(tmp_path_factory) -> tuple[dict, Any]:
     """The tiny leaderboard of two rules, with the bound searched and cached."""
     out = tmp_path_factory.mktemp("board")
-    return leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=out, searches=None, **TINY), out
+    return run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=out, searches=None, **TINY), out
 
 
 def test_best_rule_scores_zero_and_the_bound_search_is_cached(first) -> None:
@@ -98,7 +98,7 @@ def test_replaying_the_bound_scores_one(first) -> None:
     payload, out = first
     cache = json.loads(next((out / "bounds").glob("small_*.json")).read_text())
     plans = [schedule_from_rows(cache["episodes"][str(s)]["schedule"]) for s in SEEDS]
-    again = leaderboard([ENV], rules=RULES, agents={"replay-bound": ReplaySchedules(plans)}, seeds=SEEDS,
+    again = run_leaderboard([ENV], rules=RULES, agents={"replay-bound": ReplaySchedules(plans)}, seeds=SEEDS,
                         out_dir=out, searches=None, **TINY)
     assert again["bound"][ENV]["sources"] == {"cache": len(SEEDS), "saved": 0, "search": 0}
     assert again["bound"][ENV]["episode_costs"] == payload["bound"][ENV]["episode_costs"]
@@ -118,7 +118,7 @@ def test_saved_searches_are_reused_where_they_replay(first, tmp_path) -> None:
     searches = tmp_path / "searches"
     searches.mkdir()
     (searches / "room.json").write_text(json.dumps({"scenario": "small", "hindsight": {"episodes": episodes}}))
-    again = leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path / "board", searches=searches, **TINY)
+    again = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path / "board", searches=searches, **TINY)
     assert again["bound"][ENV]["sources"] == {"cache": 0, "saved": 1, "search": 1}
     assert again["bound"][ENV]["episode_costs"] == pytest.approx(payload["bound"][ENV]["episode_costs"])
 
@@ -141,7 +141,7 @@ def test_payload_schema_and_table(first) -> None:
 
 
 def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
-    payload = leaderboard([ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
+    payload = run_leaderboard([ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
     assert [r["normalised_score"] for r in payload["results"]] == [None]
     assert payload["bound"][ENV] == {"available": False, "reason": "not computed (--no-bound)"}
     assert "No normalised score: not computed (--no-bound)." in format_leaderboard(payload)
@@ -150,7 +150,7 @@ def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
 
 def test_unknown_rule_is_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match="rules must name"):
-        leaderboard([ENV], rules=["no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
+        run_leaderboard([ENV], rules=["no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
 
 
 @pytest.mark.slow
@@ -161,7 +161,7 @@ def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
 
     payload, _ = first
     with RayExecutor(num_cpus=2) as executor:
-        there = leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path, searches=None, executor=executor,
+        there = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path, searches=None, executor=executor,
                             batch_size=1, **TINY)
     assert there["results"] == payload["results"]
     drop = ("seconds", "search_seconds_per_episode")
