@@ -212,14 +212,15 @@ def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: n
 
 
 def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | None = None,
-                agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
-                out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
-                progress: bool = False, searches: Path | None = SAVED_SEARCHES, **overrides: Any) -> dict[str, Any]:
+                    agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
+                    out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
+                    progress: bool = False, searches: Path | None = SAVED_SEARCHES,
+                    **overrides: Any) -> dict[str, Any]:
     """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; default all tuned
     rules) and ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds``
     (default :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
-    ``searches``, None: none). ``overrides`` change every
-    scenario's config (e.g. a short ``horizon_years`` for tests). The payload of the module docstring: "results"
+    ``searches``, None: none). ``overrides`` change every scenario's config (e.g. a short ``horizon_years`` for
+    tests). The payload of the module docstring: "results"
     (one row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
     "best_rule" (per scenario)."""
     from trackenv.envs.line_config import scenario
