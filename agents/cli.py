@@ -1,4 +1,4 @@
-"""The ``trackenv`` command: validate, paper, compile, bench, evaluate, train, calibrate, plan.
+"""The ``trackenv`` command: validate, paper, compile, bench, evaluate, leaderboard, train, calibrate, plan.
 
 Each subcommand prints a human summary, or exactly one JSON object on stdout with ``--json`` (progress bars go
 to stderr). Results (JSON and PNG) are written under ``results/`` unless ``--out`` says otherwise.
@@ -11,10 +11,13 @@ negative count) ends in one line on stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -196,6 +199,91 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     result["wall_time_s"] = time.perf_counter() - t0
     result["ray"] = args.ray_address or ("local" if args.ray else None)
     _emit(args, result, format_line_table(result))
+    return 0
+
+
+def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
+    """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent)
+    or paths of trained per-section policies (.zip). Returns the rules (None: all tuned) and the agents by name ->
+    file; an unknown name or a missing file is a UsageError."""
+    rules: list[str] = []
+    agents: dict[str, str] = {}
+    every_rule = False
+    for item in (x.strip() for x in text.split(",")):
+        if item == "rules":
+            every_rule = True
+        elif item in rule_names:
+            rules.append(item)
+        elif item == LINE_AGENT_NAME:
+            _existing(str(LINE_PRETRAINED_FILE), f"--policies {LINE_AGENT_NAME}")
+            agents[LINE_AGENT_NAME] = str(LINE_PRETRAINED_FILE)
+        elif item.endswith(".zip"):
+            _existing(item, "--policies")
+            name = Path(item).stem  # its file name, or the path where that is taken
+            agents[item if name in agents or name in rule_names or name == LINE_AGENT_NAME else name] = item
+        else:
+            raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
+                             f"{LINE_AGENT_NAME} or the path of a trained per-section policy (.zip)")
+    if not (every_rule or rules):
+        raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
+                         "or a rule name")
+    return (None if every_rule else rules), agents
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """Meanwhile file descriptor 1 writes to stderr: the MIP solver behind the hindsight bound (HiGHS, C code)
+    prints lines on stdout that Python cannot catch, and stdout carries the summary (``--json``: one JSON
+    object) only."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def cmd_leaderboard(args: argparse.Namespace) -> int:
+    """`trackenv leaderboard`: every policy on every scenario of the suite, scored against the best tuned rule and
+    the hindsight bound (agents/evaluation/leaderboard.py); writes DIR/leaderboard.json and DIR/leaderboard.md."""
+    from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard
+    from .evaluation.line_compare import parse_seeds, scenario_of
+    from .rules.line import LINE_HEURISTICS
+
+    envs = [e.strip() for e in args.env.split(",")] if args.env else list(DEFAULT_SUITE)
+    for env_id in envs:
+        scenario_of(env_id)  # an unknown id: one line, before anything slow
+    seeds = parse_seeds(args.seeds) if args.seeds else None
+    rules, agent_files = _leaderboard_policies(args.policies, list(LINE_HEURISTICS))
+    agents: dict[str, Any] = {}
+    if agent_files:
+        from .learning.line import load_line_trained
+
+        agents = {name: load_line_trained(path, name=name) for name, path in agent_files.items()}
+    executor = _executor(args)
+    out = Path(args.out or "results/leaderboard")
+    t0 = time.perf_counter()
+    try:
+        with _stdout_to_stderr():
+            payload = run_leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
+                                  out_dir=out, executor=executor, progress=not args.json)
+    finally:
+        if executor is not None:
+            executor.close()
+    payload["command"] = " ".join(["trackenv leaderboard", *args.argv])
+    payload["wall_time_s"] = time.perf_counter() - t0
+    payload["ray"] = args.ray_address or ("local" if args.ray else None)
+    table = format_leaderboard(payload)
+    out.mkdir(parents=True, exist_ok=True)
+    from trackenv._json import json_default
+
+    (out / "leaderboard.json").write_text(json.dumps(payload, indent=1, default=json_default) + "\n")
+    (out / "leaderboard.md").write_text(table)
+    payload["files"] = [str(out / "leaderboard.json"), str(out / "leaderboard.md")]
+    _emit(args, payload, f"{table}\nwrote {', '.join(payload['files'])} in {payload['wall_time_s']:.0f} s")
     return 0
 
 
@@ -472,6 +560,26 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run the batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_evaluate)
 
+    sp = command("leaderboard", "every policy on every scenario of the suite on fixed held-out seeds, scored "
+                                "against the best tuned rule and the hindsight bound")
+    out(sp, "results/leaderboard")
+    sp.add_argument("--env", default=None, metavar="ID[,ID...]",
+                    help="the scenarios (default: trackenv/TampingLineSmall-v0, trackenv/TampingLine-v0, "
+                         "trackenv/TampingLineHard-v0, trackenv/Tamping-v1)")
+    sp.add_argument("--seeds", default=None, metavar="A:B",
+                    help="held-out episodes of every scenario: A:B (seeds A..B-1) or a,b,c (default: each "
+                         "scenario's, agents/evaluation/leaderboard.py DEFAULT_SEEDS)")
+    sp.add_argument("--policies", default=f"rules,{LINE_AGENT_NAME}", metavar="NAMES",
+                    help="comma-separated: 'rules' (every tuned rule), rule names, "
+                         f"{LINE_AGENT_NAME} (the shipped agent), paths of trained per-section policies (.zip)")
+    sp.add_argument("--no-bound", action="store_true",
+                    help="skip the hindsight bound (the normalised scores are then null)")
+    sp.add_argument("--ray", action="store_true", help="run the episodes and the bound's searches as tasks on a "
+                                                      "local Ray (trackenv[ray])")
+    sp.add_argument("--ray-address", default=None, metavar="ADDR",
+                    help="run them on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
+    sp.set_defaults(func=cmd_leaderboard)
+
     sp = command("plan", "what to tamp on a line from a line file, quarter by quarter, with the cost forecast")
     out(sp, "results/plan")
     sp.add_argument("line", metavar="LINE.yaml", help="a line file (the documentation's page Lines from files)")
@@ -528,6 +636,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.argv = list(sys.argv[2:] if argv is None else argv[1:])  # the command as given, for the files it writes
     try:
         return int(args.func(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:

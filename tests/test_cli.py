@@ -182,7 +182,7 @@ def test_version_is_the_installed_distribution_version(capsys):
     assert trackenv.__version__ == expected
 
 
-@pytest.mark.parametrize("command", ["validate", "paper", "bench", "evaluate", "train"])
+@pytest.mark.parametrize("command", ["validate", "paper", "bench", "evaluate", "train", "leaderboard"])
 def test_every_option_has_help_text(command):
     from trackenv_agents.cli import build_parser
 
@@ -266,3 +266,56 @@ def test_compile_builds_what_is_missing_and_then_has_nothing_to_do(capsys):
     assert json.loads(capsys.readouterr().out)["compiled"] == []
     assert main(["compile", "--widths", "7"]) == 2
     assert "width must be one of" in capsys.readouterr().err
+
+
+def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
+    """The whole command on one short episode of the small line without the bound: one JSON object on stdout, the
+    JSON and Markdown files under --out, null scores and the reason in the table, the command as given."""
+    argv = ["leaderboard", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "3:4", "--policies",
+            "grouped-threshold,uniform-periodic", "--no-bound", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    payload = json.loads(capsys.readouterr().out)
+    saved = json.loads((tmp_path / "leaderboard.json").read_text())
+    assert saved["results"] == payload["results"] and saved["command"] == "trackenv leaderboard " + " ".join(argv[1:])
+    assert [r["policy"] for r in payload["results"]][0] == payload["best_rule"]["trackenv/TampingLineSmall-v0"]
+    assert {r["policy"] for r in payload["results"]} == {"grouped-threshold", "uniform-periodic"}
+    assert all(r["normalised_score"] is None and r["normalised_score_ci"] is None for r in payload["results"])
+    assert payload["seeds"] == {"trackenv/TampingLineSmall-v0": [3]}
+    table = (tmp_path / "leaderboard.md").read_text()
+    assert "No normalised score: not computed (--no-bound)." in table and "| uniform-periodic |" in table
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--env", "trackenv/Nope-v0"], "'trackenv/Nope-v0' is not a registered env id"),
+    (["--seeds", "5:2"], "--seeds A:B needs B > A"),
+    (["--seeds", "a:b"], "invalid literal"),
+    (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
+    (["--policies", "cpi-agent"], "--policies names no rule"),
+    (["--policies", "rules,/missing.zip"], "--policies: no such file: /missing.zip"),
+])
+def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, tmp_path):
+    assert main(["leaderboard", *argv, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("trackenv leaderboard: ") and message in err and err.count("\n") == 1
+    assert not (tmp_path / "leaderboard.json").exists()
+
+
+def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):
+    """`--ray` hands the leaderboard a Ray executor (closed after) and the suite defaults to the four scenarios;
+    Ray itself is not started (the stub runs nothing): the same numbers over Ray are tested in
+    tests/agents/evaluation/test_leaderboard.py."""
+    import trackenv_agents.evaluation.leaderboard as lb
+    from trackenv_agents.evaluation.distributed import RayExecutor
+
+    seen = {}
+
+    def fake(envs, **kw):
+        seen.update(kw, envs=envs)
+        return {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
+
+    monkeypatch.setattr(lb, "run_leaderboard", fake)
+    monkeypatch.setattr(RayExecutor, "close", lambda self: None)
+    assert main(["leaderboard", "--ray", "--policies", "rules", "--json", "--out", str(tmp_path)]) == 0
+    assert isinstance(seen["executor"], RayExecutor) and seen["envs"] == list(lb.DEFAULT_SUITE)
+    assert seen["agents"] == {} and seen["rules"] is None and seen["bound"] is True
+    assert json.loads(capsys.readouterr().out)["ray"] == "local"

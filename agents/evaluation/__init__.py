@@ -1,7 +1,8 @@
 """Scoring policies: the harness (:mod:`.harness`: episodes on the native vector envs), its statistics
 (:mod:`.statistics`), grid tuning of the rules (:mod:`.tuning`), the comparison of policies on any preset
 (:mod:`.line_compare`), figures (:mod:`.reporting`), the per-section
-hindsight bound of the line (:mod:`.line_hindsight`) and the Ray executor (:mod:`.distributed`)."""
+hindsight bound of the line (:mod:`.line_hindsight`), the leaderboard over the suite (:mod:`.leaderboard`) and the
+Ray executor (:mod:`.distributed`)."""
 
 from .distributed import RayExecutor
 from .harness import (
@@ -15,6 +16,15 @@ from .harness import (
     policy_params,
     record_episode,
     run_episodes,
+)
+from .leaderboard import (
+    DEFAULT_SEEDS,
+    DEFAULT_SUITE,
+    bound_unavailable,
+    episode_bounds,
+    format_leaderboard,
+    normalised_score,
+    run_leaderboard,
 )
 from .line_compare import (
     SECTION_CLASSES,
@@ -57,4 +67,7 @@ __all__ = [
     "RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
     "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
     "schedule_rows",
+    # the leaderboard (.leaderboard)
+    "DEFAULT_SEEDS", "DEFAULT_SUITE", "bound_unavailable", "episode_bounds", "format_leaderboard",
+    "normalised_score", "run_leaderboard",
 ]

@@ -1,0 +1,330 @@
+"""The leaderboard: every policy on every scenario of the suite, on fixed held-out seeds, scored against the best
+tuned rule and the per-section hindsight bound (``trackenv leaderboard``).
+
+Per scenario (an env id of the suite, :data:`DEFAULT_SUITE`) and policy (the tuned rules, the shipped agent
+``cpi-agent``, trained per-section policies given by path) the harness runs one episode per held-out seed
+(:func:`~.harness.evaluate_many`, the same seeds for every policy: common random numbers) and reports the mean
+cost with its 95 % CI, the paired difference to the best tuned rule, the immediate-action count and the
+tampings per section class (:func:`~.line_compare.class_breakdown`).
+
+**The normalised score** is the share of the gap from the best tuned rule to the hindsight bound that a policy
+closes, paired per episode e::
+
+    score = Σ_e (rule_e − policy_e) / Σ_e (rule_e − bound_e)
+
+0 is the rule, 1 is clairvoyance (the bound's cost), below 0 worse than the rule; above 1 is possible, since the
+bound is a search (:mod:`.line_hindsight`), not the proven optimum. It is a ratio of paired means, not a mean of
+per-episode ratios: an episode where the rule is already near the bound has a gap near zero, and its ratio would
+swing the mean without bound. Its 95 % CI is a percentile bootstrap over episodes (the same episodes resampled in
+numerator and denominator, its own seeded generator). The best tuned rule is the rule with the lowest mean cost on
+the held-out seeds themselves: the score's zero is the strongest rule the suite has on these episodes.
+
+**The bound** is :func:`~.line_hindsight.hindsight_bounds` per episode, from the best rule's schedule with every
+scored rule's schedule as a candidate (:data:`BOUND_SEARCH`), never above the best rule's own cost (its schedule is
+always a candidate). The engine prices sections apart only where each section is its own segment and there is no
+annual budget: on the 60 m track (six sections share one segment) and on the hard line (an annual budget) the
+score is null, and the bound entry says why. A search costs seconds per episode, so each episode's bound is kept
+under ``DIR/bounds/`` keyed by (scenario, seed, a hash of the config and the search settings), and the saved
+searches of ``experiments/searches/`` are reused for the seeds they cover once their schedules replay, in the env
+as it is now, at the cost they were saved with.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .harness import EvaluationResult, evaluate_many
+from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
+from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
+
+__all__ = ["BOUND_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds",
+           "format_leaderboard", "normalised_score", "run_leaderboard"]
+
+#: The scenarios of the default leaderboard: the three lines and the 60 m track.
+DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
+                                  "trackenv/TampingLineHard-v0", "trackenv/Tamping-v1")
+
+#: The default held-out seeds per scenario (none of them a training or tuning seed, which start at 1000): as many
+#: as the whole default command scores in about a quarter of an hour on 2 cores (an episode of the hard line costs
+#: six of the 60 m track; a new bound search about 7 s per episode of the small line). The default line's seeds
+#: are among those whose hindsight searches ship in ``experiments/searches/`` (0-99).
+DEFAULT_SEEDS: dict[str, tuple[int, ...]] = {
+    "trackenv/TampingLineSmall-v0": tuple(range(0, 16)),
+    "trackenv/TampingLine-v0": tuple(range(0, 32)),
+    "trackenv/TampingLineHard-v0": tuple(range(0, 12)),
+    "trackenv/Tamping-v1": tuple(range(0, 48)),
+}
+
+#: The settings of the hindsight search behind the bound (:func:`~.line_hindsight.hindsight_bounds`): one round of
+#: local search from the closed-loop candidates at true SD 2 and 3 mm, a few seconds per episode.
+BOUND_SEARCH: dict[str, Any] = {"rounds": 1, "sd_thresholds_mm": (2.0, 3.0)}
+
+#: Episodes searched together (one batch of the search, one task under Ray).
+BOUND_CHUNK = 8
+
+#: The saved hindsight searches (``experiments/line_room.py`` results) reused for the seeds they cover.
+SAVED_SEARCHES = Path(__file__).resolve().parents[2] / "experiments" / "searches"
+
+
+def normalised_score(rule_cost: np.ndarray, policy_cost: np.ndarray, bound_cost: np.ndarray,
+                     n_resamples: int = N_BOOTSTRAP, level: float = 0.95, seed: int = 0) -> dict[str, Any]:
+    """The share of the rule-to-bound gap a policy closes, Σ(rule − policy) / Σ(rule − bound) over paired
+    episodes (arrays aligned by episode), with its percentile bootstrap CI over episodes. ``score`` and ``ci`` are
+    None where the bound closes no gap (Σ(rule − bound) <= 0: nothing to share)."""
+    rule, pol, bound = (np.asarray(x, dtype=float) for x in (rule_cost, policy_cost, bound_cost))
+    if not rule.shape == pol.shape == bound.shape or rule.ndim != 1 or rule.size == 0:
+        raise ValueError(f"the costs must be three equal, non-empty 1-d arrays, got shapes {rule.shape}, "
+                         f"{pol.shape}, {bound.shape}")
+    gain, gap = rule - pol, rule - bound
+    if gap.sum() <= 0:
+        return {"score": None, "ci": None, "gap_mean": float(gap.mean())}
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, rule.size, size=(n_resamples, rule.size))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = gain[idx].sum(axis=1) / gap[idx].sum(axis=1)
+    ratios = ratios[np.isfinite(ratios) & (gap[idx].sum(axis=1) > 0)]
+    a = (1.0 - level) / 2
+    ci = [float(v) for v in np.quantile(ratios, [a, 1.0 - a])] if ratios.size else None
+    return {"score": float(gain.sum() / gap.sum()), "ci": ci, "gap_mean": float(gap.mean())}
+
+
+def bound_unavailable(config: Any) -> str | None:
+    """Why the per-section hindsight bound cannot be computed for ``config`` (None where it can): the search prices
+    each section apart, which needs one section per segment and no annual budget."""
+    if getattr(config, "sections_per_segment", 1) != 1:
+        return (f"{config.sections_per_segment} sections share one segment: their costs are not separable, so the "
+                "per-section hindsight search does not apply")
+    if config.annual_budget > 0:
+        return (f"an annual budget ({config.annual_budget:g} k€) couples the sections' schedules, which the "
+                "per-section hindsight search prices apart")
+    return None
+
+
+def _config_key(config: Any, scenario_name: str) -> str:
+    """A short hash of the config and the search settings: a cached bound is reused only for the same ones."""
+    text = json.dumps({"config": config.to_dict(), "search": BOUND_SEARCH}, sort_keys=True, default=str)
+    return f"{scenario_name}_{hashlib.sha256(text.encode()).hexdigest()[:12]}"
+
+
+def _search_chunk(config: Any, episodes: list[tuple[int, np.ndarray, tuple]]) -> list[dict[str, Any]]:
+    """One batch of the hindsight search (the unit an executor runs): per episode its seed, cost and schedule,
+    and the seconds the batch took per episode."""
+    from .line_hindsight import hindsight_bounds, schedule_rows
+
+    t0 = time.perf_counter()
+    found = hindsight_bounds(config, episodes, **BOUND_SEARCH)
+    per_episode = (time.perf_counter() - t0) / len(episodes)
+    return [{"seed": int(h["seed"]), "cost": float(h["replayed_cost"]), "schedule": schedule_rows(h["schedule"]),
+             "source": "search", "search_seconds": per_episode} for h in found]
+
+
+def _saved_bounds(config: Any, scenario_name: str, seeds: list[int], searches: Path) -> dict[int, dict[str, Any]]:
+    """The saved searches' schedules for ``seeds`` (files of ``scenario_name`` only) that still replay at the cost
+    they were saved with; a search of another engine version is left out, not trusted."""
+    from .line_hindsight import replay_schedules, saved_schedules, schedule_rows
+
+    paths: list[str | Path] = [p for p in sorted(searches.glob("*.json"))
+                               if json.loads(p.read_text()).get("scenario") == scenario_name]
+    if not paths:
+        return {}
+    try:
+        saved_seeds, plans, costs = saved_schedules(paths, config)
+    except ValueError:  # another horizon or section count: not this config's
+        return {}
+    keep = [k for k, s in enumerate(saved_seeds) if s in set(seeds)]
+    if not keep:
+        return {}
+    replayed = replay_schedules(config, [saved_seeds[k] for k in keep], [plans[k] for k in keep])
+    return {saved_seeds[k]: {"seed": saved_seeds[k], "cost": float(c), "schedule": schedule_rows(plans[k]),
+                             "source": "saved"}
+            for k, c in zip(keep, replayed, strict=True) if abs(c - costs[k]) <= 1e-6 * abs(costs[k])}
+
+
+def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationResult], cache_dir: str | Path,
+                   executor: Any = None, searches: Path | None = SAVED_SEARCHES) -> dict[str, Any]:
+    """The hindsight bound of each episode of ``rules`` (the scored rules' results on common seeds, the best
+    first): from the cache under ``cache_dir``, else a saved search that replays (``searches``), else a new search
+    (:data:`BOUND_SEARCH`, from the best rule's schedule with the others' as candidates, :data:`BOUND_CHUNK`
+    episodes a batch, through ``executor.map`` if given). Each bound is capped at the best rule's own cost. Returns
+    {"cost" (per seed, in ``rules[0].seeds`` order), "sources" (counts), "search_seconds_per_episode" (the new
+    searches' mean, None if none ran)}."""
+    best = rules[0]
+    seeds = [int(s) for s in best.seeds]
+    path = Path(cache_dir) / f"{_config_key(config, scenario_name)}.json"
+    cached: dict[int, dict[str, Any]] = {}
+    if path.exists():
+        cached = {int(k): v for k, v in json.loads(path.read_text())["episodes"].items()}
+    found = {s: {**cached[s], "source": "cache"} for s in seeds if s in cached}
+    if searches is not None and searches.is_dir():
+        todo = [s for s in seeds if s not in found]
+        found.update(_saved_bounds(config, scenario_name, todo, searches) if todo else {})
+    todo = [s for s in seeds if s not in found]
+    seconds: list[float] = []
+    if todo:
+        if any(r.tamped is None for r in rules):
+            raise ValueError("the bound's search starts from the rules' schedules: results without them (tamped)")
+        plans = [np.asarray(r.tamped) for r in rules]  # (episodes, H, S) each, the best rule's first
+        row = {s: k for k, s in enumerate(seeds)}
+        episodes = [(s, plans[0][row[s]], tuple(p[row[s]] for p in plans[1:])) for s in todo]
+        chunks = [episodes[i:i + BOUND_CHUNK] for i in range(0, len(episodes), BOUND_CHUNK)]
+        run: Callable = functools.partial(_search_chunk, config)
+        for out in (executor.map(run, chunks) if executor is not None else map(run, chunks)):
+            for h in out:
+                seconds.append(h.pop("search_seconds"))
+                found[h["seed"]] = h
+    if todo or any(v["source"] == "saved" for v in found.values()):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        keep = {**cached, **{s: {k: v for k, v in found[s].items() if k != "source"} for s in seeds}}
+        path.write_text(json.dumps({"scenario": scenario_name, "config": config.to_dict(), "search": BOUND_SEARCH,
+                                    "episodes": {str(s): keep[s] for s in sorted(keep)}}, default=str) + "\n")
+    cost = np.minimum([found[s]["cost"] for s in seeds], best.cost)
+    sources = {k: sum(found[s]["source"] == k for s in seeds) for k in ("cache", "saved", "search")}
+    return {"cost": cost, "sources": sources,
+            "search_seconds_per_episode": float(np.mean(seconds)) if seconds else None}
+
+
+def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:
+    """One leaderboard row: ``result`` against the best rule ``best`` and, where there is one, the bound."""
+    lo, hi = bootstrap_ci(result.cost)
+    diff = paired_difference(result, best)
+    score = normalised_score(best.cost, result.cost, bound) if bound is not None else None
+    classes = class_breakdown(result)
+    return {"env": env_id, "policy": result.policy, "params": dict(result.params), "n_episodes": result.n_episodes,
+            "mean_cost": float(result.cost.mean()), "ci": [lo, hi],
+            "vs_best_rule": {k: diff[k] for k in ("mean_difference", "ci_low", "ci_high")},
+            "relative_to_best_rule": diff["mean_difference"] / float(best.cost.mean()),
+            "normalised_score": None if score is None else score["score"],
+            "normalised_score_ci": None if score is None else score["ci"],
+            "immediate_action": int(result.immediate_action_exceedances.sum()),
+            "interventions_per_class": {c: classes[c]["tampings_per_section"] for c in SECTION_CLASSES},
+            "sections_per_class": {c: classes[c]["sections_per_episode"] for c in SECTION_CLASSES},
+            "campaigns_per_episode": classes["line"]["campaigns_per_episode"],
+            "tampings_per_km_year": float(result.tampings_per_km_year.mean()),
+            "episode_costs": result.cost.tolist()}
+
+
+def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | None = None,
+                    agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
+                    out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
+                    progress: bool = False, searches: Path | None = SAVED_SEARCHES,
+                    **overrides: Any) -> dict[str, Any]:
+    """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; default all tuned
+    rules) and ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds``
+    (default :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
+    ``searches``, None: none). ``overrides`` change every scenario's config (e.g. a short ``horizon_years`` for
+    tests). The payload of the module docstring: "results"
+    (one row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
+    "best_rule" (per scenario)."""
+    from trackenv.envs.line_config import scenario
+
+    from ..rules.problems import rules_for, tuned_params_for
+
+    payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
+    for env_id in envs:
+        name = scenario_of(env_id)
+        cfg = scenario(name, **overrides)
+        family, tuned = rules_for(cfg), tuned_params_for(cfg)
+        wanted = list(rules) if rules is not None else [n for n in tuned if n in family]
+        unknown = [n for n in wanted if n not in family]
+        if unknown or not wanted:
+            raise ValueError(f"rules must name some of {sorted(family)}, got {list(wanted)}")
+        pols = [family[n](**tuned.get(n, {})) for n in wanted] + list((agents or {}).values())
+        env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
+        results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
+                                executor=executor)
+        for r, label in zip(results[len(wanted):], (agents or {}), strict=True):
+            r.policy = label
+        rule_results = sorted(results[:len(wanted)], key=lambda r: float(r.cost.mean()))
+        best = rule_results[0]
+        reason = None if bound else "not computed (--no-bound)"
+        reason = reason or bound_unavailable(cfg)
+        bound_cost = None
+        entry: dict[str, Any] = {"available": reason is None, "reason": reason}
+        if reason is None:
+            t0 = time.perf_counter()
+            b = episode_bounds(cfg, name, rule_results, Path(out_dir) / "bounds", executor, searches)
+            bound_cost = b["cost"]
+            lo, hi = bootstrap_ci(bound_cost)
+            gap = paired_difference(_as_result(best, bound_cost, "bound"), best)
+            entry.update({"mean_cost": float(bound_cost.mean()), "ci": [lo, hi],
+                          "vs_best_rule": {k: gap[k] for k in ("mean_difference", "ci_low", "ci_high")},
+                          "sources": b["sources"], "search_seconds_per_episode": b["search_seconds_per_episode"],
+                          "seconds": time.perf_counter() - t0, "search": dict(BOUND_SEARCH),
+                          "episode_costs": bound_cost.tolist()})
+        others = sorted((r for r in results if r not in rule_results), key=lambda r: float(r.cost.mean()))
+        ordered = sorted([*rule_results, *others], key=lambda r: (r is not best, float(r.cost.mean())))
+        payload["results"] += [_row(env_id, r, best, bound_cost) for r in ordered]
+        payload["bound"][env_id] = entry
+        payload["seeds"][env_id] = env_seeds
+        payload["best_rule"][env_id] = best.policy
+        payload.setdefault("scenarios", {})[env_id] = name
+    return payload
+
+
+def _as_result(like: EvaluationResult, cost: np.ndarray, name: str) -> EvaluationResult:
+    """An :class:`EvaluationResult` of per-episode costs only (on ``like``'s seeds), for paired differences."""
+    return EvaluationResult(policy=name, params={}, config=like.config, seeds=like.seeds, cost=np.asarray(cost),
+                            cost_parts={}, section_tampings=np.zeros_like(cost),
+                            immediate_action_exceedances=np.zeros_like(cost), final_mean_sd_mm=np.zeros_like(cost),
+                            sum_rewards=-np.asarray(cost))
+
+
+def _seed_text(seeds: Sequence[int]) -> str:
+    s = list(seeds)
+    return f"{s[0]}–{s[-1]}" if s == list(range(s[0], s[0] + len(s))) and len(s) > 1 else ", ".join(map(str, s))
+
+
+def _ci(lo: float, hi: float, signed: bool = False) -> str:
+    f = "{:+.1f}" if signed else "{:.1f}"
+    return f"[{f.format(lo)}, {f.format(hi)}]"
+
+
+def format_leaderboard(payload: dict[str, Any]) -> str:
+    """The leaderboard as Markdown: per scenario a table of its policies (the best rule first), the bound's line,
+    and the command that wrote it."""
+    out = []
+    short = {"plain": "plain", "transition": "trans.", "switch_or_crossing": "switch", "hidden_wet_spot": "wet"}
+    for env_id, seeds in payload["seeds"].items():
+        rows = [r for r in payload["results"] if r["env"] == env_id]
+        b = payload["bound"][env_id]
+        out += [f"### {env_id}", "",
+                f"{len(seeds)} held-out episodes (seeds {_seed_text(seeds)}); best tuned rule: "
+                f"{payload['best_rule'][env_id]}.", "",
+                "| policy | mean cost, k€ [95 % CI] | vs best rule, k€ (paired) [95 % CI] | normalised score [95 % CI] "
+                "| IA | tampings per section: " + " / ".join(short.values()) + " |",
+                "|---|---|---|---|---|---|"]
+        for r in rows:
+            d = r["vs_best_rule"]
+            vs = "—" if r["policy"] == payload["best_rule"][env_id] else (
+                f"{d['mean_difference']:+.1f} {_ci(d['ci_low'], d['ci_high'], True)} "
+                f"({100 * r['relative_to_best_rule']:+.1f} %)")
+            sc = "n/a" if r["normalised_score"] is None else f"{r['normalised_score']:.2f}"
+            if r["normalised_score_ci"]:
+                sc += " [{:.2f}, {:.2f}]".format(*r["normalised_score_ci"])
+            per = " / ".join("–" if r["interventions_per_class"][c] is None else
+                             f"{r['interventions_per_class'][c]:.2f}" for c in short)
+            out.append(f"| {r['policy']} | {r['mean_cost']:.1f} {_ci(*r['ci'])} | {vs} | {sc} | "
+                       f"{r['immediate_action']} | {per} |")
+        if b["available"]:
+            d = b["vs_best_rule"]
+            src = ", ".join(f"{n} {k}" for k, n in b["sources"].items() if n)
+            out += ["", f"Hindsight bound: {b['mean_cost']:.1f} k€ {_ci(*b['ci'])}, "
+                        f"{d['mean_difference']:+.1f} k€ {_ci(d['ci_low'], d['ci_high'], True)} against the best rule "
+                        f"(episodes: {src})."]
+        else:
+            out += ["", f"No normalised score: {b['reason']}."]
+        out.append("")
+    out += ["IA: section-steps at the immediate-action limit, all episodes together. Normalised score: "
+            "Σ(rule − policy) / Σ(rule − bound) over the paired episodes (0 = the best tuned rule, 1 = the "
+            "hindsight bound).", ""]
+    if payload.get("command"):
+        out += [f"Written by `{payload['command']}`."]
+    return "\n".join(out) + "\n"

@@ -1,0 +1,187 @@
+"""The leaderboard (`trackenv leaderboard`): the normalised score's definition (0 for the best rule, 1 for the
+bound's own schedule), the payload's schema, the bound's cache and saved-search reuse, where the bound does not
+apply, and Ray giving the single-process numbers. Every scenario is the small line cut to two years (8 steps) and
+two seeds."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation.leaderboard import (
+    bound_unavailable,
+    format_leaderboard,
+    normalised_score,
+    run_leaderboard,
+)
+from trackenv_agents.evaluation.line_hindsight import schedule_from_rows
+
+ENV = "trackenv/TampingLineSmall-v0"
+SEEDS = [0, 1]
+RULES = ["grouped-threshold", "section-threshold"]
+TINY = {"horizon_years": 2.0}  # 8 steps: on seed 1 the bound is below the best rule
+
+
+class ReplaySchedules:
+    """Tamps what the given (H, S) schedules say, one per env of the batch in seed order: the harness hands one
+    policy's envs over in the order of the seeds, all in one batch here."""
+
+    name = "replay-bound"
+
+    def __init__(self, plans: list[np.ndarray]) -> None:
+        self.plans = np.stack(plans)
+        self.t = 0
+
+    def predict(self, obs: dict, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        if episode_start is not None and np.all(episode_start):
+            self.t = 0
+        action = self.plans[:, self.t].astype(np.int8)
+        self.t += 1
+        return action, state
+
+
+def test_score_is_a_ratio_of_paired_sums() -> None:
+    rule = np.array([100.0, 200.0, 300.0])
+    bound = np.array([90.0, 150.0, 290.0])  # gaps 10, 50, 10: Σ 70
+    policy = np.array([95.0, 180.0, 310.0])  # gains 5, 20, -10: Σ 15
+    s = normalised_score(rule, policy, bound)
+    assert s["score"] == pytest.approx(15 / 70)  # not the mean of the per-episode ratios (0.5, 0.4, -1)
+    lo, hi = s["ci"]
+    assert lo <= s["score"] <= hi
+    assert normalised_score(rule, rule, bound)["score"] == 0.0
+    assert normalised_score(rule, bound, bound)["score"] == 1.0
+    assert normalised_score(rule, rule - 100, bound)["score"] > 1  # beating the bound: a search, not the optimum
+
+
+def test_score_is_null_without_a_gap_and_refuses_unpaired_costs() -> None:
+    rule = np.array([100.0, 200.0])
+    assert normalised_score(rule, rule - 1, rule) == {"score": None, "ci": None, "gap_mean": 0.0}
+    with pytest.raises(ValueError, match="equal"):
+        normalised_score(rule, rule[:1], rule)
+
+
+def test_bound_applies_only_where_sections_are_priced_apart() -> None:
+    assert bound_unavailable(scenario("small")) is None
+    assert bound_unavailable(scenario("default")) is None
+    assert "share one segment" in bound_unavailable(scenario("track60"))
+    assert "annual budget" in bound_unavailable(scenario("hard"))
+
+
+@pytest.fixture(scope="module")
+def first(tmp_path_factory) -> tuple[dict, Any]:
+    """The tiny leaderboard of two rules, with the bound searched and cached."""
+    out = tmp_path_factory.mktemp("board")
+    return run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=out, searches=None, **TINY), out
+
+
+def test_best_rule_scores_zero_and_the_bound_search_is_cached(first) -> None:
+    payload, out = first
+    rows = payload["results"]
+    best = payload["best_rule"][ENV]
+    assert rows[0]["policy"] == best and {r["policy"] for r in rows} == set(RULES)
+    assert rows[0]["normalised_score"] == 0.0 and rows[0]["vs_best_rule"]["mean_difference"] == 0.0
+    bound = payload["bound"][ENV]
+    assert bound["available"] and bound["reason"] is None
+    assert bound["sources"] == {"cache": 0, "saved": 0, "search": len(SEEDS)}
+    assert bound["search_seconds_per_episode"] > 0
+    assert np.all(np.array(bound["episode_costs"]) <= np.array(rows[0]["episode_costs"]))
+    assert len(list((out / "bounds").glob("small_*.json"))) == 1
+
+
+def test_replaying_the_bound_scores_one(first) -> None:
+    """A policy that tamps the bound's own schedules closes the whole gap; the second run reads the cached bound."""
+    payload, out = first
+    cache = json.loads(next((out / "bounds").glob("small_*.json")).read_text())
+    plans = [schedule_from_rows(cache["episodes"][str(s)]["schedule"]) for s in SEEDS]
+    again = run_leaderboard([ENV], rules=RULES, agents={"replay-bound": ReplaySchedules(plans)}, seeds=SEEDS,
+                        out_dir=out, searches=None, **TINY)
+    assert again["bound"][ENV]["sources"] == {"cache": len(SEEDS), "saved": 0, "search": 0}
+    assert again["bound"][ENV]["episode_costs"] == payload["bound"][ENV]["episode_costs"]
+    row = next(r for r in again["results"] if r["policy"] == "replay-bound")
+    assert again["bound"][ENV]["vs_best_rule"]["mean_difference"] < 0  # a gap to close
+    assert row["normalised_score"] == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(row["episode_costs"], again["bound"][ENV]["episode_costs"], rtol=1e-12)
+
+
+def test_saved_searches_are_reused_where_they_replay(first, tmp_path) -> None:
+    """A search file of the scenario (the form of experiments/searches/) stands in for the search when its
+    schedules replay at their saved costs; one whose cost no longer matches is searched again."""
+    payload, out = first
+    cache = json.loads(next((out / "bounds").glob("small_*.json")).read_text())["episodes"]
+    episodes = [{"seed": s, "schedule": cache[str(s)]["schedule"], "replayed": cache[str(s)]["cost"]} for s in SEEDS]
+    episodes[1]["replayed"] += 1.0  # as if saved by another engine version
+    searches = tmp_path / "searches"
+    searches.mkdir()
+    (searches / "room.json").write_text(json.dumps({"scenario": "small", "hindsight": {"episodes": episodes}}))
+    again = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path / "board", searches=searches, **TINY)
+    assert again["bound"][ENV]["sources"] == {"cache": 0, "saved": 1, "search": 1}
+    assert again["bound"][ENV]["episode_costs"] == pytest.approx(payload["bound"][ENV]["episode_costs"])
+
+
+def test_payload_schema_and_table(first) -> None:
+    payload, _ = first
+    assert set(payload) >= {"results", "bound", "seeds", "best_rule"}
+    assert payload["seeds"] == {ENV: SEEDS}
+    for row in payload["results"]:
+        assert set(row) >= {"env", "policy", "mean_cost", "ci", "vs_best_rule", "normalised_score",
+                            "normalised_score_ci", "immediate_action", "interventions_per_class"}
+        assert row["env"] == ENV and row["ci"][0] <= row["mean_cost"] <= row["ci"][1]
+        assert set(row["vs_best_rule"]) == {"mean_difference", "ci_low", "ci_high"}
+        assert set(row["interventions_per_class"]) == {"plain", "transition", "switch_or_crossing",
+                                                       "hidden_wet_spot"}
+    json.dumps(payload)  # plain JSON
+    table = format_leaderboard({**payload, "command": "trackenv leaderboard --env " + ENV})
+    assert f"### {ENV}" in table and "Hindsight bound:" in table
+    assert table.count(f"| {RULES[0]} |") == 1 and "Written by `trackenv leaderboard --env" in table
+
+
+def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
+    payload = run_leaderboard([ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
+    assert [r["normalised_score"] for r in payload["results"]] == [None]
+    assert payload["bound"][ENV] == {"available": False, "reason": "not computed (--no-bound)"}
+    assert "No normalised score: not computed (--no-bound)." in format_leaderboard(payload)
+    assert not (tmp_path / "bounds").exists()
+
+
+def test_unknown_rule_is_refused(tmp_path) -> None:
+    with pytest.raises(ValueError, match="rules must name"):
+        run_leaderboard([ENV], rules=["no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
+
+
+@pytest.mark.slow
+def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
+    """Episodes and searches as Ray tasks (a local Ray, 2 CPUs): the same rows and bound as in one process."""
+    pytest.importorskip("ray")
+    from trackenv_agents.evaluation.distributed import RayExecutor
+
+    payload, _ = first
+    with RayExecutor(num_cpus=2) as executor:
+        there = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path, searches=None, executor=executor,
+                            batch_size=1, **TINY)
+    assert there["results"] == payload["results"]
+    drop = ("seconds", "search_seconds_per_episode")
+    assert ({k: v for k, v in there["bound"][ENV].items() if k not in drop}
+            == {k: v for k, v in payload["bound"][ENV].items() if k not in drop})
+
+
+def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
+    """The documentation's tables are the committed leaderboard.md, which is the default command's rendering of the
+    committed leaderboard.json: its command, its default seeds and suite, and the page that includes it."""
+    from pathlib import Path
+
+    from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
+
+    root = Path(__file__).resolve().parents[3]
+    folder = root / "experiments" / "saved" / "leaderboard"
+    saved = json.loads((folder / "leaderboard.json").read_text())
+    command = "trackenv leaderboard --out experiments/saved/leaderboard"
+    assert saved["command"] == command
+    assert saved["seeds"] == {env: list(DEFAULT_SEEDS[env]) for env in DEFAULT_SUITE}
+    assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
+    page = (root / "docs" / "leaderboard.md").read_text()
+    assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page
