@@ -21,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 from scipy.ndimage import gaussian_filter1d
 
-from ..degradation import TrackDegradation
+from ..degradation import INFLUENCE_BAND, TrackDegradation
 from ..physics.dynamics import simulate_passes
 from ..physics.geometry import (
     classify,
@@ -469,7 +469,9 @@ class LineBatch:
         self.u[segs], self.cyc[segs] = implicit_settlement_step(
             self.law, self.u[segs], self.cyc[segs], self.rate()[segs], force, self.influence[segs],
             cycles * self.traffic_factor[segs],
-            band=force.shape[1],  # segments are short: the full Jacobian, as the line's calibration was run
+            # a line's segments are short: the full Jacobian, as the line's calibration was run; a longer segment
+            # of several sections (the 60 m track): the band a support's settlement reaches, as TrackDegradation
+            band=force.shape[1] if self.K == 1 else INFLUENCE_BAND,
         )
 
     # ------------------------------------------------------------------ a step
