@@ -66,3 +66,14 @@ def test_ab_speed_alternates_the_versions_and_summarises_the_pairs():
     with pytest.raises(ValueError, match="equal, non-empty"):
         ab.summary([], [])
 
+
+
+def test_robustness_conditions_each_move_one_field_of_the_default_line_and_are_valid():
+    from trackenv.envs.line_config import scenario
+
+    mod = _script("robustness")
+    nominal = scenario("default").to_dict()
+    assert mod.CONDITIONS[0] == ("nominal", {})
+    for name, overrides in mod.CONDITIONS[1:]:
+        moved = scenario("default", **overrides).to_dict()  # validated at construction
+        assert {k for k in nominal if nominal[k] != moved[k]} == set(overrides), name

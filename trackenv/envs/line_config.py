@@ -64,21 +64,21 @@ class LineConfig(ConfigBase):
     Gaussian noise ``sd_noise_mm`` on the SD and ``peak_noise_mm`` on the mean-to-peak **[assumption:
     repeatability of a recording car]**.
 
-    **Heterogeneity.** Plain-track settlement-rate factor per section lognormal with log-SD ``rate_sigma``,
-    AR(1) correlated along the line with correlation length ``rate_correlation_m`` (Andrade & Teixeira
-    2011: lognormal; the figures are **[assumption]**); inside a segment per-sleeper factors with CV
-    ``sleeper_rate_cv`` correlated over ``sleeper_rate_correlation_m`` and ballast stiffness CV
-    ``ballast_stiffness_cv``. Known zones, in the register: a **transition** (probability
-    ``transition_probability`` per section; ballast ``transition_stiffness_ratio`` times stiffer from the
-    middle of the segment on, as at a bridge, plus ``transition_rate_factor`` on the soft side: the physics
-    alone gives too little, see the calibration) and a **switch or level crossing** (``switch_probability``;
-    ``switch_rate_factor`` on the segment and a stiff 3 m patch). **Hidden wet spots**: with probability
-    ``wet_spot_probability`` per section and episode a ``wet_spot_length_m`` patch starts to settle
-    ``wet_spot_rate_factor`` times faster at a step drawn uniformly in the horizon; it is in no register.
-    ``rate_scale`` multiplies all settlement (calibrated to the published SD growth, see ``trackenv
-    calibrate``). ``initial_age_years``: each section was last tamped up to this long before the start
-    (uniform), with up to ``initial_max_tampings`` tampings since renewal; its initial level is the German
-    low-disturbance PSD scaled by a factor uniform in ``initial_scale``.
+    **Heterogeneity.** Plain-track settlement-rate factor per section lognormal with log-SD ``rate_sigma``, AR(1)
+    correlated along the line with correlation length ``rate_correlation_m`` (Andrade & Teixeira 2011: lognormal;
+    the figures are **[assumption]**); inside a segment per-sleeper factors with CV ``sleeper_rate_cv`` correlated
+    over ``sleeper_rate_correlation_m`` and ballast stiffness CV ``ballast_stiffness_cv`` around
+    ``ballast_stiffness_factor`` times the realistic track's 160 MN/m (1 by default; other values are for robustness
+    studies: the calibration was run at 1). Known zones, in the register: a **transition** (probability
+    ``transition_probability`` per section; ballast ``transition_stiffness_ratio`` times stiffer from the middle of
+    the segment on, as at a bridge, plus ``transition_rate_factor`` on the soft side: the physics alone gives too
+    little, see the calibration) and a **switch or level crossing** (``switch_probability``; ``switch_rate_factor``
+    on the segment and a stiff 3 m patch). **Hidden wet spots**: with probability ``wet_spot_probability`` per
+    section and episode a ``wet_spot_length_m`` patch starts to settle ``wet_spot_rate_factor`` times faster at a
+    step drawn uniformly in the horizon; it is in no register. ``rate_scale`` multiplies all settlement (calibrated
+    to the published SD growth, see ``trackenv calibrate``). ``initial_age_years``: each section was last tamped up
+    to this long before the start (uniform), with up to ``initial_max_tampings`` tampings since renewal; its initial
+    level is the German low-disturbance PSD scaled by a factor uniform in ``initial_scale``.
 
     **Tamping** (``tamping``: :class:`TampingModel` fields). A tamped section is lifted to the least-squares
     line of its segment keeping ``residual_fraction`` of its old shape plus a random residual (so the SD after
@@ -137,6 +137,7 @@ class LineConfig(ConfigBase):
     sleeper_rate_cv: float = 0.35
     sleeper_rate_correlation_m: float = 3.0
     ballast_stiffness_cv: float = 0.15
+    ballast_stiffness_factor: float = 1.0
     transition_probability: float = 0.12
     transition_stiffness_ratio: float = 3.0
     transition_rate_factor: float = 6.0
@@ -212,6 +213,7 @@ class LineConfig(ConfigBase):
         c("sleeper_rate_cv", low=0.0, high=2.0)
         c("sleeper_rate_correlation_m", low=0.0, high=100.0)
         c("ballast_stiffness_cv", low=0.0, high=1.0)
+        c("ballast_stiffness_factor", low=0.25, high=4.0)
         for name in ("transition_probability", "switch_probability", "wet_spot_probability"):
             c(name, low=0.0, high=1.0)
         c("transition_stiffness_ratio", low=0.2, high=10.0)

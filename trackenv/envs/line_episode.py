@@ -299,7 +299,7 @@ class LineBatch:
         reg = np.where(u < p_t, 1, np.where(u < p_t + p_s, 2, 0))
         sleeper_rate = _lognormal(_correlated_normal(rng, (R, n), c.sleeper_rate_correlation_m / SLEEPER_SPACING_M),
                                   c.sleeper_rate_cv)
-        kfield = _lognormal(_correlated_normal(rng, (R, n), 2.0), c.ballast_stiffness_cv)
+        kfield = c.ballast_stiffness_factor * _lognormal(_correlated_normal(rng, (R, n), 2.0), c.ballast_stiffness_cv)
         rate = c.rate_scale * section_rate.reshape(R, self.K)[:, self.section_of_sleeper] * sleeper_rate
         mid = n // 2
         soft = np.arange(n) < mid

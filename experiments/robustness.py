@@ -1,0 +1,115 @@
+"""How the shipped line agent and the tuned rules degrade outside the conditions they were trained and tuned on.
+
+The shipped per-section agent (``cpi-agent``) was trained, and the rules' parameters were tuned, on the default
+line (``trackenv/TampingLine-v0``: 15 MGT a year at 100 km/h, realistic ballast, a recording-car run once a
+year). Here each is run, unchanged, on the default line with one condition moved outside that range:
+
+* tonnage −50 % and +50 % (``annual_mgt`` 7.5 and 22.5);
+* ballast stiffness ×0.5 and ×2 (``ballast_stiffness_factor``: softer and stiffer support, other sleeper forces);
+* speed 70 and 140 km/h (``speed_kmh``; the passes' time step follows the speed);
+* the recording car twice a year and every two years (``measurement_interval`` 2 and 8 steps).
+
+On the same held-out episodes (``--seeds``, default 2000:2032, common random numbers across policies) the mean
+life-cycle cost of each policy with its 95 % CI, and the paired difference agent − best rule with its CI, per
+condition. The rules are the shipped tuned ones (not re-tuned: a planner who keeps the rule as tuned), the best
+rule on the nominal line is grouped-threshold. Writes ``results/robustness.json`` (``--out``) and prints a
+Markdown table; progress on stderr.
+
+    python experiments/robustness.py                       # 32 episodes per condition, ~15 min on 2 cores
+    python experiments/robustness.py --seeds 2000:2008     # a quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.evaluation.line_compare import parse_seeds
+from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.learning.line import load_line_trained
+from trackenv_agents.rules.line import LINE_HEURISTICS
+from trackenv_agents.rules.problems import tuned_params_for
+
+#: (name, overrides of the default line): the nominal line first, then one condition moved at a time
+CONDITIONS: tuple[tuple[str, dict], ...] = (
+    ("nominal", {}),
+    ("tonnage -50 %", {"annual_mgt": 7.5}),
+    ("tonnage +50 %", {"annual_mgt": 22.5}),
+    ("ballast stiffness x0.5", {"ballast_stiffness_factor": 0.5}),
+    ("ballast stiffness x2", {"ballast_stiffness_factor": 2.0}),
+    ("speed 70 km/h", {"speed_kmh": 70.0}),
+    ("speed 140 km/h", {"speed_kmh": 140.0}),
+    ("recording car twice a year", {"measurement_interval": 2}),
+    ("recording car every 2 years", {"measurement_interval": 8}),
+)
+RULES = ("grouped-threshold", "uniform-periodic")
+AGENT = "cpi-agent"
+
+
+def policies() -> list:
+    """The shipped agent and the shipped tuned rules (parameters of the nominal default line)."""
+    params = tuned_params_for(scenario("default"))
+    return [load_line_trained(name=AGENT)] + [LINE_HEURISTICS[n](**params[n]) for n in RULES]
+
+
+def run_condition(name: str, overrides: dict, seeds: list[int], batch_size: int) -> dict:
+    """Every policy on ``seeds`` of the default line with ``overrides``: costs with CIs, agent − best rule."""
+    cfg = scenario("default", **overrides)
+    results = evaluate_many(policies(), cfg, seeds, batch_size=batch_size, progress=True, desc=name)
+    rows = {}
+    for r in results:
+        lo, hi = bootstrap_ci(r.cost)
+        rows[r.policy] = {"mean_cost": float(r.cost.mean()), "ci_low": lo, "ci_high": hi,
+                          "tampings_per_km_year": float(r.tampings_per_km_year.mean())}
+    by_name = {r.policy: r for r in results}
+    best_rule = min(RULES, key=lambda n: rows[n]["mean_cost"])
+    diff = paired_difference(by_name[AGENT], by_name[best_rule])
+    rel = diff["mean_difference"] / rows[best_rule]["mean_cost"]
+    return {"condition": name, "overrides": overrides, "costs": rows, "best_rule": best_rule,
+            "agent_minus_best_rule": diff, "agent_vs_best_rule_relative": float(rel)}
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown: per condition the mean cost of each policy and the agent's paired difference to the best rule."""
+    head = ("| condition | " + " | ".join([AGENT, *RULES]) + " | agent − best rule [k€] (95 % CI) |\n"
+            "|---|" + "---:|" * (len(RULES) + 2))
+    out = [head]
+    for r in rows:
+        d = r["agent_minus_best_rule"]
+        costs = " | ".join(f"{r['costs'][p]['mean_cost']:.1f}" for p in [AGENT, *RULES])
+        out.append(f"| {r['condition']} | {costs} | {d['mean_difference']:+.1f} [{d['ci_low']:+.1f}, "
+                   f"{d['ci_high']:+.1f}] ({100 * r['agent_vs_best_rule_relative']:+.1f} % vs {r['best_rule']}) |")
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", default="2000:2032", help="held-out seeds A:B (default 2000:2032)")
+    ap.add_argument("--only", default=None, help="comma-separated condition names (default: all)")
+    ap.add_argument("--batch-size", type=int, default=24)
+    ap.add_argument("--out", default="results/robustness.json")
+    args = ap.parse_args(argv)
+    seeds = parse_seeds(args.seeds)
+    wanted = set(args.only.split(",")) if args.only else None
+    unknown = (wanted or set()) - {n for n, _ in CONDITIONS}
+    if unknown:
+        ap.error(f"--only: unknown conditions {sorted(unknown)}; known: {[n for n, _ in CONDITIONS]}")
+    t0 = time.perf_counter()
+    rows = [run_condition(n, o, seeds, args.batch_size) for n, o in CONDITIONS if wanted is None or n in wanted]
+    payload = {"seeds": [seeds[0], seeds[-1] + 1], "n_episodes": len(seeds), "rows": rows,
+               "wall_time_s": time.perf_counter() - t0}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(payload, indent=1, default=float))
+    print(table(rows))
+    print(f"wrote {out} ({payload['wall_time_s']:.0f} s)", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
