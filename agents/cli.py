@@ -585,7 +585,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("line", metavar="LINE.yaml", help="a line file (the documentation's page Lines from files)")
     sp.add_argument("--policy", default="grouped-threshold", metavar="NAME",
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
-                         "register-periodic, budgeted-worst-first (with its tuned parameters)")
+                         "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "
+                         "agent, at most the 10 years it was trained on) or the path of a trained per-section policy")
     sp.add_argument("--years", type=_positive(float), default=3.0, metavar="N", help="years to plan")
     sp.add_argument("--futures", type=_positive(int), default=8, metavar="K",
                     help="sampled futures (what the file does not know drawn again in each)")

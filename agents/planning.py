@@ -33,16 +33,34 @@ import numpy as np
 #: The share of futures from which a section's tamping in a quarter is recommended.
 RECOMMEND_SHARE = 0.5
 DEFAULT_POLICY = "grouped-threshold"
+#: The shipped trained per-section policy, by the name the other commands give it.
+AGENT_POLICY = "cpi-agent"
 
 
 def line_policy(name: str, config: Any) -> Any:
-    """The line rule ``name`` with its shipped tuned parameters (:func:`~trackenv_agents.rules.tuned_params_for`:
-    a line from a file takes the default line's), bound to ``config``; ValueError for another."""
+    """The policy ``name`` bound to ``config``: a line rule with its shipped tuned parameters
+    (:func:`~trackenv_agents.rules.tuned_params_for`: a line from a file takes the default line's), the shipped
+    agent (``cpi-agent``) or a trained per-section policy by the path of its ``.zip``; ValueError for another."""
     from .rules import LINE_HEURISTICS, tuned_params_for
 
-    if name not in LINE_HEURISTICS:
-        raise ValueError(f"unknown policy {name!r}; known: {', '.join(LINE_HEURISTICS)}")
-    return LINE_HEURISTICS[name](**tuned_params_for(config).get(name, {})).bind(config)
+    if name in LINE_HEURISTICS:
+        return LINE_HEURISTICS[name](**tuned_params_for(config).get(name, {})).bind(config)
+    if name == AGENT_POLICY or name.endswith(".zip"):
+        from .learning.line import load_line_trained
+
+        try:
+            agent = load_line_trained(None if name == AGENT_POLICY else name, name=Path(name).stem)
+        except FileNotFoundError as exc:
+            raise ValueError(f"policy {name!r}: {exc}") from None
+        return agent.bind(config)
+    raise ValueError(f"unknown policy {name!r}; known: {', '.join(LINE_HEURISTICS)}, {AGENT_POLICY} or the path of "
+                     "a trained per-section policy (.zip)")
+
+
+def trained_horizon_years(policy: Any) -> float | None:
+    """The episode length a trained policy learnt on (its ``time`` feature is the share of that horizon gone);
+    None for a rule, which reads no horizon."""
+    return getattr(policy, "horizon_years", None)
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,10 +197,19 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
 
     cfg = LineConfig(line=line, horizon_years=years, **config)
     rule = line_policy(policy, cfg)
+    steps = cfg.horizon_steps
+    trained = trained_horizon_years(rule)
+    if trained is not None:
+        # a trained policy reads the time left in its training episode: the futures run in episodes of that
+        # length, of which the plan takes its first ``years`` (the line goes on after the plan, as in training)
+        if years > trained:
+            raise ValueError(f"years: the policy {policy!r} was trained on {trained:g}-year episodes; plan at most "
+                             f"{trained:g} years with it, got {years:g}")
+        cfg = cfg.replace(horizon_years=trained)
+        rule = rule.bind(cfg)
     fit = history_fit(cfg)
     env = TampingLineVectorEnv(futures, cfg, autoreset_mode=AutoresetMode.NEXT_STEP)
     obs, _ = env.reset(seed=[seed + i for i in range(futures)])
-    steps = cfg.horizon_steps
     share = np.zeros((steps, cfg.n_sections))
     costs = np.zeros((futures, steps))
     parts: dict[str, np.ndarray] = {}

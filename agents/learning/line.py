@@ -447,4 +447,5 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
                          f"computes {_feature_names(advisor is not None)}")
     model = _algo_class(meta["algo"]).load(str(path), device="cpu")
     rule = None if advisor is None else LINE_HEURISTICS[advisor](**meta.get("advisor_params", {}))
-    return LineAgent(model.policy, name=name, advisor=rule)
+    return LineAgent(model.policy, name=name, advisor=rule,
+                     horizon_years=meta.get("config", {}).get("horizon_years"))

@@ -124,20 +124,23 @@ class LineAgent:
     sections whose probability of tamping is above one half; otherwise each drawn with its probability (``rng``:
     a numpy Generator; None: a fresh unseeded one). Bound to a config (:meth:`bind`, as the evaluation harness
     does), never a section tamped within the config's ``min_steps_between_tampings`` (the env would drop it) and
-    at most ``capacity`` sections, the most probable."""
+    at most ``capacity`` sections, the most probable. ``horizon_years``: the episode length it was trained on
+    (its ``time`` feature is the share of that horizon gone), where known."""
 
     def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
-                 rng: np.random.Generator | None = None, advisor: Any = None) -> None:
+                 rng: np.random.Generator | None = None, advisor: Any = None,
+                 horizon_years: float | None = None) -> None:
         self.policy = policy
         self.name = name
         self.config = config
         self.advisor = advisor if advisor is None or config is None else advisor.bind(config)
         self.params: dict[str, Any] = {}
         self._rng = rng
+        self.horizon_years = horizon_years
 
     def bind(self, config: LineConfig) -> LineAgent:
         """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it)."""
-        return LineAgent(self.policy, self.name, config, self._rng, self.advisor)
+        return LineAgent(self.policy, self.name, config, self._rng, self.advisor, self.horizon_years)
 
     def tamp_probability(self, obs: Mapping[str, Any]) -> np.ndarray:
         """(batch, S) probability of tamping each section (batched observation dict of numpy arrays)."""

@@ -46,6 +46,18 @@ def test_the_plan_is_what_the_policy_does_in_the_futures(tmp_path):
     assert "Q1" in plan.table() and "k€" in plan.table()
 
 
+def test_the_shipped_agent_plans_within_the_episodes_it_was_trained_on(tmp_path, capsys):
+    """The agent's futures run in its 10-year training episodes, of which the plan takes the years asked; more
+    years than it was trained on: one line, exit 2."""
+    plan = plan_line(write(tmp_path), policy="cpi-agent", years=0.5, futures=2, capacity=4)
+    assert plan.share.shape == (2, 4) and plan.costs.shape == (2, 2)
+    assert np.allclose(sum(v for v in plan.parts.values()), plan.costs.sum(axis=1))
+    assert main(["plan", str(write(tmp_path)), "--policy", "cpi-agent", "--years", "12"]) == 2
+    assert "trained on 10-year episodes" in capsys.readouterr().err
+    assert main(["plan", str(write(tmp_path)), "--policy", "no-such-policy"]) == 2
+    assert "cpi-agent" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("kind", list(FAULTS))
 def test_a_malformed_file_is_one_line_and_exit_2(tmp_path, capsys, kind):
     files, expected = FAULTS[kind]
