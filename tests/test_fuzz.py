@@ -22,6 +22,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import trackenv as te
+from trackenv.envs.choices import INTERVENTIONS
+from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import LineConfig, scenario
 from trackenv.envs.tamping import TampingEnv
 from trackenv.envs.vector import TampingVectorEnv
@@ -167,6 +169,48 @@ def test_vector_env_seed_and_actions(venv: TampingVectorEnv, seed, action) -> No
         obs, rewards = out
         assert np.all(np.isfinite(rewards))
         assert all(np.all(np.isfinite(v)) for v in obs.values())
+
+
+# the choices: config fields and actions, on the same short track (a segment of three sections) with wet spots,
+# short defects and a survey before the start, so that every choice acts
+choice_names = st.lists(st.sampled_from([*INTERVENTIONS, "grind", ""]), max_size=7)
+CHOICE_FIELDS = ["surveyed_share", "wet_spot_active_share", "local_defects_mean", "local_defect_length_m",
+                 "local_defect_rate_factor", "spot_tamping_length_m", "spot_tamping_work", "drainage_work",
+                 "renewal_work", "inspection_sd_noise_mm", "survey_cost"]
+
+
+@FUZZ
+@given(choices=mostly(st.one_of(choice_names, choice_names.map(tuple)), 3),
+       kw=st.dictionaries(st.sampled_from(CHOICE_FIELDS), mostly(st.one_of(st.floats(0, 40), st.integers(0, 40)), 2),
+                          max_size=3))
+def test_choice_config_refuses_or_stores_canonical_values(choices, kw: dict) -> None:
+    _refuses_or_stores_canonical_values(LineConfig, {"choices": choices, **kw})
+
+
+CHOICE_CFG = ENV_CFG.replace(choices=INTERVENTIONS, wet_spot_probability=0.6, wet_spot_active_share=0.5,
+                             surveyed_share=0.5, local_defects_mean=1.0, annual_budget=40.0)
+valid_choices = st.lists(st.integers(0, len(INTERVENTIONS)), min_size=3, max_size=3)
+choice_actions = st.one_of(
+    mostly(st.one_of(valid_choices, valid_choices.map(np.array)), 3),
+    st.lists(st.integers(-1, 8), min_size=0, max_size=4),
+    st.lists(st.sampled_from([0, 3, 2.5, np.nan, True, 7]), min_size=3, max_size=3),
+)
+
+
+@pytest.fixture(scope="module")
+def choice_env() -> TampingLine:
+    return TampingLine(CHOICE_CFG, action_type="choices")
+
+
+@FUZZ
+@given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=choice_actions)
+def test_choice_env_seed_and_action(choice_env: TampingLine, seed, action) -> None:
+    out = _reset_and_step(choice_env, seed, action, "TampingLine.step (choices)")
+    if out is not None:
+        obs, reward = out
+        assert math.isfinite(reward)
+        assert all(np.all(np.isfinite(v)) for v in obs.values())
+        assert choice_env.observation_space.contains(obs)
 
 
 TRACK_KEYS = ["pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping"]

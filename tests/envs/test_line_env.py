@@ -104,7 +104,7 @@ def test_section_costs_add_up_to_the_lines_cost_with_the_possession():
     vec = TampingLineVectorEnv(2, cfg)
     vec.reset(seed=3)
     vec.batch.count[1] = cfg.tamping_model.max_tampings_before_renewal  # line 0, section 1: its renewal is due
-    vec.batch.last_tamped[[1, 2, 6, 11]] = -8  # last tamped two years before: none of the asked is masked
+    vec.batch.last_work[[1, 2, 6, 11]] = -8  # last worked on two years before: none of the asked is masked
     steps = []
     for a in ([[0, 1, 1, 0, 0, 0], [0, 0, 0, 0, 0, 0]], [[0, 0, 0, 0, 0, 0], [1, 0, 0, 0, 0, 1]]):
         _, r, _, _, info = vec.step(np.array(a, dtype=np.int8))
@@ -238,7 +238,7 @@ def test_config_validation_and_scenarios():
         LineConfig(n_sections=4, capacity=5)
     with pytest.raises(ValueError, match="scenario"):
         scenario("nope")
-    assert set(SCENARIOS) == {"small", "default", "hard", "long", "track60"}
+    assert set(SCENARIOS) == {"small", "default", "hard", "long", "track60", "choices", "wet", "defects"}
     with pytest.raises(ValueError, match="shape"):
         env = TampingLine(scenario="small", **SHORT)
         env.reset(seed=0)

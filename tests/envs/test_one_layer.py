@@ -67,7 +67,7 @@ def test_dispatch_by_config_type():
         problem_config("tiny")
     with pytest.raises(ValueError, match="config must be one of"):
         problem_of({"n_sections": 3})
-    for config in CONFIGS.values():  # every preset takes both action types
-        assert problem_of(config).action_types == ("multibinary", "discrete")
+    for config in CONFIGS.values():  # every preset takes every action type
+        assert problem_of(config).action_types == ("multibinary", "discrete", "choices")
         with pytest.raises(ValueError, match="action_type"):
             TrackEnv(config, action_type="continuous")

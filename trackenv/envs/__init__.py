@@ -6,7 +6,10 @@ only cut a longer configured horizon short (``gym.make(..., horizon_years=20)`` 
 Every id is the one environment (:class:`~trackenv.envs.line.TampingLine` over the one engine) with a preset of
 :class:`~trackenv.envs.line_config.LineConfig`: the line problem (:mod:`trackenv.envs.line`),
 ``trackenv/TampingLine-v0`` (the default line), ``trackenv/TampingLineSmall-v0`` (tests, quick studies),
-``trackenv/TampingLineHard-v0`` and ``trackenv/TampingLineLong-v0`` (50 km); the 60 m track
+``trackenv/TampingLineHard-v0`` and ``trackenv/TampingLineLong-v0`` (50 km); with every choice of a track
+manager (``action_type="choices"``: :mod:`trackenv.envs.choices`), ``trackenv/TampingLine-v1`` (the default
+line), ``trackenv/TampingLineWet-v0`` (a wet, poorly drained line) and ``trackenv/TampingLineDefects-v0`` (many
+short defects); the 60 m track
 (:mod:`trackenv.envs.tamping`), ``trackenv/Tamping-v1`` (MultiBinary actions), ``trackenv/TampingDiscrete-v1``
 (one section or none per step), and for learners
 (:mod:`trackenv.envs.wrappers`) ``trackenv/TampingRanked-v1`` (``Discrete(n_sections + 1)`` ranked actions,
@@ -44,6 +47,12 @@ _ENVS = (
      {"scenario": "long"}),
     ("trackenv/TampingLineHard-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
      {"scenario": "hard"}),
+    ("trackenv/TampingLine-v1", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "choices", "action_type": "choices"}),
+    ("trackenv/TampingLineWet-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "wet", "action_type": "choices"}),
+    ("trackenv/TampingLineDefects-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
+     {"scenario": "defects", "action_type": "choices"}),
     ("trackenv/Tamping-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "multibinary"}),
     ("trackenv/TampingDiscrete-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",

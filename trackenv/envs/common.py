@@ -7,8 +7,9 @@ import numpy as np
 from gymnasium import spaces
 
 from ..physics._checks import check_int
+from .choices import CHOICES
 
-ACTION_TYPES = ("multibinary", "discrete")
+ACTION_TYPES = ("multibinary", "discrete", "choices")
 RENDER_MODES = (None, "rgb_array")
 
 #: Bounds of the observation keys that every problem has (units of the envs' tables: mm, counts, fractions);
@@ -45,6 +46,8 @@ def action_space(config, action_type: str) -> spaces.Space:
         return spaces.MultiBinary(config.n_sections)
     if action_type == "discrete":
         return spaces.Discrete(config.n_sections + 1)
+    if action_type == "choices":
+        return spaces.MultiDiscrete([len(CHOICES)] * config.n_sections)
     raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
 
 
@@ -66,7 +69,11 @@ def check_reset_arguments(seed, options) -> int | None:
 
 
 def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
-    """The sections to tamp (bool, n_sections) from an action; a malformed action raises ValueError."""
+    """The sections to tamp (bool, n_sections) from an action, or with ``action_type="choices"`` the action code
+    of each section (int64, n_sections: :data:`~trackenv.envs.choices.CHOICES`); a malformed action raises
+    ValueError."""
+    if action_type == "choices":
+        return _decode_choices(action, n_sections)
     if action_type == "discrete":
         a = np.asarray(action)
         if (
@@ -95,11 +102,30 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
     return a.astype(bool)
 
 
+def _decode_choices(action, n_sections: int) -> np.ndarray:
+    top = len(CHOICES) - 1
+    try:
+        a = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be an array of {n_sections} choice codes in [0, {top}], "
+                         f"got {action!r}") from None
+    if a.shape != (n_sections,):
+        raise ValueError(f"action must have shape ({n_sections},) (one choice code per section), got {a.shape}")
+    if not np.all(np.isfinite(a)) or not np.all((a == np.round(a)) & (a >= 0) & (a <= top)):
+        raise ValueError(f"action values must be integer choice codes in [0, {top}] ({', '.join(CHOICES)}), "
+                         f"got {a.tolist()}")
+    return a.astype(np.int64)
+
+
 def action_mask(allowed: np.ndarray, action_type: str) -> np.ndarray:
     """Valid actions for masked algorithms from ``allowed`` (..., n_sections) bool, the sections that may be
     tamped now: Discrete (..., n_sections + 1) with "nothing" always valid; MultiBinary (..., 2·n_sections) as
-    [may-not-tamp, may-tamp] pairs per section (sb3-contrib's convention)."""
+    [may-not-tamp, may-tamp] pairs per section (sb3-contrib's convention); "choices" (MultiDiscrete) from
+    ``allowed`` (..., n_sections, len(CHOICES)), the choices each section may get, flat (..., n_sections ·
+    len(CHOICES)), section after section, as sb3-contrib expects for MultiDiscrete."""
     allowed = np.asarray(allowed, dtype=bool)
+    if action_type == "choices":  # allowed: (..., n_sections, len(CHOICES)), flat per section as sb3-contrib reads
+        return allowed.reshape(allowed.shape[:-2] + (-1,))
     if action_type == "discrete":
         return np.concatenate([np.ones(allowed.shape[:-1] + (1,), dtype=bool), allowed], axis=-1)
     return np.stack([np.ones_like(allowed), allowed], axis=-1).reshape(allowed.shape[:-1] + (-1,))

@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from .batched import BatchedVectorEnv
+from .choices import CHOICES
 from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
 from .problems import ProblemConfig, problem_of
 from .state import EnvState, checked, snapshot
@@ -36,6 +37,20 @@ def _checked_action_type(config: ProblemConfig, action_type: str) -> str:
         raise ValueError(f"action_type must be one of {list(allowed)} for {type(config).__name__}, "
                          f"got {action_type!r}")
     return action_type
+
+
+def _masks(engine: Any, config: ProblemConfig, n_rows: int, action_type: str) -> np.ndarray:
+    """(n_rows, mask size) the action masks of ``engine``'s rows (before the first reset: what the config
+    allows, every section free)."""
+    if action_type == "choices":
+        if engine is None:
+            work = config.choice_work
+            free = np.array([name == "nothing" or (name in config.choices and work[name] <= config.capacity)
+                             for name in CHOICES])
+            return action_mask(np.broadcast_to(free, (n_rows, config.n_sections, len(CHOICES))), action_type)
+        return action_mask(engine.choice_mask(), action_type)
+    allowed = engine.allowed() if engine is not None else np.ones((n_rows, config.n_sections), bool)
+    return action_mask(allowed, action_type)
 
 
 class TrackEnv(gym.Env):
@@ -81,10 +96,10 @@ class TrackEnv(gym.Env):
 
     def action_masks(self) -> np.ndarray:
         """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): MultiBinary, (2·n_sections,) pairs
-        [may-not-tamp, may-tamp] per section; Discrete, (n_sections + 1,). A section tamped within the last
-        ``min_steps_between_tampings`` steps may not be tamped."""
-        allowed = self.engine.allowed()[0] if self.engine is not None else np.ones(self.config.n_sections, bool)
-        return action_mask(allowed, self.action_type)
+        [may-not-tamp, may-tamp] per section; Discrete, (n_sections + 1,); choices (MultiDiscrete),
+        (n_sections · len(CHOICES),), each section's choices in turn (:meth:`LineBatch.choice_mask`). A section
+        tamped (or worked on) within the last ``min_steps_between_tampings`` steps may not be tamped."""
+        return _masks(self.engine, self.config, 1, self.action_type)[0]
 
     def get_state(self) -> EnvState:
         """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, on any env of the
@@ -143,7 +158,7 @@ class TrackVectorEnv(BatchedVectorEnv):
     def _step_envs(self, actions: np.ndarray, stepping: list[int],
                    resetting: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, dict]]:
         n_sections = self.config.n_sections
-        want = np.zeros((self.num_envs, n_sections), dtype=bool)
+        want = np.zeros((self.num_envs, n_sections), dtype=np.int64)
         for i in stepping:
             want[i] = decode_action(actions[i], self.action_type, n_sections)
         rewards, truncated, infos = self._rows().advance(want, stepping, self._rngs, resetting)
@@ -163,9 +178,7 @@ class TrackVectorEnv(BatchedVectorEnv):
 
     def action_masks(self) -> np.ndarray:
         """(num_envs, ...) the masks of :meth:`TrackEnv.action_masks`, one row per env."""
-        shape = (self.num_envs, self.config.n_sections)
-        return action_mask(self.engine.allowed() if self.engine is not None else np.ones(shape, bool),
-                           self.action_type)
+        return _masks(self.engine, self.config, self.num_envs, self.action_type)
 
     def get_state(self, index: int) -> EnvState:
         """A snapshot of env ``index`` (:mod:`trackenv.envs.state`), the same as :meth:`TrackEnv.get_state`

@@ -80,6 +80,9 @@ class TampingLine(TrackEnv):
     ``trackenv/TampingLine-v0``         12        6         the default line
     ``trackenv/TampingLineHard-v0``     24        4         more zones and hidden spots, budget 60 k€/year
     ``trackenv/TampingLineLong-v0``     250       25        50 km
+    ``trackenv/TampingLine-v1``         12        6         every choice (below), the contact sensor
+    ``trackenv/TampingLineWet-v0``      12        6         choices; many wet spots, half the line surveyed
+    ``trackenv/TampingLineDefects-v0``  12        6         choices; switches and short local defects
     ``trackenv/Tamping-v1``             6         6         the 60 m track: :class:`~trackenv.envs.tamping.TampingEnv`
     ==================================  ========  ========  ================================================
 
@@ -90,6 +93,14 @@ class TampingLine(TrackEnv):
     annual budget: with ``over_capacity="clip"`` (default; the checkers sample unconstrained actions) the
     allowed sections with the worst *measured* SD are kept and ``info["clipped"]`` is True; with
     ``over_capacity="raise"`` a ValueError. Malformed actions raise ValueError.
+
+    With ``action_type="choices"`` (the ids ``TampingLine-v1``, ``TampingLineWet-v0``, ``TampingLineDefects-v0``):
+    ``MultiDiscrete([7] * n_sections)``, one choice per section by its code in
+    :data:`~trackenv.envs.choices.CHOICES`: 0 nothing, 1 tamp, 2 spot tamp, 3 drainage, 4 ballast renewal,
+    5 inspect (an extra measurement by a trolley), 6 survey (does a wet spot lie under the section?); those not
+    in ``LineConfig.choices`` act as nothing. ``capacity`` then counts work in tamping-section equivalents
+    (``LineConfig.choice_work``), and the masks are ``(n_sections · 7,)``, each section's codes in turn. The
+    effects, costs and work of each choice: the documentation's page "What a track manager decides".
 
     **Observation** (``Dict``, float32; what a planner has):
 
@@ -111,18 +122,26 @@ class TampingLine(TrackEnv):
     (``contact_sensor``)    reads it (relative error ``contact_sensor_noise``)
     section_dynamic_share   that peak over the static wheel load, minus 1                    -      [-1, 20]
     (``contact_sensor``)
+    section_measurement_    time since the section was last measured (recording car or       year   [0, H+1]
+    age (``inspect``)       trolley)
+    section_survey          what a survey found: -1 not surveyed, 0 no wet cause, 1 one      -      [-1, 1]
+    (``survey``)
     ======================  ===============================================================  =====  ========
 
     The true state is in ``info``: ``section_sd_m``, ``section_peak_m``, ``section_class`` (0 OK, 1 alert,
     2 intervention, 3 immediate action, EN 13848-5 style at 100 km/h), ``wet_spot_active``, ``rate_factor``.
     A value beyond its bound is clipped in the observation, never silently: ``info["observation_clipped"]``
     counts them.
-    ``info["section_costs"]``: each section's own costs of the step (k€: its tamping or renewal, geometry,
-    speed restriction, immediate action); with the line's possession they add up to the step's cost (a
-    learner can credit each section's choice with its own costs).
+    ``info["section_costs"]``: each section's own costs of the step (k€: its tamping or renewal, or its other
+    choice, geometry, speed restriction, immediate action); with the line's possession they add up to the step's
+    cost (a learner can credit each section's choice with its own costs). ``info["choices"]``: how many sections
+    got each choice this step, by name (``tamp``, ``spot_tamp``, ``drainage``, ``renew``, ``inspect``,
+    ``survey``); ``info["section_choices"]``: each section's applied code; ``info["tamped_sections"]``: tamped
+    or renewed.
 
     **Reward.** −Σ of the step's cost parts (k€) in ``info["costs"]``: ``possession`` (per campaign),
-    ``tamping`` (per metre × 200 m per section), ``renewal``, ``geometry`` (per section-year ∝
+    ``tamping`` (per metre × 200 m per section), ``renewal``, ``spot_tamping``, ``drainage``, ``inspection``,
+    ``survey`` (the choices'; 0 without them), ``geometry`` (per section-year ∝
     (SD/SD_alert)²), ``speed_restriction`` (per section-step at or above the intervention limit),
     ``immediate_action`` (per section-step at the immediate-action limit). Defaults and sources:
     :class:`~trackenv.envs.line_config.LineConfig`.
@@ -156,7 +175,10 @@ class TampingLine(TrackEnv):
     Newton iteration stops per segment and the least-squares lines are summed row by row, so a line's numbers
     no longer depend on the other lines of a batch (costs moved by ~1e-9 relative, within the Newton tolerance);
     ``info["section_costs"]``; ``info["observation_clipped"]``; lines from files (``line=``; a line without one is
-    drawn as before, bit for bit).
+    drawn as before, bit for bit); ``action_type="choices"`` and the config fields of the choices, with the zero
+    cost parts of the choices and ``info["choices"]`` (without the choices, the same draws, rewards and
+    observations, bit for bit). v1 (``TampingLine-v1``): the default line with every choice and the contact
+    sensor.
     """
 
     def __init__(self, config: LineConfig | dict | str | None = None, *, scenario: str | None = None,

@@ -23,6 +23,7 @@ from ..physics.contact import HertzContact
 from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
 from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
+from .choices import COST_KEY, INTERVENTIONS
 from .config import ConfigBase, bounded_by, check_range_field
 
 if TYPE_CHECKING:
@@ -105,6 +106,20 @@ class LineConfig(ConfigBase):
     vehicle reads it (axle-box accelerations): the peak of the step's passes and its dynamic share above the
     static wheel load, with a relative error of SD ``contact_sensor_noise`` (default 5 % **[assumption]**: the
     order of force estimates from axle-box accelerations), drawn at the reset like every other error.
+    **Choices** (``action_type="choices"``; the documentation's page "What a track manager decides" has the
+    table with sources). ``choices``: the enabled choices besides "nothing" (names of
+    :data:`~trackenv.envs.choices.CHOICES`; default ``("tamp",)``: the tamping-only problem, drawn and scored as
+    before). ``spot_tamping_length_m`` (6 m lifted around the worst sleeper), ``spot_tamping_cost`` (0.5 k€ per
+    site), ``drainage_cost`` (25 k€ per site), ``inspection_cost`` (0.3 k€ per section) with the trolley's errors
+    ``inspection_sd_noise_mm`` (0.05) and ``inspection_peak_noise_mm`` (0.2), ``survey_cost`` (0.4 k€ per
+    section) **[assumption]** all; a renewal by choice costs a tamping and ``renewal_cost_per_m``. The work of
+    each, in tamping-section equivalents of ``capacity`` (:attr:`choice_work`): tamp 1, ``spot_tamping_work``
+    0.2, ``drainage_work`` 2, ``renewal_work`` 3 **[assumption]**, inspect and survey 0 (a choice whose work
+    exceeds ``capacity`` is always masked). ``surveyed_share``: the share of sections surveyed before the start
+    (needs "survey"). Drawn only where set (else nothing is drawn for them): ``wet_spot_active_share``, the share
+    of wet spots working from the first step; ``local_defects_mean`` short local defects per segment (Poisson;
+    a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch settling
+    ``local_defect_rate_factor`` times faster **[assumption]**.
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type, the coarsest step that keeps the
     peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s for the
     coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
@@ -169,12 +184,28 @@ class LineConfig(ConfigBase):
     profiles: bool = False
     contact_sensor: bool = False
     contact_sensor_noise: float = 0.05
+    choices: tuple = ("tamp",)
+    spot_tamping_length_m: float = 6.0
+    spot_tamping_cost: float = 0.5
+    spot_tamping_work: float = 0.2
+    drainage_cost: float = 25.0
+    drainage_work: float = 2.0
+    renewal_work: float = 3.0
+    inspection_cost: float = 0.3
+    inspection_sd_noise_mm: float = 0.05
+    inspection_peak_noise_mm: float = 0.2
+    survey_cost: float = 0.4
+    surveyed_share: float = 0.0
+    wet_spot_active_share: float = 0.0
+    local_defects_mean: float = 0.0
+    local_defect_length_m: float = 2.4
+    local_defect_rate_factor: float = 2.5
     limits: tuple = ()
     dt: float | str = "auto"
     line: LineDescription | None = None
 
-    agent_action_types = ("multibinary", "discrete", "ranked")
-    _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal")
+    agent_action_types = ("multibinary", "discrete", "ranked", "choices")
+    _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal", *COST_KEY.values())
     _CAMPAIGN_COST_FIELD = "possession_cost"
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("speed_restriction", 2, "speed_restriction_cost"),
                           ("immediate_action", 3, "immediate_action_cost"))
@@ -236,8 +267,39 @@ class LineConfig(ConfigBase):
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
         object.__setattr__(self, "contact_sensor", check_bool("contact_sensor", self.contact_sensor))
         c("contact_sensor_noise", low=0.0, high=1.0)
+        self._check_choices()
         object.__setattr__(self, "dt", check_dt_option(self.dt))
         self._check_pass_time_steps()
+
+    def _check_choices(self) -> None:
+        """The enabled choices (stored as a tuple in the order of :data:`~trackenv.envs.choices.CHOICES`), their
+        costs, work and noise, and the draws that only make sense with them."""
+        value = self.choices
+        allowed = f"a non-empty list of distinct names from {list(INTERVENTIONS)}"
+        if isinstance(value, str) or not isinstance(value, (tuple, list)):
+            raise ValueError(f"choices must be {allowed}, got {value!r}")
+        unknown = [v for v in value if not isinstance(v, str) or v not in INTERVENTIONS]
+        if unknown or not value or len(set(value)) != len(value):
+            raise ValueError(f"choices must be {allowed}, got {list(value)!r}")
+        object.__setattr__(self, "choices", tuple(name for name in INTERVENTIONS if name in value))
+        c = partial(check_field, self)
+        bounded_by(self, "segment_length_m", c, "spot_tamping_length_m", low=SLEEPER_SPACING_M,
+                   high=self.segment_length_m)
+        for name in ("spot_tamping_cost", "drainage_cost", "inspection_cost", "survey_cost"):
+            c(name, low=0.0, high=1e9)
+        for name in ("spot_tamping_work", "drainage_work", "renewal_work"):  # more than capacity: always masked
+            c(name, low=0.0, high=100.0)
+        c("inspection_sd_noise_mm", low=0.0, high=10.0)
+        c("inspection_peak_noise_mm", low=0.0, high=50.0)
+        c("surveyed_share", low=0.0, high=1.0)
+        if self.surveyed_share > 0 and "survey" not in self.choices:
+            raise ValueError(f"surveyed_share = {self.surveyed_share:g} needs 'survey' in choices (the observation "
+                             f"shows what a survey found), got choices = {list(self.choices)}")
+        c("wet_spot_active_share", low=0.0, high=1.0)
+        c("local_defects_mean", low=0.0, high=10.0)
+        bounded_by(self, "segment_length_m", c, "local_defect_length_m", low=SLEEPER_SPACING_M,
+                   high=self.segment_length_m)
+        c("local_defect_rate_factor", low=0.1, high=100.0)
 
     def _check_pass_time_steps(self) -> None:
         """The dynamics' own bound on the time steps of a pass (``MAX_TIME_STEPS``), read here so that the config
@@ -346,6 +408,13 @@ class LineConfig(ConfigBase):
     def section_renewal_cost(self) -> float:
         return self.renewal_cost_per_m * self.section_length_m
 
+    @property
+    def choice_work(self) -> dict[str, float]:
+        """The possession each choice takes, in tamping-section equivalents (what ``capacity`` counts): tamping
+        a section 1, the other track work its ``*_work`` field, looking (inspect, survey) nothing."""
+        return {"tamp": 1.0, "spot_tamp": self.spot_tamping_work, "drainage": self.drainage_work,
+                "renew": self.renewal_work, "inspect": 0.0, "survey": 0.0}
+
     def vehicles(self) -> tuple[Wheelset, Wheelset]:
         """(passenger, freight) loaded wheelsets (static wheel load on the modelled rail)."""
         coach = Car.manchester_coach()
@@ -383,6 +452,17 @@ SCENARIOS: dict[str, dict[str, Any]] = {
                 "initial_age_years": 2.0, "initial_max_tampings": 0, "initial_scale": (1.0, 1.0),
                 "possession_cost": 10.0, "tamping_cost_per_m": 0.2, "alert_cost": 0.5,
                 "speed_restriction_cost": 3.0, "capacity": 6, "profiles": True},
+    # the default line with the full decision (trackenv/TampingLine-v1): every choice, and the contact sensor
+    "choices": {"choices": INTERVENTIONS, "contact_sensor": True},
+    # a wet, poorly drained line (trackenv/TampingLineWet-v0): a wet spot on ~35 % of the sections, 40 % of them
+    # working from the start, half the sections surveyed before it [assumption]; the full decision
+    "wet": {"choices": INTERVENTIONS, "contact_sensor": True, "wet_spot_probability": 0.35,
+            "wet_spot_active_share": 0.4, "surveyed_share": 0.5},
+    # a line of many short defects (trackenv/TampingLineDefects-v0): more switches and crossings, on average
+    # one short defect per segment (a joint, a weld, a failed sleeper: 2.4 m settling 2.5x faster)
+    # [assumption]; the full decision
+    "defects": {"choices": INTERVENTIONS, "contact_sensor": True, "switch_probability": 0.2,
+                "local_defects_mean": 1.0},
 }
 
 

@@ -35,6 +35,7 @@ from ..physics.geometry import (
 from ..physics.settlement import implicit_settlement_step
 from ..physics.tamping import restored_level
 from ..physics.track import Track
+from .choices import CHOICES, COST_KEY, NOTHING, TRACK_WORK, choice_counts, code
 from .common import SHARED_BOUNDS, clip_observation, clipped_values
 from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
@@ -42,6 +43,7 @@ from .info import step_info
 from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
+TAMP, SPOT_TAMP, DRAINAGE, RENEW, INSPECT, SURVEY = (code(name) for name in CHOICES[1:])
 
 
 def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
@@ -66,8 +68,8 @@ _SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", 
 _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
-                   "sd", "peak", "sd_after_tamping")
-_SECTION_NOISE = ("meas_noise", "sensor_noise")
+                   "sd", "peak", "sd_after_tamping", "last_work", "measured_at", "survey")
+_SECTION_NOISE = ("meas_noise", "sensor_noise", "inspect_noise")
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,6 +108,10 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
     if config.contact_sensor:
         bounds["section_contact_peak"] = shared["contact_force"]
         bounds["section_dynamic_share"] = (-1.0, 20.0)
+    if "inspect" in config.choices:
+        bounds["section_measurement_age"] = (0.0, config.horizon_years + 1.0)
+    if "survey" in config.choices:
+        bounds["section_survey"] = (-1.0, 1.0)
     return bounds
 
 
@@ -150,6 +156,12 @@ class LineBatch:
         self.law = c.settlement_law
         self.tm = c.tamping_model
         self.limits = c.quality_limits.for_speed(c.speed)
+        #: per action code: enabled by the config, track work, possession work (tamping-section equivalents)
+        self.enabled = np.array([name == "nothing" or name in c.choices for name in CHOICES])
+        self.is_work = np.array([name in TRACK_WORK for name in CHOICES])
+        self.work = np.array([0.0] + [c.choice_work[name] for name in CHOICES[1:]])
+        #: sleepers either side of the worst one that a spot tamping lifts
+        self.spot_half = max(int(round(c.spot_tamping_length_m / SLEEPER_SPACING_M / 2)), 1)
         self.vehicles = c.vehicles()
         self.passes = c.axle_passes_per_step()
         #: the largest static wheel load of the traffic [N]: the contact sensor's dynamic share is above it
@@ -182,8 +194,12 @@ class LineBatch:
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
         self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
+        self.last_work = np.zeros(G)  # step of the last track work (tamping, spot tamping, drainage, renewal)
+        self.measured_at = np.zeros(G, dtype=np.int64)  # step of the last measurement (recording car or trolley)
+        self.survey = np.full(G, -1, dtype=np.int64)  # what a survey found: -1 none yet, 0 no wet cause, 1 one
         self.meas_noise = np.zeros((H + 1, G, 2))
         self.sensor_noise = np.zeros((H + 1, G))  # the contact sensor's errors (``contact_sensor``), per step
+        self.inspect_noise = np.zeros((H + 1, G, 2))  # the trolley's errors (SD, peak), per step (``inspect``)
         # per line
         self.step = np.zeros(self.n_lines, dtype=np.int64)
         self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
@@ -250,7 +266,9 @@ class LineBatch:
 
     def _measure(self, lines: np.ndarray) -> None:
         """A recording-car run on ``lines`` (bool over lines), with the pre-drawn errors of this step."""
-        self.measure_rows(np.repeat(lines, self.S), np.repeat(self.step, self.S))
+        seg = np.repeat(lines, self.S)
+        self.measure_rows(seg, np.repeat(self.step, self.S))
+        self.measured_at = np.where(seg, np.repeat(self.step, self.S), self.measured_at)
         self.last_measured = np.where(lines, self.step, self.last_measured)
 
     def measure_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
@@ -327,6 +345,13 @@ class LineBatch:
         voided = self._voided_sleepers(rng, R, n)  # drawn last: configs without voids draw as before
         if c.contact_sensor:  # after that: configs without the sensor draw as before
             self.sensor_noise[:, r] = rng.standard_normal((H + 1, S))
+        # then what only the configs with these fields draw (the others draw as before)
+        if "inspect" in c.choices:
+            self.inspect_noise[:, r] = rng.standard_normal((H + 1, S, 2))
+        if c.wet_spot_active_share > 0:  # wet spots already working: they start in the first step
+            onset = np.where(rng.random(R) < c.wet_spot_active_share, 0, onset)
+        self._local_defects(rng, rate)
+        surveyed = rng.random(S) < c.surveyed_share if c.surveyed_share > 0 else np.zeros(S, dtype=bool)
         self.sd_after_tamping[r] = 0.0
         # a segment's zone belongs to the sections over its middle (all of it where a segment is one section)
         zone = np.zeros(self.K, dtype=np.int64)
@@ -360,6 +385,22 @@ class LineBatch:
         self.u[rs] = u0
         self.cyc[rs] = np.broadcast_to(cycles[:, None], (R, n))
         self._apply_line_file(b)
+        self.last_work[r] = self.last_tamped[r]
+        self.survey[r] = np.where(surveyed, self.wet_present()[r], -1)
+
+    def _local_defects(self, rng: np.random.Generator, rate: np.ndarray) -> None:
+        """Short local defects (joints, welds, crossing noses, a failed sleeper: a Poisson number per segment, mean
+        ``local_defects_mean``), each a ``local_defect_length_m`` patch settling ``local_defect_rate_factor`` times
+        faster, multiplied into ``rate`` (segments, n) in place; nothing is drawn when the mean is 0."""
+        c = self.config
+        if c.local_defects_mean == 0:
+            return
+        n = rate.shape[1]
+        length = max(int(round(c.local_defect_length_m / SLEEPER_SPACING_M)), 1)
+        counts = np.asarray(rng.poisson(c.local_defects_mean, size=rate.shape[0]))
+        for j in range(rate.shape[0]):
+            for start in rng.integers(0, n - length + 1, size=int(counts[j])):
+                rate[j, start : start + length] *= c.local_defect_rate_factor
 
     def _voided_sleepers(self, rng: np.random.Generator, R: int, n: int) -> list[np.ndarray]:
         """Per segment, the sleepers that hang (a Poisson number, mean ``voided_sleepers_mean``, never the two at
@@ -476,80 +517,150 @@ class LineBatch:
 
     # ------------------------------------------------------------------ a step
     def allowed(self) -> np.ndarray:
-        """(n_lines, S) sections that may be tamped now (not within min_steps_between_tampings)."""
+        """(n_lines, S) sections that may be tamped (or get any track work) now: not within
+        min_steps_between_tampings of their last track work."""
         return self.allowed_rows(np.repeat(self.step, self.S)).reshape(self.n_lines, self.S)
 
     def allowed_rows(self, seg_step: np.ndarray | int) -> np.ndarray:
-        """(sections,) bool: the sections that may be tamped at their step ``seg_step`` (per section or one)."""
-        return (seg_step - self.last_tamped) > self.config.min_steps_between_tampings
+        """(sections,) bool: the sections that may be tamped (or get any track work) at their step ``seg_step``
+        (per section or one)."""
+        return (seg_step - self.last_work) > self.config.min_steps_between_tampings
+
+    def choice_mask(self) -> np.ndarray:
+        """(n_lines, S, len(CHOICES)) bool: the choices each section may get now. "nothing" always; a choice the
+        config does not enable, never; track work not within ``min_steps_between_tampings`` of the section's last
+        track work, and only if its work fits the possession's ``capacity``; with an annual budget, only a choice
+        whose cost (with the possession, for track work) fits what is left of it. What fits alone may still not
+        fit with the other choices of the step: :meth:`resolve` settles that."""
+        c = self.config
+        mask = np.broadcast_to(self.enabled & (self.work <= c.capacity + 1e-9), (self.n_lines, self.S, len(CHOICES)))
+        mask = mask & (~self.is_work | self.allowed()[..., None])
+        if c.annual_budget > 0:
+            cost = self.code_costs().reshape(self.n_lines, self.S, -1) + self.is_work * c.possession_cost
+            mask &= cost <= self.budget_left[:, None, None] + 1e-9
+        mask[..., NOTHING] = True
+        return mask
+
+    def wet_present(self) -> np.ndarray:
+        """(sections,) bool: the sections where a wet spot is, working or still to start (on a segment of several
+        sections, those whose sleepers it covers): what a survey finds and drainage removes."""
+        present = (self.wet_onset >= 0) | self.wet_active
+        if self.K == 1:
+            return present.copy()
+        return self._per_section(self.wet_mask & present[:, None], "max").astype(bool)
 
     def renewing(self) -> np.ndarray:
         """(sections,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
         has had ``max_tampings_before_renewal`` tampings and the model renews)."""
         return (self.count >= self.tm.max_tampings_before_renewal) & bool(self.tm.renewal_resets)
 
-    def campaign_cost(self, want: np.ndarray) -> np.ndarray:
-        """(n_lines,) tamping + possession + renewal cost of tamping ``want`` (n_lines, S)."""
+    def code_costs(self) -> np.ndarray:
+        """(sections, len(CHOICES)) what each choice would cost each section now (k€), possession excluded: a
+        tamping (with the ballast renewal where one is due: :meth:`renewing`), a spot tamping, a drainage, a
+        ballast renewal (with its tamping), an inspection, a survey."""
         c = self.config
-        renew = self.renewing().reshape(self.n_lines, self.S)
-        k = want.sum(axis=1)
-        return (k > 0) * c.possession_cost + c.section_tamping_cost * k + c.section_renewal_cost * (want & renew).sum(1)
+        tamping = c.section_tamping_cost + self.renewing() * c.section_renewal_cost
+        per_choice: dict[str, float | np.ndarray] = {
+            "tamp": tamping, "spot_tamp": c.spot_tamping_cost, "drainage": c.drainage_cost,
+            "renew": c.section_tamping_cost + c.section_renewal_cost, "inspect": c.inspection_cost,
+            "survey": c.survey_cost}
+        out = np.zeros((self.sd.size, len(CHOICES)))
+        for i, name in enumerate(CHOICES[1:], start=1):
+            out[:, i] = per_choice[name]
+        return out
+
+    def choice_costs(self, codes: np.ndarray) -> np.ndarray:
+        """(sections,) what the choices ``codes`` (sections,) cost each section (k€; :meth:`code_costs`). Call it
+        before :meth:`apply` (a tamping resets the count that decides a renewal)."""
+        return np.take_along_axis(self.code_costs(), np.asarray(codes, dtype=np.int64)[:, None], axis=1)[:, 0]
+
+    def campaign_parts(self, codes: np.ndarray) -> np.ndarray:
+        """(len(intervention cost keys), n_lines) the step's intervention cost parts per line for the choices
+        ``codes`` (n_lines, S), in the order of ``LineConfig.cost_keys()``: the possession (any track work), the
+        tampings (tamp and renew), the renewals (renew, and tamp where due), then one part per other choice."""
+        c = self.config
+        renewing = self.renewing().reshape(self.n_lines, self.S)
+        tamped = ((codes == TAMP) | (codes == RENEW)).sum(1)
+        renewed = ((codes == TAMP) & renewing).sum(1) + (codes == RENEW).sum(1)
+        work = self.is_work[codes].sum(1)
+        other = {"spot_tamp": c.spot_tamping_cost, "drainage": c.drainage_cost, "inspect": c.inspection_cost,
+                 "survey": c.survey_cost}
+        return np.stack([
+            (work > 0) * c.possession_cost,
+            c.section_tamping_cost * tamped,
+            c.section_renewal_cost * renewed,
+            *(other[name] * (codes == code(name)).sum(1) for name in COST_KEY),
+        ])
+
+    def campaign_cost(self, codes: np.ndarray) -> np.ndarray:
+        """(n_lines,) the intervention cost of the choices ``codes`` (n_lines, S; bool: tamp), possession
+        included."""
+        return self.campaign_parts(np.asarray(codes, dtype=np.int64)).sum(axis=0)
 
     def resolve(self, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The sections actually tamped from requested ``want`` (n_lines, S) bool: masked sections dropped;
-        over capacity (or over the remaining annual budget) the allowed sections with the worst measured SD are
-        kept ("clip") or ValueError ("raise"). Returns (tamped, clipped-per-line)."""
+        """The choices actually applied from requested ``want`` (n_lines, S): action codes (bool: tamp). Choices
+        the config does not enable and track work on sections within ``min_steps_between_tampings`` of their last
+        become "nothing"; over the possession's capacity (the work of the track work, in tamping-section
+        equivalents) or over the remaining annual budget, the requested sections with the worst measured SD are
+        kept, each while it still fits ("clip"), or ValueError ("raise"). Returns (codes, clipped-per-line)."""
         c = self.config
-        want = want & self.allowed()
+        codes = np.asarray(want, dtype=np.int64)
+        codes = np.where(self.enabled[codes], codes, NOTHING)
+        codes = np.where(self.is_work[codes] & ~self.allowed(), NOTHING, codes)
+        sd = self.measured_sd.reshape(self.n_lines, self.S)
         clipped = np.zeros(self.n_lines, dtype=bool)
-        over = want.sum(axis=1) > c.capacity
+        over = self.work[codes].sum(axis=1) > c.capacity + 1e-9
         if over.any():
             if c.over_capacity == "raise":
                 b = int(np.flatnonzero(over)[0])
                 raise ValueError(
-                    f"line {b}: {int(want[b].sum())} sections requested in one campaign, capacity is {c.capacity} "
-                    "(over_capacity='raise')")
-            want = keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), c.capacity)
+                    f"line {b}: track work of {self.work[codes[b]].sum():g} tamping sections requested in one "
+                    f"possession, capacity is {c.capacity} (over_capacity='raise')")
+            codes = np.where(fit_worst(self.work[codes], sd, c.capacity), codes, NOTHING)
             clipped |= over
         if c.annual_budget > 0:
-            for _ in range(self.S):  # drop the mildest section until each line fits its remaining budget
-                too = self.campaign_cost(want) > self.budget_left + 1e-9
+            for _ in range(self.S):  # drop the mildest requested section until each line fits its remaining budget
+                too = self.campaign_cost(codes) > self.budget_left + 1e-9
                 if not too.any():
                     break
                 if c.over_capacity == "raise":
                     b = int(np.flatnonzero(too)[0])
-                    raise ValueError(f"line {b}: campaign costs more than the remaining annual budget "
+                    raise ValueError(f"line {b}: the step's work costs more than the remaining annual budget "
                                      f"{self.budget_left[b]:.1f} k€ (over_capacity='raise')")
-                keep = want.sum(axis=1) - too.astype(int)
-                want = keep_worst(want, self.measured_sd.reshape(self.n_lines, self.S), keep)
+                want_any = codes != NOTHING
+                keep = want_any.sum(axis=1) - too.astype(int)
+                codes = np.where(keep_worst(want_any, sd, keep), codes, NOTHING)
                 clipped |= too
-        return want, clipped
+        return codes, clipped
 
-    def apply(self, tamped: np.ndarray) -> np.ndarray:
-        """Tamp the sections ``tamped`` (n_lines, S) at the start of the step; returns the cost parts of the
-        campaign per line (possession, tamping, renewal)."""
+    def apply(self, codes: np.ndarray) -> np.ndarray:
+        """Apply the choices ``codes`` (n_lines, S; bool: tamp) at the start of the step (the measurements of
+        ``inspect`` come at its end: :meth:`inspect_rows`); returns the intervention cost parts per line
+        (:meth:`campaign_parts`)."""
         c = self.config
-        t = tamped.ravel()
-        renew = t & self.renewing()
-        parts = np.stack([
-            (tamped.sum(1) > 0) * c.possession_cost,
-            c.section_tamping_cost * tamped.sum(1),
-            c.section_renewal_cost * renew.reshape(self.n_lines, self.S).sum(1),
-        ])
-        self.tamp_rows(t, np.repeat(self.step, self.S))
-        if t.any() and c.annual_budget > 0:
+        codes = np.asarray(codes, dtype=np.int64)
+        parts = self.campaign_parts(codes)
+        step = np.repeat(self.step, self.S)
+        flat = codes.ravel()
+        self.tamp_rows((flat == TAMP) | (flat == RENEW), step, renew=flat == RENEW)
+        if flat.any() and not np.isin(flat, (NOTHING, TAMP)).all():
+            self.spot_tamp_rows(flat == SPOT_TAMP, step)
+            self.drain_rows(flat == DRAINAGE, step)
+            self.survey_rows(flat == SURVEY)
+        if flat.any() and c.annual_budget > 0:
             self.budget_left -= parts.sum(axis=0)
         return parts
 
-    def tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
-        """Tamp (or renew, where due) the sections ``t`` (sections,) bool at their step ``seg_step`` (per section
-        or one): :func:`~trackenv.physics.tamping.restored_level` with the pre-drawn residuals of that step (a
-        segment tamped whole is lifted to its least-squares line; sections of a longer segment to the chord
-        through their untamped neighbours, ramped in and out), consolidation restarted on the tamped sleepers.
-        No costs, no budget: :meth:`apply` is the line-level step; a search over per-section schedules calls
-        this directly."""
+    def tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int, renew: np.ndarray | None = None) -> None:
+        """Tamp (or renew, where due or where ``renew`` (sections,) bool asks) the sections ``t`` (sections,) bool
+        at their step ``seg_step`` (per section or one): :func:`~trackenv.physics.tamping.restored_level` with
+        the pre-drawn residuals of that step (a segment tamped whole is lifted to its least-squares line;
+        sections of a longer segment to the chord through their untamped neighbours, ramped in and out),
+        consolidation restarted on the tamped sleepers; a renewal keeps nothing of the old shape and resets the
+        tampings since renewal. No costs, no budget: :meth:`apply` is the line-level step; a search over
+        per-section schedules calls this directly."""
         c = self.config
-        renew = t & self.renewing()
+        renew = t & (self.renewing() if renew is None else self.renewing() | renew)
         self.sd_after_tamping[:] = 0.0
         if not t.any():
             return
@@ -574,6 +685,72 @@ class LineBatch:
         self.count[t] = np.where(renew[t], 0, self.count[t] + 1)
         self.tampings[t] += 1
         self.last_tamped[t] = step_t[t]
+        self.last_work[t] = step_t[t]
+
+    def spot_tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """Spot-tamp the sections ``t`` (sections,) bool at their step ``seg_step`` (per section or one): the
+        sleepers within ``spot_tamping_length_m / 2`` of the section's worst sleeper (largest true |D1 level|: the
+        crew finds the defect on site), inside the section, lifted to the chord through their untamped neighbours
+        and ramped (:func:`~trackenv.physics.tamping.restored_level`, the pre-drawn residuals of that step),
+        consolidation restarted on them only. The tampings since renewal do not change (a few metres of ballast
+        are disturbed, not the section's)."""
+        if not t.any():
+            return
+        c, n = self.config, self.config.n_sleepers
+        step_t = np.broadcast_to(np.asarray(seg_step), t.shape)
+        secs = np.flatnonzero(t)
+        seg_of = secs // self.K
+        in_section = self.section_of_sleeper[None, :] == (secs % self.K)[:, None]
+        centre = np.where(in_section, np.abs(self.d1[seg_of]), -np.inf).argmax(axis=1)
+        window = in_section & (np.abs(np.arange(n)[None, :] - centre[:, None]) <= self.spot_half)
+        segs, first = np.unique(seg_of, return_index=True)
+        sleepers = np.zeros((segs.size, n), dtype=bool)
+        np.logical_or.at(sleepers, np.searchsorted(segs, seg_of), window)
+        e = self.tamp_noise[np.minimum(step_t[secs[first]], c.horizon_steps), segs]
+        new = restored_level(self.level[segs], sleepers, self.tm, e, np.zeros_like(sleepers))
+        self.offset[segs] = np.where(sleepers, new, self.offset[segs])
+        self.u[segs] = np.where(sleepers, 0.0, self.u[segs])
+        self.cyc[segs] = np.where(sleepers, 0.0, self.cyc[segs])
+        self.last_work[t] = step_t[t]
+
+    def drain_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """Drainage or formation repair on the sections ``t`` (sections,) bool at their step ``seg_step``: where a
+        wet spot is (:meth:`wet_present`, working or still to start), its patch settles at the plain rate again
+        and it never starts later; elsewhere nothing changes (the work is done, and paid, all the same). A
+        drained section's survey reads 0 (the formation was opened: no wet cause is left)."""
+        if not t.any():
+            return
+        c = self.config
+        wet = t & self.wet_present()
+        segs = np.flatnonzero(self._segments_of(wet))
+        factor = np.where(self.wet_mask[segs] & self.wet_active[segs, None], c.wet_spot_rate_factor, 1.0)
+        self.base_rate[segs] = self.base_rate[segs] / factor
+        self.wet_onset[segs] = -1
+        self.wet_active[segs] = False
+        self.survey[t] = 0
+        self.last_work[t] = np.broadcast_to(np.asarray(seg_step), t.shape)[t]
+
+    def survey_rows(self, t: np.ndarray) -> None:
+        """Survey the sections ``t`` (sections,) bool (ground-penetrating radar): ``survey`` reads 1 where a wet
+        spot is (working or still to start: :meth:`wet_present`), else 0."""
+        self.survey = np.where(t, self.wet_present(), self.survey)
+
+    def inspect_rows(self, t: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """An extra measurement (a track-geometry trolley) of the sections ``t`` (sections,) bool at their step
+        ``seg_step``: the true SD and mean-to-peak with the trolley's pre-drawn errors of that step
+        (``inspection_sd_noise_mm``, ``inspection_peak_noise_mm``), the measured level of their sleepers, and
+        their measurement age reset."""
+        if not t.any():
+            return
+        c = self.config
+        step = np.broadcast_to(np.asarray(seg_step), t.shape)
+        e = self.inspect_noise[np.minimum(step, c.horizon_steps), np.arange(t.size)]
+        sd = np.maximum(self.sd + c.inspection_sd_noise_mm * 1e-3 * e[:, 0], 0.0)
+        pk = np.maximum(self.peak + c.inspection_peak_noise_mm * 1e-3 * e[:, 1], 0.0)
+        self.measured_sd = np.where(t, sd, self.measured_sd)
+        self.measured_peak = np.where(t, pk, self.measured_peak)
+        self.measured_at = np.where(t, step, self.measured_at)
+        self.measured_level = np.where(self._on_sleepers(t), self.level, self.measured_level)
 
     def traffic(self, lines: np.ndarray | None = None) -> None:
         """The period's traffic on ``lines`` (bool over lines; None: every line): wet spots that start now, the
@@ -663,7 +840,7 @@ class LineBatch:
         """The period's costs per line (k€) in named parts; reward = −Σ parts."""
         shape = (self.n_lines, self.S)
         per_section = self._quality_costs()
-        return {"possession": campaign[0], "tamping": campaign[1], "renewal": campaign[2],
+        return {**dict(zip(self.config._INTERVENTION_COST_KEYS, campaign, strict=True)),
                 **{k: v.reshape(shape).sum(1) for k, v in per_section.items()}}
 
     def _quality_costs(self) -> dict[str, np.ndarray]:
@@ -688,23 +865,25 @@ class LineBatch:
 
     def advance(self, want: np.ndarray, lines: list[int], rngs: list[np.random.Generator],
                 resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
-        """One step of ``lines``, which ask to tamp ``want`` (n_lines, S) bool (rows of other lines: ignored): the
-        campaign resolved against masks, capacity and budget, the tamping, the period's traffic, the costs; then
+        """One step of ``lines``, which ask for the choices ``want`` (n_lines, S) action codes (bool: tamp; rows of
+        other lines: ignored): the step's work resolved against masks, capacity and budget (:meth:`resolve`), the
+        work, the period's traffic, the inspections, the costs; then
         new episodes in ``resetting``, drawn from their generators ``rngs[b]`` (everything random in a line is
         drawn at its reset). Returns the rewards and truncation flags (n_lines,; 0 and False for lines not
         stepped) and the info of each stepped line. Other lines are left as they are. Every TampingLine env steps
         here."""
         stepped = np.zeros(self.n_lines, dtype=bool)
         stepped[lines] = True
-        tamped, clipped = self.resolve(want & stepped[:, None])
-        section = self.intervention_costs(tamped.ravel())
-        campaign = self.apply(tamped)
+        codes, clipped = self.resolve(np.where(stepped[:, None], np.asarray(want, dtype=np.int64), NOTHING))
+        section = self.choice_costs(codes.ravel())
+        campaign = self.apply(codes)
         self.traffic(stepped)
+        self.inspect_rows(codes.ravel() == INSPECT, np.repeat(self.step, self.S))
         parts = self.costs(campaign)
         section += self.section_costs()
         rewards = np.where(stepped, -np.asarray(sum(parts.values()), dtype=float), 0.0)
         truncated = stepped & (self.step >= self.config.horizon_steps)
-        infos = {b: self.info(b, {k: float(v[b]) for k, v in parts.items()}, tamped[b], clipped[b],
+        infos = {b: self.info(b, {k: float(v[b]) for k, v in parts.items()}, codes[b], clipped[b],
                               section[self.rows(b)]) for b in lines}
         if resetting:
             self.start(list(resetting), rngs)
@@ -725,7 +904,7 @@ class LineBatch:
     def reset_info(self, b: int) -> dict:
         """Line ``b``'s info at the start of its episode (no costs, nothing tamped)."""
         S = self.S
-        return self.info(b, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=bool), False, np.zeros(S))
+        return self.info(b, dict.fromkeys(COST_KEYS, 0.0), np.zeros(S, dtype=np.int64), False, np.zeros(S))
 
     def step_count(self, b: int) -> int:
         """Steps line ``b`` has taken in its episode."""
@@ -749,7 +928,19 @@ class LineBatch:
             "tampings": self.tampings[rows],
             "tampings_since_renewal": self.count[rows],
             "years_since_tamping": years,
+            **self._choice_values(rows, step),
         }
+
+    def _choice_values(self, rows, step) -> dict[str, np.ndarray]:
+        """The per-section keys that come with the choices: the measurement age (with ``inspect``) and what a
+        survey found (with ``survey``)."""
+        c = self.config
+        out = {}
+        if "inspect" in c.choices:
+            out["section_measurement_age"] = (np.asarray(step) - self.measured_at[rows]) / c.steps_per_year
+        if "survey" in c.choices:
+            out["section_survey"] = self.survey[rows]
+        return out
 
     def section_entries(self, rows, step) -> dict[str, np.ndarray]:
         """The per-section keys of the observation for the segments ``rows`` (a slice or indices) at step
@@ -774,18 +965,22 @@ class LineBatch:
         """Line ``b``'s observation (the table of ``TampingLine``), clipped to :func:`line_observation_bounds`."""
         return clip_observation(self._observed(b), self.bounds)
 
-    def info(self, b: int, parts: dict[str, float], tamped: np.ndarray, clipped: bool,
+    def info(self, b: int, parts: dict[str, float], codes: np.ndarray, clipped: bool,
              section_costs: np.ndarray) -> dict:
-        """Line ``b``'s step info: the cost parts (k€), and per section its own costs ``section_costs`` (k€:
-        tamping or renewal, geometry, speed restriction, immediate action; the possession is the line's)."""
+        """Line ``b``'s step info: the cost parts (k€), the choices applied (``codes`` (S,): per section in
+        ``section_choices``, counted by name in ``choices``; ``tamped_sections``: tamp or renew), and per section
+        its own costs ``section_costs`` (k€: its choice, geometry, speed restriction, immediate action; the
+        possession is the line's)."""
         r = self.rows(b)
+        codes = np.asarray(codes, dtype=np.int64)
         return step_info(
-            parts, tamped, self.sd[r], self.peak[r], classify(self.peak[r], self.limits),
+            parts, (codes == TAMP) | (codes == RENEW), self.sd[r], self.peak[r], classify(self.peak[r], self.limits),
             self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
             section_costs=np.asarray(section_costs, dtype=float).copy(), clipped=bool(clipped),
             section_sd_after_tamping_m=self.sd_after_tamping[r].copy(),
             wet_spot_active=self._wet_sections(b), rate_factor=self._per_section(self.rate()[self.segments(b)], "mean"),
-            observation_clipped=clipped_values(self._observed(b), self.bounds))
+            observation_clipped=clipped_values(self._observed(b), self.bounds),
+            choices=choice_counts(codes), section_choices=codes.copy())
 
     def _wet_sections(self, b: int) -> np.ndarray:
         """(S,) bool: line ``b``'s sections with an active wet spot (on a segment of several sections, those
@@ -794,6 +989,23 @@ class LineBatch:
         if self.K == 1:
             return self.wet_active[rs].copy()
         return self._per_section(self.wet_mask[rs] & self.wet_active[rs, None], "max").astype(bool)
+
+
+def fit_worst(work: np.ndarray, score: np.ndarray, capacity: float) -> np.ndarray:
+    """(rows, S) bool: per row, the entries with ``work`` > 0 (rows, S) kept in order of highest ``score`` first
+    (ties: lower index), each while it still fits in ``capacity`` with those kept before it; entries without
+    work are all kept. With unit work it keeps the ``capacity`` highest (:func:`keep_worst`)."""
+    s = np.where(work > 0, score, -np.inf)
+    order = np.argsort(-s, axis=1, kind="stable")
+    keep = np.ones(work.shape, dtype=bool)
+    used = np.zeros(work.shape[0])
+    rows = np.arange(work.shape[0])
+    for col in order.T:  # greedy in each row's order
+        w = work[rows, col]
+        fits = used + w <= capacity + 1e-9
+        keep[rows, col] = fits | (w == 0)
+        used += np.where(fits, w, 0.0)
+    return keep
 
 
 def keep_worst(want: np.ndarray, score: np.ndarray, k) -> np.ndarray:

@@ -36,7 +36,7 @@ class Problem:
 
 
 _PROBLEMS: dict[type, Problem] = {
-    LineConfig: Problem(LineBatch, line_observation_space, ("multibinary", "discrete")),
+    LineConfig: Problem(LineBatch, line_observation_space, ("multibinary", "discrete", "choices")),
 }
 
 

@@ -17,6 +17,12 @@ the tamping env and the line env follow that convention.
   RLModule reads the mask from (RLlib has no ``action_masks()`` method convention).
 * a flat ``Box`` observation: Gymnasium's ``FlattenObservation`` over any of these (see :func:`make_ranked`).
 
+**What each supports.** :class:`SectionObservation`, :class:`SectionVectorObservation`,
+:class:`ActionMaskObservation` and ``FlattenObservation`` take any action space, the line's choices
+(``action_type="choices"``, ``MultiDiscrete([7] * n_sections)``, the masks ``(n_sections · 7,)``) included;
+:class:`RankedActions`, :class:`RankedVectorActions` and :class:`MultiDiscreteActions` turn tamp-or-wait
+(``MultiBinary``) actions into other forms and refuse any other action space with a TypeError.
+
 **Action masks.** Every wrapper here defines ``action_masks()`` in the wrapped action space's terms, so the
 mask is reachable the way sb3-contrib looks for it (``env.get_wrapper_attr("action_masks")``, which its vector
 envs' ``env_method("action_masks")`` calls). Gymnasium's own wrappers (those ``gym.make`` adds) do not forward

@@ -1,0 +1,38 @@
+"""What a track manager may decide for a section in one step: the names of the choices, their action codes and
+which of them is track work.
+
+The action code of a choice is its index in :data:`CHOICES` (``action_type="choices"``: one code per section,
+``MultiDiscrete([len(CHOICES)] * n_sections)``). Code 1 is ``"tamp"``, so a tamp-or-wait action (MultiBinary,
+1 = tamp) is already a vector of choice codes. What each choice does to the track, what it costs and how much
+of the possession it takes: :class:`~trackenv.envs.line_config.LineConfig` (fields) and
+:class:`~trackenv.envs.line_episode.LineBatch` (physics); the documentation's page "Choices" has the table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["CHOICES", "COST_KEY", "INTERVENTIONS", "NOTHING", "TRACK_WORK", "choice_counts", "code"]
+
+#: every choice, by action code
+CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
+NOTHING = 0
+#: the choices a config may enable ("nothing" is always allowed)
+INTERVENTIONS = CHOICES[1:]
+#: the choices that are work on the track (they need the possession, count against its capacity and against
+#: ``min_steps_between_tampings``); "inspect" and "survey" look without working
+TRACK_WORK = ("tamp", "spot_tamp", "drainage", "renew")
+#: the cost part (``info["costs"]``) of each choice besides the tamping and renewal that ``tamp`` and ``renew``
+#: share with the tamping-only problem
+COST_KEY = {"spot_tamp": "spot_tamping", "drainage": "drainage", "inspect": "inspection", "survey": "survey"}
+
+
+def code(name: str) -> int:
+    """The action code of the choice ``name``."""
+    return CHOICES.index(name)
+
+
+def choice_counts(codes: np.ndarray) -> dict[str, int]:
+    """How many sections of ``codes`` (any shape, action codes) got each choice but "nothing", by name."""
+    counts = np.bincount(np.asarray(codes, dtype=np.int64).ravel(), minlength=len(CHOICES))
+    return {name: int(counts[i]) for i, name in enumerate(CHOICES) if i != NOTHING}
