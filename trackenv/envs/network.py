@@ -16,7 +16,8 @@ sections, the worst measured first: the line's clipping rule and ``info["clipped
 requests are dropped. Otherwise the machine moves: no section is tamped anywhere this step, the move costs
 ``move_cost``, and from the next step on the machine is on its destination and works there if asked again.
 Traffic, settlement and quality costs run on every line every step. ``info["dropped_requests"]`` counts, per
-line, the requested unmasked sections that were not worked (moving, or not the machine's line).
+line, the requested unmasked sections that were not tamped (the machine moving, another line than the
+machine's, or over the capacity or the annual budget: then ``info["clipped"]`` too).
 
 **Seeding.** A network's lines are drawn at reset from generators derived from the network's generator
 (:func:`line_seeds`: one 63-bit seed per line, in line order), so a network episode is a deterministic function
@@ -73,10 +74,7 @@ class NetworkConfig:
 
     def __post_init__(self) -> None:
         check_int_field(self, "n_lines", low=1, high=16)
-        if not isinstance(self.line_config, (LineConfig, dict, str)):
-            raise ValueError(f"line_config must be a LineConfig, a dict of its fields or a preset name, got "
-                             f"{type(self.line_config).__name__}")
-        line = LineConfig.coerce(self.line_config)
+        line = _line_config(self.line_config)
         if self.capacity is None:
             object.__setattr__(self, "capacity", line.capacity)
         check_int_field(self, "capacity", low=1, high=line.n_sections)
@@ -107,7 +105,7 @@ class NetworkConfig:
         mine = {k: v for k, v in overrides.items() if k in own}
         line_changes = {k: v for k, v in overrides.items() if k not in own}
         if line_changes:
-            line = LineConfig.coerce(mine.get("line_config", config.line_config))
+            line = _line_config(mine.get("line_config", config.line_config))
             mine["line_config"] = line.replace(**line_changes)
         return config.replace(**mine) if mine else config
 
@@ -139,6 +137,14 @@ class NetworkConfig:
     @property
     def steps_per_year(self) -> int:
         return self.line_config.steps_per_year
+
+
+def _line_config(value: Any) -> LineConfig:
+    """``line_config`` as a LineConfig (a config, a dict of its fields or a preset name), else ValueError."""
+    if not isinstance(value, (LineConfig, dict, str)):
+        raise ValueError(f"line_config must be a LineConfig, a dict of its fields or a preset name, got "
+                         f"{type(value).__name__}")
+    return LineConfig.coerce(value)
 
 
 def line_seeds(rng: np.random.Generator, n_lines: int) -> list[int]:
@@ -240,8 +246,11 @@ class NetworkBatch:
         self.machine = np.where(moving, target, self.machine)
         move = np.where(moving, self.config.move_cost, 0.0)
         totals = np.where(stepped, rewards.reshape(N, L).sum(axis=1) - move, 0.0)
-        infos = {b: self.info(b, [line_infos[row] for row in self.rows(b)], bool(moving[b]), requested[b],
-                              requested[b] - worked[b].sum(axis=1)) for b in networks}
+        infos = {}
+        for b in networks:
+            mine = [line_infos[row] for row in self.rows(b)]
+            tamped = np.array([info["tamped_sections"].sum() for info in mine])
+            infos[b] = self.info(b, mine, bool(moving[b]), requested[b], requested[b] - tamped)
         if resetting:
             self.start(list(resetting), rngs)
         return totals, np.asarray(truncated.reshape(N, L).all(axis=1)), infos

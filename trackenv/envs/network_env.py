@@ -44,10 +44,11 @@ class TampingNetwork(TrackEnv):
     lines, the lowest index). On its own line the machine works the requests as a TampingLine does (over
     ``capacity``, the worst measured SD kept and ``info["clipped"]`` True); requests on other lines are dropped.
     If the destination is another line the machine moves there: nothing is tamped this step, ``move_cost`` is
-    paid, and it works there from the next step if asked again. ``info["dropped_requests"]`` counts per line the
-    requests not worked. **Masks** (:meth:`action_masks`, sb3-contrib's pairs): each line's own mask (a section
-    tamped within ``min_steps_between_tampings`` steps is masked), on every line: a section the machine may
-    tamp once it is on that line; on a line the machine is not on, asking for it votes to move there.
+    paid, and it works there from the next step if asked again. ``info["dropped_requests"]`` counts per line
+    the unmasked requests not tamped (moving, another line's, or clipped). **Masks** (:meth:`action_masks`,
+    sb3-contrib's pairs): each line's own mask on every line (a section tamped within
+    ``min_steps_between_tampings`` steps is masked). On the machine's line an unmasked section may be tamped;
+    on another line, asking for it votes to move there (and it may be tamped once the machine is there).
 
     **Observation** (``Dict``, float32): every key of TampingLine's observation stacked over the lines, with the
     line's bounds: per-section keys (``section_sd``, ``register``, ...) (n_lines · n_sections,) in the action's
