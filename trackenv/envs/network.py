@@ -117,6 +117,11 @@ class NetworkConfig:
             base["capacity"] = None
         return self.from_dict({**base, **changes})
 
+    @classmethod
+    def cost_keys(cls) -> tuple[str, ...]:
+        """The parts of ``info["costs"]``: the line's, and ``move``."""
+        return NETWORK_COST_KEYS
+
     @property
     def sections_per_line(self) -> int:
         return self.line_config.n_sections
