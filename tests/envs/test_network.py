@@ -2,6 +2,8 @@
 (moving costs a step and the move cost, then works; ties; capacity over the network), the one-line network
 against the plain line, the state API and bad configs."""
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -39,10 +41,17 @@ def _pick(env, line: int, k: int) -> list[int]:
 
 
 def test_checkers():
+    """Gymnasium's and SB3's checkers, with no warning of either (bar deprecation notices from outside trackenv)."""
     from stable_baselines3.common.env_checker import check_env as sb3_check
 
-    check_env(gym.make("trackenv/TampingNetwork-v0", **SMALL).unwrapped, skip_render_check=True)
-    sb3_check(_network(), warn=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(gym.make("trackenv/TampingNetwork-v0", **SMALL).unwrapped, skip_render_check=True)
+        sb3_check(_network(), warn=True)
+    bad = [f"{w.category.__name__}: {w.message}" for w in caught
+           if not (issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, FutureWarning))
+                   and "trackenv" not in str(w.filename))]
+    assert not bad, bad
 
 
 def test_spaces_and_the_stacked_observation():
@@ -214,3 +223,12 @@ def test_config_round_trip():
     assert config.replace(line_config="default").capacity == 6
     with pytest.raises(ValueError, match="unknown NetworkConfig key"):
         NetworkConfig.from_dict({"lines": 2})
+
+
+def test_render_draws_the_machines_line():
+    env = _network(render_mode="rgb_array")
+    env.reset(seed=1)
+    first = env.render()
+    env.step(_ask({1: _pick(env, 1, 1)}))  # the machine moves to line 1: the picture is line 1's
+    assert first.ndim == 3 and first.dtype == np.uint8 and env.render().shape == first.shape
+    assert not np.array_equal(env.render(), first)
