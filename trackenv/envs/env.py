@@ -12,7 +12,9 @@ env gives for the same seed and actions, whatever the problem.
 The registered ids use the named subclasses, which carry the spec in their docstrings:
 :class:`~trackenv.envs.line.TampingLine` and :class:`~trackenv.envs.line.TampingLineVectorEnv` (the line and
 every preset), :class:`~trackenv.envs.tamping.TampingEnv` and :class:`~trackenv.envs.vector.TampingVectorEnv`
-(the 60 m track).
+(the 60 m track), :class:`~trackenv.envs.network_env.TampingNetwork` and
+:class:`~trackenv.envs.network_env.TampingNetworkVectorEnv` (lines that share a machine, whose engine
+:class:`~trackenv.envs.network.NetworkBatch` holds its lines as rows of the line's engine).
 """
 
 from __future__ import annotations
