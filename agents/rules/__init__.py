@@ -1,4 +1,5 @@
 """The heuristic maintenance rules (:mod:`.line`; the base class and the random baseline in :mod:`.base`), and
+the network's wrapper of them (:mod:`.network`), and
 their tuned parameters per preset, shipped beside them (:mod:`.problems`: ``line_tuned_heuristics.json`` for the
 default line, ``track60_tuned_heuristics.json`` for the 60 m track)."""
 
@@ -16,6 +17,7 @@ from .line import (
     planner_view,
     stale_measurement,
 )
+from .network import NetworkRule
 from .problems import TUNED_FILES, rules_for, tuned_params_for
 
 __all__ = [
@@ -23,5 +25,5 @@ __all__ = [
     "LINE_HEURISTICS", "LINE_TUNED_FILE", "BudgetedWorstFirst", "GroupedThreshold", "LineNoMaintenance",
     "RegisterPeriodic", "SectionThreshold", "UniformPeriodic", "line_tuned_params", "planner_view",
     "stale_measurement",
-    "TUNED_FILES", "rules_for", "tuned_params_for",
+    "NetworkRule", "TUNED_FILES", "rules_for", "tuned_params_for",
 ]

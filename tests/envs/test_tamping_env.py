@@ -19,8 +19,10 @@ from trackenv.envs.line_episode import line_observation_bounds
 from trackenv.physics.tamping import TampingModel
 
 IDS = ("trackenv/Tamping-v1", "trackenv/TampingDiscrete-v1")
-# the Tamping family with the learners' wrapped ids (the TampingLine ids are checked in test_line_env.py)
-ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping") and "TampingLine" not in i))
+# the Tamping family with the learners' wrapped ids (the TampingLine ids are checked in test_line_env.py, the
+# network in test_network.py)
+ALL_IDS = tuple(sorted(i for i in gym.registry if i.startswith("trackenv/Tamping")
+                       and "TampingLine" not in i and "TampingNetwork" not in i))
 COST_KEYS = ("possession", "tamping", "renewal", "spot_tamping", "drainage", "inspection", "survey", "geometry",
              "alert", "speed_restriction", "immediate_action")
 # the keywords of small_config: 30 m (51 sleepers) in 3 sections of 10 m, 2 years of quarters

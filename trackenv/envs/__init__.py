@@ -17,6 +17,8 @@ section-level Dict observation) and ``trackenv/TampingRankedFlat-v1`` (the same 
 observation: RLlib's and CleanRL's default encoders). Each has a native vector entry point
 (``gym.make_vec(..., vectorization_mode="vector_entry_point")``; add ``workers=N`` for the same envs in N
 processes, :class:`~trackenv.envs.sharded.ShardedVectorEnv`).
+``trackenv/TampingNetwork-v0`` (:mod:`trackenv.envs.network_env`) is a network of lines that share one tamping
+machine, its lines rows of the same engine (:mod:`trackenv.envs.network`).
 The line ids take a line file (``line="my_line.yaml"``: :mod:`trackenv.envs.line_file`; the example in
 :mod:`trackenv.lines`).
 :func:`~trackenv.envs.multiagent.line_parallel_env` poses any of them as a PettingZoo ``ParallelEnv`` with one
@@ -33,12 +35,14 @@ from .line_config import SCENARIOS, LineConfig, scenario
 from .line_file import LineDescription, LineFileError, load_line
 from .line_fit import history_fit
 from .multiagent import line_parallel_env
+from .network import NetworkConfig
+from .network_env import TampingNetwork, TampingNetworkVectorEnv
 from .problems import make_vector_env, problem_config
 from .state import EnvState
 from .tamping import TampingEnv
 from .vector import TampingVectorEnv
 
-_ENVS = (
+_ENVS: tuple[tuple[str, str, str, dict], ...] = (
     ("trackenv/TampingLine-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
      {"scenario": "default"}),
     ("trackenv/TampingLineSmall-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
@@ -53,6 +57,8 @@ _ENVS = (
      {"scenario": "wet", "action_type": "choices"}),
     ("trackenv/TampingLineDefects-v0", "trackenv.envs.line:TampingLine", "trackenv.envs.sharded:line_vector_env",
      {"scenario": "defects", "action_type": "choices"}),
+    ("trackenv/TampingNetwork-v0", "trackenv.envs.network_env:TampingNetwork",
+     "trackenv.envs.network_env:network_vector_env", {}),
     ("trackenv/Tamping-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
      {"action_type": "multibinary"}),
     ("trackenv/TampingDiscrete-v1", "trackenv.envs.tamping:TampingEnv", "trackenv.envs.sharded:tamping_vector_env",
@@ -66,6 +72,6 @@ for _id, _entry, _vector_entry, _kwargs in _ENVS:
     if _id not in registry:
         register(id=_id, entry_point=_entry, kwargs=_kwargs, vector_entry_point=_vector_entry)
 
-__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "TampingEnv", "TampingLine",
-           "TampingLineVectorEnv", "TampingVectorEnv", "history_fit", "line_parallel_env", "load_line",
-           "make_vector_env", "problem_config", "scenario"]
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "NetworkConfig", "TampingEnv",
+           "TampingLine", "TampingLineVectorEnv", "TampingNetwork", "TampingNetworkVectorEnv", "TampingVectorEnv",
+           "history_fit", "line_parallel_env", "load_line", "make_vector_env", "problem_config", "scenario"]

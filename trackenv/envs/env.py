@@ -12,7 +12,9 @@ env gives for the same seed and actions, whatever the problem.
 The registered ids use the named subclasses, which carry the spec in their docstrings:
 :class:`~trackenv.envs.line.TampingLine` and :class:`~trackenv.envs.line.TampingLineVectorEnv` (the line and
 every preset), :class:`~trackenv.envs.tamping.TampingEnv` and :class:`~trackenv.envs.vector.TampingVectorEnv`
-(the 60 m track).
+(the 60 m track), :class:`~trackenv.envs.network_env.TampingNetwork` and
+:class:`~trackenv.envs.network_env.TampingNetworkVectorEnv` (lines that share a machine, whose engine
+:class:`~trackenv.envs.network.NetworkBatch` holds its lines as rows of the line's engine).
 """
 
 from __future__ import annotations
@@ -27,11 +29,11 @@ from gymnasium.vector import AutoresetMode
 from .batched import BatchedVectorEnv
 from .choices import CHOICES
 from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
-from .problems import ProblemConfig, problem_of
+from .problems import EnvConfig, problem_of
 from .state import EnvState, checked, snapshot
 
 
-def _checked_action_type(config: ProblemConfig, action_type: str) -> str:
+def _checked_action_type(config: EnvConfig, action_type: str) -> str:
     allowed = problem_of(config).action_types
     if action_type not in allowed:
         raise ValueError(f"action_type must be one of {list(allowed)} for {type(config).__name__}, "
@@ -59,7 +61,7 @@ class TrackEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
-    def __init__(self, config: ProblemConfig, *, action_type: str = "multibinary",
+    def __init__(self, config: EnvConfig, *, action_type: str = "multibinary",
                  render_mode: str | None = None) -> None:
         self.config = config
         self.action_type = _checked_action_type(config, action_type)
@@ -130,7 +132,7 @@ class TrackVectorEnv(BatchedVectorEnv):
     engine per env, the physics of all of them in one batched call (see the module docstring and
     :class:`~trackenv.envs.batched.BatchedVectorEnv` for the Gymnasium conventions)."""
 
-    def __init__(self, num_envs: int, config: ProblemConfig, *, action_type: str = "multibinary",
+    def __init__(self, num_envs: int, config: EnvConfig, *, action_type: str = "multibinary",
                  autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
                  render_mode: str | None = None) -> None:
         self.config = config

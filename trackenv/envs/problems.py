@@ -3,8 +3,10 @@ observation space and which action types a config's problem has. The env layer (
 every harness (evaluation, training, search) ask here and run every problem the same way, without switching on
 which one they have.
 
-Today there is one family, :class:`~trackenv.envs.line_config.LineConfig` (every registered id: the lines and
-the 60 m track are its presets) over the one engine :class:`~trackenv.envs.line_episode.LineBatch`.
+Two families: :class:`~trackenv.envs.line_config.LineConfig` (the lines and the 60 m track are its presets) over
+the one engine :class:`~trackenv.envs.line_episode.LineBatch`, and :class:`~trackenv.envs.network.NetworkConfig`
+(lines that share one tamping machine) over :class:`~trackenv.envs.network.NetworkBatch`, a thin layer whose
+lines are rows of that same engine.
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ from gymnasium.vector import AutoresetMode
 
 from .line_config import SCENARIOS, LineConfig
 from .line_episode import LineBatch, line_observation_space
+from .network import NetworkBatch, NetworkConfig, network_observation_space
 
 if TYPE_CHECKING:
     from .env import TrackVectorEnv
 
 ProblemConfig = LineConfig
+#: the config of any env of trackenv: a line (every preset) or a network of lines
+EnvConfig = LineConfig | NetworkConfig
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,7 @@ class Problem:
 
 _PROBLEMS: dict[type, Problem] = {
     LineConfig: Problem(LineBatch, line_observation_space, ("multibinary", "discrete", "choices")),
+    NetworkConfig: Problem(NetworkBatch, network_observation_space, ("multibinary",)),
 }
 
 

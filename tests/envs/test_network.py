@@ -1,0 +1,234 @@
+"""TampingNetwork: the API checkers, the vector env against the single env, seeds, the shared machine's rules
+(moving costs a step and the move cost, then works; ties; capacity over the network), the one-line network
+against the plain line, the state API and bad configs."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import trackenv  # noqa: F401  (registers the ids)
+from trackenv.envs.line import TampingLine
+from trackenv.envs.network import NetworkConfig, line_seeds
+from trackenv.envs.network_env import TampingNetwork, TampingNetworkVectorEnv
+
+SMALL = {"line_config": "small", "n_lines": 2, "horizon_years": 0.75}  # 2 lines of 6 sections, 3 steps
+S = 6
+
+
+def _network(**kw):
+    return TampingNetwork(**{**SMALL, **kw})
+
+
+def _ask(line_sections: dict[int, list[int]], n_lines: int = 2) -> np.ndarray:
+    a = np.zeros(n_lines * S, dtype=np.int8)
+    for line, sections in line_sections.items():
+        a[[line * S + j for j in sections]] = 1
+    return a
+
+
+def _unmasked(env) -> np.ndarray:
+    return env.action_masks().reshape(-1, 2)[:, 1]
+
+
+def _pick(env, line: int, k: int) -> list[int]:
+    """The first ``k`` unmasked sections of ``line`` (a section tamped just before the start is masked)."""
+    free = np.flatnonzero(_unmasked(env).reshape(env.config.n_lines, S)[line])
+    assert free.size >= k
+    return free[:k].tolist()
+
+
+def test_checkers():
+    """Gymnasium's and SB3's checkers, with no warning of either (bar deprecation notices from outside trackenv)."""
+    from stable_baselines3.common.env_checker import check_env as sb3_check
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(gym.make("trackenv/TampingNetwork-v0", **SMALL).unwrapped, skip_render_check=True)
+        sb3_check(_network(), warn=True)
+    bad = [f"{w.category.__name__}: {w.message}" for w in caught
+           if not (issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, FutureWarning))
+                   and "trackenv" not in str(w.filename))]
+    assert not bad, bad
+
+
+def test_spaces_and_the_stacked_observation():
+    env = _network(n_lines=3)
+    obs, info = env.reset(seed=2)
+    assert env.action_space == gym.spaces.MultiBinary(3 * S)
+    assert obs["section_sd"].shape == (3 * S,) and obs["budget_left"].shape == (3,) and obs["time"].shape == (1,)
+    assert np.array_equal(obs["machine_line"], [1, 0, 0])
+    assert env.action_masks().shape == (2 * 3 * S,)
+    assert info["cost"] == 0.0 and not info["moved"] and info["tamped_sections"].shape == (3 * S,)
+    # each line draws its own episode: the lines differ
+    sd = obs["section_sd"].reshape(3, S)
+    assert not np.array_equal(sd[0], sd[1]) and not np.array_equal(sd[1], sd[2])
+
+
+def test_a_request_on_another_line_moves_the_machine_then_works():
+    env = _network(move_cost=7.0)
+    env.reset(seed=4)
+    there = _pick(env, 1, 2)
+    state = env.get_state()
+    _, idle, *_ = env.step(np.zeros(2 * S, dtype=np.int8))
+    env.set_state(state)
+    obs, moving, _, _, info = env.step(_ask({1: there}))
+    assert info["moved"] and info["machine_line"] == 1 and np.array_equal(obs["machine_line"], [0, 1])
+    assert not info["tamped_sections"].any() and info["costs"]["move"] == 7.0
+    assert list(info["dropped_requests"]) == [0, 2] and list(info["requested_sections"]) == [0, 2]
+    assert moving == pytest.approx(idle - 7.0, rel=1e-12)  # the lines' costs are an idle step's, plus the move
+    obs, _, _, _, info = env.step(_ask({1: there}))
+    assert not info["moved"] and info["costs"]["move"] == 0.0
+    assert np.array_equal(np.flatnonzero(info["tamped_sections"]), [S + j for j in there])
+    assert list(info["dropped_requests"]) == [0, 0]
+
+
+def test_ties_keep_the_machine_and_other_lines_go_to_the_first():
+    env = _network(n_lines=3)
+    env.reset(seed=5)
+    mine = _pick(env, 0, 1)
+    _, _, _, _, info = env.step(_ask({0: mine, 1: _pick(env, 1, 1)}, 3))  # 1 each: the machine's line wins
+    assert not info["moved"] and np.array_equal(np.flatnonzero(info["tamped_sections"]), mine)
+    assert list(info["dropped_requests"]) == [0, 1, 0]
+    _, _, _, _, info = env.step(_ask({1: _pick(env, 1, 2), 2: _pick(env, 2, 2)}, 3))  # 2 each: the lower index
+    assert info["moved"] and info["machine_line"] == 1
+
+
+def test_capacity_is_over_the_network():
+    env = _network(capacity=2)
+    obs, _ = env.reset(seed=6)
+    assert env.config.line_config.capacity == 2
+    mine = _pick(env, 0, 4)
+    _, _, _, _, info = env.step(_ask({0: mine, 1: _pick(env, 1, 2)}))
+    tamped = info["tamped_sections"]
+    assert tamped.sum() == 2 and not tamped[S:].any() and info["clipped"]
+    sd = obs["section_sd"][mine]
+    worst = np.asarray(mine)[np.argsort(-sd, kind="stable")[:2]]  # the line's rule: worst measured SD kept
+    assert set(np.flatnonzero(tamped)) == set(worst)
+    assert list(info["dropped_requests"]) == [2, 2]
+
+
+def test_masked_sections_are_not_counted_and_not_worked():
+    env = _network()
+    env.reset(seed=7)
+    mine = _pick(env, 0, 3)
+    env.step(_ask({0: mine}))  # tamped: masked in the next step (min_steps_between_tampings = 1)
+    assert not _unmasked(env)[mine].any()
+    _, _, _, _, info = env.step(_ask({0: mine, 1: _pick(env, 1, 1)}))  # three masked requests lose to one
+    assert info["moved"] and list(info["requested_sections"]) == [0, 1]
+
+
+def test_reward_is_the_sum_of_the_lines_and_the_move():
+    env = _network()
+    env.reset(seed=8)
+    for action in (_ask({0: [0]}), _ask({1: [1, 2]}), _ask({1: [1, 2]})):
+        _, reward, _, _, info = env.step(action)
+        assert reward == pytest.approx(-info["cost"], rel=1e-12)
+        assert info["cost"] == pytest.approx(info["line_costs"].sum() + info["costs"]["move"], rel=1e-12)
+        for part, per_line in info["line_cost_parts"].items():
+            assert info["costs"][part] == pytest.approx(per_line.sum(), rel=1e-12)
+
+
+def test_same_seed_same_rollout_and_seeds_differ():
+    actions = [_ask({0: [0, 3]}), _ask({1: [2]}), _ask({1: [2, 4]})]
+
+    def rollout(seed):
+        env = _network()
+        out = [env.reset(seed=seed)[0]["section_sd"]]
+        out += [env.step(a)[1] for a in actions]
+        return out
+
+    a, b, c = rollout(11), rollout(11), rollout(12)
+    assert np.array_equal(a[0], b[0]) and a[1:] == b[1:]
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_one_line_network_is_the_plain_line():
+    seed = 3
+    line_seed = line_seeds(np.random.default_rng(seed), 1)[0]
+    net = TampingNetwork(line_config="small", n_lines=1, horizon_years=0.75)
+    line = TampingLine(scenario="small", horizon_years=0.75)
+    nobs, _ = net.reset(seed=seed)
+    lobs, _ = line.reset(seed=line_seed)
+    assert all(np.array_equal(nobs[k], lobs[k]) for k in lobs)
+    for action in (np.array([1, 0, 1, 0, 0, 1]), np.zeros(6, int), np.array([0, 1, 0, 1, 1, 0])):
+        nobs, nr, _, ntr, ninfo = net.step(action)
+        lobs, lr, _, ltr, linfo = line.step(action)
+        assert nr == lr and ntr == ltr  # bit for bit
+        assert all(np.array_equal(nobs[k], lobs[k]) for k in lobs)
+        assert np.array_equal(ninfo["tamped_sections"], linfo["tamped_sections"])
+
+
+def test_vector_env_equals_single_envs_across_an_episode_end():
+    vec = TampingNetworkVectorEnv(2, **SMALL)
+    vobs, _ = vec.reset(seed=20)
+    singles = [_network() for _ in range(2)]
+    for i, env in enumerate(singles):
+        obs, _ = env.reset(seed=20 + i)
+        assert all(np.array_equal(vobs[k][i], obs[k]) for k in obs)
+    rng = np.random.default_rng(0)
+    for step in range(4):  # the horizon is 3 steps: the 3rd ends the episodes (SAME_STEP autoreset)
+        actions = (rng.random((2, 2 * S)) < 0.3).astype(np.int8)
+        vobs, vr, _, vtr, _ = vec.step(actions)
+        for i, env in enumerate(singles):
+            obs, r, _, tr, _ = env.step(actions[i])
+            assert vr[i] == r and vtr[i] == tr
+            if tr:
+                obs, _ = env.reset()  # the single env's generator continues, as the vector env's row's does
+            assert all(np.array_equal(vobs[k][i], obs[k]) for k in obs), (step, i)
+
+
+def test_make_vec_entry_point():
+    vec = gym.make_vec("trackenv/TampingNetwork-v0", num_envs=2, vectorization_mode="vector_entry_point", **SMALL)
+    assert isinstance(vec, TampingNetworkVectorEnv) and vec.single_action_space.n == 2 * S
+
+
+def test_state_round_trip_and_into_a_vector_row():
+    env = _network()
+    env.reset(seed=9)
+    env.step(_ask({1: [0]}))  # the machine moves: the state holds it
+    state = env.get_state()
+    after = [env.step(_ask({1: [0, 1]}))[1] for _ in range(2)]
+    env.set_state(state)
+    assert [env.step(_ask({1: [0, 1]}))[1] for _ in range(2)] == after
+    vec = TampingNetworkVectorEnv(2, **SMALL)
+    vec.reset(seed=0)
+    vec.set_state(1, state)
+    _, rewards, *_ = vec.step(np.stack([_ask({0: [0]}), _ask({1: [0, 1]})]))
+    assert rewards[1] == after[0]
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"n_lines": 0}, "n_lines"),
+    ({"n_lines": 2.0}, "n_lines"),
+    ({"capacity": 7}, "capacity"),
+    ({"capacity": 0}, "capacity"),
+    ({"move_cost": -1.0}, "move_cost"),
+    ({"start_line": 2}, "start_line"),
+    ({"line_config": "nowhere"}, "unknown scenario"),
+    ({"line_config": 3}, "line_config"),
+    ({"no_such_field": 1}, "no_such_field"),
+])
+def test_bad_config_raises_naming_the_field(bad, message):
+    with pytest.raises(ValueError, match=message):
+        TampingNetwork(**{**SMALL, **bad})
+
+
+def test_config_round_trip():
+    config = NetworkConfig(n_lines=2, line_config="small")
+    assert config.capacity == 3 and config.n_sections == 12
+    assert NetworkConfig.from_dict({"n_lines": 2, "line_config": config.line_config}) == config
+    assert config.replace(line_config="default").capacity == 6
+    with pytest.raises(ValueError, match="unknown NetworkConfig key"):
+        NetworkConfig.from_dict({"lines": 2})
+
+
+def test_render_draws_the_machines_line():
+    env = _network(render_mode="rgb_array")
+    env.reset(seed=1)
+    first = env.render()
+    env.step(_ask({1: _pick(env, 1, 1)}))  # the machine moves to line 1: the picture is line 1's
+    assert first.ndim == 3 and first.dtype == np.uint8 and env.render().shape == first.shape
+    assert not np.array_equal(env.render(), first)
