@@ -29,6 +29,7 @@ from gymnasium.vector import AutoresetMode
 from .batched import BatchedVectorEnv
 from .choices import CHOICES
 from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
+from .line_config import LineConfig
 from .problems import EnvConfig, problem_of
 from .state import EnvState, checked, snapshot
 
@@ -41,10 +42,12 @@ def _checked_action_type(config: EnvConfig, action_type: str) -> str:
     return action_type
 
 
-def _masks(engine: Any, config: ProblemConfig, n_rows: int, action_type: str) -> np.ndarray:
+def _masks(engine: Any, config: EnvConfig, n_rows: int, action_type: str) -> np.ndarray:
     """(n_rows, mask size) the action masks of ``engine``'s rows (before the first reset: what the config
     allows, every section free)."""
     if action_type == "choices":
+        if not isinstance(config, LineConfig):  # the network takes tamp requests only (its action types)
+            raise ValueError(f"action_type='choices' needs a line config, got {type(config).__name__}")
         if engine is None:
             work = config.choice_work
             free = np.array([name == "nothing" or (name in config.choices and work[name] <= config.capacity)
