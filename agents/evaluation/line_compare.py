@@ -10,8 +10,10 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.line_config import LineConfig, scenario
+from trackenv.envs.network import NetworkConfig
 
 from ..rules.line import LINE_HEURISTICS
+from ..rules.network import NetworkRule
 from ..rules.problems import tuned_file_for, tuned_params_for
 from .harness import _bound, evaluate_many, policy_name
 from .statistics import paired_difference
@@ -30,6 +32,8 @@ def scenario_of(env_id: str) -> str:
     except gym.error.Error as exc:  # an unknown name or version: the user's input, not a crash
         raise ValueError(f"{env_id!r} is not a registered env id ({exc})") from None
     entry, kwargs = str(spec.entry_point), dict(spec.kwargs)
+    if entry.endswith(":TampingNetwork"):
+        return "network"
     if entry.endswith(":TampingEnv") and kwargs.get("action_type", "multibinary") == "multibinary":
         return "track60"
     if not entry.endswith(":TampingLine"):
@@ -58,14 +62,19 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     :data:`LINE_HEURISTICS`; default all, no-maintenance included). ``executor``: runs the batches of episodes (e.g.
     :class:`~trackenv_agents.evaluation.distributed.RayExecutor`), with the same results as here."""
     name = scenario_of(env_id)
-    cfg = scenario(name, **overrides)
+    network = name == "network"
+    cfg = NetworkConfig.coerce(None, **overrides) if network else scenario(name, **overrides)
+    line_cfg = cfg.line_config if network else cfg
+    if network and retune:
+        raise ValueError("--retune: the network's rules take the tuned parameters of its line (NetworkRule); "
+                         "they are not tuned on the network")
     unknown = sorted(set(rules or ()) - set(LINE_HEURISTICS))
     if unknown or (rules is not None and not rules):
         raise ValueError(f"rules must name line rules among {sorted(LINE_HEURISTICS)}, got {rules!r}")
     wanted = set(rules or LINE_HEURISTICS)
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance" and n in wanted]
-    params = {} if retune else {n: p for n, p in tuned_params_for(cfg).items() if n in wanted}
-    tuned_from = (f"shipped (agents/rules/{tuned_file_for(cfg).name})" if params
+    params = {} if retune else {n: p for n, p in tuned_params_for(line_cfg).items() if n in wanted}
+    tuned_from = (f"shipped (agents/rules/{tuned_file_for(line_cfg).name})" if params
                   else f"tuned now on {n_train} seeds")
     if not params and classes:
         t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor)
@@ -73,6 +82,9 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     pols = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
     pols += [LINE_HEURISTICS[n](**p) for n, p in params.items()]
     pols += list((extra or {}).values())
+    if network:  # each line policy on every line, the one machine sent where the requests are
+        pols = [NetworkRule(p) for p in pols]
+        extra = {k: NetworkRule(v) for k, v in (extra or {}).items()}
     seeds = seeds or list(range(8))
     res = evaluate_many(pols, cfg, seeds, batch_size=batch_size, progress=progress, desc="test", executor=executor)
     res.sort(key=lambda r: float(r.cost.mean()))
@@ -97,7 +109,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
     # the best rule and the trained policy, side by side
     shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
-    payload["episode_plot"] = plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png"))
+    payload["episode_plot"] = (None if network else  # the network's lines: trackenv.render draws one line
+                               plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png")))
     return payload
 
 
@@ -151,26 +164,27 @@ def agent_headline(payload: dict[str, Any], name: str) -> str | None:
 
 
 def format_line_table(payload: dict[str, Any]) -> str:
+    w = max([22] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
     lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
              f"{payload['tuned_from']}",
-             f"{'policy':22s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
+             f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
              f"{'IA':>4s}  params"]
     for r in payload["results"]:
         d = r["vs_best"]
         diff = "-" if d is None else f"{d['mean_difference']:+.1f} [{d['ci_low']:+.1f}, {d['ci_high']:+.1f}]"
         ps = ", ".join(f"{k}={v}" for k, v in r["params"].items() if k not in
                        ("steps_per_year", "horizon_steps", "capacity"))
-        lines.append(f"{r['policy']:22s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
+        lines.append(f"{r['policy']:{w}s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
                      f"{diff:>30s} {r.get('immediate_action_exceedances', 0):4d}  {ps}")
     shown = [r for r in payload["results"] if r["policy"] in (payload.get("best_rule"), *payload.get("extra", []))]
     if len(shown) > 1 and all("classes" in r for r in shown):  # where the trained policy's costs differ
         lines.append("own cost per section and episode, k€ (tampings per section and episode):")
-        lines.append(f"{'policy':22s} " + " ".join(f"{c:>20s}" for c in SECTION_CLASSES) + "  campaigns")
+        lines.append(f"{'policy':{w}s} " + " ".join(f"{c:>20s}" for c in SECTION_CLASSES) + "  campaigns")
         for r in shown:
             cl = r["classes"]
             cells = ["-" if cl[c]["cost_per_section"] is None else
                      f"{cl[c]['cost_per_section']:.1f} ({cl[c]['tampings_per_section']:.2f})" for c in SECTION_CLASSES]
-            lines.append(f"{r['policy']:22s} " + " ".join(f"{c:>20s}" for c in cells)
+            lines.append(f"{r['policy']:{w}s} " + " ".join(f"{c:>20s}" for c in cells)
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
     lines.append("IA: section-steps at the immediate-action limit, all episodes together")
     lines += [headline for name in payload.get("extra", []) if (headline := agent_headline(payload, name))]

@@ -8,7 +8,7 @@ machine to the line with the most (the env's rule) without asking it to leave a 
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -38,11 +38,14 @@ class NetworkRule(Heuristic):
     module docstring). ``line_rule``: a line heuristic (default: :class:`~.line.SectionThreshold` at its default
     threshold); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity."""
 
-    name: ClassVar[str] = "network"
+    name = "network"
 
     def __init__(self, line_rule: LineHeuristic | None = None) -> None:
         self.line_rule = line_rule if line_rule is not None else SectionThreshold()
         super().__init__(line_rule=self.line_rule.name, **self.line_rule.params)
+        # one name per line rule, e.g. "network(grouped-threshold)", where results are keyed by policy name (the
+        # base class's name is a class attribute; this one is the instance's)
+        self.__dict__["name"] = f"network({self.line_rule.name})"
 
     def bind(self, config: Any) -> NetworkRule:
         """A copy whose line rule knows the calendar and capacity of the network's line config."""

@@ -117,6 +117,10 @@ class NetworkConfig:
             base["capacity"] = None
         return self.from_dict({**base, **changes})
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly: the network's fields, the line config as its own dict (:meth:`from_dict` reads it)."""
+        return {**{f.name: getattr(self, f.name) for f in fields(self)}, "line_config": self.line_config.to_dict()}
+
     @classmethod
     def cost_keys(cls) -> tuple[str, ...]:
         """The parts of ``info["costs"]``: the line's, and ``move``."""

@@ -158,3 +158,21 @@ def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
         old = evaluation.evaluate_policy(SectionThreshold(threshold_mm=0.8), small_config, SEEDS[:1])
     np.testing.assert_array_equal(old.cost,
                                   evaluate_one(SectionThreshold(threshold_mm=0.8), small_config, SEEDS[:1]).cost)
+
+
+def test_the_network_comparison_runs_each_line_rule_on_every_line(tmp_path):
+    """``trackenv evaluate --env trackenv/TampingNetwork-v0``: every line rule wrapped in a NetworkRule with the
+    line's tuned parameters, named after it, costs summing the lines' and the machine's moves."""
+    from trackenv.envs.network import NetworkConfig
+
+    out = line_comparison("trackenv/TampingNetwork-v0", seeds=[0], rules=["no-maintenance", "section-threshold"],
+                          batch_size=4, progress=False, out_dir=str(tmp_path), n_lines=2, line_config="small",
+                          horizon_years=0.5)
+    assert out["scenario"] == "network" and out["episode_plot"] is None
+    assert NetworkConfig.from_dict(out["config"]) == NetworkConfig(n_lines=2, line_config="small").replace(
+        line_config=NetworkConfig(line_config="small").line_config.replace(horizon_years=0.5))
+    by = {r["policy"]: r for r in out["results"]}
+    assert set(by) == {"network(no-maintenance)", "network(section-threshold)"}
+    assert by["network(no-maintenance)"]["tampings_per_km_year"] == 0.0
+    with pytest.raises(ValueError, match="retune"):
+        line_comparison("trackenv/TampingNetwork-v0", seeds=[0], retune=True, out_dir=str(tmp_path))
