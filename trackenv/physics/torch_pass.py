@@ -92,8 +92,7 @@ def run(mesh, drive, rows, peaks, reuse=None, width=None, *, device=None, solver
     dev = torch_device(device)
     tensors = {name: torch.as_tensor(unpack(getattr(rows, name)), device=dev) for name in ROW_FIELDS}
     tensors.update({f"out_{name}": torch.as_tensor(unpack(getattr(peaks, name)), device=dev) for name in PEAK_FIELDS})
-    with one_thread_on_cpu(dev):
-        out = integrate(mesh, drive, tensors, solver=solver)
+    out = integrate(mesh, drive, tensors, solver=solver)
     for name in STATE_FIELDS:
         pack_into(getattr(rows, name), out[name].cpu().numpy())
     for name in PEAK_FIELDS:
@@ -205,9 +204,9 @@ def contact_law(law: int, param: float, d: torch.Tensor) -> tuple[torch.Tensor, 
     f = (d/G)^{3/2} with G = param; linear: f = param·d)."""
     dd = d.clamp(min=0.0)  # (d <= 0 gives f = f' = 0 exactly below, as in the kernel)
     if law == 0:
-        r = dd / param
+        r = dd * (1.0 / param)
         sr = torch.sqrt(r)
-        return r * sr, 1.5 * sr / param
+        return r * sr, sr * (1.5 / param)
     return param * dd, (d > 0.0).to(d.dtype) * param
 
 
@@ -232,18 +231,31 @@ def predict_track(win: Window, st: dict, consts) -> torch.Tensor:
 def newton(law: int, param: float, H: torch.Tensor, res: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
     """Each row's compressions d solving d = res - H f(d) by Newton's method from ``delta``; a row stops when its
     largest residual is below the tolerance, as in the kernel, and keeps its compressions while others go on."""
-    n_axles = H.shape[1]
-    eye = torch.eye(n_axles, dtype=H.dtype, device=H.device)
+    if H.shape[1] == 1:
+        return newton_one_axle(law, param, H[:, :, 0], res, delta)
+    eye = torch.eye(H.shape[1], dtype=H.dtype, device=H.device)
     done = torch.zeros(H.shape[0], dtype=torch.bool, device=H.device)
     for it in range(NEWTON_MAX_ITERATIONS):
         f, fp = contact_law(law, param, delta)
         r = delta - res + (H @ f.unsqueeze(-1)).squeeze(-1)
-        done = done | (r.abs().amax(dim=1) < NEWTON_TOLERANCE_M)
-        if n_axles == 1:
-            step = -r / (H[:, :, 0] * fp + 1.0)
-        else:
-            step = torch.linalg.solve(H * fp.unsqueeze(1) + eye, -r)
-        delta = torch.where(done.unsqueeze(1), delta, delta + step)
+        done |= r.abs().amax(dim=1) < NEWTON_TOLERANCE_M
+        step = torch.linalg.solve(H * fp.unsqueeze(1) + eye, r)
+        delta = torch.where(done.unsqueeze(1), delta, delta - step)
+        if it + 1 >= NEWTON_UNCHECKED and bool(done.all()):
+            break
+    return delta
+
+
+def newton_one_axle(law: int, param: float, h: torch.Tensor, res: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
+    """:func:`newton` for one axle (``h``: (rows, 1) its flexibility), the step a division, in as few operations
+    as the arithmetic allows: each is a launch on a GPU."""
+    one = torch.ones_like(h)
+    done = torch.zeros_like(delta, dtype=torch.bool)
+    for it in range(NEWTON_MAX_ITERATIONS):
+        f, fp = contact_law(law, param, delta)
+        r = torch.addcmul(delta - res, h, f)
+        done |= r.abs() < NEWTON_TOLERANCE_M
+        delta = torch.where(done, delta, delta - r / torch.addcmul(one, h, fp))
         if it + 1 >= NEWTON_UNCHECKED and bool(done.all()):
             break
     return delta
@@ -299,6 +311,12 @@ def integrate(mesh, drive, st: dict, *, solver: str = "inverse") -> dict:
     shared arguments (numpy arrays)."""
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    with one_thread_on_cpu(st["u"].device):
+        return _integrate(mesh, drive, st, solver)
+
+
+def _integrate(mesh, drive, st: dict, solver: str) -> dict:
+    """:func:`integrate`, its arguments checked."""
     dev, dtype = st["u"].device, st["u"].dtype
     plan = schedule(mesh, drive)
     consts = np.asarray(drive.consts, dtype=float)
