@@ -2,7 +2,7 @@
 
 Both run the same algorithm in float64; only the window's linear algebra is done differently (dense batched
 Cholesky and inverse instead of banded sweeps), so results agree to rounding carried through the pass: measured
-≤ 3e-12 of the largest value on these cases. The tolerance, 1e-9 of a row's largest peak, is two orders of
+≤ 6e-12 of the largest value on these cases. The tolerance, 1e-9 of a row's largest peak, is two orders of
 magnitude above that and five below the physics tolerances (0.5 % for dt, 1 % for the window)."""
 
 from __future__ import annotations

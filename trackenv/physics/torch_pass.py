@@ -149,6 +149,8 @@ class Window:
     s_at: torch.Tensor  # (sleepers,) each sleeper's own DOF, relative to lo
     rail_mass: torch.Tensor  # (m, 2B+1) the rail's mass diagonals, the diagonal zeroed (it is per row)
     columns: torch.Tensor  # (rows, m, axles, ncol + 1): K_eff⁻¹ of the unit loads of each axle's bay, and zeros
+    ballast: torch.Tensor  # (rows, sleepers, 2): the window's sleepers' ballast stiffness and damping
+    pad: torch.Tensor  # (rows, sleepers, 2): their pads' stiffness and damping
 
 
 def dense_window(keff: torch.Tensor, lo: int, hi: int) -> torch.Tensor:
@@ -170,16 +172,20 @@ def solve_window(window: Window, rhs: torch.Tensor, solver: str) -> torch.Tensor
     return x.squeeze(-1) if vector else x
 
 
-def open_window(mesh, keff: torch.Tensor, rail_mass: torch.Tensor, s_lo: int, s_hi: int, bays: np.ndarray,
+def open_window(mesh, st: dict, rail_mass: torch.Tensor, s_lo: int, s_hi: int, bays: np.ndarray,
                 solver: str) -> Window:
     """The window over sleepers s_lo..s_hi: its factor, and the solved unit loads on the rail DOFs of the bays
     ``bays`` of its axles (w, θ of each of the bay's nodes)."""
+    keff = st["keff"]
     node_w, sleeper_node, sleeper_dof = np.asarray(mesh.node_w), np.asarray(mesh.sleeper_node), mesh.sleeper_dof
     lo, hi = int(node_w[sleeper_node[s_lo]]), int(sleeper_dof[s_hi]) + 1
     dev, m = keff.device, hi - lo
     factor = torch.linalg.cholesky(dense_window(keff, lo, hi))
-    # (contiguous: torch returns the inverse transposed, on which a batched product ran 100 times slower)
-    solve_with = torch.cholesky_inverse(factor).contiguous() if solver == "inverse" else factor
+    if solver == "inverse":  # K_eff⁻¹ by solving for the identity (batched on every device torch supports)
+        solve_with = torch.cholesky_solve(torch.eye(m, dtype=keff.dtype, device=dev).expand(keff.shape[0], m, m),
+                                          factor)
+    else:
+        solve_with = factor
     sleepers = np.arange(s_lo, s_hi + 1)
     w_at = torch.as_tensor(node_w[sleeper_node[sleepers]] - lo, device=dev)
     s_at = torch.as_tensor(np.asarray(sleeper_dof)[sleepers] - lo, device=dev)
@@ -195,10 +201,12 @@ def open_window(mesh, keff: torch.Tensor, rail_mass: torch.Tensor, s_lo: int, s_
         cols = torch.cholesky_solve(unit.expand(keff.shape[0], m, dofs.numel()), factor).reshape(
             keff.shape[0], m, *dofs.shape)
     columns = torch.cat([cols, torch.zeros_like(cols[..., :1])], dim=-1)
-    return Window(lo, hi, s_lo, s_hi, solve_with, w_at, s_at, masses, columns)
+    s = slice(s_lo, s_hi + 1)
+    ballast = torch.stack([st["bal_k"][:, s], st["bal_c"][:, s]], dim=-1)
+    pad = torch.stack([st["pad_k"][:, s], st["pad_c"][:, s]], dim=-1)
+    return Window(lo, hi, s_lo, s_hi, solve_with, w_at, s_at, masses, columns, ballast, pad)
 
 
-# ------------------------------------------------------------------------------------ the step's sections
 def contact_law(law: int, param: float, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Force and tangent stiffness of the contact law at compression d, zero where d <= 0 (Hertz: law 0,
     f = (d/G)^{3/2} with G = param; linear: f = param·d)."""
@@ -210,27 +218,40 @@ def contact_law(law: int, param: float, d: torch.Tensor) -> tuple[torch.Tensor, 
     return param * dd, (d > 0.0).to(d.dtype) * param
 
 
-def predict_track(win: Window, st: dict, consts) -> torch.Tensor:
+def track_maps(consts, dtype, device) -> dict:
+    """The track's Newmark arithmetic per DOF as products with small matrices of its state [u, v, a]:
+
+    * ``rhs``: p = a0 u + a2 v + a3 a and q = a1 u + a4 v + a5 a (the predictor's M p + C q), [u, v, a] · R;
+    * ``update``: with d = u_new - u, a_new = a0 d - a2 v - a3 a and v_new = v + a6 a + a7 a_new,
+      [d, v, a] · U = [v_new, a_new] (d, not u_new and u apart: a0 d is then exact where u_new ≈ u)."""
+    a0, a1, a2, a3, a4, a5, a6, a7 = (float(c) for c in consts[:8])
+    rhs = [[a0, a1], [a2, a4], [a3, a5]]
+    update = [[a7 * a0, a0], [1.0 - a7 * a2, -a2], [a6 - a7 * a3, -a3]]
+    return {"rhs": torch.tensor(rhs, dtype=dtype, device=device),
+            "update": torch.tensor(update, dtype=dtype, device=device)}
+
+
+def predict_track(win: Window, st: dict, maps: dict) -> torch.Tensor:
     """The track's predictor on the window (no contact force): K_eff pred = M p + C q, with p = a0 u + a2 v + a3 a
-    and q = a1 u + a4 v + a5 a; M is the rail's band plus each row's diagonal, C the pads' and ballast's dampers."""
-    a0, a1, a2, a3, a4, a5 = (float(c) for c in consts[:6])
+    and q = a1 u + a4 v + a5 a; M is the rail's band plus each row's diagonal, C the pads' and ballast's dampers.
+    Returns the right-hand side (rows, m)."""
     lo, hi = win.lo, win.hi
-    u, v, a = st["u"][:, lo:hi], st["v"][:, lo:hi], st["a"][:, lo:hi]
-    p = a0 * u + a2 * v + a3 * a
-    qd = a1 * u + a4 * v + a5 * a
+    pq = st["uva"][:, lo:hi] @ maps["rhs"]  # (rows, m, 2): p and q
+    p, qd = pq[..., 0], pq[..., 1]
     padded = torch.nn.functional.pad(p, (B, B))
-    rhs = (padded.unfold(1, 2 * B + 1, 1) * win.rail_mass).sum(-1) + st["mass_diag"][:, lo:hi] * p
-    s = slice(win.s_lo, win.s_hi + 1)
+    rhs = torch.addcmul((padded.unfold(1, 2 * B + 1, 1) * win.rail_mass).sum(-1), st["mass_diag"][:, lo:hi], p)
     q_w, q_s = qd[:, win.w_at], qd[:, win.s_at]
-    f_pad = st["pad_c"][:, s] * (q_w - q_s)
+    f_pad = win.pad[..., 1] * (q_w - q_s)
     rhs[:, win.w_at] += f_pad
-    rhs[:, win.s_at] += st["bal_c"][:, s] * q_s - f_pad
+    rhs[:, win.s_at] += win.ballast[..., 1] * q_s - f_pad
     return rhs
 
 
-def newton(law: int, param: float, H: torch.Tensor, res: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
-    """Each row's compressions d solving d = res - H f(d) by Newton's method from ``delta``; a row stops when its
-    largest residual is below the tolerance, as in the kernel, and keeps its compressions while others go on."""
+def newton(law: int, param: float, H: torch.Tensor, res: torch.Tensor,
+           delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each row's compressions d solving d = res - H f(d) by Newton's method from ``delta``, and the contact
+    forces f(d); a row stops when its largest residual is below the tolerance, as in the kernel, and keeps its
+    compressions while others go on."""
     if H.shape[1] == 1:
         return newton_one_axle(law, param, H[:, :, 0], res, delta)
     eye = torch.eye(H.shape[1], dtype=H.dtype, device=H.device)
@@ -239,14 +260,15 @@ def newton(law: int, param: float, H: torch.Tensor, res: torch.Tensor, delta: to
         f, fp = contact_law(law, param, delta)
         r = delta - res + (H @ f.unsqueeze(-1)).squeeze(-1)
         done |= r.abs().amax(dim=1) < NEWTON_TOLERANCE_M
+        if it + 1 >= NEWTON_UNCHECKED and bool(done.all()):
+            return delta, f  # (every row kept its compressions in this iteration: f is their force)
         step = torch.linalg.solve(H * fp.unsqueeze(1) + eye, r)
         delta = torch.where(done.unsqueeze(1), delta, delta - step)
-        if it + 1 >= NEWTON_UNCHECKED and bool(done.all()):
-            break
-    return delta
+    return delta, contact_law(law, param, delta)[0]
 
 
-def newton_one_axle(law: int, param: float, h: torch.Tensor, res: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
+def newton_one_axle(law: int, param: float, h: torch.Tensor, res: torch.Tensor,
+                    delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`newton` for one axle (``h``: (rows, 1) its flexibility), the step a division, in as few operations
     as the arithmetic allows: each is a launch on a GPU."""
     one = torch.ones_like(h)
@@ -255,50 +277,67 @@ def newton_one_axle(law: int, param: float, h: torch.Tensor, res: torch.Tensor, 
         f, fp = contact_law(law, param, delta)
         r = torch.addcmul(delta - res, h, f)
         done |= r.abs() < NEWTON_TOLERANCE_M
-        delta = torch.where(done, delta, delta - r / torch.addcmul(one, h, fp))
         if it + 1 >= NEWTON_UNCHECKED and bool(done.all()):
-            break
-    return delta
+            return delta, f
+        delta = torch.where(done, delta, delta - r / torch.addcmul(one, h, fp))
+    return delta, contact_law(law, param, delta)[0]
 
 
 def correct_track(win: Window, st: dict, pred: torch.Tensor, flex: torch.Tensor, force: torch.Tensor,
-                  consts) -> None:
+                  maps: dict) -> None:
     """u = pred + Σ_j F_j K⁻¹ N_j on the window (``flex``: (rows, m, axles) the K⁻¹ N_j of its axles), the Newmark
-    update, and the peak ballast and pad + ballast forces of the window's sleepers."""
-    a0, a2, a3, a6, a7 = (float(consts[i]) for i in (0, 2, 3, 6, 7))
+    update (:func:`track_maps`), and the peak ballast and pad + ballast forces of the window's sleepers."""
     lo, hi = win.lo, win.hi
-    u, v, a = st["u"][:, lo:hi], st["v"][:, lo:hi], st["a"][:, lo:hi]
-    new_u = pred + (flex @ force.unsqueeze(-1)).squeeze(-1)
-    an = a0 * (new_u - u) - a2 * v - a3 * a
-    v += a6 * a + a7 * an
-    a.copy_(an)
-    u.copy_(new_u)
+    uva = st["uva"][:, lo:hi]
+    new_u = torch.baddbmm(pred.unsqueeze(-1), flex, force.unsqueeze(-1)).squeeze(-1)
+    dva = torch.cat([(new_u - uva[..., 0]).unsqueeze(-1), uva[..., 1:]], dim=-1)
+    uva[..., 1:] = dva @ maps["update"]
+    uva[..., 0] = new_u
     s = slice(win.s_lo, win.s_hi + 1)
-    us, uw, vs, vw = u[:, win.s_at], u[:, win.w_at], v[:, win.s_at], v[:, win.w_at]
-    fb = st["bal_c"][:, s] * vs + st["bal_k"][:, s] * us
-    fpad = st["pad_c"][:, s] * (vw - vs) + st["pad_k"][:, s] * (uw - us)
+    at_s, at_w = uva[:, win.s_at, :2], uva[:, win.w_at, :2]  # (u, v) of each sleeper and of the rail above it
+    fb = (at_s * win.ballast).sum(-1)
+    total = fb + ((at_w - at_s) * win.pad).sum(-1)
     st["out_ballast"][:, s] = torch.maximum(st["out_ballast"][:, s], fb)
-    st["out_total"][:, s] = torch.maximum(st["out_total"][:, s], fb + fpad)
+    st["out_total"][:, s] = torch.maximum(st["out_total"][:, s], total)
 
 
-def predict_vehicle(st: dict, vehicle: dict, consts) -> torch.Tensor:
-    """The vehicle's predictor (no contact force): K_eff q = f + M p + C r, through K_eff⁻¹."""
-    a0, a1, a2, a3, a4, a5 = (float(c) for c in consts[:6])
-    q, qd, qdd = st["q"], st["qd"], st["qdd"]
-    rhs = vehicle["force"] + (a0 * q + a2 * qd + a3 * qdd) @ vehicle["mass"].T
-    rhs = rhs + (a1 * q + a4 * qd + a5 * qdd) @ vehicle["damping"].T
-    return rhs @ vehicle["kv_inv"].T
+def vehicle_maps(drive, consts, wheel_dofs: np.ndarray, as_t) -> dict:
+    """The vehicle's step as two linear maps of its state, composed once per pass (the vehicle is small: a
+    step's vehicle work is then two products instead of a few dozen operations):
+
+    * predictor, K_eff q_pred = f + M p + C r with p = a0 q + a2 q' + a3 q'', r = a1 q + a4 q' + a5 q'':
+      q_pred = [q, q', q''] · P + K_eff⁻¹ f;
+    * corrector, q_new = q_pred - K_eff⁻¹ Σ_j F_j e_wheel(j), then Newmark's a = a0 (q_new - q) - a2 q' - a3 q''
+      and q' += a6 q'' + a7 a: [q_new - q, q', q''] = [q_pred - q, F, q', q''] · Q (differences, so that a0 times
+      them is exact where q_new ≈ q)."""
+    a0, a1, a2, a3, a4, a5, a6, a7 = (float(c) for c in consts[:8])
+    mass, damping = np.asarray(drive.mass, dtype=float), np.asarray(drive.damping, dtype=float)
+    kv_inv = np.asarray(drive.kv_inv, dtype=float)
+    nv, n_axles = kv_inv.shape[0], wheel_dofs.size
+    P = np.concatenate([(kv_inv @ (c0 * mass + c1 * damping)).T for c0, c1 in ((a0, a1), (a2, a4), (a3, a5))])
+    eye, zero = np.eye(nv), np.zeros((nv, nv))
+    step = np.concatenate([eye, -kv_inv[:, wheel_dofs].T, zero, zero])  # rows: q_pred - q, F, q', q''
+    acc = a0 * step
+    acc[n_axles + nv : n_axles + 2 * nv] -= a2 * eye
+    acc[n_axles + 2 * nv :] -= a3 * eye
+    vel = a7 * acc
+    vel[n_axles + nv : n_axles + 2 * nv] += eye
+    vel[n_axles + 2 * nv :] += a6 * eye
+    return {"P": as_t(P), "f": as_t(kv_inv @ np.asarray(drive.force, dtype=float)),
+            "Q": as_t(np.concatenate([step, vel, acc], axis=1))}
 
 
-def correct_vehicle(st: dict, vehicle: dict, qpred: torch.Tensor, force: torch.Tensor, consts) -> None:
-    """q = q_pred - K_eff⁻¹ Σ_j F_j e_wheel(j), and the vehicle's Newmark update."""
-    a0, a2, a3, a6, a7 = (float(consts[i]) for i in (0, 2, 3, 6, 7))
-    q, qd, qdd = st["q"], st["qd"], st["qdd"]
-    new_q = qpred - force @ vehicle["kv_wheels"].T
-    an = a0 * (new_q - q) - a2 * qd - a3 * qdd
-    qd += a6 * qdd + a7 * an
-    qdd.copy_(an)
-    q.copy_(new_q)
+def predict_vehicle(st: dict, maps: dict) -> torch.Tensor:
+    """The vehicle's predictor (no contact force), q_pred (rows, nv): see :func:`vehicle_maps`."""
+    return torch.addmm(maps["f"], st["qstate"], maps["P"])
+
+
+def correct_vehicle(st: dict, maps: dict, qpred: torch.Tensor, force: torch.Tensor) -> None:
+    """The vehicle's corrector and Newmark update of its state (q, q', q'') in place: see :func:`vehicle_maps`."""
+    state, nv = st["qstate"], qpred.shape[1]
+    new = torch.cat([qpred - state[:, :nv], force, state[:, nv:]], dim=1) @ maps["Q"]
+    state[:, :nv] += new[:, :nv]
+    state[:, nv:] = new[:, nv:]
 
 
 # ------------------------------------------------------------------------------------ the pass
@@ -308,7 +347,8 @@ def integrate(mesh, drive, st: dict, *, solver: str = "inverse") -> dict:
     ``st`` holds torch tensors, rows first, on one device: the kernel's ``Rows`` fields (mass_diag, keff, pad_k,
     pad_c, bal_k, bal_c, z, sag, u, v, a, q, qd, qdd) and its ``Peaks`` as out_force, out_rail, out_wheel (step 0
     filled: the start) and out_ballast, out_total (the peaks so far). ``mesh`` and ``drive`` are the kernel's
-    shared arguments (numpy arrays)."""
+    shared arguments (numpy arrays). The state is integrated as two tensors, ``st["uva"]`` (rows, n_dof, 3) and
+    ``st["qstate"]`` (rows, 3 nv), added to ``st``; its u, v, a, q, qd, qdd become views of them."""
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     with one_thread_on_cpu(st["u"].device):
@@ -329,9 +369,16 @@ def _integrate(mesh, drive, st: dict, solver: str) -> dict:
         return torch.as_tensor(np.asarray(x, dtype=float), dtype=dtype, device=dev)
 
     kv_inv = np.asarray(drive.kv_inv, dtype=float)
-    vehicle = {"mass": as_t(drive.mass), "damping": as_t(drive.damping), "kv_inv": as_t(kv_inv),
-               "force": as_t(drive.force), "kv_wheels": as_t(kv_inv[:, wheel_dofs])}
+    maps = vehicle_maps(drive, consts, wheel_dofs, as_t)
     h_vehicle = as_t(kv_inv[np.ix_(wheel_dofs, wheel_dofs)])
+    # the track's state as one tensor (u, v, a of each DOF side by side) and the vehicle's (q, q', q''), st's u,
+    # v, a and q, qd, qdd views of them
+    st["uva"] = torch.stack([st["u"], st["v"], st["a"]], dim=-1)
+    st["u"], st["v"], st["a"] = (st["uva"][..., i] for i in range(3))
+    tmaps = track_maps(consts, dtype, dev)
+    nv = kv_inv.shape[0]
+    st["qstate"] = torch.cat([st["q"], st["qd"], st["qdd"]], dim=1)
+    st["q"], st["qd"], st["qdd"] = (st["qstate"][:, i * nv : (i + 1) * nv] for i in range(3))
     rail_mass = as_t(mesh.rail_mass)
     wheel_index = torch.as_tensor(wheel_dofs, device=dev)
     # the whole schedule on the device once: a step indexes it there, with no transfer
@@ -355,13 +402,13 @@ def _integrate(mesh, drive, st: dict, solver: str) -> dict:
             if np.any(bays[axles] != bay_cache[axles]):
                 windows[c] = move_window(mesh, st, rail_mass, windows[c], bays[axles], solver)
                 bay_cache[axles] = bays[axles]
-        qpred = predict_vehicle(st, vehicle, consts)
+        qpred = predict_vehicle(st, maps)
         wpred = torch.empty((n_rows, n_axles), dtype=dtype, device=dev)
         H = h_vehicle.expand(n_rows, n_axles, n_axles).clone()
         preds, flexes = [], []
         for win, sel in zip(windows, groups):
             assert win is not None
-            pred = solve_window(win, predict_track(win, st, consts), solver)
+            pred = solve_window(win, predict_track(win, st, tmaps), solver)
             flex = axle_flexibilities(win, loc_all[step, sel], shape[sel])
             at = edofs[sel] - win.lo
             wpred[:, sel] = (pred[:, at] * shape[sel]).sum(-1)
@@ -371,12 +418,11 @@ def _integrate(mesh, drive, st: dict, solver: str) -> dict:
             flexes.append(flex)
         res = qpred[:, wheel_index] - wpred - st["z"][:, step]
         delta = torch.where(force <= 0.0, res, delta)
-        delta = newton(law, param, H, res, delta)
-        force, _ = contact_law(law, param, delta)
+        delta, force = newton(law, param, H, res, delta)
         for win, sel, pred, flex in zip(windows, groups, preds, flexes):
             assert win is not None
-            correct_track(win, st, pred, flex, force[:, sel], consts)
-        correct_vehicle(st, vehicle, qpred, force, consts)
+            correct_track(win, st, pred, flex, force[:, sel], tmaps)
+        correct_vehicle(st, maps, qpred, force)
         st["out_force"][:, step] = force
         st["out_rail"][:, step] = (st["u"][:, edofs] * shape).sum(-1)
         st["out_wheel"][:, step] = st["q"][:, wheel_index]
@@ -398,6 +444,5 @@ def move_window(mesh, st: dict, rail_mass: torch.Tensor, old: Window | None, bay
     s_hi = min(int(mesh.n_sleepers) - 1, int(bays.max()) + 1 + int(mesh.margin_bays))
     lo = int(mesh.node_w[mesh.sleeper_node[s_lo]])
     if old is not None:
-        for name in ("u", "v", "a"):
-            st[name][:, old.lo : min(lo, old.hi)] = 0.0
-    return open_window(mesh, st["keff"], rail_mass, s_lo, s_hi, bays, solver)
+        st["uva"][:, old.lo : min(lo, old.hi)] = 0.0
+    return open_window(mesh, st, rail_mass, s_lo, s_hi, bays, solver)
