@@ -984,14 +984,15 @@ def _check_steady_start(track: Track, x0: np.ndarray, margin: int) -> None:
 
 def _steady_key(batch: _Batch, track: Track) -> tuple:
     """What a row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
-    law, speed, dt, the window and where the leading axle stands in its bay at the start."""
+    law, speed, dt, the window, where the leading axle stands in its bay at the start, and the backend."""
     entry = tuple(float(getattr(track, name)[0]) for name in _SUPPORT_FIELDS)
     rail = (track.sleeper_spacing, track.rail_bending_stiffness, track.rail_mass, track.elements_per_bay)
     system = batch.system
     vehicle = tuple(np.asarray(x).tobytes() for x in (system.mass, system.damping, system.stiffness, system.force,
                                                        system.wheel_dofs, system.axle_offsets))
     phase = batch.x_start - math.floor(batch.x_start / track.sleeper_spacing) * track.sleeper_spacing
-    return entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase
+    return (entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase,
+            batch.backend)  # (the backends round differently: each keeps its own)
 
 
 _SUPPORT_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
