@@ -42,8 +42,10 @@ RULES = {
     "trackenv_agents.learning": ("trackenv_agents.cli",),
 }
 #: module -> what it may import although its layer may not: the one reader of line files, which are YAML by
-#: their schema (with yaml.safe_load only)
-EXCEPTIONS = {"trackenv.envs.line_file": ("yaml",)}
+#: their schema (with yaml.safe_load only), and the torch backend of the pass, which is torch
+EXCEPTIONS = {"trackenv.envs.line_file": ("yaml",), "trackenv.physics.torch_pass": ("torch",)}
+#: modules loaded only on request (simulate_passes(..., backend="torch")): importing the rest must not load them
+ON_REQUEST = ("trackenv.physics.torch_pass",)
 #: what importing the library loads (yaml is loaded by numba, which reads its configuration file with it)
 NOT_LOADED = tuple(m for m in NOT_IN_THE_LIBRARY if m != "yaml")
 STUDIES = ("bench", "paper", "validation", "line_calibration", "calibration")
@@ -119,14 +121,15 @@ def test_the_library_holds_no_study():
 
 
 def test_importing_every_module_of_the_library_loads_neither_agents_nor_studies():
-    names = sorted(m.name for m in pkgutil.walk_packages(trackenv.__path__, "trackenv."))
+    names = sorted(m.name for m in pkgutil.walk_packages(trackenv.__path__, "trackenv.") if m.name not in ON_REQUEST)
     loaded = _loaded_after("import " + ", ".join(["trackenv", *names]))
     assert set(names) <= loaded
     assert not {m for m in loaded if _within(m, NOT_LOADED)}
 
 
 def test_the_physics_imports_no_rl_no_plotting():
-    names = sorted(m.name for m in pkgutil.walk_packages(trackenv.physics.__path__, "trackenv.physics."))
+    names = sorted(m.name for m in pkgutil.walk_packages(trackenv.physics.__path__, "trackenv.physics.")
+                   if m.name not in ON_REQUEST)
     loaded = _loaded_after("import " + ", ".join(names))
     # importing trackenv.physics runs trackenv/__init__ (which registers the env, with gymnasium), so look at
     # what the library as a whole must not load; the physics' own imports are scanned above

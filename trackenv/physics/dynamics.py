@@ -518,6 +518,7 @@ def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
 
 
 START_OPTIONS = ("static", "rest", "steady")
+BACKENDS = ("numba", "torch")
 STEADY_RUN_BAYS = 40  # sleeper bays the steady state is integrated over, from a static start (see _steady_states)
 _STEADY_CACHE_SIZE = 256  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase)
 
@@ -536,6 +537,8 @@ def simulate_passes(
     window_bays: int | str | None = "auto",
     sleeper_force_measure: str = "ballast",
     support_settlement=None,
+    backend: str = "numba",
+    device=None,
 ) -> list[PassResult]:
     """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
 
@@ -561,8 +564,12 @@ def simulate_passes(
     supports' static forces are added to the peak sleeper forces; a sleeper that settled more than its
     neighbours hangs partly in the rail and carries less (negative values: the linear model's tension where a
     real sleeper would lift off its ballast).
+    ``backend``: "numba", the compiled kernel on the CPU, or "torch": the same integration batched over the rows in
+    torch (:mod:`trackenv.physics.torch_pass`) on ``device`` ("cpu", "cuda", ...; None: the CPU), within ~1e-9
+    relative of the kernel (its window solves round differently).
     """
     tracks = _as_tracks(tracks)
+    check_choice("backend", backend, BACKENDS)
     system, law, speed = _vehicle_system(vehicle), _contact_law(contact), check_speed(speed)
     auto = isinstance(dt, str)
     check_dt_option(dt)
@@ -574,7 +581,8 @@ def simulate_passes(
     settlement = None if support_settlement is None else _settlement_rows(support_settlement, len(tracks), tracks[0])
     margins = _row_margins(tracks, window_bays)
     x_start, x_end = _pass_range(tracks[0], system, start, margins, x_start, x_end)
-    options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure)
+    options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure,
+                   backend=backend, device=device)
     groups: dict = {}
     for b, margin in enumerate(margins):
         groups.setdefault(margin, []).append(b)
@@ -585,7 +593,7 @@ def simulate_passes(
                         dt="auto" if auto else dt, window_bays=margin, **options)
         return results
     batch = _Batch(tracks, irr_rows, settlement, system, law, speed, dt, start, x_start, x_end, margins[0],
-                   sleeper_force_measure)
+                   sleeper_force_measure, backend=backend, device=device)
     results, lost = _simulate_batch(batch)
     if auto and dt > DT_REFERENCE_S and lost:
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
@@ -613,6 +621,8 @@ class _Batch:
     margin: int | None
     measure: str
     keep_factors: bool = True  # a one-row pass keeps its window factors for the next pass over its track
+    backend: str = "numba"  # the integration's backend (BACKENDS) and, for torch, its device
+    device: object = None
 
     @property
     def margin_bays(self) -> int:
@@ -715,6 +725,11 @@ def _simulate_batch(batch: _Batch) -> tuple[list[PassResult], list[int]]:
 def _integrate(batch: _Batch) -> _Run:
     """The batch's pass through the kernel (:func:`_prepare`)."""
     run, arguments = _prepare(batch)
+    if batch.backend == "torch":
+        from . import torch_pass  # (torch is imported only by the passes that ask for it)
+
+        torch_pass.run(*arguments, device=batch.device)
+        return run
     from .kernels import announce_compile  # (kernels imports this module's helpers)
 
     announce_compile(arguments[2].u.shape[0] > 1, arguments[-1])
@@ -969,14 +984,15 @@ def _check_steady_start(track: Track, x0: np.ndarray, margin: int) -> None:
 
 def _steady_key(batch: _Batch, track: Track) -> tuple:
     """What a row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
-    law, speed, dt, the window and where the leading axle stands in its bay at the start."""
+    law, speed, dt, the window, where the leading axle stands in its bay at the start, and the backend."""
     entry = tuple(float(getattr(track, name)[0]) for name in _SUPPORT_FIELDS)
     rail = (track.sleeper_spacing, track.rail_bending_stiffness, track.rail_mass, track.elements_per_bay)
     system = batch.system
     vehicle = tuple(np.asarray(x).tobytes() for x in (system.mass, system.damping, system.stiffness, system.force,
                                                        system.wheel_dofs, system.axle_offsets))
     phase = batch.x_start - math.floor(batch.x_start / track.sleeper_spacing) * track.sleeper_spacing
-    return entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase
+    return (entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase,
+            batch.backend)  # (the backends round differently: each keeps its own)
 
 
 _SUPPORT_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
@@ -1017,7 +1033,8 @@ def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
     uniform = [Track.uniform(n_sleepers, **{name: float(getattr(t, name)[0]) for name in _SUPPORT_FIELDS}, **scalars)
                for t in tracks]
     runs = _Batch(uniform, [None] * len(uniform), None, system, batch.law, batch.speed, batch.dt, "static",
-                  x_start, x_start + batch.speed * (n_steps * batch.dt), margin, "ballast", keep_factors=False)
+                  x_start, x_start + batch.speed * (n_steps * batch.dt), margin, "ballast", keep_factors=False,
+                  backend=batch.backend, device=batch.device)
     run = _integrate(runs)
     n = len(uniform)
     u, v, a, q, qd, qdd = (_unpack(x, n) for x in (run.final.u, run.final.v, run.final.a, run.final.q,
