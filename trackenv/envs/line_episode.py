@@ -137,8 +137,11 @@ class LineBatch:
       episode, exactly);
     * sections: :meth:`allowed_rows`, :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`,
       :meth:`measure_rows`, :meth:`section_costs`, :meth:`section_entries` (what a planner sees of a section),
-      :meth:`true_quality`; and, where every segment carries one section (so that sections evolve independently
-      of each other but for the line's possession), :meth:`copy_rows` to fork single sections in a search;
+      :meth:`true_quality`; the other choices (:mod:`~trackenv.envs.choices`): :meth:`choice_mask`,
+      :meth:`code_costs`, :meth:`choice_costs`, :meth:`spot_tamp_rows`, :meth:`drain_rows`, :meth:`survey_rows`,
+      :meth:`inspect_rows`, :meth:`wet_present`; and, where every segment carries one section (so that sections
+      evolve independently of each other but for the line's possession), :meth:`copy_rows` to fork single
+      sections in a search;
     * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band), ``step``
       (per line), ``register`` (per section).
 
