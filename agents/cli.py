@@ -596,7 +596,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")
     out(sp, "results/line_calibration")
-    sp.add_argument("--scenario", default="default", choices=("small", "default", "hard"), help="line scenario")
+    sp.add_argument("--scenario", default="default", choices=("small", "default", "hard", "wet", "defects"),
+                    help="line scenario")
     sp.add_argument("--seeds", default="2000:2004", metavar="A:B", help="episodes: A:B or a,b,c")
     sp.add_argument("--threshold", type=float, default=2.0, help="SD [mm] at which the rule tamps a section")
     sp.add_argument("--horizon-years", type=float, default=None, help="shorter or longer episodes")
