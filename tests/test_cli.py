@@ -6,10 +6,13 @@ import argparse
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from trackenv_agents.cli import main
+
+HERE = Path(__file__).resolve().parent
 
 
 @pytest.mark.slow
@@ -291,7 +294,9 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
     (["--seeds", "a:b"], "invalid literal"),
     (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
     (["--policies", "cpi-agent"], "--policies names no rule"),
-    (["--policies", "rules,/missing.zip"], "--policies: no such file: /missing.zip"),
+    (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
+    (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
+    (["--policies", f"rules,{HERE / 'conftest.py'}"], "conftest.py: a trained policy is a .zip (stable-baselines3) or"),
 ])
 def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, tmp_path):
     assert main(["leaderboard", *argv, "--out", str(tmp_path)]) == 2
