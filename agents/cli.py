@@ -225,7 +225,8 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             found = saved_baselines()
             if not found:
                 raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
-            agents.update({p.stem: str(p) for p in found})
+            cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
+            agents.update({p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found})
         elif item.endswith(".zip") or Path(item).exists():
             from .learning.baselines import baseline_kind
 

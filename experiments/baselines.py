@@ -5,10 +5,9 @@ committed folder that ``trackenv leaderboard --policies baselines`` scores.
         rllib-ppo-ranked=runs/baseline_rllib rllib-shared-ppo=runs/baseline_shared
     python experiments/baselines.py export maskable-ppo-ranked=runs/baseline_maskable ...
 
-``curves`` reads each run's record of return against env steps (a run of ``experiments/train_ppo.py``: its
-held-out evaluations, ``evaluations.json``; a run of ``experiments/train_rllib.py``: the mean return of its
-training episodes per iteration, ``rllib_summary.json``), draws them against the best tuned rule's return on the
-same evaluation seeds, and writes ``experiments/saved/baselines/training_curves.json`` and
+``curves`` reads each run's record of return against env steps (:func:`curve`: its training episodes, and the
+held-out evaluations of a run of ``experiments/train_ppo.py``), draws them against the best tuned rule's return
+on the evaluation seeds, and writes ``experiments/saved/baselines/training_curves.json`` and
 ``docs/baselines_training.png``. ``export`` copies each run's final policy to
 ``experiments/saved/baselines/NAME`` (``NAME.zip`` and its observation statistics; an RLlib run's summary and
 RLModule only, not its optimiser and runner state).
@@ -38,23 +37,42 @@ def _runs(items: list[str]) -> dict[str, Path]:
     return runs
 
 
+def _tensorboard_returns(run: Path) -> tuple[list[int], list[float]]:
+    """The training episodes' mean return (stable-baselines3's ``rollout/ep_rew_mean``: the last 100 episodes,
+    raw k€, VecMonitor sits under the normalisation) per roll-out, from the run's TensorBoard events."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    files = sorted(run.glob("*/events.out.tfevents.*"))
+    if not files:
+        return [], []
+    events = EventAccumulator(str(files[-1]))
+    events.Reload()
+    rows = events.Scalars("rollout/ep_rew_mean")
+    return [int(r.step) for r in rows], [float(r.value) for r in rows]
+
+
 def curve(run: Path) -> dict[str, Any]:
-    """A run's return against env steps (line-steps): its held-out evaluations (SB3) or its training episodes'
-    mean return per iteration (RLlib), with the wall time of its training."""
+    """A run's mean return per episode against env steps (line-steps) of its training episodes (the stochastic
+    policy as it explores: RLlib's ``episode_return_mean`` per iteration, stable-baselines3's ``ep_rew_mean`` per
+    roll-out) and, for a stable-baselines3 run, of its held-out evaluations (the deterministic policy, as the
+    leaderboard plays it), with the wall time of its training."""
     if (run / RLLIB_SUMMARY).is_file():
         summary = json.loads((run / RLLIB_SUMMARY).read_text())
         hist = [h for h in summary["history"] if h["episode_return_mean"] is not None]
-        return {"source": "training episodes (RLlib)", "env_config": summary["env_config"],
-                "env_steps": [h["env_steps"] for h in hist], "mean_return": [h["episode_return_mean"] for h in hist],
+        return {"library": "RLlib", "env_config": summary["env_config"],
+                "training": {"env_steps": [h["env_steps"] for h in hist],
+                             "mean_return": [h["episode_return_mean"] for h in hist]},
                 "iterations": len(summary["history"]),
                 "train_seconds": sum(h["seconds"] for h in summary["history"])}
     summary = json.loads((run / "summary.json").read_text())
     meta = json.loads((run / "train_meta.json").read_text())
     evals = summary["evaluations"]
-    return {"source": f"held-out evaluation, seeds {meta['eval_seeds'][0]}-{meta['eval_seeds'][-1]}",
-            "hyperparams": meta["hyperparams"], "env_steps": [e["timesteps"] for e in evals],
-            "mean_return": [e["mean_return"] for e in evals], "timesteps": summary["timesteps"],
-            "train_seconds": summary["wall_seconds"], "eval_seeds": meta["eval_seeds"]}
+    steps, returns = _tensorboard_returns(run)
+    return {"library": "stable-baselines3", "hyperparams": meta["hyperparams"],
+            "training": {"env_steps": steps, "mean_return": returns},
+            "evaluation": {"env_steps": [e["timesteps"] for e in evals],
+                           "mean_return": [e["mean_return"] for e in evals], "seeds": meta["eval_seeds"]},
+            "timesteps": summary["timesteps"], "train_seconds": summary["wall_seconds"]}
 
 
 def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_name: str) -> dict[str, Any]:
@@ -65,23 +83,28 @@ def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_na
     from trackenv_agents.rules import LINE_HEURISTICS, tuned_params_for
 
     curves = {name: curve(run) for name, run in runs.items()}
-    seeds = next((c["eval_seeds"] for c in curves.values() if "eval_seeds" in c), list(range(10_000, 10_008)))
+    seeds = next((c["evaluation"]["seeds"] for c in curves.values() if "evaluation" in c), list(range(10_000, 10_008)))
     config = scenario(scenario_name)
     rule = "grouped-threshold"
     ref = evaluate_one(LINE_HEURISTICS[rule](**tuned_params_for(config).get(rule, {})), config, seeds)
     payload = {"scenario": scenario_name, "curves": curves,
                "reference": {"policy": rule, "seeds": seeds, "mean_return": -float(ref.cost.mean())}}
-    fig = Figure(figsize=(7, 4))
-    ax = fig.add_subplot()
-    for name, c in curves.items():
-        ax.plot(c["env_steps"], c["mean_return"], "o-", label=f"{name} ({c['source']})")
-    ax.axhline(payload["reference"]["mean_return"], color="k", ls="--", lw=1,
-               label=f"{rule} (tuned rule), evaluation seeds")
-    ax.set_xlabel("line-steps (env steps of the line)")
-    ax.set_ylabel("mean return per episode [k€]")
-    ax.set_yscale("symlog", linthresh=1000)
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
+    fig = Figure(figsize=(7.5, 6.0))
+    train_ax, eval_ax = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
+    for k, (name, c) in enumerate(curves.items()):
+        train_ax.plot(c["training"]["env_steps"], c["training"]["mean_return"], "o-", color=f"C{k}", label=name)
+        if "evaluation" in c:
+            eval_ax.plot(c["evaluation"]["env_steps"], c["evaluation"]["mean_return"], "s--", color=f"C{k}",
+                         label=name)
+    train_ax.set_title("training episodes (the stochastic policy; seeds from 20000)", fontsize=9)
+    eval_ax.set_title(f"held-out evaluation (the deterministic policy; seeds {seeds[0]}-{seeds[-1]})", fontsize=9)
+    eval_ax.axhline(payload["reference"]["mean_return"], color="k", ls="--", lw=1,
+                    label=f"{rule} (tuned rule), same seeds")
+    eval_ax.set_xlabel("line-steps (env steps of the line)")
+    for ax in (train_ax, eval_ax):
+        ax.set_ylabel("mean return [k€]")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
     fig.tight_layout()
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=110)
@@ -126,7 +149,7 @@ def main(argv: list[str] | None = None) -> Any:
     runs = _runs(a.runs)
     if a.command == "curves":
         out = cmd_curves(runs, Path(a.out_json), Path(a.out_png), a.scenario)
-        print(json.dumps({k: {"env_steps": v["env_steps"][-1:], "mean_return": v["mean_return"][-1:]}
+        print(json.dumps({k: {part: v[part]["mean_return"][-1:] for part in ("training", "evaluation") if part in v}
                           for k, v in out["curves"].items()}))
         return out
     written = cmd_export(runs, Path(a.dest))

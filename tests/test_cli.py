@@ -324,3 +324,16 @@ def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):
     assert isinstance(seen["executor"], RayExecutor) and seen["envs"] == list(lb.DEFAULT_SUITE)
     assert seen["agents"] == {} and seen["rules"] is None and seen["bound"] is True
     assert json.loads(capsys.readouterr().out)["ray"] == "local"
+
+
+def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):
+    """`--policies rules,baselines`: every rule and each trained policy of experiments/saved/baselines/ by its
+    name, its path relative to the working directory."""
+    from trackenv_agents.cli import _leaderboard_policies
+    from trackenv_agents.learning.baselines import SAVED_BASELINES, saved_baselines
+
+    monkeypatch.chdir(SAVED_BASELINES.parents[2])
+    rules, agents = _leaderboard_policies("rules,baselines", ["grouped-threshold"])
+    assert rules is None
+    assert agents == {p.stem: str(p.relative_to(SAVED_BASELINES.parents[2])) for p in saved_baselines()}
+    assert sorted(agents) == ["maskable-ppo-ranked", "rllib-ppo-ranked", "rllib-shared-ppo"]

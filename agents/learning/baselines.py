@@ -156,7 +156,7 @@ def _load_rllib(run_dir: Path, name: str) -> TrainedPolicy:
     module_dir = rllib_module_dir(run_dir, multi_agent)
     if not module_dir.is_dir():
         raise FileNotFoundError(f"{run_dir}: no RLModule at {module_dir}")
-    module = RLModule.from_checkpoint(str(module_dir))
+    module = RLModule.from_checkpoint(str(module_dir.resolve()))  # pyarrow reads a relative path as a URI
     policy: RLlibRankedPolicy | RLlibSectionPolicy
     if multi_agent:
         from trackenv.envs.multiagent import line_parallel_env

@@ -107,18 +107,20 @@ def _rllib_run(folder: Path, multi_agent: bool) -> Path:
 
 
 @pytest.mark.parametrize("multi_agent", [False, True], ids=["flat-ranked", "parameter-shared"])
-def test_rllib_module_loads_and_acts(multi_agent, tmp_path) -> None:
+def test_rllib_module_loads_and_acts(multi_agent, tmp_path, monkeypatch) -> None:
     if multi_agent:
         pytest.importorskip("pettingzoo")
     run = _rllib_run(tmp_path / "run", multi_agent)
     assert baseline_kind(run) == "rllib"
-    policy = load_baseline(run)
+    monkeypatch.chdir(tmp_path)
+    policy = load_baseline(Path("run"))  # a relative path, as the command line gives it
     assert policy.name == "run" and policy.params["kind"] == "rllib"
     assert type(policy.policy).__name__ == ("RLlibSectionPolicy" if multi_agent else "RLlibRankedPolicy")
     config = scenario("small", **SHORT)
     assert policy.unfit_for(config) is None and policy.unfit_for(scenario("small")) is not None
     _assert_acts(policy, config)
     assert saved_baselines(tmp_path) == [run]
+    assert policy.policy.name == "run" and policy.params["path"] == "run"
 
 
 def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
