@@ -203,9 +203,11 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 
 def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
-    """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent)
-    or paths of trained per-section policies (.zip). Returns the rules (None: all tuned) and the agents by name ->
-    file; an unknown name or a missing file is a UsageError."""
+    """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent),
+    ``baselines`` (the committed baselines of experiments/saved/baselines/) or paths of trained policies (a .zip
+    of stable-baselines3, a folder of experiments/train_rllib.py; the kind is told by the files there,
+    :func:`~trackenv_agents.learning.baselines.baseline_kind`). Returns the rules (None: all tuned) and the agents
+    by name -> path; an unknown name, a missing path or one that holds no trained policy is a UsageError."""
     rules: list[str] = []
     agents: dict[str, str] = {}
     every_rule = False
@@ -217,13 +219,27 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
         elif item == LINE_AGENT_NAME:
             _existing(str(LINE_PRETRAINED_FILE), f"--policies {LINE_AGENT_NAME}")
             agents[LINE_AGENT_NAME] = str(LINE_PRETRAINED_FILE)
-        elif item.endswith(".zip"):
-            _existing(item, "--policies")
-            name = Path(item).stem  # its file name, or the path where that is taken
+        elif item == "baselines":
+            from .learning.baselines import SAVED_BASELINES, saved_baselines
+
+            found = saved_baselines()
+            if not found:
+                raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
+            cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
+            agents.update({p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found})
+        elif item.endswith(".zip") or Path(item).exists():
+            from .learning.baselines import baseline_kind
+
+            try:
+                baseline_kind(item)
+            except (FileNotFoundError, ValueError) as err:
+                raise UsageError(f"--policies: {err}") from None
+            name = Path(item).stem  # its file or folder name, or the path where that is taken
             agents[item if name in agents or name in rule_names or name == LINE_AGENT_NAME else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{LINE_AGENT_NAME} or the path of a trained per-section policy (.zip)")
+                             f"{LINE_AGENT_NAME} or the path of a trained policy (.zip, or a folder of "
+                             "experiments/train_rllib.py)")
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
                          "or a rule name")
@@ -260,9 +276,9 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     rules, agent_files = _leaderboard_policies(args.policies, list(LINE_HEURISTICS))
     agents: dict[str, Any] = {}
     if agent_files:
-        from .learning.line import load_line_trained
+        from .learning.baselines import load_baseline
 
-        agents = {name: load_line_trained(path, name=name) for name, path in agent_files.items()}
+        agents = {name: load_baseline(path, name=name) for name, path in agent_files.items()}
     executor = _executor(args)
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()
@@ -571,7 +587,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "scenario's, agents/evaluation/leaderboard.py DEFAULT_SEEDS)")
     sp.add_argument("--policies", default=f"rules,{LINE_AGENT_NAME}", metavar="NAMES",
                     help="comma-separated: 'rules' (every tuned rule), rule names, "
-                         f"{LINE_AGENT_NAME} (the shipped agent), paths of trained per-section policies (.zip)")
+                         f"{LINE_AGENT_NAME} (the shipped agent), baselines (those committed in "
+                         "experiments/saved/baselines/), paths of trained policies (a stable-baselines3 "
+                         ".zip, a folder of experiments/train_rllib.py; each scored on the line it was trained on, "
+                         "a per-section policy on every line)")
     sp.add_argument("--no-bound", action="store_true",
                     help="skip the hindsight bound (the normalised scores are then null)")
     sp.add_argument("--ray", action="store_true", help="run the episodes and the bound's searches as tasks on a "

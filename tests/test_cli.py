@@ -6,10 +6,13 @@ import argparse
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from trackenv_agents.cli import main
+
+HERE = Path(__file__).resolve().parent
 
 
 @pytest.mark.slow
@@ -291,7 +294,9 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
     (["--seeds", "a:b"], "invalid literal"),
     (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
     (["--policies", "cpi-agent"], "--policies names no rule"),
-    (["--policies", "rules,/missing.zip"], "--policies: no such file: /missing.zip"),
+    (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
+    (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
+    (["--policies", f"rules,{HERE / 'conftest.py'}"], "conftest.py: a trained policy is a .zip (stable-baselines3) or"),
 ])
 def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, tmp_path):
     assert main(["leaderboard", *argv, "--out", str(tmp_path)]) == 2
@@ -319,3 +324,16 @@ def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):
     assert isinstance(seen["executor"], RayExecutor) and seen["envs"] == list(lb.DEFAULT_SUITE)
     assert seen["agents"] == {} and seen["rules"] is None and seen["bound"] is True
     assert json.loads(capsys.readouterr().out)["ray"] == "local"
+
+
+def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):
+    """`--policies rules,baselines`: every rule and each trained policy of experiments/saved/baselines/ by its
+    name, its path relative to the working directory."""
+    from trackenv_agents.cli import _leaderboard_policies
+    from trackenv_agents.learning.baselines import SAVED_BASELINES, saved_baselines
+
+    monkeypatch.chdir(SAVED_BASELINES.parents[2])
+    rules, agents = _leaderboard_policies("rules,baselines", ["grouped-threshold"])
+    assert rules is None
+    assert agents == {p.stem: str(p.relative_to(SAVED_BASELINES.parents[2])) for p in saved_baselines()}
+    assert sorted(agents) == ["maskable-ppo-ranked", "rllib-ppo-ranked", "rllib-shared-ppo"]

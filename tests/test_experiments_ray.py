@@ -46,6 +46,17 @@ def test_one_ppo_iteration(tmp_path) -> None:
     assert rec["episode_len_mean"] == 4.0  # episodes split at the horizon, not a step early or late
     assert np.isfinite(rec["episode_return_mean"]) and rec["episode_return_mean"] < 0
     assert (tmp_path / "rllib_summary.json").exists()
+    _scores_through_the_harness(tmp_path)
+
+
+def _scores_through_the_harness(run_dir) -> None:
+    """The run's RLModule, loaded as a leaderboard baseline, plays one episode of the config it trained on."""
+    from trackenv_agents.evaluation.harness import evaluate_one
+    from trackenv_agents.learning.baselines import load_baseline
+
+    policy = load_baseline(run_dir)
+    result = evaluate_one(policy, policy.config, [0])
+    assert np.isfinite(result.cost).all() and result.cost[0] > 0
 
 
 @pytest.mark.slow
@@ -61,6 +72,7 @@ def test_one_ppo_iteration_one_agent_per_section(tmp_path) -> None:
     assert rec["env_steps"] >= 16
     assert rec["episode_len_mean"] == 4.0  # the line's steps: every agent truncated together at the horizon
     assert np.isfinite(rec["episode_return_mean"]) and rec["episode_return_mean"] < 0
+    _scores_through_the_harness(tmp_path)
 
 
 @pytest.mark.slow

@@ -2,10 +2,11 @@
 tuned rule and the per-section hindsight bound (``trackenv leaderboard``).
 
 Per scenario (an env id of the suite, :data:`DEFAULT_SUITE`) and policy (the tuned rules, the shipped agent
-``cpi-agent``, trained per-section policies given by path) the harness runs one episode per held-out seed
-(:func:`~.harness.evaluate_many`, the same seeds for every policy: common random numbers) and reports the mean
-cost with its 95 % CI, the paired difference to the best tuned rule, the immediate-action count and the
-tampings per section class (:func:`~.line_compare.class_breakdown`).
+``cpi-agent``, trained policies given by path: the baselines of the standard libraries,
+:mod:`trackenv_agents.learning.baselines`, each on the line it was trained on) the harness runs one episode per
+held-out seed (:func:`~.harness.evaluate_many`, the same seeds for every policy: common random numbers) and
+reports the mean cost with its 95 % CI, the paired difference to the best tuned rule, the immediate-action count
+and the tampings per section class (:func:`~.line_compare.class_breakdown`).
 
 **The normalised score** is the share of the gap from the best tuned rule to the hindsight bound that a policy
 closes, paired per episode e::
@@ -46,7 +47,7 @@ from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
 __all__ = ["BOUND_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds",
-           "format_leaderboard", "normalised_score", "run_leaderboard"]
+           "fitting_agents", "format_leaderboard", "normalised_score", "run_leaderboard"]
 
 #: The scenarios of the default leaderboard: the three lines and the 60 m track.
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
@@ -191,6 +192,22 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
             "search_seconds_per_episode": float(np.mean(seconds)) if seconds else None}
 
 
+def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """The ``agents`` that can be scored on ``config``, and why each other one cannot: a policy with
+    ``unfit_for(config)`` (a baseline that sees the observation of the line it was trained on,
+    :class:`~trackenv_agents.learning.baselines.TrainedPolicy`) is scored where that returns None only."""
+    here: dict[str, Any] = {}
+    unfit: dict[str, str] = {}
+    for label, agent in agents.items():
+        check = getattr(agent, "unfit_for", None)
+        reason = check(config) if callable(check) else None
+        if reason is None:
+            here[label] = agent
+        else:
+            unfit[label] = reason
+    return here, unfit
+
+
 def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:
     """One leaderboard row: ``result`` against the best rule ``best`` and, where there is one, the bound."""
     lo, hi = bootstrap_ci(result.cost)
@@ -220,9 +237,10 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     rules) and ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds``
     (default :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
     ``searches``, None: none). ``overrides`` change every scenario's config (e.g. a short ``horizon_years`` for
-    tests). The payload of the module docstring: "results"
-    (one row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
-    "best_rule" (per scenario)."""
+    tests). An agent that does not fit a scenario (:func:`fitting_agents`) is left out there. The payload of
+    the module docstring: "results" (one row per scenario and policy, the best rule first, then by mean cost),
+    "bound" (per scenario), "seeds", "best_rule" (per scenario), "not_scored" (per scenario, the agents left out
+    and why)."""
     from trackenv.envs.line_config import scenario
 
     from ..rules.problems import rules_for, tuned_params_for
@@ -236,11 +254,12 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         unknown = [n for n in wanted if n not in family]
         if unknown or not wanted:
             raise ValueError(f"rules must name some of {sorted(family)}, got {list(wanted)}")
-        pols = [family[n](**tuned.get(n, {})) for n in wanted] + list((agents or {}).values())
+        here, unfit = fitting_agents(agents or {}, cfg)
+        pols = [family[n](**tuned.get(n, {})) for n in wanted] + list(here.values())
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
         results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
                                 executor=executor)
-        for r, label in zip(results[len(wanted):], (agents or {}), strict=True):
+        for r, label in zip(results[len(wanted):], here, strict=True):
             r.policy = label
         rule_results = sorted(results[:len(wanted)], key=lambda r: float(r.cost.mean()))
         best = rule_results[0]
@@ -265,6 +284,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         payload["bound"][env_id] = entry
         payload["seeds"][env_id] = env_seeds
         payload["best_rule"][env_id] = best.policy
+        payload.setdefault("not_scored", {})[env_id] = unfit
         payload.setdefault("scenarios", {})[env_id] = name
     return payload
 
@@ -321,6 +341,10 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
                         f"(episodes: {src})."]
         else:
             out += ["", f"No normalised score: {b['reason']}."]
+        unfit = payload.get("not_scored", {}).get(env_id) or {}
+        if unfit:
+            out += ["", "Not scored here (each sees the observation of the line it was trained on): "
+                        + ", ".join(sorted(unfit)) + "."]
         out.append("")
     out += ["IA: section-steps at the immediate-action limit, all episodes together. Normalised score: "
             "Σ(rule − policy) / Σ(rule − bound) over the paired episodes (0 = the best tuned rule, 1 = the "

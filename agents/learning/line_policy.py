@@ -32,7 +32,7 @@ from trackenv.envs.line_config import LineConfig
 from ..rules.base import as_batch
 from ..rules.line import stale_measurement
 
-__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
+__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "may_tamp", "n_features",
            "section_features"]
 
 #: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
@@ -117,6 +117,14 @@ def section_features(obs: Mapping[str, Any], advisor: Any = None) -> np.ndarray:
     return np.clip(x, 0.0, FEATURE_CLIP).astype(np.float32)
 
 
+def may_tamp(obs: Mapping[str, Any], config: LineConfig) -> np.ndarray:
+    """(batch, S) bool: the sections of a batched line observation that the env would tamp if asked, as far as
+    the observation tells: not tamped within the config's ``min_steps_between_tampings`` (the env's action mask,
+    read from ``years_since_tamping``)."""
+    gap = config.min_steps_between_tampings / config.steps_per_year  # years: tamped since then, masked
+    return np.asarray(obs["years_since_tamping"]) > gap + 1e-3
+
+
 class LineAgent:
     """A trained section policy (an SB3 policy over :func:`section_features`, ``Discrete(2)`` actions) with SB3's
     ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)`` on raw TampingLine
@@ -168,8 +176,7 @@ class LineAgent:
         if c is not None:
             from trackenv.envs.line_episode import keep_worst
 
-            gap = c.min_steps_between_tampings / c.steps_per_year  # years: tamped since then, masked
-            want &= np.asarray(b["years_since_tamping"]) > gap + 1e-3
+            want &= may_tamp(b, c)
             want = keep_worst(want, p, c.capacity)
         act = want.astype(np.int8)
         return (act if batched else act[0]), state

@@ -141,8 +141,8 @@ class LineParallelEnv(ParallelEnv):
         self._line_keys = [k for k in space if k not in self._section_keys]
         self.feature_names: tuple[str, ...] = self._feature_names(space)
         """The names of the entries of every agent's ``"observation"`` vector, in order."""
-        low = self._features({k: s.low for k, s in space.items()})  # type: ignore[attr-defined]
-        high = self._features({k: s.high for k, s in space.items()})  # type: ignore[attr-defined]
+        low = self.agent_features({k: s.low for k, s in space.items()})  # type: ignore[attr-defined]
+        high = self.agent_features({k: s.high for k, s in space.items()})  # type: ignore[attr-defined]
         mask_space = spaces.Box(0, 1, (2,), np.int8)
         self.observation_spaces: dict[str, spaces.Space] = {
             agent: spaces.Dict({"observation": spaces.Box(low[j], high[j], dtype=np.float32),
@@ -175,9 +175,9 @@ class LineParallelEnv(ParallelEnv):
             names += [key] if width == 1 else [f"{key}[{i}]" for i in range(width)]
         return tuple(names)
 
-    def _features(self, arrays: Mapping[str, np.ndarray]) -> np.ndarray:
+    def agent_features(self, arrays: Mapping[str, np.ndarray]) -> np.ndarray:
         """(n_sections, n_features) float32: row j is agent j's ``"observation"`` from the line env's
-        observation (or its space's bounds) ``arrays``."""
+        observation (or its space's bounds) ``arrays``; a policy trained here reads a line observation with it."""
         n = len(self.possible_agents)
         columns = [np.asarray(arrays[k]).reshape(n, -1) for k in self._section_keys]
         columns += [np.broadcast_to(np.asarray(arrays[k]).reshape(1, -1), (n, np.size(arrays[k])))
@@ -234,7 +234,7 @@ class LineParallelEnv(ParallelEnv):
 
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         assert self._obs is not None
-        features = self._features(self._obs)
+        features = self.agent_features(self._obs)
         masks = np.asarray(self.env.get_wrapper_attr("action_masks")(), dtype=np.int8).reshape(-1, 2)
         return {agent: {"observation": features[j], "action_mask": masks[j]}
                 for j, agent in enumerate(self.possible_agents)}

@@ -170,8 +170,9 @@ def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
 
 
 def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
-    """The documentation's tables are the committed leaderboard.md, which is the default command's rendering of the
-    committed leaderboard.json: its command, its default seeds and suite, and the page that includes it."""
+    """The documentation's tables are the committed leaderboard.md, which is the command's rendering of the
+    committed leaderboard.json: its command, its default seeds and suite, every committed baseline scored on the
+    default line (where they were trained) and listed as not scored elsewhere, and the page that includes it."""
     from pathlib import Path
 
     from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
@@ -179,9 +180,15 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     root = Path(__file__).resolve().parents[3]
     folder = root / "experiments" / "saved" / "leaderboard"
     saved = json.loads((folder / "leaderboard.json").read_text())
-    command = "trackenv leaderboard --out experiments/saved/leaderboard"
+    command = "trackenv leaderboard --out experiments/saved/leaderboard --policies rules,cpi-agent,baselines"
     assert saved["command"] == command
     assert saved["seeds"] == {env: list(DEFAULT_SEEDS[env]) for env in DEFAULT_SUITE}
+    baselines = {p.stem for p in (root / "experiments" / "saved" / "baselines").iterdir()
+                 if p.suffix == ".zip" or p.is_dir()}
+    assert len(baselines) == 3
+    line = "trackenv/TampingLine-v0"
+    assert baselines <= {r["policy"] for r in saved["results"] if r["env"] == line}
+    assert all(set(saved["not_scored"][env]) == (set() if env == line else baselines) for env in DEFAULT_SUITE)
     assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
     page = (root / "docs" / "leaderboard.md").read_text()
     assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page

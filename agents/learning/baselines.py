@@ -1,0 +1,247 @@
+"""Policies trained by the standard libraries, loaded for the evaluation harness: SB3's ``predict`` on raw
+batched observations of the line, whatever library trained them.
+
+Three kinds, told apart by what the path holds (:func:`baseline_kind`):
+
+* ``sb3`` — a stable-baselines3 / sb3-contrib model (``.zip``) with its observation statistics beside it
+  (``<stem>_obs_stats.json``), as :func:`~.tamping.train` writes it (``experiments/train_ppo.py``, e.g. the
+  ranked MaskablePPO baseline): :func:`~.tamping.load_trained`.
+* ``line`` — a per-section policy (``.zip``) with ``<stem>_meta.json`` beside it, as ``trackenv train --env ID``
+  writes it: :func:`~.line.load_line_trained`.
+* ``rllib`` — the folder that ``experiments/train_rllib.py --out DIR`` writes (``rllib_summary.json`` and the
+  checkpoint): its RLModule, run forward in torch without a Ray runtime. On a flat id (ranked actions over the
+  flattened section-level observation) :class:`RLlibRankedPolicy`; with ``--multi-agent`` (one shared module for
+  every section's agent of the PettingZoo interface) :class:`RLlibSectionPolicy`.
+
+A policy of the ``sb3`` and ``rllib`` kinds sees the observation of the scenario it was trained on (its sizes are
+those of the line: flattened section arrays, a count of sections to tamp), so it is wrapped in
+:class:`TrainedPolicy`, whose :meth:`~TrainedPolicy.unfit_for` tells the leaderboard to score it on that
+scenario only. A ``line`` policy reads per-section features and runs on any line, as before.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.line_config import LineConfig
+from trackenv.envs.wrappers import ranked_to_sections
+
+from ..rules.base import as_batch
+from .line_policy import may_tamp
+
+__all__ = ["BASELINE_KINDS", "RLLIB_SUMMARY", "SAVED_BASELINES", "RLlibRankedPolicy", "RLlibSectionPolicy",
+           "TrainedPolicy", "baseline_kind", "load_baseline", "rllib_module_dir", "saved_baselines"]
+
+#: The kinds :func:`load_baseline` reads.
+BASELINE_KINDS = ("sb3", "line", "rllib")
+#: The file that marks a folder of ``experiments/train_rllib.py``.
+RLLIB_SUMMARY = "rllib_summary.json"
+#: The committed baselines (``trackenv leaderboard --policies baselines``): their commands, budgets and curves are
+#: on the documentation's leaderboard page.
+SAVED_BASELINES = Path(__file__).resolve().parents[2] / "experiments" / "saved" / "baselines"
+#: The RLModule ids of ``experiments/train_rllib.py``: one module (single agent), or the module every section's
+#: agent shares (``--multi-agent``).
+RLLIB_MODULE_IDS = {False: "default_policy", True: "shared"}
+
+
+def saved_baselines(folder: str | Path = SAVED_BASELINES) -> list[Path]:
+    """The trained policies in ``folder`` (default the committed baselines, :data:`SAVED_BASELINES`), by name:
+    each ``.zip`` with a sidecar and each folder of ``experiments/train_rllib.py``; none if there is no folder."""
+    root = Path(folder)
+    if not root.is_dir():
+        return []
+    found = []
+    for p in sorted(root.iterdir()):
+        try:
+            baseline_kind(p)
+        except ValueError:
+            continue  # a sidecar, the curves
+        found.append(p)
+    return found
+
+
+def baseline_kind(path: str | Path) -> str:
+    """The kind of trained policy at ``path`` (one of :data:`BASELINE_KINDS`), from the files there;
+    FileNotFoundError if nothing is there, ValueError naming what a policy of each kind holds otherwise."""
+    from .line import line_meta_path
+    from .tamping import stats_path
+
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"no trained policy at {p}")
+    if p.is_dir():
+        if (p / RLLIB_SUMMARY).is_file():
+            return "rllib"
+        raise ValueError(f"{p}: a folder of a trained policy must hold {RLLIB_SUMMARY} (experiments/train_rllib.py "
+                         "--out DIR)")
+    if p.suffix == ".zip":
+        if stats_path(p).is_file():
+            return "sb3"
+        if line_meta_path(p).is_file():
+            return "line"
+        raise ValueError(f"{p}: a trained .zip needs {stats_path(p).name} (experiments/train_ppo.py) or "
+                         f"{line_meta_path(p).name} (trackenv train --env ID) beside it")
+    raise ValueError(f"{p}: a trained policy is a .zip (stable-baselines3) or a folder of "
+                     f"experiments/train_rllib.py, got a {p.suffix or 'file without a suffix'}")
+
+
+def load_baseline(path: str | Path, name: str | None = None) -> Any:
+    """The trained policy at ``path`` (any kind of :func:`baseline_kind`) with SB3's ``predict`` on raw
+    batched line observations, named ``name`` (default: the file or folder name)."""
+    p = Path(path)
+    kind = baseline_kind(p)
+    label = name or p.stem
+    if kind == "line":
+        from .line import load_line_trained
+
+        return load_line_trained(p, name=label)
+    if kind == "sb3":
+        from .tamping import load_trained, stats_path
+
+        trained = json.loads(stats_path(p).read_text()).get("config")
+        if trained is None:
+            raise ValueError(f"{stats_path(p)}: no 'config' (the line it was trained on)")
+        return TrainedPolicy(load_trained(p, name=label), LineConfig.coerce(trained), label, kind, p)
+    return _load_rllib(p, label)
+
+
+class TrainedPolicy:
+    """A loaded policy scored only on the line it was trained on (``config``): its observation has that line's
+    sizes. ``predict`` and ``reset`` are the policy's; :meth:`unfit_for` says why another config does not fit."""
+
+    def __init__(self, policy: Any, config: LineConfig, name: str, kind: str, path: str | Path) -> None:
+        self.policy = policy
+        self.config = config
+        self.name = name
+        self.params: dict[str, Any] = {"kind": kind, "path": str(path)}
+
+    def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        return self.policy.predict(observation, state=state, episode_start=episode_start,
+                                   deterministic=deterministic)
+
+    def reset(self) -> None:
+        reset = getattr(self.policy, "reset", None)
+        if callable(reset):
+            reset()
+
+    def unfit_for(self, config: LineConfig) -> str | None:
+        """None where ``config`` is the line this policy was trained on; else which of its fields differ."""
+        mine, theirs = self.config.to_dict(), LineConfig.coerce(config).to_dict()
+        differ = [k for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
+        if not differ:
+            return None
+        shown = ", ".join(f"{k} {mine.get(k)!r} (here {theirs.get(k)!r})" for k in differ[:3])
+        more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
+        return f"trained on another line: {shown}{more}"
+
+
+def rllib_module_dir(run_dir: str | Path, multi_agent: bool) -> Path:
+    """Where the RLModule of a run of ``experiments/train_rllib.py`` lies in its checkpoint."""
+    return Path(run_dir) / "checkpoint" / "learner_group" / "learner" / "rl_module" / RLLIB_MODULE_IDS[multi_agent]
+
+
+def _load_rllib(run_dir: Path, name: str) -> TrainedPolicy:
+    from ray.rllib.core.rl_module.rl_module import RLModule
+
+    env_config = dict(json.loads((run_dir / RLLIB_SUMMARY).read_text())["env_config"])
+    env_id = env_config.pop("env_id")
+    multi_agent = bool(env_config.pop("multi_agent", False))
+    env_config.pop("num_envs", None)
+    module_dir = rllib_module_dir(run_dir, multi_agent)
+    if not module_dir.is_dir():
+        raise FileNotFoundError(f"{run_dir}: no RLModule at {module_dir}")
+    module = RLModule.from_checkpoint(str(module_dir.resolve()))  # pyarrow reads a relative path as a URI
+    policy: RLlibRankedPolicy | RLlibSectionPolicy
+    if multi_agent:
+        from trackenv.envs.multiagent import line_parallel_env
+
+        penv = line_parallel_env(env_id, **env_config)
+        config = penv.env.unwrapped.config
+        policy = RLlibSectionPolicy(module, penv, config, name)
+    else:
+        from trackenv.envs.wrappers import make_ranked
+
+        env = make_ranked(env_id, **env_config)
+        config = env.unwrapped.config  # type: ignore[attr-defined]
+        policy = RLlibRankedPolicy(module, list(env.observation_space.spaces), name)  # type: ignore[attr-defined]
+        env.close()
+    return TrainedPolicy(policy, config, name, "rllib", run_dir)
+
+
+def _logits(module: Any, x: np.ndarray) -> np.ndarray:
+    """The action logits of an RLModule (its inference pass in torch) for the rows of ``x``."""
+    import torch
+
+    with torch.no_grad():
+        out = module.forward_inference({"obs": torch.as_tensor(x, dtype=torch.float32)})
+    return out["action_dist_inputs"].cpu().numpy()
+
+
+def _choose(logits: np.ndarray, deterministic: bool, rng: np.random.Generator | None) -> np.ndarray:
+    """Per row, the most likely action (deterministic) or one drawn from the softmax of ``logits``."""
+    if deterministic:
+        return logits.argmax(axis=-1)
+    p = np.exp(logits - logits.max(axis=-1, keepdims=True))
+    p /= p.sum(axis=-1, keepdims=True)
+    u = (rng or np.random.default_rng()).random(p.shape[:-1] + (1,))
+    return np.minimum((p.cumsum(axis=-1) < u).sum(axis=-1), p.shape[-1] - 1)
+
+
+class RLlibRankedPolicy:
+    """An RLModule trained on the flat ranked view of a line (:func:`trackenv.envs.wrappers.make_ranked` with
+    ``flat=True``): the section-level observation, its keys in ``obs_keys`` order flattened to one row, gives
+    logits over ``Discrete(n_sections + 1)``; the count ``k`` tamps the ``k`` sections of largest measured SD
+    (:func:`~trackenv.envs.wrappers.ranked_to_sections`). ``rng``: the draws of ``deterministic=False``."""
+
+    def __init__(self, module: Any, obs_keys: list[str], name: str = "rllib-ppo",
+                 rng: np.random.Generator | None = None) -> None:
+        self.module = module
+        self.obs_keys = list(obs_keys)
+        self.name = name
+        self._rng = rng
+
+    def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        b, batched = as_batch(dict(observation))
+        n = b["section_sd"].shape[0]
+        x = np.concatenate([np.asarray(b[k], dtype=np.float32).reshape(n, -1) for k in self.obs_keys], axis=1)
+        counts = _choose(_logits(self.module, x), deterministic, self._rng)
+        act = ranked_to_sections(counts, b["section_sd"])
+        return (act if batched else act[0]), state
+
+
+class RLlibSectionPolicy:
+    """The RLModule every section's agent shares (``experiments/train_rllib.py --multi-agent``), run for every
+    section of a batched line observation: each agent's observation of the PettingZoo interface
+    (:class:`~trackenv.envs.parallel.LineParallelEnv`: its features, its action mask [may wait, may tamp]),
+    flattened in its Dict space's key order as RLlib's ``FlattenObservations`` does, gives logits over wait / tamp.
+    The mask is read from the observation (:func:`~.line_policy.may_tamp`) and a masked section is never asked
+    for; the line env resolves the campaign's capacity as it does for the agents in training."""
+
+    def __init__(self, module: Any, parallel_env: Any, config: LineConfig, name: str = "rllib-shared-ppo",
+                 rng: np.random.Generator | None = None) -> None:
+        self.module = module
+        self.parallel_env = parallel_env
+        self.config = config
+        self.name = name
+        self._rng = rng
+        agent = parallel_env.possible_agents[0]
+        self._order = list(parallel_env.observation_space(agent).spaces)  # the Dict's keys, as flattened
+
+    def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        b, batched = as_batch(dict(observation))
+        n, s = b["section_sd"].shape
+        may = may_tamp(b, self.config)
+        features = np.stack([self.parallel_env.agent_features({k: v[i] for k, v in b.items()}) for i in range(n)])
+        parts = {"observation": features, "action_mask": np.stack([np.ones_like(may), may], axis=-1)}
+        x = np.concatenate([parts[k].astype(np.float32) for k in self._order], axis=-1).reshape(n * s, -1)
+        want = _choose(_logits(self.module, x), deterministic, self._rng).reshape(n, s).astype(bool) & may
+        act = want.astype(np.int8)
+        return (act if batched else act[0]), state

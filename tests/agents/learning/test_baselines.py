@@ -1,0 +1,137 @@
+"""The baselines' adapters (agents/learning/baselines.py): each kind of trained policy loads from what its trainer
+writes and acts through the evaluation harness on one episode of the small line cut to one year (4 steps); a
+path that holds no trained policy is refused naming what one holds; a baseline is scored on its own line only.
+
+The RLlib kinds are RLModules of RLlib's default PPO network, built and saved where experiments/train_rllib.py's
+checkpoint keeps them (no Ray runtime: the adapters need none); tests/test_experiments_ray.py loads the modules
+of real training runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation.harness import evaluate_one
+from trackenv_agents.evaluation.leaderboard import format_leaderboard, run_leaderboard
+from trackenv_agents.learning.baselines import (
+    RLLIB_SUMMARY,
+    baseline_kind,
+    load_baseline,
+    rllib_module_dir,
+    saved_baselines,
+)
+
+SMALL = "trackenv/TampingLineSmall-v0"
+SHORT = {"horizon_years": 1.0}  # 4 steps
+
+
+def _assert_acts(policy, config) -> None:
+    """One episode through the harness: finite costs, every tamping one the env allowed, and the policy's
+    actions on a batch of raw observations are 0/1 per section."""
+    result = evaluate_one(policy, config, [3])
+    assert np.isfinite(result.cost).all() and result.cost[0] > 0
+    assert 0 <= result.section_tampings[0] <= config.n_sections * config.horizon_steps
+    from trackenv.envs.problems import make_vector_env
+
+    env = make_vector_env(config, 2)
+    obs, _ = env.reset(seed=[0, 1])
+    action, _ = policy.predict(obs, deterministic=False)
+    assert action.shape == (2, config.n_sections) and set(np.unique(action)) <= {0, 1}
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def sb3_model(tmp_path_factory) -> Path:
+    """A MaskablePPO of the ranked view trained for 16 line-steps on the short small line."""
+    pytest.importorskip("sb3_contrib")
+    from trackenv_agents.learning.tamping import train
+
+    out = tmp_path_factory.mktemp("maskable")
+    hp = {"algo": "maskable_ppo", "action_type": "ranked", "keep_per_sleeper": False, "warm_start_rule": None,
+          "n_steps": 8, "batch_size": 8, "n_epochs": 1}
+    return train(config=scenario("small", **SHORT), total_timesteps=16, n_envs=2, out_dir=out, hyperparams=hp,
+                 progress=False, eval_seeds=None, checkpoint_every_s=0, verbose=0)
+
+
+def test_sb3_model_loads_and_acts_on_its_own_line_only(sb3_model) -> None:
+    assert baseline_kind(sb3_model) == "sb3"
+    policy = load_baseline(sb3_model, name="maskable")
+    config = scenario("small", **SHORT)
+    assert policy.name == "maskable" and policy.params["kind"] == "sb3"
+    assert policy.unfit_for(config) is None
+    assert "horizon_years 1.0 (here 10.0)" in policy.unfit_for(scenario("small"))
+    assert "n_sections 6 (here 12)" in policy.unfit_for(scenario("default", **SHORT))
+    _assert_acts(policy, config)
+
+
+def test_leaderboard_scores_a_baseline_on_its_line_and_says_where_it_does_not(sb3_model, tmp_path) -> None:
+    policy = load_baseline(sb3_model, name="maskable")
+    payload = run_leaderboard([SMALL, "trackenv/TampingLine-v0"], rules=["grouped-threshold"],
+                              agents={"maskable": policy}, seeds=[0], bound=False, out_dir=tmp_path, **SHORT)
+    assert [(r["env"], r["policy"]) for r in payload["results"] if r["policy"] == "maskable"] == [(SMALL, "maskable")]
+    assert payload["not_scored"][SMALL] == {}
+    assert "n_sections" in payload["not_scored"]["trackenv/TampingLine-v0"]["maskable"]
+    assert "Not scored here (each sees the observation of the line it was trained on): maskable." in (
+        format_leaderboard(payload))
+
+
+def _rllib_run(folder: Path, multi_agent: bool) -> Path:
+    """A folder as experiments/train_rllib.py writes it, with an untrained RLModule of RLlib's default PPO."""
+    pytest.importorskip("ray.rllib")
+    from gymnasium import spaces
+    from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import DefaultPPOTorchRLModule
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+    env_config = {"env_id": SMALL, **SHORT, **({"multi_agent": True} if multi_agent else {})}
+    if multi_agent:
+        from trackenv.envs.multiagent import line_parallel_env
+
+        penv = line_parallel_env(SMALL, **SHORT)
+        obs_space = spaces.flatten_space(penv.observation_space("section_0"))
+        act_space = penv.action_space("section_0")
+    else:
+        from trackenv.envs.wrappers import make_ranked
+
+        env = make_ranked(SMALL, flat=True, **SHORT)
+        obs_space, act_space = env.observation_space, env.action_space
+    spec = RLModuleSpec(module_class=DefaultPPOTorchRLModule, observation_space=obs_space, action_space=act_space,
+                        model_config=DefaultModelConfig(fcnet_hiddens=[8]))
+    spec.build().save_to_path(str(rllib_module_dir(folder, multi_agent)))
+    (folder / RLLIB_SUMMARY).write_text(json.dumps({"env_config": env_config, "history": []}))
+    return folder
+
+
+@pytest.mark.parametrize("multi_agent", [False, True], ids=["flat-ranked", "parameter-shared"])
+def test_rllib_module_loads_and_acts(multi_agent, tmp_path, monkeypatch) -> None:
+    if multi_agent:
+        pytest.importorskip("pettingzoo")
+    run = _rllib_run(tmp_path / "run", multi_agent)
+    assert baseline_kind(run) == "rllib"
+    monkeypatch.chdir(tmp_path)
+    policy = load_baseline(Path("run"))  # a relative path, as the command line gives it
+    assert policy.name == "run" and policy.params["kind"] == "rllib"
+    assert type(policy.policy).__name__ == ("RLlibSectionPolicy" if multi_agent else "RLlibRankedPolicy")
+    config = scenario("small", **SHORT)
+    assert policy.unfit_for(config) is None and policy.unfit_for(scenario("small")) is not None
+    _assert_acts(policy, config)
+    assert saved_baselines(tmp_path) == [run]
+    assert policy.policy.name == "run" and policy.params["path"] == "run"
+
+
+def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
+    with pytest.raises(FileNotFoundError, match="no trained policy at"):
+        baseline_kind(tmp_path / "missing.zip")
+    with pytest.raises(ValueError, match=f"must hold {RLLIB_SUMMARY}"):
+        baseline_kind(tmp_path)
+    (tmp_path / "model.zip").write_bytes(b"")
+    with pytest.raises(ValueError, match="needs model_obs_stats.json .* or model_meta.json"):
+        baseline_kind(tmp_path / "model.zip")
+    (tmp_path / "notes.txt").write_text("")
+    with pytest.raises(ValueError, match="a .zip .* or a folder"):
+        baseline_kind(tmp_path / "notes.txt")
+    assert saved_baselines(tmp_path) == [] and saved_baselines(tmp_path / "none") == []
