@@ -182,8 +182,8 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
-            "tamped": tamped, "section_choices": chosen, "section_cost": section_cost, "register": register, "wet_spot": wet,
-            "traces": traces}
+            "tamped": tamped, "section_choices": chosen, "section_cost": section_cost, "register": register,
+            "wet_spot": wet, "traces": traces}
 
 
 def run_episodes(config: ProblemConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],

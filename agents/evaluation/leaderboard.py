@@ -45,8 +45,8 @@ from .harness import EvaluationResult, evaluate_many
 from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
-__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds",
-           "format_leaderboard", "normalised_score", "run_leaderboard"]
+__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable",
+           "episode_bounds", "format_leaderboard", "normalised_score", "run_leaderboard"]
 
 #: The scenarios of the default leaderboard: the three lines and the 60 m track.
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",

@@ -60,9 +60,9 @@ import numpy as np
 
 from trackenv.envs.choices import CHOICES, NOTHING, TRACK_WORK, code
 
-__all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
-           "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
-           "schedule_rows"]
+__all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "choice_work", "hindsight_bound",
+           "hindsight_bounds", "recorded_rule_schedules", "replay", "replay_schedules", "replay_sections",
+           "room_summary", "saved_schedules", "schedule_from_rows", "schedule_rows"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -135,23 +135,21 @@ def _action_type(config: Any) -> str:
 def choice_rules(config: Any, rules: list[TrueStateRule], drainage: tuple[str, ...] = ("first", "onset"),
                  spot_peak_fractions: tuple[float, ...] = (0.6,),
                  renew_counts: tuple[float, ...] = (5,)) -> list[TrueStateRule]:
-    """``rules`` followed by their variants with the choices ``config`` enables besides tamping: every combination
-    of a drainage timing (``drainage``, with "drainage"), a spot-tamping fraction (``spot_peak_fractions``, with
-    "spot_tamp") and a renewal count (``renew_counts``, with "renew"), or none of each; ``rules`` alone on a
-    tamping-only config. Inspections and surveys never: they change what a planner sees, not the track."""
+    """``rules`` followed by their variants with the choices ``config`` enables besides tamping: each rule with
+    each drainage timing (``drainage``, with "drainage"), with each spot-tamping fraction (``spot_peak_fractions``,
+    with "spot_tamp") alone and with each drainage timing, and with each renewal count (``renew_counts``, with
+    "renew"); ``rules`` alone on a tamping-only config. Inspections and surveys never: they change what a planner
+    sees, not the track. (Not every combination: a spot-tamping variant forks on most sections, so each one costs
+    a replay of most of the line; a drainage variant forks on the wet sections only.)"""
     from dataclasses import replace
 
-    drains = ("never", *drainage) if _enabled(config, "drainage") else ("never",)
-    spots = (np.inf, *spot_peak_fractions) if _enabled(config, "spot_tamp") else (np.inf,)
-    renews = (np.inf, *renew_counts) if _enabled(config, "renew") else (np.inf,)
-    out = list(rules)
-    for rule in rules:
-        for d in drains:
-            for f in spots:
-                for k in renews:
-                    if (d, f, k) != ("never", np.inf, np.inf):
-                        out.append(replace(rule, drainage=d, spot_peak_fraction=f, renew_count=k))
-    return out
+    drains = tuple(drainage) if _enabled(config, "drainage") else ()
+    spots = tuple(spot_peak_fractions) if _enabled(config, "spot_tamp") else ()
+    renews = tuple(renew_counts) if _enabled(config, "renew") else ()
+    combos = ([(d, np.inf, np.inf) for d in drains] + [(d, f, np.inf) for f in spots for d in ("never", *drains)]
+              + [("never", np.inf, k) for k in renews])
+    return list(rules) + [replace(rule, drainage=d, spot_peak_fraction=f, renew_count=k) for rule in rules
+                          for d, f, k in combos]
 
 
 def choice_work(config: Any) -> np.ndarray:
@@ -343,8 +341,9 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     work, within the capacity (:func:`_total`). Solved exactly as a small integer program (HiGHS through
     :func:`scipy.optimize.milp`): binaries x[j, o] (section j takes option o, one per section) and y[t] (a
     campaign at step t) with Σ_j,o work[j, o, t]·x[j, o] <= capacity·y[t] (work: the choice's ``choice_work``;
-    track work of no work counts 1e-9, so that it still needs the campaign). Returns the choice (S,) and its total; never worse than
-    ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the optimum."""
+    track work of no work counts 1e-9, so that it still needs the campaign). Returns the choice (S,) and its
+    total; never worse than ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the
+    optimum."""
     from scipy.optimize import Bounds, LinearConstraint, milp
     from scipy.sparse import coo_array
 
@@ -425,9 +424,9 @@ def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray 
 
 
 def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> np.ndarray:
-    """Each (H, S) schedule of ``plans`` (choice codes, or bool: tamp) run on its episode of ``seeds`` in the env itself (one native vector
-    env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check of the per-section
-    pricing."""
+    """Each (H, S) schedule of ``plans`` (choice codes, or bool: tamp) run on its episode of ``seeds`` in the env
+    itself (one native vector env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check
+    of the per-section pricing."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv

@@ -49,7 +49,8 @@ def test_a_tamping_only_config_gets_no_choice_rules():
     rules = [TrueStateRule(2.0, 0.8, 0)]
     assert choice_rules(scenario("small"), rules) == rules
     every = choice_rules(scenario("small", choices=INTERVENTIONS), rules)
-    assert every[0] == rules[0] and len(every) == 3 * 2 * 2  # drainage (never, first, onset) × spot × renew
+    # drainage (first, onset); spot tamping alone and with each drainage timing; renewal
+    assert every[0] == rules[0] and len(every) == 1 + 2 + 3 + 1
     assert not any(r.tamping_only for r in every[1:])
     assert choice_rules(scenario("small", choices=("tamp", "drainage")), rules)[1:] == [
         TrueStateRule(2.0, 0.8, 0, drainage="first"), TrueStateRule(2.0, 0.8, 0, drainage="onset")]
@@ -80,11 +81,12 @@ def test_the_choice_bound_is_exact_below_its_start_and_doing_nothing_and_never_l
 def test_the_search_drains_a_wet_spot_rather_than_tamp_it_again_and_again():
     """Every section has a wet spot working from the start: tamping alone must come back to it, draining once
     returns it to the plain rate. Same episodes with and without drainage (the draws do not depend on it)."""
-    wet = scenario("small", horizon_years=3.0, wet_spot_probability=1.0, wet_spot_active_share=1.0,
+    wet = scenario("small", horizon_years=2.5, wet_spot_probability=1.0, wet_spot_active_share=1.0,
                    wet_spot_rate_factor=20.0, initial_scale=(1.0, 1.5))
     plan = np.zeros((wet.horizon_steps, wet.n_sections), dtype=np.int8)
-    tamping = hindsight_bound(wet, 1, plan, **SEARCH)
-    drained = hindsight_bound(wet.replace(choices=("tamp", "drainage")), 1, plan, **SEARCH)
+    closed_loop = {**SEARCH, "rounds": 0}  # the candidates alone: a drainage rule against tamping rules
+    tamping = hindsight_bound(wet, 1, plan, **closed_loop)
+    drained = hindsight_bound(wet.replace(choices=("tamp", "drainage")), 1, plan, **closed_loop)
     assert drained["cost"] < tamping["cost"] and (drained["schedule"] == DRAIN).any()
     assert drained["cost"] == pytest.approx(drained["replayed_cost"], rel=1e-9)
     per_section = (drained["schedule"] == DRAIN).any(axis=0)
