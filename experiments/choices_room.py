@@ -6,10 +6,11 @@ shipped tuned parameters of the scenario: ``tuned_params_for``) runs on the held
 comes from the leaderboard's cache (``--cache``, default the committed ``experiments/saved/leaderboard/bounds``),
 and an episode not cached yet is searched from the rule's schedule and cached
 (:func:`trackenv_agents.evaluation.leaderboard.episode_bounds`, the leaderboard's search settings). The bound of an
-episode is capped at that rule's cost (its schedule is a candidate). ``--costs FILE`` (JSON {"seed": cost, ...},
-k€, of the one env id given) compares the bound with those costs instead, e.g. a rule with choices scored
-elsewhere. ``--old LEADERBOARD.json`` adds the scenarios of a saved leaderboard (its best rule against its bound,
-or why it has none).
+episode is capped at that rule's cost (its schedule is a candidate). ``--costs FILE`` compares the bound with
+another policy's costs on the one env id given: a JSON {"seed": cost, ...} (k€), or a leaderboard's
+``leaderboard.json`` with ``--policy NAME`` (that policy's row of the env id), e.g. a rule with choices.
+``--old LEADERBOARD.json`` adds the scenarios of a saved leaderboard (its best rule against its bound, or why it
+has none).
 
 Per scenario: the rule's and the bound's mean cost with 95 % bootstrap CIs, their paired difference (bound − rule)
 with its CI, absolute and relative to the rule's mean, and the search's seconds per episode. Writes JSON
@@ -75,6 +76,18 @@ def scenario_room(env_id: str, seeds: list[int], rule: str, cache: Path,
     return {**out, **room(result.cost, b["cost"])}
 
 
+def given_costs(path: Path, env_id: str, policy: str | None) -> dict[int, float]:
+    """Per seed the costs of ``path``: a JSON {"seed": cost}, or a leaderboard payload's row of ``env_id`` and
+    ``policy``."""
+    payload = json.loads(path.read_text())
+    if "results" not in payload:
+        return {int(k): float(v) for k, v in payload.items()}
+    rows = [r for r in payload["results"] if r["env"] == env_id and r["policy"] == policy]
+    if not rows:
+        raise SystemExit(f"{path} has no row of policy {policy!r} on {env_id} (give --policy)")
+    return dict(zip(payload["seeds"][env_id], rows[0]["episode_costs"], strict=True))
+
+
 def saved_room(path: Path) -> list[dict[str, Any]]:
     """The scenarios of a saved leaderboard: its best rule against its bound (or the reason it has none)."""
     board = json.loads(path.read_text())
@@ -116,7 +129,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--env", default=",".join(NEW_IDS), help="comma-separated env ids")
     ap.add_argument("--seeds", default="0:32", help="held-out seeds, 'A:B' or 'a,b,c'")
     ap.add_argument("--rule", default="grouped-threshold", help="the rule the bound is compared with")
-    ap.add_argument("--costs", help="JSON {seed: cost} of one env id: compare the bound with these costs")
+    ap.add_argument("--costs", help="JSON {seed: cost} or a leaderboard.json (with --policy) of one env id: compare "
+                    "the bound with these costs")
+    ap.add_argument("--policy", help="the policy of --costs' leaderboard.json")
     ap.add_argument("--old", help="a saved leaderboard.json whose scenarios join the table")
     ap.add_argument("--cache", default=str(CACHE), help="the bound cache (the leaderboard's DIR/bounds)")
     ap.add_argument("--out", default="results/choices_room.json")
@@ -126,7 +141,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.costs:
         if len(envs) != 1:
             raise SystemExit("--costs compares one scenario: give one --env")
-        costs = {int(k): float(v) for k, v in json.loads(Path(args.costs).read_text()).items()}
+        costs = given_costs(Path(args.costs), envs[0], args.policy)
     t0 = time.perf_counter()
     rows = [scenario_room(e, seeds, args.rule, Path(args.cache), costs) for e in envs]
     if args.old:
