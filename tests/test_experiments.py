@@ -30,6 +30,25 @@ def test_room_summary_takes_each_episodes_cheapest_search_and_never_more_than_th
     assert out["ci_low"] <= out["mean_difference"] <= out["ci_high"]
 
 
+def test_choices_room_pairs_the_bound_with_a_rule_or_given_costs(tmp_path):
+    import json
+
+    mod = _script("choices_room")
+    out = mod.room(np.array([100.0, 200.0, 300.0]), np.array([80.0, 150.0, 300.0]))
+    assert out["difference"] == pytest.approx(-70.0 / 3) and out["relative"] == pytest.approx(-70.0 / 600)
+    assert out["difference_ci"][0] <= out["difference"] <= out["difference_ci"][1] <= 0
+    board = {"seeds": {"e": [3, 4]}, "results": [{"env": "e", "policy": "p", "episode_costs": [1.0, 2.0]}]}
+    (tmp_path / "board.json").write_text(json.dumps(board))
+    (tmp_path / "costs.json").write_text(json.dumps({"3": 5.0}))
+    assert mod.given_costs(tmp_path / "board.json", "e", "p") == {3: 1.0, 4: 2.0}
+    assert mod.given_costs(tmp_path / "costs.json", "e", None) == {3: 5.0}
+    with pytest.raises(SystemExit, match="no row"):
+        mod.given_costs(tmp_path / "board.json", "e", "q")
+    text = mod.table([{**out, "env": "e", "rule": "p"}, {"env": "f", "rule": "p", "n_episodes": 2, "rule_mean": 1.0,
+                                                          "rule_ci": [0.5, 1.5], "bound_unavailable": "a budget"}])
+    assert "-11.7 %" in text and "a budget" in text
+
+
 def test_kernel_profile_counts_every_section_of_the_kernels_time_step():
     kp = _script("kernel_profile")
     source = kp.KERNEL.read_text()

@@ -78,6 +78,8 @@ class EvaluationResult:
     # ("wet_spot"), each (episodes, sections)
     extra: dict[str, Any] = field(default_factory=dict)
     tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
+    # the choice code each section got in each step of each episode (episodes, steps, sections), int8
+    section_choices: np.ndarray | None = None
 
     @property
     def n_episodes(self) -> int:
@@ -143,6 +145,7 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
+    chosen = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=np.int8)
     section_cost = np.zeros((n, cfg.n_sections))  # each section's own costs (info["section_costs"])
     register = np.asarray(obs.get("register", np.zeros((n, cfg.n_sections))), dtype=np.int64)
     traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
@@ -163,6 +166,7 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
         tamped[:, t] = info["tamped_sections"]
+        chosen[:, t] = info.get("section_choices", info["tamped_sections"])
         section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
         if record:
@@ -178,8 +182,8 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
-            "tamped": tamped, "section_cost": section_cost, "register": register, "wet_spot": wet,
-            "traces": traces}
+            "tamped": tamped, "section_choices": chosen, "section_cost": section_cost, "register": register,
+            "wet_spot": wet, "traces": traces}
 
 
 def run_episodes(config: ProblemConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
@@ -239,7 +243,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     seed_arr = np.array([s for _, s in slots])
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
-    tamped = cat("tamped")
+    tamped, chosen = cat("tamped"), cat("section_choices")
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
     results = []
     for p, pol in enumerate(bound):
@@ -249,7 +253,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
-            tamped=tamped[m], extra={k: v[m] for k, v in sections.items()}))
+            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()}))
     return results
 
 

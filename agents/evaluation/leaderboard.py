@@ -46,8 +46,8 @@ from .harness import EvaluationResult, evaluate_many
 from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
-__all__ = ["BOUND_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds",
-           "fitting_agents", "format_leaderboard", "normalised_score", "run_leaderboard"]
+__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable",
+           "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score", "run_leaderboard"]
 
 #: The scenarios of the default leaderboard: the three lines and the 60 m track.
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
@@ -67,6 +67,11 @@ DEFAULT_SEEDS: dict[str, tuple[int, ...]] = {
 #: The settings of the hindsight search behind the bound (:func:`~.line_hindsight.hindsight_bounds`): one round of
 #: local search from the closed-loop candidates at true SD 2 and 3 mm, a few seconds per episode.
 BOUND_SEARCH: dict[str, Any] = {"rounds": 1, "sd_thresholds_mm": (2.0, 3.0)}
+
+#: The choices' candidates of the search on a config with choices besides tamping (the keyword arguments of
+#: :func:`~.line_hindsight.choice_rules`): drainage of a wet section at the first step or at the spot's onset,
+#: spot tamping from 60 % of the intervention limit, renewal from the fifth tamping since the last.
+CHOICE_SEARCH: dict[str, Any] = {"drainage": ("first", "onset"), "spot_peak_fractions": (0.6,), "renew_counts": (5,)}
 
 #: Episodes searched together (one batch of the search, one task under Ray).
 BOUND_CHUNK = 8
@@ -109,10 +114,42 @@ def bound_unavailable(config: Any) -> str | None:
     return None
 
 
+def _with_choices(config: Any) -> bool:
+    """Whether ``config`` enables choices besides tamping (the search then offers them)."""
+    return tuple(getattr(config, "choices", ("tamp",))) != ("tamp",)
+
+
+def _search_settings(config: Any) -> dict[str, Any]:
+    """The search's keyword arguments for ``config``: :data:`BOUND_SEARCH`, and :data:`CHOICE_SEARCH` where it has
+    choices besides tamping."""
+    return {**BOUND_SEARCH, "choice_search": CHOICE_SEARCH} if _with_choices(config) else dict(BOUND_SEARCH)
+
+
 def _config_key(config: Any, scenario_name: str) -> str:
     """A short hash of the config and the search settings: a cached bound is reused only for the same ones."""
-    text = json.dumps({"config": config.to_dict(), "search": BOUND_SEARCH}, sort_keys=True, default=str)
+    text = json.dumps({"config": config.to_dict(), "search": _search_settings(config)}, sort_keys=True, default=str)
     return f"{scenario_name}_{hashlib.sha256(text.encode()).hexdigest()[:12]}"
+
+
+def _cache_path(config: Any, scenario_name: str, folder: Path) -> Path:
+    """The bound cache of ``config`` under ``folder``: the file of its key (:func:`_config_key`), else a file of
+    the scenario written with the same search settings for a config that, read by today's config class, is this
+    one (a cache written before the config gained fields, at their defaults, stays valid), else the key's (new)
+    file."""
+    path = folder / f"{_config_key(config, scenario_name)}.json"
+    if path.exists() or not folder.is_dir():
+        return path
+    settings = json.loads(json.dumps(_search_settings(config), default=str))
+    for other in sorted(folder.glob(f"{scenario_name}_*.json")):
+        saved = json.loads(other.read_text())
+        if saved.get("search") != settings:
+            continue
+        try:
+            if type(config).from_dict(saved["config"]) == config:
+                return other
+        except (ValueError, TypeError, KeyError):  # another config class or a field since removed: not this one
+            continue
+    return path
 
 
 def _search_chunk(config: Any, episodes: list[tuple[int, np.ndarray, tuple]]) -> list[dict[str, Any]]:
@@ -121,7 +158,7 @@ def _search_chunk(config: Any, episodes: list[tuple[int, np.ndarray, tuple]]) ->
     from .line_hindsight import hindsight_bounds, schedule_rows
 
     t0 = time.perf_counter()
-    found = hindsight_bounds(config, episodes, **BOUND_SEARCH)
+    found = hindsight_bounds(config, episodes, **_search_settings(config))
     per_episode = (time.perf_counter() - t0) / len(episodes)
     return [{"seed": int(h["seed"]), "cost": float(h["replayed_cost"]), "schedule": schedule_rows(h["schedule"]),
              "source": "search", "search_seconds": per_episode} for h in found]
@@ -159,7 +196,7 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     searches' mean, None if none ran)}."""
     best = rules[0]
     seeds = [int(s) for s in best.seeds]
-    path = Path(cache_dir) / f"{_config_key(config, scenario_name)}.json"
+    path = _cache_path(config, scenario_name, Path(cache_dir))
     cached: dict[int, dict[str, Any]] = {}
     if path.exists():
         cached = {int(k): v for k, v in json.loads(path.read_text())["episodes"].items()}
@@ -170,9 +207,11 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     todo = [s for s in seeds if s not in found]
     seconds: list[float] = []
     if todo:
-        if any(r.tamped is None for r in rules):
+        if any(r.tamped is None and r.section_choices is None for r in rules):
             raise ValueError("the bound's search starts from the rules' schedules: results without them (tamped)")
-        plans = [np.asarray(r.tamped) for r in rules]  # (episodes, H, S) each, the best rule's first
+        # (episodes, H, S) each, the best rule's first: the choices the rules made (their tampings where a result
+        # has no codes)
+        plans = [np.asarray(r.section_choices if r.section_choices is not None else r.tamped) for r in rules]
         row = {s: k for k, s in enumerate(seeds)}
         episodes = [(s, plans[0][row[s]], tuple(p[row[s]] for p in plans[1:])) for s in todo]
         chunks = [episodes[i:i + BOUND_CHUNK] for i in range(0, len(episodes), BOUND_CHUNK)]
@@ -184,7 +223,8 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     if todo or any(v["source"] == "saved" for v in found.values()):
         path.parent.mkdir(parents=True, exist_ok=True)
         keep = {**cached, **{s: {k: v for k, v in found[s].items() if k != "source"} for s in seeds}}
-        path.write_text(json.dumps({"scenario": scenario_name, "config": config.to_dict(), "search": BOUND_SEARCH,
+        path.write_text(json.dumps({"scenario": scenario_name, "config": config.to_dict(),
+                                    "search": _search_settings(config),
                                     "episodes": {str(s): keep[s] for s in sorted(keep)}}, default=str) + "\n")
     cost = np.minimum([found[s]["cost"] for s in seeds], best.cost)
     sources = {k: sum(found[s]["source"] == k for s in seeds) for k in ("cache", "saved", "search")}
@@ -276,7 +316,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
             entry.update({"mean_cost": float(bound_cost.mean()), "ci": [lo, hi],
                           "vs_best_rule": {k: gap[k] for k in ("mean_difference", "ci_low", "ci_high")},
                           "sources": b["sources"], "search_seconds_per_episode": b["search_seconds_per_episode"],
-                          "seconds": time.perf_counter() - t0, "search": dict(BOUND_SEARCH),
+                          "seconds": time.perf_counter() - t0, "search": _search_settings(cfg),
                           "episode_costs": bound_cost.tolist()})
         others = sorted((r for r in results if r not in rule_results), key=lambda r: float(r.cost.mean()))
         ordered = sorted([*rule_results, *others], key=lambda r: (r is not best, float(r.cost.mean())))

@@ -32,6 +32,20 @@ The search (:func:`hindsight_bounds`, per episode):
    per-section plan gains over a whole-line rule; the integer program moves several sections at once (it can
    empty a campaign), which a one-section-at-a-time descent cannot.
 
+**The choices** (``action_type="choices"`` configs that enable more than tamping): a schedule is then a
+sequence of per-step choice codes (:data:`~trackenv.envs.choices.CHOICES`) instead of tamp-or-wait, replayed
+through the engine's per-section entry (:meth:`~trackenv.envs.line_episode.LineBatch.work_rows`). The
+closed-loop candidates add what clairvoyance makes obvious (:class:`TrueStateRule`, :func:`choice_rules`):
+drainage of a section with a wet spot at the first step it may get work, or at the spot's onset (the planner
+knows where the spots are and when they start); spot tamping where the true D1 mean-to-peak is high while the SD
+is still below the tamping threshold; a renewal instead of a tamping once the section has had a given number of
+tampings since its last. Inspections and surveys change only what a planner sees, never the track or its costs,
+so a planner that knows the truth gains nothing from them: the bound never buys them (a given schedule that
+does is also offered without them). The local search also swaps one track-work choice for another (tamp, spot
+tamp, renew) and adds spot tampings where it adds tampings. The selection counts each choice's **work**
+(``config.choice_work``) against the capacity and pays the possession in a step with any track work. On a
+tamping-only config every candidate, move and selection is the tamping-only one: the same bounds, bit for bit.
+
 It is a search, not an exact optimum, so the bound is an upper bound on the true hindsight optimum; the
 final schedule is replayed in the env as a check of the pricing.
 """
@@ -44,9 +58,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
-           "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",
-           "schedule_rows"]
+from trackenv.envs.choices import CHOICES, NOTHING, TRACK_WORK, code
+
+__all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "choice_work", "hindsight_bound",
+           "hindsight_bounds", "recorded_rule_schedules", "replay", "replay_schedules", "replay_sections",
+           "room_summary", "saved_schedules", "schedule_from_rows", "schedule_rows"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -58,27 +74,115 @@ RECORDING_DESIGNS: tuple[dict[str, Any], ...] = (
 _RECORDING_FIELDS = frozenset({"measurement_interval", "sd_noise_mm", "peak_noise_mm"})
 
 
+TAMP, SPOT_TAMP, DRAINAGE, RENEW = (code(name) for name in ("tamp", "spot_tamp", "drainage", "renew"))
+LOOKING = (code("inspect"), code("survey"))
+#: When a clairvoyant rule drains a section with a wet spot: never, at the first step the section may get work, or
+#: at the step the spot starts working (one already working: the first step the section may get work).
+DRAINAGE_TIMINGS = ("never", "first", "onset")
+
+
 @dataclass(frozen=True)
 class TrueStateRule:
-    """A closed-loop hindsight rule on the true state: tamp a section when its SD >= ``sd_mm`` or its D1 mean-to-
-    peak >= ``peak_fraction`` × the intervention limit, except in the last ``stop_steps`` steps."""
+    """A closed-loop hindsight rule on the true state, except in the last ``stop_steps`` steps: tamp a section when
+    its SD >= ``sd_mm`` or its D1 mean-to-peak >= ``peak_fraction`` × the intervention limit. With the choices:
+    drain a section with a wet spot (``drainage``: one of :data:`DRAINAGE_TIMINGS`) before anything else; renew
+    instead of tamping once it has had ``renew_count`` tampings since its last renewal; spot-tamp it when its
+    mean-to-peak >= ``spot_peak_fraction`` × the limit and it is not due for tamping."""
 
     sd_mm: float = np.inf
     peak_fraction: float = np.inf
     stop_steps: int = 0
+    drainage: str = "never"
+    spot_peak_fraction: float = np.inf
+    renew_count: float = np.inf
+
+    def __post_init__(self) -> None:
+        if self.drainage not in DRAINAGE_TIMINGS:
+            raise ValueError(f"drainage must be one of {DRAINAGE_TIMINGS}, got {self.drainage!r}")
+
+    @property
+    def tamping_only(self) -> bool:
+        """Whether the rule only tamps (its decisions are those of the tamping-only search)."""
+        return self.drainage == "never" and self.spot_peak_fraction == np.inf and self.renew_count == np.inf
+
+    def decide(self, t: int, horizon: int, sd_m: float, peak_m: float, limit_m: float, wet: bool = False,
+               wet_working: bool = False, tampings_since_renewal: float = 0.0) -> int:
+        """The choice code at step ``t`` of ``horizon`` for a section of true SD ``sd_m`` and mean-to-peak
+        ``peak_m`` [m] (intervention limit ``limit_m``), with a wet spot (``wet``) that works in this step's
+        traffic (``wet_working``), after ``tampings_since_renewal`` tampings."""
+        if t >= horizon - self.stop_steps:
+            return NOTHING
+        if wet and (self.drainage == "first" or (self.drainage == "onset" and wet_working)):
+            return DRAINAGE
+        if sd_m * 1e3 >= self.sd_mm or peak_m >= self.peak_fraction * limit_m:
+            return RENEW if tampings_since_renewal >= self.renew_count else TAMP
+        if peak_m >= self.spot_peak_fraction * limit_m:
+            return SPOT_TAMP
+        return NOTHING
+
+
+def _enabled(config: Any, name: str) -> bool:
+    """Whether ``config`` enables the choice ``name``."""
+    return name in getattr(config, "choices", ("tamp",))
+
+
+def _action_type(config: Any) -> str:
+    """The env's action type that replays a schedule of ``config``: its choice codes where it enables more than
+    tamping, else tamp-or-wait (as the tamping-only envs ran)."""
+    return "choices" if tuple(getattr(config, "choices", ("tamp",))) != ("tamp",) else "multibinary"
+
+
+def choice_rules(config: Any, rules: list[TrueStateRule], drainage: tuple[str, ...] = ("first", "onset"),
+                 spot_peak_fractions: tuple[float, ...] = (0.6,),
+                 renew_counts: tuple[float, ...] = (5,)) -> list[TrueStateRule]:
+    """``rules`` followed by their variants with the choices ``config`` enables besides tamping: each rule with
+    each drainage timing (``drainage``, with "drainage"), with each spot-tamping fraction (``spot_peak_fractions``,
+    with "spot_tamp") alone and with each drainage timing, and with each renewal count (``renew_counts``, with
+    "renew"); ``rules`` alone on a tamping-only config. Inspections and surveys never: they change what a planner
+    sees, not the track. (Not every combination: a spot-tamping variant forks on most sections, so each one costs
+    a replay of most of the line; a drainage variant forks on the wet sections only.)"""
+    from dataclasses import replace
+
+    drains = tuple(drainage) if _enabled(config, "drainage") else ()
+    spots = tuple(spot_peak_fractions) if _enabled(config, "spot_tamp") else ()
+    renews = tuple(renew_counts) if _enabled(config, "renew") else ()
+    combos = ([(d, np.inf, np.inf) for d in drains] + [(d, f, np.inf) for f in spots for d in ("never", *drains)]
+              + [("never", np.inf, k) for k in renews])
+    return list(rules) + [replace(rule, drainage=d, spot_peak_fraction=f, renew_count=k) for rule in rules
+                          for d, f, k in combos]
+
+
+def choice_work(config: Any) -> np.ndarray:
+    """(len(CHOICES),) the possession work of each choice code (``config.choice_work``: tamping 1)."""
+    work = getattr(config, "choice_work", {"tamp": 1.0})
+    return np.array([0.0] + [float(work.get(name, 0.0)) for name in CHOICES[1:]])
+
+
+#: (len(CHOICES),) bool: the codes that are track work (they need the possession)
+IS_WORK = np.array([name in TRACK_WORK for name in CHOICES])
+
+
+def _apart(a: TrueStateRule, b: TrueStateRule) -> tuple[int, int]:
+    """How far two rules are apart for prefix sharing: the fields other than the drainage timing that differ, then
+    whether the timing differs (a drainage variant parts from its rule on a wet section only)."""
+    other = sum(getattr(a, f) != getattr(b, f) for f in ("peak_fraction", "stop_steps", "spot_peak_fraction",
+                                                          "renew_count"))
+    return int(other), int(a.drainage != b.drainage)
 
 
 def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
                     share_prefixes: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Replay every candidate (seed, section j, policy) on its episode, all in one batch of segments (so many
-    episodes share the kernel's batch). A policy is an (H,) bool schedule of section j (open loop) or a
-    :class:`TrueStateRule`. Returns per candidate the section's cost without possession (N,), the schedule
-    actually applied (N, H; masked tampings dropped) and the speed-restriction-or-worse flags (N, H).
+    episodes share the kernel's batch). A policy is an (H,) schedule of section j (open loop: choice codes, or
+    bool for tamp-or-wait) or a :class:`TrueStateRule`. Returns per candidate the section's cost without
+    possession (N,), the schedule actually applied (N, H int8 codes; choices the config does not enable and masked
+    track work dropped) and the speed-restriction-or-worse flags (N, H).
 
     With ``share_prefixes`` (the default) candidates share their common past: each (episode, section)'s
     no-tamping trajectory is a root, every candidate follows a parent of its episode and section (an open-loop
     one: the earlier open-loop candidate with the longest common prefix; a closed-loop one: the earlier rule
-    with the same SD threshold, else the root) and is forked, a copy of the parent's segment
+    with the same SD threshold, else the root; a rule with choices: the nearest of those, preferably one apart
+    only in its drainage timing) and is forked, a copy of the parent's segment
     (:meth:`~trackenv.envs.line_episode.LineBatch.copy_rows`), only at the first step where its decision
     differs. Until then it costs nothing. The numbers are those of replaying every candidate from the start
     (a segment's numbers do not depend on its batch; tested), at a fraction of the passes."""
@@ -92,8 +196,8 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
         raise ValueError(f"candidate sections must lie in [0, {S}), got {sorted({j for _, j, _ in candidates})}")
     # the nodes: one root (no tamping) per episode and section, then the candidates, each with its parent node
     n_roots = len(seeds) * S
-    zero = np.zeros(H, dtype=bool)
-    policy: list[Any] = [zero] * n_roots + [p if isinstance(p, TrueStateRule) else np.asarray(p, dtype=bool)
+    zero = np.zeros(H, dtype=np.int8)
+    policy: list[Any] = [zero] * n_roots + [p if isinstance(p, TrueStateRule) else np.asarray(p, dtype=np.int8)
                                             for _, _, p in candidates]
     key = list(range(n_roots)) + [episode[int(e)] * S + j for e, j, _ in candidates]  # (episode, section) index
     parent = list(range(n_roots)) + [-1] * len(candidates)  # a root is its own parent; -1: replayed from the start
@@ -105,6 +209,8 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
             continue
         if isinstance(p, TrueStateRule):
             same = [m for m in rules[k] if policy[m].sd_mm == p.sd_mm]
+            if same and not p.tamping_only:  # the nearest (ties: the last): a variant forks where it first differs
+                same = [max(same, key=lambda m: (tuple(-a for a in _apart(policy[m], p)), m))]
             parent[i] = same[-1] if same else k
             rules[k].append(i)
         else:
@@ -120,56 +226,66 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     row[starts] = np.arange(len(starts))
     bt.copy_rows(row[starts], ref, np.array(key)[starts])
     G = bt.n_lines * S
-    acc, sched, restr = np.zeros(G), np.zeros((G, H), dtype=bool), np.zeros((G, H), dtype=bool)
+    acc, sched, restr = np.zeros(G), np.zeros((G, H), dtype=np.int8), np.zeros((G, H), dtype=bool)
     free = len(starts)
     limit = bt.limits.intervention_m
-    host, want = np.zeros(N, dtype=int), np.zeros(N, dtype=bool)
+    enabled = np.array([name == "nothing" or _enabled(config, name) for name in CHOICES])
+    with_choices = [p for p in policy if isinstance(p, TrueStateRule) and not p.tamping_only]
+    needs_count = any(p.renew_count < np.inf for p in with_choices)
+    host, want = np.zeros(N, dtype=int), np.zeros(N, dtype=np.int64)
+    wet, working, count = np.zeros(G, dtype=bool), np.zeros(G, dtype=bool), np.zeros(G)
     for t in range(H):
         allowed = bt.allowed_rows(t)
         sd, peak = bt.true_quality()
+        if with_choices:  # what clairvoyance knows of the wet spots, and the tampings since renewal
+            wet, working = bt.wet_present(), bt.wet_working_rows(t).copy()
+            if needs_count:
+                count = bt.section_entries(slice(None), t)["tampings_since_renewal"].astype(float)
         for i in range(N):  # parents come before their children
             h = row[i] if row[i] >= 0 else host[parent[i]]
             p = policy[i]
             if isinstance(p, TrueStateRule):
-                w = (sd[h] * 1e3 >= p.sd_mm or peak[h] >= p.peak_fraction * limit) and t < H - p.stop_steps
+                w = p.decide(t, H, sd[h], peak[h], limit, wet[h], working[h], count[h])
             else:
-                w = bool(p[t])
-            w = bool(w and allowed[h])
+                w = int(p[t])
+            if not enabled[w] or (IS_WORK[w] and not allowed[h]):
+                w = NOTHING
             if row[i] < 0 and w != want[parent[i]]:  # it parts from its parent: fork
                 bt.copy_rows(np.array([free]), bt, np.array([h]))
                 acc[free], sched[free], restr[free], allowed[free] = acc[h], sched[h], restr[h], allowed[h]
                 sd[free], peak[free] = sd[h], peak[h]
+                wet[free], working[free], count[free] = wet[h], working[h], count[h]
                 row[i], h, free = free, free, free + 1
             host[i], want[i] = h, w
         owned = row >= 0
-        tam = np.zeros(G, dtype=bool)
-        tam[row[owned]] = want[owned]
+        codes = np.zeros(G, dtype=np.int64)
+        codes[row[owned]] = want[owned]
         act = np.zeros(G, dtype=bool)
         act[row[owned]] = True
-        acc += bt.intervention_costs(tam)
-        bt.tamp_rows(tam, t)
+        acc += bt.choice_costs(codes)
+        bt.work_rows(codes, t)
         bt.traffic_rows(act, t)
         acc[act] += bt.section_costs()[act]
-        sched[act, t] = tam[act]
+        sched[act, t] = codes[act]
         restr[act, t] = classify(bt.true_quality()[1][act], bt.limits) >= 2
     out = host[n_roots:]
     return acc[out], sched[out], restr[out]
 
 
 def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
-    """Run episode ``seed`` of ``config`` in the env under ``policy``: an (H, S) bool schedule, or a policy with
-    SB3's ``predict`` bound to ``config``. Returns the schedule the env applied (H, S) and the episode's cost
-    (−Σ rewards, k€)."""
+    """Run episode ``seed`` of ``config`` in the env under ``policy``: an (H, S) schedule (choice codes, or bool:
+    tamp), or a policy with SB3's ``predict`` bound to ``config``. Returns the choices the env applied (H, S) int8
+    codes and the episode's cost (−Σ rewards, k€)."""
     from trackenv.envs.line import TampingLine
 
-    env = TampingLine(config)
+    env = TampingLine(config, action_type=_action_type(config))
     obs, _ = env.reset(seed=seed)
-    plan = np.zeros((config.horizon_steps, config.n_sections), dtype=bool)
+    plan = np.zeros((config.horizon_steps, config.n_sections), dtype=np.int8)
     cost = 0.0
     for t in range(config.horizon_steps):
         action = policy[t].astype(np.int8) if isinstance(policy, np.ndarray) else policy.predict(obs)[0]
         obs, r, _, _, info = env.step(action)
-        plan[t] = info["tamped_sections"]
+        plan[t] = info["section_choices"]
         cost -= r
     return plan, cost
 
@@ -200,11 +316,12 @@ def recorded_rule_schedules(config: Any, seeds: list[int], policies: list,
 
 
 def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
-    """Exact episode cost of a plan (H, S) whose sections cost ``section_cost`` (S,): inf over capacity."""
-    per_step = plan.sum(axis=1)
-    if (per_step > config.capacity).any():
+    """Exact episode cost of a plan (H, S) of choice codes (bool: tamp) whose sections cost ``section_cost``
+    (S,): their costs and a possession per step with track work; inf where a step's work exceeds the capacity."""
+    codes = np.asarray(plan, dtype=np.int64)
+    if (choice_work(config)[codes].sum(axis=1) > config.capacity + 1e-9).any():
         return np.inf
-    return float(section_cost.sum() + config.possession_cost * np.count_nonzero(per_step))
+    return float(section_cost.sum() + config.possession_cost * np.count_nonzero(IS_WORK[codes].any(axis=1)))
 
 
 def _plan(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray) -> np.ndarray:
@@ -219,12 +336,14 @@ def _choice_total(options: list[list[tuple[np.ndarray, float]]], choice: np.ndar
 
 def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
             incumbent: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """The cheapest pick of one option per section: ``options[j]`` is a list of (schedule (H,), cost) of section
-    j; the total is the sections' costs plus the possession cost of every step with a tamping, within the
-    capacity (:func:`_total`). Solved exactly as a small integer program (HiGHS through :func:`scipy.optimize.
-    milp`): binaries x[j, o] (section j takes option o, one per section) and y[t] (a campaign at step t) with
-    Σ_j,o tamp[j, o, t]·x[j, o] <= capacity·y[t]. Returns the choice (S,) and its total; never worse than
-    ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the optimum."""
+    """The cheapest pick of one option per section: ``options[j]`` is a list of (schedule (H,) of choice codes or
+    bool, cost) of section j; the total is the sections' costs plus the possession cost of every step with track
+    work, within the capacity (:func:`_total`). Solved exactly as a small integer program (HiGHS through
+    :func:`scipy.optimize.milp`): binaries x[j, o] (section j takes option o, one per section) and y[t] (a
+    campaign at step t) with Σ_j,o work[j, o, t]·x[j, o] <= capacity·y[t] (work: the choice's ``choice_work``;
+    track work of no work counts 1e-9, so that it still needs the campaign). Returns the choice (S,) and its
+    total; never worse than ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the
+    optimum."""
     from scipy.optimize import Bounds, LinearConstraint, milp
     from scipy.sparse import coo_array
 
@@ -236,10 +355,11 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     # one option per section
     rows = np.repeat(np.arange(S), n)
     pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + H))
-    # tampings at step t need a campaign at t, of at most capacity sections
-    tamp = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(float)  # (nx, H)
-    r, q = np.nonzero(tamp.T)
-    load = coo_array((np.concatenate([np.ones(r.size), np.full(H, -float(config.capacity))]),
+    # track work at step t needs a campaign at t, of at most capacity work
+    codes = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(np.int64)  # (nx, H)
+    work = np.where(IS_WORK, np.maximum(choice_work(config), 1e-9), 0.0)[codes]
+    r, q = np.nonzero(work.T)
+    load = coo_array((np.concatenate([work.T[r, q], np.full(H, -float(config.capacity))]),
                       (np.concatenate([r, np.arange(H)]), np.concatenate([q, nx + np.arange(H)]))),
                      shape=(H, nx + H))
     res = milp(c, integrality=np.ones(nx + H), bounds=Bounds(0, 1),
@@ -258,12 +378,14 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
 
 
 def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray | None = None,
-              reach: int = 4) -> list[np.ndarray]:
-    """One section's schedule (H,) varied by one tamping: each moved by ±1/±2 steps or dropped; one added 1-2
-    steps before the first step under a speed restriction (``restricted``, (H,) bool). With ``campaigns`` (H,)
-    bool (the steps where the line's plan tamps anything), also the moves that join a campaign, where the
-    possession is paid anyway: each tamping moved to a campaign step within ``reach`` steps, and one added at
-    any campaign step."""
+              reach: int = 4, swaps: tuple[int, ...] = ()) -> list[np.ndarray]:
+    """One section's schedule (H,) (choice codes, or bool: tamp) varied by one intervention: each moved by ±1/±2
+    steps or dropped; a tamping added 1-2 steps before the first step under a speed restriction (``restricted``,
+    (H,) bool). With ``campaigns`` (H,) bool (the steps where the line's plan has track work), also the moves
+    that join a campaign, where the possession is paid anyway: each intervention moved to a campaign step within
+    ``reach`` steps, and a tamping added at any campaign step. With ``swaps`` (choice codes, e.g. tamp, spot
+    tamp, renew), also each intervention of one of them replaced by each other, and each added tamping added as
+    each of them instead."""
     H = column.size
     out = []
     join = np.flatnonzero(campaigns) if campaigns is not None else np.zeros(0, dtype=int)
@@ -272,17 +394,29 @@ def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray 
         for u in sorted(moves):
             if 0 <= u < H and not column[u]:
                 v = column.copy()
-                v[t], v[u] = False, True
+                v[t], v[u] = 0, column[t]
                 out.append(v)
         v = column.copy()
-        v[t] = False
+        v[t] = 0
         out.append(v)
     adds = {f - d for f in np.flatnonzero(restricted)[:1] for d in (1, 2)} | {int(u) for u in join}
     for u in sorted(adds):
         if 0 <= u < H and not column[u]:
             v = column.copy()
-            v[u] = True
+            v[u] = TAMP
             out.append(v)
+    for t in np.flatnonzero(np.isin(column, swaps)) if swaps else ():
+        for other in swaps:
+            if other != column[t]:
+                v = column.copy()
+                v[t] = other
+                out.append(v)
+    for u in sorted(adds) if swaps else ():
+        for other in swaps:
+            if 0 <= u < H and not column[u] and other != TAMP:
+                v = column.copy()
+                v[u] = other
+                out.append(v)
     unique: dict[bytes, np.ndarray] = {}
     for v in out:
         unique.setdefault(v.tobytes(), v)
@@ -290,14 +424,15 @@ def _variants(column: np.ndarray, restricted: np.ndarray, campaigns: np.ndarray 
 
 
 def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> np.ndarray:
-    """Each (H, S) bool schedule of ``plans`` run on its episode of ``seeds`` in the env itself (one native vector
-    env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check of the per-section
-    pricing."""
+    """Each (H, S) schedule of ``plans`` (choice codes, or bool: tamp) run on its episode of ``seeds`` in the env
+    itself (one native vector env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check
+    of the per-section pricing."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv
 
-    env = TampingLineVectorEnv(len(seeds), config, autoreset_mode=AutoresetMode.NEXT_STEP)
+    env = TampingLineVectorEnv(len(seeds), config, action_type=_action_type(config),
+                               autoreset_mode=AutoresetMode.NEXT_STEP)
     env.reset(seed=[int(s) for s in seeds])
     plans_ = np.stack([np.asarray(p, dtype=np.int8) for p in plans])
     cost = np.zeros(len(seeds))
@@ -321,7 +456,7 @@ class _Pool:
     def add(self, asked: Any, cost: float, sched: np.ndarray, restr: np.ndarray) -> int:
         """Record a replay; returns the index of its option."""
         if not isinstance(asked, TrueStateRule):
-            self.asked.add(np.asarray(asked, dtype=bool).tobytes())
+            self.asked.add(np.asarray(asked, dtype=np.int8).tobytes())
         key = sched.tobytes()
         if key not in self.index:
             self.index[key] = len(self.options)
@@ -337,12 +472,14 @@ class _Pool:
 def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]], rounds: int = 2,
                      sd_thresholds_mm: tuple[float, ...] = (1.5, 2.0, 2.5, 3.0, 4.0),
                      peak_fractions: tuple[float, ...] = (0.8, np.inf), stop_steps: tuple[int, ...] = (0, 4),
-                     progress: bool = False) -> list[dict]:
+                     progress: bool = False, choice_search: dict[str, Any] | None = None) -> list[dict]:
     """The hindsight search of the module docstring on several episodes at once (each stage's replays of all
-    episodes share one batch): ``episodes`` are (seed, base schedule (H, S) bool: a feasible schedule, e.g. the
-    best rule's, extra candidate schedules). Returns per episode {"seed", "cost", "replayed_cost", "schedule",
-    "search" (the best total after each stage), "start_cost" (the base schedule's total), "options" (candidates
-    replayed per section)}."""
+    episodes share one batch): ``episodes`` are (seed, base schedule (H, S): a feasible schedule, e.g. the best
+    rule's, extra candidate schedules), schedules of choice codes or bool (tamp). On a config with choices
+    besides tamping, the closed-loop rules are extended by :func:`choice_rules` (``choice_search``: its keyword
+    arguments) and the local search swaps and adds the enabled track work (tamp, spot tamp, renew). Returns per
+    episode {"seed", "cost", "replayed_cost", "schedule" ((H, S) int8 codes), "search" (the best total after
+    each stage), "start_cost" (the base schedule's total), "options" (candidates replayed per section)}."""
     from tqdm.auto import tqdm
 
     S, H = config.n_sections, config.horizon_steps
@@ -354,11 +491,17 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
         raise ValueError(f"episodes must have distinct seeds, got {seeds}")
     rules = [TrueStateRule(s, p, k) for s in (*sd_thresholds_mm, np.inf) for p in peak_fractions for k in stop_steps
              if not (s == np.inf and p == np.inf)]
+    rules = choice_rules(config, rules, **(choice_search or {}))
+    swaps = tuple(code(n) for n in ("tamp", "spot_tamp", "renew") if _enabled(config, n))
+    swaps = swaps if len(swaps) > 1 else ()
     bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
     pools = [[_Pool() for _ in range(S)] for _ in seeds]
     cands, firsts = [], []  # an episode's candidates start with its base schedule's S columns
     for seed, base, extra in episodes:
-        pols = [np.asarray(base, dtype=bool), np.zeros((H, S), dtype=bool), *(np.asarray(x, bool) for x in extra)]
+        pols = [np.asarray(base, dtype=np.int8), np.zeros((H, S), dtype=np.int8),
+                *(np.asarray(x, dtype=np.int8) for x in extra)]
+        pols += [np.where(np.isin(p, LOOKING), NOTHING, p).astype(np.int8) for p in list(pols)
+                 if np.isin(p, LOOKING).any()]  # looking changes nothing a clairvoyant planner needs
         firsts.append(len(cands))
         cands += [(seed, j, p[:, j]) for p in pols for j in range(S)] + [(seed, j, r) for r in rules for j in range(S)]
     cost, sched, restr = replay_sections(config, cands)
@@ -380,10 +523,10 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
         # replayed as forks of the incumbent where they part from it; the selection then sees every option so far
         cands = []
         for e, seed in enumerate(seeds):
-            campaigns = _plan(options_of[e], choice[e]).any(axis=1)
+            campaigns = IS_WORK[_plan(options_of[e], choice[e])].any(axis=1)
             for j in range(S):
                 inc, flag = pools[e][j].options[choice[e][j]][0], pools[e][j].flags[choice[e][j]]
-                var = pools[e][j].new(_variants(inc, flag, campaigns))
+                var = pools[e][j].new(_variants(inc, flag, campaigns, swaps=swaps))
                 if var:
                     cands += [(seed, j, inc)] + [(seed, j, v) for v in var]
         if cands:
@@ -410,17 +553,21 @@ def hindsight_bound(config: Any, seed: int, base_schedule: np.ndarray, rounds: i
 
 
 def schedule_rows(plan: np.ndarray) -> list[str]:
-    """An (H, S) bool schedule as H strings of S '0'/'1' (JSON for the results files; a later search can start
-    from it)."""
-    return ["".join("1" if x else "0" for x in row) for row in np.asarray(plan, dtype=bool)]
+    """An (H, S) schedule of choice codes (bool: tamp) as H strings of S digits, each section's code ('0'/'1'
+    on a tamping-only schedule; JSON for the results files; a later search can start from it)."""
+    return ["".join(str(int(x)) for x in row) for row in np.asarray(plan, dtype=np.int64)]
+
+
+_CODE_DIGITS = frozenset(str(i) for i in range(len(CHOICES)))
 
 
 def schedule_from_rows(rows: list[str]) -> np.ndarray:
-    """The (H, S) bool schedule of :func:`schedule_rows`' strings (ValueError on anything but equal-length rows
-    of '0'/'1')."""
-    if not rows or len({len(r) for r in rows}) != 1 or any(set(r) - {"0", "1"} for r in rows):
-        raise ValueError("a schedule is a non-empty list of equal-length strings of '0' and '1'")
-    return np.array([[c == "1" for c in r] for r in rows], dtype=bool)
+    """The (H, S) int8 schedule of choice codes of :func:`schedule_rows`' strings (ValueError on anything but
+    equal-length rows of the digits of the codes)."""
+    if not rows or len({len(r) for r in rows}) != 1 or any(set(r) - _CODE_DIGITS for r in rows):
+        raise ValueError(f"a schedule is a non-empty list of equal-length strings of choice codes "
+                         f"(digits 0-{len(CHOICES) - 1})")
+    return np.array([[int(c) for c in r] for r in rows], dtype=np.int8)
 
 
 def saved_schedules(paths: list[str | Path], config: Any) -> tuple[list[int], list[np.ndarray], list[float]]:

@@ -80,6 +80,28 @@ def test_drainage_returns_a_wet_patch_to_the_plain_rate_and_stops_a_latent_one()
     np.testing.assert_allclose(batch.base_rate, plain, rtol=1e-12)
 
 
+def test_work_rows_apply_each_sections_choice_as_the_step_does():
+    """The engine's per-section entry (what a search over schedules of choices replays) does what the line's step
+    applies: a per-section replay of a schedule is the env's episode."""
+    a, b = _batch(3, wet_spot_probability=1.0), _batch(3, wet_spot_probability=1.0)
+    codes = _codes(a, s0=TAMP, s1=SPOT, s2=DRAIN, s3=RENEW, s4=SURVEY, s5=INSPECT)
+    a.apply(codes)
+    b.work_rows(codes.ravel(), 0)
+    for name in ("offset", "u", "cyc", "base_rate", "wet_onset", "wet_active", "count", "tampings", "last_work",
+                 "survey", "measured_sd"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert b.wet_onset[2] == -1 and b.survey[4] in (0, 1) and b.count[3] == 0
+
+
+def test_a_wet_spot_works_from_its_onset_step_on():
+    batch = _batch(2, wet_spot_probability=1.0, horizon_years=1.0)
+    onset = batch.wet_onset.copy()  # one section per segment on the line presets
+    assert (onset > 0).any()
+    for t in range(batch.config.horizon_steps):
+        np.testing.assert_array_equal(batch.wet_working_rows(t), (onset >= 0) & (onset <= t))
+        batch.traffic()
+
+
 def test_drainage_of_a_dry_section_changes_nothing_but_is_paid():
     batch = _batch(3, wet_spot_probability=0.0)
     rate = batch.base_rate.copy()

@@ -118,9 +118,9 @@ class LineConfig(ConfigBase):
     exceeds ``capacity`` is always masked). ``surveyed_share``: the share of sections surveyed before the start
     (needs "survey"). Drawn only where set (else nothing is drawn for them): ``wet_spot_active_share``, the share
     of wet spots working from the first step; ``local_defects_mean`` short local defects per segment (Poisson;
-    a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch (3.6 m: a shorter one lies mostly
-    below the D1 band of 3-25 m and hardly shows in the measured level) settling ``local_defect_rate_factor``
-    (3) times faster **[assumption]**.
+    a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch (2.4 m) settling
+    ``local_defect_rate_factor`` (2.5) times faster **[assumption]**; such a short patch lies mostly below the D1
+    band of 3-25 m, so it shows little in the measured level.
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type, the coarsest step that keeps the
     peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s for the
     coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
@@ -199,8 +199,8 @@ class LineConfig(ConfigBase):
     surveyed_share: float = 0.0
     wet_spot_active_share: float = 0.0
     local_defects_mean: float = 0.0
-    local_defect_length_m: float = 3.6
-    local_defect_rate_factor: float = 3.0
+    local_defect_length_m: float = 2.4
+    local_defect_rate_factor: float = 2.5
     limits: tuple = ()
     dt: float | str = "auto"
     line: LineDescription | None = None
@@ -460,7 +460,7 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "wet": {"choices": INTERVENTIONS, "contact_sensor": True, "wet_spot_probability": 0.35,
             "wet_spot_active_share": 0.4, "surveyed_share": 0.5},
     # a line of many short defects (trackenv/TampingLineDefects-v0): more switches and crossings, on average
-    # one short defect per segment (a joint, a weld, a failed sleeper: 3.6 m settling 3x faster)
+    # one short defect per segment (a joint, a weld, a failed sleeper: 2.4 m settling 2.5x faster)
     # [assumption]; the full decision
     "defects": {"choices": INTERVENTIONS, "contact_sensor": True, "switch_probability": 0.2,
                 "local_defects_mean": 1.0},

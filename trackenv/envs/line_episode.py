@@ -135,13 +135,13 @@ class LineBatch:
     * lines: :meth:`start` (new episodes), :meth:`advance` (one step of the env), :meth:`observation`,
       :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state` / :meth:`set_state` (a line's
       episode, exactly);
-    * sections: :meth:`allowed_rows`, :meth:`intervention_costs`, :meth:`tamp_rows`, :meth:`traffic_rows`,
-      :meth:`measure_rows`, :meth:`section_costs`, :meth:`section_entries` (what a planner sees of a section),
-      :meth:`true_quality`; the other choices (:mod:`~trackenv.envs.choices`): :meth:`choice_mask`,
-      :meth:`code_costs`, :meth:`choice_costs`, :meth:`spot_tamp_rows`, :meth:`drain_rows`, :meth:`survey_rows`,
-      :meth:`inspect_rows`, :meth:`wet_present`; and, where every segment carries one section (so that sections
-      evolve independently of each other but for the line's possession), :meth:`copy_rows` to fork single
-      sections in a search;
+    * sections: :meth:`allowed_rows`, :meth:`intervention_costs`, :meth:`choice_costs`, :meth:`tamp_rows`,
+      :meth:`work_rows` (any choice), :meth:`traffic_rows`, :meth:`measure_rows`, :meth:`section_costs`,
+      :meth:`section_entries` (what a planner sees of a section), :meth:`true_quality`, :meth:`wet_present`,
+      :meth:`wet_working_rows`; the other choices (:mod:`~trackenv.envs.choices`): :meth:`choice_mask`,
+      :meth:`code_costs`, :meth:`spot_tamp_rows`, :meth:`drain_rows`, :meth:`survey_rows`, :meth:`inspect_rows`;
+      and, where every segment carries one section (so that sections evolve independently of each other but for
+      the line's possession), :meth:`copy_rows` to fork single sections in a search;
     * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band), ``step``
       (per line), ``register`` (per section).
 
@@ -552,6 +552,16 @@ class LineBatch:
             return present.copy()
         return self._per_section(self.wet_mask & present[:, None], "max").astype(bool)
 
+    def wet_working_rows(self, seg_step: np.ndarray | int) -> np.ndarray:
+        """(sections,) bool: the sections whose wet spot works in the traffic of their step ``seg_step`` (per
+        section or one): already working, or starting with it. What a planner who knows the future drains at the
+        latest before the spot costs anything."""
+        step = np.broadcast_to(np.asarray(seg_step), self.sd.shape).reshape(-1, self.K)[:, 0]
+        working = self.wet_active | (self.wet_onset == step)
+        if self.K == 1:
+            return working
+        return self._per_section(self.wet_mask & working[:, None], "max").astype(bool)
+
     def renewing(self) -> np.ndarray:
         """(sections,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
         has had ``max_tampings_before_renewal`` tampings and the model renews)."""
@@ -643,16 +653,24 @@ class LineBatch:
         c = self.config
         codes = np.asarray(codes, dtype=np.int64)
         parts = self.campaign_parts(codes)
-        step = np.repeat(self.step, self.S)
         flat = codes.ravel()
-        self.tamp_rows((flat == TAMP) | (flat == RENEW), step, renew=flat == RENEW)
-        if flat.any() and not np.isin(flat, (NOTHING, TAMP)).all():
-            self.spot_tamp_rows(flat == SPOT_TAMP, step)
-            self.drain_rows(flat == DRAINAGE, step)
-            self.survey_rows(flat == SURVEY)
+        self.work_rows(flat, np.repeat(self.step, self.S))
         if flat.any() and c.annual_budget > 0:
             self.budget_left -= parts.sum(axis=0)
         return parts
+
+    def work_rows(self, codes: np.ndarray, seg_step: np.ndarray | int) -> None:
+        """Apply the choices ``codes`` (sections,) action codes to their sections at their step ``seg_step`` (per
+        section or one), each section on its own: tamping and renewal (:meth:`tamp_rows`), spot tamping
+        (:meth:`spot_tamp_rows`), drainage (:meth:`drain_rows`), survey (:meth:`survey_rows`); inspections measure
+        at the end of the step (:meth:`inspect_rows`). No masks, no costs, no budget: :meth:`apply` is the
+        line-level step; a search over per-section schedules of choices calls this directly."""
+        codes = np.asarray(codes, dtype=np.int64)
+        self.tamp_rows((codes == TAMP) | (codes == RENEW), seg_step, renew=codes == RENEW)
+        if codes.any() and not np.isin(codes, (NOTHING, TAMP)).all():
+            self.spot_tamp_rows(codes == SPOT_TAMP, seg_step)
+            self.drain_rows(codes == DRAINAGE, seg_step)
+            self.survey_rows(codes == SURVEY)
 
     def tamp_rows(self, t: np.ndarray, seg_step: np.ndarray | int, renew: np.ndarray | None = None) -> None:
         """Tamp (or renew, where due or where ``renew`` (sections,) bool asks) the sections ``t`` (sections,) bool

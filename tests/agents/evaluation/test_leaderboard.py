@@ -72,6 +72,23 @@ def test_bound_applies_only_where_sections_are_priced_apart() -> None:
     assert "annual budget" in bound_unavailable(scenario("hard"))
 
 
+def test_the_scenarios_with_choices_have_a_bound_searched_over_their_choices(tmp_path) -> None:
+    """The bound applies to the ids with choices, with the choices' search settings in its cache key; a cache
+    written before the config gained fields (at their defaults) is still this config's."""
+    from trackenv_agents.evaluation.leaderboard import CHOICE_SEARCH, _cache_path, _config_key, _search_settings
+
+    wet = scenario("wet")
+    assert bound_unavailable(wet) is None and _search_settings(wet)["choice_search"] == CHOICE_SEARCH
+    assert "choice_search" not in _search_settings(scenario("small"))
+    small = scenario("small")
+    older = {k: v for k, v in small.to_dict().items() if k not in ("choices", "contact_sensor", "drainage_cost")}
+    (tmp_path / "small_0123456789ab.json").write_text(json.dumps(
+        {"scenario": "small", "config": older, "search": _search_settings(small), "episodes": {}}, default=str))
+    assert _cache_path(small, "small", tmp_path).name == "small_0123456789ab.json"
+    other = small.replace(capacity=2)
+    assert _cache_path(other, "small", tmp_path) == tmp_path / f"{_config_key(other, 'small')}.json"
+
+
 @pytest.fixture(scope="module")
 def first(tmp_path_factory) -> tuple[dict, Any]:
     """The tiny leaderboard of two rules, with the bound searched and cached."""

@@ -1,0 +1,93 @@
+"""The hindsight search with the choices: priced exactly, below its own candidates and doing nothing, drainage
+found where a wet spot makes repeated tamping dear, never a look (inspect, survey), and on a tamping-only config
+the numbers of the tamping-only search."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv.envs.choices import INTERVENTIONS, code
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation.line_hindsight import (
+    TrueStateRule,
+    _total,
+    choice_rules,
+    choice_work,
+    hindsight_bound,
+    hindsight_bounds,
+    replay,
+    schedule_from_rows,
+    schedule_rows,
+)
+
+TAMP, SPOT, DRAIN, RENEW, INSPECT, SURVEY = (code(n) for n in INTERVENTIONS)
+REFERENCE = Path(__file__).parent / "data" / "hindsight_tamping_reference.json"
+SEARCH = {"rounds": 1, "sd_thresholds_mm": (2.0,), "peak_fractions": (0.8,), "stop_steps": (0,)}
+
+
+def test_tamping_only_configs_give_the_tamping_only_search_bit_for_bit():
+    """The reference was written by the search before it knew the choices (same config, plans and settings)."""
+    ref = json.loads(REFERENCE.read_text())
+    cfg = scenario(ref["config"]["scenario"], horizon_years=ref["config"]["horizon_years"],
+                   initial_scale=tuple(ref["config"]["initial_scale"]))
+    plan, extra = schedule_from_rows(ref["plan"]), schedule_from_rows(ref["extra"])
+    search = {k: tuple(v) if isinstance(v, list) else v for k, v in ref["search"].items()}
+    found = hindsight_bounds(cfg, [(4, plan.astype(bool), (extra.astype(bool),)), (9, plan.astype(bool), ())],
+                             **search)
+    for h, r in zip(found, ref["episodes"], strict=True):
+        assert (h["seed"], h["cost"], h["replayed_cost"], h["start_cost"]) == \
+            (r["seed"], r["cost"], r["replayed_cost"], r["start_cost"])
+        assert h["search"] == r["search"] and h["options"] == r["options"]
+        assert schedule_rows(h["schedule"]) == r["schedule"]
+
+
+def test_a_tamping_only_config_gets_no_choice_rules():
+    rules = [TrueStateRule(2.0, 0.8, 0)]
+    assert choice_rules(scenario("small"), rules) == rules
+    every = choice_rules(scenario("small", choices=INTERVENTIONS), rules)
+    # drainage (first, onset); spot tamping alone and with each drainage timing; renewal
+    assert every[0] == rules[0] and len(every) == 1 + 2 + 3 + 1
+    assert not any(r.tamping_only for r in every[1:])
+    assert choice_rules(scenario("small", choices=("tamp", "drainage")), rules)[1:] == [
+        TrueStateRule(2.0, 0.8, 0, drainage="first"), TrueStateRule(2.0, 0.8, 0, drainage="onset")]
+    with pytest.raises(ValueError, match="drainage"):
+        TrueStateRule(drainage="later")
+
+
+def test_the_choice_bound_is_exact_below_its_start_and_doing_nothing_and_never_looks():
+    cfg = scenario("small", choices=INTERVENTIONS, horizon_years=2.0, initial_scale=(1.2, 2.0),
+                   wet_spot_probability=0.5, wet_spot_active_share=0.5, local_defects_mean=1.0)
+    H, S = cfg.horizon_steps, cfg.n_sections
+    plan = np.zeros((H, S), dtype=np.int8)
+    plan[1, :2], plan[1, 2], plan[3, 3:] = TAMP, SPOT, TAMP
+    plan[0, 4], plan[2, 5] = INSPECT, SURVEY  # looks, which the bound never needs
+    _, start = replay(cfg, 2, plan)
+    _, nothing = replay(cfg, 2, np.zeros((H, S), dtype=np.int8))
+    h = hindsight_bound(cfg, 2, plan, **SEARCH)
+    assert h["start_cost"] == pytest.approx(start, rel=1e-9)  # the per-section pricing of a schedule of choices
+    assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9)  # ... and of the result, in the env
+    assert h["cost"] <= min(start, nothing) + 1e-9 and h["search"] == sorted(h["search"], reverse=True)
+    sched = h["schedule"]
+    assert not np.isin(sched, (INSPECT, SURVEY)).any()
+    assert (choice_work(cfg)[sched].sum(axis=1) <= cfg.capacity + 1e-9).all()
+    assert _total(sched, np.zeros(S), cfg) == pytest.approx(
+        cfg.possession_cost * np.isin(sched, (TAMP, SPOT, DRAIN, RENEW)).any(axis=1).sum())
+
+
+def test_the_search_drains_a_wet_spot_rather_than_tamp_it_again_and_again():
+    """Every section has a wet spot working from the start: tamping alone must come back to it, draining once
+    returns it to the plain rate. Same episodes with and without drainage (the draws do not depend on it)."""
+    wet = scenario("small", horizon_years=2.5, wet_spot_probability=1.0, wet_spot_active_share=1.0,
+                   wet_spot_rate_factor=20.0, initial_scale=(1.0, 1.5))
+    plan = np.zeros((wet.horizon_steps, wet.n_sections), dtype=np.int8)
+    closed_loop = {**SEARCH, "rounds": 0}  # the candidates alone: a drainage rule against tamping rules
+    tamping = hindsight_bound(wet, 1, plan, **closed_loop)
+    drained = hindsight_bound(wet.replace(choices=("tamp", "drainage")), 1, plan, **closed_loop)
+    assert drained["cost"] < tamping["cost"] and (drained["schedule"] == DRAIN).any()
+    assert drained["cost"] == pytest.approx(drained["replayed_cost"], rel=1e-9)
+    per_section = (drained["schedule"] == DRAIN).any(axis=0)
+    assert (tamping["schedule"][:, per_section] == TAMP).sum() > (drained["schedule"][:, per_section] == TAMP).sum()
