@@ -46,7 +46,7 @@ from .base import as_batch
 from .line import STALE_TOLERANCE_YEARS, GroupedThreshold
 
 __all__ = ["CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "choice_grid", "choice_view",
-           "regrowth_mm_per_year"]
+           "choices_off", "regrowth_mm_per_year"]
 
 TAMP, SPOT_TAMP, DRAINAGE, RENEW, INSPECT, SURVEY = (code(name) for name in CHOICES[1:])
 #: the shortest time between a tamping and the measurement that a growth rate is read over [year]
@@ -230,25 +230,30 @@ class ChoiceThresholdNoLooking(ChoiceThreshold):
 
 
 def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[dict[str, Any]]:
-    """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): every choice
-    off (the grouped threshold itself, so the tuned family is never worse on the training seeds), spot tamping at
-    two peaks, drainage where surveyed, and with ``cls.looks`` surveys (of every section, or of the fast-growing
-    and often tamped ones), extra inspections and renewal on top."""
+    """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): drainage where
+    surveyed with spot tamping at two peaks and a second-tamping drainage trigger; with ``cls.looks``, surveys of
+    every section first, and extra inspections on top. With every choice off the family is the grouped
+    threshold itself (:func:`choices_off`): the tuning compares against it."""
+    off = choices_off(cls)
+    drain = {**off, "drain_surveyed": True}
+    if not cls.looks:
+        grid = [{**drain, "spot_peak_mm": 12.0}, {**drain, "spot_peak_mm": 9.0},
+                {**drain, "spot_peak_mm": 9.0, "drain_after_tampings": 2}]
+    else:
+        survey = {**drain, "survey_all": True}
+        grid = [survey, {**survey, "spot_peak_mm": 12.0}, {**survey, "spot_peak_mm": 9.0},
+                {**survey, "spot_peak_mm": 9.0, "inspect_margin_mm": 0.5, "inspect_peak_mm": 7.0}]
+    return [{**base, **extra} for extra in grid]
+
+
+def choices_off(cls: type[ChoiceThreshold]) -> dict[str, Any]:
+    """The parameters of ``cls`` with every choice but tamping off (the grouped threshold itself)."""
     off: dict[str, Any] = {"spot_peak_mm": 0.0, "drain_surveyed": False, "drain_after_tampings": 0,
                            "fast_growth_mm_per_year": 1.5, "renew_after_tampings": 0}
     if cls.looks:
         off |= {"survey_fast": False, "survey_after_tampings": 0, "survey_all": False, "inspect_margin_mm": 0.0,
                 "inspect_age_years": 0.5, "inspect_peak_mm": 0.0}
-    drain = {**off, "drain_surveyed": True}
-    grid = [off, {**off, "spot_peak_mm": 12.0}, {**off, "spot_peak_mm": 9.0}, drain,
-            {**drain, "spot_peak_mm": 12.0}, {**drain, "spot_peak_mm": 12.0, "drain_after_tampings": 2}]
-    if cls.looks:
-        survey = {**drain, "survey_all": True}
-        grid += [survey, {**survey, "spot_peak_mm": 12.0}, {**survey, "spot_peak_mm": 9.0},
-                 {**drain, "survey_fast": True, "survey_after_tampings": 2, "spot_peak_mm": 12.0},
-                 {**survey, "spot_peak_mm": 12.0, "inspect_margin_mm": 0.5, "inspect_peak_mm": 12.0},
-                 {**survey, "spot_peak_mm": 12.0, "renew_after_tampings": 6}]
-    return [{**base, **extra} for extra in grid]
+    return off
 
 
 CHOICE_RULES: dict[str, type[ChoiceThreshold]] = {c.name: c for c in (ChoiceThreshold, ChoiceThresholdNoLooking)}
