@@ -26,6 +26,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -54,19 +55,17 @@ def tune(name: str, train_seeds: list[int], batch_size: int) -> dict[str, Any]:
     grouped threshold's campaign first, then each choice family around it; a family keeps every choice off (the
     grouped threshold itself) where no grid point beats that on the training seeds."""
     cfg = scenario(name)
-    grids = [[{"trigger_mm": t, "include_mm": i} for t, i in CAMPAIGNS]]
-    best = tune_many([GroupedThreshold], cfg, train_seeds, batch_size, False, grids=grids,
-                     action_type="choices")[0]
-    base = best["best_params"]
-    family = [ChoiceThreshold, ChoiceThresholdNoLooking]
-    tuned = tune_many(family, cfg, train_seeds, batch_size, False, grids=[choice_grid(c, base) for c in family],
-                      action_type="choices")
+    known = _known_rows(name, train_seeds)
+    best = _tune_grid(GroupedThreshold, [{"trigger_mm": t, "include_mm": i} for t, i in CAMPAIGNS], cfg,
+                      train_seeds, batch_size, known)
+    base = best[0]["params"]
     params: dict[str, Any] = {GroupedThreshold.name: base}
-    tables = {GroupedThreshold.name: best["table"]}
-    for i, v in tuned.items():
-        off = {"params": {**base, **choices_off(family[i])}, "mean_cost": best["best_mean_cost"]}
-        table = sorted([*v["table"], off], key=lambda row: row["mean_cost"])
-        params[family[i].name], tables[family[i].name] = table[0]["params"], table
+    tables = {GroupedThreshold.name: best}
+    for cls in (ChoiceThreshold, ChoiceThresholdNoLooking):
+        off = {"params": {**base, **choices_off(cls)}, "mean_cost": best[0]["mean_cost"]}
+        table = sorted([*_tune_grid(cls, choice_grid(cls, base), cfg, train_seeds, batch_size, known), off],
+                       key=lambda row: row["mean_cost"])
+        params[cls.name], tables[cls.name] = table[0]["params"], table
     payload = {"scenario": name, "train_seeds": train_seeds, "tuned_by": "experiments/choices_compare.py --tune",
                "params": params,
                "train_mean_cost": {rule: [{"params": row["params"], "mean_cost": row["mean_cost"]} for row in table]
@@ -75,17 +74,52 @@ def tune(name: str, train_seeds: list[int], batch_size: int) -> dict[str, Any]:
     return params
 
 
+def _known_rows(name: str, train_seeds: list[int]) -> dict[str, list[dict[str, Any]]]:
+    """The training costs already in scenario ``name``'s tuned file, where it was tuned on ``train_seeds``: a grid
+    point scored there with the same code need not run again (an episode is a function of its seed and actions)."""
+    path = TUNED_FILES[name]
+    if not path.exists():
+        return {}
+    saved = json.loads(path.read_text())
+    return saved.get("train_mean_cost", {}) if saved.get("train_seeds") == train_seeds else {}
+
+
+def _tune_grid(cls: type, grid: list[dict[str, Any]], cfg: Any, train_seeds: list[int], batch_size: int,
+               known: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """``cls`` over ``grid`` on ``train_seeds`` (the points in ``known`` read from there), sorted by cost."""
+    def key(params: dict[str, Any]) -> str:  # every parameter, defaults included
+        return json.dumps(cls(**params).params, sort_keys=True)
+
+    old = {key(row["params"]): row for row in known.get(cls.name, [])}
+    rows = [old[key(g)] for g in grid if key(g) in old]
+    new = [g for g in grid if key(g) not in old]
+    if new:
+        rows += tune_many([cls], cfg, train_seeds, batch_size, False, grids=[new], action_type="choices")[0]["table"]
+    return sorted(({"params": r["params"], "mean_cost": r["mean_cost"]} for r in rows),
+                  key=lambda row: row["mean_cost"])
+
+
 def evaluate(name: str, params: dict[str, Any], seeds: list[int], voi_seeds: list[int],
              batch_size: int) -> dict[str, Any]:
     """The grouped threshold and the choice rule on ``seeds`` of scenario ``name``, the choice rule without
-    looking on ``voi_seeds`` (a subset), with the paired differences."""
+    looking on ``voi_seeds`` (a subset), with the paired differences. A rule whose parameters and seeds are those
+    of the saved comparison is read from it (an episode is a function of its seed and actions)."""
     cfg = scenario(name)
-    main, blind = RULES[:2], RULES[2]
-    results = evaluate_many([cls(**params[cls.name]) for cls in main], cfg, seeds, action_type="choices",
-                            batch_size=batch_size)
-    results += evaluate_many([blind(**params[blind.name])], cfg, voi_seeds, action_type="choices",
-                             batch_size=batch_size)
-    tamping, choice, no_looking = results
+    path = SAVED / f"choices_compare_{name}.json"
+    saved = json.loads(path.read_text())["rules"] if path.exists() else {}
+    summaries, results = {}, {}
+    for cls, rule_seeds in zip(RULES, (seeds, seeds, voi_seeds), strict=True):
+        old = saved.get(cls.name)
+        if old and old["seeds"] == rule_seeds and cls(**old["params"]).params == cls(**params[cls.name]).params:
+            summaries[cls.name] = old
+            results[cls.name] = SimpleNamespace(policy=cls.name, seeds=np.array(old["seeds"]),
+                                                cost=np.array(old["episode_costs"]))
+            continue
+        r = evaluate_many([cls(**params[cls.name])], cfg, rule_seeds, action_type="choices",
+                          batch_size=batch_size)[0]
+        summaries[cls.name] = {**r.summary(), "seeds": r.seeds.tolist(), "episode_costs": r.cost.tolist()}
+        results[cls.name] = r
+    tamping, choice, no_looking = (results[cls.name] for cls in RULES)
 
     def compare(a, b) -> dict[str, Any]:
         d = paired_difference(a, b)
@@ -94,9 +128,7 @@ def evaluate(name: str, params: dict[str, Any], seeds: list[int], voi_seeds: lis
         return {**d, "reference_mean_cost": ref, "relative": d["mean_difference"] / ref,
                 "relative_ci": [d["ci_low"] / ref, d["ci_high"] / ref]}
 
-    return {"scenario": name, "env": IDS[name], "seeds": seeds, "voi_seeds": voi_seeds,
-            "rules": {r.policy: {**r.summary(), "seeds": r.seeds.tolist(), "episode_costs": r.cost.tolist()}
-                      for r in results},
+    return {"scenario": name, "env": IDS[name], "seeds": seeds, "voi_seeds": voi_seeds, "rules": summaries,
             "choices_vs_tamping": compare(choice, tamping), "value_of_information": compare(choice, no_looking),
             "target_ratio": TARGET[name]}
 

@@ -16,7 +16,8 @@ switched off by a zero:
   since its last renewal and fast regrowth;
 * **extra inspections** of a section whose last measurement is at least ``inspect_age_years`` old and whose SD,
   projected at its growth rate, is within ``inspect_margin_mm`` of the trigger, or whose measured peak is at
-  least ``inspect_peak_mm``.
+  least ``inspect_peak_mm``; and of a section just tamped whose peak before the tamping was at least
+  ``check_peak_mm`` (a tamping may leave a local defect standing: the fresh peak then asks for a spot tamping).
 
 "Fast regrowth" is a measured SD growth of at least ``fast_growth_mm_per_year`` since the section's last
 tamping in the episode (:func:`regrowth_mm_per_year`). :class:`ChoiceThresholdNoLooking` is the same family
@@ -96,6 +97,7 @@ class ChoiceThreshold(GroupedThreshold):
                  survey_fast: bool = False, survey_after_tampings: int = 0, survey_all: bool = False,
                  renew_after_tampings: int = 0,
                  inspect_margin_mm: float = 0.0, inspect_age_years: float = 0.5, inspect_peak_mm: float = 0.0,
+                 check_peak_mm: float = 0.0,
                  choices: tuple[str, ...] = CHOICES[1:], choice_work: Mapping[str, float] | None = None,
                  min_steps_between_tampings: int = 1, **kw: Any) -> None:
         params = {"spot_peak_mm": spot_peak_mm, "drain_surveyed": bool(drain_surveyed),
@@ -105,9 +107,10 @@ class ChoiceThreshold(GroupedThreshold):
         if self.looks:
             params |= {"survey_fast": bool(survey_fast), "survey_after_tampings": int(survey_after_tampings),
                        "survey_all": bool(survey_all), "inspect_margin_mm": inspect_margin_mm,
-                       "inspect_age_years": inspect_age_years, "inspect_peak_mm": inspect_peak_mm}
+                       "inspect_age_years": inspect_age_years, "inspect_peak_mm": inspect_peak_mm,
+                       "check_peak_mm": check_peak_mm}
         for key in ("spot_peak_mm", "fast_growth_mm_per_year", "inspect_margin_mm", "inspect_age_years",
-                    "inspect_peak_mm"):
+                    "inspect_peak_mm", "check_peak_mm"):
             if key in params and not params[key] >= 0:
                 raise ValueError(f"{key} must be >= 0 (0: off), got {params[key]!r}")
         for key in ("drain_after_tampings", "survey_after_tampings", "renew_after_tampings"):
@@ -131,7 +134,8 @@ class ChoiceThreshold(GroupedThreshold):
                           choice_work=config.choice_work, min_steps_between_tampings=config.min_steps_between_tampings)
 
     # ------------------------------------------------------------------ the decision
-    def _wanted(self, obs: dict[str, np.ndarray], step: np.ndarray, last_spot: np.ndarray) -> np.ndarray:
+    def _wanted(self, obs: dict[str, np.ndarray], step: np.ndarray, last_spot: np.ndarray,
+                peak_at_tamping: np.ndarray) -> np.ndarray:
         """(batch, S) the action code each section is asked for, before capacity and masks."""
         p = self.params
         sd, peak = obs["section_sd"], obs["section_peak"]
@@ -154,7 +158,8 @@ class ChoiceThreshold(GroupedThreshold):
             drain |= (tampings >= p["drain_after_tampings"]) & fast & (survey != 0)
         codes = np.where(drain & (codes != RENEW), DRAINAGE, codes)
         if self.looks:
-            codes = np.where((codes == 0) & self._inspect(obs), INSPECT, codes)  # time presses: before a survey
+            inspect = self._inspect(obs) | self._check(obs, peak_at_tamping)
+            codes = np.where((codes == 0) & inspect, INSPECT, codes)  # time presses: before a survey
             codes = np.where((codes == 0) & self._survey(survey, fast, tampings), SURVEY, codes)
         return codes
 
@@ -178,6 +183,14 @@ class ChoiceThreshold(GroupedThreshold):
             out |= obs["section_peak"] >= p["inspect_peak_mm"]
         return out & old
 
+    def _check(self, obs: dict[str, np.ndarray], peak_at_tamping: np.ndarray) -> np.ndarray:
+        """The sections tamped since their last measurement whose peak before that tamping was at least
+        ``check_peak_mm``."""
+        if not self.params["check_peak_mm"]:
+            return np.zeros(peak_at_tamping.shape, dtype=bool)
+        stale = (obs["years_since_tamping"] <= _measurement_age(obs) + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
+        return stale & (peak_at_tamping >= self.params["check_peak_mm"])
+
     def _allowed(self, codes: np.ndarray, obs: dict[str, np.ndarray], step: np.ndarray,
                  last_work: np.ndarray) -> np.ndarray:
         """``codes`` with what the env would mask or clip set to nothing: choices not enabled, track work too soon
@@ -190,23 +203,24 @@ class ChoiceThreshold(GroupedThreshold):
         return np.where(keep, codes, 0)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
-        """SB3-style: the action codes (int8 per section; batched if ``obs`` is) and the state, (batch, 2, S): the
-        step of each section's last track work and last spot tamping asked for by this rule (reset where
-        ``episode_start``)."""
+        """SB3-style: the action codes (int8 per section; batched if ``obs`` is) and the state, (batch, 3, S): the
+        step of each section's last track work and last spot tamping asked for by this rule, and its measured peak
+        when the rule last asked for its tamping (reset where ``episode_start``)."""
         b, batched = as_batch(obs)
         b = choice_view(b)
         n, S = b["section_sd"].shape
         memory = self._memory(state, episode_start, n, S)
         step = self._step(b).astype(float)
-        codes = self._allowed(self._wanted(b, step, memory[:, 1]), b, step, memory[:, 0])
+        codes = self._allowed(self._wanted(b, step, memory[:, 1], memory[:, 2]), b, step, memory[:, 0])
         memory[:, 0] = np.where(self.is_work[codes], step[:, None], memory[:, 0])
         memory[:, 1] = np.where(codes == SPOT_TAMP, step[:, None], memory[:, 1])
+        memory[:, 2] = np.where((codes == TAMP) | (codes == RENEW), b["section_peak"], memory[:, 2])
         act = codes.astype(np.int8)
         return (act if batched else act[0]), memory
 
     @staticmethod
     def _memory(state: Any, episode_start: Any, n: int, S: int) -> np.ndarray:
-        fresh = np.full((n, 2, S), -np.inf)
+        fresh = np.full((n, 3, S), -np.inf)
         if not isinstance(state, np.ndarray) or state.shape != fresh.shape:
             return fresh
         memory = state.copy()
@@ -232,8 +246,8 @@ class ChoiceThresholdNoLooking(ChoiceThreshold):
 def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[dict[str, Any]]:
     """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): drainage where
     surveyed with spot tamping at two peaks and a second-tamping drainage trigger; with ``cls.looks``, surveys of
-    every section first, and extra inspections on top. With every choice off the family is the grouped
-    threshold itself (:func:`choices_off`): the tuning compares against it."""
+    every section first, and extra inspections on top (between runs, or of a high peak just tamped). With every
+    choice off the family is the grouped threshold itself (:func:`choices_off`): the tuning compares against it."""
     off = choices_off(cls)
     drain = {**off, "drain_surveyed": True}
     if not cls.looks:
@@ -242,7 +256,9 @@ def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[d
     else:
         survey = {**drain, "survey_all": True}
         grid = [survey, {**survey, "spot_peak_mm": 12.0}, {**survey, "spot_peak_mm": 9.0},
-                {**survey, "spot_peak_mm": 9.0, "inspect_margin_mm": 0.5, "inspect_peak_mm": 7.0}]
+                {**survey, "spot_peak_mm": 9.0, "inspect_margin_mm": 0.5, "inspect_peak_mm": 7.0},
+                {**survey, "spot_peak_mm": 12.0, "check_peak_mm": 12.0},
+                {**survey, "spot_peak_mm": 9.0, "check_peak_mm": 12.0}]
     return [{**base, **extra} for extra in grid]
 
 
@@ -252,7 +268,7 @@ def choices_off(cls: type[ChoiceThreshold]) -> dict[str, Any]:
                            "fast_growth_mm_per_year": 1.5, "renew_after_tampings": 0}
     if cls.looks:
         off |= {"survey_fast": False, "survey_after_tampings": 0, "survey_all": False, "inspect_margin_mm": 0.0,
-                "inspect_age_years": 0.5, "inspect_peak_mm": 0.0}
+                "inspect_age_years": 0.5, "inspect_peak_mm": 0.0, "check_peak_mm": 0.0}
     return off
 
 

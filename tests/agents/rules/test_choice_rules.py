@@ -100,6 +100,29 @@ def test_the_rule_remembers_its_spot_tamping_until_a_measurement_after_it():
     assert rule.predict(later, state=state, episode_start=np.array([True]))[0][0, 0] == code("spot_tamp")
 
 
+def test_a_high_peak_just_tamped_is_inspected_and_then_spot_tamped_if_it_stands():
+    """The rule remembers the peak it tamped a section on; the next step (the measurement stale) it inspects the
+    section, and on the trolley's fresh peak, still high while the SD is low, it asks for a spot tamping."""
+    rule = _bound(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, check_peak_mm=12.0, trigger_mm=3.5,
+                                  include_mm=3.0), CFG)
+    obs = _obs(section_sd=[4.0, 1, 1, 1, 1, 1], section_peak=[18, 4, 4, 4, 4, 4])
+    obs["time"][:] = 0.25
+    a, state = rule.predict(obs, state=None, episode_start=np.array([True]))
+    assert a[0].tolist() == [code("tamp"), 0, 0, 0, 0, 0]
+    tamped = {**obs, "time": np.full((1, 1), 0.5), "tampings": np.array([[1.0, 0, 0, 0, 0, 0]]),
+              "years_since_tamping": np.array([[0.25, 2, 2, 2, 2, 2]])}
+    a, state = rule.predict(tamped, state=state, episode_start=np.array([False]))
+    assert a[0].tolist() == [code("inspect"), 0, 0, 0, 0, 0]
+    inspected = {**tamped, "time": np.full((1, 1), 0.75), "years_since_tamping": np.array([[0.5, 2, 2, 2, 2, 2]]),
+                 "section_measurement_age": np.array([[0.0, 0.25, 0.25, 0.25, 0.25, 0.25]]),
+                 "section_sd": np.array([[1.5, 1, 1, 1, 1, 1]]), "section_peak": np.array([[16.0, 4, 4, 4, 4, 4]])}
+    assert rule.predict(inspected, state=state, episode_start=np.array([False]))[0][0].tolist() == [
+        code("spot_tamp"), 0, 0, 0, 0, 0]
+    quiet = _bound(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, trigger_mm=3.5, include_mm=3.0), CFG)
+    _, s = quiet.predict(obs, state=None, episode_start=np.array([True]))
+    assert quiet.predict(tamped, state=s, episode_start=np.array([False]))[0][0].tolist() == [0] * 6
+
+
 def test_regrowth_reads_the_sd_over_the_years_between_tamping_and_measurement():
     obs = _obs(section_sd=[2.0, 2.0, 2.0, 2.0, 2.0, 2.0], tampings=[1, 1, 0, 1, 1, 1],
                years_since_tamping=[1.25, 0.5, 1.25, 0.25, 2.25, 0.3])
@@ -119,7 +142,7 @@ def test_every_grid_point_gives_valid_codes_within_capacity(cls):
                "measurement_age": np.full((3, 1), 0.25), "tampings_since_renewal": rng.integers(0, 8, (3, 6)),
                "section_measurement_age": rng.uniform(0, 1, (3, 6)), "register": np.zeros((3, 6))}
         a, state = _bound(cls(**params), CFG).predict(obs)
-        assert a.shape == (3, 6) and a.dtype == np.int8 and state.shape == (3, 2, 6)
+        assert a.shape == (3, 6) and a.dtype == np.int8 and state.shape == (3, 3, 6)
         work = np.array([0.0] + [CFG.choice_work[n] for n in CHOICES[1:]])[a].sum(axis=1)
         assert (work <= CFG.capacity).all() and a.min() >= 0 and a.max() < len(CHOICES)
         if not cls.looks:
