@@ -169,11 +169,28 @@ def report(names: list[str]) -> str:
             rows.append(f"| `{s['env']}` | {rule} | " + " | ".join(f"{v['choices'][c]:.1f}" for c in
                                                                   ("tamp", "spot_tamp", "drainage", "renew",
                                                                    "inspect", "survey")) + " |")
+    rows += ["", "| id | rule | tuned parameters (choices left off not shown) | training cost k€ |",
+             "|---|---|---|---:|"]
+    for s in saved:
+        tuned = json.loads(TUNED_FILES[s["scenario"]].read_text())
+        for rule, params in tuned["params"].items():
+            shown = ", ".join(f"{k} = {v}" for k, v in params.items() if v not in (0, 0.0, False)
+                              and not (k in ("fast_growth_mm_per_year", "inspect_age_years") and not _uses(k, params)))
+            cost = min(row["mean_cost"] for row in tuned["train_mean_cost"][rule])
+            rows.append(f"| `{s['env']}` | {rule} | {shown} | {cost:.0f} |")
     table = "\n".join(rows)
     (SAVED / "choices_compare.md").write_text(table + "\n")
     if saved:
         plot(saved, str(SAVED / "choices_compare.png"))
     return table
+
+
+def _uses(key: str, params: dict[str, Any]) -> bool:
+    """Whether a rule with ``params`` reads the parameter ``key`` (the growth threshold and the inspection age
+    only matter where a choice that reads them is on)."""
+    if key == "fast_growth_mm_per_year":
+        return any(params.get(k) for k in ("drain_after_tampings", "survey_fast", "renew_after_tampings"))
+    return bool(params.get("inspect_margin_mm") or params.get("inspect_peak_mm"))
 
 
 def plot(saved: list[dict[str, Any]], out_png: str) -> str:

@@ -182,6 +182,7 @@ def test_the_harness_counts_the_applied_choices():
     assert all((res[1].choices[n] == 0).all() for n in CHOICE_NAMES if n != "tamp")
 
 
+@pytest.mark.slow
 def test_trackenv_evaluate_scores_the_choice_rules_and_reports_the_choices(tmp_path, capsys):
     """`trackenv evaluate --env trackenv/TampingLineWet-v0 --seeds 0:2 --json` scores the tamping and the choice
     rules with their shipped parameters, and reports per policy the mean count of each choice."""
