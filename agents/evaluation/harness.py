@@ -8,8 +8,10 @@ policies are compared on common random numbers and differences are paired
 (:func:`trackenv_agents.evaluation.statistics.paired_difference`).
 
 Per episode we collect the life-cycle cost (k€, the sum of ``info["costs"]`` = minus the sum of rewards),
-its parts, the number of section tampings, the immediate-action exceedances (section-steps in class 3) and
-the mean section SD at the end. **Tampings per km-year** is the tamped length per length of track per year:
+its parts, the number of section tampings, the count of each applied choice (:data:`CHOICE_NAMES`, from
+``info["choices"]``: on the tamping-only problems ``tamp`` counts the tamped sections and the others stay 0),
+the immediate-action exceedances (section-steps in class 3) and the mean section SD at the end.
+**Tampings per km-year** is the tamped length per length of track per year:
 ``section_tampings · section_length_km / (track_length_km · horizon_years) = section_tampings /
 (n_sections · horizon_years)``; 1.0 means the whole track is tamped once a year.
 
@@ -36,17 +38,20 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.batched import BatchedVectorEnv
+from trackenv.envs.choices import INTERVENTIONS
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
 
 __all__ = [
-    "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
+    "CHOICE_NAMES", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
     "policy_params", "record_episode", "run_episodes",
 ]
 
 TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
 TEST_SEEDS: tuple[int, ...] = tuple(range(0, 200))
+#: the choices counted per episode (``EvaluationResult.choices``), by their names in ``info["choices"]``
+CHOICE_NAMES: tuple[str, ...] = INTERVENTIONS
 
 
 def policy_name(policy: Any) -> str:
@@ -80,6 +85,7 @@ class EvaluationResult:
     tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
     # the choice code each section got in each step of each episode (episodes, steps, sections), int8
     section_choices: np.ndarray | None = None
+    choices: dict[str, np.ndarray] = field(default_factory=dict)  # per CHOICE_NAMES: applied count per episode
 
     @property
     def n_episodes(self) -> int:
@@ -107,6 +113,8 @@ class EvaluationResult:
             "immediate_action_exceedances": int(self.immediate_action_exceedances.sum()),
             "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
             "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
+            "choices": {name: float(np.mean(self.choices[name])) if name in self.choices else 0.0
+                        for name in CHOICE_NAMES},
         }
 
 
@@ -142,6 +150,7 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
     parts = {k: np.zeros(n) for k in keys}
     rewards = np.zeros(n)
     tampings = np.zeros(n)
+    choices = {name: np.zeros(n) for name in CHOICE_NAMES}
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
@@ -165,6 +174,9 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
         for k in keys:
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
+        applied = info.get("choices") or {"tamp": info["tamped_sections"].sum(axis=1)}
+        for name in CHOICE_NAMES:
+            choices[name] += applied.get(name, 0)
         tamped[:, t] = info["tamped_sections"]
         chosen[:, t] = info.get("section_choices", info["tamped_sections"])
         section_cost += info["section_costs"]
@@ -181,9 +193,9 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
                 raise RuntimeError("episodes did not end at the configured horizon")
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
-    return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "final_sd": final_sd,
-            "tamped": tamped, "section_choices": chosen, "section_cost": section_cost, "register": register,
-            "wet_spot": wet, "traces": traces}
+    return {"parts": parts, "rewards": rewards, "tampings": tampings, "choices": choices, "exceed": exceed,
+            "final_sd": final_sd, "tamped": tamped, "section_choices": chosen, "section_cost": section_cost,
+            "register": register, "wet_spot": wet, "traces": traces}
 
 
 def run_episodes(config: ProblemConfig, slots: Sequence[tuple[int, int]], policies: Sequence[Any],
@@ -242,6 +254,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     pol_of = np.array([p for p, _ in slots])
     seed_arr = np.array([s for _, s in slots])
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
+    choices_all = {k: np.concatenate([o["choices"][k] for o in outs]) for k in CHOICE_NAMES}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     tamped, chosen = cat("tamped"), cat("section_choices")
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
@@ -253,7 +266,8 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
-            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()}))
+            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()},
+            choices={k: v[m] for k, v in choices_all.items()}))
     return results
 
 

@@ -14,8 +14,8 @@ from trackenv.envs.network import NetworkConfig
 
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import NetworkRule
-from ..rules.problems import tuned_file_for, tuned_params_for
-from .harness import _bound, evaluate_many, policy_name
+from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
+from .harness import CHOICE_NAMES, _bound, evaluate_many, policy_name
 from .statistics import paired_difference
 from .tuning import tune_many
 
@@ -42,6 +42,16 @@ def scenario_of(env_id: str) -> str:
     return kwargs["scenario"]
 
 
+def action_type_of(env_id: str) -> str:
+    """The action type registered for ``env_id`` ("choices" on the ids with every choice, else "multibinary")."""
+    import gymnasium as gym
+
+    import trackenv  # noqa: F401
+
+    scenario_of(env_id)  # a clear error for an id that is no preset with per-section actions
+    return str(gym.spec(env_id).kwargs.get("action_type", "multibinary"))
+
+
 def parse_seeds(text: str) -> list[int]:
     """'A:B' -> A..B-1; 'a,b,c' -> those."""
     if ":" in text:
@@ -59,34 +69,40 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
     ``extra`` policies (by name, e.g. the trained line policy) scored on ``seeds`` with 95 % CIs, and the paired
     difference of each against the best. ``rules``: the rule families to score (names of
-    :data:`LINE_HEURISTICS`; default all, no-maintenance included). ``executor``: runs the batches of episodes (e.g.
+    :data:`LINE_HEURISTICS`, and on the ids with every choice those of
+    :data:`~trackenv_agents.rules.choices.CHOICE_RULES`; default all, no-maintenance included). ``executor``: runs
+    the batches of episodes (e.g.
     :class:`~trackenv_agents.evaluation.distributed.RayExecutor`), with the same results as here."""
     name = scenario_of(env_id)
     network = name == "network"
+    action_type = "multibinary" if network else action_type_of(env_id)
     cfg = NetworkConfig.coerce(None, **overrides) if network else scenario(name, **overrides)
     line_cfg = cfg.line_config if network else cfg
     if network and retune:
         raise ValueError("--retune: the network's rules take the tuned parameters of its line (NetworkRule); "
                          "they are not tuned on the network")
-    unknown = sorted(set(rules or ()) - set(LINE_HEURISTICS))
+    family = rules_for(line_cfg)
+    unknown = sorted(set(rules or ()) - set(family))
     if unknown or (rules is not None and not rules):
-        raise ValueError(f"rules must name line rules among {sorted(LINE_HEURISTICS)}, got {rules!r}")
-    wanted = set(rules or LINE_HEURISTICS)
-    classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance" and n in wanted]
+        raise ValueError(f"rules must name line rules among {sorted(family)}, got {rules!r}")
+    wanted = set(rules or family)
+    classes = [c for n, c in family.items() if n != "no-maintenance" and n in wanted]
     params = {} if retune else {n: p for n, p in tuned_params_for(line_cfg).items() if n in wanted}
     tuned_from = (f"shipped (agents/rules/{tuned_file_for(line_cfg).name})" if params
                   else f"tuned now on {n_train} seeds")
     if not params and classes:
-        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor)
+        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor,
+                      action_type=action_type)
         params = {classes[i].name: v["best_params"] for i, v in t.items()}
     pols = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
-    pols += [LINE_HEURISTICS[n](**p) for n, p in params.items()]
+    pols += [family[n](**p) for n, p in params.items()]
     pols += list((extra or {}).values())
     if network:  # each line policy on every line, the one machine sent where the requests are
         pols = [NetworkRule(p) for p in pols]
         extra = {k: NetworkRule(v) for k, v in (extra or {}).items()}
     seeds = seeds or list(range(8))
-    res = evaluate_many(pols, cfg, seeds, batch_size=batch_size, progress=progress, desc="test", executor=executor)
+    res = evaluate_many(pols, cfg, seeds, action_type=action_type, batch_size=batch_size, progress=progress,
+                        desc="test", executor=executor)
     res.sort(key=lambda r: float(r.cost.mean()))
     best = res[0]
     rows = []
@@ -101,7 +117,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     by_name = {policy_name(p): p for p in pols}
     rule_names = {policy_name(p) for p in pols[:len(pols) - len(extra or {})]}
     best_rule = next((r.policy for r in res if r.policy in rule_names), None)
-    payload = {"env": env_id, "scenario": name, "config": cfg.to_dict(), "seeds": seeds, "tuned_from": tuned_from,
+    payload = {"env": env_id, "scenario": name, "action_type": action_type, "config": cfg.to_dict(), "seeds": seeds,
+               "tuned_from": tuned_from,
                "best_rule": best_rule, "extra": [policy_name(p) for p in (extra or {}).values()], "results": rows}
     (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
     from .reporting import plot_comparison
@@ -110,7 +127,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     # the best rule and the trained policy, side by side
     shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
     payload["episode_plot"] = (None if network else  # the network's lines: trackenv.render draws one line
-                               plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png")))
+                               plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png"), action_type))
     return payload
 
 
@@ -163,19 +180,26 @@ def agent_headline(payload: dict[str, Any], name: str) -> str | None:
             f"[{low:+.1f}, {high:+.1f}] per episode, {pct:+.1f} %")
 
 
+#: the column heads of the choice counts in :func:`format_line_table`
+CHOICE_COLUMNS = {"tamp": "tamp", "spot_tamp": "spot", "drainage": "drain", "renew": "renew", "inspect": "insp",
+                  "survey": "surv"}
+
+
 def format_line_table(payload: dict[str, Any]) -> str:
-    w = max([22] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
+    w = max([27] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
     lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
              f"{payload['tuned_from']}",
              f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
-             f"{'IA':>4s}  params"]
+             f"{'IA':>4s} " + " ".join(f"{CHOICE_COLUMNS[c]:>5s}" for c in CHOICE_NAMES) + "  params"]
     for r in payload["results"]:
         d = r["vs_best"]
         diff = "-" if d is None else f"{d['mean_difference']:+.1f} [{d['ci_low']:+.1f}, {d['ci_high']:+.1f}]"
         ps = ", ".join(f"{k}={v}" for k, v in r["params"].items() if k not in
                        ("steps_per_year", "horizon_steps", "capacity"))
+        counts = r.get("choices", {})
         lines.append(f"{r['policy']:{w}s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
-                     f"{diff:>30s} {r.get('immediate_action_exceedances', 0):4d}  {ps}")
+                     f"{diff:>30s} {r.get('immediate_action_exceedances', 0):4d} "
+                     + " ".join(f"{counts.get(c, 0.0):5.1f}" for c in CHOICE_NAMES) + f"  {ps}")
     shown = [r for r in payload["results"] if r["policy"] in (payload.get("best_rule"), *payload.get("extra", []))]
     if len(shown) > 1 and all("classes" in r for r in shown):  # where the trained policy's costs differ
         lines.append("own cost per section and episode, k€ (tampings per section and episode):")
@@ -186,7 +210,8 @@ def format_line_table(payload: dict[str, Any]) -> str:
                      f"{cl[c]['cost_per_section']:.1f} ({cl[c]['tampings_per_section']:.2f})" for c in SECTION_CLASSES]
             lines.append(f"{r['policy']:{w}s} " + " ".join(f"{c:>20s}" for c in cells)
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
-    lines.append("IA: section-steps at the immediate-action limit, all episodes together")
+    lines.append("IA: section-steps at the immediate-action limit, all episodes together; tamp ... survey: applied "
+                 "choices per episode (tamp, spot tamp, drainage, renewal, inspection, survey)")
     lines += [headline for name in payload.get("extra", []) if (headline := agent_headline(payload, name))]
     if payload.get("episode_plot"):
         lines.append(f"plots: {payload['plot']}, {payload['episode_plot']} (episode {payload['seeds'][0]} under "
@@ -194,7 +219,8 @@ def format_line_table(payload: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str) -> str:
+def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
+                      action_type: str = "multibinary") -> str:
     """One episode under each of ``policies`` (one policy or a list, SB3-style ``predict``), side by side on
     shared axes: the true SD of every section over time (dotted: as last measured), tamping marked, each
     panel's cost in its title."""
@@ -207,11 +233,12 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str) -
     axes = fig.subplots(1, len(pols), sharey=True, squeeze=False)[0]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
     for ax, pol in zip(axes, pols, strict=True):
-        env = TampingLine(cfg)
+        env = TampingLine(cfg, action_type=action_type)
         obs, info = env.reset(seed=seed)
         sd, tam, meas, cost = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()], 0.0
-        for _ in range(cfg.horizon_steps):
-            a = pol.predict(obs)[0]
+        state = None
+        for t in range(cfg.horizon_steps):
+            a, state = pol.predict(obs, state=state, episode_start=np.array([t == 0]))
             obs, r, _, _, info = env.step(a)
             sd.append(info["section_sd_m"] * 1e3)
             meas.append(obs["section_sd"].copy())

@@ -1,6 +1,8 @@
-"""The rules of a config and their shipped tuned parameters: one rule family serves every preset; the tuned
-parameters are per preset (tuned on its training seeds by ``trackenv evaluate --env ID --retune``), and a config
-that is no shipped preset gets those of the default line."""
+"""The rules of a config and their shipped tuned parameters: one rule family serves every preset, and the rules
+that use the choices (:mod:`.choices`) join it where the config enables more than tamping; the tuned parameters
+are per preset (tuned on its training seeds by ``trackenv evaluate --env ID --retune``, or for the choice
+scenarios by ``experiments/choices_compare.py --tune``), and a config that is no shipped preset gets those of
+the default line."""
 
 from __future__ import annotations
 
@@ -10,20 +12,28 @@ from typing import Any
 
 from trackenv.envs.line_config import LineConfig, scenario
 
+from .choices import CHOICE_RULES
 from .line import LINE_HEURISTICS, LINE_TUNED_FILE
 
+_HERE = Path(__file__).resolve().parent
 #: preset name -> the file of its tuned parameters
 TUNED_FILES: dict[str, Path] = {
     "default": LINE_TUNED_FILE,
-    "track60": Path(__file__).resolve().parent / "track60_tuned_heuristics.json",
+    "track60": _HERE / "track60_tuned_heuristics.json",
+    "choices": _HERE / "choices_tuned_heuristics.json",
+    "wet": _HERE / "wet_tuned_heuristics.json",
+    "defects": _HERE / "defects_tuned_heuristics.json",
 }
 
 
 def rules_for(config: Any) -> dict[str, Any]:
-    """The rule classes by name (every config: one family)."""
+    """The rule classes by name: the tamping rules on every config, and the rules that use the choices
+    (:data:`~.choices.CHOICE_RULES`) where the config enables more than tamping."""
     if not isinstance(config, LineConfig):
         raise ValueError(f"config must be a LineConfig, got {type(config).__name__}")
-    return LINE_HEURISTICS
+    if tuple(config.choices) == ("tamp",):
+        return LINE_HEURISTICS
+    return {**LINE_HEURISTICS, **CHOICE_RULES}
 
 
 def tuned_file_for(config: LineConfig) -> Path:
