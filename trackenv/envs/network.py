@@ -297,8 +297,8 @@ class NetworkBatch:
         (their sum = −reward), ``line_costs`` (n_lines,) each line's cost and ``line_cost_parts`` (part ->
         (n_lines,)), ``machine_line`` (after the step), ``moved``, ``requested_sections`` and
         ``dropped_requests`` (n_lines,); then the lines' own keys, per-section arrays concatenated in the
-        action's order (n_lines · S,) and scalars combined (counts summed, ``clipped`` any, the largest contact
-        force, the year; any other as an (n_lines,) array)."""
+        action's order (n_lines · S,), counts by name summed (``choices``) and scalars combined (counts summed,
+        ``clipped`` any, the largest contact force, the year; any other as an (n_lines,) array)."""
         move = self.config.move_cost if moved else 0.0
         parts = {k: float(sum(info["costs"][k] for info in line_infos)) for k in line_infos[0]["costs"]}
         parts[MOVE_COST_KEY] = float(move)
@@ -318,6 +318,8 @@ class NetworkBatch:
             values = [info[key] for info in line_infos]
             if isinstance(value, np.ndarray):
                 out[key] = np.concatenate(values)
+            elif isinstance(value, dict):  # counts by name (``choices``): summed over the lines
+                out[key] = {name: sum(v[name] for v in values) for name in value}
             elif key in _COMBINE:
                 out[key] = type(value)(_COMBINE[key](values))
             else:
