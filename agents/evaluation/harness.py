@@ -174,7 +174,9 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
         for k in keys:
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
-        applied = info.get("choices") or {"tamp": info["tamped_sections"].sum(axis=1)}
+        applied = info.get("choices")
+        if not isinstance(applied, Mapping):  # a problem without per-name counts (the network): its tampings
+            applied = {"tamp": info["tamped_sections"].sum(axis=1)}
         for name in CHOICE_NAMES:
             choices[name] += applied.get(name, 0)
         tamped[:, t] = info["tamped_sections"]
