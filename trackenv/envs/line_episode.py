@@ -281,13 +281,20 @@ class LineBatch:
         this directly."""
         c = self.config
         step = np.broadcast_to(np.asarray(seg_step), seg.shape)
-        e = self.meas_noise[np.minimum(step, c.horizon_steps), np.arange(seg.size)]
-        sd = np.maximum(self.sd + c.sd_noise_mm * 1e-3 * e[:, 0], 0.0)
-        pk = np.maximum(self.peak + c.peak_noise_mm * 1e-3 * e[:, 1], 0.0)
-        self.measured_sd = np.where(seg, sd, self.measured_sd)
-        self.measured_peak = np.where(seg, pk, self.measured_peak)
+        self._read(seg, step, self.meas_noise, c.sd_noise_mm, c.peak_noise_mm)
         segs = self._segments_of(seg)
         self.measured_level[segs] = self.level[segs]
+
+    def _read(self, rows: np.ndarray, step: np.ndarray, noise: np.ndarray, sd_noise_mm: float,
+              peak_noise_mm: float) -> None:
+        """The measured SD and mean-to-peak of the sections ``rows`` (sections,) bool: the truth plus the pre-drawn
+        errors ``noise`` (steps + 1, sections, 2) of each section's ``step``, scaled by the instrument's error [mm]
+        (the recording car's or the trolley's), never below 0."""
+        e = noise[np.minimum(step, self.config.horizon_steps), np.arange(rows.size)]
+        sd = np.maximum(self.sd + sd_noise_mm * 1e-3 * e[:, 0], 0.0)
+        pk = np.maximum(self.peak + peak_noise_mm * 1e-3 * e[:, 1], 0.0)
+        self.measured_sd = np.where(rows, sd, self.measured_sd)
+        self.measured_peak = np.where(rows, pk, self.measured_peak)
 
     # ------------------------------------------------------------------ reset
     def start(self, lines: list[int], rngs: list[np.random.Generator]) -> None:
@@ -765,11 +772,7 @@ class LineBatch:
             return
         c = self.config
         step = np.broadcast_to(np.asarray(seg_step), t.shape)
-        e = self.inspect_noise[np.minimum(step, c.horizon_steps), np.arange(t.size)]
-        sd = np.maximum(self.sd + c.inspection_sd_noise_mm * 1e-3 * e[:, 0], 0.0)
-        pk = np.maximum(self.peak + c.inspection_peak_noise_mm * 1e-3 * e[:, 1], 0.0)
-        self.measured_sd = np.where(t, sd, self.measured_sd)
-        self.measured_peak = np.where(t, pk, self.measured_peak)
+        self._read(t, step, self.inspect_noise, c.inspection_sd_noise_mm, c.inspection_peak_noise_mm)
         self.measured_at = np.where(t, step, self.measured_at)
         self.measured_level = np.where(self._on_sleepers(t), self.level, self.measured_level)
 
