@@ -115,7 +115,7 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
             choice = np.asarray(policy.predict(seen)[0], dtype=bool)[np.arange(old.size), f_sec[old]]
             tamp[old] = choice & forks.allowed_rows(t)[old]
         if live.size:
-            f_cost[live] += forks.intervention_costs(tamp)[live]
+            f_cost[live] += forks.choice_costs(tamp)[live]  # a tamp mask: code 1 is "tamp"
             forks.tamp_rows(tamp, t)
             on = np.zeros(forks.n_lines * S, dtype=bool)
             on[live] = True

@@ -1,6 +1,5 @@
-"""The heuristic maintenance rules (:mod:`.line`; the base class and the random baseline in :mod:`.base`), the
-rules that use every choice of a track manager (:mod:`.choices`), the network's wrapper of them
-(:mod:`.network`), and
+"""The heuristic maintenance rules (:mod:`.line`; the base class and the random baseline in :mod:`.base`), the rules
+that use every choice of a track manager (:mod:`.choices`), the network's wrapper of them (:mod:`.network`), and
 their tuned parameters per preset, shipped beside them (:mod:`.problems`: ``line_tuned_heuristics.json`` for the
 default line, ``track60_tuned_heuristics.json`` for the 60 m track)."""
 

@@ -40,16 +40,27 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from trackenv.envs.choices import CHOICES, TRACK_WORK, code
+from trackenv.envs.choices import (
+    CHOICES,
+    DRAINAGE,
+    INSPECT,
+    IS_TRACK_WORK,
+    RENEW,
+    SPOT_TAMP,
+    SURVEY,
+    TAMP,
+    enabled_codes,
+    work_per_code,
+)
+from trackenv.envs.line_config import LineConfig
 from trackenv.envs.line_episode import fit_worst
 
 from .base import as_batch
-from .line import STALE_TOLERANCE_YEARS, GroupedThreshold
+from .line import GroupedThreshold, stale_measurement
 
 __all__ = ["CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "choice_grid", "choice_view",
            "choices_off", "regrowth_mm_per_year"]
 
-TAMP, SPOT_TAMP, DRAINAGE, RENEW, INSPECT, SURVEY = (code(name) for name in CHOICES[1:])
 #: the shortest time between a tamping and the measurement that a growth rate is read over [year]
 MIN_GROWTH_YEARS = 0.25
 
@@ -65,9 +76,8 @@ def _measurement_age(obs: Mapping[str, np.ndarray]) -> np.ndarray:
 def choice_view(obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The batched observation as the choice rules read it: the measured SD and peak of a section tamped since
     its own last measurement (per section, with inspections) set to 0 (fresh, not due), as
-    :func:`~.line.planner_view` does with the recording car's."""
-    age = _measurement_age(obs)
-    stale = (obs["years_since_tamping"] <= age + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
+    :func:`~.line.planner_view` does (:func:`~.line.stale_measurement`), in float64."""
+    stale = stale_measurement(obs)
     out = dict(obs)
     for key in ("section_sd", "section_peak"):
         out[key] = np.where(stale, 0.0, np.asarray(obs[key], dtype=float))
@@ -119,11 +129,10 @@ class ChoiceThreshold(GroupedThreshold):
         super().__init__(trigger_mm=trigger_mm, include_mm=include_mm, **params, **kw)
         allowed = set(choices) - (set() if self.looks else {"inspect", "survey"})
         #: per action code: whether the rule may ask for it (the config enables it and the family uses it)
-        self.enabled = np.array([i == 0 or name in allowed for i, name in enumerate(CHOICES)])
-        work = dict(choice_work) if choice_work is not None else {"tamp": 1.0, "spot_tamp": 0.2, "drainage": 2.0,
-                                                                  "renew": 3.0, "inspect": 0.0, "survey": 0.0}
-        self.work = np.array([0.0] + [float(work[name]) for name in CHOICES[1:]])
-        self.is_work = np.array([name in TRACK_WORK for name in CHOICES])
+        self.enabled = enabled_codes(allowed)
+        # unbound: the work of the default config's choices
+        self.work = work_per_code(choice_work if choice_work is not None else LineConfig().choice_work)
+        self.is_work = IS_TRACK_WORK
         self.min_steps = int(min_steps_between_tampings)
 
     def bind(self, config: Any) -> ChoiceThreshold:
@@ -188,8 +197,7 @@ class ChoiceThreshold(GroupedThreshold):
         ``check_peak_mm``."""
         if not self.params["check_peak_mm"]:
             return np.zeros(peak_at_tamping.shape, dtype=bool)
-        stale = (obs["years_since_tamping"] <= _measurement_age(obs) + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
-        return stale & (peak_at_tamping >= self.params["check_peak_mm"])
+        return stale_measurement(obs) & (peak_at_tamping >= self.params["check_peak_mm"])
 
     def _allowed(self, codes: np.ndarray, obs: dict[str, np.ndarray], step: np.ndarray,
                  last_work: np.ndarray) -> np.ndarray:

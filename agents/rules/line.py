@@ -38,12 +38,15 @@ __all__ = ["BudgetedWorstFirst", "GroupedThreshold", "LINE_HEURISTICS", "Registe
 
 
 def stale_measurement(obs: Mapping[str, Any]) -> Any:
-    """(batch, S) bool: the sections tamped in this episode since the last recording run, whose measured SD and
+    """(batch, S) bool: the sections tamped in this episode since their last measurement, whose measured SD and
     peak therefore describe the track *before* that tamping. A tamping at step t comes after the run of step t
-    (runs close a step), so a section is stale when its years since tamping are at most the measurement's age;
-    sections not tamped in the episode are never stale (their last tamping preceded the first run). Batched
-    observations as numpy arrays or torch tensors (the per-section policy reads the same flag)."""
-    return (obs["years_since_tamping"] <= obs["measurement_age"] + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
+    (runs close a step), so a section is stale when its years since tamping are at most the measurement's age:
+    each section's own (``section_measurement_age``) where the problem observes it (with inspections, a trolley
+    measures single sections), else the recording car's (``measurement_age``); sections not tamped in the
+    episode are never stale (their last tamping preceded the first run). Batched observations as numpy arrays
+    or torch tensors (the per-section policy reads the same flag)."""
+    age = obs["section_measurement_age"] if "section_measurement_age" in obs else obs["measurement_age"]
+    return (obs["years_since_tamping"] <= age + STALE_TOLERANCE_YEARS) & (obs["tampings"] > 0)
 
 
 #: float32 years are quarters (0.25 apart): this tolerance separates equal from one step apart

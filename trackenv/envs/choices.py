@@ -10,9 +10,12 @@ of the possession it takes: :class:`~trackenv.envs.line_config.LineConfig` (fiel
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+
 import numpy as np
 
-__all__ = ["CHOICES", "COST_KEY", "INTERVENTIONS", "NOTHING", "TRACK_WORK", "choice_counts", "code"]
+__all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "RENEW",
+           "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "choice_counts", "code", "enabled_codes", "work_per_code"]
 
 #: every choice, by action code
 CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
@@ -22,6 +25,8 @@ INTERVENTIONS = CHOICES[1:]
 #: the choices that are work on the track (they need the possession, count against its capacity and against
 #: ``min_steps_between_tampings``); "inspect" and "survey" look without working
 TRACK_WORK = ("tamp", "spot_tamp", "drainage", "renew")
+#: per action code: whether it is track work
+IS_TRACK_WORK = np.array([name in TRACK_WORK for name in CHOICES])
 #: the cost part (``info["costs"]``) of each choice besides the tamping and renewal that ``tamp`` and ``renew``
 #: share with the tamping-only problem
 COST_KEY = {"spot_tamp": "spot_tamping", "drainage": "drainage", "inspect": "inspection", "survey": "survey"}
@@ -30,6 +35,22 @@ COST_KEY = {"spot_tamp": "spot_tamping", "drainage": "drainage", "inspect": "ins
 def code(name: str) -> int:
     """The action code of the choice ``name``."""
     return CHOICES.index(name)
+
+
+#: the action codes of the interventions, by name
+TAMP, SPOT_TAMP, DRAINAGE, RENEW, INSPECT, SURVEY = (code(name) for name in INTERVENTIONS)
+
+
+def enabled_codes(choices: Iterable[str]) -> np.ndarray:
+    """(len(CHOICES),) bool per action code: "nothing" and the enabled ``choices`` (names)."""
+    enabled = set(choices)
+    return np.array([name == "nothing" or name in enabled for name in CHOICES])
+
+
+def work_per_code(choice_work: Mapping[str, float]) -> np.ndarray:
+    """(len(CHOICES),) the possession work of each action code (nothing: 0), from ``choice_work`` by name
+    (``LineConfig.choice_work``: tamping-section equivalents)."""
+    return np.array([0.0] + [float(choice_work[name]) for name in INTERVENTIONS])
 
 
 def choice_counts(codes: np.ndarray) -> dict[str, int]:

@@ -35,7 +35,22 @@ from ..physics.geometry import (
 from ..physics.settlement import implicit_settlement_step
 from ..physics.tamping import restored_level
 from ..physics.track import Track
-from .choices import CHOICES, COST_KEY, NOTHING, TRACK_WORK, choice_counts, code
+from .choices import (
+    CHOICES,
+    COST_KEY,
+    DRAINAGE,
+    INSPECT,
+    IS_TRACK_WORK,
+    NOTHING,
+    RENEW,
+    SPOT_TAMP,
+    SURVEY,
+    TAMP,
+    choice_counts,
+    code,
+    enabled_codes,
+    work_per_code,
+)
 from .common import SHARED_BOUNDS, clip_observation, clipped_values
 from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
@@ -43,7 +58,6 @@ from .info import step_info
 from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
-TAMP, SPOT_TAMP, DRAINAGE, RENEW, INSPECT, SURVEY = (code(name) for name in CHOICES[1:])
 
 
 def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
@@ -135,7 +149,7 @@ class LineBatch:
     * lines: :meth:`start` (new episodes), :meth:`advance` (one step of the env), :meth:`observation`,
       :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state` / :meth:`set_state` (a line's
       episode, exactly);
-    * sections: :meth:`allowed_rows`, :meth:`intervention_costs`, :meth:`choice_costs`, :meth:`tamp_rows`,
+    * sections: :meth:`allowed_rows`, :meth:`choice_costs`, :meth:`tamp_rows`,
       :meth:`work_rows` (any choice), :meth:`traffic_rows`, :meth:`measure_rows`, :meth:`section_costs`,
       :meth:`section_entries` (what a planner sees of a section), :meth:`true_quality`, :meth:`wet_present`,
       :meth:`wet_working_rows`; the other choices (:mod:`~trackenv.envs.choices`): :meth:`choice_mask`,
@@ -160,9 +174,12 @@ class LineBatch:
         self.tm = c.tamping_model
         self.limits = c.quality_limits.for_speed(c.speed)
         #: per action code: enabled by the config, track work, possession work (tamping-section equivalents)
-        self.enabled = np.array([name == "nothing" or name in c.choices for name in CHOICES])
-        self.is_work = np.array([name in TRACK_WORK for name in CHOICES])
-        self.work = np.array([0.0] + [c.choice_work[name] for name in CHOICES[1:]])
+        self.enabled = enabled_codes(c.choices)
+        self.is_work = IS_TRACK_WORK
+        self.work = work_per_code(c.choice_work)
+        #: the price of each choice that costs the same on every section (k€; tamp and renew depend on the count)
+        self.fixed_price = {"spot_tamp": c.spot_tamping_cost, "drainage": c.drainage_cost,
+                            "inspect": c.inspection_cost, "survey": c.survey_cost}
         #: sleepers either side of the worst one that a spot tamping lifts
         self.spot_half = max(int(round(c.spot_tamping_length_m / SLEEPER_SPACING_M / 2)), 1)
         self.vehicles = c.vehicles()
@@ -554,20 +571,14 @@ class LineBatch:
     def wet_present(self) -> np.ndarray:
         """(sections,) bool: the sections where a wet spot is, working or still to start (on a segment of several
         sections, those whose sleepers it covers): what a survey finds and drainage removes."""
-        present = (self.wet_onset >= 0) | self.wet_active
-        if self.K == 1:
-            return present.copy()
-        return self._per_section(self.wet_mask & present[:, None], "max").astype(bool)
+        return self._wet_on_sections((self.wet_onset >= 0) | self.wet_active)
 
     def wet_working_rows(self, seg_step: np.ndarray | int) -> np.ndarray:
         """(sections,) bool: the sections whose wet spot works in the traffic of their step ``seg_step`` (per
         section or one): already working, or starting with it. What a planner who knows the future drains at the
         latest before the spot costs anything."""
         step = np.broadcast_to(np.asarray(seg_step), self.sd.shape).reshape(-1, self.K)[:, 0]
-        working = self.wet_active | (self.wet_onset == step)
-        if self.K == 1:
-            return working
-        return self._per_section(self.wet_mask & working[:, None], "max").astype(bool)
+        return self._wet_on_sections(self.wet_active | (self.wet_onset == step))
 
     def renewing(self) -> np.ndarray:
         """(sections,) bool: whether a section's next intervention is a ballast renewal instead of a tamping (it
@@ -581,9 +592,7 @@ class LineBatch:
         c = self.config
         tamping = c.section_tamping_cost + self.renewing() * c.section_renewal_cost
         per_choice: dict[str, float | np.ndarray] = {
-            "tamp": tamping, "spot_tamp": c.spot_tamping_cost, "drainage": c.drainage_cost,
-            "renew": c.section_tamping_cost + c.section_renewal_cost, "inspect": c.inspection_cost,
-            "survey": c.survey_cost}
+            "tamp": tamping, "renew": c.section_tamping_cost + c.section_renewal_cost, **self.fixed_price}
         out = np.zeros((self.sd.size, len(CHOICES)))
         for i, name in enumerate(CHOICES[1:], start=1):
             out[:, i] = per_choice[name]
@@ -603,13 +612,11 @@ class LineBatch:
         tamped = ((codes == TAMP) | (codes == RENEW)).sum(1)
         renewed = ((codes == TAMP) & renewing).sum(1) + (codes == RENEW).sum(1)
         work = self.is_work[codes].sum(1)
-        other = {"spot_tamp": c.spot_tamping_cost, "drainage": c.drainage_cost, "inspect": c.inspection_cost,
-                 "survey": c.survey_cost}
         return np.stack([
             (work > 0) * c.possession_cost,
             c.section_tamping_cost * tamped,
             c.section_renewal_cost * renewed,
-            *(other[name] * (codes == code(name)).sum(1) for name in COST_KEY),
+            *(self.fixed_price[name] * (codes == code(name)).sum(1) for name in COST_KEY),
         ])
 
     def campaign_cost(self, codes: np.ndarray) -> np.ndarray:
@@ -875,13 +882,6 @@ class LineBatch:
             geometry_cost_per_section_year=c.geometry_cost_per_section_year, steps_per_year=c.steps_per_year,
             class_costs=c.class_costs)
 
-    def intervention_costs(self, t: np.ndarray) -> np.ndarray:
-        """(segments,) what tamping the segments ``t`` (segments,) bool costs each (k€): the tamping, or the
-        ballast renewal where one is due (:meth:`renewing`); possession excluded (it is the line's). Call it
-        before the tamping (:meth:`tamp_rows` resets the count)."""
-        c = self.config
-        return t * c.section_tamping_cost + (t & self.renewing()) * c.section_renewal_cost
-
     def section_costs(self) -> np.ndarray:
         """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
         the parts of :meth:`costs` that belong to one section (for per-section search, e.g. hindsight)."""
@@ -1009,10 +1009,14 @@ class LineBatch:
     def _wet_sections(self, b: int) -> np.ndarray:
         """(S,) bool: line ``b``'s sections with an active wet spot (on a segment of several sections, those
         whose sleepers it covers)."""
-        rs = self.segments(b)
+        return self._wet_on_sections(self.wet_active, self.segments(b))
+
+    def _wet_on_sections(self, wet: np.ndarray, segs: slice = slice(None)) -> np.ndarray:
+        """(sections of ``segs``,) bool: the sections of the segments ``segs`` whose wet spot has the flag ``wet``
+        (every segment's, (segments,) bool; on a segment of several sections, the sections its patch covers)."""
         if self.K == 1:
-            return self.wet_active[rs].copy()
-        return self._per_section(self.wet_mask[rs] & self.wet_active[rs, None], "max").astype(bool)
+            return wet[segs].copy()
+        return self._per_section(self.wet_mask[segs] & wet[segs, None], "max").astype(bool)
 
 
 def fit_worst(work: np.ndarray, score: np.ndarray, capacity: float) -> np.ndarray:
