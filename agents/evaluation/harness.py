@@ -8,8 +8,9 @@ policies are compared on common random numbers and differences are paired
 (:func:`trackenv_agents.evaluation.statistics.paired_difference`).
 
 Per episode we collect the life-cycle cost (k€, the sum of ``info["costs"]`` = minus the sum of rewards),
-its parts, the number of section tampings, the count of each applied choice (:data:`CHOICE_NAMES`, from
-``info["choices"]``: on the tamping-only problems ``tamp`` counts the tamped sections and the others stay 0),
+its parts, the number of section tampings, each section's applied choice in each step (``info["section_choices"]``,
+counted per name by :attr:`EvaluationResult.choices`: on the tamping-only problems ``tamp`` counts the tamped
+sections and the others stay 0),
 the immediate-action exceedances (section-steps in class 3) and the mean section SD at the end.
 **Tampings per km-year** is the tamped length per length of track per year:
 ``section_tampings · section_length_km / (track_length_km · horizon_years) = section_tampings /
@@ -38,7 +39,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.batched import BatchedVectorEnv
-from trackenv.envs.choices import INTERVENTIONS
+from trackenv.envs.choices import INTERVENTIONS, code
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
@@ -85,7 +86,15 @@ class EvaluationResult:
     tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
     # the choice code each section got in each step of each episode (episodes, steps, sections), int8
     section_choices: np.ndarray | None = None
-    choices: dict[str, np.ndarray] = field(default_factory=dict)  # per CHOICE_NAMES: applied count per episode
+
+    @property
+    def choices(self) -> dict[str, np.ndarray]:
+        """Per name of :data:`CHOICE_NAMES`, how many sections got that choice in each episode (from
+        ``section_choices``; {} where the result has none)."""
+        if self.section_choices is None:
+            return {}
+        codes = np.asarray(self.section_choices)
+        return {name: (codes == code(name)).sum(axis=(1, 2)) for name in CHOICE_NAMES}
 
     @property
     def n_episodes(self) -> int:
@@ -99,6 +108,7 @@ class EvaluationResult:
 
     def summary(self) -> dict[str, Any]:
         lo, hi = bootstrap_ci(self.cost)
+        counts = self.choices
         return {
             "policy": self.policy,
             "params": dict(self.params),
@@ -113,8 +123,7 @@ class EvaluationResult:
             "immediate_action_exceedances": int(self.immediate_action_exceedances.sum()),
             "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
             "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
-            "choices": {name: float(np.mean(self.choices[name])) if name in self.choices else 0.0
-                        for name in CHOICE_NAMES},
+            "choices": {name: float(np.mean(counts[name])) if name in counts else 0.0 for name in CHOICE_NAMES},
         }
 
 
@@ -150,7 +159,6 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
     parts = {k: np.zeros(n) for k in keys}
     rewards = np.zeros(n)
     tampings = np.zeros(n)
-    choices = {name: np.zeros(n) for name in CHOICE_NAMES}
     exceed = np.zeros(n)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
@@ -174,13 +182,8 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
         for k in keys:
             parts[k] += info["costs"][k]
         tampings += info["tamped_sections"].sum(axis=1)
-        applied = info.get("choices")
-        if not isinstance(applied, Mapping):  # a problem without per-name counts (the network): its tampings
-            applied = {"tamp": info["tamped_sections"].sum(axis=1)}
-        for name in CHOICE_NAMES:
-            choices[name] += applied.get(name, 0)
         tamped[:, t] = info["tamped_sections"]
-        chosen[:, t] = info.get("section_choices", info["tamped_sections"])
+        chosen[:, t] = info["section_choices"]
         section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
         if record:
@@ -195,7 +198,7 @@ def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Se
                 raise RuntimeError("episodes did not end at the configured horizon")
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
-    return {"parts": parts, "rewards": rewards, "tampings": tampings, "choices": choices, "exceed": exceed,
+    return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed,
             "final_sd": final_sd, "tamped": tamped, "section_choices": chosen, "section_cost": section_cost,
             "register": register, "wet_spot": wet, "traces": traces}
 
@@ -256,7 +259,6 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     pol_of = np.array([p for p, _ in slots])
     seed_arr = np.array([s for _, s in slots])
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
-    choices_all = {k: np.concatenate([o["choices"][k] for o in outs]) for k in CHOICE_NAMES}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     tamped, chosen = cat("tamped"), cat("section_choices")
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
@@ -268,8 +270,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
-            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()},
-            choices={k: v[m] for k, v in choices_all.items()}))
+            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()}))
     return results
 
 
