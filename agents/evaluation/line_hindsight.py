@@ -58,9 +58,22 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.choices import CHOICES, NOTHING, TRACK_WORK, code
+from trackenv.envs.choices import (
+    CHOICES,
+    DRAINAGE,
+    INSPECT,
+    IS_TRACK_WORK,
+    NOTHING,
+    RENEW,
+    SPOT_TAMP,
+    SURVEY,
+    TAMP,
+    code,
+    enabled_codes,
+    work_per_code,
+)
 
-__all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "choice_work", "hindsight_bound",
+__all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "hindsight_bound",
            "hindsight_bounds", "recorded_rule_schedules", "replay", "replay_schedules", "replay_sections",
            "room_summary", "saved_schedules", "schedule_from_rows", "schedule_rows"]
 
@@ -74,8 +87,7 @@ RECORDING_DESIGNS: tuple[dict[str, Any], ...] = (
 _RECORDING_FIELDS = frozenset({"measurement_interval", "sd_noise_mm", "peak_noise_mm"})
 
 
-TAMP, SPOT_TAMP, DRAINAGE, RENEW = (code(name) for name in ("tamp", "spot_tamp", "drainage", "renew"))
-LOOKING = (code("inspect"), code("survey"))
+LOOKING = (INSPECT, SURVEY)
 #: When a clairvoyant rule drains a section with a wet spot: never, at the first step the section may get work, or
 #: at the step the spot starts working (one already working: the first step the section may get work).
 DRAINAGE_TIMINGS = ("never", "first", "onset")
@@ -121,15 +133,10 @@ class TrueStateRule:
         return NOTHING
 
 
-def _enabled(config: Any, name: str) -> bool:
-    """Whether ``config`` enables the choice ``name``."""
-    return name in getattr(config, "choices", ("tamp",))
-
-
 def _action_type(config: Any) -> str:
     """The env's action type that replays a schedule of ``config``: its choice codes where it enables more than
     tamping, else tamp-or-wait (as the tamping-only envs ran)."""
-    return "choices" if tuple(getattr(config, "choices", ("tamp",))) != ("tamp",) else "multibinary"
+    return "choices" if tuple(config.choices) != ("tamp",) else "multibinary"
 
 
 def choice_rules(config: Any, rules: list[TrueStateRule], drainage: tuple[str, ...] = ("first", "onset"),
@@ -143,23 +150,13 @@ def choice_rules(config: Any, rules: list[TrueStateRule], drainage: tuple[str, .
     a replay of most of the line; a drainage variant forks on the wet sections only.)"""
     from dataclasses import replace
 
-    drains = tuple(drainage) if _enabled(config, "drainage") else ()
-    spots = tuple(spot_peak_fractions) if _enabled(config, "spot_tamp") else ()
-    renews = tuple(renew_counts) if _enabled(config, "renew") else ()
+    drains = tuple(drainage) if "drainage" in config.choices else ()
+    spots = tuple(spot_peak_fractions) if "spot_tamp" in config.choices else ()
+    renews = tuple(renew_counts) if "renew" in config.choices else ()
     combos = ([(d, np.inf, np.inf) for d in drains] + [(d, f, np.inf) for f in spots for d in ("never", *drains)]
               + [("never", np.inf, k) for k in renews])
     return list(rules) + [replace(rule, drainage=d, spot_peak_fraction=f, renew_count=k) for rule in rules
                           for d, f, k in combos]
-
-
-def choice_work(config: Any) -> np.ndarray:
-    """(len(CHOICES),) the possession work of each choice code (``config.choice_work``: tamping 1)."""
-    work = getattr(config, "choice_work", {"tamp": 1.0})
-    return np.array([0.0] + [float(work.get(name, 0.0)) for name in CHOICES[1:]])
-
-
-#: (len(CHOICES),) bool: the codes that are track work (they need the possession)
-IS_WORK = np.array([name in TRACK_WORK for name in CHOICES])
 
 
 def _apart(a: TrueStateRule, b: TrueStateRule) -> tuple[int, int]:
@@ -229,7 +226,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     acc, sched, restr = np.zeros(G), np.zeros((G, H), dtype=np.int8), np.zeros((G, H), dtype=bool)
     free = len(starts)
     limit = bt.limits.intervention_m
-    enabled = np.array([name == "nothing" or _enabled(config, name) for name in CHOICES])
+    enabled = enabled_codes(config.choices)
     with_choices = [p for p in policy if isinstance(p, TrueStateRule) and not p.tamping_only]
     needs_count = any(p.renew_count < np.inf for p in with_choices)
     host, want = np.zeros(N, dtype=int), np.zeros(N, dtype=np.int64)
@@ -248,7 +245,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
                 w = p.decide(t, H, sd[h], peak[h], limit, wet[h], working[h], count[h])
             else:
                 w = int(p[t])
-            if not enabled[w] or (IS_WORK[w] and not allowed[h]):
+            if not enabled[w] or (IS_TRACK_WORK[w] and not allowed[h]):
                 w = NOTHING
             if row[i] < 0 and w != want[parent[i]]:  # it parts from its parent: fork
                 bt.copy_rows(np.array([free]), bt, np.array([h]))
@@ -319,9 +316,9 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     """Exact episode cost of a plan (H, S) of choice codes (bool: tamp) whose sections cost ``section_cost``
     (S,): their costs and a possession per step with track work; inf where a step's work exceeds the capacity."""
     codes = np.asarray(plan, dtype=np.int64)
-    if (choice_work(config)[codes].sum(axis=1) > config.capacity + 1e-9).any():
+    if (work_per_code(config.choice_work)[codes].sum(axis=1) > config.capacity + 1e-9).any():
         return np.inf
-    return float(section_cost.sum() + config.possession_cost * np.count_nonzero(IS_WORK[codes].any(axis=1)))
+    return float(section_cost.sum() + config.possession_cost * np.count_nonzero(IS_TRACK_WORK[codes].any(axis=1)))
 
 
 def _plan(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray) -> np.ndarray:
@@ -357,7 +354,7 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + H))
     # track work at step t needs a campaign at t, of at most capacity work
     codes = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(np.int64)  # (nx, H)
-    work = np.where(IS_WORK, np.maximum(choice_work(config), 1e-9), 0.0)[codes]
+    work = np.where(IS_TRACK_WORK, np.maximum(work_per_code(config.choice_work), 1e-9), 0.0)[codes]
     r, q = np.nonzero(work.T)
     load = coo_array((np.concatenate([work.T[r, q], np.full(H, -float(config.capacity))]),
                       (np.concatenate([r, np.arange(H)]), np.concatenate([q, nx + np.arange(H)]))),
@@ -492,7 +489,7 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
     rules = [TrueStateRule(s, p, k) for s in (*sd_thresholds_mm, np.inf) for p in peak_fractions for k in stop_steps
              if not (s == np.inf and p == np.inf)]
     rules = choice_rules(config, rules, **(choice_search or {}))
-    swaps = tuple(code(n) for n in ("tamp", "spot_tamp", "renew") if _enabled(config, n))
+    swaps = tuple(code(n) for n in ("tamp", "spot_tamp", "renew") if n in config.choices)
     swaps = swaps if len(swaps) > 1 else ()
     bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
     pools = [[_Pool() for _ in range(S)] for _ in seeds]
@@ -523,7 +520,7 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
         # replayed as forks of the incumbent where they part from it; the selection then sees every option so far
         cands = []
         for e, seed in enumerate(seeds):
-            campaigns = IS_WORK[_plan(options_of[e], choice[e])].any(axis=1)
+            campaigns = IS_TRACK_WORK[_plan(options_of[e], choice[e])].any(axis=1)
             for j in range(S):
                 inc, flag = pools[e][j].options[choice[e][j]][0], pools[e][j].flags[choice[e][j]]
                 var = pools[e][j].new(_variants(inc, flag, campaigns, swaps=swaps))

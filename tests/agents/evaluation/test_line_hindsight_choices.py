@@ -10,13 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackenv.envs.choices import INTERVENTIONS, code
+from trackenv.envs.choices import INTERVENTIONS, code, work_per_code
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.line_hindsight import (
     TrueStateRule,
     _total,
     choice_rules,
-    choice_work,
     hindsight_bound,
     hindsight_bounds,
     replay,
@@ -73,7 +72,7 @@ def test_the_choice_bound_is_exact_below_its_start_and_doing_nothing_and_never_l
     assert h["cost"] <= min(start, nothing) + 1e-9 and h["search"] == sorted(h["search"], reverse=True)
     sched = h["schedule"]
     assert not np.isin(sched, (INSPECT, SURVEY)).any()
-    assert (choice_work(cfg)[sched].sum(axis=1) <= cfg.capacity + 1e-9).all()
+    assert (work_per_code(cfg.choice_work)[sched].sum(axis=1) <= cfg.capacity + 1e-9).all()
     assert _total(sched, np.zeros(S), cfg) == pytest.approx(
         cfg.possession_cost * np.isin(sched, (TAMP, SPOT, DRAIN, RENEW)).any(axis=1).sum())
 
