@@ -138,6 +138,12 @@ def _reset_and_step(env, seed, action, name: str):
     return obs, reward
 
 
+def _assert_finite(obs: dict, reward) -> None:
+    """A step's reward(s) and every observed value are finite numbers."""
+    assert np.all(np.isfinite(reward))
+    assert all(np.all(np.isfinite(v)) for v in obs.values())
+
+
 @pytest.fixture(scope="module")
 def env() -> TampingEnv:
     return TampingEnv(ENV_CFG)
@@ -148,9 +154,7 @@ def env() -> TampingEnv:
 def test_env_seed_and_action(env: TampingEnv, seed, action) -> None:
     out = _reset_and_step(env, seed, action, "TampingEnv.step")
     if out is not None:
-        obs, reward = out
-        assert math.isfinite(reward)
-        assert all(np.all(np.isfinite(v)) for v in obs.values())
+        _assert_finite(*out)
 
 
 @pytest.fixture(scope="module")
@@ -166,9 +170,7 @@ def venv() -> TampingVectorEnv:
 def test_vector_env_seed_and_actions(venv: TampingVectorEnv, seed, action) -> None:
     out = _reset_and_step(venv, seed, action, "TampingVectorEnv.step")
     if out is not None:
-        obs, rewards = out
-        assert np.all(np.isfinite(rewards))
-        assert all(np.all(np.isfinite(v)) for v in obs.values())
+        _assert_finite(*out)
 
 
 # the choices: config fields and actions, on the same short track (a segment of three sections) with wet spots,
@@ -207,10 +209,8 @@ def choice_env() -> TampingLine:
 def test_choice_env_seed_and_action(choice_env: TampingLine, seed, action) -> None:
     out = _reset_and_step(choice_env, seed, action, "TampingLine.step (choices)")
     if out is not None:
-        obs, reward = out
-        assert math.isfinite(reward)
-        assert all(np.all(np.isfinite(v)) for v in obs.values())
-        assert choice_env.observation_space.contains(obs)
+        _assert_finite(*out)
+        assert choice_env.observation_space.contains(out[0])
 
 
 TRACK_KEYS = ["pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping"]
