@@ -17,8 +17,8 @@ from typing import Any
 
 #: public name -> the module of this package that defines it
 _EXPORTS: dict[str, str] = {
-    **dict.fromkeys(["ACTION_TYPES", "RANKED", "agent_action_space", "check_action_type", "env_action_type",
-                     "ranked_to_sections"], "actions"),
+    **dict.fromkeys(["ACTION_TYPES", "RANKED", "RANKED_CHOICES", "VEC_ACTION_TYPES", "agent_action_space",
+                     "check_action_type", "env_action_type", "ranked_to_choices", "ranked_to_sections"], "actions"),
     **dict.fromkeys(["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
                      "section_features"], "line_policy"),
     "section_counterfactuals": "line_counterfactual",
@@ -38,13 +38,14 @@ _EXPORTS: dict[str, str] = {
 __all__ = [  # = sorted(_EXPORTS) (a test keeps them equal), written out for linters and editors
     "ACTION_TYPES", "ADVISOR_FEATURES", "AlgoSettings", "DEFAULT_ENV_ID", "DEFAULT_EVAL_SEEDS", "DEFAULT_HYPERPARAMS",
     "DEFAULT_LINE_PRETRAINED", "DEFAULT_PRETRAINED", "DEFAULT_TRAIN_SEED", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM",
-    "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "LineSettings", "NormalizedPolicy", "RANKED", "SectionAgentsVecEnv",
-    "TampingSB3VecEnv", "TampingSettings", "TrainingSettings", "VecScaleReward", "ZooSchema", "agent_action_space",
-    "check_action_type", "collect_demonstrations", "env_action_type", "export_line_policy", "export_policy",
-    "filter_observation", "fit_choices", "fit_policy", "from_zoo", "line_meta_path", "load_hyperparams",
-    "load_line_trained", "load_trained", "make_progress_callback", "make_vec_env", "n_features", "observation_keys",
-    "ranked_to_sections", "return_scale", "section_counterfactuals", "section_features", "single_torch_thread",
-    "stats_path", "teacher_policy", "teacher_to_agent_actions", "train", "train_line", "warm_start",
+    "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "LineSettings", "NormalizedPolicy", "RANKED", "RANKED_CHOICES",
+    "SectionAgentsVecEnv", "TampingSB3VecEnv", "TampingSettings", "TrainingSettings", "VEC_ACTION_TYPES",
+    "VecScaleReward", "ZooSchema", "agent_action_space", "check_action_type", "collect_demonstrations",
+    "env_action_type", "export_line_policy", "export_policy", "filter_observation", "fit_choices", "fit_policy",
+    "from_zoo", "line_meta_path", "load_hyperparams", "load_line_trained", "load_trained", "make_progress_callback",
+    "make_vec_env", "n_features", "observation_keys", "ranked_to_choices", "ranked_to_sections", "return_scale",
+    "section_counterfactuals", "section_features", "single_torch_thread", "stats_path", "teacher_policy",
+    "teacher_to_agent_actions", "train", "train_line", "warm_start",
 ]
 
 

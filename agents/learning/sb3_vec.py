@@ -13,8 +13,9 @@ adapter only translates conventions:
 * ``env_method("action_masks")`` / :meth:`action_masks` give the masks sb3-contrib's MaskablePPO asks for;
 * seeds set by :meth:`seed` (SB3's convention: ``seed + i`` for env ``i``) are used at the next :meth:`reset`;
 * ``action_type="ranked"``: the agent picks how many of the worst sections to tamp (``Discrete(n_sections +
-  1)``), through the same vector wrapper any library gets
-  (:class:`trackenv.envs.wrappers.RankedVectorActions`);
+  1)``), and ``"ranked_choices"`` (a line with the choices, ``LineConfig.choices``) how many sections get each
+  enabled intervention (``MultiDiscrete([n_sections + 1] * len(choices))``), through the same vector wrapper any
+  library gets (:class:`trackenv.envs.wrappers.RankedVectorActions`);
 * the planning horizon ends the problem: the life-cycle cost is summed over the horizon only and the
   observation carries the time, so by default done envs are reported as terminal and SB3 does not bootstrap
   past the horizon (``bootstrap_at_horizon=True`` marks them ``TimeLimit.truncated`` instead, as a Gymnasium
@@ -43,7 +44,7 @@ from trackenv.envs.problems import make_vector_env, problem_config
 from trackenv.envs.sharded import native_or_sharded
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
 
-from .actions import RANKED, env_action_type
+from .actions import RANKED, RANKED_CHOICES, env_action_type
 from .line_policy import FEATURE_CLIP, n_features, section_features
 
 
@@ -108,7 +109,8 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
     ``config`` is a :class:`LineConfig`, a preset name ("small", "default", "hard", "track60"), a dict of its
-    fields, or None (the 60 m track); ``action_type`` is "multibinary", "discrete" or "ranked"; ``seed``
+    fields, or None (the 60 m track); ``action_type`` is "multibinary", "discrete", "ranked", "choices" or
+    "ranked_choices" (:mod:`~trackenv_agents.learning.actions`); ``seed``
     (optional) seeds the first reset (env ``i`` gets ``seed + i``); ``workers`` > 1 splits the envs over that
     many processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps
     in parallel; call :meth:`close` when done).
@@ -125,7 +127,7 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
         make = partial(make_vector_env, problem, action_type=env_action_type(action_type))
         venv = native_or_sharded(make, num_envs, workers)
         self.config = venv.config
-        if action_type == RANKED:
+        if action_type in (RANKED, RANKED_CHOICES):
             venv = RankedVectorActions(venv)
         if not keep_per_sleeper:
             venv = SectionVectorObservation(venv)
@@ -179,7 +181,8 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
 
     def action_masks(self) -> np.ndarray:
         """(num_envs, mask size) valid actions, as :meth:`TampingEnv.action_masks` gives them per env (ranked:
-        every count is valid; a masked section among the worst is simply not tamped by the env)."""
+        every count is valid; a masked section among the worst is simply not tamped by the env; ranked choices:
+        :func:`trackenv.envs.wrappers.ranked_choice_masks`)."""
         return self.venv.action_masks()
 
     def _target(self, name: str):
@@ -198,16 +201,17 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
 
     def get_state(self) -> dict[str, Any] | None:
         """What a checkpoint needs to continue these envs exactly: each env's snapshot (its episode, generator
-        and last info; :mod:`trackenv.envs.state`) and the ranked actions' section SDs (the wrapper decodes the
-        next counts on them). None where the envs live in worker processes (``workers`` > 1), out of reach of
-        the planning state API. Call after :meth:`reset`."""
+        and last info; :mod:`trackenv.envs.state`) and what the ranked actions' wrapper kept of the last
+        observation (it decodes the next counts on it). None where the envs live in worker processes
+        (``workers`` > 1), out of reach of the planning state API. Call after :meth:`reset`."""
         base = self.venv.unwrapped
         if not hasattr(base, "get_state"):
             return None
         ranked = self._ranked_wrapper()
         return {"envs": [base.get_state(i) for i in range(self.num_envs)],
-                # the wrapper keeps the last observation's SDs privately; there is no public way to set them
-                "ranked_sd": None if ranked is None else np.array(ranked._sd, copy=True)}
+                # the wrapper keeps the last observation's keys privately; there is no public way to set them
+                "ranked_obs": None if ranked is None else {k: np.array(v, copy=True)
+                                                           for k, v in ranked._obs.items()}}
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Continue the envs from :meth:`get_state`'s ``state`` (taken from envs of the same config and
@@ -220,10 +224,13 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
         for i, env_state in enumerate(state["envs"]):
             base.set_state(i, env_state)
         ranked = self._ranked_wrapper()
-        if (ranked is None) != (state["ranked_sd"] is None):
+        kept = state.get("ranked_obs")
+        if kept is None and state.get("ranked_sd") is not None:  # a state taken before the choices: SDs only
+            kept = {"section_sd": state["ranked_sd"]}
+        if (ranked is None) != (kept is None) or (ranked is not None and set(kept) != set(ranked._obs)):
             raise ValueError("the state comes from an adapter of another action type")
         if ranked is not None:
-            ranked._sd = np.array(state["ranked_sd"], copy=True)
+            ranked._obs = {k: np.array(v, copy=True) for k, v in kept.items()}
         self._reset_seeds()  # a seed set before would reseed the restored generators at the next reset
 
 

@@ -205,7 +205,7 @@ class LineConfig(ConfigBase):
     dt: float | str = "auto"
     line: LineDescription | None = None
 
-    agent_action_types = ("multibinary", "discrete", "ranked", "choices")
+    agent_action_types = ("multibinary", "discrete", "ranked", "choices", "ranked_choices")
     _INTERVENTION_COST_KEYS = ("possession", "tamping", "renewal", *COST_KEY.values())
     _CAMPAIGN_COST_FIELD = "possession_cost"
     _CLASS_COST_FIELDS = (("alert", 1, "alert_cost"), ("speed_restriction", 2, "speed_restriction_cost"),

@@ -21,13 +21,15 @@ MISSING_PETTINGZOO = 'line_parallel_env needs PettingZoo: pip install "trackenv[
 
 def line_parallel_env(env_id: str = "trackenv/TampingLine-v0", **kwargs: Any) -> LineParallelEnv:
     """A PettingZoo ``ParallelEnv`` over ``gym.make(env_id, **kwargs)``: one agent per section of the line
-    (``"section_0"``, ...), each observing its section and the line context, acting wait (0) or tamp (1), and
-    rewarded with its section's own costs plus an equal share of the possession of the campaigns it is tamped in
+    (``"section_0"``, ...), each observing its section and the line context, acting wait (0) or tamp (1) (on the
+    ids with the choices, its section's choice code, ``Discrete(7)``), and rewarded with its section's own costs
+    plus an equal share of the possession of the steps it gets track work in
     (:class:`~trackenv.envs.parallel.LineParallelEnv`).
 
     ``env_id`` is any id whose env is a TampingLine (``trackenv/TampingLine-v0``, ``trackenv/TampingLineSmall-v0``,
-    ...); ``kwargs`` go to ``gym.make`` (a config, a scenario name, ``LineConfig`` fields, ``render_mode``).
-    ImportError naming the extra if PettingZoo is not installed; ValueError if the env is not a line env."""
+    ``trackenv/TampingLine-v1``, ``trackenv/TampingLineWet-v0``, ...); ``kwargs`` go to ``gym.make`` (a config,
+    a scenario name, ``LineConfig`` fields, ``render_mode``). ImportError naming the extra if PettingZoo is not
+    installed; ValueError if the env is not a line env."""
     try:
         import pettingzoo  # noqa: F401  (the optional dependency, checked before the env is built)
     except ImportError:

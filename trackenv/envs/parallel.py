@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .choices import CHOICES, IS_TRACK_WORK
 from .line import TampingLine
 from .multiagent import MISSING_PETTINGZOO
 
@@ -27,7 +28,6 @@ __all__ = ["SHARED_COST_KEYS", "LineParallelEnv", "agent_name", "possession_shar
 #: The cost parts of the line env's ``info["costs"]`` that belong to the line, not to one section: split among
 #: the agents by :func:`possession_shares`; every other part is in ``info["section_costs"]``, section by section.
 SHARED_COST_KEYS = ("possession",)
-WAIT, TAMP = 0, 1
 
 
 def agent_name(section: int) -> str:
@@ -35,16 +35,18 @@ def agent_name(section: int) -> str:
     return f"section_{section}"
 
 
-def possession_shares(shared_cost: float, tamped: np.ndarray) -> np.ndarray:
+def possession_shares(shared_cost: float, worked: np.ndarray) -> np.ndarray:
     """(n_sections,) each section's share of the step's ``shared_cost`` (k€): equal shares among the sections
-    ``tamped`` in the step's campaign, nothing for the others (equal shares among all sections if none was
-    tamped, so that the shares always add up to ``shared_cost``; the line env has no possession then).
+    ``worked`` on in the step's possession (tamped; with the choices, any track work: tamp, spot tamp,
+    drainage, renewal), nothing for the others (equal shares among all sections if none was, so that the shares
+    always add up to ``shared_cost``; the line env has no possession then).
 
-    Why equal shares: the possession is a fixed cost that any non-empty campaign incurs in full whatever its
+    Why equal shares: the possession is a fixed cost that any step with track work incurs in full whatever its
     size, and the Shapley value of such a cost among the sections that use it is an equal share. A section that
-    waits pays none of it, and a section that joins a campaign pays less than one that goes alone."""
-    tamped = np.asarray(tamped, dtype=bool)
-    payers = tamped if tamped.any() else np.ones_like(tamped)
+    waits (or is only inspected or surveyed, which needs no possession) pays none of it, and a section that joins
+    a campaign pays less than one that goes alone."""
+    worked = np.asarray(worked, dtype=bool)
+    payers = worked if worked.any() else np.ones_like(worked)
     return np.where(payers, float(shared_cost) / int(payers.sum()), 0.0)
 
 
@@ -54,19 +56,26 @@ def _line_env_ids() -> list[str]:
     return sorted(env_id for env_id, spec in gym.registry.items() if spec.entry_point in line)
 
 
-def _check_line_env(env: gym.Env) -> int:
-    """The number of sections of ``env``, a TampingLine (possibly wrapped) with MultiBinary section actions and
-    a Dict observation; ValueError naming what it is otherwise."""
+def _check_line_env(env: gym.Env) -> tuple[int, int]:
+    """The number of sections of ``env``, a TampingLine (possibly wrapped) with MultiBinary section actions or the
+    choices (``MultiDiscrete([7] * n_sections)``) and a Dict observation, and the number of codes a section's
+    action has (2 or 7); ValueError naming what it is otherwise."""
     name = env.spec.id if env.spec is not None else type(env).__name__
     if not isinstance(env.unwrapped, TampingLine):
         raise ValueError(f"env_id must name a TampingLine env (one of {_line_env_ids()}), got {name!r} "
                          f"({type(env.unwrapped).__name__})")
-    if not isinstance(env.action_space, spaces.MultiBinary) or len(env.action_space.shape) != 1:
-        raise ValueError(f"{name!r}: the line env's action space must be MultiBinary(n_sections) (a wrapper "
-                         f"changed it?), got {env.action_space}")
+    space = env.action_space
+    n = int(space.shape[0]) if space.shape is not None and len(space.shape) == 1 else 0
+    if n and space == spaces.MultiBinary(n):
+        codes = 2
+    elif n and space == spaces.MultiDiscrete([len(CHOICES)] * n):
+        codes = len(CHOICES)
+    else:
+        raise ValueError(f"{name!r}: the line env's action space must be MultiBinary(n_sections) or the choices "
+                         f"MultiDiscrete([{len(CHOICES)}] * n_sections) (a wrapper changed it?), got {space}")
     if not isinstance(env.observation_space, spaces.Dict):
         raise ValueError(f"{name!r}: the line env's observation space must be a Dict, got {env.observation_space}")
-    return int(env.action_space.shape[0])
+    return n, codes
 
 
 class LineParallelEnv(ParallelEnv):
@@ -75,11 +84,14 @@ class LineParallelEnv(ParallelEnv):
     **Agents.** ``"section_0"``, ..., ``"section_<n-1>"`` along the line (``possible_agents``); all of them live
     from ``reset`` to the horizon, when all are truncated together and ``agents`` becomes empty.
 
-    **Action space** (per agent): ``Discrete(2)``: 0 = wait, 1 = tamp this section in this step's campaign. The
-    joint action is the line env's ``MultiBinary`` action, with its rules: a masked section is not tamped, and
-    over the campaign's capacity (or the annual budget) the line env keeps the sections with the worst measured
+    **Action space** (per agent): ``Discrete(2)``: 0 = wait, 1 = tamp this section in this step's campaign; on
+    a line with the choices (``action_type="choices"``: ``trackenv/TampingLine-v1``, ``TampingLineWet-v0``,
+    ``TampingLineDefects-v0``), ``Discrete(7)``: the section's choice code
+    (:data:`~trackenv.envs.choices.CHOICES`: 0 nothing, 1 tamp, 2 spot tamp, 3 drainage, 4 renew, 5 inspect,
+    6 survey). The joint action is the line env's action, with its rules: a masked choice becomes nothing, and
+    over the possession's capacity (or the annual budget) the line env keeps the sections with the worst measured
     SD (``over_capacity="clip"``, the default) or raises. ``info["tamped_sections"]`` says whether the agent's
-    section was tamped.
+    section was tamped (or renewed), ``info["section_choices"]`` which choice it got.
 
     **Observation** (per agent): ``Dict`` with
 
@@ -90,18 +102,21 @@ class LineParallelEnv(ParallelEnv):
       the entries in their order (that of the line env's observation space); units and bounds are the line
       env's (its table: :class:`~trackenv.envs.line.TampingLine`).
     * ``"action_mask"``: int8 ``(2,)`` [may wait, may tamp]: 0 for tamp while the section is within
-      ``min_steps_between_tampings`` of its last tamping (the line env's ``action_masks()``, section by
-      section). The mask is in the observation only (PettingZoo's convention, which its API test samples with);
-      capacity and budget are not masked: they are joint limits, resolved by the line env.
+      ``min_steps_between_tampings`` of its last tamping; with the choices ``(7,)``, one entry per code (the
+      line env's ``action_masks()``, section by section: a choice not enabled, track work too soon after the
+      last, work larger than the possession, a cost over what is left of the budget). The mask is in the
+      observation only (PettingZoo's convention, which its API test samples with); what the sections' choices
+      need together (capacity, budget) is not masked: the line env resolves it.
 
     Every agent has the same observation and action spaces, so one policy can serve them all (parameter
     sharing).
 
     **Reward** (per agent, −k€): −(the section's own costs of the step, ``info["section_costs"]`` of the line
     env: its tamping or renewal, geometry, speed restriction and immediate action, + its share of the step's
-    possession). The possession of a campaign is split **equally among the sections tamped in it**
-    (:func:`possession_shares`: the Shapley value of a fixed cost); sections that wait pay none. So the agents'
-    rewards add up to the line env's reward (up to floating-point rounding).
+    possession). The possession of a campaign is split **equally among the sections tamped in it** (with the
+    choices: among the sections with track work, i.e. tamp, spot tamp, drainage or renewal; an inspection or a
+    survey needs no possession) (:func:`possession_shares`: the Shapley value of a fixed cost); sections that wait
+    pay none. So the agents' rewards add up to the line env's reward (up to floating-point rounding).
 
     **Infos** (per agent): every per-section entry of the line env's info at the agent's section
     (``tamped_sections``, ``section_costs``, ``section_sd_mm``, ``section_class``, ``wet_spot_active``, ...),
@@ -121,7 +136,7 @@ class LineParallelEnv(ParallelEnv):
     picture of the line.
 
     **Arguments.** ``env``: a TampingLine env (``gym.make`` of a line id, possibly wrapped, with its
-    ``MultiBinary`` actions and Dict observation); ValueError otherwise. Usually built by
+    ``MultiBinary`` actions or the choices and its Dict observation); ValueError otherwise. Usually built by
     :func:`~trackenv.envs.multiagent.line_parallel_env`.
     """
 
@@ -129,7 +144,7 @@ class LineParallelEnv(ParallelEnv):
                 "is_parallelizable": True}
 
     def __init__(self, env: gym.Env) -> None:
-        n_sections = _check_line_env(env)
+        n_sections, self._codes = _check_line_env(env)
         self.env = env
         self.render_mode = env.render_mode
         self.possible_agents: list[str] = [agent_name(j) for j in range(n_sections)]
@@ -143,12 +158,13 @@ class LineParallelEnv(ParallelEnv):
         """The names of the entries of every agent's ``"observation"`` vector, in order."""
         low = self.agent_features({k: s.low for k, s in space.items()})  # type: ignore[attr-defined]
         high = self.agent_features({k: s.high for k, s in space.items()})  # type: ignore[attr-defined]
-        mask_space = spaces.Box(0, 1, (2,), np.int8)
+        mask_space = spaces.Box(0, 1, (self._codes,), np.int8)
         self.observation_spaces: dict[str, spaces.Space] = {
             agent: spaces.Dict({"observation": spaces.Box(low[j], high[j], dtype=np.float32),
                                 "action_mask": mask_space})
             for j, agent in enumerate(self.possible_agents)}
-        self.action_spaces: dict[str, spaces.Space] = {agent: spaces.Discrete(2) for agent in self.possible_agents}
+        self.action_spaces: dict[str, spaces.Space] = {agent: spaces.Discrete(self._codes)
+                                                       for agent in self.possible_agents}
         self.state_space = spaces.flatten_space(space)
         self._obs: dict[str, np.ndarray] | None = None
         self._info: dict[str, Any] = {}
@@ -159,7 +175,8 @@ class LineParallelEnv(ParallelEnv):
         return self.observation_spaces[self._known(agent)]
 
     def action_space(self, agent: str) -> spaces.Space:
-        """The action space of ``agent``, ``Discrete(2)`` (the same object at every call)."""
+        """The action space of ``agent``, ``Discrete(2)`` or with the choices ``Discrete(7)`` (the same object
+        at every call)."""
         return self.action_spaces[self._known(agent)]
 
     def _known(self, agent: str) -> str:
@@ -197,7 +214,8 @@ class LineParallelEnv(ParallelEnv):
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict[str, dict], dict[str, float], dict[str, bool],
                                                        dict[str, bool], dict[str, dict]]:
-        """One step of the line env with the joint action of ``actions`` (one 0/1 per live agent)."""
+        """One step of the line env with the joint action of ``actions`` (one 0/1, or one choice code, per live
+        agent)."""
         if not self.agents:
             raise RuntimeError("call reset() before step()" if self._obs is None else
                                "the episode has ended (every agent truncated at the horizon): call reset()")
@@ -205,7 +223,8 @@ class LineParallelEnv(ParallelEnv):
         self._obs, _, terminated, truncated, self._info = self.env.step(self._joint_action(actions))
         info = self._info
         own = np.asarray(info["section_costs"], dtype=float)
-        shares = possession_shares(sum(info["costs"][k] for k in SHARED_COST_KEYS), info["tamped_sections"])
+        worked = IS_TRACK_WORK[np.asarray(info["section_choices"], dtype=np.int64)]
+        shares = possession_shares(sum(info["costs"][k] for k in SHARED_COST_KEYS), worked)
         costs = own + shares
         rewards = {agent: -float(costs[j]) for j, agent in enumerate(self.possible_agents)}
         terminations = dict.fromkeys(live, bool(terminated))
@@ -216,26 +235,28 @@ class LineParallelEnv(ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _joint_action(self, actions: Mapping[str, Any]) -> np.ndarray:
-        """The line env's MultiBinary action from one 0/1 per live agent; ValueError naming what is wrong."""
+        """The line env's action from one 0/1 (or one choice code) per live agent; ValueError naming what is
+        wrong."""
+        allowed = "0 (wait) or 1 (tamp)" if self._codes == 2 else f"a choice code in [0, {self._codes - 1}]"
         if not isinstance(actions, Mapping):
-            raise ValueError(f"actions must be a dict of agent -> 0 (wait) or 1 (tamp), got {type(actions).__name__}")
+            raise ValueError(f"actions must be a dict of agent -> {allowed}, got {type(actions).__name__}")
         missing = [agent for agent in self.agents if agent not in actions]
         unknown = [agent for agent in actions if agent not in self.agents]
         if missing or unknown:
             raise ValueError(f"actions must have one entry per live agent {self.agents}; missing {missing}, "
                              f"unknown {unknown}")
-        want = np.zeros(len(self.possible_agents), dtype=np.int8)
+        want = np.zeros(len(self.possible_agents), dtype=np.int8 if self._codes == 2 else np.int64)
         for j, agent in enumerate(self.possible_agents):
             value = np.asarray(actions[agent])
-            if value.size != 1 or value.ravel()[0] not in (WAIT, TAMP):
-                raise ValueError(f"actions[{agent!r}] must be 0 (wait) or 1 (tamp), got {actions[agent]!r}")
+            if value.size != 1 or value.ravel()[0] not in range(self._codes):
+                raise ValueError(f"actions[{agent!r}] must be {allowed}, got {actions[agent]!r}")
             want[j] = int(value.ravel()[0])
         return want
 
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         assert self._obs is not None
         features = self.agent_features(self._obs)
-        masks = np.asarray(self.env.get_wrapper_attr("action_masks")(), dtype=np.int8).reshape(-1, 2)
+        masks = np.asarray(self.env.get_wrapper_attr("action_masks")(), dtype=np.int8).reshape(-1, self._codes)
         return {agent: {"observation": features[j], "action_mask": masks[j]}
                 for j, agent in enumerate(self.possible_agents)}
 

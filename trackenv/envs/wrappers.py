@@ -9,26 +9,28 @@ the tamping env and the line env follow that convention.
   campaign, good schedules tamp many sections at once, rarely; under ``MultiBinary`` a policy must switch its
   independent Bernoulli heads on in the same rare step, which per-section exploration almost never finds;
   ranked, a campaign is one choice among ``n_sections + 1``. The order of preference (worst first) is fixed;
-  when and how much to tamp is learnt.
+  when and how much to tamp is learnt. Over an env with the choices (``action_type="choices"``) the same idea
+  per intervention: ``MultiDiscrete([n_sections + 1] * len(config.choices))``, one count per enabled choice
+  (how many of the worst sections by SD to tamp, by peak to spot-tamp, ...), each with its fixed order of
+  preference (:mod:`trackenv.envs.ranking` has the scores and the precedence between them).
 * :class:`SectionObservation` — drops the per-sleeper arrays (``level``, ``contact_force``): keeps the keys of
   shape ``(n_sections, ...)`` and the scalar ones (``time``). Small, and independent of the track's length.
-* :class:`MultiDiscreteActions` — ``MultiBinary(n)`` as ``MultiDiscrete([2] * n)`` (what RLlib accepts).
+* :class:`MultiDiscreteActions` — ``MultiBinary(n)`` as ``MultiDiscrete([2] * n)`` (what RLlib accepts); the
+  choices, already ``MultiDiscrete``, pass through.
 * :class:`ActionMaskObservation` — ``Dict(action_mask=..., observations=...)``, the form RLlib's action-masking
   RLModule reads the mask from (RLlib has no ``action_masks()`` method convention).
 * a flat ``Box`` observation: Gymnasium's ``FlattenObservation`` over any of these (see :func:`make_ranked`).
 
-**What each supports.** :class:`SectionObservation`, :class:`SectionVectorObservation`,
-:class:`ActionMaskObservation` and ``FlattenObservation`` take any action space, the line's choices
-(``action_type="choices"``, ``MultiDiscrete([7] * n_sections)``, the masks ``(n_sections · 7,)``) included;
-:class:`RankedActions`, :class:`RankedVectorActions` and :class:`MultiDiscreteActions` turn tamp-or-wait
-(``MultiBinary``) actions into other forms and refuse any other action space with a TypeError.
+**What each supports.** Every wrapper here takes the tamp-or-wait envs (``MultiBinary``) and the line's
+choices (``action_type="choices"``, ``MultiDiscrete([7] * n_sections)``, the masks ``(n_sections · 7,)``);
+the action wrappers refuse any other action space (``Discrete``) with a TypeError.
 
 **Action masks.** Every wrapper here defines ``action_masks()`` in the wrapped action space's terms, so the
 mask is reachable the way sb3-contrib looks for it (``env.get_wrapper_attr("action_masks")``, which its vector
 envs' ``env_method("action_masks")`` calls). Gymnasium's own wrappers (those ``gym.make`` adds) do not forward
 methods: call ``env.get_wrapper_attr("action_masks")()`` or ``env.unwrapped.action_masks()``.
 
-The ranked decoding is also batched (:func:`ranked_to_sections`) and exists as vector wrappers
+The ranked decoding is batched (:func:`ranked_to_sections`, :func:`ranked_to_choices`) and exists as vector wrappers
 (:class:`RankedVectorActions`, :class:`SectionVectorObservation`) over the native vector env, which the SB3
 adapter in ``trackenv_agents.learning.sb3_vec`` uses: one implementation for every library.
 """
@@ -43,43 +45,20 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorActionWrapper, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
+from .choices import CHOICES
+from .ranking import rank_mask, ranked_choice_masks, ranked_to_choices, ranked_to_sections, score_keys
+
 __all__ = [
     "ActionMaskObservation", "MultiDiscreteActions", "RankedActions", "RankedVectorActions",
-    "SectionObservation", "SectionVectorObservation", "make_ranked", "make_ranked_vector", "n_sections_of",
-    "rank_mask", "ranked_to_sections", "section_keys",
+    "SectionObservation", "SectionVectorObservation", "choices_of", "make_ranked", "make_ranked_vector",
+    "n_sections_of", "rank_mask", "ranked_choice_masks", "ranked_to_choices", "ranked_to_sections", "section_keys",
 ]
 
 SD_KEY = "section_sd"
+SURVEY_KEY = "section_survey"
 
 
-# --- the logic, as functions (batched) ---
-def rank_mask(score: np.ndarray, eligible: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Per row, True for the ``k[row]`` highest-``score`` entries among ``eligible`` (ties: lower index)."""
-    s = np.where(eligible, score, -np.inf)
-    order = np.argsort(-s, axis=1, kind="stable")
-    ranks = np.empty_like(order)
-    np.put_along_axis(ranks, order, np.arange(s.shape[1])[None, :].repeat(s.shape[0], 0), axis=1)
-    return eligible & (ranks < np.asarray(k).reshape(-1, 1))
-
-
-def ranked_to_sections(k, section_sd) -> np.ndarray:
-    """MultiBinary actions (int8, ``section_sd``'s shape) tamping the ``k`` worst sections by SD per row.
-
-    ``k``: one count per row (or a scalar for a single unbatched observation); ``section_sd``: (n_sections,)
-    or (n_envs, n_sections). Ties go to the lower section index. A count outside [0, n_sections] raises.
-    """
-    sd = np.asarray(section_sd, dtype=float)
-    single = sd.ndim == 1
-    sd2 = sd[None] if single else sd
-    counts = np.asarray(k).reshape(-1)
-    if counts.size != sd2.shape[0]:
-        raise ValueError(f"need one ranked action per row of section_sd ({sd2.shape[0]}), got {counts.size}")
-    if not np.all((counts >= 0) & (counts <= sd2.shape[1]) & (counts == np.round(counts))):
-        raise ValueError(f"ranked actions must be integers in [0, {sd2.shape[1]}], got {counts.tolist()}")
-    out = rank_mask(sd2, np.ones(sd2.shape, dtype=bool), counts.astype(int)).astype(np.int8)
-    return out[0] if single else out
-
-
+# --- what the wrappers read of an env ---
 def n_sections_of(env: gym.Env | VectorEnv) -> int:
     """The number of tamping sections of a (wrapped) trackenv env: ``n_sections`` or ``config.n_sections``."""
     base = env.unwrapped
@@ -91,6 +70,15 @@ def n_sections_of(env: gym.Env | VectorEnv) -> int:
     if n is None:
         raise TypeError(f"{type(base).__name__} has neither n_sections nor config.n_sections")
     return int(n)
+
+
+def choices_of(env: gym.Env | VectorEnv) -> tuple[str, ...]:
+    """The enabled interventions of a (wrapped) trackenv env, in the order of the action codes:
+    ``config.choices`` (``("tamp",)`` for an env without it)."""
+    base = env.unwrapped
+    if getattr(base, "config", None) is None and getattr(base, "envs", None):  # SyncVectorEnv: its first env's
+        return choices_of(base.envs[0])  # type: ignore[union-attr]
+    return tuple(getattr(getattr(base, "config", None), "choices", ("tamp",)))
 
 
 def section_keys(space: spaces.Space, n_sections: int) -> list[str]:
@@ -116,44 +104,101 @@ def _vector_masks(env) -> np.ndarray:
     return np.asarray(env.action_masks())
 
 
+class _RankedForm:
+    """What a ranked wrapper decodes, batched: over a tamp-or-wait env (``MultiBinary(n)``), one count
+    (``Discrete(n + 1)``, :func:`ranked_to_sections`, every count valid); over an env with the choices
+    (``MultiDiscrete([7] * n)``), one count per enabled intervention (``MultiDiscrete([n + 1] * heads)``,
+    :func:`ranked_to_choices`, masked by :func:`ranked_choice_masks`). TypeError for any other env."""
+
+    def __init__(self, owner: str, action_space: spaces.Space, observation_space: spaces.Space, n_sections: int,
+                 choices: tuple[str, ...]) -> None:
+        if action_space == spaces.MultiBinary(n_sections):
+            self.heads: tuple[str, ...] | None = None
+            keys: tuple[str, ...] = (SD_KEY,)
+            self.space: spaces.Space = spaces.Discrete(n_sections + 1)
+        elif action_space == spaces.MultiDiscrete([len(CHOICES)] * n_sections):
+            self.heads = tuple(choices)
+            keys = score_keys(self.heads)
+            self.space = spaces.MultiDiscrete([n_sections + 1] * len(self.heads))
+        else:
+            raise TypeError(f"{owner} needs a MultiBinary({n_sections}) env or one with the choices "
+                            f"(MultiDiscrete([{len(CHOICES)}] * {n_sections})), got {action_space}")
+        if not isinstance(observation_space, spaces.Dict) or not set(keys) <= set(observation_space.spaces):
+            raise TypeError(f"{owner} needs a Dict observation with {list(keys)}")
+        if self.heads is not None and SURVEY_KEY in observation_space.spaces:
+            keys += (SURVEY_KEY,)  # drainage ranks by what a survey found where the observation says it
+        self.keys = tuple(dict.fromkeys(keys))
+        self.n_sections = n_sections
+
+    @property
+    def width(self) -> int:
+        """How many counts one action holds."""
+        return 1 if self.heads is None else len(self.heads)
+
+    def kept(self, observation: dict) -> dict[str, np.ndarray]:
+        """The keys of ``observation`` the decoding reads, copied."""
+        return {k: np.asarray(observation[k], dtype=float).copy() for k in self.keys}
+
+    def decode(self, counts: np.ndarray, observation: dict[str, np.ndarray], env_masks) -> np.ndarray:
+        """The env's actions (rows, n) of ``counts`` (rows, width) on the batched ``observation``;
+        ``env_masks()`` gives the env's masks (read only for the choices)."""
+        if self.heads is None:
+            return ranked_to_sections(counts.reshape(-1), observation[SD_KEY])
+        masks = np.asarray(env_masks()).reshape(counts.shape[0], -1)
+        return ranked_to_choices(counts, observation, masks, self.heads)
+
+    def masks(self, rows: int, env_masks) -> np.ndarray:
+        """(rows, mask size) the valid ranked actions."""
+        if self.heads is None:
+            return np.ones((rows, self.n_sections + 1), dtype=bool)
+        return np.asarray(ranked_choice_masks(env_masks(), self.heads)).reshape(rows, -1)
+
+
 # --- single-env wrappers ---
 class RankedActions(gym.ActionWrapper):
-    """``Discrete(n_sections + 1)`` over a ``MultiBinary(n_sections)`` env: ``k`` tamps the ``k`` sections with
-    the largest ``section_sd`` of the observation the action was chosen on (see the module docstring).
+    """Ranked actions over a ``MultiBinary(n_sections)`` env or one with the choices (see the module docstring).
 
-    Wrap the env's own Dict observation (apply observation wrappers outside this one). A masked section among
-    the ``k`` worst is not tamped (the env ignores it), so every count is valid: :meth:`action_masks` is all
-    True."""
+    Tamp-or-wait: ``Discrete(n_sections + 1)``, ``k`` tamps the ``k`` sections with the largest ``section_sd``
+    of the observation the action was chosen on; a masked section among the ``k`` worst is not tamped (the env
+    ignores it), so every count is valid: :meth:`action_masks` is all True.
+
+    The choices (``action_type="choices"``): ``MultiDiscrete([n_sections + 1] * len(heads))``, one count per
+    enabled intervention (:attr:`heads`, the env's ``config.choices``), each marking the sections that rank first
+    by the head's score among those the env's mask lets get it (:func:`ranked_to_choices`); :meth:`action_masks`
+    allows a count up to the number of such sections (:func:`ranked_choice_masks`).
+
+    Wrap the env's own Dict observation (apply observation wrappers outside this one)."""
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         n = n_sections_of(env)
-        if env.action_space != spaces.MultiBinary(n):
-            raise TypeError(f"RankedActions needs a MultiBinary({n}) env, got {env.action_space}")
-        if not isinstance(env.observation_space, spaces.Dict) or SD_KEY not in env.observation_space.spaces:
-            raise TypeError(f"RankedActions needs a Dict observation with {SD_KEY!r}")
         self.n_sections = n
-        self.action_space = spaces.Discrete(n + 1)
-        self._sd = np.zeros(n)
+        self._form = _RankedForm("RankedActions", env.action_space, env.observation_space, n, choices_of(env))
+        self.heads = self._form.heads
+        """The interventions counted by the action, in order (None over a tamp-or-wait env)."""
+        self.action_space = self._form.space
+        self._obs = {k: np.zeros(n) for k in self._form.keys}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
-        self._sd = np.asarray(obs[SD_KEY], dtype=float).copy()
+        self._obs = self._form.kept(obs)
         return obs, info
 
     def step(self, action):
         obs, reward, terminated, truncated, info = super().step(action)
-        self._sd = np.asarray(obs[SD_KEY], dtype=float).copy()
+        self._obs = self._form.kept(obs)
         return obs, reward, terminated, truncated, info
 
     def action(self, action) -> np.ndarray:
         a = np.asarray(action)
-        if a.size != 1:
-            raise ValueError(f"a ranked action is one integer in [0, {self.n_sections}], got {action!r}")
-        return ranked_to_sections(a.reshape(()), self._sd)
+        if a.size != self._form.width:
+            raise ValueError(f"a ranked action is {self._form.width} integer(s) in [0, {self.n_sections}], got "
+                             f"{action!r}")
+        rows = {k: v[None] for k, v in self._obs.items()}
+        return self._form.decode(a.reshape(1, -1), rows, lambda: _masks(self.env))[0]
 
     def action_masks(self) -> np.ndarray:
-        return np.ones(self.n_sections + 1, dtype=bool)
+        return self._form.masks(1, lambda: _masks(self.env))[0]
 
 
 class SectionObservation(gym.ObservationWrapper):
@@ -173,16 +218,24 @@ class SectionObservation(gym.ObservationWrapper):
 
 class MultiDiscreteActions(gym.ActionWrapper):
     """``MultiBinary(n)`` actions as ``MultiDiscrete([2] * n)`` (same meaning; the masks are the same pairs
-    [may-not-tamp, may-tamp] per section that sb3-contrib expects for MultiDiscrete)."""
+    [may-not-tamp, may-tamp] per section that sb3-contrib expects for MultiDiscrete). An env whose actions are
+    already ``MultiDiscrete`` (the choices) passes through unchanged, so one pipeline of wrappers serves both;
+    any other action space raises TypeError."""
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        if not isinstance(env.action_space, spaces.MultiBinary) or len(env.action_space.shape) != 1:
-            raise TypeError(f"MultiDiscreteActions needs a 1-D MultiBinary env, got {env.action_space}")
-        self.action_space = spaces.MultiDiscrete([2] * env.action_space.n)
+        space = env.action_space
+        if isinstance(space, spaces.MultiDiscrete) and len(space.shape) == 1:
+            self.action_space = space
+            self._dtype = space.dtype
+        elif isinstance(space, spaces.MultiBinary) and len(space.shape) == 1:
+            self.action_space = spaces.MultiDiscrete([2] * space.n)
+            self._dtype = np.dtype(np.int8)
+        else:
+            raise TypeError(f"MultiDiscreteActions needs a 1-D MultiBinary or MultiDiscrete env, got {space}")
 
     def action(self, action) -> np.ndarray:
-        return np.asarray(action, dtype=np.int8)
+        return np.asarray(action, dtype=self._dtype)
 
     def action_masks(self) -> np.ndarray:
         return _masks(self.env)
@@ -218,7 +271,8 @@ def _mask_size(space: spaces.Space) -> int:
 
 
 def make_ranked(env_id: str = "trackenv/Tamping-v1", *, flat: bool = False, **kwargs: Any) -> gym.Env:
-    """A MultiBinary env (``gym.make(env_id, **kwargs)``, the tamping env by default) learnt in ranked actions
+    """A MultiBinary env or one with the choices (``gym.make(env_id, **kwargs)``, the tamping env by default;
+    e.g. ``trackenv/TampingLineWet-v0``) learnt in ranked actions
     on the section-level observation; ``flat=True`` flattens that to one ``Box`` (default encoders of RLlib
     and CleanRL). The entry point of ``trackenv/TampingRanked-v1`` and ``trackenv/TampingRankedFlat-v1``."""
     env = SectionObservation(RankedActions(gym.make(env_id, **kwargs)))
@@ -227,35 +281,37 @@ def make_ranked(env_id: str = "trackenv/Tamping-v1", *, flat: bool = False, **kw
 
 # --- vector wrappers (the same logic over a batched env) ---
 class RankedVectorActions(VectorActionWrapper):
-    """:class:`RankedActions` for a vector env of MultiBinary envs: (num_envs,) counts, decoded per env on the
-    section SD of the observation last returned (in NEXT_STEP autoreset the count given to an env that is
-    being reset is ignored, as every action is then)."""
+    """:class:`RankedActions` for a vector env of MultiBinary envs or envs with the choices: one row of counts
+    per env, decoded per env on the observation last returned and the env's masks (in NEXT_STEP autoreset the
+    counts given to an env that is being reset are ignored, as every action is then)."""
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
         n = n_sections_of(env)
-        if env.single_action_space != spaces.MultiBinary(n):
-            raise TypeError(f"RankedVectorActions needs MultiBinary({n}) envs, got {env.single_action_space}")
         self.n_sections = n
-        self.single_action_space = spaces.Discrete(n + 1)
+        self._form = _RankedForm("RankedVectorActions", env.single_action_space, env.single_observation_space, n,
+                                 choices_of(env))
+        self.heads = self._form.heads
+        self.single_action_space = self._form.space
         self.action_space = batch_space(self.single_action_space, env.num_envs)
-        self._sd = np.zeros((env.num_envs, n))
+        self._obs = {k: np.zeros((env.num_envs, n)) for k in self._form.keys}
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
-        self._sd = np.asarray(obs[SD_KEY], dtype=float).copy()
+        self._obs = self._form.kept(obs)
         return obs, info
 
     def step(self, actions):
         obs, rewards, terminated, truncated, info = self.env.step(self.actions(actions))
-        self._sd = np.asarray(obs[SD_KEY], dtype=float).copy()
+        self._obs = self._form.kept(obs)
         return obs, rewards, terminated, truncated, info
 
     def actions(self, actions) -> np.ndarray:  # type: ignore[override]
-        return ranked_to_sections(np.asarray(actions).reshape(self.num_envs), self._sd)
+        counts = np.asarray(actions).reshape(self.num_envs, self._form.width)
+        return self._form.decode(counts, self._obs, lambda: _vector_masks(self.env))
 
     def action_masks(self) -> np.ndarray:
-        return np.ones((self.num_envs, self.n_sections + 1), dtype=bool)
+        return self._form.masks(self.num_envs, lambda: _vector_masks(self.env))
 
 
 class SectionVectorObservation(VectorWrapper):
