@@ -1,8 +1,9 @@
 """Train PPO with RLlib (Ray 2.60, new API stack) on a trackenv env, registered with ``register_env``.
 
 The env is ``--env-id`` (default ``trackenv/Tamping-v1``; any id with MultiBinary section actions and a Dict
-observation with ``section_sd`` works, e.g. the line env's) seen through :mod:`trackenv.envs.wrappers`: ranked
-actions (``Discrete(n_sections + 1)``) and the section-level observation flattened to one ``Box``, which
+observation with ``section_sd`` works, e.g. the line env's, and the ids with the choices) seen through
+:mod:`trackenv.envs.wrappers`: ranked actions (``Discrete(n_sections + 1)``; with the choices one count per
+choice, ``MultiDiscrete``) and the section-level observation flattened to one ``Box``, which
 RLlib's default encoders take (a Dict observation or MultiBinary actions they do not). With ``--num-envs`` > 1
 each env runner steps the native vector env (batched physics, NEXT_STEP autoreset, RLlib's convention).
 

@@ -20,6 +20,7 @@ pytest.importorskip("pettingzoo")
 
 from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
 
+from trackenv.envs.choices import CHOICES, IS_TRACK_WORK  # noqa: E402
 from trackenv.envs.parallel import LineParallelEnv, agent_name, possession_shares  # noqa: E402
 
 SMALL = "trackenv/TampingLineSmall-v0"  # 6 sections, capacity 3, a tamped section masked for 1 step
@@ -140,6 +141,55 @@ def test_masks_forbid_what_the_line_env_forbids():
                 masked_requests += 1
                 assert not infos[agent]["tamped_sections"] and infos[agent]["possession_share"] == 0.0
     assert masked_requests >= 2  # section 2 at the start, section 0 the step after its tamping
+
+
+CHOICE_IDS = ("trackenv/TampingLine-v1", "trackenv/TampingLineWet-v0")
+CHOICE_SMALL = {"n_sections": 4, "capacity": 3, "horizon_years": 0.75}  # 3 steps
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("env_id", CHOICE_IDS)
+def test_pettingzoo_api_and_seed_tests_on_the_choices(env_id):
+    env = line_parallel_env(env_id, **CHOICE_SMALL)
+    assert env.action_space("section_0") == gym.spaces.Discrete(len(CHOICES))
+    assert env.observation_space("section_0")["action_mask"].shape == (len(CHOICES),)
+    assert {"section_measurement_age", "section_survey"} <= set(env.feature_names)
+    parallel_api_test(env, num_cycles=100)
+    parallel_seed_test(lambda: line_parallel_env(env_id, **CHOICE_SMALL))
+
+
+def test_choices_split_the_possession_among_the_sections_with_track_work():
+    """Random choices drawn within each agent's mask, on the wet line under a budget small enough to mask:
+    the masks are the line env's, the agents' rewards add up to the line's, and the possession is shared by the
+    sections with track work only (an inspection or a survey pays none of it)."""
+    kwargs = {**CHOICE_SMALL, "horizon_years": 2.0, "annual_budget": 80.0}
+    single = gym.make("trackenv/TampingLineWet-v0", **kwargs)
+    parallel = line_parallel_env("trackenv/TampingLineWet-v0", **kwargs)
+    single.reset(seed=3)
+    observations, _ = parallel.reset(seed=3)
+    agents = parallel.possible_agents
+    rng = np.random.default_rng(0)
+    kinds = set()
+    while parallel.agents:
+        masks = np.stack([observations[agent]["action_mask"] for agent in agents])
+        np.testing.assert_array_equal(masks, single.unwrapped.action_masks().reshape(len(agents), len(CHOICES)))
+        joint = np.array([rng.choice(np.flatnonzero(row)) for row in masks])
+        _, reward, _, _, info = single.step(joint)
+        observations, rewards, _, _, infos = parallel.step(dict(zip(agents, joint.tolist())))
+        assert sum(rewards.values()) == pytest.approx(reward, rel=1e-12, abs=1e-9)
+        worked = IS_TRACK_WORK[info["section_choices"]]
+        possession = info["costs"]["possession"]
+        assert (possession > 0) == worked.any()
+        for j, agent in enumerate(agents):
+            share = possession / worked.sum() if worked[j] else 0.0
+            assert infos[agent]["possession_share"] == pytest.approx(share, rel=1e-12)
+            assert infos[agent]["section_choices"] == info["section_choices"][j]
+            assert rewards[agent] == pytest.approx(-(info["section_costs"][j] + share), rel=1e-12, abs=1e-12)
+        kinds |= {CHOICES[c] for c in info["section_choices"]}
+    assert {"inspect", "survey"} & kinds and {"spot_tamp", "drainage", "renew"} & kinds  # the rule was exercised
+    with pytest.raises(ValueError, match=r"must be a choice code in \[0, 6\], got 7"):
+        parallel.reset(seed=0)
+        parallel.step({**dict.fromkeys(agents, 0), "section_1": 7})
 
 
 def test_render_passes_through():
