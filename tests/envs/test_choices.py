@@ -381,5 +381,5 @@ def test_the_section_level_flat_and_mask_wrappers_take_the_choices():
     masked = ActionMaskObservation(base)
     obs, _ = masked.reset(seed=0)
     assert obs["action_mask"].shape == (4 * len(CHOICES),) and masked.observation_space.contains(obs)
-    with pytest.raises(TypeError, match="MultiBinary"):
-        RankedActions(base)
+    # the ranked form of the choices: one count per choice (tests/envs/test_ranking.py)
+    assert RankedActions(base).action_space == gym.spaces.MultiDiscrete([5] * len(INTERVENTIONS))

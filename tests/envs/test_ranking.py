@@ -13,7 +13,13 @@ from gymnasium import spaces
 import trackenv.envs  # noqa: F401  (registers the ids)
 from trackenv.envs.choices import CHOICES, INTERVENTIONS, NOTHING, code
 from trackenv.envs.ranking import PRECEDENCE, rank_mask, ranked_choice_masks, ranked_to_choices, score_keys
-from trackenv.envs.wrappers import MultiDiscreteActions, RankedActions, make_ranked, make_ranked_vector
+from trackenv.envs.wrappers import (
+    MultiDiscreteActions,
+    RankedActions,
+    RankedVectorActions,
+    make_ranked,
+    make_ranked_vector,
+)
 
 TAMP, SPOT, DRAIN, RENEW, INSPECT, SURVEY = (code(n) for n in INTERVENTIONS)
 SMALL = {"n_sections": 4, "capacity": 3, "horizon_years": 2.0}  # 8 steps
@@ -180,3 +186,21 @@ def test_maskable_ppo_learns_on_ranked_choices() -> None:
     obs = venv.reset()
     action, _ = model.predict(obs, action_masks=get_action_masks(venv), deterministic=True)
     assert get_action_masks(venv)[0].reshape(len(INTERVENTIONS), 5)[np.arange(len(INTERVENTIONS)), action[0]].all()
+
+
+def test_ranked_choices_over_gymnasiums_sync_vector_env() -> None:
+    """Over Gymnasium's SyncVectorEnv (an env without a batched form) the masks come from its envs, and the
+    rollout is that of the native vector env."""
+    native = make_ranked_vector(2, env_id="trackenv/TampingLine-v1", **SMALL)
+    sync = RankedVectorActions(gym.make_vec("trackenv/TampingLine-v1", num_envs=2, vectorization_mode="sync",
+                                            **SMALL))
+    native.reset(seed=[7, 8])
+    sync.reset(seed=[7, 8])
+    rng = np.random.default_rng(2)
+    for _ in range(4):
+        np.testing.assert_array_equal(sync.action_masks(), native.action_masks())
+        counts = rng.integers(0, 5, (2, len(INTERVENTIONS)))
+        _, sync_rewards, *_, sync_infos = sync.step(counts)
+        _, native_rewards, *_, native_infos = native.step(counts)
+        np.testing.assert_array_equal(sync_rewards, native_rewards)
+        np.testing.assert_array_equal(sync_infos["section_choices"], native_infos["section_choices"])

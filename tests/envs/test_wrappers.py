@@ -16,6 +16,7 @@ from trackenv.envs.wrappers import (
     RankedActions,
     SectionObservation,
     make_ranked,
+    make_ranked_vector,
     n_sections_of,
     ranked_to_sections,
     section_keys,
@@ -164,7 +165,6 @@ def test_ranked_flat_vector_falls_back_to_sync_vector_env(vector_entry_point) ->
     env_id = f"trackenv_test/TampingVector{'None' if vector_entry_point is None else 'SameStep'}-v0"
     if env_id not in gym.registry:
         gym.register(env_id, entry_point="trackenv.envs.tamping:TampingEnv", vector_entry_point=vector_entry_point)
-    from trackenv.envs.wrappers import make_ranked_vector
 
     venv = make_ranked_vector(2, env_id=env_id, flat=True, config=CFG)
     assert isinstance(venv.unwrapped, gym.vector.SyncVectorEnv)
@@ -173,3 +173,28 @@ def test_ranked_flat_vector_falls_back_to_sync_vector_env(vector_entry_point) ->
     assert obs.shape == (2, FLAT_SIZE)
     obs, rewards, *_ = venv.step(np.array([3, 0]))
     assert venv.observation_space.contains(obs) and np.all(rewards < 0)
+
+
+def test_tamping_only_ranked_wrappers_are_the_k_worst_by_a_plain_sort() -> None:
+    """The tamp-or-wait ranked wrappers, single and vector, against the line env driven by a reference decoding
+    written out here (a stable sort of the observed SDs): the same rewards and tampings, bit for bit (the ranked
+    form of the choices shares their code and must leave them as they were)."""
+    env_id, kwargs, seeds = "trackenv/TampingLineSmall-v0", {"n_sections": 4, "horizon_years": 1.0}, [5, 6]
+    single = RankedActions(gym.make(env_id, **kwargs))
+    venv = make_ranked_vector(2, env_id=env_id, **kwargs)
+    bases = [gym.make(env_id, **kwargs) for _ in seeds]
+    single.reset(seed=seeds[0])
+    venv.reset(seed=seeds)
+    observations = [base.reset(seed=s)[0] for base, s in zip(bases, seeds)]
+    for counts in [(2, 4), (0, 1), (3, 3), (1, 0)]:
+        _, rewards, _, _, infos = venv.step(np.array(counts))
+        _, reward, *_, info = single.step(counts[0])
+        for i, (base, k) in enumerate(zip(bases, counts)):
+            action = np.zeros(4, dtype=np.int8)
+            action[np.argsort(-observations[i]["section_sd"], kind="stable")[:k]] = 1
+            observations[i], base_reward, *_, base_info = base.step(action)
+            assert rewards[i] == base_reward
+            np.testing.assert_array_equal(infos["tamped_sections"][i], base_info["tamped_sections"])
+            if i == 0:
+                assert reward == base_reward
+                np.testing.assert_array_equal(info["tamped_sections"], base_info["tamped_sections"])

@@ -96,8 +96,11 @@ def _masks(env) -> np.ndarray:
 
 
 def _vector_masks(env) -> np.ndarray:
-    """:func:`_masks` for vector envs (Gymnasium's vector wrappers have no ``get_wrapper_attr``)."""
+    """:func:`_masks` for vector envs (Gymnasium's vector wrappers have no ``get_wrapper_attr``); over
+    Gymnasium's SyncVectorEnv, its envs' masks stacked."""
     while not hasattr(type(env), "action_masks"):
+        if isinstance(env, gym.vector.SyncVectorEnv):
+            return np.stack(env.call("action_masks"))
         if not hasattr(env, "env"):
             raise AttributeError(f"no layer of {env} defines action_masks")
         env = env.env
