@@ -35,7 +35,7 @@ each step; without it, ``predict`` acts on the observation alone).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -50,6 +50,7 @@ from trackenv.envs.choices import (
     SURVEY,
     TAMP,
     enabled_codes,
+    work_on_sections,
     work_per_code,
 )
 from trackenv.envs.line_config import LineConfig
@@ -109,7 +110,8 @@ class ChoiceThreshold(GroupedThreshold):
                  inspect_margin_mm: float = 0.0, inspect_age_years: float = 0.5, inspect_peak_mm: float = 0.0,
                  check_peak_mm: float = 0.0,
                  choices: tuple[str, ...] = CHOICES[1:], choice_work: Mapping[str, float] | None = None,
-                 min_steps_between_tampings: int = 1, **kw: Any) -> None:
+                 length_factors: Sequence[float] | None = None, min_steps_between_tampings: int = 1,
+                 **kw: Any) -> None:
         params = {"spot_peak_mm": spot_peak_mm, "drain_surveyed": bool(drain_surveyed),
                   "drain_after_tampings": int(drain_after_tampings),
                   "fast_growth_mm_per_year": fast_growth_mm_per_year,
@@ -132,15 +134,18 @@ class ChoiceThreshold(GroupedThreshold):
         self.enabled = enabled_codes(allowed)
         # unbound: the work of the default config's choices
         self.work = work_per_code(choice_work if choice_work is not None else LineConfig().choice_work)
+        #: each section's length over the line's (its tamping's and renewal's work scale with it; unbound: 1)
+        self.length_factors = np.asarray(length_factors, dtype=float) if length_factors is not None else 1.0
         self.is_work = IS_TRACK_WORK
         self.min_steps = int(min_steps_between_tampings)
 
     def bind(self, config: Any) -> ChoiceThreshold:
-        """A copy that knows ``config``'s calendar, capacity, enabled choices, their work and the steps between
-        track work on a section."""
+        """A copy that knows ``config``'s calendar, capacity, enabled choices, their work (on each section: its
+        length's) and the steps between track work on a section."""
         return type(self)(**self.params, steps_per_year=config.steps_per_year, horizon_steps=config.horizon_steps,
                           capacity=config.capacity, choices=tuple(config.choices),
-                          choice_work=config.choice_work, min_steps_between_tampings=config.min_steps_between_tampings)
+                          choice_work=config.choice_work, length_factors=tuple(config.length_factors),
+                          min_steps_between_tampings=config.min_steps_between_tampings)
 
     # ------------------------------------------------------------------ the decision
     def _wanted(self, obs: dict[str, np.ndarray], step: np.ndarray, last_spot: np.ndarray,
@@ -207,7 +212,8 @@ class ChoiceThreshold(GroupedThreshold):
         since_tamping = np.rint(np.asarray(obs["years_since_tamping"], dtype=float) * self.steps_per_year)
         since = np.minimum(since_tamping, step[:, None] - last_work)
         codes = np.where(self.is_work[codes] & (since <= self.min_steps), 0, codes)
-        keep = fit_worst(self.work[codes], np.asarray(obs["section_sd"], dtype=float), self.capacity)
+        work = work_on_sections(self.work, codes, self.length_factors)
+        keep = fit_worst(work, np.asarray(obs["section_sd"], dtype=float), self.capacity)
         return np.where(keep, codes, 0)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
