@@ -35,7 +35,7 @@ each step; without it, ``predict`` acts on the observation alone).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -110,8 +110,7 @@ class ChoiceThreshold(GroupedThreshold):
                  inspect_margin_mm: float = 0.0, inspect_age_years: float = 0.5, inspect_peak_mm: float = 0.0,
                  check_peak_mm: float = 0.0,
                  choices: tuple[str, ...] = CHOICES[1:], choice_work: Mapping[str, float] | None = None,
-                 length_factors: Sequence[float] | None = None, min_steps_between_tampings: int = 1,
-                 **kw: Any) -> None:
+                 min_steps_between_tampings: int = 1, **kw: Any) -> None:
         params = {"spot_peak_mm": spot_peak_mm, "drain_surveyed": bool(drain_surveyed),
                   "drain_after_tampings": int(drain_after_tampings),
                   "fast_growth_mm_per_year": fast_growth_mm_per_year,
@@ -134,8 +133,6 @@ class ChoiceThreshold(GroupedThreshold):
         self.enabled = enabled_codes(allowed)
         # unbound: the work of the default config's choices
         self.work = work_per_code(choice_work if choice_work is not None else LineConfig().choice_work)
-        #: each section's length over the line's (its tamping's and renewal's work scale with it; unbound: 1)
-        self.length_factors = np.asarray(length_factors, dtype=float) if length_factors is not None else 1.0
         self.is_work = IS_TRACK_WORK
         self.min_steps = int(min_steps_between_tampings)
 
@@ -212,7 +209,7 @@ class ChoiceThreshold(GroupedThreshold):
         since_tamping = np.rint(np.asarray(obs["years_since_tamping"], dtype=float) * self.steps_per_year)
         since = np.minimum(since_tamping, step[:, None] - last_work)
         codes = np.where(self.is_work[codes] & (since <= self.min_steps), 0, codes)
-        work = work_on_sections(self.work, codes, self.length_factors)
+        work = work_on_sections(self.work, codes, 1.0 if self.length_factors is None else self.length_factors)
         keep = fit_worst(work, np.asarray(obs["section_sd"], dtype=float), self.capacity)
         return np.where(keep, codes, 0)
 

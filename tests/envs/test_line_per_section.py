@@ -135,11 +135,12 @@ def test_per_section_values_round_trip_and_keep_the_config_hashable():
 
 
 def test_the_masks_and_the_rules_count_a_sections_work_by_its_length():
-    """The env's first masks (before a reset), the engine's and the choice rule's capacity agree on a line with
-    sections of several lengths."""
+    """The env's first masks (before a reset), the engine's and the rules' capacity agree on a line with sections
+    of several lengths."""
     from trackenv.envs.env import _masks
     from trackenv.envs.line import TampingLine
     from trackenv_agents.rules.choices import ChoiceThreshold
+    from trackenv_agents.rules.line import GroupedThreshold
 
     c = LineConfig(**{**BASE, "capacity": 2}, per_section={"section_length_m": (200.0, 300.0, 100.0, 200.0)},
                    choices=("tamp", "renew"))
@@ -153,3 +154,7 @@ def test_the_masks_and_the_rules_count_a_sections_work_by_its_length():
                                                      "section_sd": np.array([[1.0, 2.0, 3.0, 0.5]])},
                           np.zeros(1, dtype=np.int64), np.full((1, 4), -10))
     assert codes.tolist() == [[0, 1, 1, 0]]  # 1.5 + 0.5 fit a capacity of 2; the mildest section is left
+    tamp = GroupedThreshold().bind(c)._cap(np.array([[True, True, True, False]]),
+                                           {"section_sd": np.array([[1.0, 2.0, 3.0, 0.5]])})
+    assert tamp.tolist() == [[False, True, True, False]]  # the line rules count work too
+    assert GroupedThreshold().bind(LineConfig(**BASE)).length_factors is None  # one length: sections, as before
