@@ -120,6 +120,14 @@ def test_bad_per_section_values_are_refused_naming_the_field(per_section, messag
         LineConfig(**BASE, per_section=per_section)
 
 
+def test_every_sections_speed_is_checked_against_the_passes_time_steps():
+    """A pass the dynamics could not take (too many time steps at a slow section's speed) is refused by the config,
+    naming the per-section speed, where the line's speed alone is fine."""
+    LineConfig(n_sections=2, capacity=1, dt=1e-5)
+    with pytest.raises(ValueError, match=r"per_section\['speed_kmh'\] and dt: .*MAX_TIME_STEPS"):
+        LineConfig(n_sections=2, capacity=1, dt=1e-5, per_section={"speed_kmh": (100.0, 5.0)})
+
+
 def test_per_section_needs_one_section_per_segment():
     with pytest.raises(ValueError, match="per_section needs sections_per_segment = 1"):
         LineConfig(n_sections=4, section_length_m=10.0, segment_length_m=40.0, sections_per_segment=4, capacity=4,
