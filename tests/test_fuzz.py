@@ -173,6 +173,49 @@ def test_vector_env_seed_and_actions(venv: TampingVectorEnv, seed, action) -> No
         _assert_finite(*out)
 
 
+# a section's own length, speed and traffic (``per_section``): any names, any values, any count
+per_section_values = st.dictionaries(
+    st.sampled_from(["section_length_m", "speed_kmh", "annual_mgt", "freight_share", "axle_load_t"]),
+    mostly(st.lists(mostly(st.floats(0, 400), 6), min_size=2, max_size=4), 4), max_size=3)
+
+
+@FUZZ
+@given(per_section=mostly(per_section_values, 4), n_sections=st.integers(2, 4))
+def test_per_section_config_refuses_or_stores_canonical_values(per_section, n_sections) -> None:
+    """A config refuses per-section values naming per_section (or a field whose bound they set), or stores them
+    as floats in range, one per section."""
+    kw = {"per_section": per_section, "n_sections": n_sections, "capacity": 1, "segment_length_m": 12.0}
+    _refuses_or_stores_canonical_values(LineConfig, kw)
+    try:
+        cfg = LineConfig(**kw)
+    except ValueError:
+        return
+    for name, values in cfg.per_section:
+        assert len(values) == n_sections and all(type(v) is float and math.isfinite(v) for v in values), name
+        assert (cfg.section_values(name) == values).all()
+
+
+# three values each, mostly in the ranges of the fields (a share, a speed, a length or a tonnage)
+three_values = st.lists(st.one_of(st.floats(0, 1), st.floats(12, 300), st.floats(0, 400)), min_size=3, max_size=3)
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 12)
+@given(per_section=st.dictionaries(st.sampled_from(["section_length_m", "speed_kmh", "annual_mgt", "freight_share"]),
+                                   three_values, max_size=3), seed=st.integers(0, 2**16))
+def test_a_line_with_per_section_values_refuses_or_steps_finitely(per_section, seed) -> None:
+    """A three-section line with fuzzed per-section values is refused naming per_section, or resets and steps
+    with finite observations and reward."""
+    kw = {"n_sections": 3, "capacity": 3, "segment_length_m": 12.0, "horizon_years": 0.5}
+    try:
+        env = TampingLine(LineConfig(**kw, per_section=per_section))
+    except ValueError as e:
+        _assert_names(e, ["per_section", "segment_length_m"])
+        return
+    event("stepped")
+    env.reset(seed=seed)
+    _assert_finite(*env.step(np.array([1, 0, 1], dtype=np.int8))[:2])
+
+
 # the choices: config fields and actions, on the same short track (a segment of three sections) with wet spots,
 # short defects and a survey before the start, so that every choice acts
 choice_names = st.lists(st.sampled_from([*INTERVENTIONS, "grind", ""]), max_size=7)

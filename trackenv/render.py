@@ -60,7 +60,8 @@ def segment_frame(batch, line: int, info: dict) -> np.ndarray:
 def line_frame(batch, line: int, info: dict) -> np.ndarray:
     """An RGB array (H, W, 3) of line ``line`` of a :class:`~trackenv.envs.line_episode.LineBatch`: per section
     the true SD and D1 mean-to-peak (bars, from the physics) and the last measured ones (dots, what the planner
-    sees), against the SD alert limit and the mean-to-peak alert, intervention and immediate-action limits;
+    sees), against the SD alert limit and the mean-to-peak alert, intervention and immediate-action limits (of
+    each section's speed band);
     sections tamped this step (``info["tamped_sections"]``) shaded, known zones of the register labelled."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -68,16 +69,18 @@ def line_frame(batch, line: int, info: dict) -> np.ndarray:
     c = batch.config
     r = batch.rows(line)
     x = np.arange(c.n_sections)
-    lim = batch.limits
+    def lim(name: str) -> np.ndarray:  # each section's, of its speed band
+        return batch.section_limits(name)[r]
+
     tamped = info.get("tamped_sections", np.zeros(c.n_sections, dtype=bool))
     fig = Figure(figsize=(8, 5), dpi=80)
     canvas = FigureCanvasAgg(fig)
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
     panels = (
-        (ax1, batch.sd[r], batch.measured_sd[r], "SD of D1 [mm]", ((lim.sd_alert_m, "orange", "SD alert"),)),
+        (ax1, batch.sd[r], batch.measured_sd[r], "SD of D1 [mm]", ((lim("sd_alert_m"), "orange", "SD alert"),)),
         (ax2, batch.peak[r], batch.measured_peak[r], "D1 mean-to-peak [mm]",
-         ((lim.alert_m, "orange", "alert"), (lim.intervention_m, "C1", "intervention"),
-          (lim.immediate_action_m, "red", "immediate action"))),
+         ((lim("alert_m"), "orange", "alert"), (lim("intervention_m"), "C1", "intervention"),
+          (lim("immediate_action_m"), "red", "immediate action"))),
     )
     for ax, true_m, measured_m, label, limits in panels:
         for s in np.flatnonzero(tamped):
@@ -85,7 +88,10 @@ def line_frame(batch, line: int, info: dict) -> np.ndarray:
         ax.bar(x, true_m * 1e3, width=0.6, color="0.6", label="true")
         ax.plot(x, measured_m * 1e3, "o", color="C0", ms=5, label="measured")
         for value_m, color, name in limits:
-            ax.axhline(value_m * 1e3, color=color, ls="--", lw=0.8, label=name)
+            if (value_m == value_m[0]).all():
+                ax.axhline(value_m[0] * 1e3, color=color, ls="--", lw=0.8, label=name)
+            else:  # sections of several speed bands: each section's limit
+                ax.step(x, value_m * 1e3, where="mid", color=color, ls="--", lw=0.8, label=name)
         ax.set_ylabel(label)
         ax.legend(loc="upper left", fontsize=7, ncol=3)
     zone = {1: "transition", 2: "switch"}

@@ -70,6 +70,7 @@ from trackenv.envs.choices import (
     TAMP,
     code,
     enabled_codes,
+    work_on_sections,
     work_per_code,
 )
 
@@ -184,7 +185,6 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     differs. Until then it costs nothing. The numbers are those of replaying every candidate from the start
     (a segment's numbers do not depend on its batch; tested), at a fraction of the passes."""
     from trackenv.envs.line_episode import LineBatch
-    from trackenv.physics.geometry import classify
 
     S, H = config.n_sections, config.horizon_steps
     seeds = sorted({int(e) for e, _, _ in candidates})
@@ -225,7 +225,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
     G = bt.n_lines * S
     acc, sched, restr = np.zeros(G), np.zeros((G, H), dtype=np.int8), np.zeros((G, H), dtype=bool)
     free = len(starts)
-    limit = bt.limits.intervention_m
+    limit = bt.section_limits("intervention_m")  # each section's, of its speed band
     enabled = enabled_codes(config.choices)
     with_choices = [p for p in policy if isinstance(p, TrueStateRule) and not p.tamping_only]
     needs_count = any(p.renew_count < np.inf for p in with_choices)
@@ -242,7 +242,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
             h = row[i] if row[i] >= 0 else host[parent[i]]
             p = policy[i]
             if isinstance(p, TrueStateRule):
-                w = p.decide(t, H, sd[h], peak[h], limit, wet[h], working[h], count[h])
+                w = p.decide(t, H, sd[h], peak[h], limit[h], wet[h], working[h], count[h])
             else:
                 w = int(p[t])
             if not enabled[w] or (IS_TRACK_WORK[w] and not allowed[h]):
@@ -264,7 +264,7 @@ def replay_sections(config: Any, candidates: list[tuple[int, int, Any]],
         bt.traffic_rows(act, t)
         acc[act] += bt.section_costs()[act]
         sched[act, t] = codes[act]
-        restr[act, t] = classify(bt.true_quality()[1][act], bt.limits) >= 2
+        restr[act, t] = bt.classify_rows(bt.true_quality()[1][act], act) >= 2
     out = host[n_roots:]
     return acc[out], sched[out], restr[out]
 
@@ -316,7 +316,8 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     """Exact episode cost of a plan (H, S) of choice codes (bool: tamp) whose sections cost ``section_cost``
     (S,): their costs and a possession per step with track work; inf where a step's work exceeds the capacity."""
     codes = np.asarray(plan, dtype=np.int64)
-    if (work_per_code(config.choice_work)[codes].sum(axis=1) > config.capacity + 1e-9).any():
+    work = work_on_sections(work_per_code(config.choice_work), codes, config.length_factors[None, :])
+    if (work.sum(axis=1) > config.capacity + 1e-9).any():
         return np.inf
     return float(section_cost.sum() + config.possession_cost * np.count_nonzero(IS_TRACK_WORK[codes].any(axis=1)))
 
@@ -337,7 +338,8 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     bool, cost) of section j; the total is the sections' costs plus the possession cost of every step with track
     work, within the capacity (:func:`_total`). Solved exactly as a small integer program (HiGHS through
     :func:`scipy.optimize.milp`): binaries x[j, o] (section j takes option o, one per section) and y[t] (a
-    campaign at step t) with Σ_j,o work[j, o, t]·x[j, o] <= capacity·y[t] (work: the choice's ``choice_work``;
+    campaign at step t) with Σ_j,o work[j, o, t]·x[j, o] <= capacity·y[t] (work: the choice's ``choice_work``,
+    a tamping's and a renewal's scaled by the section's length;
     track work of no work counts 1e-9, so that it still needs the campaign). Returns the choice (S,) and its
     total; never worse than ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the
     optimum."""
@@ -354,7 +356,9 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + H))
     # track work at step t needs a campaign at t, of at most capacity work
     codes = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(np.int64)  # (nx, H)
-    work = np.where(IS_TRACK_WORK, np.maximum(work_per_code(config.choice_work), 1e-9), 0.0)[codes]
+    length = config.length_factors[rows][:, None]  # each option's section's
+    work = work_on_sections(np.where(IS_TRACK_WORK, np.maximum(work_per_code(config.choice_work), 1e-9), 0.0), codes,
+                            length)
     r, q = np.nonzero(work.T)
     load = coo_array((np.concatenate([work.T[r, q], np.full(H, -float(config.capacity))]),
                       (np.concatenate([r, np.arange(H)]), np.concatenate([q, nx + np.arange(H)]))),

@@ -50,6 +50,7 @@ from trackenv.envs.choices import (
     SURVEY,
     TAMP,
     enabled_codes,
+    work_on_sections,
     work_per_code,
 )
 from trackenv.envs.line_config import LineConfig
@@ -136,11 +137,12 @@ class ChoiceThreshold(GroupedThreshold):
         self.min_steps = int(min_steps_between_tampings)
 
     def bind(self, config: Any) -> ChoiceThreshold:
-        """A copy that knows ``config``'s calendar, capacity, enabled choices, their work and the steps between
-        track work on a section."""
+        """A copy that knows ``config``'s calendar, capacity, enabled choices, their work (on each section: its
+        length's) and the steps between track work on a section."""
         return type(self)(**self.params, steps_per_year=config.steps_per_year, horizon_steps=config.horizon_steps,
                           capacity=config.capacity, choices=tuple(config.choices),
-                          choice_work=config.choice_work, min_steps_between_tampings=config.min_steps_between_tampings)
+                          choice_work=config.choice_work, length_factors=tuple(config.length_factors),
+                          min_steps_between_tampings=config.min_steps_between_tampings)
 
     # ------------------------------------------------------------------ the decision
     def _wanted(self, obs: dict[str, np.ndarray], step: np.ndarray, last_spot: np.ndarray,
@@ -207,7 +209,8 @@ class ChoiceThreshold(GroupedThreshold):
         since_tamping = np.rint(np.asarray(obs["years_since_tamping"], dtype=float) * self.steps_per_year)
         since = np.minimum(since_tamping, step[:, None] - last_work)
         codes = np.where(self.is_work[codes] & (since <= self.min_steps), 0, codes)
-        keep = fit_worst(self.work[codes], np.asarray(obs["section_sd"], dtype=float), self.capacity)
+        work = work_on_sections(self.work, codes, 1.0 if self.length_factors is None else self.length_factors)
+        keep = fit_worst(work, np.asarray(obs["section_sd"], dtype=float), self.capacity)
         return np.where(keep, codes, 0)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):

@@ -22,13 +22,13 @@ The per-section hindsight bound is :mod:`trackenv_agents.evaluation.line_hindsig
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from trackenv.envs.line_episode import keep_worst
+from trackenv.envs.line_episode import fit_worst, keep_worst
 
 from .base import Heuristic, as_batch
 
@@ -67,15 +67,24 @@ def planner_view(obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 class LineHeuristic(Heuristic):
     """Base: knows the line's calendar and capacity once bound to its config."""
 
-    def __init__(self, steps_per_year: int = 4, horizon_steps: int = 40, capacity: int = 6, **params: Any) -> None:
+    #: each section's length over the line's, where sections differ in length (else None)
+    length_factors: np.ndarray | None = None
+
+    def __init__(self, steps_per_year: int = 4, horizon_steps: int = 40, capacity: int = 6,
+                 length_factors: Sequence[float] | None = None, **params: Any) -> None:
         super().__init__(**params)
         self.steps_per_year = int(steps_per_year)
         self.horizon_steps = int(horizon_steps)
         self.capacity = int(capacity)
+        #: each section's length over the line's (``LineConfig.length_factors``: a tamping's work scales with it);
+        #: None where every section has the line's length
+        factors = None if length_factors is None else np.asarray(length_factors, dtype=float)
+        self.length_factors = None if factors is None or (factors == 1.0).all() else factors
 
     def bind(self, config: Any) -> LineHeuristic:
         return type(self)(**self.params, steps_per_year=config.steps_per_year,
-                          horizon_steps=config.horizon_steps, capacity=config.capacity)
+                          horizon_steps=config.horizon_steps, capacity=config.capacity,
+                          length_factors=getattr(config, "length_factors", None))
 
     def _step(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         return np.rint(obs["time"][:, 0].astype(float) * self.horizon_steps).astype(int)
@@ -84,7 +93,12 @@ class LineHeuristic(Heuristic):
         return max(int(round(years * self.steps_per_year)), 1)
 
     def _cap(self, want: np.ndarray, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return keep_worst(want, obs["section_sd"], self.capacity)
+        """``want`` within the capacity, worst measured SD first: in sections, or in their work where sections
+        differ in length."""
+        if self.length_factors is None:
+            return keep_worst(want, obs["section_sd"], self.capacity)
+        work = np.where(want, self.length_factors, 0.0)
+        return want & fit_worst(work, np.asarray(obs["section_sd"], dtype=float), self.capacity)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         b, batched = as_batch(obs)

@@ -167,12 +167,20 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-#: The example line (``trackenv/lines/example.yaml``): 100 sections of 200 m. Zones by section number (1-based).
+#: The example line (``trackenv/lines/example.yaml``): 100 sections, most of 200 m. Zones by section number
+#: (1-based).
 EXAMPLE_STATION = (47, 48, 49, 50, 51)  # a station with switches at both throats (47, 48, 51)
+EXAMPLE_STATION_SPEED_KMH = 80.0  # through the station's switches, against 120 km/h on the line
 EXAMPLE_SWITCHES = (47, 48, 51, 35, 88)  # and two level crossings
 EXAMPLE_BRIDGES = (22, 78)  # each with a transition zone on both approaches
 EXAMPLE_WET = (12, 13, 14, 15, 63, 64, 65, 66)  # two cuttings known to be wet
-EXAMPLE_BRANCH_FROM = 49  # a freight branch joins at the station: more traffic from here on
+EXAMPLE_BRANCH_FROM = 49  # a freight branch joins at the station: more traffic from here on, most of it freight
+#: Traffic before / from the branch: MGT a year and freight share (the branch adds 6 MGT, nearly all freight:
+#: (18 × 0.35 + 6) / 24 ≈ 0.5) **[assumption]**.
+EXAMPLE_TRAFFIC = ((18.0, 0.35), (24.0, 0.5))
+#: Sections of other lengths than 200 m (the bridges' own sections, and two longer plain ones): the line stays
+#: 20 km.
+EXAMPLE_LENGTHS_M = {22: 150.0, 78: 150.0, 30: 250.0, 90: 250.0}
 #: Tamping cycles [years] by class in the example's past (a railway's usual order: switches and transitions
 #: most often) **[assumption]**.
 EXAMPLE_CYCLES = {"plain": 5.0, "wet": 3.0, "transition": 2.0, "switch_or_crossing": 1.5}
@@ -190,10 +198,11 @@ def example_line(seed: int = 2026, history_years: float = 5.0) -> tuple[LineDesc
     (the factor times its drawn field's roughness over the class's typical one, what the fit estimates)."""
     rng = np.random.default_rng(seed)
     n = 100
-    rho = math.exp(-200.0 / 600.0)
+    lengths = [EXAMPLE_LENGTHS_M.get(j, 200.0) for j in range(1, n + 1)]
     z = np.empty(n)
     z[0] = rng.standard_normal()
-    for j in range(1, n):
+    for j in range(1, n):  # AR(1) over the distance between the sections' centres
+        rho = math.exp(-(lengths[j - 1] + lengths[j]) / 2 / 600.0)
         z[j] = rho * z[j - 1] + math.sqrt(1 - rho * rho) * rng.standard_normal()
     rates = np.clip(np.exp(0.5 * z - 0.125), 0.4, 2.0)  # no extreme sections in an example
     transitions = {b + d for b in EXAMPLE_BRIDGES for d in (-1, 1)}
@@ -203,17 +212,20 @@ def example_line(seed: int = 2026, history_years: float = 5.0) -> tuple[LineDesc
                     else "plain")
         kind = "wet" if j in EXAMPLE_WET else register
         cycle = EXAMPLE_CYCLES[kind]
+        mgt, share = EXAMPLE_TRAFFIC[j >= EXAMPLE_BRANCH_FROM]
         sections.append(Section(
-            id=f"S{j:03d}", length_m=200.0, register=register, wet=j in EXAMPLE_WET,
-            annual_mgt=24.0 if j >= EXAMPLE_BRANCH_FROM else 18.0, speed_kmh=120.0, freight_share=0.35,
+            id=f"S{j:03d}", length_m=lengths[j - 1], register=register, wet=j in EXAMPLE_WET, annual_mgt=mgt,
+            speed_kmh=EXAMPLE_STATION_SPEED_KMH if j in EXAMPLE_STATION else 120.0, freight_share=share,
             years_since_tamping=round(float(rng.uniform(0.0, cycle)) * 4) / 4,
             tampings_since_renewal=int(rng.integers(0, 4)), rate_factor=float(rates[j - 1])))
     start = LineDescription(name="Example Valley Line (synthetic)", as_of="2021-01-01", speed_kmh=120.0,
                             annual_mgt=18.0, freight_share=0.35, freight_axle_load_t=22.5, sections=tuple(sections),
                             description="A synthetic 20 km main line made by trackenv's engine: a "
-                                        "station with switches, two bridges with transition zones, two level "
-                                        "crossings, two cuttings known to be wet, a freight branch joining at the "
-                                        "station, five years of recording-car runs twice a year.")
+                                        "station with switches passed at 80 km/h, two bridges with transition "
+                                        "zones, two level crossings, two cuttings known to be wet, a freight "
+                                        "branch joining at the station (more tonnage, most of it freight, from "
+                                        "there on), sections of 150-250 m, five years of recording-car runs "
+                                        "twice a year.")
     steps = int(round(history_years * 4))
     tamp_at = {}
     for s in sections:

@@ -126,10 +126,14 @@ FAULTS = {
                               ["sections.csv, row 5", "id 'A' repeats row 3", "unique"]),
     "unknown section in history": (dict(history=HISTORY + "E,2025-01-01,1.0,3\n"),
                                    ["history.csv, row 9", "'E' is not a section of the sections file"]),
-    "varying speed": (dict(sections=SECTIONS.replace("annual_mgt,", "speed_kmh,").replace("no,30,", "no,80,")),
-                      ["row 5 (section C)", "speed_kmh: 80 differs from the line's 100", "one speed per line"]),
-    "varying length": (dict(sections=SECTIONS.replace("D,200", "D,150")),
-                       ["row 6 (section D)", "150 m differs", "same length"]),
+    "section speed out of range": (dict(sections=SECTIONS.replace("annual_mgt,", "speed_kmh,")
+                                        .replace("no,30,", "no,400,")),
+                                   ["row 5 (section C)", "speed_kmh: speed_kmh must lie in [5, 300], got 400"]),
+    "section freight share in per cent": (dict(sections=SECTIONS.replace("annual_mgt,", "freight_share,")
+                                               .replace("no,30,", "no,40,")),
+                                          ["row 5 (section C)", "freight_share", "per cent: give a fraction"]),
+    "section shorter than the segment": (dict(sections=SECTIONS.replace("D,200", "D,20")),
+                                         ["row 6 (section D)", "length_m: segment_length_m must lie in [12, 20]"]),
     "invalid YAML": (dict(line=LINE.replace("traffic:", "traffic: [")), ["line.yaml, line", "not valid YAML"]),
     "bad date": (dict(history=HISTORY.replace("2024-03-01", "01/03/2024")),
                  ["row 2 (section A)", "'01/03/2024' is not a date; write YYYY-MM-DD"]),
@@ -167,6 +171,32 @@ def test_every_fault_is_one_line_naming_file_row_and_field(tmp_path, kind):
 def test_a_missing_line_file_is_one_line(tmp_path):
     with pytest.raises(LineFileError, match=r"^no such line file: .*nowhere\.yaml$"):
         load_line(tmp_path / "nowhere.yaml")
+
+
+def test_a_sections_own_speed_traffic_and_length_load_into_the_config(tmp_path):
+    sections = (SECTIONS.replace("annual_mgt,", "annual_mgt,speed_kmh,freight_share,")
+                .replace("A,200,plain,no,,", "A,250,plain,no,,,,")
+                .replace("B,200,transition,no,,", "B,200,transition,no,,80,,")
+                .replace("C,200,switch_or_crossing,no,30,", "C,150,switch_or_crossing,no,30,80,0.7,")
+                .replace("D,200,plain,yes,,", "D,200,plain,yes,,,0.7,"))
+    line = load_line(write(tmp_path, sections=sections, history=None, line=LINE.replace("history: history.csv\n",
+                                                                                        "")))
+    assert [s.speed_kmh for s in line.sections] == [100.0, 80.0, 80.0, 100.0]  # blank: the line's
+    assert [s.freight_share for s in line.sections] == [0.4, 0.4, 0.7, 0.7]
+    assert line.section_length_m == 200.0 and line.length_m == 800.0  # the most common length is the line's
+    c = LineConfig(line=line)
+    assert c.section_length_m == 200.0
+    assert dict(c.per_section) == {"annual_mgt": (15.0, 15.0, 30.0, 15.0), "freight_share": (0.4, 0.4, 0.7, 0.7),
+                                   "section_length_m": (250.0, 200.0, 150.0, 200.0),
+                                   "speed_kmh": (100.0, 80.0, 80.0, 100.0)}
+    assert c.length_factors.tolist() == [1.25, 1.0, 0.75, 1.0]
+    # the file's values can be given again only as they are
+    assert LineConfig(line=line, per_section=dict(c.per_section)) == c
+    with pytest.raises(ValueError, match="per_section=.* conflicts with the line file"):
+        LineConfig(line=line, per_section={"speed_kmh": (100.0,) * 4})
+    batch = LineBatch(c, 1)
+    assert batch.pass_speed.tolist() == pytest.approx([100 / 3.6, 80 / 3.6, 80 / 3.6, 100 / 3.6])
+    assert batch.traffic_factor.tolist() == [1.0, 1.0, 2.0, 1.0]
 
 
 def test_a_line_dict_is_checked_as_a_file(line_file):
@@ -247,7 +277,7 @@ def test_the_engine_applies_the_file(line_file):
     assert obs["tampings_since_renewal"].tolist() == [1, 2, 0, 3]
     assert info["wet_spot_active"].tolist() == [False, False, False, True]  # known, wet from the start
     rows = env.engine.get_state(0).rows
-    assert rows["traffic_factor"].tolist() == [1.0, 1.0, 2.0, 1.0]
+    assert rows["traffic_factor"].tolist() == [1.0, 1.0, 2.0, 1.0]  # the config's (per_section annual_mgt)
     assert rows["wet_onset"][3] == -1  # not hidden: no onset to come
     # the sections with a fitted history start at the SD the fit gives
     fit = history_fit(env.config)
@@ -328,7 +358,10 @@ def test_the_fit_recovers_rates_the_engine_generated():
 @pytest.mark.slow
 def test_the_example_line_runs_an_episode():
     line = load_line(EXAMPLE)
-    assert line.n_sections == 100 and line.length_m == 20_000.0
+    assert line.n_sections == 100 and line.length_m == 20_000.0 and line.section_length_m == 200.0
+    assert {s.length_m for s in line.sections} == {150.0, 200.0, 250.0}
+    assert {s.speed_kmh for s in line.sections} == {80.0, 120.0}  # the station's switches
+    assert {(s.annual_mgt, s.freight_share) for s in line.sections} == {(18.0, 0.35), (24.0, 0.5)}  # the branch
     registers = [s.register for s in line.sections]
     assert registers.count("transition") == 4 and registers.count("switch_or_crossing") == 5
     assert sum(s.wet for s in line.sections) == 8 and len(line.history) > 1000

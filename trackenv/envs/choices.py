@@ -14,8 +14,9 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-__all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "RENEW",
-           "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "choice_counts", "code", "enabled_codes", "work_per_code"]
+__all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "PER_METRE",
+           "RENEW", "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "choice_counts", "code", "enabled_codes",
+           "work_on_sections", "work_per_code"]
 
 #: every choice, by action code
 CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
@@ -51,6 +52,19 @@ def work_per_code(choice_work: Mapping[str, float]) -> np.ndarray:
     """(len(CHOICES),) the possession work of each action code (nothing: 0), from ``choice_work`` by name
     (``LineConfig.choice_work``: tamping-section equivalents)."""
     return np.array([0.0] + [float(choice_work[name]) for name in INTERVENTIONS])
+
+
+#: per action code: whether its cost and possession work scale with the section's length (tamping, renewal)
+PER_METRE = np.array([name in ("tamp", "renew") for name in CHOICES])
+
+
+def work_on_sections(work: np.ndarray, codes: np.ndarray, length_factors: np.ndarray | float = 1.0) -> np.ndarray:
+    """The possession work of the action ``codes`` (any shape) on their sections, in tamping-section equivalents:
+    ``work[codes]`` (per code: :func:`work_per_code`), a tamping's and a renewal's times the section's
+    ``length_factors`` (its length over the line's section length, shaped like ``codes`` or broadcast to it;
+    ``LineConfig.length_factors``)."""
+    codes = np.asarray(codes, dtype=np.int64)
+    return work[codes] * np.where(PER_METRE[codes], length_factors, 1.0)
 
 
 def choice_counts(codes: np.ndarray) -> dict[str, int]:

@@ -14,13 +14,14 @@ from collections.abc import Mapping
 import numpy as np
 
 
-def section_quality_costs(sd_m: np.ndarray, section_class: np.ndarray, *, sd_alert_m: float,
-                          geometry_cost_per_section_year: float, steps_per_year: int,
+def section_quality_costs(sd_m: np.ndarray, section_class: np.ndarray, *, sd_alert_m: float | np.ndarray,
+                          geometry_cost_per_section_year: float | np.ndarray, steps_per_year: int,
                           class_costs: Mapping[str, tuple[int, float]]) -> dict[str, np.ndarray]:
     """The step's quality costs per section (k€, arrays shaped like ``sd_m``): ``"geometry"`` =
-    ``geometry_cost_per_section_year / steps_per_year · (sd_m / sd_alert_m)²``, and for each ``name: (cls,
-    cost)`` of ``class_costs`` the cost where ``section_class == cls`` (0 OK, 1 alert, 2 intervention, 3
-    immediate action: :func:`trackenv.physics.geometry.classify`)."""
+    ``geometry_cost_per_section_year / steps_per_year · (sd_m / sd_alert_m)²`` (the SD alert and the geometry
+    cost one for all, or per section: its speed band's, its length's), and for each ``name: (cls, cost)`` of
+    ``class_costs`` the cost where ``section_class == cls`` (0 OK, 1 alert, 2 intervention, 3 immediate action:
+    :func:`trackenv.physics.geometry.classify`)."""
     parts = {"geometry": geometry_cost_per_section_year / steps_per_year * (sd_m / sd_alert_m) ** 2}
     for name, (cls, cost) in class_costs.items():
         parts[name] = cost * (section_class == cls)

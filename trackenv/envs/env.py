@@ -27,7 +27,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from .batched import BatchedVectorEnv
-from .choices import CHOICES, enabled_codes, work_per_code
+from .choices import CHOICES, enabled_codes, work_on_sections, work_per_code
 from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
 from .line_config import LineConfig
 from .problems import EnvConfig, problem_of
@@ -49,7 +49,9 @@ def _masks(engine: Any, config: EnvConfig, n_rows: int, action_type: str) -> np.
         if not isinstance(config, LineConfig):  # the network takes tamp requests only (its action types)
             raise ValueError(f"action_type='choices' needs a line config, got {type(config).__name__}")
         if engine is None:
-            free = enabled_codes(config.choices) & (work_per_code(config.choice_work) <= config.capacity + 1e-9)
+            every = np.broadcast_to(np.arange(len(CHOICES)), (config.n_sections, len(CHOICES)))
+            work = work_on_sections(work_per_code(config.choice_work), every, config.length_factors[:, None])
+            free = enabled_codes(config.choices) & (work <= config.capacity + 1e-9)
             return action_mask(np.broadcast_to(free, (n_rows, config.n_sections, len(CHOICES))), action_type)
         return action_mask(engine.choice_mask(), action_type)
     allowed = engine.allowed() if engine is not None else np.ones((n_rows, config.n_sections), bool)

@@ -18,7 +18,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..physics._checks import check_bool, check_choice, check_field, check_int_field, check_time_steps
+from ..physics._checks import (
+    check_bool,
+    check_choice,
+    check_field,
+    check_int_field,
+    check_scalar,
+    check_time_steps,
+)
 from ..physics.contact import HertzContact
 from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
 from ..physics.track import Track
@@ -34,9 +41,15 @@ SLEEPER_SPACING_M = 0.6
 APPROACH_SLEEPERS = 10
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
-#: The fields a line file sets (``line``): its number of sections, their length and the line's traffic.
+#: The line's fields that may also be given per section (``per_section``), with their bounds: the one range of
+#: each, read by the line's value and by every section's.
+PER_SECTION_BOUNDS: dict[str, tuple[float, float]] = {
+    "section_length_m": (5.0, 1000.0), "speed_kmh": (5.0, 300.0), "annual_mgt": (0.1, 200.0),
+    "freight_share": (0.0, 1.0)}
+#: The fields a line file sets (``line``): its number of sections, their length, the line's traffic and what
+#: differs per section.
 LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt", "freight_share",
-                    "freight_axle_load_t")
+                    "freight_axle_load_t", "per_section")
 
 
 @dataclass(frozen=True)
@@ -121,16 +134,33 @@ class LineConfig(ConfigBase):
     a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch (2.4 m) settling
     ``local_defect_rate_factor`` (2.5) times faster **[assumption]**; such a short patch lies mostly below the D1
     band of 3-25 m, so it shows little in the measured level.
-    ``dt``: time step of the passes [s] or "auto" (default: per vehicle type, the coarsest step that keeps the
-    peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s for the
-    coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
+    ``dt``: time step of the passes [s] or "auto" (default: per vehicle type and speed, the coarsest step that
+    keeps the peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s
+    for the coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
+
+    **Per section** (``per_section``: a mapping of some of :data:`PER_SECTION_BOUNDS` to one value per section;
+    a field left out is the line's everywhere; needs ``sections_per_segment`` = 1, as each section then has a
+    pass of its own). ``speed_kmh``: the section's passes run at its speed (so do its time steps with
+    dt="auto"), and its quality limits are those of its speed band. ``freight_share``: the mix of its axle
+    passes (its equivalent force and, as freight axles carry more tonnes, how many there are) and the static
+    wheel load its contact sensor reads the dynamic share above. ``annual_mgt``: its axle passes scale with its
+    tonnage. ``section_length_m``: the section is still represented by a segment of ``segment_length_m`` (a
+    sample of its track: at most the shortest section), so its length changes what is counted per metre: its
+    tamping and renewal cost, the possession work of tamping or renewing it (in sections of the line's
+    ``section_length_m``, what ``capacity`` counts), its geometry cost, and the correlation of its settlement
+    rate with its neighbours' (over the distance between their centres). It does not change its dynamics, its
+    SD and mean-to-peak (those of its segment), the per-site choices (spot tamping, drainage) or the
+    per-section ones (inspection, survey, the costs of a quality class). The line's own fields stay the
+    reference: ``section_length_m`` is the unit of ``capacity``, ``speed_kmh`` the band of ``LineBatch.limits``
+    (a section's own: :meth:`~trackenv.envs.line_episode.LineBatch.section_limits`).
 
     **A line from a file** (``line``: the path of a line file, or a
     :class:`~trackenv.envs.line_file.LineDescription`; the documentation's page "Lines from files"): the file
-    sets :data:`LINE_FILE_FIELDS` (the number of sections, their length, the line's speed and traffic; giving
+    sets :data:`LINE_FILE_FIELDS` (the number of sections, the line's section length, speed and traffic, and
+    ``per_section``: the lengths, speeds, tonnages and freight shares that differ between its sections; giving
     one of them as well is an error unless it equals the file's) and, per section, the register, known wet
-    zones, traffic (a factor on the axle passes), years since tamping and tampings since renewal; where it
-    gives a measured history the section's rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
+    zones, years since tamping and tampings since renewal; where it gives a measured history the section's
+    rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
     the file does not know is drawn per episode as without one. ``capacity`` is at most the file's number of
     sections.
     """
@@ -203,6 +233,7 @@ class LineConfig(ConfigBase):
     local_defect_rate_factor: float = 2.5
     limits: tuple = ()
     dt: float | str = "auto"
+    per_section: tuple = ()
     line: LineDescription | None = None
 
     agent_action_types = ("multibinary", "discrete", "ranked", "choices", "ranked_choices")
@@ -216,11 +247,19 @@ class LineConfig(ConfigBase):
         # each check stores the value back in its canonical type
         c, ci = partial(check_field, self), partial(check_int_field, self)
         ci("n_sections", low=1, high=256)
-        c("section_length_m", low=5.0, high=1000.0)
+        lo, hi = PER_SECTION_BOUNDS["section_length_m"]
+        c("section_length_m", low=lo, high=hi)
         ci("sections_per_segment", low=1, high=64)
+        self._check_per_section()
         K = self.sections_per_segment
         if K == 1:
             bounded_by(self, "section_length_m", c, "segment_length_m", low=12.0, high=self.section_length_m)
+            lengths = self.section_values("section_length_m")
+            if (lengths < self.segment_length_m).any():  # a section is represented by a segment of its track
+                j = int(np.argmin(lengths))
+                raise ValueError(f"per_section['section_length_m'][{j}] must lie in [segment_length_m = "
+                                 f"{self.segment_length_m:g}, {PER_SECTION_BOUNDS['section_length_m'][1]:g}] (a "
+                                 f"section is represented by a segment of its track), got {lengths[j]:g}")
         else:  # the segment is its sections, end to end
             c("segment_length_m", low=12.0, high=2000.0)
             if abs(self.segment_length_m - K * self.section_length_m) > 1e-9 * self.segment_length_m:
@@ -231,9 +270,9 @@ class LineConfig(ConfigBase):
                 raise ValueError(f"n_sections must be a multiple of sections_per_segment = {K}, "
                                  f"got {self.n_sections}")
             # every section holds at least 8 sleepers: section_length_m >= 5 m at 0.6 m spacing
-        c("speed_kmh", low=5.0, high=300.0)
-        c("annual_mgt", low=0.1, high=200.0)
-        c("freight_share", low=0.0, high=1.0)
+        for name in ("speed_kmh", "annual_mgt", "freight_share"):
+            lo, hi = PER_SECTION_BOUNDS[name]
+            c(name, low=lo, high=hi)
         c("freight_axle_load_t", low=5.0, high=40.0)
         ci("steps_per_year", low=1, high=52)
         c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
@@ -272,6 +311,36 @@ class LineConfig(ConfigBase):
         object.__setattr__(self, "dt", check_dt_option(self.dt))
         self._check_pass_time_steps()
 
+    def _check_per_section(self) -> None:
+        """``per_section``: a mapping of names of :data:`PER_SECTION_BOUNDS` to one number per section, each in
+        the range of the line's field; stored as sorted (name, tuple of floats) items. Needs one section per
+        segment (the sections of a segment share their pass)."""
+        value = self.per_section
+        if isinstance(value, dict):
+            value = tuple(value.items())
+        allowed = f"a mapping of {list(PER_SECTION_BOUNDS)} to {self.n_sections} numbers each (one per section)"
+        try:
+            items = dict((str(k), v) for k, v in value)
+        except (TypeError, ValueError):
+            raise ValueError(f"per_section must be {allowed}, got {self.per_section!r}") from None
+        out = []
+        for name in sorted(items):
+            if name not in PER_SECTION_BOUNDS:
+                raise ValueError(f"per_section: unknown field {name!r}; allowed: {list(PER_SECTION_BOUNDS)}")
+            values = items[name]
+            if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") \
+                    or len(values) != self.n_sections:
+                raise ValueError(f"per_section[{name!r}] must be {self.n_sections} numbers (n_sections), got "
+                                 f"{values!r}")
+            lo, hi = PER_SECTION_BOUNDS[name]
+            out.append((name, tuple(check_scalar(f"per_section[{name!r}][{j}]", v, low=lo, high=hi)
+                                    for j, v in enumerate(values))))
+        object.__setattr__(self, "per_section", tuple(out))
+        if out and self.sections_per_segment != 1:
+            raise ValueError(f"per_section needs sections_per_segment = 1 (each section a pass of its own; the "
+                             f"sections of a segment share one), got sections_per_segment = "
+                             f"{self.sections_per_segment}")
+
     def _check_choices(self) -> None:
         """The enabled choices (stored as a tuple in the order of :data:`~trackenv.envs.choices.CHOICES`), their
         costs, work and noise, and the draws that only make sense with them."""
@@ -308,14 +377,22 @@ class LineConfig(ConfigBase):
         span to the end of the modelled track (:meth:`pass_length_m`); with dt="auto" a pass that loses contact
         is rerun at the reference step, so the finer of the two counts."""
         track = Track.realistic(30.0)  # the sleeper spacing and supports the auto step reads
-        for vehicle in self.vehicles():
-            system = vehicle.system()
-            finest = (min(auto_time_step(track, system, self.speed, HertzContact()), DT_REFERENCE_S)
-                      if isinstance(self.dt, str) else self.dt)
+        speeds = sorted({self.speed_kmh, *self.section_values("speed_kmh")})
+        for speed_kmh in speeds:
+            speed = speed_kmh / 3.6
             try:
-                check_time_steps(self.pass_length_m(system.span), self.speed, finest)
+                self.quality_limits.for_speed(speed)
             except ValueError as e:
-                raise ValueError(f"segment_length_m, speed_kmh and dt: {e}") from None
+                raise ValueError(f"per_section['speed_kmh'] and limits: {e}") from None
+            for vehicle in self.vehicles():
+                system = vehicle.system()
+                finest = (min(auto_time_step(track, system, speed, HertzContact()), DT_REFERENCE_S)
+                          if isinstance(self.dt, str) else self.dt)
+                try:
+                    check_time_steps(self.pass_length_m(system.span), speed, finest)
+                except ValueError as e:
+                    where = "speed_kmh" if speed_kmh == self.speed_kmh else "per_section['speed_kmh']"
+                    raise ValueError(f"segment_length_m, {where} and dt: {e}") from None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -334,6 +411,7 @@ class LineConfig(ConfigBase):
     def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d["initial_scale"] = tuple(self.initial_scale)
+        d["per_section"] = dict(self.per_section)
         d["line"] = None if self.line is None else self.line.to_dict()
         return d
 
@@ -373,6 +451,8 @@ class LineConfig(ConfigBase):
         defaults = {f.name: f.default for f in fields(self)}
         for name in LINE_FILE_FIELDS:
             value, theirs = getattr(self, name), getattr(line, name)
+            if name == "per_section":  # compared in its stored form
+                value = _items(value)
             if value != defaults[name] and value != theirs:
                 raise ValueError(f"{name}={value!r} conflicts with the line file {line.source}, which sets it to "
                                  f"{theirs!r}: leave it out")
@@ -401,8 +481,28 @@ class LineConfig(ConfigBase):
         more at each end (a wheelset has no span)."""
         return (self.n_sleepers - 1 + 2 * APPROACH_SLEEPERS) * SLEEPER_SPACING_M - span_m
 
+    def section_values(self, name: str) -> np.ndarray:
+        """(n_sections,) the value of the line field ``name`` (one of :data:`PER_SECTION_BOUNDS`) on each
+        section: its ``per_section`` values, or the line's everywhere."""
+        if name not in PER_SECTION_BOUNDS:
+            raise ValueError(f"name must be one of {list(PER_SECTION_BOUNDS)}, got {name!r}")
+        given = dict(self.per_section).get(name)
+        return np.array(given, dtype=float) if given is not None else np.full(self.n_sections, getattr(self, name))
+
+    @property
+    def length_factors(self) -> np.ndarray:
+        """(n_sections,) each section's length over the line's ``section_length_m``: what its costs and work per
+        metre are multiplied by (1 everywhere without per-section lengths)."""
+        return self.section_values("section_length_m") / self.section_length_m
+
+    @property
+    def traffic_factors(self) -> np.ndarray:
+        """(n_sections,) each section's annual tonnage over the line's: what its axle passes are multiplied by."""
+        return self.section_values("annual_mgt") / self.annual_mgt
+
     @property
     def section_tamping_cost(self) -> float:
+        """The tamping cost of a section of the line's ``section_length_m`` (k€)."""
         return self.tamping_cost_per_m * self.section_length_m
 
     @property
@@ -424,13 +524,32 @@ class LineConfig(ConfigBase):
         freight = Wheelset(mass=1400.0, static_load=wheel - 700.0 * GRAVITY)
         return passenger, freight
 
-    def axle_passes_per_step(self) -> np.ndarray:
-        """(passenger, freight) axle passes per step."""
+    def axle_passes_per_step(self, freight_share: float | None = None) -> np.ndarray:
+        """(passenger, freight) axle passes per step of the line's tonnage, with the line's freight share or
+        ``freight_share`` (a section's: :meth:`section_axle_passes`)."""
         p, f = self.vehicles()
+        share_f = self.freight_share if freight_share is None else freight_share
         tonnes = self.annual_mgt * 1e6 / self.steps_per_year
         axle_t = np.array([p.wheel_load, f.wheel_load]) * 2 / GRAVITY / 1000.0
-        share = np.array([1.0 - self.freight_share, self.freight_share])
+        share = np.array([1.0 - share_f, share_f])
         return tonnes * share / axle_t
+
+    def section_axle_passes(self) -> np.ndarray:
+        """(n_sections, 2) (passenger, freight) axle passes per step on each section: the line's tonnage with the
+        section's freight share (:meth:`axle_passes_per_step`: the mix), times its :attr:`traffic_factors` (its
+        own tonnage)."""
+        shares = self.section_values("freight_share")
+        return np.stack([self.axle_passes_per_step(share) for share in shares]) * self.traffic_factors[:, None]
+
+
+def _items(value: Any) -> Any:
+    """``per_section`` as it is stored (sorted (name, tuple) items), for comparing a given value with a line
+    file's; a value that is no mapping is returned as it is (its check refuses it)."""
+    try:
+        items = dict(value.items() if isinstance(value, dict) else value)
+        return tuple(sorted((str(k), tuple(float(x) for x in v)) for k, v in items.items()))
+    except (TypeError, ValueError):
+        return value
 
 
 #: The scenario suite (documented in the TampingLine docstring and on the documentation's environment pages).

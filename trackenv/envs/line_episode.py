@@ -49,6 +49,7 @@ from .choices import (
     choice_counts,
     code,
     enabled_codes,
+    work_on_sections,
     work_per_code,
 )
 from .common import SHARED_BOUNDS, clip_observation, clipped_values
@@ -78,11 +79,12 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
 
 #: The arrays of :class:`LineBatch` with a leading axis of segments, and those indexed (step, segment).
 _SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", "wet_mask", "wet_active",
-                   "measured_level", "contact_profile", "d1", "traffic_factor")
+                   "measured_level", "contact_profile", "d1", "traffic_factor", "pass_speed", "axle_mix")
 _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
-                   "sd", "peak", "sd_after_tamping", "last_work", "measured_at", "survey")
+                   "sd", "peak", "sd_after_tamping", "last_work", "measured_at", "survey", "length_factor",
+                   "static_wheel_load", "band")
 _SECTION_NOISE = ("meas_noise", "sensor_noise", "inspect_noise")
 
 
@@ -156,8 +158,9 @@ class LineBatch:
       :meth:`code_costs`, :meth:`spot_tamp_rows`, :meth:`drain_rows`, :meth:`survey_rows`, :meth:`inspect_rows`;
       and, where every segment carries one section (so that sections evolve independently of each other but for
       the line's possession), :meth:`copy_rows` to fork single sections in a search;
-    * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band), ``step``
-      (per line), ``register`` (per section).
+    * read-only: ``config``, ``n_lines``, ``limits`` (the quality limits of the line's speed band; a section's
+      own, of its speed band: :meth:`section_limits`, :meth:`classify_rows`), ``step`` (per line), ``register``
+      (per section).
 
     Rows of other lines and the arrays behind them are the engine's; code outside this module reads the state
     through the methods above."""
@@ -183,9 +186,6 @@ class LineBatch:
         #: sleepers either side of the worst one that a spot tamping lifts
         self.spot_half = max(int(round(c.spot_tamping_length_m / SLEEPER_SPACING_M / 2)), 1)
         self.vehicles = c.vehicles()
-        self.passes = c.axle_passes_per_step()
-        #: the largest static wheel load of the traffic [N]: the contact sensor's dynamic share is above it
-        self.static_wheel_load = max(v.wheel_load for v, k in zip(self.vehicles, self.passes, strict=True) if k > 0)
         self.p_exp = float(dict(c.law_params).get("force_exponent", 1.0))
         self.model_tracks: list[Track | None] = [None] * GR
         self.n_extra = APPROACH_SLEEPERS
@@ -202,7 +202,7 @@ class LineBatch:
         self.contact_profile = np.zeros((GR, n))  # largest wheel/rail force over each sleeper bay [N]
         self.d1 = np.zeros((GR, n))
         self.tamp_noise = np.zeros((H + 1, GR, n))
-        self.traffic_factor = np.ones(GR)  # factor on the axle passes per segment (a line file's per-section traffic)
+        self._section_traffic(c, S, R)
         # per section
         self.count = np.zeros(G, dtype=np.int64)  # tampings since renewal
         self.tampings = np.zeros(G, dtype=np.int64)  # tampings this episode
@@ -224,6 +224,33 @@ class LineBatch:
         self.step = np.zeros(self.n_lines, dtype=np.int64)
         self.last_measured = np.zeros(self.n_lines, dtype=np.int64)
         self.budget_left = np.zeros(self.n_lines)
+
+    def _section_traffic(self, c: LineConfig, S: int, R: int) -> None:
+        """What a section's own length, speed and traffic (``per_section``; the line's where not given) set, per
+        segment and per section row: its speed [m/s], the mix of its axle passes (passenger, freight per step at
+        the line's tonnage and its freight share) and the factor of its tonnage on them, its length over the
+        line's, the largest static wheel load of its traffic and its speed band's limits. A segment of several
+        sections has the line's (``per_section`` needs one section per segment)."""
+        K, n_lines = self.K, self.n_lines
+        per_segment = {name: c.section_values(name).reshape(R, K)[:, 0] for name in ("speed_kmh", "freight_share")}
+        #: per segment: the speed of its passes [m/s], the (passenger, freight) axle passes per step of its mix at
+        #: the line's tonnage, and the factor of its tonnage on them
+        self.pass_speed = np.tile(per_segment["speed_kmh"] / 3.6, n_lines)
+        mix = np.stack([c.axle_passes_per_step(share) for share in per_segment["freight_share"]])
+        self.axle_mix = np.tile(mix, (n_lines, 1))
+        self.traffic_factor = np.tile(c.traffic_factors.reshape(R, K)[:, 0], n_lines)
+        #: per section: its length over the line's section length (its costs and work per metre scale with it)
+        self.length_factor = np.tile(c.length_factors, n_lines)
+        #: per section: the largest static wheel load of its traffic [N] (the contact sensor's dynamic share is
+        #: above it)
+        loads = np.array([v.wheel_load for v in self.vehicles])
+        static = np.where(self.axle_mix > 0, loads, -np.inf).max(axis=1)
+        self.static_wheel_load = np.repeat(static, K)
+        #: the quality limits of the sections' speed bands, and each section's band (an index into them)
+        speeds, of_speed = np.unique(np.tile(c.section_values("speed_kmh"), n_lines) / 3.6, return_inverse=True)
+        limits = [c.quality_limits.for_speed(v) for v in speeds]
+        self.bands = tuple(dict.fromkeys(limits))
+        self.band = np.array([self.bands.index(b) for b in limits])[of_speed]
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -266,6 +293,29 @@ class LineBatch:
         parts = [values[:, self.section_of_sleeper == k] for k in range(self.K)]
         out = [p.max(axis=1) if reduce == "max" else p.mean(axis=1) for p in parts]
         return np.stack(out, axis=1).ravel()
+
+    def section_limits(self, name: str) -> np.ndarray:
+        """(sections,) each section's limit ``name`` (a field of
+        :class:`~trackenv.physics.geometry.BandLimits`: ``alert_m``, ``intervention_m``, ``immediate_action_m``,
+        ``sd_alert_m``) in its speed band [m]."""
+        return np.array([getattr(b, name) for b in self.bands])[self.band]
+
+    def classify_rows(self, peak: np.ndarray, rows=slice(None)) -> np.ndarray:
+        """The quality class of the sections ``rows`` (a slice or indices) whose D1 mean-to-peak is ``peak`` [m],
+        each against the limits of its speed band (:func:`~trackenv.physics.geometry.classify`)."""
+        if len(self.bands) == 1:
+            return classify(peak, self.bands[0])
+        band = self.band[rows]
+        out = np.zeros(np.shape(peak), dtype=np.int64)
+        for i, limits in enumerate(self.bands):
+            out[band == i] = classify(np.asarray(peak)[band == i], limits)
+        return out
+
+    def _work(self, codes: np.ndarray) -> np.ndarray:
+        """The possession work of the choices ``codes`` (sections, or (n_lines, S)) on their sections, in
+        tamping-section equivalents (:func:`~trackenv.envs.choices.work_on_sections`: a tamping's and a
+        renewal's scale with the section's length)."""
+        return work_on_sections(self.work, codes, self.length_factor.reshape(np.shape(codes)))
 
     def rate(self) -> np.ndarray:
         """Current settlement-rate factor per sleeper (segments, n): base (section, zone, wet spot) × ballast
@@ -331,12 +381,12 @@ class LineBatch:
         S, R, n, H = c.n_sections, c.n_segments, c.n_sleepers, c.horizon_steps
         r, rs = self.rows(b), self.segments(b)
         # section rate factors: lognormal, AR(1) along the line
-        rho = np.exp(-c.section_length_m / c.rate_correlation_m) if c.rate_correlation_m > 0 else 0.0
+        rho = self._rate_correlation()
         e = rng.standard_normal(S)
         z = np.empty(S)
         z[0] = e[0]
         for j in range(1, S):  # the AR(1) recursion (drawn once per episode, at reset)
-            z[j] = rho * z[j - 1] + np.sqrt(1 - rho * rho) * e[j]
+            z[j] = rho[j] * z[j - 1] + np.sqrt(1 - rho[j] * rho[j]) * e[j]
         section_rate = np.exp(c.rate_sigma * z - c.rate_sigma**2 / 2)
         # register (per segment): transition zones and switches/crossings, in the middle of the segment
         u = rng.random(R)
@@ -406,14 +456,34 @@ class LineBatch:
             self.model_tracks[rs.start + j] = sim.model_track
             self.influence[rs.start + j] = sim.support_influence
         # the settlement since the last tamping: advance the fresh state over its age at the mean load
-        cycles = age * c.steps_per_year * self.passes.sum()
-        f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # static, Winkler
-        u0 = self.rate()[rs] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (R, n)))
-        self.u[rs] = u0
-        self.cyc[rs] = np.broadcast_to(cycles[:, None], (R, n))
+        self._settled_since(rs, age)
         self._apply_line_file(b)
         self.last_work[r] = self.last_tamped[r]
         self.survey[r] = np.where(surveyed, self.wet_present()[r], -1)
+
+    def _rate_correlation(self) -> np.ndarray:
+        """(S,) the AR(1) correlation of each section's rate factor with the one before it: exp(−d / L) over the
+        distance d between their centres (the line's section length where the sections have one length), L =
+        ``rate_correlation_m`` (0: none); the first section's is unused."""
+        c = self.config
+        if c.rate_correlation_m <= 0:
+            return np.zeros(c.n_sections)
+        if "section_length_m" not in dict(c.per_section):
+            return np.full(c.n_sections, np.exp(-c.section_length_m / c.rate_correlation_m))
+        lengths = c.section_values("section_length_m")
+        gaps = np.concatenate([[0.0], (lengths[1:] + lengths[:-1]) / 2])
+        return np.exp(-gaps / c.rate_correlation_m)
+
+    def _settled_since(self, rs: slice, years: np.ndarray) -> None:
+        """The segments ``rs`` (one line's) settled from a fresh tamping over ``years`` (per segment) of their
+        traffic at the static equivalent load (Winkler: 0.45 of each wheel load on the sleeper below it)."""
+        n = self.config.n_sleepers
+        cycles = years * self.config.steps_per_year * self.axle_mix[rs].sum(axis=1) * self.traffic_factor[rs]
+        loads = 0.45 * np.array([v.wheel_load for v in self.vehicles])
+        f0 = self._equivalent(np.broadcast_to(loads[:, None], (2, cycles.size)), self.axle_mix[rs])
+        cyc = np.broadcast_to(cycles[:, None], (cycles.size, n))
+        self.u[rs] = self.rate()[rs] * self.law.settlement(f0[:, None], cyc)
+        self.cyc[rs] = cyc
 
     def _local_defects(self, rng: np.random.Generator, rate: np.ndarray) -> None:
         """Short local defects (joints, welds, crossing noses, a failed sleeper: a Poisson number per segment, mean
@@ -441,8 +511,8 @@ class LineBatch:
         """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
         the drawn values (:func:`~trackenv.envs.line_fit.line_overrides`): the register, with its zones' rate
         and stiffness (the statics rebuilt where they change); known wet zones (the drawn patch, wet from the
-        start instead of hidden); the per-section traffic factor, tampings since renewal and years since tamping
-        with the settlement since (as above); the rate factor the file gives, or a draw from its posterior given
+        start instead of hidden); tampings since renewal and years since tamping with the settlement since (as
+        above, at the section's own traffic); the rate factor the file gives, or a draw from its posterior given
         the history (:func:`~trackenv.envs.line_fit.rate_multipliers`), in place of the drawn one; and the SD the
         history gives at the start (the drawn shape and settlement scaled to it:
         :func:`~trackenv.envs.line_fit.start_levels`).
@@ -453,7 +523,7 @@ class LineBatch:
         from .line_fit import drawn_section_factor, line_overrides, rate_multipliers, start_levels, zone_factors
 
         # a line file's config has one section per segment (LineConfig refuses more): section j is segment j
-        o, r, rs, S, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sections, c.n_sleepers
+        o, r, rs, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sleepers
         old_rate, old_k = zone_factors(self.register[r], n, c)
         new_rate, new_k = zone_factors(o.register, n, c)
         drawn = drawn_section_factor(self.base_rate[rs] / old_rate, c)
@@ -473,21 +543,18 @@ class LineBatch:
             self.model_tracks[rs.start + j] = sim.model_track
             self.influence[rs.start + j] = sim.support_influence
         self.register[r] = o.register
-        self.traffic_factor[rs] = o.traffic_factor
         self.count[r] = o.tampings_since_renewal
         self.last_tamped[r] = -np.round(o.years_since_tamping * c.steps_per_year)
-        cycles = o.years_since_tamping * c.steps_per_year * self.passes.sum() * o.traffic_factor
-        f0 = float(self._equivalent(0.45 * np.array([v.wheel_load for v in self.vehicles])))  # as above
-        self.u[rs] = self.rate()[rs] * self.law.settlement(f0, np.broadcast_to(cycles[:, None], (S, n)))
-        self.cyc[rs] = np.broadcast_to(cycles[:, None], (S, n))
+        self._settled_since(rs, o.years_since_tamping)
         known = np.flatnonzero(~np.isnan(o.start_sd_m))
         rows = rs.start + known
         self.offset[rows], self.u[rows] = start_levels(self.offset[rows], self.u[rows],
                                                        o.sd_after_tamping_m[known], o.start_sd_m[known])
 
-    def _equivalent(self, forces: np.ndarray) -> np.ndarray:
-        """Equivalent force of the traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, ...)."""
-        w = (self.passes / self.passes.sum()).reshape((2,) + (1,) * (forces.ndim - 1))
+    def _equivalent(self, forces: np.ndarray, mix: np.ndarray) -> np.ndarray:
+        """Equivalent force of each row's traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, rows, ...), mix
+        (rows, 2) axle passes per vehicle type."""
+        w = (mix / mix.sum(axis=1, keepdims=True)).T.reshape(mix.shape[::-1] + (1,) * (forces.ndim - 2))
         return (np.sum(w * np.maximum(forces, 0.0) ** self.p_exp, axis=0)) ** (1.0 / self.p_exp)
 
     # ------------------------------------------------------------------ physics
@@ -497,26 +564,26 @@ class LineBatch:
         return self.K > 1 or self.config.profiles
 
     def _passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One batched pass per vehicle type with traffic over the segments ``segs``: the equivalent sleeper force
-        (segs, n), the largest contact force per segment [N] and, where needed (:attr:`_profiles_needed`; else
-        zeros), the largest over each sleeper bay (segs, n) [N]."""
+        """One batched pass per vehicle type and speed with traffic over the segments ``segs`` (each segment at
+        its own speed): the equivalent sleeper force (segs, n), the largest contact force per segment [N] and,
+        where needed (:attr:`_profiles_needed`; else zeros), the largest over each sleeper bay (segs, n) [N]."""
         c = self.config
         n, ne = c.n_sleepers, self.n_extra
         lv = self.level[segs]
         prof = np.concatenate([np.repeat(lv[:, :1], ne, 1), lv, np.repeat(lv[:, -1:], ne, 1)], axis=1)
-        tracks = [self.model_tracks[i] for i in segs]
-        forces, contact = [], np.zeros(len(segs))
+        speed, mix = self.pass_speed[segs], self.axle_mix[segs]
+        forces, contact = np.zeros((2, len(segs), n)), np.zeros(len(segs))
         bays = np.zeros((len(segs), n))
-        for v, passes in zip(self.vehicles, self.passes, strict=True):
-            if passes == 0:  # no traffic of this type: no pass (its weight in the mix is 0)
-                forces.append(np.zeros((len(segs), n)))
-                continue
-            res = simulate_passes(tracks, v, c.speed, None, support_settlement=prof, dt=c.dt)
-            forces.append(np.stack([r.sleeper_force[ne : ne + n] for r in res]))
-            contact = np.maximum(contact, [r.contact_force.max() for r in res])
-            if self._profiles_needed:
-                bays = np.maximum(bays, np.stack([r.contact_force_profile()[ne : ne + n] for r in res]))
-        return self._equivalent(np.stack(forces)), contact, bays
+        for k, v in enumerate(self.vehicles):
+            for pass_speed in np.unique(speed[mix[:, k] > 0]):  # none: no traffic of this type, no pass
+                rows = np.flatnonzero((speed == pass_speed) & (mix[:, k] > 0))
+                res = simulate_passes([self.model_tracks[segs[i]] for i in rows], v, float(pass_speed), None,
+                                      support_settlement=prof[rows], dt=c.dt)
+                forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
+                contact[rows] = np.maximum(contact[rows], [r.contact_force.max() for r in res])
+                if self._profiles_needed:
+                    bays[rows] = np.maximum(bays[rows], np.stack([r.contact_force_profile()[ne : ne + n] for r in res]))
+        return self._equivalent(forces, mix), contact, bays
 
     def _contact(self, segs: np.ndarray, contact: np.ndarray, bays: np.ndarray) -> None:
         """Keep the contact forces of a pass over ``segs``: per sleeper bay, and per section (the segment's largest
@@ -525,10 +592,11 @@ class LineBatch:
         secs = self._sections_of(segs)
         self.contact_force[secs] = contact if self.K == 1 else self._per_section(bays, "max")
 
-    def _advance(self, segs: np.ndarray, force: np.ndarray, cycles: float) -> None:
-        """Advance the segments ``segs`` by ``cycles`` axle passes under the equivalent forces ``force`` (segs, n),
-        with the static load redistribution taken implicitly (backward Euler, as TrackDegradation's support
-        feedback): :func:`~trackenv.physics.settlement.implicit_settlement_step`, batched over the segments.
+    def _advance(self, segs: np.ndarray, force: np.ndarray) -> None:
+        """Advance the segments ``segs`` by a step's axle passes (of their mix and tonnage) under the equivalent
+        forces ``force`` (segs, n), with the static load redistribution taken implicitly (backward Euler, as
+        TrackDegradation's support feedback): :func:`~trackenv.physics.settlement.implicit_settlement_step`,
+        batched over the segments.
 
         Each segment iterates until its own residual is below 1e-9 m and then stops, so its settlement does not
         depend on the other segments of the batch: a line gives the same numbers alone (``TampingLine``) and
@@ -536,7 +604,7 @@ class LineBatch:
         its own schedule (the hindsight search relies on that)."""
         self.u[segs], self.cyc[segs] = implicit_settlement_step(
             self.law, self.u[segs], self.cyc[segs], self.rate()[segs], force, self.influence[segs],
-            cycles * self.traffic_factor[segs],
+            self.axle_mix[segs].sum(axis=1) * self.traffic_factor[segs],
             # a line's segments are short: the full Jacobian, as the line's calibration was run; a longer segment
             # of several sections (the 60 m track): the band a support's settlement reaches, as TrackDegradation
             band=force.shape[1] if self.K == 1 else INFLUENCE_BAND,
@@ -560,7 +628,9 @@ class LineBatch:
         whose cost (with the possession, for track work) fits what is left of it. What fits alone may still not
         fit with the other choices of the step: :meth:`resolve` settles that."""
         c = self.config
-        mask = np.broadcast_to(self.enabled & (self.work <= c.capacity + 1e-9), (self.n_lines, self.S, len(CHOICES)))
+        every = np.broadcast_to(np.arange(len(CHOICES)), (self.n_lines * self.S, len(CHOICES)))
+        fits = work_on_sections(self.work, every, self.length_factor[:, None]) <= c.capacity + 1e-9
+        mask = self.enabled & fits.reshape(self.n_lines, self.S, len(CHOICES))
         mask = mask & (~self.is_work | self.allowed()[..., None])
         if c.annual_budget > 0:
             cost = self.code_costs().reshape(self.n_lines, self.S, -1) + self.is_work * c.possession_cost
@@ -588,11 +658,13 @@ class LineBatch:
     def code_costs(self) -> np.ndarray:
         """(sections, len(CHOICES)) what each choice would cost each section now (k€), possession excluded: a
         tamping (with the ballast renewal where one is due: :meth:`renewing`), a spot tamping, a drainage, a
-        ballast renewal (with its tamping), an inspection, a survey."""
-        c = self.config
-        tamping = c.section_tamping_cost + self.renewing() * c.section_renewal_cost
+        ballast renewal (with its tamping), an inspection, a survey. A tamping's and a renewal's scale with the
+        section's length."""
+        c, length = self.config, self.length_factor
+        tamping = c.section_tamping_cost * length + self.renewing() * c.section_renewal_cost * length
         per_choice: dict[str, float | np.ndarray] = {
-            "tamp": tamping, "renew": c.section_tamping_cost + c.section_renewal_cost, **self.fixed_price}
+            "tamp": tamping, "renew": c.section_tamping_cost * length + c.section_renewal_cost * length,
+            **self.fixed_price}
         out = np.zeros((self.sd.size, len(CHOICES)))
         for i, name in enumerate(CHOICES[1:], start=1):
             out[:, i] = per_choice[name]
@@ -609,8 +681,9 @@ class LineBatch:
         tampings (tamp and renew), the renewals (renew, and tamp where due), then one part per other choice."""
         c = self.config
         renewing = self.renewing().reshape(self.n_lines, self.S)
-        tamped = ((codes == TAMP) | (codes == RENEW)).sum(1)
-        renewed = ((codes == TAMP) & renewing).sum(1) + (codes == RENEW).sum(1)
+        length = self.length_factor.reshape(self.n_lines, self.S)  # counted in sections of the line's length
+        tamped = (((codes == TAMP) | (codes == RENEW)) * length).sum(1)
+        renewed = (((codes == TAMP) & renewing) * length).sum(1) + ((codes == RENEW) * length).sum(1)
         work = self.is_work[codes].sum(1)
         return np.stack([
             (work > 0) * c.possession_cost,
@@ -636,14 +709,15 @@ class LineBatch:
         codes = np.where(self.is_work[codes] & ~self.allowed(), NOTHING, codes)
         sd = self.measured_sd.reshape(self.n_lines, self.S)
         clipped = np.zeros(self.n_lines, dtype=bool)
-        over = self.work[codes].sum(axis=1) > c.capacity + 1e-9
+        work = self._work(codes)
+        over = work.sum(axis=1) > c.capacity + 1e-9
         if over.any():
             if c.over_capacity == "raise":
                 b = int(np.flatnonzero(over)[0])
                 raise ValueError(
-                    f"line {b}: track work of {self.work[codes[b]].sum():g} tamping sections requested in one "
+                    f"line {b}: track work of {work[b].sum():g} tamping sections requested in one "
                     f"possession, capacity is {c.capacity} (over_capacity='raise')")
-            codes = np.where(fit_worst(self.work[codes], sd, c.capacity), codes, NOTHING)
+            codes = np.where(fit_worst(work, sd, c.capacity), codes, NOTHING)
             clipped |= over
         if c.annual_budget > 0:
             for _ in range(self.S):  # drop the mildest requested section until each line fits its remaining budget
@@ -813,7 +887,7 @@ class LineBatch:
         segs = np.flatnonzero(on)
         force, contact, bays = self._passes(segs)
         self._contact(segs, contact, bays)
-        self._advance(segs, force, float(self.passes.sum()))
+        self._advance(segs, force)
         self._quality(segs)
 
     def copy_rows(self, dst: np.ndarray, source: LineBatch, src: np.ndarray) -> None:
@@ -875,12 +949,13 @@ class LineBatch:
                 **{k: v.reshape(shape).sum(1) for k, v in per_section.items()}}
 
     def _quality_costs(self) -> dict[str, np.ndarray]:
-        """The step's quality costs per segment (:func:`~trackenv.envs.costs.section_quality_costs`)."""
+        """The step's quality costs per section (:func:`~trackenv.envs.costs.section_quality_costs`): against the
+        limits of its speed band, the geometry cost per metre of it."""
         c = self.config
         return section_quality_costs(
-            self.sd, classify(self.peak, self.limits), sd_alert_m=self.limits.sd_alert_m,
-            geometry_cost_per_section_year=c.geometry_cost_per_section_year, steps_per_year=c.steps_per_year,
-            class_costs=c.class_costs)
+            self.sd, self.classify_rows(self.peak), sd_alert_m=self.section_limits("sd_alert_m"),
+            geometry_cost_per_section_year=c.geometry_cost_per_section_year * self.length_factor,
+            steps_per_year=c.steps_per_year, class_costs=c.class_costs)
 
     def section_costs(self) -> np.ndarray:
         """(segments,) the step's geometry, speed-restriction and immediate-action cost of each section (k€):
@@ -944,7 +1019,8 @@ class LineBatch:
         if c.contact_sensor:
             e = self.sensor_noise[np.minimum(np.asarray(step), c.horizon_steps), np.arange(self.sd.size)[rows]]
             peak = np.maximum(self.contact_force[rows] * (1.0 + c.contact_sensor_noise * e), 0.0)
-            sensed = {"section_contact_peak": peak / 1e3, "section_dynamic_share": peak / self.static_wheel_load - 1.0}
+            sensed = {"section_contact_peak": peak / 1e3,
+                      "section_dynamic_share": peak / self.static_wheel_load[rows] - 1.0}
         return {**sensed,
             "section_sd": self.measured_sd[rows] * 1e3,
             "section_peak": self.measured_peak[rows] * 1e3,
@@ -998,7 +1074,7 @@ class LineBatch:
         r = self.rows(b)
         codes = np.asarray(codes, dtype=np.int64)
         return step_info(
-            parts, (codes == TAMP) | (codes == RENEW), self.sd[r], self.peak[r], classify(self.peak[r], self.limits),
+            parts, (codes == TAMP) | (codes == RENEW), self.sd[r], self.peak[r], self.classify_rows(self.peak[r], r),
             self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
             section_costs=np.asarray(section_costs, dtype=float).copy(), clipped=bool(clipped),
             section_sd_after_tamping_m=self.sd_after_tamping[r].copy(),

@@ -15,9 +15,10 @@ file raises :class:`LineFileError`, a ``ValueError`` whose text is one line nami
 field, and what is allowed: a command line prints it and exits with status 2. A misspelled key or column is an
 error (with the closest known name), never a silent default; YAML is read with ``yaml.safe_load`` only.
 
-Bounds: the line's own fields (section length, number of sections, speed, traffic) are checked by
-:class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges live, and its refusal is reported
-against the file; the per-section and history fields have theirs in the column tables below. Values that fit
+Bounds: the line's own fields (section length, number of sections, speed, traffic) and a section's own length,
+speed and traffic are checked by :class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges
+live, and its refusal is reported against the file; the other per-section and history fields have theirs in the
+column tables below. Values that fit
 another unit (an SD given in m where mm is expected, a length in km, a share in per cent) are named as such.
 """
 
@@ -83,13 +84,16 @@ DEFAULT_FREIGHT_AXLE_LOAD_T = 22.5
 #: The columns of the sections CSV, one row per section in line order.
 SECTION_COLUMNS: dict[str, Field] = {
     "section": Field("-", True, "the section's id: unique, any text (a kilometre post, an asset number)"),
-    "length_m": Field("m", True, "section length; every section of a line has the same length today"),
+    "length_m": Field("m", True, "section length: what its tamping, renewal and geometry cost and its possession "
+                      "work scale with (its physics is the line's segment either way)"),
     "register": Field("-", True, "asset-register class: " + ", ".join(REGISTER_CLASSES) + " (transition: a "
                       "bridge or culvert approach; switch_or_crossing: switches and crossings, level crossings)"),
     "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage); blank: no"),
-    "annual_mgt": Field("MGT/year", False, "the section's traffic; blank: the line's"),
-    "speed_kmh": Field("km/h", False, "the section's speed; blank: the line's, which it must equal today"),
-    "freight_share": Field("-", False, "the section's freight share; blank: the line's, which it must equal today"),
+    "annual_mgt": Field("MGT/year", False, "the section's tonnage (its axle passes); blank: the line's"),
+    "speed_kmh": Field("km/h", False, "the section's speed (its passes, time steps and quality limits: a station's "
+                       "switches, a restriction); blank: the line's"),
+    "freight_share": Field("-", False, "the section's freight share of its tonnage (its mix of axle passes: freight "
+                           "joining at a junction); blank: the line's"),
     "years_since_tamping": Field("year", True, "time from the section's last tamping (or renewal) to as_of",
                                  0.0, 50.0),
     "tampings_since_renewal": Field("-", True, "tampings since the last ballast renewal (a whole number)",
@@ -179,15 +183,32 @@ class LineDescription:
 
     @property
     def section_length_m(self) -> float:
-        """The one length of the line's sections [m]."""
-        return self.sections[0].length_m
+        """The line's section length [m]: the most common of its sections' lengths (of equally common ones, the
+        first in line order); the unit of a possession's ``capacity`` and of the costs of a section."""
+        lengths = [s.length_m for s in self.sections]
+        return max(dict.fromkeys(lengths), key=lengths.count)
+
+    @property
+    def per_section(self) -> tuple[tuple[str, tuple[float, ...]], ...]:
+        """What differs between its sections, as :class:`~trackenv.envs.line_config.LineConfig` takes it
+        (``per_section``): for each of length, speed, annual tonnage and freight share that is not the line's on
+        every section, its value per section."""
+        line = {"section_length_m": self.section_length_m, "speed_kmh": self.speed_kmh,
+                "annual_mgt": self.annual_mgt, "freight_share": self.freight_share}
+        out = []
+        for name, attr in (("annual_mgt", "annual_mgt"), ("freight_share", "freight_share"),
+                           ("section_length_m", "length_m"), ("speed_kmh", "speed_kmh")):
+            values = tuple(float(getattr(s, attr)) for s in self.sections)
+            if any(v != line[name] for v in values):
+                out.append((name, values))
+        return tuple(out)
 
     @property
     def length_m(self) -> float:
         return sum(s.length_m for s in self.sections)
 
     def traffic_factors(self) -> tuple[float, ...]:
-        """Per section, its traffic over the line's (its axle passes are the line's times this)."""
+        """Per section, its tonnage over the line's (its axle passes are those of the line's tonnage times this)."""
         return tuple(s.annual_mgt / self.annual_mgt for s in self.sections)
 
     def measurements(self, section: str) -> tuple[Measurement, ...]:
@@ -463,7 +484,6 @@ def _build(source: str, doc: Mapping[str, Any], section_rows: Sequence[tuple[str
     for key, value in line_traffic.items():
         _config_check(source, f"traffic.{key}", key, value, TRAFFIC_KEYS[key].unit)
     sections = _sections(section_rows, line_traffic)
-    _config_check(section_rows[0][0], "length_m", "section_length_m", sections[0].length_m, "m")
     _config_check(source, f"sections ({len(sections)} rows)", "n_sections", len(sections), "sections")
     history = _history(history_rows, {s.id for s in sections}, as_of)
     return LineDescription(name=name, as_of=as_of, sections=tuple(sections), history=tuple(history),
@@ -474,6 +494,9 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
     out: list[Section] = []
     seen: dict[str, str] = {}
     cols = SECTION_COLUMNS
+    # the values already checked (the line's were, with its traffic)
+    checked: dict[str, set[float]] = {"section_length_m": set(), **{k: {line[k]} for k in
+                                                                      ("annual_mgt", "speed_kmh", "freight_share")}}
     for where, row in rows:
         sid = _text(where, "section", row["section"])
         if not sid:
@@ -485,21 +508,16 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         length = _number(at, "length_m", row["length_m"], "m")
         if length <= 0:
             raise LineFileError(f"{at}, length_m: must be a positive length [m], got {length:g}")
-        if out and length != out[0].length_m:
-            raise LineFileError(f"{at}, length_m: {length:g} m differs from the first section's "
-                                f"{out[0].length_m:g} m; every section of a line has the same length today "
-                                "(split or merge sections to the line's section length)")
+        if length not in checked["section_length_m"]:
+            _config_check(at, "length_m", "section_length_m", length, "m")
+            checked["section_length_m"].add(length)
         traffic = {}
         for key in ("annual_mgt", "speed_kmh", "freight_share"):
             value = row.get(key)
             traffic[key] = line[key] if _blank(value) else _number(at, key, value, cols[key].unit)
-        for key, what in (("speed_kmh", "one speed"), ("freight_share", "one freight share")):
-            if traffic[key] != line[key]:
-                raise LineFileError(
-                    f"{at}, {key}: {traffic[key]:g} differs from the line's {line[key]:g}; the engine runs "
-                    f"{what} per line today (per-section traffic is supported as annual_mgt)")
-        if traffic["annual_mgt"] != line["annual_mgt"]:
-            _config_check(at, "annual_mgt", "annual_mgt", traffic["annual_mgt"], "MGT/year")
+            if traffic[key] not in checked[key]:  # the range of the line's value (LineConfig's)
+                _config_check(at, key, key, traffic[key], cols[key].unit)
+                checked[key].add(traffic[key])
         years = _in_range(at, "years_since_tamping",
                           _number(at, "years_since_tamping", row["years_since_tamping"], "year"),
                           cols["years_since_tamping"])

@@ -3,10 +3,11 @@ history.
 
 :func:`line_overrides` turns a config's line file (:class:`~trackenv.envs.line_file.LineDescription`) into
 per-section arrays that the line engine applies over an episode's draws (``LineBatch._apply_line_file``): the
-register, the known wet zones, the traffic factor, years since tamping and tampings since renewal, the rate
-factor where the file gives one, the posterior of the rate where the history gives one, and the SD the section
-starts from. Everything else (the within-section fields, hidden wet spots, the rates of sections without
-history) is drawn per episode as on a line without a file.
+register, the known wet zones, years since tamping and tampings since renewal, the rate factor where the file
+gives one, the posterior of the rate where the history gives one, and the SD the section starts from (a
+section's own length, speed and traffic come with the config: ``LineConfig.per_section``). Everything else (the
+within-section fields, hidden wet spots, the rates of sections without history) is drawn per episode as on a line
+without a file.
 
 **The history fit** (:func:`history_fit`). After its last tamping a section's D1 level is its post-tamping
 shape plus the settlement since. The shape does not change; the settlement grows with a fixed pattern (the
@@ -142,14 +143,13 @@ class HistoryFit:
 @dataclass(frozen=True, eq=False)
 class LineOverrides:
     """Per section (line order), what the line file sets over an episode's draws: ``register`` (codes),
-    ``wet`` (known wet zones), ``traffic_factor`` (on the axle passes), ``years_since_tamping``,
+    ``wet`` (known wet zones), ``years_since_tamping``,
     ``tampings_since_renewal``, ``rate_factor`` (the file's; NaN: none), ``rate_cdf`` (the posterior CDF of a
     fitted rate on :data:`RATE_GRID`; NaN rows: not fitted), ``start_sd_m`` (the SD at the start; NaN: as
     drawn) and ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn)."""
 
     register: np.ndarray
     wet: np.ndarray
-    traffic_factor: np.ndarray
     years_since_tamping: np.ndarray
     tampings_since_renewal: np.ndarray
     rate_factor: np.ndarray
@@ -168,7 +168,6 @@ def line_overrides(config: LineConfig) -> LineOverrides:
     arrays = LineOverrides(
         register=np.array([s.register_index for s in secs], dtype=np.int64),
         wet=np.array([s.wet for s in secs], dtype=bool),
-        traffic_factor=np.array(line.traffic_factors()),
         years_since_tamping=np.array([s.years_since_tamping for s in secs]),
         tampings_since_renewal=np.array([s.tampings_since_renewal for s in secs], dtype=np.int64),
         rate_factor=np.array([math.nan if s.rate_factor is None else s.rate_factor for s in secs]),
@@ -270,9 +269,10 @@ def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
     return t[keep], sd[keep]
 
 
-def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float]:
-    """What the growth of a section's SD depends on besides its rate: register, known wet zone, traffic."""
-    return (s.register, s.wet, s.annual_mgt / line.annual_mgt)
+def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float, float, float]:
+    """What the growth of a section's SD depends on besides its rate: register, known wet zone, traffic (its
+    tonnage over the line's, its speed, its freight share)."""
+    return (s.register, s.wet, s.annual_mgt / line.annual_mgt, s.speed_kmh, s.freight_share)
 
 
 def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
@@ -316,16 +316,16 @@ def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
     return SectionFit(s.id, "fitted", rate_factor=p50, rate_p10=p10, rate_p90=p90, **common), cdf
 
 
-def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float], ...], years: float) -> list[_Growth]:
+def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float, float, float], ...],
+            years: float) -> list[_Growth]:
     """Each class's :class:`_Growth` from the engine (k = 1, one tamping since renewal), every step from the
     tamping up to ``years``."""
     line = _line(config)
     steps = max(int(math.ceil(years * config.steps_per_year - 1e-9)), 1)
     protos = tuple(Section(id=f"class{i}", length_m=line.section_length_m, register=reg, wet=wet,
-                           annual_mgt=line.annual_mgt * factor, speed_kmh=line.speed_kmh,
-                           freight_share=line.freight_share, years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS,
-                           tampings_since_renewal=0, rate_factor=1.0)
-                   for i, (reg, wet, factor) in enumerate(classes))
+                           annual_mgt=line.annual_mgt * factor, speed_kmh=speed, freight_share=share,
+                           years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS, tampings_since_renewal=0, rate_factor=1.0)
+                   for i, (reg, wet, factor, speed, share) in enumerate(classes))
     proto_line = replace(line, sections=protos, history=(), source=f"{line.source} (fit)")
     proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year)
     phi, rough, rough_sd, rho_mean, rho_sd = _simulated_growth(proto, steps)
