@@ -14,8 +14,13 @@ section's SD and peak, at once and after the step's traffic.
    neighbours do not, so part of the lift settles back within the step.
 3. **Sharper defects** (:data:`SHARPER`): the largest true SD per episode under the same rule, against the
    shipped preset's; beyond a few times the plain rate on a switch the dynamics leave their validity.
+4. ``--ablation``: the shipped choice rule (``agents/rules/defects_tuned_heuristics.json``) with spot tamping
+   off (``spot_peak_mm = 0``, every other parameter as tuned) on the held-out episodes of the saved comparison
+   (``experiments/saved/choices_compare_defects.json``), paired against the choice rule and the grouped
+   threshold there.
 
     python experiments/defects_spot.py                      # seeds 1000:1004, writes saved/defects_spot.json
+    python experiments/defects_spot.py --ablation           # and the rule without spot tamping (100 episodes)
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -33,7 +39,10 @@ from trackenv.envs.line_config import SLEEPER_SPACING_M, scenario
 from trackenv.envs.line_episode import LineBatch
 from trackenv.envs.problems import make_vector_env
 from trackenv.physics.geometry import d1_filter
+from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.evaluation.line_compare import parse_seeds
+from trackenv_agents.evaluation.statistics import paired_difference
+from trackenv_agents.rules.choices import ChoiceThreshold
 from trackenv_agents.rules.line import GroupedThreshold
 from trackenv_agents.rules.problems import TUNED_FILES
 
@@ -125,9 +134,25 @@ def sharper_defects(cfg: Any, seeds: list[int]) -> dict[str, Any]:
             "largest_sd_mm_shipped": _run(cfg, seeds)["sd"].max(axis=(0, 2)).round(1).tolist()}
 
 
+def spot_ablation() -> dict[str, Any]:
+    saved = json.loads((SAVED / "choices_compare_defects.json").read_text())["rules"]
+
+    def result(name: str) -> SimpleNamespace:
+        rule = saved[name]
+        return SimpleNamespace(policy=name, seeds=np.array(rule["seeds"]), cost=np.array(rule["episode_costs"]))
+
+    params = {**saved[ChoiceThreshold.name]["params"], "spot_peak_mm": 0.0}
+    off = evaluate_many([ChoiceThreshold(**params)], scenario("defects"), saved[ChoiceThreshold.name]["seeds"],
+                        action_type="choices", batch_size=50)[0]
+    return {"params": params, "mean_cost": float(off.cost.mean()), "choices": off.summary()["choices"],
+            "choice_rule_minus_no_spot": paired_difference(result(ChoiceThreshold.name), off),
+            "no_spot_minus_grouped_threshold": paired_difference(off, result(GroupedThreshold.name))}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="1000:1004", metavar="A:B", help="training episodes (default 1000:1004)")
+    ap.add_argument("--ablation", action="store_true", help="also the choice rule without spot tamping")
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
     cfg = scenario("defects")
@@ -135,6 +160,8 @@ def main() -> None:
     out = {"scenario": "defects", "seeds": seeds, "command": "python experiments/defects_spot.py",
            "limits_below_trigger": limits_below_trigger(cfg, seeds), "spot_effect": spot_effect(cfg, seeds),
            "sharper_defects": sharper_defects(cfg, seeds)}
+    if args.ablation:
+        out["spot_ablation"] = spot_ablation()
     out["seconds"] = round(time.time() - t0, 1)
     (SAVED / "defects_spot.json").write_text(json.dumps(out, indent=1) + "\n")
     print(json.dumps(out, indent=1))
