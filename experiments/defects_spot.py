@@ -14,7 +14,9 @@ section's SD and peak, at once and after the step's traffic.
    neighbours do not, so part of the lift settles back within the step.
 3. **Sharper defects** (:data:`SHARPER`): the largest true SD per episode under the same rule, against the
    shipped preset's; beyond a few times the plain rate on a switch the dynamics leave their validity.
-4. ``--ablation``: the shipped choice rule (``agents/rules/defects_tuned_heuristics.json``) with spot tamping
+4. **The contact sensor** as a trigger: the rank correlation (Spearman) over the section-steps of point 1
+   between the observed dynamic share and the true D1 peak, with the sensor's error and without it.
+5. ``--ablation``: the shipped choice rule (``agents/rules/defects_tuned_heuristics.json``) with spot tamping
    off (``spot_peak_mm = 0``, every other parameter as tuned) on the held-out episodes of the saved comparison
    (``experiments/saved/choices_compare_defects.json``), paired against the choice rule and the grouped
    threshold there.
@@ -33,6 +35,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from trackenv.envs.choices import SPOT_TAMP
 from trackenv.envs.line_config import SLEEPER_SPACING_M, scenario
@@ -61,20 +64,21 @@ def _rule(cfg: Any) -> GroupedThreshold:
 
 
 def _run(cfg: Any, seeds: list[int], stop_at: int | None = None, last: int = 0) -> dict[str, np.ndarray]:
-    """The tuned grouped threshold on ``seeds``: the true SD and peak per step and section [mm] (steps, seeds,
-    S); with ``stop_at``, the action code ``last`` on every section at that step instead of the rule's, and the
-    run ends there."""
+    """The tuned grouped threshold on ``seeds``: the true SD and peak per step and section [mm] and the observed
+    dynamic share (steps, seeds, S); with ``stop_at``, the action code ``last`` on every section at that step
+    instead of the rule's, and the run ends there."""
     env = make_vector_env(cfg, len(seeds), action_type="choices")
     rule = _rule(cfg)
     obs, _ = env.reset(seed=seeds)
-    state, sd, peak = None, [], []
+    state, sd, peak, share = None, [], [], []
     for t in range(cfg.horizon_steps if stop_at is None else stop_at + 1):
         action, state = rule.predict(obs, state=state, episode_start=np.full(len(seeds), t == 0))
         action = np.full_like(action, last) if t == stop_at else action
         obs, _, _, _, info = env.step(action)
         sd.append(info["section_sd_mm"].copy())
         peak.append(info["section_peak_mm"].copy())
-    return {"sd": np.array(sd), "peak": np.array(peak)}
+        share.append(obs["section_dynamic_share"].copy())
+    return {"sd": np.array(sd), "peak": np.array(peak), "dynamic_share": np.array(share)}
 
 
 def limits_below_trigger(cfg: Any, seeds: list[int]) -> dict[str, Any]:
@@ -134,6 +138,15 @@ def sharper_defects(cfg: Any, seeds: list[int]) -> dict[str, Any]:
             "largest_sd_mm_shipped": _run(cfg, seeds)["sd"].max(axis=(0, 2)).round(1).tolist()}
 
 
+def contact_sensor(cfg: Any, seeds: list[int]) -> dict[str, float]:
+    out = {}
+    for key, noise in (("with_error", cfg.contact_sensor_noise), ("without_error", 0.0)):
+        run = _run(scenario("defects", contact_sensor_noise=noise), seeds)
+        out[f"spearman_dynamic_share_true_peak_{key}"] = float(
+            spearmanr(run["dynamic_share"].ravel(), run["peak"].ravel())[0])
+    return out
+
+
 def spot_ablation() -> dict[str, Any]:
     saved = json.loads((SAVED / "choices_compare_defects.json").read_text())["rules"]
 
@@ -159,7 +172,7 @@ def main() -> None:
     t0 = time.time()
     out = {"scenario": "defects", "seeds": seeds, "command": "python experiments/defects_spot.py",
            "limits_below_trigger": limits_below_trigger(cfg, seeds), "spot_effect": spot_effect(cfg, seeds),
-           "sharper_defects": sharper_defects(cfg, seeds)}
+           "sharper_defects": sharper_defects(cfg, seeds), "contact_sensor": contact_sensor(cfg, seeds)}
     if args.ablation:
         out["spot_ablation"] = spot_ablation()
     out["seconds"] = round(time.time() - t0, 1)
