@@ -62,6 +62,23 @@ def test_spot_tamping_lifts_the_worst_defect_and_leaves_the_rest_of_the_section(
     assert batch.last_work[j] == 0
 
 
+def test_a_spot_tamping_on_a_local_defect_lowers_its_peak_more_than_its_sd():
+    # the short-defect line at its start: a section whose D1 peak stands at least 3 SDs out is a local defect,
+    # and a lift of the few metres around it takes more of the peak than of the section's SD
+    ratios = []
+    for seed in range(3):
+        batch = LineBatch(scenario("defects", horizon_years=1.0), 1)
+        batch.start([0], [np.random.default_rng(seed)])
+        local = batch.peak >= 3.0 * batch.sd
+        sd, peak = batch.sd[local], batch.peak[local]
+        batch.spot_tamp_rows(local, 0)
+        d1 = d1_filter(batch.level[local], SLEEPER_SPACING_M)  # one section per segment on this line
+        ratios.append(np.stack([d1.std(axis=1) / sd, np.abs(d1).max(axis=1) / peak]))
+    sd_ratio, peak_ratio = np.concatenate(ratios, axis=1)
+    assert sd_ratio.size >= 3
+    assert (peak_ratio < sd_ratio).all() and (peak_ratio < 0.9).all()
+
+
 def test_drainage_returns_a_wet_patch_to_the_plain_rate_and_stops_a_latent_one():
     batch = _batch(2, wet_spot_probability=1.0, wet_spot_active_share=0.5, drainage_work=0.5)
     plain = batch.base_rate.copy()
