@@ -307,12 +307,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """Load the line first (a fault in it: one line, exit 2, before anything slow), then plan and write."""
     from trackenv.envs.line_file import load_line
 
-    from .planning import line_policy, plan_line
+    from .planning import line_policy, plan_config, plan_line
 
     line = load_line(args.line)
-    from trackenv.envs.line_config import LineConfig
-
-    line_policy(args.policy, LineConfig(line=line))  # an unknown policy before the fit and the futures
+    # an unknown policy or scenario before the fit and the futures
+    line_policy(args.policy, plan_config(line, args.scenario), args.scenario)
     t0 = time.perf_counter()
     progress = None
     if not args.json:
@@ -321,7 +320,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         bar = tqdm(total=int(round(args.years * 4)), desc="plan (quarters)", file=sys.stderr, leave=False)
         progress = bar.update
     plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
-                     progress=progress)
+                     scenario=args.scenario, progress=progress)
     if progress is not None:
         bar.close()
     files = plan.write(Path(args.out or "results/plan"))
@@ -599,13 +598,19 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run them on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_leaderboard)
 
-    sp = command("plan", "what to tamp on a line from a line file, quarter by quarter, with the cost forecast")
+    sp = command("plan", "what to do on a line from a line file, quarter by quarter, with the cost forecast")
     out(sp, "results/plan")
     sp.add_argument("line", metavar="LINE.yaml", help="a line file (the documentation's page Lines from files)")
     sp.add_argument("--policy", default="grouped-threshold", metavar="NAME",
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
                          "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "
-                         "agent, at most the 10 years it was trained on) or the path of a trained per-section policy")
+                         "agent, at most the 10 years it was trained on) or the path of a trained per-section policy; "
+                         "with a scenario that has every choice also choice-threshold, choice-threshold-no-looking")
+    sp.add_argument("--scenario", default="default", choices=("default", "choices", "wet", "defects"),
+                    help="how the line is modelled beyond its file: default (hidden parts as on the default line, "
+                         "tamping only), choices (every intervention and inspection), wet (a wet, poorly drained "
+                         "line) or defects (many short defects), each with every choice; a rule takes that "
+                         "scenario's tuned parameters")
     sp.add_argument("--years", type=_positive(float), default=3.0, metavar="N", help="years to plan")
     sp.add_argument("--futures", type=_positive(int), default=8, metavar="K",
                     help="sampled futures (what the file does not know drawn again in each)")

@@ -88,3 +88,35 @@ def test_the_example_line_round_trips_through_plan(tmp_path, capsys):
     assert "80 sections' rates fitted" in out
     for name in ("plan.csv", "costs.csv", "plan.png"):
         assert (tmp_path / name).stat().st_size > 0
+
+
+def test_a_plan_with_every_choice_recommends_each_by_name(tmp_path, capsys):
+    """In a scenario with every choice the plan records each choice's share of futures (they add up to one per
+    section and quarter), the rule takes that scenario's tuned parameters, and the JSON, table and CSV name the
+    choices."""
+    from trackenv_agents.planning import PLAN_SCENARIOS
+
+    plan = plan_line(write(tmp_path), policy="choice-threshold", scenario="wet", years=0.5, futures=2)
+    assert plan.choice_share.shape == (2, 4, 7) and np.allclose(plan.choice_share.sum(axis=2), 1.0)
+    assert plan.choices == ("tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
+    assert np.allclose(plan.share, 1.0 - plan.choice_share[:, :, 0])
+    # the wet line's tuned rule surveys every section not surveyed yet in the first quarter
+    assert plan.choice_share[0, :, 6].sum() > 0
+    quarter = plan.to_dict()["quarters"][0]
+    assert set(plan.choices) <= set(quarter) and plan.to_dict()["scenario"] == "wet"
+    out = tmp_path / "plan"
+    assert main(["plan", str(write(tmp_path)), "--scenario", "wet", "--policy", "choice-threshold", "--years", "0.5",
+                 "--futures", "2", "--out", str(out)]) == 0
+    assert "(wet)" in capsys.readouterr().out
+    with open(out / "plan.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and {r["choice"] for r in rows} <= set(plan.choices)
+    assert "survey" in {r["choice"] for r in rows}
+    # the command offers exactly the scenarios that take the line from its file
+    assert PLAN_SCENARIOS == ("default", "choices", "wet", "defects")
+
+
+def test_a_choice_rule_needs_a_scenario_with_the_choices(tmp_path, capsys):
+    assert main(["plan", str(write(tmp_path)), "--policy", "choice-threshold"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown policy 'choice-threshold'" in err and "grouped-threshold" in err
