@@ -43,6 +43,22 @@ def test_without_error_the_sensor_reads_the_passes_peak_and_its_dynamic_share():
         assert (obs["section_dynamic_share"] > 0).all()  # a pass over irregular track loads beyond the static
 
 
+def test_without_error_the_sensor_follows_the_geometry_of_its_own_section():
+    """The peak is taken over the section's own sleeper bays, not over the pass's approach, whose start from rest
+    rings more than a local defect adds: without error, the sections with the larger true D1 peak read the larger
+    dynamic share (left without maintenance on the short-defect line, the peaks spread)."""
+    from scipy.stats import spearmanr
+
+    env = gym.make("trackenv/TampingLineDefects-v0", contact_sensor_noise=0.0, **SHORT)
+    env.reset(seed=3)
+    share, peak = [], []
+    for _ in range(8):
+        obs, _, _, _, info = env.step(np.zeros(12, np.int64))
+        share.append(obs["section_dynamic_share"].astype(float))
+        peak.append(np.asarray(info["section_peak_mm"], dtype=float))
+    assert spearmanr(np.concatenate(share), np.concatenate(peak)).statistic > 0.5
+
+
 def test_the_sensor_error_has_its_configured_size_and_leaves_the_dynamics_alone():
     _, exact = _rollout(0.0)
     _, noisy = _rollout(0.05)

@@ -565,8 +565,9 @@ class LineBatch:
 
     def _passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One batched pass per vehicle type and speed with traffic over the segments ``segs`` (each segment at
-        its own speed): the equivalent sleeper force (segs, n), the largest contact force per segment [N] and,
-        where needed (:attr:`_profiles_needed`; else zeros), the largest over each sleeper bay (segs, n) [N]."""
+        its own speed): the equivalent sleeper force (segs, n), the largest contact force over each segment's own
+        sleeper bays [N] and, where needed (:attr:`_profiles_needed`; else zeros), the largest over each sleeper bay
+        (segs, n) [N]."""
         c = self.config
         n, ne = c.n_sleepers, self.n_extra
         lv = self.level[segs]
@@ -580,9 +581,12 @@ class LineBatch:
                 res = simulate_passes([self.model_tracks[segs[i]] for i in rows], v, float(pass_speed), None,
                                       support_settlement=prof[rows], dt=c.dt)
                 forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
-                contact[rows] = np.maximum(contact[rows], [r.contact_force.max() for r in res])
+                # over the segment's own bays: the approach and exit zones (and the pass's start from rest, whose
+                # ringing is larger than what a local defect adds) are not the section's
+                bay = np.stack([r.contact_force_profile()[ne : ne + n] for r in res])
+                contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
                 if self._profiles_needed:
-                    bays[rows] = np.maximum(bays[rows], np.stack([r.contact_force_profile()[ne : ne + n] for r in res]))
+                    bays[rows] = np.maximum(bays[rows], bay)
         return self._equivalent(forces, mix), contact, bays
 
     def _contact(self, segs: np.ndarray, contact: np.ndarray, bays: np.ndarray) -> None:
