@@ -84,3 +84,23 @@ def test_a_restored_state_reads_the_same_sensor_errors():
 def test_the_sensor_fields_are_checked(field, value, message):
     with pytest.raises(ValueError, match=message):
         scenario("small", **{field: value})
+
+
+def test_a_settlement_that_runs_away_is_a_warning_not_silent_figures():
+    """A short defect settling 5x faster on a switch feeds on its own sleeper forces until the settlement reaches
+    metres and the forces meganewtons: the engine warns once that the line has left the model's validity, naming
+    the fields to check; the shipped preset on the same episode does not warn."""
+    import warnings
+
+    def run(**fields):
+        env = gym.make("trackenv/TampingLineDefects-v0", **fields)
+        env.reset(seed=1000)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(40):
+                env.step(np.zeros(12, np.int64))
+        return [w for w in caught if issubclass(w.category, RuntimeWarning) and "validity" in str(w.message)]
+
+    runaway = run(local_defect_length_m=3.0, local_defect_rate_factor=5.0)
+    assert len(runaway) == 1 and "local_defect_rate_factor=5" in str(runaway[0].message)
+    assert run() == []

@@ -14,6 +14,7 @@ numbers and a hindsight search can replay the future of any schedule.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from functools import partial
 
@@ -59,6 +60,14 @@ from .info import step_info
 from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
+#: The largest wheel/rail force the model is taken to represent, in static wheel loads: impact forces at dipped
+#: joints and crossings reach about 2-3 times the static load in the field; the engine's lines stay below 1.3
+#: even at 130 mm of mean-to-peak without maintenance [assumption: a validity guard, not a design limit].
+VALID_CONTACT_FACTOR = 3.0
+#: The largest D1 mean-to-peak [m] the settlement law is taken to represent: about ten times the default line's
+#: immediate-action limit (26 mm), beyond any track in service; the shipped lines reach about 140 mm when never
+#: maintained [assumption: a validity guard].
+VALID_PEAK_M = 0.25
 
 
 def _correlated_normal(rng: np.random.Generator, shape: tuple[int, ...], corr: float) -> np.ndarray:
@@ -211,6 +220,7 @@ class LineBatch:
         self.measured_sd = np.zeros(G)
         self.measured_peak = np.zeros(G)
         self.contact_force = np.zeros(G)
+        self._validity_warned = False  # :meth:`_check_validity` warns once per batch
         self.sd = np.zeros(G)
         self.peak = np.zeros(G)
         self.sd_after_tamping = np.zeros(G)  # true SD right after this step's tamping [m] (0: not tamped)
@@ -893,6 +903,31 @@ class LineBatch:
         self._contact(segs, contact, bays)
         self._advance(segs, force)
         self._quality(segs)
+        self._check_validity(self._sections_of(segs))
+
+    def _check_validity(self, secs: np.ndarray) -> None:
+        """Warn (once per batch) where a section has left what the model represents: a wheel/rail force above
+        :data:`VALID_CONTACT_FACTOR` times the static wheel load, or a D1 mean-to-peak above
+        :data:`VALID_PEAK_M`. A settlement rate that feeds on its own sleeper forces (a very fast, short defect)
+        can run away to metres of settlement and meganewtons; such figures are not physical, and the costs that
+        follow from them are not either."""
+        if self._validity_warned:
+            return
+        force = self.contact_force[secs] > VALID_CONTACT_FACTOR * self.static_wheel_load[secs]
+        level = self.peak[secs] > VALID_PEAK_M
+        if force.any() or level.any():
+            self._validity_warned = True
+            at = int(np.asarray(secs)[np.flatnonzero(force | level)[0]])
+            c = self.config
+            ratio = self.contact_force[at] / self.static_wheel_load[at]
+            warnings.warn(
+                f"section {at % c.n_sections} of line {at // c.n_sections} has left the model's validity: "
+                f"wheel/rail force {self.contact_force[at] / 1e3:.0f} kN ({ratio:.1f} x the static wheel load; "
+                f"valid up to {VALID_CONTACT_FACTOR:g} x), D1 mean-to-peak "
+                f"{self.peak[at] * 1e3:.0f} mm (valid up to {VALID_PEAK_M * 1e3:.0f} mm); its settlement has run "
+                f"away (check local_defect_rate_factor={c.local_defect_rate_factor:g}, "
+                f"local_defect_length_m={c.local_defect_length_m:g}, wet_spot_rate_factor={c.wet_spot_rate_factor:g}"
+                f"): the figures from here on are not physical", RuntimeWarning, stacklevel=3)
 
     def copy_rows(self, dst: np.ndarray, source: LineBatch, src: np.ndarray) -> None:
         """Make sections ``dst`` of this batch exact copies of sections ``src`` of ``source`` (the same config, one
