@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.choices import CHOICES
+from trackenv.envs.choices import CHOICES, action_type_for
 from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS
 
 #: The share of futures from which a section's choice in a quarter is recommended.
@@ -271,8 +271,7 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
         cfg = cfg.replace(horizon_years=trained)
         rule = rule.bind(cfg)
     fit = history_fit(cfg)
-    action_type = "multibinary" if cfg.choices == ("tamp",) else "choices"
-    env = TampingLineVectorEnv(futures, cfg, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type)
+    env = TampingLineVectorEnv(futures, cfg, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(cfg))
     obs, _ = env.reset(seed=[seed + i for i in range(futures)])
     share = np.zeros((steps, cfg.n_sections, len(CHOICES)))
     costs = np.zeros((futures, steps))

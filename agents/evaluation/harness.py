@@ -39,7 +39,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.batched import BatchedVectorEnv
-from trackenv.envs.choices import INTERVENTIONS, code
+from trackenv.envs.choices import INTERVENTIONS, action_type_for, code
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
@@ -216,14 +216,18 @@ def run_episodes(config: ProblemConfig, slots: Sequence[tuple[int, int]], polici
 
 
 def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | None = None,
-                  seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                  seeds: Iterable[int] = TEST_SEEDS, action_type: str | None = None, batch_size: int = 32,
                   progress: bool = False, desc: str = "evaluate", executor: Any = None) -> list[EvaluationResult]:
     """Evaluate every policy on every seed, all (policy, seed) pairs batched ``batch_size`` at a time.
+
+    ``action_type``: the env's (None: the config's own, :func:`~trackenv.envs.choices.action_type_for`: the
+    choice codes where it enables more than tamping, else tamp or wait).
 
     Results are independent of the batching: each env draws only from its own seed's generator. ``executor``:
     runs the batches (:func:`run_episodes`) through its ``map`` (e.g. on Ray workers); None: here, in turn.
     """
     cfg = problem_config(config)
+    action_type = action_type or action_type_for(cfg)
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must not be empty")
@@ -275,7 +279,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
 
 
 def evaluate_one(policy: Any, config: ProblemConfig | dict | str | None = None,
-                 seeds: Iterable[int] = TEST_SEEDS, action_type: str = "multibinary", batch_size: int = 32,
+                 seeds: Iterable[int] = TEST_SEEDS, action_type: str | None = None, batch_size: int = 32,
                  progress: bool = False) -> EvaluationResult:
     """One policy, one episode per seed through the problem's native vector env (``batch_size`` envs at a time):
     :func:`evaluate_many` for a single policy. The episode returns are ``.sum_rewards``."""

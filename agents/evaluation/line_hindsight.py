@@ -68,6 +68,7 @@ from trackenv.envs.choices import (
     SPOT_TAMP,
     SURVEY,
     TAMP,
+    action_type_for,
     code,
     enabled_codes,
     work_on_sections,
@@ -132,12 +133,6 @@ class TrueStateRule:
         if peak_m >= self.spot_peak_fraction * limit_m:
             return SPOT_TAMP
         return NOTHING
-
-
-def _action_type(config: Any) -> str:
-    """The env's action type that replays a schedule of ``config``: its choice codes where it enables more than
-    tamping, else tamp-or-wait (as the tamping-only envs ran)."""
-    return "choices" if tuple(config.choices) != ("tamp",) else "multibinary"
 
 
 def choice_rules(config: Any, rules: list[TrueStateRule], drainage: tuple[str, ...] = ("first", "onset"),
@@ -275,7 +270,7 @@ def replay(config: Any, seed: int, policy: Any) -> tuple[np.ndarray, float]:
     codes and the episode's cost (−Σ rewards, k€)."""
     from trackenv.envs.line import TampingLine
 
-    env = TampingLine(config, action_type=_action_type(config))
+    env = TampingLine(config, action_type=action_type_for(config))
     obs, _ = env.reset(seed=seed)
     plan = np.zeros((config.horizon_steps, config.n_sections), dtype=np.int8)
     cost = 0.0
@@ -432,7 +427,7 @@ def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> 
 
     from trackenv.envs.line import TampingLineVectorEnv
 
-    env = TampingLineVectorEnv(len(seeds), config, action_type=_action_type(config),
+    env = TampingLineVectorEnv(len(seeds), config, action_type=action_type_for(config),
                                autoreset_mode=AutoresetMode.NEXT_STEP)
     env.reset(seed=[int(s) for s in seeds])
     plans_ = np.stack([np.asarray(p, dtype=np.int8) for p in plans])

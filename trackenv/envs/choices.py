@@ -11,12 +11,13 @@ of the possession it takes: :class:`~trackenv.envs.line_config.LineConfig` (fiel
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
 __all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "PER_METRE",
-           "RENEW", "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "choice_counts", "code", "enabled_codes",
-           "work_on_sections", "work_per_code"]
+           "RENEW", "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "action_type_for", "choice_counts", "code",
+           "enabled_codes", "work_on_sections", "work_per_code"]
 
 #: every choice, by action code
 CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
@@ -31,6 +32,13 @@ IS_TRACK_WORK = np.array([name in TRACK_WORK for name in CHOICES])
 #: the cost part (``info["costs"]``) of each choice besides the tamping and renewal that ``tamp`` and ``renew``
 #: share with the tamping-only problem
 COST_KEY = {"spot_tamp": "spot_tamping", "drainage": "drainage", "inspect": "inspection", "survey": "survey"}
+
+
+def action_type_for(config: Any) -> str:
+    """The action type a config's env runs with unless told otherwise: ``"choices"`` (a code per section) where
+    the config enables more than tamping, else ``"multibinary"`` (tamp or wait). A tamp-or-wait action is also a
+    valid choices action (codes 0 and 1), so tamping-only policies run on either."""
+    return "choices" if tuple(getattr(config, "choices", ("tamp",))) != ("tamp",) else "multibinary"
 
 
 def code(name: str) -> int:
