@@ -49,9 +49,11 @@ from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 __all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable",
            "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score", "run_leaderboard"]
 
-#: The scenarios of the default leaderboard: the three lines and the 60 m track.
+#: The scenarios of the default leaderboard: the three lines, the 60 m track, and the three lines with every
+#: choice (the default line, the wet line, the line of short defects).
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
-                                  "trackenv/TampingLineHard-v0", "trackenv/Tamping-v1")
+                                  "trackenv/TampingLineHard-v0", "trackenv/Tamping-v1", "trackenv/TampingLine-v1",
+                                  "trackenv/TampingLineWet-v0", "trackenv/TampingLineDefects-v0")
 
 #: The default held-out seeds per scenario (none of them a training or tuning seed, which start at 1000): as many
 #: as the whole default command scores in about a quarter of an hour on 2 cores (an episode of the hard line costs
@@ -62,6 +64,11 @@ DEFAULT_SEEDS: dict[str, tuple[int, ...]] = {
     "trackenv/TampingLine-v0": tuple(range(0, 32)),
     "trackenv/TampingLineHard-v0": tuple(range(0, 12)),
     "trackenv/Tamping-v1": tuple(range(0, 48)),
+    # the ids with every choice: the episodes whose bounds ship (a search with the choices costs about a minute an
+    # episode on a quiet machine)
+    "trackenv/TampingLine-v1": tuple(range(0, 16)),
+    "trackenv/TampingLineWet-v0": tuple(range(0, 12)),
+    "trackenv/TampingLineDefects-v0": tuple(range(0, 12)),
 }
 
 #: The settings of the hindsight search behind the bound (:func:`~.line_hindsight.hindsight_bounds`): one round of
