@@ -56,14 +56,12 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
     the tamping rules, and the choice rules where the config has more choices) with the shipped tuned parameters
     of ``scenario`` (default: those of the preset ``config`` is, else the default line's), the shipped agent
     (``cpi-agent``) or a trained per-section policy by the path of its ``.zip``; ValueError for another."""
-    from .rules import TUNED_FILES, rules_for, tuned_params_for
+    from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_params_for
 
     rules = rules_for(config)
     if name in rules:
         if scenario is not None and TUNED_FILES.get(scenario, Path()).is_file():
-            import json
-
-            params = json.loads(TUNED_FILES[scenario].read_text())["params"]
+            params = line_tuned_params(TUNED_FILES[scenario])
         else:
             params = tuned_params_for(config)
         return rules[name](**params.get(name, {})).bind(config)

@@ -6,14 +6,13 @@ the default line."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from trackenv.envs.line_config import LineConfig, scenario
 
 from .choices import CHOICE_RULES
-from .line import LINE_HEURISTICS, LINE_TUNED_FILE
+from .line import LINE_HEURISTICS, LINE_TUNED_FILE, line_tuned_params
 
 _HERE = Path(__file__).resolve().parent
 #: preset name -> the file of its tuned parameters
@@ -48,5 +47,4 @@ def tuned_file_for(config: LineConfig) -> Path:
 def tuned_params_for(config: Any) -> dict[str, dict[str, Any]]:
     """The shipped tuned parameters of ``config``'s rules, by rule name ({} where none ship)."""
     rules_for(config)
-    path = tuned_file_for(config)
-    return json.loads(path.read_text())["params"] if path.exists() else {}
+    return line_tuned_params(tuned_file_for(config))
