@@ -21,17 +21,34 @@ Examples::
     python experiments/train_rllib.py --multi-agent --env-id trackenv/TampingLineSmall-v0
 
 Writes ``<out>/rllib_summary.json`` (per-iteration mean return, episode length, time) and a checkpoint.
+
+**Reproducible.** The same command on the same machine trains the same policy: ``--seed`` seeds RLlib (its
+module, its sampling, the envs' first reset), and the script runs with ``PYTHONHASHSEED`` fixed (it starts
+itself again with ``PYTHONHASHSEED=0`` where the variable is unset, and passes it to Ray's workers): RLlib's
+multi-agent episodes iterate sets of agent ids, whose order follows Python's per-process string hashing, so
+without it two runs of ``--multi-agent`` sample in different orders from the first iteration on.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 ENV_NAME = "trackenv-rllib"
+HASH_SEED = "0"  # PYTHONHASHSEED the script runs with where none is set (see the module's docstring)
+
+
+def run_with_fixed_hash_seed() -> None:
+    """Start this script again with ``PYTHONHASHSEED`` fixed where it is unset (it must be set before the
+    interpreter starts); a value the caller set is kept."""
+    if os.environ.get("PYTHONHASHSEED") is None:
+        os.environ["PYTHONHASHSEED"] = HASH_SEED
+        os.execv(sys.executable, [sys.executable, *sys.argv])
 
 
 def make_env(env_config: dict[str, Any]):
@@ -122,7 +139,9 @@ def main(argv=None) -> dict:
     a = p.parse_args(argv)
     import ray
 
-    ray.init(address=a.address, num_cpus=None if a.address else a.num_cpus, include_dashboard=False)
+    hash_seed = os.environ.get("PYTHONHASHSEED")
+    ray.init(address=a.address, num_cpus=None if a.address else a.num_cpus, include_dashboard=False,
+             runtime_env={"env_vars": {"PYTHONHASHSEED": hash_seed}} if hash_seed is not None else None)
     env_id = a.env_id or ("trackenv/TampingLine-v0" if a.multi_agent else "trackenv/Tamping-v1")
     env_config = {"env_id": env_id, **json.loads(a.env_config), **({"multi_agent": True} if a.multi_agent else {})}
     num_envs = a.num_envs if a.num_envs is not None else (1 if a.multi_agent else 8)
@@ -139,7 +158,7 @@ def main(argv=None) -> dict:
         out = Path(a.out).resolve()
         out.mkdir(parents=True, exist_ok=True)
         checkpoint = algo.save(str(out / "checkpoint"))
-        summary = {"env_config": env_config, "history": history,
+        summary = {"env_config": env_config, "seed": a.seed, "pythonhashseed": hash_seed, "history": history,
                    "checkpoint": str(getattr(checkpoint, "checkpoint", checkpoint))}
         (out / "rllib_summary.json").write_text(json.dumps(summary, indent=1, default=str))
     finally:
@@ -149,4 +168,5 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
+    run_with_fixed_hash_seed()
     main()
