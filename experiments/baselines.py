@@ -8,7 +8,8 @@ committed folder that ``trackenv leaderboard --policies baselines`` scores.
 ``curves`` reads each run's record of return against env steps (:func:`curve`: its training episodes, and the
 held-out evaluations of a run of ``experiments/train_ppo.py``), draws them against the best tuned rule's return
 on the evaluation seeds, and writes ``experiments/saved/baselines/training_curves.json`` and
-``docs/baselines_training.png``. ``export`` copies each run's final policy to
+``docs/baselines_training.png`` (with ``--keep-others`` the curves of the runs not named are kept from that JSON,
+so one baseline can be retrained and redrawn without the others' run folders). ``export`` copies each run's final policy to
 ``experiments/saved/baselines/NAME`` (``NAME.zip`` and its observation statistics; an RLlib run's summary and
 RLModule only, not its optimiser and runner state).
 """
@@ -75,7 +76,8 @@ def curve(run: Path) -> dict[str, Any]:
             "timesteps": summary["timesteps"], "train_seconds": summary["wall_seconds"]}
 
 
-def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_name: str) -> dict[str, Any]:
+def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_name: str,
+               keep_others: bool = False) -> dict[str, Any]:
     from matplotlib.figure import Figure
 
     from trackenv.envs.line_config import scenario
@@ -83,6 +85,13 @@ def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_na
     from trackenv_agents.rules import LINE_HEURISTICS, tuned_params_for
 
     curves = {name: curve(run) for name, run in runs.items()}
+    if keep_others and out_json.is_file():
+        kept = json.loads(out_json.read_text())
+        if kept.get("scenario") != scenario_name:
+            raise SystemExit(f"--keep-others: {out_json} holds the curves of scenario {kept.get('scenario')!r}, "
+                             f"not {scenario_name!r}")
+        curves = {**{k: v for k, v in kept["curves"].items() if k not in curves}, **curves}
+        curves = {k: curves[k] for k in [*kept["curves"], *runs] if k in curves}  # the file's order, new ones last
     seeds = next((c["evaluation"]["seeds"] for c in curves.values() if "evaluation" in c), list(range(10_000, 10_008)))
     config = scenario(scenario_name)
     rule = "grouped-threshold"
@@ -142,13 +151,15 @@ def main(argv: list[str] | None = None) -> Any:
     c.add_argument("--scenario", default="default", help="the line the runs trained on (for the reference rule)")
     c.add_argument("--out-json", default=str(SAVED_BASELINES / "training_curves.json"))
     c.add_argument("--out-png", default=str(ROOT / "docs" / "baselines_training.png"))
+    c.add_argument("--keep-others", action="store_true",
+                   help="keep the curves of runs not named from --out-json (retrain one baseline, redraw all)")
     e = sub.add_parser("export", help="copy each run's final policy to the committed baselines")
     e.add_argument("runs", nargs="+", metavar="NAME=FOLDER")
     e.add_argument("--dest", default=str(SAVED_BASELINES))
     a = p.parse_args(argv)
     runs = _runs(a.runs)
     if a.command == "curves":
-        out = cmd_curves(runs, Path(a.out_json), Path(a.out_png), a.scenario)
+        out = cmd_curves(runs, Path(a.out_json), Path(a.out_png), a.scenario, a.keep_others)
         print(json.dumps({k: {part: v[part]["mean_return"][-1:] for part in ("training", "evaluation") if part in v}
                           for k, v in out["curves"].items()}))
         return out
