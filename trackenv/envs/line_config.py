@@ -609,10 +609,12 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "wet": {"choices": INTERVENTIONS, "contact_sensor": True, "wet_spot_probability": 0.35,
             "wet_spot_active_share": 0.4, "surveyed_share": 0.5},
     # a line of many short defects (trackenv/TampingLineDefects-v0): more switches and crossings, on average
-    # one short defect per segment (a joint, a weld, a failed sleeper: 2.4 m settling 2.5x faster)
-    # [assumption]; the full decision
+    # one short defect per section (a joint, a weld, a failed sleeper: 2.4 m settling 5x faster than plain track,
+    # a zone's rate kept where faster; the section's SD counts it once in its 200 m), and spot tamping alone in a
+    # short possession at a fifth of a tamping possession's cost [assumption]; the full decision
     "defects": {"choices": INTERVENTIONS, "contact_sensor": True, "switch_probability": 0.2,
-                "local_defects_mean": 1.0},
+                "local_defects_mean": 1.0, "local_defect_rate_factor": 5.0, "local_defect_in_zone": "faster",
+                "local_defect_near_m": 3.0, "spot_possession_share": 0.2},
 }
 
 
