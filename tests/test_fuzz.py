@@ -220,8 +220,8 @@ def test_a_line_with_per_section_values_refuses_or_steps_finitely(per_section, s
 # short defects and a survey before the start, so that every choice acts
 choice_names = st.lists(st.sampled_from([*INTERVENTIONS, "grind", ""]), max_size=7)
 CHOICE_FIELDS = ["surveyed_share", "wet_spot_active_share", "local_defects_mean", "local_defect_length_m",
-                 "local_defect_rate_factor", "spot_tamping_length_m", "spot_tamping_work", "drainage_work",
-                 "renewal_work", "inspection_sd_noise_mm", "survey_cost"]
+                 "local_defect_rate_factor", "local_defect_near_m", "spot_tamping_length_m", "spot_tamping_work",
+                 "spot_possession_share", "drainage_work", "renewal_work", "inspection_sd_noise_mm", "survey_cost"]
 
 
 @FUZZ

@@ -309,12 +309,19 @@ def recorded_rule_schedules(config: Any, seeds: list[int], policies: list,
 
 def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     """Exact episode cost of a plan (H, S) of choice codes (bool: tamp) whose sections cost ``section_cost``
-    (S,): their costs and a possession per step with track work; inf where a step's work exceeds the capacity."""
+    (S,): their costs and a possession per step with track work (``spot_possession_share`` of it where the step's
+    only track work is spot tamping); inf where a step's work exceeds the capacity."""
     codes = np.asarray(plan, dtype=np.int64)
     work = work_on_sections(work_per_code(config.choice_work), codes, config.length_factors[None, :])
     if (work.sum(axis=1) > config.capacity + 1e-9).any():
         return np.inf
-    return float(section_cost.sum() + config.possession_cost * np.count_nonzero(IS_TRACK_WORK[codes].any(axis=1)))
+    any_work = IS_TRACK_WORK[codes].any(axis=1)
+    full = (IS_TRACK_WORK[codes] & (codes != SPOT_TAMP)).any(axis=1)
+    spot_only = np.count_nonzero(any_work & ~full)
+    if config.spot_possession_share == 1.0:
+        return float(section_cost.sum() + config.possession_cost * np.count_nonzero(any_work))
+    return float(section_cost.sum() + config.possession_cost * (np.count_nonzero(full)
+                                                                  + config.spot_possession_share * spot_only))
 
 
 def _plan(options: list[list[tuple[np.ndarray, float]]], choice: np.ndarray) -> np.ndarray:
@@ -337,7 +344,8 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     a tamping's and a renewal's scaled by the section's length;
     track work of no work counts 1e-9, so that it still needs the campaign). Returns the choice (S,) and its
     total; never worse than ``incumbent`` (a choice, e.g. the last one) if the solver stops before it proves the
-    optimum."""
+    optimum. With a cheaper spot possession (``spot_possession_share`` < 1) a step may instead have a spot
+    possession z[t] (y[t] + z[t] <= 1, at that share of the cost) whose work is spot tamping only."""
     from scipy.optimize import Bounds, LinearConstraint, milp
     from scipy.sparse import coo_array
 
@@ -345,21 +353,36 @@ def _select(options: list[list[tuple[np.ndarray, float]]], config: Any,
     n = [len(o) for o in options]
     first = np.concatenate([[0], np.cumsum(n)])
     nx = int(first[-1])
-    c = np.concatenate([[cost for _, cost in o] for o in options] + [np.full(H, config.possession_cost)])
+    spot = config.spot_possession_share < 1.0
+    P = H * (2 if spot else 1)  # possession variables: y (any work), then z (spot tamping only)
+    c = np.concatenate([[cost for _, cost in o] for o in options] + [np.full(H, config.possession_cost)]
+                       + ([np.full(H, config.spot_possession_share * config.possession_cost)] if spot else []))
     # one option per section
     rows = np.repeat(np.arange(S), n)
-    pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + H))
+    pick = coo_array((np.ones(nx), (rows, np.arange(nx))), shape=(S, nx + P))
     # track work at step t needs a campaign at t, of at most capacity work
     codes = np.concatenate([np.stack([sched for sched, _ in o]) for o in options]).astype(np.int64)  # (nx, H)
     length = config.length_factors[rows][:, None]  # each option's section's
-    work = work_on_sections(np.where(IS_TRACK_WORK, np.maximum(work_per_code(config.choice_work), 1e-9), 0.0), codes,
-                            length)
-    r, q = np.nonzero(work.T)
-    load = coo_array((np.concatenate([work.T[r, q], np.full(H, -float(config.capacity))]),
-                      (np.concatenate([r, np.arange(H)]), np.concatenate([q, nx + np.arange(H)]))),
-                     shape=(H, nx + H))
-    res = milp(c, integrality=np.ones(nx + H), bounds=Bounds(0, 1),
-               constraints=[LinearConstraint(pick, 1, 1), LinearConstraint(load, -np.inf, 0)],
+    per_code = np.where(IS_TRACK_WORK, np.maximum(work_per_code(config.choice_work), 1e-9), 0.0)
+    work = work_on_sections(per_code, codes, length)
+
+    def load(work: np.ndarray, possessions: tuple[int, ...]) -> coo_array:
+        """Σ work·x − capacity · (the possession variables ``possessions`` of each step) <= 0, per step."""
+        r, q = np.nonzero(work.T)
+        steps = np.arange(H)
+        return coo_array((np.concatenate([work.T[r, q], np.full(H * len(possessions), -float(config.capacity))]),
+                          (np.concatenate([r, *(steps for _ in possessions)]),
+                           np.concatenate([q, *(nx + k * H + steps for k in possessions)]))), shape=(H, nx + P))
+
+    constraints = [LinearConstraint(pick, 1, 1)]
+    if not spot:
+        constraints.append(LinearConstraint(load(work, (0,)), -np.inf, 0))
+    else:  # any work within a possession of either kind; work other than spot tamping within a full one
+        full = work_on_sections(np.where(np.arange(per_code.size) == SPOT_TAMP, 0.0, per_code), codes, length)
+        one = coo_array((np.ones(2 * H), (np.tile(np.arange(H), 2), nx + np.arange(2 * H))), shape=(H, nx + P))
+        constraints += [LinearConstraint(load(work, (0, 1)), -np.inf, 0),
+                        LinearConstraint(load(full, (0,)), -np.inf, 0), LinearConstraint(one, -np.inf, 1)]
+    res = milp(c, integrality=np.ones(nx + P), bounds=Bounds(0, 1), constraints=constraints,
                options={"time_limit": 60.0})
     found = None
     if res.x is not None:

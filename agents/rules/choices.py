@@ -256,20 +256,21 @@ class ChoiceThresholdNoLooking(ChoiceThreshold):
 
 def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[dict[str, Any]]:
     """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): drainage where
-    surveyed with spot tamping at two peaks and a second-tamping drainage trigger; with ``cls.looks``, surveys of
+    surveyed with spot tamping at three peaks and a second-tamping drainage trigger; with ``cls.looks``, surveys of
     every section first, and extra inspections on top (between runs, or of a high peak just tamped). With every
     choice off the family is the grouped threshold itself (:func:`choices_off`): the tuning compares against it."""
     off = choices_off(cls)
     drain = {**off, "drain_surveyed": True}
     if not cls.looks:
         grid = [{**drain, "spot_peak_mm": 12.0}, {**drain, "spot_peak_mm": 9.0},
-                {**drain, "spot_peak_mm": 9.0, "drain_after_tampings": 2}]
+                {**drain, "spot_peak_mm": 9.0, "drain_after_tampings": 2}, {**drain, "spot_peak_mm": 7.0}]
     else:
         survey = {**drain, "survey_all": True}
         grid = [survey, {**survey, "spot_peak_mm": 12.0}, {**survey, "spot_peak_mm": 9.0},
                 {**survey, "spot_peak_mm": 9.0, "inspect_margin_mm": 0.5, "inspect_peak_mm": 7.0},
                 {**survey, "spot_peak_mm": 12.0, "check_peak_mm": 12.0},
-                {**survey, "spot_peak_mm": 9.0, "check_peak_mm": 12.0}]
+                {**survey, "spot_peak_mm": 9.0, "check_peak_mm": 12.0},
+                {**survey, "spot_peak_mm": 7.0, "check_peak_mm": 12.0}]
     return [{**base, **extra} for extra in grid]
 
 

@@ -64,7 +64,7 @@ def test_spot_tamping_lifts_the_worst_defect_and_leaves_the_rest_of_the_section(
 
 def test_a_spot_tamping_on_a_local_defect_lowers_its_peak_more_than_its_sd():
     # the short-defect line at its start: a section whose D1 peak stands at least 3 SDs out is a local defect,
-    # and a lift of the few metres around it takes more of the peak than of the section's SD
+    # and a lift of the few metres around it brings its peak down, on average by more than its SD
     ratios = []
     for seed in range(3):
         batch = LineBatch(scenario("defects", horizon_years=1.0), 1)
@@ -73,10 +73,11 @@ def test_a_spot_tamping_on_a_local_defect_lowers_its_peak_more_than_its_sd():
         sd, peak = batch.sd[local], batch.peak[local]
         batch.spot_tamp_rows(local, 0)
         d1 = d1_filter(batch.level[local], SLEEPER_SPACING_M)  # one section per segment on this line
-        ratios.append(np.stack([d1.std(axis=1) / sd, np.abs(d1).max(axis=1) / peak]))
+        sd_after = batch._segment_sd(d1, np.flatnonzero(local))  # the section's SD: its defects once in 200 m
+        ratios.append(np.stack([sd_after / sd, np.abs(d1).max(axis=1) / peak]))
     sd_ratio, peak_ratio = np.concatenate(ratios, axis=1)
     assert sd_ratio.size >= 3
-    assert (peak_ratio < sd_ratio).all() and (peak_ratio < 0.9).all()
+    assert (peak_ratio < 1).all() and peak_ratio.mean() < sd_ratio.mean() and (sd_ratio < 1).all()
 
 
 def test_drainage_returns_a_wet_patch_to_the_plain_rate_and_stops_a_latent_one():
@@ -204,6 +205,50 @@ def test_local_defects_and_early_wet_spots_are_drawn_only_where_asked():
     assert (c.wet_onset == 0).all()
 
 
+def test_one_defect_per_section_weighs_the_defects_neighbourhood_by_its_length():
+    # a hand-made D1 level on the 51 sleepers of a 30 m segment: 10 (6 m) near a defect at ±4 mm, 40 of the other
+    # 41 at ±1 mm and the last at 0 (mean 0), on a 200 m section: SD² = (6·16 + 194·40/41) / 200 mm², below the
+    # segment's own (10·16 + 40) / 51 mm²
+    batch = _batch(0, local_defects_mean=1.0, local_defect_near_m=3.0)
+    n = batch.config.n_sleepers
+    assert n == 51
+    near = np.zeros((2, n), dtype=bool)
+    near[0, 20:30] = True
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    sign[-1] = 0.0
+    d1 = np.stack([np.where(near[0], 4.0, 1.0) * sign, sign]) * 1e-3
+    batch.defect_near[:2] = near
+    sd = batch._segment_sd(d1, np.arange(2))
+    assert sd[0] == pytest.approx(np.sqrt((6.0 * 16 + 194.0 * 40 / 41) / 200) * 1e-3, rel=1e-12)
+    assert sd[0] < d1[0].std()
+    assert sd[1] == pytest.approx(d1[1].std(), rel=1e-12)  # no defect: the segment's own SD
+
+
+def test_one_defect_per_section_changes_the_sd_where_a_defect_is_and_never_the_peak():
+    fields = {"local_defects_mean": 1.0, "switch_probability": 0.0, "transition_probability": 0.0}
+    plain, once = _batch(3, **fields), _batch(3, **fields, local_defect_near_m=3.0)
+    has = once.defect_near.any(axis=1)
+    assert has.any() and not has.all()
+    np.testing.assert_array_equal(once.peak, plain.peak)  # the same draws and physics
+    np.testing.assert_allclose(once.sd[~has], plain.sd[~has], rtol=1e-12)
+    assert (once.sd[has] != plain.sd[has]).all()
+    assert once.sd[has].mean() < plain.sd[has].mean()  # a defect in 200 m of track, not in every 30 m
+    assert not plain.defect_near.any()  # off: nothing kept
+
+
+def test_a_local_defect_in_a_zone_keeps_the_faster_rate_where_asked():
+    # every section a switch (4x the plain rate): a defect at 2.5x the plain rate adds nothing there with
+    # "faster", and multiplies the zone's with "multiply" (the default)
+    fields = {"local_defects_mean": 2.0, "switch_probability": 1.0, "transition_probability": 0.0,
+              "wet_spot_probability": 0.0}
+    times, faster = _batch(4, **fields), _batch(4, **fields, local_defect_in_zone="faster")
+    zone_only = _batch(4, **{**fields, "local_defect_rate_factor": 1.0})
+    patches = times.base_rate > zone_only.base_rate * 1.01
+    assert patches.any()
+    np.testing.assert_allclose(times.base_rate[patches], 2.5 * zone_only.base_rate[patches], rtol=1e-12)
+    np.testing.assert_allclose(faster.base_rate, zone_only.base_rate, rtol=1e-12)
+
+
 # --- masks, capacity in work, budget ---
 def test_masks_follow_the_config_the_last_work_and_the_capacity():
     env = _env(choices=("tamp", "drainage", "inspect"), capacity=2, drainage_work=2.0)
@@ -317,10 +362,18 @@ def test_tamping_as_choices_is_tamping_as_multibinary():
     ({"wet_spot_active_share": 1.5}, "wet_spot_active_share"),
     ({"local_defects_mean": -1}, "local_defects_mean"),
     ({"local_defect_rate_factor": 0.0}, "local_defect_rate_factor"),
+    ({"local_defect_near_m": -1.0}, "local_defect_near_m"),
+    ({"local_defect_near_m": 20.0}, "segment_length_m"),
+    ({"local_defect_in_zone": "add"}, "local_defect_in_zone"),
 ])
 def test_bad_choice_fields_are_refused_by_name(fields, match):
     with pytest.raises(ValueError, match=match):
         LineConfig(**fields)
+
+
+def test_one_defect_per_section_needs_a_segment_per_section():
+    with pytest.raises(ValueError, match="local_defect_near_m = 3 needs sections_per_segment = 1"):
+        scenario("track60", local_defect_near_m=3.0)
 
 
 def test_choices_are_stored_in_their_canonical_order():

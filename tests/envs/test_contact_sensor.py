@@ -87,9 +87,9 @@ def test_the_sensor_fields_are_checked(field, value, message):
 
 
 def test_a_settlement_that_runs_away_is_a_warning_not_silent_figures():
-    """A short defect settling 5x faster on a switch feeds on its own sleeper forces until the settlement reaches
-    metres and the forces meganewtons: the engine warns once that the line has left the model's validity, naming
-    the fields to check; the shipped preset on the same episode does not warn."""
+    """A short defect settling 5x faster than a switch (the two factors multiplied) feeds on its own sleeper forces
+    until the settlement reaches metres and the forces meganewtons: the engine warns once that the line has left
+    the model's validity, naming the fields to check; the shipped preset on the same episode does not warn."""
     import warnings
 
     def run(**fields):
@@ -101,6 +101,6 @@ def test_a_settlement_that_runs_away_is_a_warning_not_silent_figures():
                 env.step(np.zeros(12, np.int64))
         return [w for w in caught if issubclass(w.category, RuntimeWarning) and "validity" in str(w.message)]
 
-    runaway = run(local_defect_length_m=3.0, local_defect_rate_factor=5.0)
+    runaway = run(local_defect_length_m=3.0, local_defect_rate_factor=5.0, local_defect_in_zone="multiply")
     assert len(runaway) == 1 and "local_defect_rate_factor=5" in str(runaway[0].message)
     assert run() == []

@@ -41,6 +41,10 @@ SLEEPER_SPACING_M = 0.6
 APPROACH_SLEEPERS = 10
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
+#: How a local defect's rate factor meets a known zone's (transition, switch or crossing) on its sleepers:
+#: "multiply" (the two factors multiply) or "faster" (the patch settles ``local_defect_rate_factor`` times the
+#: plain track's rate, or at the zone's where that is faster).
+LOCAL_DEFECT_IN_ZONE = ("multiply", "faster")
 #: The line's fields that may also be given per section (``per_section``), with their bounds: the one range of
 #: each, read by the line's value and by every section's.
 PER_SECTION_BOUNDS: dict[str, tuple[float, float]] = {
@@ -128,12 +132,26 @@ class LineConfig(ConfigBase):
     section) **[assumption]** all; a renewal by choice costs a tamping and ``renewal_cost_per_m``. The work of
     each, in tamping-section equivalents of ``capacity`` (:attr:`choice_work`): tamp 1, ``spot_tamping_work``
     0.2, ``drainage_work`` 2, ``renewal_work`` 3 **[assumption]**, inspect and survey 0 (a choice whose work
-    exceeds ``capacity`` is always masked). ``surveyed_share``: the share of sections surveyed before the start
-    (needs "survey"). Drawn only where set (else nothing is drawn for them): ``wet_spot_active_share``, the share
-    of wet spots working from the first step; ``local_defects_mean`` short local defects per segment (Poisson;
-    a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch (2.4 m) settling
-    ``local_defect_rate_factor`` (2.5) times faster **[assumption]**; such a short patch lies mostly below the D1
-    band of 3-25 m, so it shows little in the measured level.
+    exceeds ``capacity`` is always masked). ``spot_possession_share`` (1): the share of ``possession_cost`` a step
+    pays whose only track work is spot tamping (a short possession for a small tamper or a gang with hand-held
+    tampers instead of a night's for a tamping machine **[assumption]**). ``surveyed_share``: the share of
+    sections surveyed before the start (needs "survey"). Drawn only where set (else nothing is drawn for them):
+    ``wet_spot_active_share``, the share of wet spots working from the first step; ``local_defects_mean`` short
+    local defects per segment (Poisson; a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch
+    (2.4 m) settling ``local_defect_rate_factor`` (2.5) times faster **[assumption]**; such a short patch lies
+    mostly below the D1 band of 3-25 m, so it shows little in the measured level. ``local_defect_near_m`` (0:
+    off) makes a section
+    of ``section_length_m`` carry its segment's local defects once, instead of once every segment length: its SD
+    (true and measured, and whatever reads it) is the length-weighted combination of the D1 variance over the
+    sleepers within ``local_defect_near_m`` of a local defect and the variance over the rest of the segment,
+    which stands for the rest of the section, ``SD² = (w·var_near + (L − w)·var_far) / L`` (w the length of the
+    defects' neighbourhoods, L the section's length); its mean-to-peak stays the segment's. At 3 m either side
+    the neighbourhood holds about 95 % of a 2.4 m dip's D1 energy **[assumption]**. Needs
+    ``sections_per_segment`` = 1. ``local_defect_in_zone`` ("multiply", the default, or "faster"): on the sleepers
+    of a transition or switch zone, a local defect's factor multiplies the zone's, or the patch settles at the
+    factor times the plain track's rate unless the zone's is faster **[assumption]**: the zone's fast settlement
+    comes from the same dynamic loads, and multiplied factors (up to 50x on a transition's soft side) can run a
+    never-maintained section past the model's validity.
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type and speed, the coarsest step that
     keeps the peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s
     for the coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
@@ -219,6 +237,7 @@ class LineConfig(ConfigBase):
     spot_tamping_length_m: float = 6.0
     spot_tamping_cost: float = 0.5
     spot_tamping_work: float = 0.2
+    spot_possession_share: float = 1.0
     drainage_cost: float = 25.0
     drainage_work: float = 2.0
     renewal_work: float = 3.0
@@ -231,6 +250,8 @@ class LineConfig(ConfigBase):
     local_defects_mean: float = 0.0
     local_defect_length_m: float = 2.4
     local_defect_rate_factor: float = 2.5
+    local_defect_near_m: float = 0.0
+    local_defect_in_zone: str = "multiply"
     limits: tuple = ()
     dt: float | str = "auto"
     per_section: tuple = ()
@@ -357,6 +378,7 @@ class LineConfig(ConfigBase):
                    high=self.segment_length_m)
         for name in ("spot_tamping_cost", "drainage_cost", "inspection_cost", "survey_cost"):
             c(name, low=0.0, high=1e9)
+        c("spot_possession_share", low=0.0, high=1.0)
         for name in ("spot_tamping_work", "drainage_work", "renewal_work"):  # more than capacity: always masked
             c(name, low=0.0, high=100.0)
         c("inspection_sd_noise_mm", low=0.0, high=10.0)
@@ -370,6 +392,14 @@ class LineConfig(ConfigBase):
         bounded_by(self, "segment_length_m", c, "local_defect_length_m", low=SLEEPER_SPACING_M,
                    high=self.segment_length_m)
         c("local_defect_rate_factor", low=0.1, high=100.0)
+        if self.local_defect_in_zone not in LOCAL_DEFECT_IN_ZONE:
+            raise ValueError(f"local_defect_in_zone must be one of {list(LOCAL_DEFECT_IN_ZONE)}, got "
+                             f"{self.local_defect_in_zone!r}")
+        bounded_by(self, "segment_length_m", c, "local_defect_near_m", low=0.0, high=self.segment_length_m / 2)
+        if self.local_defect_near_m > 0 and self.sections_per_segment != 1:
+            raise ValueError(f"local_defect_near_m = {self.local_defect_near_m:g} needs sections_per_segment = 1 "
+                             f"(a section represented by a segment of its own), got sections_per_segment = "
+                             f"{self.sections_per_segment}")
 
     def _check_pass_time_steps(self) -> None:
         """The dynamics' own bound on the time steps of a pass (``MAX_TIME_STEPS``), read here so that the config
@@ -579,10 +609,12 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "wet": {"choices": INTERVENTIONS, "contact_sensor": True, "wet_spot_probability": 0.35,
             "wet_spot_active_share": 0.4, "surveyed_share": 0.5},
     # a line of many short defects (trackenv/TampingLineDefects-v0): more switches and crossings, on average
-    # one short defect per segment (a joint, a weld, a failed sleeper: 2.4 m settling 2.5x faster)
-    # [assumption]; the full decision
+    # one short defect per section (a joint, a weld, a failed sleeper: 2.4 m settling 5x faster than plain track,
+    # a zone's rate kept where faster; the section's SD counts it once in its 200 m), and spot tamping alone in a
+    # short possession at a fifth of a tamping possession's cost [assumption]; the full decision
     "defects": {"choices": INTERVENTIONS, "contact_sensor": True, "switch_probability": 0.2,
-                "local_defects_mean": 1.0},
+                "local_defects_mean": 1.0, "local_defect_rate_factor": 5.0, "local_defect_in_zone": "faster",
+                "local_defect_near_m": 3.0, "spot_possession_share": 0.2},
 }
 
 

@@ -88,7 +88,8 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
 
 #: The arrays of :class:`LineBatch` with a leading axis of segments, and those indexed (step, segment).
 _SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", "wet_mask", "wet_active",
-                   "measured_level", "contact_profile", "d1", "traffic_factor", "pass_speed", "axle_mix")
+                   "measured_level", "contact_profile", "d1", "traffic_factor", "pass_speed", "axle_mix",
+                   "defect_near")
 _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
@@ -207,6 +208,8 @@ class LineBatch:
         self.wet_onset = np.full(GR, -1, dtype=np.int64)
         self.wet_mask = np.zeros((GR, n), dtype=bool)
         self.wet_active = np.zeros(GR, dtype=bool)
+        #: the sleepers within ``local_defect_near_m`` of a local defect (used only where that field is set)
+        self.defect_near = np.zeros((GR, n), dtype=bool)
         self.measured_level = np.zeros((GR, n))
         self.contact_profile = np.zeros((GR, n))  # largest wheel/rail force over each sleeper bay [N]
         self.d1 = np.zeros((GR, n))
@@ -338,7 +341,7 @@ class LineBatch:
         d1 = self.d1[segs]
         secs = self._sections_of(segs)
         if self.K == 1:
-            self.sd[secs] = d1.std(axis=1)
+            self.sd[secs] = self._segment_sd(d1, segs)
             self.peak[secs] = np.abs(d1).max(axis=1)
         else:
             self.sd[secs] = section_sd(d1, self.section_of_sleeper, self.K).ravel()
@@ -406,6 +409,7 @@ class LineBatch:
                                   c.sleeper_rate_cv)
         kfield = c.ballast_stiffness_factor * _lognormal(_correlated_normal(rng, (R, n), 2.0), c.ballast_stiffness_cv)
         rate = c.rate_scale * section_rate.reshape(R, self.K)[:, self.section_of_sleeper] * sleeper_rate
+        plain_rate = rate.copy()
         mid = n // 2
         soft = np.arange(n) < mid
         rate[reg == 1] *= np.where(soft, c.transition_rate_factor, 1.0)
@@ -437,7 +441,7 @@ class LineBatch:
             self.inspect_noise[:, r] = rng.standard_normal((H + 1, S, 2))
         if c.wet_spot_active_share > 0:  # wet spots already working: they start in the first step
             onset = np.where(rng.random(R) < c.wet_spot_active_share, 0, onset)
-        self._local_defects(rng, rate)
+        self.defect_near[rs] = self._near_defects(self._local_defects(rng, rate, plain_rate))
         surveyed = rng.random(S) < c.surveyed_share if c.surveyed_share > 0 else np.zeros(S, dtype=bool)
         self.sd_after_tamping[r] = 0.0
         # a segment's zone belongs to the sections over its middle (all of it where a segment is one section)
@@ -495,19 +499,59 @@ class LineBatch:
         self.u[rs] = self.rate()[rs] * self.law.settlement(f0[:, None], cyc)
         self.cyc[rs] = cyc
 
-    def _local_defects(self, rng: np.random.Generator, rate: np.ndarray) -> None:
+    def _local_defects(self, rng: np.random.Generator, rate: np.ndarray, plain_rate: np.ndarray) -> np.ndarray:
         """Short local defects (joints, welds, crossing noses, a failed sleeper: a Poisson number per segment, mean
         ``local_defects_mean``), each a ``local_defect_length_m`` patch settling ``local_defect_rate_factor`` times
-        faster, multiplied into ``rate`` (segments, n) in place; nothing is drawn when the mean is 0."""
+        faster, into ``rate`` (segments, n, with the zones' factors) in place: multiplied, or, with
+        ``local_defect_in_zone = "faster"``, the factor times ``plain_rate`` (the rate without the zones) where
+        that is faster than ``rate``; nothing is drawn when the mean is 0. Returns the sleepers of the patches
+        (segments, n) bool."""
         c = self.config
+        patches = np.zeros(rate.shape, dtype=bool)
         if c.local_defects_mean == 0:
-            return
+            return patches
         n = rate.shape[1]
         length = max(int(round(c.local_defect_length_m / SLEEPER_SPACING_M)), 1)
         counts = np.asarray(rng.poisson(c.local_defects_mean, size=rate.shape[0]))
         for j in range(rate.shape[0]):
             for start in rng.integers(0, n - length + 1, size=int(counts[j])):
-                rate[j, start : start + length] *= c.local_defect_rate_factor
+                patches[j, start : start + length] = True
+                if c.local_defect_in_zone == "multiply":
+                    rate[j, start : start + length] *= c.local_defect_rate_factor
+        if c.local_defect_in_zone == "faster":
+            rate[patches] = np.maximum(rate[patches], c.local_defect_rate_factor * plain_rate[patches])
+        return patches
+
+    def _near_defects(self, patches: np.ndarray) -> np.ndarray:
+        """(segments, n) bool: the sleepers within ``local_defect_near_m`` of a sleeper of the local defects'
+        ``patches`` (segments, n) bool; none where the field is 0 (off)."""
+        reach = int(round(self.config.local_defect_near_m / SLEEPER_SPACING_M))
+        if self.config.local_defect_near_m == 0 or not patches.any():
+            return np.zeros(patches.shape, dtype=bool)
+        near = patches.copy()
+        for shift in range(1, reach + 1):
+            near[:, shift:] |= patches[:, :-shift]
+            near[:, :-shift] |= patches[:, shift:]
+        return near
+
+    def _segment_sd(self, d1: np.ndarray, segs: np.ndarray) -> np.ndarray:
+        """(segs,) the SD of the sections represented by the segments ``segs`` (indices; one section each) whose
+        D1 level is ``d1`` (segs, n): the segment's own; with ``local_defect_near_m``, the section of its own
+        length with the segment's local defects once: the squared deviations from the segment's mean, averaged
+        over the defects' neighbourhoods (:attr:`defect_near`, length w) and over the rest of the segment, and
+        weighted w : (L − w) over the section's length L (a segment without a defect: its own SD)."""
+        c = self.config
+        if c.local_defect_near_m == 0:
+            return d1.std(axis=1)
+        near = self.defect_near[segs]
+        dev2 = (d1 - d1.mean(axis=1, keepdims=True)) ** 2
+        n_near = near.sum(axis=1)
+        n_far = near.shape[1] - n_near
+        var_near = (dev2 * near).sum(axis=1) / np.maximum(n_near, 1)
+        var_far = np.where(n_far > 0, (dev2 * ~near).sum(axis=1) / np.maximum(n_far, 1), var_near)
+        length = c.section_length_m * self.length_factor[self._sections_of(segs)]
+        w = np.minimum(n_near * SLEEPER_SPACING_M, length)
+        return np.sqrt((w * var_near + (length - w) * var_far) / length)
 
     def _voided_sleepers(self, rng: np.random.Generator, R: int, n: int) -> list[np.ndarray]:
         """Per segment, the sleepers that hang (a Poisson number, mean ``voided_sleepers_mean``, never the two at
@@ -647,7 +691,9 @@ class LineBatch:
         mask = self.enabled & fits.reshape(self.n_lines, self.S, len(CHOICES))
         mask = mask & (~self.is_work | self.allowed()[..., None])
         if c.annual_budget > 0:
-            cost = self.code_costs().reshape(self.n_lines, self.S, -1) + self.is_work * c.possession_cost
+            spot = np.arange(len(CHOICES)) == SPOT_TAMP  # alone, in a spot possession
+            possession = self.is_work * np.where(spot, c.spot_possession_share, 1.0) * c.possession_cost
+            cost = self.code_costs().reshape(self.n_lines, self.S, -1) + possession
             mask &= cost <= self.budget_left[:, None, None] + 1e-9
         mask[..., NOTHING] = True
         return mask
@@ -699,8 +745,9 @@ class LineBatch:
         tamped = (((codes == TAMP) | (codes == RENEW)) * length).sum(1)
         renewed = (((codes == TAMP) & renewing) * length).sum(1) + ((codes == RENEW) * length).sum(1)
         work = self.is_work[codes].sum(1)
+        spot_only = (work > 0) & (work == (codes == SPOT_TAMP).sum(1))
         return np.stack([
-            (work > 0) * c.possession_cost,
+            (work > 0) * np.where(spot_only, c.spot_possession_share * c.possession_cost, c.possession_cost),
             c.section_tamping_cost * tamped,
             c.section_renewal_cost * renewed,
             *(self.fixed_price[name] * (codes == code(name)).sum(1) for name in COST_KEY),
@@ -795,7 +842,7 @@ class LineBatch:
         new = restored_level(self.level[segs], sleepers, self.tm, e, self._on_sleepers(renew)[segs])
         if self.K == 1:
             self.offset[segs] = new
-            self.sd_after_tamping[segs] = d1_filter(new, SLEEPER_SPACING_M).std(axis=1)
+            self.sd_after_tamping[segs] = self._segment_sd(d1_filter(new, SLEEPER_SPACING_M), segs)
             self.u[segs] = 0.0
             self.cyc[segs] = 0.0
         else:

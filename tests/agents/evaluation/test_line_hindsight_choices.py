@@ -14,6 +14,7 @@ from trackenv.envs.choices import INTERVENTIONS, code, work_per_code
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.line_hindsight import (
     TrueStateRule,
+    _select,
     _total,
     choice_rules,
     hindsight_bound,
@@ -75,6 +76,27 @@ def test_the_choice_bound_is_exact_below_its_start_and_doing_nothing_and_never_l
     assert (work_per_code(cfg.choice_work)[sched].sum(axis=1) <= cfg.capacity + 1e-9).all()
     assert _total(sched, np.zeros(S), cfg) == pytest.approx(
         cfg.possession_cost * np.isin(sched, (TAMP, SPOT, DRAIN, RENEW)).any(axis=1).sum())
+
+
+def test_a_spot_possession_is_priced_as_the_env_prices_it():
+    # a step whose only track work is spot tamping pays spot_possession_share of the possession, in the search's
+    # pricing, in its selection and in the env (the search's result is replayed there)
+    cfg = scenario("small", choices=INTERVENTIONS, horizon_years=2.0, initial_scale=(1.2, 2.0),
+                   local_defects_mean=1.0, spot_possession_share=0.2)
+    H, S = cfg.horizon_steps, cfg.n_sections
+    plan = np.zeros((H, S), dtype=np.int8)
+    plan[1, :2], plan[3, :2], plan[3, 3], plan[5, 0] = SPOT, TAMP, SPOT, INSPECT
+    assert _total(plan, np.zeros(S), cfg) == pytest.approx(cfg.possession_cost * (1 + 0.2))
+    _, start = replay(cfg, 2, plan)
+    h = hindsight_bound(cfg, 2, plan, **SEARCH)
+    assert h["start_cost"] == pytest.approx(start, rel=1e-9)
+    assert h["cost"] == pytest.approx(h["replayed_cost"], rel=1e-9) and h["cost"] <= start + 1e-9
+    options = [[(np.where(np.arange(H) == 0, SPOT, 0).astype(np.int8), 1.0), (np.zeros(H, dtype=np.int8), 10.0)]
+               for _ in range(S)]
+    choice, total = _select(options, cfg)
+    assert (choice == 0).all() and total == pytest.approx(S * 1.0 + 0.2 * cfg.possession_cost)
+    choice, total = _select(options, cfg.replace(spot_possession_share=1.0))
+    assert (choice == 0).all() and total == pytest.approx(S * 1.0 + cfg.possession_cost)
 
 
 def test_the_search_drains_a_wet_spot_rather_than_tamp_it_again_and_again():
