@@ -75,11 +75,13 @@ from .tamping import (
     single_torch_thread,
 )
 
-__all__ = ["DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy", "line_meta_path",
-           "load_line_trained", "train_line"]
+__all__ = ["DEFAULT_CHOICE_PRETRAINED", "DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy",
+           "line_meta_path", "load_line_trained", "train_line"]
 
 LINE_ENV_ID = "trackenv/TampingLine-v0"
 DEFAULT_LINE_PRETRAINED = HERE / "pretrained" / "ppo_tamping_line.zip"
+#: the shipped policy of the lines with every choice (the choice rule as advisor: it answers in choice codes)
+DEFAULT_CHOICE_PRETRAINED = HERE / "pretrained" / "cpi_choice_line.zip"
 META_SUFFIX = "_meta.json"
 #: what :func:`train_line` reads from an RL Zoo entry (see :class:`trackenv_agents.learning.tamping.ZooSchema`)
 LINE_ZOO = ZooSchema("MlpPolicy", "one network decides for every section from its features", ("net_arch",), False,
@@ -435,6 +437,7 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
     """The line policy at ``path`` (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``), with SB3's
     ``predict`` on raw observations of any TampingLine scenario (its advisor rule rebuilt from the JSON beside
     it). FileNotFoundError if there is none; ValueError if it was trained on other features."""
+    from ..rules.choices import CHOICE_RULES
     from ..rules.line import LINE_HEURISTICS
 
     path = Path(path) if path is not None else DEFAULT_LINE_PRETRAINED
@@ -446,6 +449,6 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
         raise ValueError(f"{line_meta_path(path)}: trained on the features {meta.get('features')}, this version "
                          f"computes {_feature_names(advisor is not None)}")
     model = _algo_class(meta["algo"]).load(str(path), device="cpu")
-    rule = None if advisor is None else LINE_HEURISTICS[advisor](**meta.get("advisor_params", {}))
+    rule = None if advisor is None else (LINE_HEURISTICS | CHOICE_RULES)[advisor](**meta.get("advisor_params", {}))
     return LineAgent(model.policy, name=name, advisor=rule,
                      horizon_years=meta.get("config", {}).get("horizon_years"))
