@@ -47,6 +47,9 @@ def main(argv=None) -> None:
     p.add_argument("--eval-seeds", default="10000:10016", help="held-out episodes A:B, paired with the rule")
     p.add_argument("--hyperparams", default=None,
                    help="YAML (RL Zoo form) or JSON overriding the trackenv/TampingLine-v0 entry of ppo.yml")
+    p.add_argument("--init", default=None, metavar="ZIP",
+                   help="start the network from this saved line policy's weights (e.g. the shipped "
+                        "agents/learning/pretrained/ppo_tamping_line.zip)")
     p.add_argument("--out", default="runs/ppo_line")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--export", action="store_true",
@@ -67,7 +70,7 @@ def main(argv=None) -> None:
         hyperparams = {**given, "advisor": a.advisor}
     path = train_line(config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed, out_dir=a.out,
                       hyperparams=hyperparams, progress=not a.no_progress, eval_seeds=parse_seeds(a.eval_seeds),
-                      iterations=a.iterations, episodes_per_iteration=a.episodes)
+                      iterations=a.iterations, episodes_per_iteration=a.episodes, init_policy=a.init)
     summary = json.loads((path.parent / "summary.json").read_text())
     print(f"saved {path}; policy iteration {summary['policy_iteration_seconds']:.0f} s "
           f"({summary['line_steps_per_second']:.1f} line-steps/s of physics, forks included); "

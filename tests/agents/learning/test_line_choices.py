@@ -166,13 +166,18 @@ def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
 
 def test_training_with_a_choice_rule_as_advisor_saves_a_choice_agent(tmp_path):
     pytest.importorskip("sb3_contrib")
-    from trackenv_agents.learning.line import line_meta_path, load_line_trained, train_line
-
-    cfg = scenario("wet", n_sections=4, capacity=2, horizon_years=1.0, segment_length_m=12.0)
-    path = train_line(cfg, out_dir=tmp_path / "run", hyperparams={"advisor": "choice-threshold", "fit_epochs": 2},
-                      iterations=1, episodes_per_iteration=2, eval_seeds=[10000], progress=False, verbose=0)
     import json
 
+    from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, line_meta_path, load_line_trained, train_line
+
+    cfg = scenario("wet", n_sections=4, capacity=2, horizon_years=1.0, segment_length_m=12.0)
+    hp = {"advisor": "choice-threshold", "fit_epochs": 2}
+    with pytest.raises(ValueError, match="init_policy"):  # another network
+        train_line(cfg, out_dir=tmp_path / "other", hyperparams={**hp, "net_arch": [8]}, iterations=1,
+                   init_policy=DEFAULT_LINE_PRETRAINED, progress=False, verbose=0)
+    path = train_line(cfg, out_dir=tmp_path / "run", hyperparams=hp, iterations=1, episodes_per_iteration=2,
+                      eval_seeds=[10000], progress=False, verbose=0, init_policy=DEFAULT_LINE_PRETRAINED)
+    assert json.loads((tmp_path / "run" / "train_meta.json").read_text())["init_policy"] == str(DEFAULT_LINE_PRETRAINED)
     meta = json.loads(line_meta_path(path).read_text())
     assert meta["advisor"] == "choice-threshold"
     agent = load_line_trained(path).bind(cfg)
