@@ -216,7 +216,7 @@ class _LineTrainer:
         self.model = self.AlgoClass("MlpPolicy", self.env, seed=seed, tensorboard_log=str(run_dir), verbose=0,
                                     device="cpu", policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
         #: what is saved with every policy (line_meta_path)
-        self.meta = {"env_id": LINE_ENV_ID, "net_arch": list(s.net_arch), "features": _feature_names(True),
+        self.meta = {"env_id": _line_env_id(config), "net_arch": list(s.net_arch), "features": _feature_names(True),
                      "advisor": self.advisor.name, "advisor_params": dict(self.advisor.params),
                      "reward_scale": s.reward_scale, "config": config.to_dict(), "seed": seed}
         self.baseline: Any = None
@@ -437,6 +437,22 @@ class _LineTrainer:
                 "checkpoints": {"count": self.checkpoint_count, "seconds": self.checkpoint_seconds,
                                 "bytes": (self.run_dir / CHECKPOINT_FILE).stat().st_size}
                 if self.checkpoint_count else None}
+
+
+def _line_env_id(config: LineConfig) -> str:
+    """The registered TampingLine id whose preset ``config`` is (any horizon), else :data:`LINE_ENV_ID` (the
+    hyper-parameter file's entry): what a saved policy's metadata says it was trained on."""
+    import gymnasium as gym
+
+    import trackenv  # noqa: F401  (registers the ids)
+    from trackenv.envs.line_config import scenario
+
+    for env_id, spec in sorted(gym.registry.items()):
+        name = spec.kwargs.get("scenario")
+        if str(spec.entry_point).endswith(":TampingLine") and name and config.replace(horizon_years=10.0) == scenario(
+                name):
+            return env_id
+    return LINE_ENV_ID
 
 
 def _run_started_from(run_dir: Path) -> bool:

@@ -168,7 +168,13 @@ def test_training_with_a_choice_rule_as_advisor_saves_a_choice_agent(tmp_path):
     pytest.importorskip("sb3_contrib")
     import json
 
-    from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, line_meta_path, load_line_trained, train_line
+    from trackenv_agents.learning.line import (
+        DEFAULT_LINE_PRETRAINED,
+        _line_env_id,
+        line_meta_path,
+        load_line_trained,
+        train_line,
+    )
 
     cfg = scenario("wet", n_sections=4, capacity=2, horizon_years=1.0, segment_length_m=12.0)
     hp = {"advisor": "choice-threshold", "fit_epochs": 2}
@@ -179,7 +185,8 @@ def test_training_with_a_choice_rule_as_advisor_saves_a_choice_agent(tmp_path):
                       eval_seeds=[10000], progress=False, verbose=0, init_policy=DEFAULT_LINE_PRETRAINED)
     assert json.loads((tmp_path / "run" / "train_meta.json").read_text())["init_policy"] == str(DEFAULT_LINE_PRETRAINED)
     meta = json.loads(line_meta_path(path).read_text())
-    assert meta["advisor"] == "choice-threshold"
+    assert meta["advisor"] == "choice-threshold" and meta["env_id"] == "trackenv/TampingLine-v0"  # not a preset
+    assert _line_env_id(scenario("wet", horizon_years=2.0)) == "trackenv/TampingLineWet-v0"
     agent = load_line_trained(path).bind(cfg)
     assert agent.choices
     env = TampingLine(cfg, action_type="choices")
