@@ -31,6 +31,10 @@ LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretraine
 # the shipped line policy's name in every table: a network over section features, trained by counterfactual policy
 # iteration (its file format is stable-baselines3's, hence "ppo" in the file name)
 LINE_AGENT_NAME = "cpi-agent"
+# = trackenv_agents.learning.line.DEFAULT_CHOICE_PRETRAINED: the same kind of network, trained with the choice rule
+# as advisor; it answers in choice codes (its tamping from the network, the other choices from the choice rule)
+CHOICE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "cpi_choice_line.zip"
+CHOICE_AGENT_NAME = "cpi-choice-agent"
 
 
 class UsageError(Exception):
@@ -204,6 +208,7 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
     """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent),
+    ``cpi-choice-agent`` (the shipped agent of the lines with every choice),
     ``baselines`` (the committed baselines of experiments/saved/baselines/) or paths of trained policies (a .zip
     of stable-baselines3, a folder of experiments/train_rllib.py; the kind is told by the files there,
     :func:`~trackenv_agents.learning.baselines.baseline_kind`). Returns the rules (None: all tuned) and the agents
@@ -219,6 +224,9 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
         elif item == LINE_AGENT_NAME:
             _existing(str(LINE_PRETRAINED_FILE), f"--policies {LINE_AGENT_NAME}")
             agents[LINE_AGENT_NAME] = str(LINE_PRETRAINED_FILE)
+        elif item == CHOICE_AGENT_NAME:
+            _existing(str(CHOICE_PRETRAINED_FILE), f"--policies {CHOICE_AGENT_NAME}")
+            agents[CHOICE_AGENT_NAME] = str(CHOICE_PRETRAINED_FILE)
         elif item == "baselines":
             from .learning.baselines import SAVED_BASELINES, saved_baselines
 
@@ -235,11 +243,12 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             except (FileNotFoundError, ValueError) as err:
                 raise UsageError(f"--policies: {err}") from None
             name = Path(item).stem  # its file or folder name, or the path where that is taken
-            agents[item if name in agents or name in rule_names or name == LINE_AGENT_NAME else name] = item
+            taken = name in agents or name in rule_names or name in (LINE_AGENT_NAME, CHOICE_AGENT_NAME)
+            agents[item if taken else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{LINE_AGENT_NAME} or the path of a trained policy (.zip, or a folder of "
-                             "experiments/train_rllib.py)")
+                             f"{LINE_AGENT_NAME}, {CHOICE_AGENT_NAME} or the path of a trained policy (.zip, or a "
+                             "folder of experiments/train_rllib.py)")
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
                          "or a rule name")
@@ -586,7 +595,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "scenario's, agents/evaluation/leaderboard.py DEFAULT_SEEDS)")
     sp.add_argument("--policies", default=f"rules,{LINE_AGENT_NAME}", metavar="NAMES",
                     help="comma-separated: 'rules' (every tuned rule), rule names, "
-                         f"{LINE_AGENT_NAME} (the shipped agent), baselines (those committed in "
+                         f"{LINE_AGENT_NAME} (the shipped agent), {CHOICE_AGENT_NAME} (the shipped agent of the "
+                         "lines with every choice), baselines (those committed in "
                          "experiments/saved/baselines/), paths of trained policies (a stable-baselines3 "
                          ".zip, a folder of experiments/train_rllib.py; each scored on the line it was trained on, "
                          "a per-section policy on every line)")

@@ -8,6 +8,10 @@ after each; the documentation's agents page gives its wall time). ``--scenario s
 the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamping_line.zip``, which
 ``trackenv evaluate --env trackenv/TampingLine-v0`` then scores next to the rules.
 ``trackenv train --env trackenv/TampingLine-v0`` runs the same training.
+
+The lines with every choice: ``--scenario wet --advisor choice-threshold`` trains the network's tamping with the
+wet line's tuned choice rule as advisor (the agent answers in choice codes, the rule's other choices with its
+tamping); ``--export`` then copies it to ``agents/learning/pretrained/cpi_choice_line.zip`` (``cpi-choice-agent``).
 """
 
 from __future__ import annotations
@@ -17,13 +21,21 @@ import json
 import time
 from pathlib import Path
 
-from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, export_line_policy, train_line
+from trackenv_agents.learning.line import (
+    DEFAULT_CHOICE_PRETRAINED,
+    DEFAULT_LINE_PRETRAINED,
+    export_line_policy,
+    train_line,
+)
 from trackenv_agents.learning.tamping import DEFAULT_TRAIN_SEED
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", choices=["small", "default", "hard"], default="default")
+    p.add_argument("--scenario", choices=["small", "default", "hard", "choices", "wet", "defects"], default="default")
+    p.add_argument("--advisor", default=None,
+                   help="the advisor rule (default: ppo.yml's); a choice rule (choice-threshold) on the lines with "
+                        "every choice")
     p.add_argument("--horizon-years", type=float, default=None, help="shorter or longer episodes")
     p.add_argument("--iterations", type=int, default=None, help="policy iterations (default: hyperparams/ppo.yml)")
     p.add_argument("--episodes", type=int, default=None, help="training episodes per iteration (default: ppo.yml)")
@@ -35,18 +47,30 @@ def main(argv=None) -> None:
     p.add_argument("--eval-seeds", default="10000:10016", help="held-out episodes A:B, paired with the rule")
     p.add_argument("--hyperparams", default=None,
                    help="YAML (RL Zoo form) or JSON overriding the trackenv/TampingLine-v0 entry of ppo.yml")
+    p.add_argument("--init", default=None, metavar="ZIP",
+                   help="start the network from this saved line policy's weights (e.g. the shipped "
+                        "agents/learning/pretrained/ppo_tamping_line.zip)")
     p.add_argument("--out", default="runs/ppo_line")
     p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--export", action="store_true", help=f"copy the best iteration to {DEFAULT_LINE_PRETRAINED}")
+    p.add_argument("--export", action="store_true",
+                   help=f"copy the best iteration to {DEFAULT_LINE_PRETRAINED} ({DEFAULT_CHOICE_PRETRAINED} with a "
+                        "choice rule as advisor)")
     a = p.parse_args(argv)
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.line_compare import parse_seeds
 
     config = scenario(a.scenario, **({"horizon_years": a.horizon_years} if a.horizon_years else {}))
     t0 = time.time()
+    hyperparams = a.hyperparams
+    if a.advisor is not None:
+        from trackenv_agents.learning.line import LINE_ENV_ID, LINE_ZOO
+        from trackenv_agents.learning.tamping import load_hyperparams
+
+        given = load_hyperparams(a.hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO) if a.hyperparams else {}
+        hyperparams = {**given, "advisor": a.advisor}
     path = train_line(config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed, out_dir=a.out,
-                      hyperparams=a.hyperparams, progress=not a.no_progress, eval_seeds=parse_seeds(a.eval_seeds),
-                      iterations=a.iterations, episodes_per_iteration=a.episodes)
+                      hyperparams=hyperparams, progress=not a.no_progress, eval_seeds=parse_seeds(a.eval_seeds),
+                      iterations=a.iterations, episodes_per_iteration=a.episodes, init_policy=a.init)
     summary = json.loads((path.parent / "summary.json").read_text())
     print(f"saved {path}; policy iteration {summary['policy_iteration_seconds']:.0f} s "
           f"({summary['line_steps_per_second']:.1f} line-steps/s of physics, forks included); "
@@ -59,7 +83,12 @@ def main(argv=None) -> None:
                   f"{d['mean_difference']:+.1f} k€ [{d['ci_low']:+.1f}, {d['ci_high']:+.1f}]")
     if a.export:
         best = Path(a.out) / "best_model.zip"
-        print(f"exported {best if best.exists() else path} to {export_line_policy(best if best.exists() else path)}")
+        from trackenv_agents.rules.choices import CHOICE_RULES
+
+        choice = a.advisor in CHOICE_RULES
+        dest = DEFAULT_CHOICE_PRETRAINED if choice else DEFAULT_LINE_PRETRAINED
+        model = best if best.exists() else path
+        print(f"exported {model} to {export_line_policy(model, dest)}")
 
 
 if __name__ == "__main__":

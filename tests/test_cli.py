@@ -337,3 +337,18 @@ def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):
     assert rules is None
     assert agents == {p.stem: str(p.relative_to(SAVED_BASELINES.parents[2])) for p in saved_baselines()}
     assert sorted(agents) == ["maskable-ppo-ranked", "rllib-ppo-ranked", "rllib-shared-ppo"]
+
+
+def test_leaderboard_policies_name_both_shipped_line_agents():
+    """`--policies cpi-agent,cpi-choice-agent`: the two shipped line policies by name, each a per-section policy
+    whose metadata names its advisor (the choice rule for the agent of the lines with every choice)."""
+    import json
+
+    from trackenv_agents import cli
+    from trackenv_agents.learning.line import DEFAULT_CHOICE_PRETRAINED, line_meta_path
+
+    assert cli.CHOICE_PRETRAINED_FILE == DEFAULT_CHOICE_PRETRAINED
+    rules, agents = cli._leaderboard_policies("grouped-threshold,cpi-agent,cpi-choice-agent", ["grouped-threshold"])
+    assert rules == ["grouped-threshold"]
+    assert agents == {"cpi-agent": str(cli.LINE_PRETRAINED_FILE), "cpi-choice-agent": str(DEFAULT_CHOICE_PRETRAINED)}
+    assert json.loads(line_meta_path(DEFAULT_CHOICE_PRETRAINED).read_text())["advisor"] == "choice-threshold"

@@ -19,8 +19,9 @@ from typing import Any
 _EXPORTS: dict[str, str] = {
     **dict.fromkeys(["ACTION_TYPES", "RANKED", "RANKED_CHOICES", "VEC_ACTION_TYPES", "agent_action_space",
                      "check_action_type", "env_action_type", "ranked_to_choices", "ranked_to_sections"], "actions"),
-    **dict.fromkeys(["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "n_features",
-                     "section_features"], "line_policy"),
+    **dict.fromkeys(["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "compose_choices",
+                     "is_choice_rule", "may_tamp", "n_features", "remember_work", "section_features", "tamping_codes"],
+                    "line_policy"),
     "section_counterfactuals": "line_counterfactual",
     **dict.fromkeys(["SectionAgentsVecEnv", "TampingSB3VecEnv", "VecScaleReward", "make_vec_env", "observation_keys",
                      "filter_observation"], "sb3_vec"),
@@ -31,21 +32,22 @@ _EXPORTS: dict[str, str] = {
                      "load_hyperparams", "load_trained", "make_progress_callback", "single_torch_thread",
                      "stats_path", "train"], "tamping"),
     **dict.fromkeys(["AlgoSettings", "LineSettings", "TampingSettings", "TrainingSettings"], "settings"),
-    **dict.fromkeys(["DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy", "line_meta_path",
-                     "load_line_trained", "train_line"], "line"),
+    **dict.fromkeys(["DEFAULT_CHOICE_PRETRAINED", "DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO",
+                     "export_line_policy", "line_meta_path", "load_line_trained", "train_line"], "line"),
 }
 
 __all__ = [  # = sorted(_EXPORTS) (a test keeps them equal), written out for linters and editors
-    "ACTION_TYPES", "ADVISOR_FEATURES", "AlgoSettings", "DEFAULT_ENV_ID", "DEFAULT_EVAL_SEEDS", "DEFAULT_HYPERPARAMS",
-    "DEFAULT_LINE_PRETRAINED", "DEFAULT_PRETRAINED", "DEFAULT_TRAIN_SEED", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM",
-    "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "LineSettings", "NormalizedPolicy", "RANKED", "RANKED_CHOICES",
-    "SectionAgentsVecEnv", "TampingSB3VecEnv", "TampingSettings", "TrainingSettings", "VEC_ACTION_TYPES",
-    "VecScaleReward", "ZooSchema", "agent_action_space", "check_action_type", "collect_demonstrations",
-    "env_action_type", "export_line_policy", "export_policy", "filter_observation", "fit_choices", "fit_policy",
-    "from_zoo", "line_meta_path", "load_hyperparams", "load_line_trained", "load_trained", "make_progress_callback",
-    "make_vec_env", "n_features", "observation_keys", "ranked_to_choices", "ranked_to_sections", "return_scale",
-    "section_counterfactuals", "section_features", "single_torch_thread", "stats_path", "teacher_policy",
-    "teacher_to_agent_actions", "train", "train_line", "warm_start",
+    "ACTION_TYPES", "ADVISOR_FEATURES", "AlgoSettings", "DEFAULT_CHOICE_PRETRAINED", "DEFAULT_ENV_ID",
+    "DEFAULT_EVAL_SEEDS", "DEFAULT_HYPERPARAMS", "DEFAULT_LINE_PRETRAINED", "DEFAULT_PRETRAINED", "DEFAULT_TRAIN_SEED",
+    "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LINE_ENV_ID", "LINE_ZOO", "LineAgent", "LineSettings",
+    "NormalizedPolicy", "RANKED", "RANKED_CHOICES", "SectionAgentsVecEnv", "TampingSB3VecEnv", "TampingSettings",
+    "TrainingSettings", "VEC_ACTION_TYPES", "VecScaleReward", "ZooSchema", "agent_action_space", "check_action_type",
+    "collect_demonstrations", "compose_choices", "env_action_type", "export_line_policy", "export_policy",
+    "filter_observation", "fit_choices", "fit_policy", "from_zoo", "is_choice_rule", "line_meta_path",
+    "load_hyperparams", "load_line_trained", "load_trained", "make_progress_callback", "make_vec_env", "may_tamp",
+    "n_features", "observation_keys", "ranked_to_choices", "ranked_to_sections", "remember_work", "return_scale",
+    "section_counterfactuals", "section_features", "single_torch_thread", "stats_path", "tamping_codes",
+    "teacher_policy", "teacher_to_agent_actions", "train", "train_line", "warm_start",
 ]
 
 

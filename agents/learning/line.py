@@ -75,11 +75,13 @@ from .tamping import (
     single_torch_thread,
 )
 
-__all__ = ["DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy", "line_meta_path",
-           "load_line_trained", "train_line"]
+__all__ = ["DEFAULT_CHOICE_PRETRAINED", "DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID", "LINE_ZOO", "export_line_policy",
+           "line_meta_path", "load_line_trained", "train_line"]
 
 LINE_ENV_ID = "trackenv/TampingLine-v0"
 DEFAULT_LINE_PRETRAINED = HERE / "pretrained" / "ppo_tamping_line.zip"
+#: the shipped policy of the lines with every choice (the choice rule as advisor: it answers in choice codes)
+DEFAULT_CHOICE_PRETRAINED = HERE / "pretrained" / "cpi_choice_line.zip"
 META_SUFFIX = "_meta.json"
 #: what :func:`train_line` reads from an RL Zoo entry (see :class:`trackenv_agents.learning.tamping.ZooSchema`)
 LINE_ZOO = ZooSchema("MlpPolicy", "one network decides for every section from its features", ("net_arch",), False,
@@ -131,7 +133,7 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
                hyperparams: LineSettings | dict | str | Path | None = None, progress: bool = True,
                eval_seeds: Sequence[int] | None = DEFAULT_EVAL_SEEDS, iterations: int | None = None,
                episodes_per_iteration: int | None = None, verbose: int = 1, resume: str | Path | None = None,
-               checkpoint_every_s: float | None = None) -> Path:
+               checkpoint_every_s: float | None = None, init_policy: str | Path | None = None) -> Path:
     """Train on a TampingLine ``config`` (a LineConfig, its fields as a dict, or a scenario name; default the
     default line) by counterfactual policy iteration (then MaskablePPO for ``total_timesteps`` line-steps, 0 by
     default); save ``out_dir/model.zip`` (+ ``model_meta.json``) and return its path.
@@ -153,11 +155,17 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     continue in place from its last complete iteration (or PPO checkpoint), with the settings, config, seeds
     and held-out seeds it was started with (``eval_seeds`` is the run's own; the other arguments but
     ``progress``, ``verbose`` and ``checkpoint_every_s`` must be None); a finished run returns its model at
-    once."""
+    once.
+
+    ``init_policy``: a saved line policy (:func:`load_line_trained`'s files, of the same network and features)
+    whose weights the network starts from, e.g. the shipped one: the first iteration then runs and forks that
+    policy rather than the advisor, and the fits go on from its weights (policy iteration from a trained agent,
+    e.g. onto a new line or a new advisor)."""
     if resume is not None:
         run_dir = resume_folder(resume, out_dir)
         refuse_on_resume(run_dir, config=config, total_timesteps=total_timesteps, n_envs=n_envs, seed=seed,
-                         hyperparams=hyperparams, iterations=iterations, episodes_per_iteration=episodes_per_iteration)
+                         hyperparams=hyperparams, iterations=iterations, episodes_per_iteration=episodes_per_iteration,
+                         init_policy=init_policy)
         run_meta = read_run_meta(run_dir)
         ckpt = read_checkpoint(run_dir)
         done = finished_run(run_dir, ckpt.info, int(ckpt.info["total"]))
@@ -179,6 +187,8 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
     trainer = _LineTrainer(s, LineConfig.coerce("default" if config is None else config),
                            DEFAULT_TRAIN_SEED if seed is None else int(seed), run_dir,
                            None if eval_seeds is None else [int(x) for x in eval_seeds], progress, verbose)
+    if init_policy is not None:
+        trainer.start_from(Path(init_policy))
     return trainer.run(None)
 
 
@@ -206,12 +216,25 @@ class _LineTrainer:
         self.model = self.AlgoClass("MlpPolicy", self.env, seed=seed, tensorboard_log=str(run_dir), verbose=0,
                                     device="cpu", policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
         #: what is saved with every policy (line_meta_path)
-        self.meta = {"env_id": LINE_ENV_ID, "net_arch": list(s.net_arch), "features": _feature_names(True),
+        self.meta = {"env_id": _line_env_id(config), "net_arch": list(s.net_arch), "features": _feature_names(True),
                      "advisor": self.advisor.name, "advisor_params": dict(self.advisor.params),
                      "reward_scale": s.reward_scale, "config": config.to_dict(), "seed": seed}
         self.baseline: Any = None
+        #: the saved policy the network started from (train_line's init_policy), if any
+        self.init_policy: str | None = None
         self.checkpoint_seconds = 0.0
         self.checkpoint_count = 0
+
+    def start_from(self, path: Path) -> None:
+        """The network's weights from the saved line policy at ``path`` (same network and features, else
+        ValueError)."""
+        meta = json.loads(line_meta_path(path).read_text())
+        if meta.get("features") != self.meta["features"] or list(meta.get("net_arch", [])) != self.meta["net_arch"]:
+            raise ValueError(f"init_policy {path}: features {meta.get('features')} and network {meta.get('net_arch')}"
+                             f", this run has {self.meta['features']} and {self.meta['net_arch']}")
+        source = _algo_class(meta["algo"]).load(str(path), device="cpu")
+        self.model.policy.load_state_dict(source.policy.state_dict())
+        self.init_policy = str(path)
 
     # --- checkpoints ---
     def _checkpoint(self, info: dict[str, Any], state: dict[str, Any]) -> None:
@@ -232,7 +255,8 @@ class _LineTrainer:
         if ckpt is None:
             write_json_atomic(self.run_dir / META_FILE, {"trainer": "line", "algo": self.s.algo,
                                                          "hyperparams": self.s.to_dict(), **self.meta,
-                                                         "eval_seeds": self.eval_seeds})
+                                                         "eval_seeds": self.eval_seeds,
+                                                         "init_policy": self.init_policy})
             self._evaluate_baseline()
             pi = {"done": 0, "data": [], "history": [], "best": -np.inf, "line_steps": 0, "fork_steps": 0,
                   "seconds": 0.0}
@@ -309,7 +333,8 @@ class _LineTrainer:
             from tqdm.auto import tqdm
 
             bar = tqdm(total=s.iterations * H, initial=pi["done"] * H, desc="policy iteration", unit="step")
-        behaviour: Any = self.advisor if pi["done"] == 0 else LineAgent(self.model.policy, advisor=self.advisor)
+        started = pi["done"] > 0 or self.init_policy is not None or _run_started_from(self.run_dir)
+        behaviour: Any = LineAgent(self.model.policy, advisor=self.advisor) if started else self.advisor
         for it in range(pi["done"], s.iterations):
             t_it = time.time()
             seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
@@ -414,6 +439,29 @@ class _LineTrainer:
                 if self.checkpoint_count else None}
 
 
+def _line_env_id(config: LineConfig) -> str:
+    """The registered TampingLine id whose preset ``config`` is (any horizon), else :data:`LINE_ENV_ID` (the
+    hyper-parameter file's entry): what a saved policy's metadata says it was trained on."""
+    import gymnasium as gym
+
+    import trackenv  # noqa: F401  (registers the ids)
+    from trackenv.envs.line_config import scenario
+
+    for env_id, spec in sorted(gym.registry.items()):
+        name = spec.kwargs.get("scenario")
+        if str(spec.entry_point).endswith(":TampingLine") and name and config.replace(horizon_years=10.0) == scenario(
+                name):
+            return env_id
+    return LINE_ENV_ID
+
+
+def _run_started_from(run_dir: Path) -> bool:
+    """Whether the run in ``run_dir`` started from a saved policy (its ``init_policy``): a resumed run at its
+    first iteration then runs that network, not the advisor."""
+    meta = run_dir / META_FILE
+    return meta.exists() and json.loads(meta.read_text()).get("init_policy") is not None
+
+
 def _log_iteration(logger: Any, rec: dict[str, Any]) -> None:
     """One iteration's record in the policy iteration's logs (step: the iteration)."""
     if "evaluation" in rec:
@@ -435,6 +483,7 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
     """The line policy at ``path`` (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``), with SB3's
     ``predict`` on raw observations of any TampingLine scenario (its advisor rule rebuilt from the JSON beside
     it). FileNotFoundError if there is none; ValueError if it was trained on other features."""
+    from ..rules.choices import CHOICE_RULES
     from ..rules.line import LINE_HEURISTICS
 
     path = Path(path) if path is not None else DEFAULT_LINE_PRETRAINED
@@ -446,6 +495,6 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
         raise ValueError(f"{line_meta_path(path)}: trained on the features {meta.get('features')}, this version "
                          f"computes {_feature_names(advisor is not None)}")
     model = _algo_class(meta["algo"]).load(str(path), device="cpu")
-    rule = None if advisor is None else LINE_HEURISTICS[advisor](**meta.get("advisor_params", {}))
+    rule = None if advisor is None else (LINE_HEURISTICS | CHOICE_RULES)[advisor](**meta.get("advisor_params", {}))
     return LineAgent(model.policy, name=name, advisor=rule,
                      horizon_years=meta.get("config", {}).get("horizon_years"))

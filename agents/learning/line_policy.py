@@ -17,7 +17,9 @@ sections), and a learner can credit each section's choice with that section's ow
   from it).
 * :class:`LineAgent` — a trained section policy (any SB3 policy over these features with ``Discrete(2)``
   actions) with SB3's ``predict`` on raw line observations: it tamps the sections whose probability of tamping
-  is above one half, never one the env would drop, at most ``capacity`` (the most probable).
+  is above one half, never one the env would drop, at most ``capacity`` (the most probable). With a choice rule
+  as its advisor (:data:`~trackenv_agents.rules.choices.CHOICE_RULES`) it answers in choice codes: the network
+  decides where and when to tamp, the rule the other choices (:func:`compose_choices`).
 """
 
 from __future__ import annotations
@@ -27,13 +29,26 @@ from typing import Any
 
 import numpy as np
 
+from trackenv.envs.choices import (
+    DRAINAGE,
+    INSPECT,
+    IS_TRACK_WORK,
+    NOTHING,
+    RENEW,
+    SPOT_TAMP,
+    SURVEY,
+    TAMP,
+    work_on_sections,
+    work_per_code,
+)
 from trackenv.envs.line_config import LineConfig
 
 from ..rules.base import as_batch
 from ..rules.line import stale_measurement
 
-__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "may_tamp", "n_features",
-           "section_features"]
+__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "compose_choices",
+           "is_choice_rule", "may_tamp", "n_features", "remember_work", "section_features",
+           "tamping_codes"]
 
 #: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
 #: β = 0.24 (the documentation's line-problem page, calibration) at a 3 mm SD before.
@@ -66,8 +81,38 @@ RENEWAL_AFTER = 8  # TampingModel.max_tampings_before_renewal's default; a featu
 
 
 #: With an advisor, two more features, last: whether it tamps the section now, and whether it calls a campaign
-#: now (tamps any section of the line)
+#: now (tamps any section of the line). A choice rule's renewal is a tamping here (it replaces the tamping a
+#: campaign gives the section); its other choices are not.
 ADVISOR_FEATURES = ("advisor_tamps", "advisor_campaign")
+
+
+def tamping_codes(codes: np.ndarray) -> np.ndarray:
+    """Bool, shaped like ``codes`` (action codes, or a tamp-or-wait 0/1 action): the tamping kind of track work,
+    a tamping or a ballast renewal (which replaces the tamping of the section)."""
+    return np.isin(np.asarray(codes), (TAMP, RENEW))
+
+
+def is_choice_rule(rule: Any) -> bool:
+    """Whether ``rule`` is one of the choice rules (:data:`~trackenv_agents.rules.choices.CHOICE_RULES`), which
+    answer in choice codes and remember their own track work in SB3's recurrent ``state``."""
+    from ..rules.choices import CHOICE_RULES
+
+    return getattr(rule, "name", None) in CHOICE_RULES
+
+
+def compose_choices(tamp: np.ndarray, advice: np.ndarray) -> np.ndarray:
+    """The action codes of a section policy that decides where and when to tamp (``tamp``, bool) with an advisor
+    rule's choice codes ``advice`` (same shape) for the rest, by the rule's own precedence (the choice rules'
+    ``_wanted``): a drainage the rule asks for stands whatever the tamping decision (it comes before a tamping
+    there); a renewal stands where the policy tamps (it replaces that tamping) and lapses where it waits; the
+    rule's spot tamping, inspection and survey stand where the policy waits (the rule gives them only to
+    sections it does not tamp) and give way to the policy's tamping; the rule's own tamping lapses where the
+    policy waits. Requests only: masks and the possession's capacity come after (:meth:`LineAgent.predict`)."""
+    tamp = np.asarray(tamp, dtype=bool)
+    advice = np.asarray(advice, dtype=np.int64)
+    when_tamped = np.where(np.isin(advice, (RENEW, DRAINAGE)), advice, TAMP)
+    when_waiting = np.where(np.isin(advice, (SPOT_TAMP, DRAINAGE, INSPECT, SURVEY)), advice, NOTHING)
+    return np.where(tamp, when_tamped, when_waiting)
 
 
 def n_features(advisor: Any = None) -> int:
@@ -75,11 +120,13 @@ def n_features(advisor: Any = None) -> int:
     return len(FEATURES) + (len(ADVISOR_FEATURES) if advisor is not None else 0)
 
 
-def section_features(obs: Mapping[str, Any], advisor: Any = None) -> np.ndarray:
+def section_features(obs: Mapping[str, Any], advisor: Any = None, advice: np.ndarray | None = None) -> np.ndarray:
     """(batch, S, :func:`n_features`) float32 features of a batched TampingLine observation (see the module
     docstring and :data:`FEATURES`). ``advisor``: a rule bound to the line's config (SB3 ``predict``) whose
     choice is two more features, last (:data:`ADVISOR_FEATURES`: it tamps the section now; it calls a campaign
-    now): a learner then has the rule exactly and learns where to depart from it (residual policy learning)."""
+    now): a learner then has the rule exactly and learns where to depart from it (residual policy learning).
+    ``advice``: the advisor's (batch, S) codes where the caller has them already (a rule with a recurrent
+    state answers with it: :meth:`LineAgent.predict`); else they are asked of ``advisor`` on ``obs`` alone."""
     o = {k: np.asarray(v, dtype=np.float64) for k, v in obs.items()}
     sd, peak = o["section_sd"], o["section_peak"]
     B, S = sd.shape
@@ -110,10 +157,11 @@ def section_features(obs: Mapping[str, Any], advisor: Any = None) -> np.ndarray:
     scales = np.array([s for _, s in FEATURES])
     x = np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1) / scales
     if advisor is not None:
-        advice = np.asarray(advisor.predict({k: np.asarray(v) for k, v in obs.items()})[0], dtype=np.float64)
-        advice = advice.reshape(B, S)
-        campaign = np.broadcast_to(advice.max(axis=1, keepdims=True), (B, S))
-        x = np.concatenate([x, advice[..., None], campaign[..., None]], axis=-1)
+        if advice is None:
+            advice = np.asarray(advisor.predict({k: np.asarray(v) for k, v in obs.items()})[0])
+        tamps = tamping_codes(advice).reshape(B, S).astype(np.float64)
+        campaign = np.broadcast_to(tamps.max(axis=1, keepdims=True), (B, S))
+        x = np.concatenate([x, tamps[..., None], campaign[..., None]], axis=-1)
     return np.clip(x, 0.0, FEATURE_CLIP).astype(np.float32)
 
 
@@ -133,7 +181,18 @@ class LineAgent:
     a numpy Generator; None: a fresh unseeded one). Bound to a config (:meth:`bind`, as the evaluation harness
     does), never a section tamped within the config's ``min_steps_between_tampings`` (the env would drop it) and
     at most ``capacity`` sections, the most probable. ``horizon_years``: the episode length it was trained on
-    (its ``time`` feature is the share of that horizon gone), where known."""
+    (its ``time`` feature is the share of that horizon gone), where known.
+
+    **Choice mode**: with a choice rule as ``advisor`` (:func:`is_choice_rule`) the agent answers in choice codes
+    (:data:`trackenv.envs.choices.CHOICES`): where and when to tamp from its network, spot tamping, drainage,
+    renewal, inspections and surveys from the rule (:func:`compose_choices`). Bound to a config, the advisor is
+    the rule with that config's tuned parameters (:func:`~trackenv_agents.rules.tuned_params_for`; the rule's
+    defaults where none ship, e.g. on a tamping-only id, whose config enables tamping only). The rule's recurrent
+    state, its memory of each section's track work (the step of its last track work and last spot tamping, and
+    its measured peak when last tamped), is the agent's ``state``, kept for the codes the agent asks for rather
+    than for the rule's own. The agent asks for no track work that the env would drop (within
+    ``min_steps_between_tampings`` of the section's last) and fits the step's work in ``capacity``, worst measured
+    SD first as the env does, so the env applies its codes as asked."""
 
     def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
                  rng: np.random.Generator | None = None, advisor: Any = None,
@@ -141,20 +200,25 @@ class LineAgent:
         self.policy = policy
         self.name = name
         self.config = config
-        self.advisor = advisor if advisor is None or config is None else advisor.bind(config)
+        self.choices = is_choice_rule(advisor)
+        if advisor is not None and config is not None:
+            advisor = _tuned_choice_rule(advisor.name, config) if self.choices else advisor.bind(config)
+        self.advisor = advisor
         self.params: dict[str, Any] = {}
         self._rng = rng
         self.horizon_years = horizon_years
 
     def bind(self, config: LineConfig) -> LineAgent:
-        """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it)."""
+        """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it: in
+        choice mode, the config's tuned choice rule)."""
         return LineAgent(self.policy, self.name, config, self._rng, self.advisor, self.horizon_years)
 
-    def tamp_probability(self, obs: Mapping[str, Any]) -> np.ndarray:
-        """(batch, S) probability of tamping each section (batched observation dict of numpy arrays)."""
+    def tamp_probability(self, obs: Mapping[str, Any], advice: np.ndarray | None = None) -> np.ndarray:
+        """(batch, S) probability of tamping each section (batched observation dict of numpy arrays; ``advice``:
+        the advisor's codes where the caller has them, see :func:`section_features`)."""
         import torch
 
-        x = section_features(obs, self.advisor)
+        x = section_features(obs, self.advisor, advice)
         B, S, F = x.shape
         self.policy.set_training_mode(False)
         with torch.no_grad():
@@ -162,24 +226,82 @@ class LineAgent:
             p = self.policy.get_distribution(t).distribution.probs[:, 1]
         return p.cpu().numpy().reshape(B, S)
 
+    def _wants(self, p: np.ndarray, deterministic: bool) -> np.ndarray:
+        if deterministic:
+            return p > 0.5
+        if self._rng is None:
+            self._rng = np.random.default_rng()
+        return self._rng.random(p.shape) < p
+
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
         b, batched = as_batch(dict(observation))
-        p = self.tamp_probability(b)
-        if deterministic:
-            want = p > 0.5
+        if self.choices:
+            act, state = self._predict_choices(b, state, episode_start, deterministic)
         else:
-            if self._rng is None:
-                self._rng = np.random.default_rng()
-            want = self._rng.random(p.shape) < p
-        c = self.config
-        if c is not None:
-            from trackenv.envs.line_episode import keep_worst
+            p = self.tamp_probability(b)
+            want = self._wants(p, deterministic)
+            c = self.config
+            if c is not None:
+                from trackenv.envs.line_episode import keep_worst
 
-            want &= may_tamp(b, c)
-            want = keep_worst(want, p, c.capacity)
-        act = want.astype(np.int8)
+                want &= may_tamp(b, c)
+                want = keep_worst(want, p, c.capacity)
+            act = want.astype(np.int8)
         return (act if batched else act[0]), state
 
+    def _predict_choices(self, b: dict[str, np.ndarray], state: Any, episode_start: Any,
+                         deterministic: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Choice mode: (batch, S) int8 codes and the advisor's memory of the track work asked for."""
+        from trackenv.envs.line_episode import fit_worst
+
+        from ..rules.choices import choice_view
+
+        c = self.config
+        if c is None:
+            raise ValueError("a line agent with a choice rule as advisor answers once bound to a config (bind)")
+        n, S = b["section_sd"].shape
+        memory = _fresh_memory(state, episode_start, n, S)
+        advice = np.asarray(self.advisor.predict(b, state=memory)[0], dtype=np.int64)  # its own memory: not kept
+        tamp = self._wants(self.tamp_probability(b, advice), deterministic) & may_tamp(b, c)
+        codes = compose_choices(tamp, advice)
+        step = np.rint(np.asarray(b["time"], dtype=float)[:, 0] * c.horizon_steps)[:, None]
+        too_soon = IS_TRACK_WORK[codes] & ((step - memory[:, 0] <= c.min_steps_between_tampings) | ~may_tamp(b, c))
+        codes = np.where(too_soon, NOTHING, codes)
+        work = work_on_sections(work_per_code(c.choice_work), codes, np.asarray(c.length_factors, dtype=float))
+        codes = np.where(fit_worst(work, np.asarray(b["section_sd"], dtype=float), c.capacity), codes, NOTHING)
+        return codes.astype(np.int8), remember_work(memory, codes, step, choice_view(b)["section_peak"])
+
     def reset(self) -> None:
-        """Nothing to forget: the policy is stateless."""
+        """Nothing to forget: the policy is stateless (in choice mode, its memory is SB3's ``state``)."""
+
+
+def _tuned_choice_rule(name: str, config: LineConfig) -> Any:
+    """The choice rule ``name`` with ``config``'s tuned parameters (its defaults where none ship), bound to it."""
+    from ..rules import tuned_params_for
+    from ..rules.choices import CHOICE_RULES
+
+    return CHOICE_RULES[name](**tuned_params_for(config).get(name, {})).bind(config)
+
+
+def remember_work(memory: np.ndarray, codes: np.ndarray, step: np.ndarray | float, peak: np.ndarray) -> np.ndarray:
+    """A choice rule's memory (..., 3, S) after the action ``codes`` (..., S) at ``step`` (broadcast to them):
+    the step of each section's last track work and last spot tamping, and its measured ``peak`` (as the rules
+    read it, :func:`~trackenv_agents.rules.choices.choice_view`) where it is tamped or renewed; the layout of
+    :meth:`~trackenv_agents.rules.choices.ChoiceThreshold.predict`'s state, updated in place and returned."""
+    codes = np.asarray(codes, dtype=np.int64)
+    memory[..., 0, :] = np.where(IS_TRACK_WORK[codes], step, memory[..., 0, :])
+    memory[..., 1, :] = np.where(codes == SPOT_TAMP, step, memory[..., 1, :])
+    memory[..., 2, :] = np.where(tamping_codes(codes), peak, memory[..., 2, :])
+    return memory
+
+
+def _fresh_memory(state: Any, episode_start: Any, n: int, S: int) -> np.ndarray:
+    """A copy of a choice rule's memory ``state`` (batch, 3, S), forgotten where ``episode_start`` (all of it if
+    ``state`` is not one): the layout of :meth:`~trackenv_agents.rules.choices.ChoiceThreshold.predict`."""
+    if not isinstance(state, np.ndarray) or state.shape != (n, 3, S):
+        return np.full((n, 3, S), -np.inf)
+    memory = np.array(state, dtype=float)
+    if episode_start is not None:
+        memory[np.asarray(episode_start, dtype=bool).reshape(n)] = -np.inf
+    return memory

@@ -210,9 +210,10 @@ def _action_types() -> tuple[str, ...]:
 
 
 def _rules() -> tuple[str, ...]:
+    from ..rules.choices import CHOICE_RULES
     from ..rules.line import LINE_HEURISTICS
 
-    return tuple(sorted(LINE_HEURISTICS))
+    return tuple(sorted(LINE_HEURISTICS | CHOICE_RULES))
 
 
 @dataclass(frozen=True)
@@ -262,7 +263,8 @@ class LineSettings(AlgoSettings):
                                      doc="the policy iteration's checkpoint follows each iteration; the PPO "
                                          "stage's comes every this many seconds of wall clock (0: none at all)")
     advisor: str = _choice("grouped-threshold", "RULES", doc="the rule the policy starts from (its choice is a "
-                                                             "feature)")
+                                                             "feature; a choice rule: the policy answers in choice "
+                                                             "codes, the rule's other choices with its tamping)")
     advisor_params: Mapping[str, Any] | None = _params("the advisor's parameters (None: its tuned ones)")
     iterations: int = _num(6, 0, 1000, integer=True, doc="counterfactual policy iterations")
     episodes_per_iteration: int = _num(16, 1, 4096, integer=True, doc="new training episodes per iteration")
