@@ -9,9 +9,9 @@ committed folder that ``trackenv leaderboard --policies baselines`` scores.
 held-out evaluations of a run of ``experiments/train_ppo.py``), draws them against the best tuned rule's return
 on the evaluation seeds, and writes ``experiments/saved/baselines/training_curves.json`` and
 ``docs/baselines_training.png`` (with ``--keep-others`` the curves of the runs not named are kept from that JSON,
-so one baseline can be retrained and redrawn without the others' run folders). ``export`` copies each run's final policy to
-``experiments/saved/baselines/NAME`` (``NAME.zip`` and its observation statistics; an RLlib run's summary and
-RLModule only, not its optimiser and runner state).
+so one baseline can be retrained and redrawn without the others' run folders). ``export`` copies each run's
+final policy to ``experiments/saved/baselines/NAME`` (``NAME.zip`` and its observation statistics; an RLlib
+run's summary and RLModule only, not its optimiser and runner state).
 """
 
 from __future__ import annotations

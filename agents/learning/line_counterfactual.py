@@ -73,8 +73,8 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     from trackenv.envs.line_episode import LineBatch
 
     from ..evaluation.harness import _bound
-    from ..rules.choices import choice_view
-    from .line_policy import FEATURES, compose_choices, remember_work, section_features, tamping_codes
+    from ..rules.choices import choice_view, remember_work
+    from .line_policy import FEATURES, compose_choices, section_features, tamping_codes
 
     seeds = [int(s) for s in seeds]
     if not seeds:

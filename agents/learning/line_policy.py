@@ -44,6 +44,7 @@ from trackenv.envs.choices import (
 from trackenv.envs.line_config import LineConfig
 
 from ..rules.base import as_batch
+from ..rules.choices import fresh_memory, remember_work
 from ..rules.line import stale_measurement
 
 __all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "compose_choices",
@@ -261,7 +262,7 @@ class LineAgent:
         if c is None:
             raise ValueError("a line agent with a choice rule as advisor answers once bound to a config (bind)")
         n, S = b["section_sd"].shape
-        memory = _fresh_memory(state, episode_start, n, S)
+        memory = fresh_memory(state, episode_start, n, S)
         advice = np.asarray(self.advisor.predict(b, state=memory)[0], dtype=np.int64)  # its own memory: not kept
         tamp = self._wants(self.tamp_probability(b, advice), deterministic) & may_tamp(b, c)
         codes = compose_choices(tamp, advice)
@@ -283,25 +284,3 @@ def _tuned_choice_rule(name: str, config: LineConfig) -> Any:
 
     return CHOICE_RULES[name](**tuned_params_for(config).get(name, {})).bind(config)
 
-
-def remember_work(memory: np.ndarray, codes: np.ndarray, step: np.ndarray | float, peak: np.ndarray) -> np.ndarray:
-    """A choice rule's memory (..., 3, S) after the action ``codes`` (..., S) at ``step`` (broadcast to them):
-    the step of each section's last track work and last spot tamping, and its measured ``peak`` (as the rules
-    read it, :func:`~trackenv_agents.rules.choices.choice_view`) where it is tamped or renewed; the layout of
-    :meth:`~trackenv_agents.rules.choices.ChoiceThreshold.predict`'s state, updated in place and returned."""
-    codes = np.asarray(codes, dtype=np.int64)
-    memory[..., 0, :] = np.where(IS_TRACK_WORK[codes], step, memory[..., 0, :])
-    memory[..., 1, :] = np.where(codes == SPOT_TAMP, step, memory[..., 1, :])
-    memory[..., 2, :] = np.where(tamping_codes(codes), peak, memory[..., 2, :])
-    return memory
-
-
-def _fresh_memory(state: Any, episode_start: Any, n: int, S: int) -> np.ndarray:
-    """A copy of a choice rule's memory ``state`` (batch, 3, S), forgotten where ``episode_start`` (all of it if
-    ``state`` is not one): the layout of :meth:`~trackenv_agents.rules.choices.ChoiceThreshold.predict`."""
-    if not isinstance(state, np.ndarray) or state.shape != (n, 3, S):
-        return np.full((n, 3, S), -np.inf)
-    memory = np.array(state, dtype=float)
-    if episode_start is not None:
-        memory[np.asarray(episode_start, dtype=bool).reshape(n)] = -np.inf
-    return memory

@@ -59,8 +59,8 @@ from trackenv.envs.line_episode import fit_worst
 from .base import as_batch
 from .line import GroupedThreshold, stale_measurement
 
-__all__ = ["CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "choice_grid", "choice_view",
-           "choices_off", "regrowth_mm_per_year"]
+__all__ = ["CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "choice_grid", "choice_view", "fresh_memory",
+           "choices_off", "regrowth_mm_per_year", "remember_work"]
 
 #: the shortest time between a tamping and the measurement that a growth rate is read over [year]
 MIN_GROWTH_YEARS = 0.25
@@ -93,6 +93,30 @@ def regrowth_mm_per_year(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     years = np.asarray(obs["years_since_tamping"], dtype=float) - _measurement_age(obs)
     rate = np.asarray(obs["section_sd"], dtype=float) / np.maximum(years, MIN_GROWTH_YEARS)
     return np.where((np.asarray(obs["tampings"]) > 0) & (years > 0), rate, 0.0)
+
+
+
+def fresh_memory(state: Any, episode_start: Any, n: int, S: int) -> np.ndarray:
+    """The choice rules' memory (n, 3, S) for a step: a copy of ``state`` where it is one, forgotten (-inf) where
+    ``episode_start``; all -inf where ``state`` is not one (the first step, or no state handed back)."""
+    if not isinstance(state, np.ndarray) or state.shape != (n, 3, S):
+        return np.full((n, 3, S), -np.inf)
+    memory = np.array(state, dtype=float)
+    if episode_start is not None:
+        memory[np.asarray(episode_start, dtype=bool).reshape(n)] = -np.inf
+    return memory
+
+
+def remember_work(memory: np.ndarray, codes: np.ndarray, step: np.ndarray | float, peak: np.ndarray) -> np.ndarray:
+    """The choice rules' memory (..., 3, S) after the action ``codes`` (..., S) at ``step`` (broadcast to them):
+    the step of each section's last track work and last spot tamping, and its measured ``peak`` (as
+    :func:`choice_view` reads it) where it is tamped or renewed. Updated in place and returned; any policy that
+    answers in choice codes with a choice rule's help keeps its memory this way."""
+    codes = np.asarray(codes, dtype=np.int64)
+    memory[..., 0, :] = np.where(IS_TRACK_WORK[codes], step, memory[..., 0, :])
+    memory[..., 1, :] = np.where(codes == SPOT_TAMP, step, memory[..., 1, :])
+    memory[..., 2, :] = np.where((codes == TAMP) | (codes == RENEW), peak, memory[..., 2, :])
+    return memory
 
 
 class ChoiceThreshold(GroupedThreshold):
@@ -220,24 +244,12 @@ class ChoiceThreshold(GroupedThreshold):
         b, batched = as_batch(obs)
         b = choice_view(b)
         n, S = b["section_sd"].shape
-        memory = self._memory(state, episode_start, n, S)
+        memory = fresh_memory(state, episode_start, n, S)
         step = self._step(b).astype(float)
         codes = self._allowed(self._wanted(b, step, memory[:, 1], memory[:, 2]), b, step, memory[:, 0])
-        memory[:, 0] = np.where(self.is_work[codes], step[:, None], memory[:, 0])
-        memory[:, 1] = np.where(codes == SPOT_TAMP, step[:, None], memory[:, 1])
-        memory[:, 2] = np.where((codes == TAMP) | (codes == RENEW), b["section_peak"], memory[:, 2])
+        remember_work(memory, codes, step[:, None], b["section_peak"])
         act = codes.astype(np.int8)
         return (act if batched else act[0]), memory
-
-    @staticmethod
-    def _memory(state: Any, episode_start: Any, n: int, S: int) -> np.ndarray:
-        fresh = np.full((n, 3, S), -np.inf)
-        if not isinstance(state, np.ndarray) or state.shape != fresh.shape:
-            return fresh
-        memory = state.copy()
-        if episode_start is not None:
-            memory[np.asarray(episode_start, dtype=bool).reshape(n)] = -np.inf
-        return memory
 
     @classmethod
     def param_grid(cls) -> list[dict[str, Any]]:
