@@ -197,7 +197,8 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     root = Path(__file__).resolve().parents[3]
     folder = root / "experiments" / "saved" / "leaderboard"
     saved = json.loads((folder / "leaderboard.json").read_text())
-    command = "trackenv leaderboard --out experiments/saved/leaderboard --policies rules,cpi-agent,baselines"
+    command = ("trackenv leaderboard --out experiments/saved/leaderboard "
+               "--policies rules,cpi-agent,cpi-choice-agent,baselines")
     assert saved["command"] == command
     assert saved["seeds"] == {env: list(DEFAULT_SEEDS[env]) for env in DEFAULT_SUITE}
     baselines = {p.stem for p in (root / "experiments" / "saved" / "baselines").iterdir()
