@@ -32,14 +32,11 @@ import numpy as np
 from trackenv.envs.choices import (
     DRAINAGE,
     INSPECT,
-    IS_TRACK_WORK,
     NOTHING,
     RENEW,
     SPOT_TAMP,
     SURVEY,
     TAMP,
-    work_on_sections,
-    work_per_code,
 )
 from trackenv.envs.line_config import LineConfig
 
@@ -254,8 +251,6 @@ class LineAgent:
     def _predict_choices(self, b: dict[str, np.ndarray], state: Any, episode_start: Any,
                          deterministic: bool) -> tuple[np.ndarray, np.ndarray]:
         """Choice mode: (batch, S) int8 codes and the advisor's memory of the track work asked for."""
-        from trackenv.envs.line_episode import fit_worst
-
         from ..rules.choices import choice_view
 
         c = self.config
@@ -265,13 +260,9 @@ class LineAgent:
         memory = fresh_memory(state, episode_start, n, S)
         advice = np.asarray(self.advisor.predict(b, state=memory)[0], dtype=np.int64)  # its own memory: not kept
         tamp = self._wants(self.tamp_probability(b, advice), deterministic) & may_tamp(b, c)
-        codes = compose_choices(tamp, advice)
-        step = np.rint(np.asarray(b["time"], dtype=float)[:, 0] * c.horizon_steps)[:, None]
-        too_soon = IS_TRACK_WORK[codes] & ((step - memory[:, 0] <= c.min_steps_between_tampings) | ~may_tamp(b, c))
-        codes = np.where(too_soon, NOTHING, codes)
-        work = work_on_sections(work_per_code(c.choice_work), codes, np.asarray(c.length_factors, dtype=float))
-        codes = np.where(fit_worst(work, np.asarray(b["section_sd"], dtype=float), c.capacity), codes, NOTHING)
-        return codes.astype(np.int8), remember_work(memory, codes, step, choice_view(b)["section_peak"])
+        step = np.rint(np.asarray(b["time"], dtype=float)[:, 0] * c.horizon_steps)
+        codes = self.advisor.allowed(compose_choices(tamp, advice), b, step, memory[:, 0])  # as the env applies them
+        return codes.astype(np.int8), remember_work(memory, codes, step[:, None], choice_view(b)["section_peak"])
 
     def reset(self) -> None:
         """Nothing to forget: the policy is stateless (in choice mode, its memory is SB3's ``state``)."""

@@ -225,10 +225,13 @@ class ChoiceThreshold(GroupedThreshold):
             return np.zeros(peak_at_tamping.shape, dtype=bool)
         return stale_measurement(obs) & (peak_at_tamping >= self.params["check_peak_mm"])
 
-    def _allowed(self, codes: np.ndarray, obs: dict[str, np.ndarray], step: np.ndarray,
-                 last_work: np.ndarray) -> np.ndarray:
-        """``codes`` with what the env would mask or clip set to nothing: choices not enabled, track work too soon
-        after the section's last, and the work over ``capacity`` (worst measured SD first)."""
+    def allowed(self, codes: np.ndarray, obs: dict[str, np.ndarray], step: np.ndarray,
+                last_work: np.ndarray) -> np.ndarray:
+        """``codes`` (batch, S) with what the env would mask or clip set to nothing: choices not enabled, track
+        work too soon after the section's last (from ``years_since_tamping`` and ``last_work``, the step of the
+        last track work asked for, at ``step`` (batch,)), and the work over ``capacity`` (worst measured SD first).
+        Any policy that asks for choice codes with this rule's help filters them here (the line agent's choice
+        mode)."""
         codes = np.where(self.enabled[codes], codes, 0)
         since_tamping = np.rint(np.asarray(obs["years_since_tamping"], dtype=float) * self.steps_per_year)
         since = np.minimum(since_tamping, step[:, None] - last_work)
@@ -246,7 +249,7 @@ class ChoiceThreshold(GroupedThreshold):
         n, S = b["section_sd"].shape
         memory = fresh_memory(state, episode_start, n, S)
         step = self._step(b).astype(float)
-        codes = self._allowed(self._wanted(b, step, memory[:, 1], memory[:, 2]), b, step, memory[:, 0])
+        codes = self.allowed(self._wanted(b, step, memory[:, 1], memory[:, 2]), b, step, memory[:, 0])
         remember_work(memory, codes, step[:, None], b["section_peak"])
         act = codes.astype(np.int8)
         return (act if batched else act[0]), memory

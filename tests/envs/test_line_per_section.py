@@ -158,7 +158,7 @@ def test_the_masks_and_the_rules_count_a_sections_work_by_its_length():
     assert (first == _masks(env.engine, c, 1, "choices")).all()
     assert not env.engine.choice_mask()[0, 1, 4] and env.engine.choice_mask()[0, 2, 4]  # 4.5 and 1.5 sections
     rule = ChoiceThreshold().bind(c)
-    codes = rule._allowed(np.array([[1, 1, 1, 0]]), {"years_since_tamping": np.full((1, 4), 5.0),
+    codes = rule.allowed(np.array([[1, 1, 1, 0]]), {"years_since_tamping": np.full((1, 4), 5.0),
                                                      "section_sd": np.array([[1.0, 2.0, 3.0, 0.5]])},
                           np.zeros(1, dtype=np.int64), np.full((1, 4), -10))
     assert codes.tolist() == [[0, 1, 1, 0]]  # 1.5 + 0.5 fit a capacity of 2; the mildest section is left
