@@ -71,6 +71,7 @@ from trackenv.envs.choices import (
     action_type_for,
     code,
     enabled_codes,
+    spot_only_steps,
     work_on_sections,
     work_per_code,
 )
@@ -315,12 +316,9 @@ def _total(plan: np.ndarray, section_cost: np.ndarray, config: Any) -> float:
     work = work_on_sections(work_per_code(config.choice_work), codes, config.length_factors[None, :])
     if (work.sum(axis=1) > config.capacity + 1e-9).any():
         return np.inf
-    any_work = IS_TRACK_WORK[codes].any(axis=1)
-    full = (IS_TRACK_WORK[codes] & (codes != SPOT_TAMP)).any(axis=1)
-    spot_only = np.count_nonzero(any_work & ~full)
-    if config.spot_possession_share == 1.0:
-        return float(section_cost.sum() + config.possession_cost * np.count_nonzero(any_work))
-    return float(section_cost.sum() + config.possession_cost * (np.count_nonzero(full)
+    steps = np.count_nonzero(IS_TRACK_WORK[codes].any(axis=1))
+    spot_only = np.count_nonzero(spot_only_steps(codes))
+    return float(section_cost.sum() + config.possession_cost * (steps - spot_only
                                                                   + config.spot_possession_share * spot_only))
 
 

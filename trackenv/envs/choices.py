@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "PER_METRE",
            "RENEW", "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "action_type_for", "choice_counts", "code",
-           "enabled_codes", "work_on_sections", "work_per_code"]
+           "enabled_codes", "spot_only_steps", "work_on_sections", "work_per_code"]
 
 #: every choice, by action code
 CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
@@ -74,6 +74,15 @@ def work_on_sections(work: np.ndarray, codes: np.ndarray, length_factors: np.nda
     codes = np.asarray(codes, dtype=np.int64)
     return work[codes] * np.where(PER_METRE[codes], length_factors, 1.0)
 
+
+
+def spot_only_steps(codes: np.ndarray) -> np.ndarray:
+    """(rows,) bool: the rows of action codes ``codes`` (rows, S; a step of a line) whose only track work is spot
+    tamping. Such a step pays ``LineConfig.spot_possession_share`` of the possession, any other step with track
+    work the whole of it (the env's costs and the hindsight search's prices read this one rule)."""
+    codes = np.asarray(codes, dtype=np.int64)
+    work = IS_TRACK_WORK[codes]
+    return work.any(axis=1) & ~(work & (codes != SPOT_TAMP)).any(axis=1)
 
 def choice_counts(codes: np.ndarray) -> dict[str, int]:
     """How many sections of ``codes`` (any shape, action codes) got each choice but "nothing", by name."""

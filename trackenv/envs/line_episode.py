@@ -50,6 +50,7 @@ from .choices import (
     choice_counts,
     code,
     enabled_codes,
+    spot_only_steps,
     work_on_sections,
     work_per_code,
 )
@@ -745,7 +746,7 @@ class LineBatch:
         tamped = (((codes == TAMP) | (codes == RENEW)) * length).sum(1)
         renewed = (((codes == TAMP) & renewing) * length).sum(1) + ((codes == RENEW) * length).sum(1)
         work = self.is_work[codes].sum(1)
-        spot_only = (work > 0) & (work == (codes == SPOT_TAMP).sum(1))
+        spot_only = spot_only_steps(codes)
         return np.stack([
             (work > 0) * np.where(spot_only, c.spot_possession_share * c.possession_cost, c.possession_cost),
             c.section_tamping_cost * tamped,
