@@ -90,8 +90,7 @@ def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_na
         if kept.get("scenario") != scenario_name:
             raise SystemExit(f"--keep-others: {out_json} holds the curves of scenario {kept.get('scenario')!r}, "
                              f"not {scenario_name!r}")
-        curves = {**{k: v for k, v in kept["curves"].items() if k not in curves}, **curves}
-        curves = {k: curves[k] for k in [*kept["curves"], *runs] if k in curves}  # the file's order, new ones last
+        curves = {**kept["curves"], **curves}  # the file's order, the named runs' curves in place, new ones last
     seeds = next((c["evaluation"]["seeds"] for c in curves.values() if "evaluation" in c), list(range(10_000, 10_008)))
     config = scenario(scenario_name)
     rule = "grouped-threshold"
