@@ -21,20 +21,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, LINE_PRETRAINED_FILE, SHIPPED_AGENTS
+
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
 DEFAULT_ENV_ID = "trackenv/Tamping-v1"  # the SB3 trainer's env (= trackenv_agents.learning.tamping.DEFAULT_ENV_ID)
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
-# = trackenv_agents.learning.line.DEFAULT_LINE_PRETRAINED (the shipped line policy), written out for the same reason
-LINE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "ppo_tamping_line.zip"
-# the shipped line policy's name in every table: a network over section features, trained by counterfactual policy
-# iteration (its file format is stable-baselines3's, hence "ppo" in the file name)
-LINE_AGENT_NAME = "cpi-agent"
-# = trackenv_agents.learning.line.DEFAULT_CHOICE_PRETRAINED: the same kind of network, trained with the choice rule
-# as advisor; it answers in choice codes (its tamping from the network, the other choices from the choice rule)
-CHOICE_PRETRAINED_FILE = Path(__file__).resolve().parent / "learning" / "pretrained" / "cpi_choice_line.zip"
-CHOICE_AGENT_NAME = "cpi-choice-agent"
 
 
 class UsageError(Exception):
@@ -221,12 +214,9 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             every_rule = True
         elif item in rule_names:
             rules.append(item)
-        elif item == LINE_AGENT_NAME:
-            _existing(str(LINE_PRETRAINED_FILE), f"--policies {LINE_AGENT_NAME}")
-            agents[LINE_AGENT_NAME] = str(LINE_PRETRAINED_FILE)
-        elif item == CHOICE_AGENT_NAME:
-            _existing(str(CHOICE_PRETRAINED_FILE), f"--policies {CHOICE_AGENT_NAME}")
-            agents[CHOICE_AGENT_NAME] = str(CHOICE_PRETRAINED_FILE)
+        elif item in SHIPPED_AGENTS:
+            _existing(str(SHIPPED_AGENTS[item]), f"--policies {item}")
+            agents[item] = str(SHIPPED_AGENTS[item])
         elif item == "baselines":
             from .learning.baselines import SAVED_BASELINES, saved_baselines
 
@@ -243,7 +233,7 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             except (FileNotFoundError, ValueError) as err:
                 raise UsageError(f"--policies: {err}") from None
             name = Path(item).stem  # its file or folder name, or the path where that is taken
-            taken = name in agents or name in rule_names or name in (LINE_AGENT_NAME, CHOICE_AGENT_NAME)
+            taken = name in agents or name in rule_names or name in SHIPPED_AGENTS
             agents[item if taken else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
@@ -615,7 +605,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
                          "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "
                          "agent, at most the 10 years it was trained on) or the path of a trained per-section policy; "
-                         "with a scenario that has every choice also choice-threshold, choice-threshold-no-looking")
+                         "with a scenario that has every choice also choice-threshold, choice-threshold-no-looking "
+                         "and cpi-choice-agent (the shipped agent of the lines with every choice)")
     sp.add_argument("--scenario", default="default", choices=("default", "choices", "wet", "defects"),
                     help="how the line is modelled beyond its file: default (hidden parts as on the default line, "
                          "tamping only), choices (every intervention and inspection), wet (a wet, poorly drained "

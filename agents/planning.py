@@ -41,21 +41,22 @@ import numpy as np
 from trackenv.envs.choices import CHOICES, action_type_for
 from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS
 
+from .shipped import SHIPPED_AGENTS
+
 #: The share of futures from which a section's choice in a quarter is recommended.
 RECOMMEND_SHARE = 0.5
 #: The scenarios a line from a file can be planned in: those that leave the line's own fields (its sections,
 #: lengths and traffic) to the file.
 PLAN_SCENARIOS = tuple(name for name, fields_ in SCENARIOS.items() if not set(fields_) & set(LINE_FILE_FIELDS))
 DEFAULT_POLICY = "grouped-threshold"
-#: The shipped trained per-section policy, by the name the other commands give it.
-AGENT_POLICY = "cpi-agent"
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
     """The policy ``name`` bound to ``config``: a rule of the config (:func:`~trackenv_agents.rules.rules_for`:
     the tamping rules, and the choice rules where the config has more choices) with the shipped tuned parameters
-    of ``scenario`` (default: those of the preset ``config`` is, else the default line's), the shipped agent
-    (``cpi-agent``) or a trained per-section policy by the path of its ``.zip``; ValueError for another."""
+    of ``scenario`` (default: those of the preset ``config`` is, else the default line's), a shipped agent by its
+    name (:data:`~trackenv_agents.shipped.SHIPPED_AGENTS`: ``cpi-agent``, ``cpi-choice-agent``) or a trained
+    per-section policy by the path of its ``.zip``; ValueError for another."""
     from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_params_for
 
     rules = rules_for(config)
@@ -65,16 +66,16 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
         else:
             params = tuned_params_for(config)
         return rules[name](**params.get(name, {})).bind(config)
-    if name == AGENT_POLICY or name.endswith(".zip"):
+    if name in SHIPPED_AGENTS or name.endswith(".zip"):
         from .learning.line import load_line_trained
 
         try:
-            agent = load_line_trained(None if name == AGENT_POLICY else name, name=Path(name).stem)
+            agent = load_line_trained(SHIPPED_AGENTS.get(name, name), name=Path(name).stem)
         except FileNotFoundError as exc:
             raise ValueError(f"policy {name!r}: {exc}") from None
         return agent.bind(config)
-    raise ValueError(f"unknown policy {name!r}; known: {', '.join(rules)}, {AGENT_POLICY} or the path of "
-                     "a trained per-section policy (.zip)")
+    raise ValueError(f"unknown policy {name!r}; known: {', '.join([*rules, *SHIPPED_AGENTS])} or the path of a "
+                     "trained per-section policy (.zip)")
 
 
 def plan_config(line: Any, scenario: str = "default", **config: Any) -> Any:

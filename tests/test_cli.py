@@ -347,8 +347,8 @@ def test_leaderboard_policies_name_both_shipped_line_agents():
     from trackenv_agents import cli
     from trackenv_agents.learning.line import DEFAULT_CHOICE_PRETRAINED, line_meta_path
 
-    assert cli.CHOICE_PRETRAINED_FILE == DEFAULT_CHOICE_PRETRAINED
     rules, agents = cli._leaderboard_policies("grouped-threshold,cpi-agent,cpi-choice-agent", ["grouped-threshold"])
     assert rules == ["grouped-threshold"]
     assert agents == {"cpi-agent": str(cli.LINE_PRETRAINED_FILE), "cpi-choice-agent": str(DEFAULT_CHOICE_PRETRAINED)}
+    assert all(Path(path).is_file() for path in agents.values())
     assert json.loads(line_meta_path(DEFAULT_CHOICE_PRETRAINED).read_text())["advisor"] == "choice-threshold"

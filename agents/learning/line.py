@@ -41,6 +41,7 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig
 
+from ..shipped import CHOICE_PRETRAINED_FILE, LINE_PRETRAINED_FILE
 from .checkpoint import (
     CHECKPOINT_FILE,
     META_FILE,
@@ -65,7 +66,6 @@ from .settings import LineSettings
 from .tamping import (
     DEFAULT_EVAL_SEEDS,
     DEFAULT_TRAIN_SEED,
-    HERE,
     ZooSchema,
     _algo_class,
     _make_eval_callback,
@@ -79,9 +79,10 @@ __all__ = ["DEFAULT_CHOICE_PRETRAINED", "DEFAULT_LINE_PRETRAINED", "LINE_ENV_ID"
            "line_meta_path", "load_line_trained", "train_line"]
 
 LINE_ENV_ID = "trackenv/TampingLine-v0"
-DEFAULT_LINE_PRETRAINED = HERE / "pretrained" / "ppo_tamping_line.zip"
-#: the shipped policy of the lines with every choice (the choice rule as advisor: it answers in choice codes)
-DEFAULT_CHOICE_PRETRAINED = HERE / "pretrained" / "cpi_choice_line.zip"
+#: the shipped agents' files (:mod:`trackenv_agents.shipped`): cpi-agent's, and cpi-choice-agent's, the policy of the
+#: lines with every choice (the choice rule as advisor: it answers in choice codes)
+DEFAULT_LINE_PRETRAINED = LINE_PRETRAINED_FILE
+DEFAULT_CHOICE_PRETRAINED = CHOICE_PRETRAINED_FILE
 META_SUFFIX = "_meta.json"
 #: what :func:`train_line` reads from an RL Zoo entry (see :class:`trackenv_agents.learning.tamping.ZooSchema`)
 LINE_ZOO = ZooSchema("MlpPolicy", "one network decides for every section from its features", ("net_arch",), False,

@@ -58,6 +58,20 @@ def test_the_shipped_agent_plans_within_the_episodes_it_was_trained_on(tmp_path,
     assert "cpi-agent" in capsys.readouterr().err
 
 
+def test_every_shipped_agent_plans_by_its_name(tmp_path):
+    """``cpi-choice-agent`` by name is the shipped file of the lines with every choice: on the wet scenario its
+    plan is that of the same file given by path, to the cost, and its choices are the scenario's."""
+    from trackenv_agents.shipped import CHOICE_AGENT_NAME, SHIPPED_AGENTS
+
+    line = write(tmp_path)
+    kw = {"years": 0.5, "futures": 2, "capacity": 4, "scenario": "wet"}
+    by_name = plan_line(line, policy=CHOICE_AGENT_NAME, **kw)
+    by_path = plan_line(line, policy=str(SHIPPED_AGENTS[CHOICE_AGENT_NAME]), **kw)
+    assert np.array_equal(by_name.costs, by_path.costs)
+    assert np.array_equal(by_name.choice_share, by_path.choice_share)
+    assert by_name.choice_share.shape[-1] > 2  # choice codes beyond wait and tamp
+
+
 @pytest.mark.parametrize("kind", list(FAULTS))
 def test_a_malformed_file_is_one_line_and_exit_2(tmp_path, capsys, kind):
     files, expected = FAULTS[kind]

@@ -1,0 +1,20 @@
+"""The shipped line agents by the names every command and table gives them, and their files.
+
+Kept free of imports beyond the standard library: the command line reads these names and paths for every command,
+and loading a policy (torch, stable-baselines3) waits until one is asked for."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+PRETRAINED = Path(__file__).resolve().parent / "learning" / "pretrained"
+#: a network over section features trained by counterfactual policy iteration, with the tuned grouped threshold
+#: as its advisor; tamping only (its file format is stable-baselines3's, hence "ppo" in the file name)
+LINE_AGENT_NAME = "cpi-agent"
+LINE_PRETRAINED_FILE = PRETRAINED / "ppo_tamping_line.zip"
+#: the same kind of network trained with the choice rule as advisor, for the lines with every choice: its
+#: tamping from the network, the other choices from the choice rule
+CHOICE_AGENT_NAME = "cpi-choice-agent"
+CHOICE_PRETRAINED_FILE = PRETRAINED / "cpi_choice_line.zip"
+#: name -> file of every shipped line agent
+SHIPPED_AGENTS: dict[str, Path] = {LINE_AGENT_NAME: LINE_PRETRAINED_FILE, CHOICE_AGENT_NAME: CHOICE_PRETRAINED_FILE}
