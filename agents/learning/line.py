@@ -361,7 +361,8 @@ class _LineTrainer:
             seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
             d = section_counterfactuals(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
                                         other_rate=s.other_rate, seed=seed + it,
-                                        progress=bar.update if bar is not None else None, choices=self.learned)
+                                        progress=bar.update if bar is not None else None, choices=self.learned,
+                                        choice_features=s.learn_choices)
             t_forks = time.time() - t_it
             pi["data"].append(d)
             pooled = {k: np.concatenate([x[k] for x in pi["data"]]) for k in d}

@@ -130,16 +130,17 @@ def _query_rates(features: np.ndarray, names: Sequence[str], acted: np.ndarray, 
 def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advisor: Any = None,
                             focus_rate: float = 0.5, other_rate: float = 0.1, seed: int = 0,
                             progress: Callable[[int], Any] | None = None,
-                            choices: Sequence[str] = ("tamp",)) -> dict[str, np.ndarray]:
+                            choices: Sequence[str] = ("tamp",),
+                            choice_features: bool | None = None) -> dict[str, np.ndarray]:
     """Run ``policy`` (SB3 ``predict`` on batched line observations, deterministic; bound to ``config``) on the
     episodes ``seeds`` of ``config`` (one batch), and price the other way of a random subset of its decisions
     (each section, step and choice of ``choices`` (:func:`flipped_choices`) whose flip changes the section's code,
     that may get track work, whose other choice fits the possession's capacity with the line's other work and
     where the network decides the choice (:func:`~trackenv_agents.learning.line_policy.choice_open`), with
     probability ``focus_rate`` or ``other_rate``, see :func:`_query_rates`;
-    drawn from ``seed``) by a fork continued under ``policy`` itself. ``choices`` beyond ``("tamp",)`` need a
-    choice rule as ``advisor`` and add the choice features
-    (:data:`~trackenv_agents.learning.line_policy.CHOICE_FEATURES`) to every sample's.
+    drawn from ``seed``) by a fork continued under ``policy`` itself. ``choice_features``: the samples' features
+    end with the choice features (:data:`~trackenv_agents.learning.line_policy.CHOICE_FEATURES`; None: where
+    ``choices`` go beyond ``("tamp",)``), which need a choice rule as ``advisor``.
 
     Returns arrays over the priced decisions: ``features`` (N, F) as the learner sees the section then (with
     ``advisor``'s choice as the last features and, with the choice features, the choice asked about; see
@@ -180,9 +181,9 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     choices = tuple(choices)
     if not choices or not set(choices) <= set(LEARNABLE_CHOICES) or len(set(choices)) < len(choices):
         raise ValueError(f"choices must name distinct choices of {list(LEARNABLE_CHOICES)}, got {choices!r}")
-    extended = choices != ("tamp",)
-    if extended and advisor is None:
-        raise ValueError(f"pricing the choices {choices!r} needs a choice rule as advisor")
+    extended = choices != ("tamp",) if choice_features is None else bool(choice_features)
+    if (extended or choices != ("tamp",)) and advisor is None:
+        raise ValueError(f"pricing the choices {choices!r} with the choice features needs a choice rule as advisor")
     c = config
     E, S, H = len(seeds), c.n_sections, c.horizon_steps
     policy = _bound(policy, c)

@@ -174,6 +174,16 @@ def test_the_forks_find_the_drainage_of_a_wet_section():
     assert (saved < 0).any()  # and not everywhere: a spot that starts late is not worth draining early
 
 
+def test_tamping_alone_priced_with_the_choice_features():
+    """A network with the choice features on a line where only the tamping is learnt: its samples carry them."""
+    rule = _bound(SPOTS, WET)
+    data = section_counterfactuals(WET, [3], rule, advisor=rule, seed=1, choice_features=True)
+    assert data["features"].shape == (len(data["q_do"]), len(NAMES)) and (data["choice"] == 0).all()
+    assert (data["features"][:, -2:] == 0).all()  # asked about the tamping
+    with pytest.raises(ValueError, match="choice rule as advisor"):
+        section_counterfactuals(WET, [3], rule, choice_features=True)
+
+
 class _Asks:
     """A stand-in for a trained SB3 policy with the choice features: says yes to the choices in ``yes`` (read from
     the features' one-hot of the choice asked about), no to the others."""
