@@ -194,11 +194,12 @@ def fit_policy(model, env, demos: dict[str, Any], epochs: int = 300, batch_size:
 def fit_choices(model, samples: dict[str, np.ndarray], reward_scale: float, epochs: int = 30,
                 batch_size: int = 512, learning_rate: float = 1e-3, vf_coef: float = 0.5, margin: float = 1.0,
                 seed: int = 0) -> dict[str, float]:
-    """Fit ``model.policy`` (an SB3 policy with ``Discrete(2)`` actions: 1 = tamp) to the cheaper of two priced
-    choices per sample (``samples``: ``features``, ``q_tamp``, ``q_wait`` k€ to the horizon, ``acted``,
-    ``weight``, as :func:`trackenv_agents.learning.line_counterfactual.section_counterfactuals` gives them):
-    cost-sensitive classification, the cross-entropy of the cheaper choice weighted by ``weight`` ×
-    max(|q_tamp − q_wait|, ``margin``) (a choice that costs much when wrong counts as much). Where the two
+    """Fit ``model.policy`` (an SB3 policy with ``Discrete(2)`` actions: 1 = make the choice, e.g. tamp) to the
+    cheaper of two priced choices per sample (``samples``: ``features``, ``q_do``, ``q_skip`` k€ to the horizon
+    for making the sample's choice and not, ``did``, ``weight``, as
+    :func:`trackenv_agents.learning.line_counterfactual.section_counterfactuals` gives them): cost-sensitive
+    classification, the cross-entropy of the cheaper choice weighted by ``weight`` ×
+    max(|q_do − q_skip|, ``margin``) (a choice that costs much when wrong counts as much). Where the two
     differ by less than ``margin`` k€ the target is the choice the data's policy made: a difference that small
     is within what one sampled future decides, and keeping the policy's choice there keeps the learner from
     wandering where nothing is gained. The value head is fitted to minus the cost-to-go of the choice made, over
@@ -208,8 +209,8 @@ def fit_choices(model, samples: dict[str, np.ndarray], reward_scale: float, epoc
 
     policy = model.policy
     x = torch.as_tensor(samples["features"], dtype=torch.float32, device=policy.device)
-    q_tamp, q_wait = np.asarray(samples["q_tamp"], float), np.asarray(samples["q_wait"], float)
-    acted = np.asarray(samples["acted"], bool)
+    q_tamp, q_wait = np.asarray(samples["q_do"], float), np.asarray(samples["q_skip"], float)
+    acted = np.asarray(samples["did"], bool)
     if not (np.isfinite(margin) and margin >= 0):
         raise ValueError(f"margin must be a number >= 0 (k€), got {margin!r}")
     clear = np.abs(q_tamp - q_wait) >= margin

@@ -61,7 +61,7 @@ from .checkpoint import (
     write_checkpoint,
     write_json_atomic,
 )
-from .line_policy import ADVISOR_FEATURES, FEATURES, LineAgent
+from .line_policy import ADVISOR_FEATURES, CHOICE_FEATURES, FEATURES, LEARNABLE_CHOICES, LineAgent, is_choice_rule
 from .settings import LineSettings
 from .tamping import (
     DEFAULT_EVAL_SEEDS,
@@ -89,8 +89,9 @@ LINE_ZOO = ZooSchema("MlpPolicy", "one network decides for every section from it
                      LineSettings)
 
 
-def _feature_names(advisor: bool) -> list[str]:
-    return [n for n, _ in FEATURES] + (list(ADVISOR_FEATURES) if advisor else [])
+def _feature_names(advisor: bool, choices: bool = False) -> list[str]:
+    return [n for n, _ in FEATURES] + (list(ADVISOR_FEATURES) if advisor else []) + (
+        list(CHOICE_FEATURES) if choices else [])
 
 
 def line_meta_path(zip_path: str | Path) -> Path:
@@ -212,30 +213,49 @@ class _LineTrainer:
         single_torch_thread()  # the physics (numba) wants the cores; the small network does not
         set_random_seed(seed)
         self.advisor = teacher_policy(s.advisor, config, None if s.advisor_params is None else dict(s.advisor_params))
+        #: the choices the network decides (learn_choices: those of LEARNABLE_CHOICES the config enables)
+        self.learned: tuple[str, ...] = ("tamp",)
+        if s.learn_choices:
+            if not is_choice_rule(self.advisor):
+                raise ValueError(f"learn_choices needs a choice rule as advisor, got {s.advisor!r}")
+            self.learned = tuple(c for c in LEARNABLE_CHOICES if c == "tamp" or c in config.choices)
         self.env = SectionAgentsVecEnv(s.n_envs, config, seed=seed + 1_000_000, reward_scale=s.reward_scale,
-                                       advisor=self.advisor)
+                                       advisor=self.advisor, choice_features=s.learn_choices)
         self.model = self.AlgoClass("MlpPolicy", self.env, seed=seed, tensorboard_log=str(run_dir), verbose=0,
                                     device="cpu", policy_kwargs={"net_arch": list(s.net_arch)}, **s.algo_kwargs())
         #: what is saved with every policy (line_meta_path)
-        self.meta = {"env_id": _line_env_id(config), "net_arch": list(s.net_arch), "features": _feature_names(True),
+        self.meta = {"env_id": _line_env_id(config), "net_arch": list(s.net_arch),
+                     "features": _feature_names(True, s.learn_choices), "learned": list(self.learned),
                      "advisor": self.advisor.name, "advisor_params": dict(self.advisor.params),
                      "reward_scale": s.reward_scale, "config": config.to_dict(), "seed": seed}
         self.baseline: Any = None
         #: the saved policy the network started from (train_line's init_policy), if any
         self.init_policy: str | None = None
+        #: the choices the saved policy decided (it runs the first iteration that way)
+        self.init_learned: tuple[str, ...] = ("tamp",)
         self.checkpoint_seconds = 0.0
         self.checkpoint_count = 0
 
     def start_from(self, path: Path) -> None:
-        """The network's weights from the saved line policy at ``path`` (same network and features, else
-        ValueError)."""
+        """The network's weights from the saved line policy at ``path`` (same network; the same features, or the
+        first of this run's: the new inputs get zero weights, so the network answers as the saved one did),
+        else ValueError."""
         meta = json.loads(line_meta_path(path).read_text())
-        if meta.get("features") != self.meta["features"] or list(meta.get("net_arch", [])) != self.meta["net_arch"]:
+        features = list(meta.get("features") or [])
+        if features != self.meta["features"][:len(features)] or not features \
+                or list(meta.get("net_arch", [])) != self.meta["net_arch"]:
             raise ValueError(f"init_policy {path}: features {meta.get('features')} and network {meta.get('net_arch')}"
                              f", this run has {self.meta['features']} and {self.meta['net_arch']}")
         source = _algo_class(meta["algo"]).load(str(path), device="cpu")
-        self.model.policy.load_state_dict(source.policy.state_dict())
+        self.model.policy.load_state_dict(_widened_inputs(source.policy.state_dict(), self.model.policy.state_dict()))
         self.init_policy = str(path)
+        self.init_learned = tuple(meta.get("learned", ("tamp",)))
+
+    def _agent(self, policy: Any, learned: tuple[str, ...] | None = None) -> LineAgent:
+        """The line agent of ``policy`` with this run's advisor and features, deciding ``learned`` (default the
+        run's choices)."""
+        return LineAgent(policy, advisor=self.advisor, choice_features=self.s.learn_choices,
+                         learned=self.learned if learned is None else learned)
 
     # --- checkpoints ---
     def _checkpoint(self, info: dict[str, Any], state: dict[str, Any]) -> None:
@@ -335,13 +355,15 @@ class _LineTrainer:
 
             bar = tqdm(total=s.iterations * H, initial=pi["done"] * H, desc="policy iteration", unit="step")
         started = pi["done"] > 0 or self.init_policy is not None or _run_started_from(self.run_dir)
-        behaviour: Any = LineAgent(self.model.policy, advisor=self.advisor) if started else self.advisor
+        first = self.init_learned if pi["done"] == 0 and self.init_policy is not None else self.learned
+        behaviour: Any = self._agent(self.model.policy, first) if started else self.advisor
         for it in range(pi["done"], s.iterations):
             t_it = time.time()
             seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
             d = section_counterfactuals(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
                                         other_rate=s.other_rate, seed=seed + it,
-                                        progress=bar.update if bar is not None else None)
+                                        progress=bar.update if bar is not None else None, choices=self.learned,
+                                        choice_features=s.learn_choices)
             t_forks = time.time() - t_it
             pi["data"].append(d)
             pooled = {k: np.concatenate([x[k] for x in pi["data"]]) for k in d}
@@ -350,9 +372,11 @@ class _LineTrainer:
             pi["line_steps"] += n_episodes * H
             pi["fork_steps"] += int(np.sum(H - d["step"]))
             rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
-                                   "other_choice_cheaper": float(np.mean((d["q_tamp"] < d["q_wait"]) != d["acted"])),
+                                   "other_choice_cheaper": float(np.mean((d["q_do"] < d["q_skip"]) != d["did"])),
+                                   "samples_per_choice": {name: int(np.sum(d["choice"] == i))
+                                                          for i, name in enumerate(self.learned)},
                                    "fork_seconds": t_forks, "fit_seconds": time.time() - t_it - t_forks, "fit": fit}
-            behaviour = LineAgent(self.model.policy, advisor=self.advisor)
+            behaviour = self._agent(self.model.policy)
             _save_line_policy(self.model, self.run_dir / "checkpoints" / f"iteration_{it}.zip", self.meta)
             if self.baseline is not None:
                 rec["evaluation"] = self._evaluate(behaviour)
@@ -399,7 +423,7 @@ class _LineTrainer:
         if self.baseline is not None and s.eval_freq > 0:
             eval_cb = _make_eval_callback(
                 config, list(self.eval_seeds or []), s.eval_freq * config.n_sections, self.run_dir,
-                lambda m: LineAgent(m.policy, advisor=self.advisor),
+                lambda m: self._agent(m.policy),
                 lambda m, agent, path: _save_line_policy(m, path, self.meta), "multibinary", self.verbose,
                 evaluate_at_start=ckpt is None, baseline=self.baseline)
             if ckpt is not None and ckpt.state["evaluation"] is not None:
@@ -475,6 +499,23 @@ def _log_iteration(logger: Any, rec: dict[str, Any]) -> None:
     logger.dump(rec["iteration"])
 
 
+def _widened_inputs(source: dict[str, Any], target: dict[str, Any]) -> dict[str, Any]:
+    """``source`` (a network's state dict) shaped as ``target``: an input layer's weights (F_old inputs) padded with
+    zero columns to ``target``'s F_new inputs (the inputs added last then change nothing); any other shape that
+    differs raises ValueError."""
+    import torch
+
+    out = {}
+    for key, value in source.items():
+        want = target[key].shape
+        if value.shape != want:
+            if value.ndim != 2 or value.shape[0] != want[0] or value.shape[1] > want[1]:
+                raise ValueError(f"{key}: shape {tuple(value.shape)} does not widen to {tuple(want)}")
+            value = torch.cat([value, value.new_zeros(want[0], want[1] - value.shape[1])], dim=1)
+        out[key] = value
+    return out
+
+
 def export_line_policy(model_zip: str | Path, dest: str | Path = DEFAULT_LINE_PRETRAINED) -> Path:
     """Copy a saved line policy and its JSON to ``dest`` (default the shipped path)."""
     return export_policy(model_zip, dest, sidecar=line_meta_path)
@@ -492,10 +533,11 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
         raise FileNotFoundError(f"no trained line policy at {path}")
     meta = json.loads(line_meta_path(path).read_text())
     advisor = meta.get("advisor")
-    if meta.get("features") != _feature_names(advisor is not None):
+    choice_features = CHOICE_FEATURES[0] in (meta.get("features") or [])
+    if meta.get("features") != _feature_names(advisor is not None, choice_features):
         raise ValueError(f"{line_meta_path(path)}: trained on the features {meta.get('features')}, this version "
-                         f"computes {_feature_names(advisor is not None)}")
+                         f"computes {_feature_names(advisor is not None, choice_features)}")
     model = _algo_class(meta["algo"]).load(str(path), device="cpu")
     rule = None if advisor is None else (LINE_HEURISTICS | CHOICE_RULES)[advisor](**meta.get("advisor_params", {}))
-    return LineAgent(model.policy, name=name, advisor=rule,
-                     horizon_years=meta.get("config", {}).get("horizon_years"))
+    return LineAgent(model.policy, name=name, advisor=rule, horizon_years=meta.get("config", {}).get("horizon_years"),
+                     choice_features=choice_features, learned=tuple(meta.get("learned", ("tamp",))))

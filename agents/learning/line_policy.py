@@ -19,7 +19,9 @@ sections), and a learner can credit each section's choice with that section's ow
   actions) with SB3's ``predict`` on raw line observations: it tamps the sections whose probability of tamping
   is above one half, never one the env would drop, at most ``capacity`` (the most probable). With a choice rule
   as its advisor (:data:`~trackenv_agents.rules.choices.CHOICE_RULES`) it answers in choice codes: the network
-  decides where and when to tamp, the rule the other choices (:func:`compose_choices`).
+  decides where and when to tamp, the rule the other choices (:func:`compose_choices`); a network trained with
+  the choice features (:data:`CHOICE_FEATURES`) also decides spot tamping and drainage
+  (:data:`LEARNABLE_CHOICES`), asked about each choice in turn.
 """
 
 from __future__ import annotations
@@ -44,9 +46,9 @@ from ..rules.base import as_batch
 from ..rules.choices import fresh_memory, remember_work
 from ..rules.line import stale_measurement
 
-__all__ = ["ADVISOR_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LineAgent", "compose_choices",
-           "is_choice_rule", "may_tamp", "n_features", "remember_work", "section_features",
-           "tamping_codes"]
+__all__ = ["ADVISOR_FEATURES", "CHOICE_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LEARNABLE_CHOICES",
+           "LineAgent", "choice_open", "compose_choices", "is_choice_rule", "may_tamp", "n_features", "remember_work",
+           "section_features", "tamping_codes"]
 
 #: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
 #: β = 0.24 (the documentation's line-problem page, calibration) at a 3 mm SD before.
@@ -83,6 +85,17 @@ RENEWAL_AFTER = 8  # TampingModel.max_tampings_before_renewal's default; a featu
 #: campaign gives the section); its other choices are not.
 ADVISOR_FEATURES = ("advisor_tamps", "advisor_campaign")
 
+#: The choices a network with the choice features decides (the tamping first; inspections, surveys and, where
+#: the tamping falls due, the renewal stay the advisor's). Why these: spot tamping and drainage are where the
+#: money of the lines with every choice lies besides the tamping (the documentation's choices page).
+LEARNABLE_CHOICES = ("tamp", "spot_tamp", "drainage")
+#: With the choice features, five more, after the advisor's: the advisor spot-tamps the section now, it drains the
+#: section now, a survey found the section wet; and which choice the network is asked about (one-hot over the
+#: choices of :data:`LEARNABLE_CHOICES` after the tamping; both 0: the tamping). One network with the choice as
+#: an input answers for every choice (the data of each choice is little; the section's state is shared), and a
+#: network trained on the tamping alone carries over with zero weights on the new inputs.
+CHOICE_FEATURES = ("advisor_spot_tamps", "advisor_drains", "surveyed_wet", "asks_spot_tamp", "asks_drainage")
+
 
 def tamping_codes(codes: np.ndarray) -> np.ndarray:
     """Bool, shaped like ``codes`` (action codes, or a tamp-or-wait 0/1 action): the tamping kind of track work,
@@ -98,33 +111,57 @@ def is_choice_rule(rule: Any) -> bool:
     return getattr(rule, "name", None) in CHOICE_RULES
 
 
-def compose_choices(tamp: np.ndarray, advice: np.ndarray) -> np.ndarray:
+def compose_choices(tamp: np.ndarray, advice: np.ndarray, spot: np.ndarray | None = None,
+                    drain: np.ndarray | None = None) -> np.ndarray:
     """The action codes of a section policy that decides where and when to tamp (``tamp``, bool) with an advisor
     rule's choice codes ``advice`` (same shape) for the rest, by the rule's own precedence (the choice rules'
     ``_wanted``): a drainage the rule asks for stands whatever the tamping decision (it comes before a tamping
     there); a renewal stands where the policy tamps (it replaces that tamping) and lapses where it waits; the
     rule's spot tamping, inspection and survey stand where the policy waits (the rule gives them only to
     sections it does not tamp) and give way to the policy's tamping; the rule's own tamping lapses where the
-    policy waits. Requests only: masks and the possession's capacity come after (:meth:`LineAgent.predict`)."""
+    policy waits. ``spot`` and ``drain`` (bool, same shape): the policy's own spot tamping and drainage in place
+    of the rule's (None: the rule's), with the same precedence (drainage, then the tamping, then spot tamping,
+    then the rule's inspection or survey). Requests only: masks and the possession's capacity come after
+    (:meth:`LineAgent.predict`)."""
     tamp = np.asarray(tamp, dtype=bool)
     advice = np.asarray(advice, dtype=np.int64)
-    when_tamped = np.where(np.isin(advice, (RENEW, DRAINAGE)), advice, TAMP)
-    when_waiting = np.where(np.isin(advice, (SPOT_TAMP, DRAINAGE, INSPECT, SURVEY)), advice, NOTHING)
-    return np.where(tamp, when_tamped, when_waiting)
+    drain = advice == DRAINAGE if drain is None else np.asarray(drain, dtype=bool)
+    spot = advice == SPOT_TAMP if spot is None else np.asarray(spot, dtype=bool)
+    looks = np.where(np.isin(advice, (INSPECT, SURVEY)), advice, NOTHING)
+    when_waiting = np.where(spot, SPOT_TAMP, looks)
+    return np.where(drain, DRAINAGE, np.where(tamp, np.where(advice == RENEW, RENEW, TAMP), when_waiting))
 
 
-def n_features(advisor: Any = None) -> int:
-    """How many features :func:`section_features` gives (two more with an advisor)."""
-    return len(FEATURES) + (len(ADVISOR_FEATURES) if advisor is not None else 0)
+def choice_open(choice: str, obs: Mapping[str, Any], advice: np.ndarray) -> np.ndarray:
+    """(batch, S) bool: where the network decides the choice ``choice`` (:data:`LEARNABLE_CHOICES`); elsewhere the
+    advisor's answer stands. The tamping and spot tamping: everywhere. Drainage: where a survey found the section
+    wet or the advisor drains it, the sections where drainage is in question: elsewhere a drainage removes no wet
+    cause, and as it comes before the tamping, one asked in a section the forks seldom priced would take the
+    place of a tamping."""
+    advice = np.asarray(advice)
+    if choice != "drainage":
+        return np.ones(advice.shape, dtype=bool)
+    survey = np.asarray(obs.get("section_survey", np.full(advice.shape, -1))).reshape(advice.shape)
+    return (survey == 1) | (advice == DRAINAGE)
 
 
-def section_features(obs: Mapping[str, Any], advisor: Any = None, advice: np.ndarray | None = None) -> np.ndarray:
+def n_features(advisor: Any = None, choices: bool = False) -> int:
+    """How many features :func:`section_features` gives (two more with an advisor, and five more with the choice
+    features)."""
+    return (len(FEATURES) + (len(ADVISOR_FEATURES) if advisor is not None else 0)
+            + (len(CHOICE_FEATURES) if choices else 0))
+
+
+def section_features(obs: Mapping[str, Any], advisor: Any = None, advice: np.ndarray | None = None,
+                     ask: str | None = None) -> np.ndarray:
     """(batch, S, :func:`n_features`) float32 features of a batched TampingLine observation (see the module
     docstring and :data:`FEATURES`). ``advisor``: a rule bound to the line's config (SB3 ``predict``) whose
     choice is two more features, last (:data:`ADVISOR_FEATURES`: it tamps the section now; it calls a campaign
     now): a learner then has the rule exactly and learns where to depart from it (residual policy learning).
     ``advice``: the advisor's (batch, S) codes where the caller has them already (a rule with a recurrent
-    state answers with it: :meth:`LineAgent.predict`); else they are asked of ``advisor`` on ``obs`` alone."""
+    state answers with it: :meth:`LineAgent.predict`); else they are asked of ``advisor`` on ``obs`` alone.
+    ``ask``: a choice of :data:`LEARNABLE_CHOICES` (with an advisor): the choice features follow
+    (:data:`CHOICE_FEATURES`), asking about that choice; None: none."""
     o = {k: np.asarray(v, dtype=np.float64) for k, v in obs.items()}
     sd, peak = o["section_sd"], o["section_peak"]
     B, S = sd.shape
@@ -160,6 +197,15 @@ def section_features(obs: Mapping[str, Any], advisor: Any = None, advice: np.nda
         tamps = tamping_codes(advice).reshape(B, S).astype(np.float64)
         campaign = np.broadcast_to(tamps.max(axis=1, keepdims=True), (B, S))
         x = np.concatenate([x, tamps[..., None], campaign[..., None]], axis=-1)
+        if ask is not None:
+            if ask not in LEARNABLE_CHOICES:
+                raise ValueError(f"ask must be one of {list(LEARNABLE_CHOICES)} or None, got {ask!r}")
+            advice = np.asarray(advice).reshape(B, S)
+            wet = np.asarray(obs.get("section_survey", np.full((B, S), -1))).reshape(B, S) == 1
+            asks = [np.full((B, S), float(ask == name)) for name in LEARNABLE_CHOICES[1:]]
+            x = np.concatenate([x, np.stack([advice == SPOT_TAMP, advice == DRAINAGE, wet, *asks], axis=-1)], axis=-1)
+    elif ask is not None:
+        raise ValueError("the choice features (ask) need an advisor")
     return np.clip(x, 0.0, FEATURE_CLIP).astype(np.float32)
 
 
@@ -190,11 +236,26 @@ class LineAgent:
     its measured peak when last tamped), is the agent's ``state``, kept for the codes the agent asks for rather
     than for the rule's own. The agent asks for no track work that the env would drop (within
     ``min_steps_between_tampings`` of the section's last) and fits the step's work in ``capacity``, worst measured
-    SD first as the env does, so the env applies its codes as asked."""
+    SD first as the env does, so the env applies its codes as asked.
+
+    ``choice_features``: the network was trained with the choice features (:data:`CHOICE_FEATURES`; a choice
+    rule as advisor); ``learned``: the choices of :data:`LEARNABLE_CHOICES` it decides, each asked in turn, in
+    place of the rule's (the tamping always; spot tamping and drainage where listed, which needs the choice
+    features), each where :func:`choice_open` opens it."""
 
     def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
                  rng: np.random.Generator | None = None, advisor: Any = None,
-                 horizon_years: float | None = None) -> None:
+                 horizon_years: float | None = None, choice_features: bool = False,
+                 learned: tuple[str, ...] = ("tamp",)) -> None:
+        learned = tuple(learned)
+        if learned[:1] != ("tamp",) or not set(learned) <= set(LEARNABLE_CHOICES):
+            raise ValueError(f"learned must start with 'tamp' and name choices of {list(LEARNABLE_CHOICES)}, "
+                             f"got {learned!r}")
+        if (choice_features or learned != ("tamp",)) and not (choice_features and is_choice_rule(advisor)):
+            raise ValueError("choice_features needs a choice rule as advisor, and learned choices beyond 'tamp' "
+                             f"need choice_features=True (advisor {getattr(advisor, 'name', None)!r}, "
+                             f"choice_features={choice_features!r}, learned={learned!r})")
+        self.choice_features, self.learned = bool(choice_features), learned
         self.policy = policy
         self.name = name
         self.config = config
@@ -209,14 +270,17 @@ class LineAgent:
     def bind(self, config: LineConfig) -> LineAgent:
         """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it: in
         choice mode, the config's tuned choice rule)."""
-        return LineAgent(self.policy, self.name, config, self._rng, self.advisor, self.horizon_years)
+        return LineAgent(self.policy, self.name, config, self._rng, self.advisor, self.horizon_years,
+                         self.choice_features, self.learned)
 
-    def tamp_probability(self, obs: Mapping[str, Any], advice: np.ndarray | None = None) -> np.ndarray:
+    def tamp_probability(self, obs: Mapping[str, Any], advice: np.ndarray | None = None,
+                         ask: str = "tamp") -> np.ndarray:
         """(batch, S) probability of tamping each section (batched observation dict of numpy arrays; ``advice``:
-        the advisor's codes where the caller has them, see :func:`section_features`)."""
+        the advisor's codes where the caller has them, see :func:`section_features`); with the choice features,
+        of making the choice ``ask`` (:data:`LEARNABLE_CHOICES`)."""
         import torch
 
-        x = section_features(obs, self.advisor, advice)
+        x = section_features(obs, self.advisor, advice, ask if self.choice_features else None)
         B, S, F = x.shape
         self.policy.set_training_mode(False)
         with torch.no_grad():
@@ -259,9 +323,13 @@ class LineAgent:
         n, S = b["section_sd"].shape
         memory = fresh_memory(state, episode_start, n, S)
         advice = np.asarray(self.advisor.predict(b, state=memory)[0], dtype=np.int64)  # its own memory: not kept
-        tamp = self._wants(self.tamp_probability(b, advice), deterministic) & may_tamp(b, c)
+        wants = {name: self._wants(self.tamp_probability(b, advice, name), deterministic) & may_tamp(b, c)
+                 for name in self.learned}
+        if "drainage" in wants:  # where drainage is not in question, the advisor's answer (no drainage)
+            wants["drainage"] = np.where(choice_open("drainage", b, advice), wants["drainage"], advice == DRAINAGE)
         step = np.rint(np.asarray(b["time"], dtype=float)[:, 0] * c.horizon_steps)
-        codes = self.advisor.allowed(compose_choices(tamp, advice), b, step, memory[:, 0])  # as the env applies them
+        wanted = compose_choices(wants["tamp"], advice, wants.get("spot_tamp"), wants.get("drainage"))
+        codes = self.advisor.allowed(wanted, b, step, memory[:, 0])  # as the env applies them
         return codes.astype(np.int8), remember_work(memory, codes, step[:, None], choice_view(b)["section_peak"])
 
     def reset(self) -> None:

@@ -276,10 +276,11 @@ class SectionAgentsVecEnv(_OneObjectVecEnv):
     the horizon, reported as terminal (the life-cycle cost ends there; see :mod:`trackenv_agents.learning.sb3_vec`), and
     restart in the same step (SB3's convention, ``terminal_observation`` in the info). ``seed``: line ``i`` of
     the first reset gets ``seed + i``; later resets continue each line's generator. ``advisor``: a rule whose
-    choice is a feature (:func:`~trackenv_agents.learning.line_policy.section_features`)."""
+    choice is a feature (:func:`~trackenv_agents.learning.line_policy.section_features`); ``choice_features``:
+    with the choice features too, asking about the tamping (a choice rule as advisor)."""
 
     def __init__(self, n_lines: int, config: LineConfig | str | dict | None = None, *, seed: int | None = None,
-                 reward_scale: float = 20.0, advisor: Any = None) -> None:
+                 reward_scale: float = 20.0, advisor: Any = None, choice_features: bool = False) -> None:
         if not (np.isfinite(reward_scale) and reward_scale > 0):
             raise ValueError(f"reward_scale must be a number > 0 (k€), got {reward_scale!r}")
         self.lines = TampingSB3VecEnv(int(n_lines), LineConfig.coerce(config), seed=seed)
@@ -287,14 +288,15 @@ class SectionAgentsVecEnv(_OneObjectVecEnv):
         self.n_lines, self.S = self.lines.num_envs, self.config.n_sections
         self.reward_scale = float(reward_scale)
         self.advisor = None if advisor is None else advisor.bind(self.config)
-        space = spaces.Box(0.0, FEATURE_CLIP, (n_features(advisor),), np.float32)
+        self.ask = "tamp" if choice_features else None
+        space = spaces.Box(0.0, FEATURE_CLIP, (n_features(advisor, choice_features),), np.float32)
         self.render_mode = None
         super().__init__(self.n_lines * self.S, space, spaces.Discrete(2))
         self._actions: np.ndarray | None = None
         self.line_obs: dict[str, np.ndarray] = {}  # the lines' last raw observation (a rule acting on it: cloning)
 
     def _features(self, line_obs: Mapping[str, np.ndarray]) -> np.ndarray:
-        return section_features(line_obs, self.advisor).reshape(self.num_envs, -1)
+        return section_features(line_obs, self.advisor, ask=self.ask).reshape(self.num_envs, -1)
 
     def reset(self):
         obs = self.line_obs = self.lines.reset()
@@ -317,7 +319,7 @@ class SectionAgentsVecEnv(_OneObjectVecEnv):
             share = info["costs"]["possession"] / max(int(tamped.sum()), 1)
             rewards[b] = -(np.asarray(info["section_costs"]) + share * tamped) / self.reward_scale
             terminal = section_features({k: v[None] for k, v in info["terminal_observation"].items()},
-                                        self.advisor)[0] if dones[b] else None
+                                        self.advisor, ask=self.ask)[0] if dones[b] else None
             for j in range(self.S):
                 d: dict[str, Any] = {"tamped": bool(tamped[j])}
                 if terminal is not None:

@@ -272,3 +272,5 @@ class LineSettings(AlgoSettings):
     other_rate: float = _num(0.1, 1e-6, 1.0, doc="share of the other decisions that are priced")
     fit_epochs: int = _num(40, 1, 100_000, integer=True, doc="epochs of each fit")
     fit_margin: float = _num(1.0, 0.0, 1e9, doc="k€: below it the policy keeps its own choice")
+    learn_choices: bool = _flag(False, doc="the network also decides spot tamping and drainage, priced in the "
+                                           "forks (with a choice rule as advisor, on a line that enables them)")

@@ -120,7 +120,7 @@ def test_fit_choices_learns_the_cheaper_choice_and_keeps_its_own_where_it_does_n
     tiny = x[:, 1] > 0.7  # differences below the margin, either way
     q_tamp[tiny] = 50.0 + rng.uniform(-0.4, 0.4, tiny.sum())
     q_wait[tiny] = 50.0
-    samples = {"features": x, "q_tamp": q_tamp, "q_wait": q_wait, "acted": acted, "weight": np.ones(800)}
+    samples = {"features": x, "q_do": q_tamp, "q_skip": q_wait, "did": acted, "weight": np.ones(800)}
     fit = fit_choices(model, samples, reward_scale=20.0, epochs=100, margin=1.0, batch_size=64)
     assert fit["weighted_target_share"] > 0.9 and fit["samples"] == 800
     chosen = model.policy.get_distribution(torch.as_tensor(x)).mode().numpy().astype(bool)
@@ -129,6 +129,6 @@ def test_fit_choices_learns_the_cheaper_choice_and_keeps_its_own_where_it_does_n
     assert (chosen[tiny] == acted[tiny]).mean() > 0.8
     with pytest.raises(ValueError, match="margin"):
         fit_choices(model, samples, reward_scale=20.0, margin=-1.0)
-    flat = {**samples, "q_tamp": q_wait.copy()}
+    flat = {**samples, "q_do": q_wait.copy()}
     with pytest.raises(ValueError, match="no cost difference"):
         fit_choices(model, flat, reward_scale=20.0, margin=0.0)

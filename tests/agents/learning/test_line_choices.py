@@ -133,7 +133,7 @@ def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
     rule = _bound(RULE, CFG)
     seeds = [3, 4]
     data = section_counterfactuals(CFG, seeds, rule, advisor=rule, focus_rate=0.4, other_rate=0.1, seed=1)
-    n = len(data["q_tamp"])
+    n = len(data["q_do"])
     assert n > 5 and data["features"].shape == (n, len(FEATURES) + 2)
     plans, states = {}, {}
     for s in seeds:
@@ -149,13 +149,13 @@ def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
         plans[s], states[s] = np.array(plan), memory
     rng = np.random.default_rng(0)
     for k in rng.choice(n, size=4, replace=False):
-        s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["acted"][k])
+        s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["did"][k])
         code = int(plans[s][t, j])
         assert tamping_codes(code) == acted
         first = compose_choices(np.array(not acted), np.array(code))  # the rule's own code is its advice
         other = _replay(CFG, s, rule, plans[s], states[s], j, t, int(first))
         own = _replay(CFG, s, rule, plans[s], states[s], j, t, code)
-        q_other, q_own = (data["q_wait"][k], data["q_tamp"][k]) if acted else (data["q_tamp"][k], data["q_wait"][k])
+        q_other, q_own = (data["q_skip"][k], data["q_do"][k]) if acted else (data["q_do"][k], data["q_skip"][k])
         assert q_own == pytest.approx(own, rel=1e-9) and q_other == pytest.approx(other, rel=1e-9)
     # the features carry the rule's tamping, not its other codes
     x = section_features({k: v[None] for k, v in TampingLine(CFG, action_type="choices").reset(seed=3)[0].items()},

@@ -34,7 +34,7 @@ def test_forks_are_the_envs_section_costs_under_the_other_choice():
     rule = _bound(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), CFG)
     seeds = [3, 4]
     data = section_counterfactuals(CFG, seeds, rule, focus_rate=0.3, other_rate=0.05, seed=1)
-    n = len(data["q_tamp"])
+    n = len(data["q_do"])
     assert n > 5 and data["features"].shape[0] == n and (data["weight"] >= 1.0).all()
     assert set(np.unique(data["weight"])) <= {1 / 0.3, 1 / 0.05}
     # the policy's own run, as the env records it
@@ -48,11 +48,11 @@ def test_forks_are_the_envs_section_costs_under_the_other_choice():
         plans[s] = np.array(plan)
     rng = np.random.default_rng(0)
     for k in rng.choice(n, size=4, replace=False):
-        s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["acted"][k])
+        s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["did"][k])
         assert plans[s][t, j] == acted
         other = _section_cost_to_go(CFG, s, rule, plans[s], j, t, int(not acted))
         own = _section_cost_to_go(CFG, s, rule, plans[s], j, t, int(acted))
-        q_other, q_own = (data["q_wait"][k], data["q_tamp"][k]) if acted else (data["q_tamp"][k], data["q_wait"][k])
+        q_other, q_own = (data["q_skip"][k], data["q_do"][k]) if acted else (data["q_do"][k], data["q_skip"][k])
         assert q_other == pytest.approx(other, rel=1e-9) and q_own == pytest.approx(own, rel=1e-9)
     with pytest.raises(ValueError, match="focus_rate"):
         section_counterfactuals(CFG, seeds, rule, focus_rate=0.0)
