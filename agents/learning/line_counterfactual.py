@@ -276,10 +276,7 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
             forks.traffic_rows(on, t)
             f_cost[live] += forks.section_costs()[live]
             if (t + 1) % c.measurement_interval == 0:
-                forks.measure_rows(on, t + 1)
-                # the recording car's run dates the sections' measurements, as the line's run does (LineBatch.
-                # _measure): measure_rows leaves that to its caller, and an undated run reads as an old one
-                forks.measured_at[on] = t + 1
+                forks.measure_rows(on, t + 1)  # dates the sections' measurements, as the line's run
             forks.inspect_rows(fork_codes == INSPECT, t + 1)
         # the policy's own step
         obs, _, _, _, info = env.step(codes.astype(np.int8))

@@ -180,6 +180,18 @@ def test_the_recording_car_resets_every_sections_age():
     assert (obs["section_measurement_age"] == 0).all()
 
 
+def test_a_measurement_of_some_sections_dates_those_sections_only():
+    """``measure_rows`` (a recording-car reading of some sections, as the per-section forks take one) dates what
+    it measured, as the line's run and the trolley do: a fork's fresh measurement does not read as an old one."""
+    batch = _batch(measurement_interval=100)
+    before = batch.measured_at.copy()
+    seg = np.zeros(batch.S, dtype=bool)
+    seg[[1, 4]] = True
+    batch.measure_rows(seg, 3)
+    assert (batch.measured_at[seg] == 3).all()
+    np.testing.assert_array_equal(batch.measured_at[~seg], before[~seg])
+
+
 def test_a_survey_reveals_whether_a_wet_spot_is_there():
     env = _env(wet_spot_probability=0.5)
     obs, _ = env.reset(seed=6)

@@ -352,17 +352,17 @@ class LineBatch:
         """A recording-car run on ``lines`` (bool over lines), with the pre-drawn errors of this step."""
         seg = np.repeat(lines, self.S)
         self.measure_rows(seg, np.repeat(self.step, self.S))
-        self.measured_at = np.where(seg, np.repeat(self.step, self.S), self.measured_at)
         self.last_measured = np.where(lines, self.step, self.last_measured)
 
     def measure_rows(self, seg: np.ndarray, seg_step: np.ndarray | int) -> None:
         """A measurement of the sections ``seg`` (sections,) bool at their step ``seg_step`` (per section or one),
         with the pre-drawn errors of that step: the measured SD and mean-to-peak, and the level of their
-        segments. No calendar: :meth:`_measure` is the line-level run; a per-section fork is measured through
-        this directly."""
+        segments, and their measurement dated ``seg_step``. No calendar: :meth:`_measure` is the line-level run; a
+        per-section fork is measured through this directly."""
         c = self.config
         step = np.broadcast_to(np.asarray(seg_step), seg.shape)
         self._read(seg, step, self.meas_noise, c.sd_noise_mm, c.peak_noise_mm)
+        self.measured_at = np.where(seg, step, self.measured_at)
         segs = self._segments_of(seg)
         self.measured_level[segs] = self.level[segs]
 
