@@ -4,19 +4,23 @@ information (the same family with and without inspections and surveys), on the t
 For each scenario (``choices``: ``trackenv/TampingLine-v1``; ``wet``: ``trackenv/TampingLineWet-v0``;
 ``defects``: ``trackenv/TampingLineDefects-v0``):
 
-1. ``--tune``: the grouped threshold (the best tamping rule) over a small grid of campaigns on the training
-   seeds, then the choice rules (:mod:`trackenv_agents.rules.choices`) around the best campaign
-   (:func:`~trackenv_agents.rules.choices.choice_grid`); the tuned parameters are written to
-   ``agents/rules/<scenario>_tuned_heuristics.json`` (what ``trackenv evaluate`` reads by default).
-2. The grouped threshold and the choice rule on the held-out seeds (``--seeds``, default 0:100), the choice rule
-   without looking on ``--voi-seeds`` (default the same), paired per episode: the choice rule against the
-   grouped threshold, and against the same family without looking; saved as
-   ``experiments/saved/choices_compare_<scenario>.json`` (per-episode costs and the paired differences).
+1. ``--tune``: the grouped threshold (the best tamping rule) over a small grid of campaigns (:data:`CAMPAIGNS`)
+   on the training seeds, and each family of choice rules (:mod:`trackenv_agents.rules.choices`) over its choice
+   settings (:func:`~trackenv_agents.rules.choices.choice_grid`) at every one of these campaigns, jointly; the
+   tuned parameters are written to ``agents/rules/<scenario>_tuned_heuristics.json`` (what ``trackenv
+   evaluate`` reads by default).
+2. The grouped threshold, the choice rule and the rule with spot tamping alone on the held-out seeds
+   (``--seeds``, default 0:100), the choice rule without looking on ``--voi-seeds`` (default the same), paired
+   per episode: the choice rule and the spot-tamping rule against the grouped threshold, and the choice rule
+   against the same family without looking; saved as ``experiments/saved/choices_compare_<scenario>.json``
+   (per-episode costs and the paired differences).
 3. ``--report``: the saved scenarios as one Markdown table (``experiments/saved/choices_compare.md``) and a plot.
 
     python experiments/choices_compare.py --scenario wet --tune          # one scenario: tune, then score
     python experiments/choices_compare.py --scenario wet --scenario defects --scenario choices --tune \
         --voi-seeds 0:30                                                 # what the documentation shows
+    python experiments/choices_compare.py --scenario defects --tune --train-seeds 1000:1016
+                                                                         # the defects line as shipped
     python experiments/choices_compare.py --report                       # the table and the plot
 """
 
@@ -36,7 +40,13 @@ from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.evaluation.line_compare import parse_seeds
 from trackenv_agents.evaluation.statistics import paired_difference
 from trackenv_agents.evaluation.tuning import tune_many
-from trackenv_agents.rules.choices import ChoiceThreshold, ChoiceThresholdNoLooking, choice_grid, choices_off
+from trackenv_agents.rules.choices import (
+    ChoiceThreshold,
+    ChoiceThresholdNoLooking,
+    ChoiceThresholdSpotOnly,
+    choice_grid,
+    choices_off,
+)
 from trackenv_agents.rules.line import GroupedThreshold
 from trackenv_agents.rules.problems import TUNED_FILES
 
@@ -45,28 +55,39 @@ IDS = {"choices": "trackenv/TampingLine-v1", "wet": "trackenv/TampingLineWet-v0"
        "defects": "trackenv/TampingLineDefects-v0"}
 #: what the issue asks of each scenario: the choice rule's cost at most this share of the tamping-only rule's
 TARGET = {"choices": 1.0, "wet": 0.90, "defects": 0.95}
-#: the grouped threshold's campaigns searched on each scenario (trigger, include) [mm]
-CAMPAIGNS = ((3.5, 1.75), (3.0, 1.5), (2.5, 1.25))
-RULES = (GroupedThreshold, ChoiceThreshold, ChoiceThresholdNoLooking)
+#: the campaigns searched on each scenario (trigger, include) [mm], for the grouped threshold and, jointly with
+#: their choices, for the choice rules
+CAMPAIGNS = ((2.5, 1.25), (3.0, 1.5), (3.5, 1.75), (4.0, 2.0), (4.5, 2.25))
+CHOICE_FAMILIES = (ChoiceThreshold, ChoiceThresholdNoLooking, ChoiceThresholdSpotOnly)
+RULES = (GroupedThreshold, *CHOICE_FAMILIES)
 
 
-def tune(name: str, train_seeds: list[int], batch_size: int) -> dict[str, Any]:
-    """Tune the three rules on ``train_seeds`` of scenario ``name`` and write its tuned-parameter file: the
-    grouped threshold's campaign first, then each choice family around it; a family keeps every choice off (the
-    grouped threshold itself) where no grid point beats that on the training seeds."""
+def tune(name: str, train_seeds: list[int], batch_size: int, keep: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Tune the rules on ``train_seeds`` of scenario ``name`` and write its tuned-parameter file: the grouped
+    threshold over :data:`CAMPAIGNS`, and each choice family over its choice settings at every campaign; a
+    family's settings with every choice off are the grouped threshold itself (its cost read from there), so a
+    family keeps every choice off where no grid point beats the best campaign on the training seeds. The rules
+    named in ``keep`` keep their shipped parameters (the cheapest on the training seeds did worse on held-out
+    episodes); their training costs still join the file's tables."""
     cfg = scenario(name)
+    shipped = json.loads(TUNED_FILES[name].read_text())["params"] if TUNED_FILES[name].exists() else {}
+    missing = [rule for rule in keep if rule not in shipped]
+    if missing:
+        raise ValueError(f"--keep: no shipped parameters of {missing} for scenario {name!r}")
     known = _known_rows(name, train_seeds)
-    best = _tune_grid(GroupedThreshold, [{"trigger_mm": t, "include_mm": i} for t, i in CAMPAIGNS], cfg,
-                      train_seeds, batch_size, known)
-    base = best[0]["params"]
-    params: dict[str, Any] = {GroupedThreshold.name: base}
+    campaigns = [{"trigger_mm": t, "include_mm": i} for t, i in CAMPAIGNS]
+    best = _tune_grid(GroupedThreshold, campaigns, cfg, train_seeds, batch_size, known)
+    params: dict[str, Any] = {GroupedThreshold.name: best[0]["params"]}
     tables = {GroupedThreshold.name: best}
-    for cls in (ChoiceThreshold, ChoiceThresholdNoLooking):
-        off = {"params": {**base, **choices_off(cls)}, "mean_cost": best[0]["mean_cost"]}
-        table = sorted([*_tune_grid(cls, choice_grid(cls, base), cfg, train_seeds, batch_size, known), off],
+    for cls in CHOICE_FAMILIES:
+        off = [{"params": {**row["params"], **choices_off(cls)}, "mean_cost": row["mean_cost"]} for row in best]
+        grid = [point for campaign in campaigns for point in choice_grid(cls, campaign)]
+        table = sorted([*_tune_grid(cls, grid, cfg, train_seeds, batch_size, known), *off],
                        key=lambda row: row["mean_cost"])
         params[cls.name], tables[cls.name] = table[0]["params"], table
-    payload = {"scenario": name, "train_seeds": train_seeds, "tuned_by": "experiments/choices_compare.py --tune",
+    params |= {rule: shipped[rule] for rule in keep}
+    tuned_by = "experiments/choices_compare.py --tune" + (f" --keep {','.join(keep)}" if keep else "")
+    payload = {"scenario": name, "train_seeds": train_seeds, "tuned_by": tuned_by,
                "params": params,
                "train_mean_cost": {rule: [{"params": row["params"], "mean_cost": row["mean_cost"]} for row in table]
                                    for rule, table in tables.items()}}
@@ -101,14 +122,16 @@ def _tune_grid(cls: type, grid: list[dict[str, Any]], cfg: Any, train_seeds: lis
 
 def evaluate(name: str, params: dict[str, Any], seeds: list[int], voi_seeds: list[int],
              batch_size: int) -> dict[str, Any]:
-    """The grouped threshold and the choice rule on ``seeds`` of scenario ``name``, the choice rule without
-    looking on ``voi_seeds`` (a subset), with the paired differences. A rule whose parameters and seeds are those
+    """The grouped threshold, the choice rule and the spot-tamping rule on ``seeds`` of scenario ``name``, the
+    choice rule without looking on ``voi_seeds`` (a subset), with the paired differences; a family with no
+    parameters in ``params`` (not tuned on the scenario) is left out. A rule whose parameters and seeds are those
     of the saved comparison is read from it (an episode is a function of its seed and actions)."""
     cfg = scenario(name)
     path = SAVED / f"choices_compare_{name}.json"
     saved = json.loads(path.read_text())["rules"] if path.exists() else {}
     summaries, results = {}, {}
-    for cls, rule_seeds in zip(RULES, (seeds, seeds, voi_seeds), strict=True):
+    for cls in (c for c in RULES if c.name in params):
+        rule_seeds = voi_seeds if cls is ChoiceThresholdNoLooking else seeds
         old = saved.get(cls.name)
         if old and old["seeds"] == rule_seeds and cls(**old["params"]).params == cls(**params[cls.name]).params:
             summaries[cls.name] = old
@@ -119,7 +142,7 @@ def evaluate(name: str, params: dict[str, Any], seeds: list[int], voi_seeds: lis
                           batch_size=batch_size)[0]
         summaries[cls.name] = {**r.summary(), "seeds": r.seeds.tolist(), "episode_costs": r.cost.tolist()}
         results[cls.name] = r
-    tamping, choice, no_looking = (results[cls.name] for cls in RULES)
+    tamping, choice, no_looking = (results[cls.name] for cls in RULES[:3])
 
     def compare(a, b) -> dict[str, Any]:
         d = paired_difference(a, b)
@@ -128,9 +151,12 @@ def evaluate(name: str, params: dict[str, Any], seeds: list[int], voi_seeds: lis
         return {**d, "reference_mean_cost": ref, "relative": d["mean_difference"] / ref,
                 "relative_ci": [d["ci_low"] / ref, d["ci_high"] / ref]}
 
-    return {"scenario": name, "env": IDS[name], "seeds": seeds, "voi_seeds": voi_seeds, "rules": summaries,
-            "choices_vs_tamping": compare(choice, tamping), "value_of_information": compare(choice, no_looking),
-            "target_ratio": TARGET[name]}
+    out = {"scenario": name, "env": IDS[name], "seeds": seeds, "voi_seeds": voi_seeds, "rules": summaries,
+           "choices_vs_tamping": compare(choice, tamping), "value_of_information": compare(choice, no_looking),
+           "target_ratio": TARGET[name]}
+    if ChoiceThresholdSpotOnly.name in results:
+        out["spot_vs_tamping"] = compare(results[ChoiceThresholdSpotOnly.name], tamping)
+    return out
 
 
 def report(names: list[str]) -> str:
@@ -160,6 +186,22 @@ def report(names: list[str]) -> str:
                 "minus the other, paired per episode, with 95 % bootstrap CIs; the value of information is what "
                 "looking saves (the rule without inspections and surveys minus the one with, on the episodes both "
                 "ran).")
+    spot = [s for s in saved if "spot_vs_tamping" in s]
+    if spot:
+        rows += ["", "| id | episodes | grouped threshold k€ | spot tamping alone k€ | spot tamping alone vs grouped "
+                 "threshold (paired, 95 % CI) | issue asks | met |", "|---|---:|---:|---:|---:|---|---|"]
+    for s in spot:
+        d, target = s["spot_vs_tamping"], s["target_ratio"]
+        met = d["relative"] <= target - 1.0 and d["ci_high"] < 0.0
+        rows.append(f"| `{s['env']}` | {d['n_episodes']} | {d['reference_mean_cost']:.0f} "
+                    f"| {s['rules'][ChoiceThresholdSpotOnly.name]['mean_cost']:.0f} "
+                    f"| {d['mean_difference']:+.0f} [{d['ci_low']:+.0f}, {d['ci_high']:+.0f}] "
+                    f"({100 * d['relative']:+.1f} % [{100 * d['relative_ci'][0]:+.1f}, "
+                    f"{100 * d['relative_ci'][1]:+.1f}]) | ≤ {100 * (target - 1):.0f} % | {'yes' if met else 'no'} |")
+    if spot:
+        rows.append("")
+        rows.append("Spot tamping alone: `choice-threshold-spot-only`, the grouped threshold's campaigns with spot "
+                    "tamping and no other choice, minus the grouped threshold, paired per episode.")
     rows.append("")
     rows.append("| id | rule | " + " | ".join(("tamp", "spot_tamp", "drainage", "renew", "inspect", "survey"))
                 + " |")
@@ -176,7 +218,9 @@ def report(names: list[str]) -> str:
         for rule, params in tuned["params"].items():
             shown = ", ".join(f"{k} = {v}" for k, v in params.items() if v not in (0, 0.0, False)
                               and not (k in ("fast_growth_mm_per_year", "inspect_age_years") and not _uses(k, params)))
-            cost = min(row["mean_cost"] for row in tuned["train_mean_cost"][rule])
+            table_rows = tuned["train_mean_cost"][rule]  # the shipped setting (a kept rule: not the cheapest)
+            cost = next((row["mean_cost"] for row in table_rows if row["params"] == params),
+                        min(row["mean_cost"] for row in table_rows))
             rows.append(f"| `{s['env']}` | {rule} | {shown} | {cost:.0f} |")
     table = "\n".join(rows)
     (SAVED / "choices_compare.md").write_text(table + "\n")
@@ -201,12 +245,16 @@ def plot(saved: list[dict[str, Any]], out_png: str) -> str:
     fig = Figure(figsize=(7.0, 3.8))
     ax = fig.subplots()
     x = np.arange(len(saved))
-    for k, (key, label, sign) in enumerate((("choices_vs_tamping", "choice rule vs grouped threshold", 1.0),
-                                           ("value_of_information", "choice rule vs no looking", 1.0))):
-        mid = np.array([sign * 100 * s[key]["relative"] for s in saved])
-        lo = np.array([sign * 100 * s[key]["relative_ci"][0] for s in saved])
-        hi = np.array([sign * 100 * s[key]["relative_ci"][1] for s in saved])
-        ax.errorbar(x + (k - 0.5) * 0.2, mid, yerr=[mid - lo, hi - mid], fmt="o", capsize=4, label=label)
+    for k, (key, label) in enumerate((("choices_vs_tamping", "choice rule vs grouped threshold"),
+                                      ("value_of_information", "choice rule vs no looking"),
+                                      ("spot_vs_tamping", "spot tamping alone vs grouped threshold"))):
+        at = [i for i, s in enumerate(saved) if key in s]
+        if not at:
+            continue
+        mid = np.array([100 * saved[i][key]["relative"] for i in at])
+        lo = np.array([100 * saved[i][key]["relative_ci"][0] for i in at])
+        hi = np.array([100 * saved[i][key]["relative_ci"][1] for i in at])
+        ax.errorbar(x[at] + (k - 1) * 0.2, mid, yerr=[mid - lo, hi - mid], fmt="o", capsize=4, label=label)
     for i, s in enumerate(saved):
         if s["target_ratio"] < 1.0:
             ax.plot([i - 0.3, i + 0.3], [100 * (s["target_ratio"] - 1)] * 2, "k--", lw=0.8)
@@ -225,6 +273,8 @@ def main() -> None:
     ap.add_argument("--scenario", choices=sorted(IDS), action="append", help="scenario(s) to run (repeatable)")
     ap.add_argument("--tune", action="store_true", help="tune on the training seeds first (else: the shipped files)")
     ap.add_argument("--train-seeds", default="1000:1004", metavar="A:B", help="training episodes (default 1000:1004)")
+    ap.add_argument("--keep", default="", metavar="RULE[,RULE]",
+                    help="with --tune: rules that keep their shipped parameters")
     ap.add_argument("--seeds", default="0:100", metavar="A:B", help="held-out episodes (default 0:100)")
     ap.add_argument("--voi-seeds", default=None, metavar="A:B",
                     help="held-out episodes of the rule without looking (default: --seeds)")
@@ -235,7 +285,8 @@ def main() -> None:
     for name in args.scenario or []:
         t0 = time.perf_counter()
         if args.tune:
-            params = tune(name, parse_seeds(args.train_seeds), args.batch_size)
+            params = tune(name, parse_seeds(args.train_seeds), args.batch_size,
+                          tuple(rule for rule in args.keep.split(",") if rule))
         else:
             params = json.loads(TUNED_FILES[name].read_text())["params"]
         seeds = parse_seeds(args.seeds)

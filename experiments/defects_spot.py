@@ -35,8 +35,10 @@ rule loses without spot tamping.
 8. ``--ablation``: the shipped choice rule (``agents/rules/defects_tuned_heuristics.json``) with spot tamping
    off (``spot_peak_mm = 0``, every other parameter as tuned) on the held-out episodes of the saved comparison
    (``experiments/saved/choices_compare_defects.json``), paired against the choice rule and the grouped
-   threshold there; and the shipped choice rule with a spot tamping's possession at the full price
-   (``spot_possession_share = 1``) against the rule without spot tamping.
+   threshold there; the choice family tuned without spot tamping (the cheapest setting with ``spot_peak_mm = 0``
+   on the training seeds of the tuned file) against the choice rule, each tuned on its own; and the shipped
+   choice rule with a spot tamping's possession at the full price (``spot_possession_share = 1``) against the
+   rule without spot tamping.
 
     python experiments/defects_spot.py                      # seeds 1000:1004, writes saved/defects_spot.json
     python experiments/defects_spot.py --ablation           # and the rule without spot tamping (100 episodes)
@@ -236,7 +238,17 @@ def spot_ablation() -> dict[str, Any]:
                          scenario("defects", spot_possession_share=1.0), saved[ChoiceThreshold.name]["seeds"],
                          action_type="choices", batch_size=50)[0]
     spot = paired_difference(result(ChoiceThreshold.name), off)
+    tuned_off = min((row for row in json.loads(TUNED_FILES["defects"].read_text())["train_mean_cost"][
+        ChoiceThreshold.name] if not row["params"]["spot_peak_mm"]), key=lambda row: row["mean_cost"])
+    alone = evaluate_many([ChoiceThreshold(**tuned_off["params"])], scenario("defects"),
+                          saved[ChoiceThreshold.name]["seeds"], action_type="choices", batch_size=50)[0]
+    fair = paired_difference(result(ChoiceThreshold.name), alone)
     return {"params": params, "mean_cost": float(off.cost.mean()), "choices": off.summary()["choices"],
+            "tuned_without_spot": {"params": tuned_off["params"], "train_mean_cost": tuned_off["mean_cost"],
+                                   "mean_cost": float(alone.cost.mean()), "choices": alone.summary()["choices"],
+                                   "choice_rule_minus_it": fair,
+                                   "choice_rule_minus_it_relative": [fair[k] / float(alone.cost.mean()) for k in
+                                                                     ("mean_difference", "ci_low", "ci_high")]},
             "choice_rule_minus_no_spot": spot,
             "choice_rule_minus_no_spot_relative": [spot[k] / float(off.cost.mean())
                                                    for k in ("mean_difference", "ci_low", "ci_high")],

@@ -4,7 +4,7 @@ their tuned parameters per preset, shipped beside them (:mod:`.problems`: ``line
 default line, ``track60_tuned_heuristics.json`` for the 60 m track)."""
 
 from .base import Heuristic, RandomPolicy, as_batch
-from .choices import CHOICE_RULES, ChoiceThreshold, ChoiceThresholdNoLooking
+from .choices import CHOICE_RULES, ChoiceThreshold, ChoiceThresholdNoLooking, ChoiceThresholdSpotOnly
 from .line import (
     LINE_HEURISTICS,
     LINE_TUNED_FILE,
@@ -23,7 +23,7 @@ from .problems import TUNED_FILES, rules_for, tuned_params_for
 
 __all__ = [
     "Heuristic", "RandomPolicy", "as_batch",
-    "CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking",
+    "CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "ChoiceThresholdSpotOnly",
     "LINE_HEURISTICS", "LINE_TUNED_FILE", "BudgetedWorstFirst", "GroupedThreshold", "LineNoMaintenance",
     "RegisterPeriodic", "SectionThreshold", "UniformPeriodic", "line_tuned_params", "planner_view",
     "stale_measurement",

@@ -22,7 +22,9 @@ switched off by a zero:
 "Fast regrowth" is a measured SD growth of at least ``fast_growth_mm_per_year`` since the section's last
 tamping in the episode (:func:`regrowth_mm_per_year`). :class:`ChoiceThresholdNoLooking` is the same family
 without inspections and surveys (it still reads the surveys made before the start): the two give the value of
-information.
+information. :class:`ChoiceThresholdSpotOnly` keeps only the tamping campaigns and spot tamping: against the
+grouped threshold it gives what spot tamping alone is worth. A family's ``uses`` (choice names) says which
+choices it may ask for, and so which parameters it takes (:data:`CHOICE_OFF`).
 
 Each rule respects what the env would otherwise clip or mask, so its requests are applied as asked: choices the
 config does not enable are never asked for, no track work within ``min_steps_between_tampings`` steps of the
@@ -59,11 +61,30 @@ from trackenv.envs.line_episode import fit_worst
 from .base import as_batch
 from .line import GroupedThreshold, stale_measurement
 
-__all__ = ["CHOICE_RULES", "ChoiceThreshold", "ChoiceThresholdNoLooking", "choice_grid", "choice_view", "fresh_memory",
-           "choices_off", "regrowth_mm_per_year", "remember_work"]
+__all__ = ["CHOICE_OFF", "CHOICE_RULES", "SPOT_PEAKS_MM", "ChoiceThreshold", "ChoiceThresholdNoLooking",
+           "ChoiceThresholdSpotOnly", "choice_grid", "choice_view", "choices_off", "fresh_memory",
+           "regrowth_mm_per_year", "remember_work"]
 
 #: the shortest time between a tamping and the measurement that a growth rate is read over [year]
 MIN_GROWTH_YEARS = 0.25
+#: each parameter of the choice rules: the choices that read it, and its value with them off (0 or False: off;
+#: the growth threshold and the inspection age only qualify a choice that is on)
+CHOICE_OFF: dict[str, tuple[frozenset[str], Any]] = {
+    "spot_peak_mm": (frozenset({"spot_tamp"}), 0.0),
+    "drain_surveyed": (frozenset({"drainage"}), False),
+    "drain_after_tampings": (frozenset({"drainage"}), 0),
+    "fast_growth_mm_per_year": (frozenset({"drainage", "renew", "survey"}), 1.5),
+    "renew_after_tampings": (frozenset({"renew"}), 0),
+    "survey_fast": (frozenset({"survey"}), False),
+    "survey_after_tampings": (frozenset({"survey"}), 0),
+    "survey_all": (frozenset({"survey"}), False),
+    "inspect_margin_mm": (frozenset({"inspect"}), 0.0),
+    "inspect_age_years": (frozenset({"inspect"}), 0.5),
+    "inspect_peak_mm": (frozenset({"inspect"}), 0.0),
+    "check_peak_mm": (frozenset({"inspect"}), 0.0),
+}
+#: the spot-tamping peaks searched for :class:`ChoiceThresholdSpotOnly` [mm] (with spot tamping off as well)
+SPOT_PEAKS_MM = (5.0, 6.0, 7.0, 8.0, 9.0)
 
 
 def _measurement_age(obs: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -124,8 +145,9 @@ class ChoiceThreshold(GroupedThreshold):
     docstring for each parameter; 0 or False switches a choice off)."""
 
     name: ClassVar[str] = "choice-threshold"
-    #: whether the family may inspect and survey
-    looks: ClassVar[bool] = True
+    #: the choices the family may ask for (names of :data:`~trackenv.envs.choices.CHOICES`); it takes the
+    #: parameters that these read (:data:`CHOICE_OFF`)
+    uses: ClassVar[frozenset[str]] = frozenset(CHOICES[1:])
 
     def __init__(self, trigger_mm: float = 3.5, include_mm: float = 1.75, spot_peak_mm: float = 0.0,
                  drain_surveyed: bool = True, drain_after_tampings: int = 0, fast_growth_mm_per_year: float = 1.0,
@@ -135,15 +157,15 @@ class ChoiceThreshold(GroupedThreshold):
                  check_peak_mm: float = 0.0,
                  choices: tuple[str, ...] = CHOICES[1:], choice_work: Mapping[str, float] | None = None,
                  min_steps_between_tampings: int = 1, **kw: Any) -> None:
-        params = {"spot_peak_mm": spot_peak_mm, "drain_surveyed": bool(drain_surveyed),
-                  "drain_after_tampings": int(drain_after_tampings),
-                  "fast_growth_mm_per_year": fast_growth_mm_per_year,
-                  "renew_after_tampings": int(renew_after_tampings)}
-        if self.looks:
-            params |= {"survey_fast": bool(survey_fast), "survey_after_tampings": int(survey_after_tampings),
-                       "survey_all": bool(survey_all), "inspect_margin_mm": inspect_margin_mm,
-                       "inspect_age_years": inspect_age_years, "inspect_peak_mm": inspect_peak_mm,
-                       "check_peak_mm": check_peak_mm}
+        every = {"spot_peak_mm": spot_peak_mm, "drain_surveyed": bool(drain_surveyed),
+                 "drain_after_tampings": int(drain_after_tampings),
+                 "fast_growth_mm_per_year": fast_growth_mm_per_year,
+                 "renew_after_tampings": int(renew_after_tampings),
+                 "survey_fast": bool(survey_fast), "survey_after_tampings": int(survey_after_tampings),
+                 "survey_all": bool(survey_all), "inspect_margin_mm": inspect_margin_mm,
+                 "inspect_age_years": inspect_age_years, "inspect_peak_mm": inspect_peak_mm,
+                 "check_peak_mm": check_peak_mm}
+        params = {key: value for key, value in every.items() if CHOICE_OFF[key][0] & self.uses}
         for key in ("spot_peak_mm", "fast_growth_mm_per_year", "inspect_margin_mm", "inspect_age_years",
                     "inspect_peak_mm", "check_peak_mm"):
             if key in params and not params[key] >= 0:
@@ -152,9 +174,8 @@ class ChoiceThreshold(GroupedThreshold):
             if key in params and params[key] < 0:
                 raise ValueError(f"{key} must be >= 0 (0: off), got {params[key]!r}")
         super().__init__(trigger_mm=trigger_mm, include_mm=include_mm, **params, **kw)
-        allowed = set(choices) - (set() if self.looks else {"inspect", "survey"})
         #: per action code: whether the rule may ask for it (the config enables it and the family uses it)
-        self.enabled = enabled_codes(allowed)
+        self.enabled = enabled_codes(set(choices) & self.uses)
         # unbound: the work of the default config's choices
         self.work = work_per_code(choice_work if choice_work is not None else LineConfig().choice_work)
         self.is_work = IS_TRACK_WORK
@@ -176,25 +197,26 @@ class ChoiceThreshold(GroupedThreshold):
         sd, peak = obs["section_sd"], obs["section_peak"]
         peak = np.where(step[:, None] - last_spot <= _measurement_age(obs) * self.steps_per_year + 1e-6, 0.0, peak)
         growth = regrowth_mm_per_year(obs)
-        fast = growth >= p["fast_growth_mm_per_year"]
+        fast = growth >= p.get("fast_growth_mm_per_year", np.inf)  # no family that reads it: never fast
         survey = np.asarray(obs.get("section_survey", np.full(sd.shape, -1)))
         tampings = np.asarray(obs["tampings"])
         codes = np.where(GroupedThreshold._act(self, obs), TAMP, 0)
-        if p["renew_after_tampings"]:
+        if p.get("renew_after_tampings"):
             renew = (codes == TAMP) & (obs["tampings_since_renewal"] >= p["renew_after_tampings"]) & fast
             codes = np.where(renew, RENEW, codes)
-        if p["spot_peak_mm"]:
+        if p.get("spot_peak_mm"):
             spot = (codes == 0) & (peak >= p["spot_peak_mm"]) & (sd < p["trigger_mm"])
             codes = np.where(spot, SPOT_TAMP, codes)
         drain = np.zeros(sd.shape, dtype=bool)
-        if p["drain_surveyed"]:
+        if p.get("drain_surveyed"):
             drain |= survey == 1
-        if p["drain_after_tampings"]:
+        if p.get("drain_after_tampings"):
             drain |= (tampings >= p["drain_after_tampings"]) & fast & (survey != 0)
         codes = np.where(drain & (codes != RENEW), DRAINAGE, codes)
-        if self.looks:
+        if "inspect" in self.uses:
             inspect = self._inspect(obs) | self._check(obs, peak_at_tamping)
             codes = np.where((codes == 0) & inspect, INSPECT, codes)  # time presses: before a survey
+        if "survey" in self.uses:
             codes = np.where((codes == 0) & self._survey(survey, fast, tampings), SURVEY, codes)
         return codes
 
@@ -266,17 +288,29 @@ class ChoiceThresholdNoLooking(ChoiceThreshold):
     before the start are all it sees."""
 
     name: ClassVar[str] = "choice-threshold-no-looking"
-    looks: ClassVar[bool] = False
+    uses: ClassVar[frozenset[str]] = frozenset(CHOICES[1:]) - {"inspect", "survey"}
+
+
+class ChoiceThresholdSpotOnly(ChoiceThreshold):
+    """The grouped threshold with spot tamping and no other choice (no drainage, renewal, inspection or survey):
+    its campaigns and ``spot_peak_mm`` are its parameters."""
+
+    name: ClassVar[str] = "choice-threshold-spot-only"
+    uses: ClassVar[frozenset[str]] = frozenset({"tamp", "spot_tamp"})
 
 
 def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[dict[str, Any]]:
-    """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): drainage where
-    surveyed with spot tamping at three peaks and a second-tamping drainage trigger; with ``cls.looks``, surveys of
-    every section first, and extra inspections on top (between runs, or of a high peak just tamped). With every
-    choice off the family is the grouped threshold itself (:func:`choices_off`): the tuning compares against it."""
+    """The parameter sets searched for ``cls`` around the campaign ``base`` (trigger and include): spot tamping
+    alone at :data:`SPOT_PEAKS_MM` for a family that uses no other choice; else drainage where surveyed with spot
+    tamping at three peaks and a second-tamping drainage trigger, and for a family that surveys and inspects,
+    surveys of every section first, and extra inspections on top (between runs, or of a high peak just tamped).
+    With every choice off the family is the grouped threshold itself (:func:`choices_off`): the tuning compares
+    against it."""
     off = choices_off(cls)
     drain = {**off, "drain_surveyed": True}
-    if not cls.looks:
+    if cls.uses <= {"tamp", "spot_tamp"}:
+        grid = [{**off, "spot_peak_mm": peak} for peak in SPOT_PEAKS_MM]
+    elif "survey" not in cls.uses:
         grid = [{**drain, "spot_peak_mm": 12.0}, {**drain, "spot_peak_mm": 9.0},
                 {**drain, "spot_peak_mm": 9.0, "drain_after_tampings": 2}, {**drain, "spot_peak_mm": 7.0}]
     else:
@@ -291,12 +325,8 @@ def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[d
 
 def choices_off(cls: type[ChoiceThreshold]) -> dict[str, Any]:
     """The parameters of ``cls`` with every choice but tamping off (the grouped threshold itself)."""
-    off: dict[str, Any] = {"spot_peak_mm": 0.0, "drain_surveyed": False, "drain_after_tampings": 0,
-                           "fast_growth_mm_per_year": 1.5, "renew_after_tampings": 0}
-    if cls.looks:
-        off |= {"survey_fast": False, "survey_after_tampings": 0, "survey_all": False, "inspect_margin_mm": 0.0,
-                "inspect_age_years": 0.5, "inspect_peak_mm": 0.0, "check_peak_mm": 0.0}
-    return off
+    return {key: value for key, (readers, value) in CHOICE_OFF.items() if readers & cls.uses}
 
 
-CHOICE_RULES: dict[str, type[ChoiceThreshold]] = {c.name: c for c in (ChoiceThreshold, ChoiceThresholdNoLooking)}
+CHOICE_RULES: dict[str, type[ChoiceThreshold]] = {
+    c.name: c for c in (ChoiceThreshold, ChoiceThresholdNoLooking, ChoiceThresholdSpotOnly)}

@@ -13,7 +13,9 @@ from trackenv_agents.rules.choices import (
     CHOICE_RULES,
     ChoiceThreshold,
     ChoiceThresholdNoLooking,
+    ChoiceThresholdSpotOnly,
     choice_grid,
+    choices_off,
     regrowth_mm_per_year,
 )
 from trackenv_agents.rules.line import LINE_HEURISTICS, GroupedThreshold
@@ -61,6 +63,39 @@ def test_surveys_inspections_and_their_absence_without_looking():
     blind = ChoiceThresholdNoLooking(**{**OFF, "drain_surveyed": True, "survey_all": True, "inspect_margin_mm": 0.5})
     assert _act(blind, obs).tolist() == [0, 0, code("drainage"), 0, 0, 0]
     assert "survey_all" not in blind.params
+
+
+def test_the_spot_only_family_spot_tamps_and_tamps_and_does_nothing_else():
+    """Its parameters are the campaign's and the spot peak's; a surveyed wet section, a fast-regrowing one and an
+    old measurement near the trigger ask for nothing, as with the grouped threshold."""
+    rule = ChoiceThresholdSpotOnly(trigger_mm=3.5, include_mm=3.3, spot_peak_mm=9.0, drain_surveyed=True,
+                                   survey_all=True, inspect_margin_mm=0.5, renew_after_tampings=1)
+    assert set(rule.params) == {"trigger_mm", "include_mm", "spot_peak_mm"}
+    obs = _obs(section_survey=[1, -1, -1, -1, 1, -1], section_peak=[4, 10, 10, 4, 4, 4],
+               section_sd=[1.0, 1.0, 3.6, 3.2, 1.0, 1.0], tampings=[2, 0, 0, 0, 2, 0],
+               years_since_tamping=[0.5, 2, 2, 2, 0.5, 2], section_measurement_age=[0.25, 0.25, 0.25, 0.75, 0.25, 0.25])
+    assert _act(rule, obs).tolist() == [0, code("spot_tamp"), code("tamp"), 0, 0, 0]
+    everything = ChoiceThreshold(trigger_mm=3.5, include_mm=3.3, spot_peak_mm=9.0, drain_surveyed=True,
+                                 survey_all=True, inspect_margin_mm=0.5)
+    assert code("drainage") in _act(everything, obs)  # the same observation asks the full family for more
+
+
+def test_the_spot_only_grid_and_with_spot_tamping_off_the_grouped_threshold():
+    base = {"trigger_mm": 4.0, "include_mm": 2.0}
+    grid = choice_grid(ChoiceThresholdSpotOnly, base)
+    assert [g["spot_peak_mm"] for g in grid] and all(g["spot_peak_mm"] > 0 for g in grid)
+    assert all(set(g) == {"trigger_mm", "include_mm", "spot_peak_mm"} and g.items() >= base.items() for g in grid)
+    assert choices_off(ChoiceThresholdSpotOnly) == {"spot_peak_mm": 0.0}
+    assert set(choices_off(ChoiceThresholdNoLooking)) < set(choices_off(ChoiceThreshold))
+    rng = np.random.default_rng(1)
+    obs = {**_obs(), "section_sd": rng.uniform(0.5, 4.5, (4, 6)), "section_peak": rng.uniform(2, 16, (4, 6)),
+           "section_survey": rng.integers(-1, 2, (4, 6)).astype(float), "time": np.full((4, 1), 0.5),
+           "years_since_tamping": np.full((4, 6), 2.0), "tampings": np.zeros((4, 6)),
+           "measurement_age": np.full((4, 1), 0.25), "tampings_since_renewal": np.zeros((4, 6)),
+           "section_measurement_age": np.full((4, 6), 0.25), "register": np.zeros((4, 6))}
+    off = _bound(ChoiceThresholdSpotOnly(**base, **choices_off(ChoiceThresholdSpotOnly)), CFG).predict(obs)[0]
+    tamp = _bound(GroupedThreshold(**base), CFG.replace(choices=("tamp",), surveyed_share=0.0)).predict(obs)[0]
+    assert off.any() and (off == np.where(tamp, code("tamp"), 0)).all()
 
 
 def test_the_work_fits_the_capacity_worst_measured_sd_first():
@@ -145,8 +180,8 @@ def test_every_grid_point_gives_valid_codes_within_capacity(cls):
         assert a.shape == (3, 6) and a.dtype == np.int8 and state.shape == (3, 3, 6)
         work = np.array([0.0] + [CFG.choice_work[n] for n in CHOICES[1:]])[a].sum(axis=1)
         assert (work <= CFG.capacity).all() and a.min() >= 0 and a.max() < len(CHOICES)
-        if not cls.looks:
-            assert not np.isin(a, (code("inspect"), code("survey"))).any()
+        unused = [code(name) for name in CHOICES[1:] if name not in cls.uses]
+        assert not np.isin(a, unused).any()
 
 
 def test_the_rules_of_a_config_and_their_tuned_files():
