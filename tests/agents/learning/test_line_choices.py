@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rule_plans import rule_plans
 
 from trackenv.envs.choices import DRAINAGE, INSPECT, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
 from trackenv.envs.line import TampingLine
@@ -135,18 +136,7 @@ def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
     data = section_counterfactuals(CFG, seeds, rule, advisor=rule, focus_rate=0.4, other_rate=0.1, seed=1)
     n = len(data["q_do"])
     assert n > 5 and data["features"].shape == (n, len(FEATURES) + 2)
-    plans, states = {}, {}
-    for s in seeds:
-        env, plan, memory = TampingLine(CFG, action_type="choices"), [], []
-        obs, _ = env.reset(seed=s)
-        state = None
-        for t in range(CFG.horizon_steps):
-            memory.append(state)
-            codes, state = rule.predict({k: v[None] for k, v in obs.items()}, state=state,
-                                        episode_start=np.array([t == 0]))
-            obs, *_, info = env.step(codes[0])
-            plan.append(info["section_choices"])
-        plans[s], states[s] = np.array(plan), memory
+    plans, states = rule_plans(CFG, rule, seeds)
     rng = np.random.default_rng(0)
     for k in rng.choice(n, size=4, replace=False):
         s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["did"][k])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rule_plans import rule_plans
 
 from trackenv.envs.choices import DRAINAGE, INSPECT, IS_TRACK_WORK, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
 from trackenv.envs.line import TampingLine
@@ -128,18 +129,7 @@ def test_forks_of_spot_tamping_and_drainage_are_the_envs_section_costs(cfg, rule
                                    choices=choices)
     n = len(data["q_do"])
     assert data["features"].shape == (n, len(NAMES))
-    plans, states = {}, {}
-    for s in seeds:
-        env, plan, memory = TampingLine(cfg, action_type="choices"), [], []
-        obs, _ = env.reset(seed=s)
-        state = None
-        for t in range(cfg.horizon_steps):
-            memory.append(state)
-            codes, state = rule.predict({k: v[None] for k, v in obs.items()}, state=state,
-                                        episode_start=np.array([t == 0]))
-            obs, *_, info = env.step(codes[0])
-            plan.append(info["section_choices"])
-        plans[s], states[s] = np.array(plan), memory
+    plans, states = rule_plans(cfg, rule, seeds)
     rng = np.random.default_rng(0)
     for i, choice in enumerate(choices):
         rows = np.flatnonzero(data["choice"] == i)
