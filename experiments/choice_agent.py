@@ -27,12 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from trackenv_agents.shipped import SHIPPED_AGENTS
+
 OUT = Path(__file__).resolve().parent / "saved" / "choice_agent"
-SHIPPED = {"cpi-agent": "ppo_tamping_line.zip", "cpi-choice-agent": "cpi_choice_line.zip"}
 
 
 def _policy(name: str, config):
-    from trackenv_agents.learning.line import HERE, load_line_trained
+    from trackenv_agents.learning.line import load_line_trained
     from trackenv_agents.learning.line_policy import LineAgent
     from trackenv_agents.rules import rules_for, tuned_params_for
 
@@ -40,8 +41,8 @@ def _policy(name: str, config):
     if name in rules:
         return rules[name](**tuned_params_for(config).get(name, {}))
     agent, _, advisor = name.partition("@")  # AGENT@RULE: the agent's network with another advisor
-    path = HERE / "pretrained" / SHIPPED[agent] if agent in SHIPPED else Path(agent)
-    loaded = load_line_trained(path, name=agent if agent in SHIPPED else path.stem)
+    path = SHIPPED_AGENTS.get(agent, Path(agent))
+    loaded = load_line_trained(path, name=agent if agent in SHIPPED_AGENTS else path.stem)
     if advisor:
         return LineAgent(loaded.policy, name=name, advisor=rules[advisor](), horizon_years=loaded.horizon_years)
     return loaded
@@ -59,7 +60,7 @@ def score(env_id: str, policies: list[str], seeds: list[int], out: Path, batch_s
     wall, cpu = time.time() - t0, time.process_time() - c0
     out.mkdir(parents=True, exist_ok=True)
     for name, r in zip(policies, results):
-        label = name if name in SHIPPED or "/" not in name else Path(name).stem
+        label = name if name in SHIPPED_AGENTS or "/" not in name else Path(name).stem
         payload = {"env": env_id, "scenario": scenario, "policy": label, "params": r.params,
                    "seeds": r.seeds.tolist(), "cost": r.cost.tolist(),
                    "choices": {k: float(np.mean(v)) for k, v in r.choices.items()},

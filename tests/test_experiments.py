@@ -96,3 +96,18 @@ def test_robustness_conditions_each_move_one_field_of_the_default_line_and_are_v
     for name, overrides in mod.CONDITIONS[1:]:
         moved = scenario("default", **overrides).to_dict()  # validated at construction
         assert {k for k in nominal if nominal[k] != moved[k]} == set(overrides), name
+
+
+def test_choice_agent_script_loads_every_shipped_agent_and_an_agent_with_another_advisor():
+    """``experiments/choice_agent.py`` names its policies as the commands do: each shipped agent by its name (the
+    shipped files), ``AGENT@RULE`` with another advisor, and a rule with the scenario's tuned parameters."""
+    from trackenv.envs.problems import problem_config
+    from trackenv_agents.shipped import SHIPPED_AGENTS
+
+    mod = _script("choice_agent")
+    config = problem_config("wet")
+    for name in SHIPPED_AGENTS:
+        assert mod._policy(name, config).name == name
+    mixed = mod._policy("cpi-agent@choice-threshold", config)
+    assert mixed.name == "cpi-agent@choice-threshold" and mixed.advisor.name == "choice-threshold"
+    assert mod._policy("choice-threshold", config).name == "choice-threshold"
