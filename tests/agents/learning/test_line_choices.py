@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rule_plans import rule_plans
+from fork_replays import rule_plans, section_cost
 
 from trackenv.envs.choices import DRAINAGE, INSPECT, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
 from trackenv.envs.line import TampingLine
@@ -95,41 +95,6 @@ def test_choice_agent_answers_codes_the_env_applies_as_asked():
     assert {TAMP, DRAINAGE} <= seen
 
 
-def _replay(cfg, seed, policy, plan, states, j, t, first):
-    """Section j's cost from step t in the env (its own costs plus the possession where it works alone), the other
-    sections replaying ``plan`` (H, S) codes, section j following ``policy`` except ``first`` at step t; the
-    policy's memory that of the policy's own run (``states``, before each step) but section j's own."""
-    from trackenv.envs.choices import IS_TRACK_WORK
-
-    env = TampingLine(cfg, action_type="choices")
-    obs, _ = env.reset(seed=seed)
-    own = None
-    cost = 0.0
-    for step in range(cfg.horizon_steps):
-        a = plan[step].astype(np.int8).copy()
-        memory = None if states[step] is None else states[step].copy()
-        if own is not None:
-            memory[0, :, j] = own
-        choice, after = policy.predict({k: v[None] for k, v in obs.items()}, state=memory,
-                                       episode_start=np.array([step == 0]))
-        if step == t:
-            a[j] = first
-            from trackenv_agents.learning.line_policy import remember_work
-            from trackenv_agents.rules.choices import choice_view
-
-            base = np.full((1, 3, cfg.n_sections), -np.inf) if states[step] is None else states[step].copy()
-            peak = choice_view({k: v[None] for k, v in obs.items()})["section_peak"]
-            own = remember_work(base, np.asarray(a)[None], step, peak)[0, :, j]
-        elif step > t:
-            a[j] = choice[0][j]
-            own = after[0, :, j]
-        obs, _, _, _, info = env.step(a)
-        if step >= t:
-            work = IS_TRACK_WORK[info["section_choices"]]
-            cost += info["section_costs"][j] + cfg.possession_cost * (work[j] and work.sum() == 1)
-    return cost
-
-
 def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
     rule = _bound(RULE, CFG)
     seeds = [3, 4]
@@ -143,8 +108,8 @@ def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
         code = int(plans[s][t, j])
         assert tamping_codes(code) == acted
         first = compose_choices(np.array(not acted), np.array(code))  # the rule's own code is its advice
-        other = _replay(CFG, s, rule, plans[s], states[s], j, t, int(first))
-        own = _replay(CFG, s, rule, plans[s], states[s], j, t, code)
+        other = section_cost(CFG, s, rule, plans[s], states[s], j, t, int(first))
+        own = section_cost(CFG, s, rule, plans[s], states[s], j, t, code)
         q_other, q_own = (data["q_skip"][k], data["q_do"][k]) if acted else (data["q_do"][k], data["q_skip"][k])
         assert q_own == pytest.approx(own, rel=1e-9) and q_other == pytest.approx(other, rel=1e-9)
     # the features carry the rule's tamping, not its other codes

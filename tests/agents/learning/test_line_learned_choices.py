@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rule_plans import rule_plans
+from fork_replays import rule_plans, section_cost
 
-from trackenv.envs.choices import DRAINAGE, INSPECT, IS_TRACK_WORK, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
+from trackenv.envs.choices import DRAINAGE, INSPECT, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.harness import _bound
@@ -79,42 +79,6 @@ def test_marginal_possession_follows_the_envs_spot_rule():
                                                    np.array([TAMP, SPOT_TAMP])), [full - spot, spot])
 
 
-def _section_cost(cfg, seed, policy, plan, states, j, t, first):
-    """Section j's cost from step t in the env under ``first`` at step t then ``policy`` (its memory that of the
-    policy's run, section j's own), the other sections replaying ``plan``: its own costs plus the possession the
-    line pays beyond what it would pay without j's track work (read from the env's possession part)."""
-    from trackenv_agents.learning.line_policy import remember_work
-    from trackenv_agents.rules.choices import choice_view
-
-    env = TampingLine(cfg, action_type="choices")
-    obs, _ = env.reset(seed=seed)
-    own, cost = None, 0.0
-    for step in range(cfg.horizon_steps):
-        a = plan[step].astype(np.int8).copy()
-        memory = None if states[step] is None else states[step].copy()
-        if own is not None:
-            memory[0, :, j] = own
-        choice, after = policy.predict({k: v[None] for k, v in obs.items()}, state=memory,
-                                       episode_start=np.array([step == 0]))
-        if step == t:
-            a[j] = first
-            base = np.full((1, 3, cfg.n_sections), -np.inf) if states[step] is None else states[step].copy()
-            peak = choice_view({k: v[None] for k, v in obs.items()})["section_peak"]
-            own = remember_work(base, a[None].astype(np.int64), step, peak)[0, :, j]
-        elif step > t:
-            a[j] = choice[0][j]
-            own = after[0, :, j]
-        obs, _, _, _, info = env.step(a)
-        if step >= t:
-            applied = np.asarray(info["section_choices"])
-            others = np.delete(applied, j)
-            work = IS_TRACK_WORK[others]
-            spot_only = work.any() and (others[work] == SPOT_TAMP).all()
-            without = 0.0 if not work.any() else cfg.possession_cost * (cfg.spot_possession_share if spot_only else 1)
-            cost += info["section_costs"][j] + info["costs"]["possession"] - without
-    return cost
-
-
 SPOTS = ChoiceThreshold(trigger_mm=1.5, include_mm=1.0, spot_peak_mm=4.0, survey_all=True)
 
 
@@ -143,8 +107,8 @@ def test_forks_of_spot_tamping_and_drainage_are_the_envs_section_costs(cfg, rule
             code = plans[s][t, j]
             other = flipped_choices(choice, np.array([code]), np.array([code]))[0]  # the rule's code is its advice
             assert other != code
-            q_own = _section_cost(cfg, s, rule, plans[s], states[s], j, t, int(code))
-            q_other = _section_cost(cfg, s, rule, plans[s], states[s], j, t, int(other))
+            q_own = section_cost(cfg, s, rule, plans[s], states[s], j, t, int(code))
+            q_other = section_cost(cfg, s, rule, plans[s], states[s], j, t, int(other))
             did = bool(data["did"][k])
             assert (data["q_do"][k], data["q_skip"][k]) == pytest.approx((q_own, q_other) if did else (q_other, q_own),
                                                                          rel=1e-9)
