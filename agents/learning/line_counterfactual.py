@@ -57,18 +57,14 @@ def marginal_possession(config: Any, codes: np.ndarray, lines: np.ndarray, secti
     choice ``own[i]`` on its section ``sections[i]``, beyond what it pays with nothing there (the other sections
     as in ``codes``): the whole possession, or ``spot_possession_share`` of it in a step with spot tamping alone
     (:func:`~trackenv.envs.choices.spot_only_steps`, the env's rule), or none while no section works."""
-    from trackenv.envs.choices import IS_TRACK_WORK, NOTHING, spot_only_steps
-
-    def possession(rows: np.ndarray) -> np.ndarray:
-        share = np.where(spot_only_steps(rows), config.spot_possession_share, 1.0)
-        return config.possession_cost * IS_TRACK_WORK[rows].any(axis=1) * share
+    from trackenv.envs.choices import NOTHING, step_possession
 
     at = np.arange(len(lines))
     rows = np.array(codes, dtype=np.int64)[lines]
     rows[at, sections] = own
-    paid = possession(rows)
+    paid = step_possession(config, rows)
     rows[at, sections] = NOTHING
-    return paid - possession(rows)
+    return paid - step_possession(config, rows)
 
 
 def flipped_choices(choice: str, codes: np.ndarray, advice: np.ndarray | None) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["CHOICES", "COST_KEY", "DRAINAGE", "INSPECT", "INTERVENTIONS", "IS_TRACK_WORK", "NOTHING", "PER_METRE",
            "RENEW", "SPOT_TAMP", "SURVEY", "TAMP", "TRACK_WORK", "action_type_for", "choice_counts", "code",
-           "enabled_codes", "spot_only_steps", "work_on_sections", "work_per_code"]
+           "enabled_codes", "spot_only_steps", "step_possession", "work_on_sections", "work_per_code"]
 
 #: every choice, by action code
 CHOICES = ("nothing", "tamp", "spot_tamp", "drainage", "renew", "inspect", "survey")
@@ -83,6 +83,18 @@ def spot_only_steps(codes: np.ndarray) -> np.ndarray:
     codes = np.asarray(codes, dtype=np.int64)
     work = IS_TRACK_WORK[codes]
     return work.any(axis=1) & ~(work & (codes != SPOT_TAMP)).any(axis=1)
+
+
+def step_possession(config, codes: np.ndarray) -> np.ndarray:
+    """(rows,) k€: the possession each row of action codes ``codes`` (rows, S; a step of a line) pays under
+    ``config`` (a :class:`~trackenv.envs.line_config.LineConfig`): ``possession_cost`` where any section gets track
+    work, ``spot_possession_share`` of it where that work is spot tamping alone (:func:`spot_only_steps`), none
+    where no section works."""
+    codes = np.asarray(codes, dtype=np.int64)
+    price = np.where(spot_only_steps(codes), config.spot_possession_share * config.possession_cost,
+                     config.possession_cost)
+    return IS_TRACK_WORK[codes].any(axis=1) * price
+
 
 def choice_counts(codes: np.ndarray) -> dict[str, int]:
     """How many sections of ``codes`` (any shape, action codes) got each choice but "nothing", by name."""

@@ -50,7 +50,7 @@ from .choices import (
     choice_counts,
     code,
     enabled_codes,
-    spot_only_steps,
+    step_possession,
     work_on_sections,
     work_per_code,
 )
@@ -745,10 +745,8 @@ class LineBatch:
         length = self.length_factor.reshape(self.n_lines, self.S)  # counted in sections of the line's length
         tamped = (((codes == TAMP) | (codes == RENEW)) * length).sum(1)
         renewed = (((codes == TAMP) & renewing) * length).sum(1) + ((codes == RENEW) * length).sum(1)
-        work = self.is_work[codes].sum(1)
-        spot_only = spot_only_steps(codes)
         return np.stack([
-            (work > 0) * np.where(spot_only, c.spot_possession_share * c.possession_cost, c.possession_cost),
+            step_possession(c, codes),
             c.section_tamping_cost * tamped,
             c.section_renewal_cost * renewed,
             *(self.fixed_price[name] * (codes == code(name)).sum(1) for name in COST_KEY),
