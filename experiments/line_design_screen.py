@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation.harness import _bound
+from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.evaluation.line_hindsight import hindsight_bound, recorded_rule_schedules, replay
 from trackenv_agents.evaluation.tuning import tune_many
 from trackenv_agents.rules.line import LINE_HEURISTICS, GroupedThreshold, SectionThreshold, UniformPeriodic
@@ -62,7 +62,7 @@ def main(argv=None) -> dict:
                                                              for n, t in best.items()},
            "aware_vs_uniform": 1.0 - aware["best_mean_cost"] / uniform["best_mean_cost"], "episodes": []}
     print(f"aware vs uniform: -{100 * out['aware_vs_uniform']:.1f} %  ({time.time() - t0:.0f} s)", flush=True)
-    pol = _bound(LINE_HEURISTICS[aware["policy"]](**aware["best_params"]), cfg)
+    pol = bind_policy(LINE_HEURISTICS[aware["policy"]](**aware["best_params"]), cfg)
     rules = [cls(**best[cls.name]["best_params"]) for cls in classes]
     rule_costs = aware["table"][0]["episode_costs"]
     for seed, rule_cost in zip(seeds, rule_costs, strict=True):

@@ -9,6 +9,7 @@ from .harness import (
     TEST_SEEDS,
     TRAIN_SEEDS,
     EvaluationResult,
+    bind_policy,
     evaluate_many,
     evaluate_one,
     evaluate_policy,  # noqa: F401  (the deprecated name of evaluate_one, kept where it was)
@@ -56,7 +57,7 @@ from .tuning import tune, tune_many
 
 __all__ = [
     # the harness (.harness) and its statistics (.statistics)
-    "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
+    "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many", "evaluate_one", "policy_name",
     "policy_params", "record_episode", "run_episodes", "N_BOOTSTRAP", "bootstrap_ci", "paired_difference",
     # tuning, reports, the executor
     "tune", "tune_many", "plot_comparison", "RayExecutor",

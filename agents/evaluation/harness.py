@@ -45,8 +45,8 @@ from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_confi
 from .statistics import bootstrap_ci
 
 __all__ = [
-    "CHOICE_NAMES", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "evaluate_many", "evaluate_one", "policy_name",
-    "policy_params", "record_episode", "run_episodes",
+    "CHOICE_NAMES", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many", "evaluate_one",
+    "policy_name", "policy_params", "record_episode", "run_episodes",
 ]
 
 TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
@@ -133,7 +133,9 @@ def _vector_env(n: int, cfg: Any, action_type: str) -> BatchedVectorEnv:
     return make_vector_env(cfg, n, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
 
 
-def _bound(policy: Any, config: ProblemConfig) -> Any:
+def bind_policy(policy: Any, config: ProblemConfig) -> Any:
+    """``policy`` as it plays ``config``: a rule that reads the problem's calendar or capacity (it has ``bind``)
+    bound to it, any other policy (a trained agent, a callable) as it is."""
     bind = getattr(policy, "bind", None)
     return bind(config) if callable(bind) else policy
 
@@ -233,7 +235,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
         raise ValueError("seeds must not be empty")
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size!r}")
-    bound = [_bound(p, cfg) for p in policies]
+    bound = [bind_policy(p, cfg) for p in policies]
     slots = [(p, s) for p in range(len(bound)) for s in seeds]
     chunks = [slots[i:i + batch_size] for i in range(0, len(slots), batch_size)]
     pbar = None
@@ -302,7 +304,7 @@ def record_episode(policy: Any, config: ProblemConfig | dict | str | None = None
     """One episode's traces: section SD [mm] (steps+1, n_sections), tamped (steps, n_sections), cost and year
     per step."""
     cfg = problem_config(config)
-    pol = _bound(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
+    pol = bind_policy(copy.deepcopy(policy) if hasattr(policy, "_rng") else policy, cfg)
     env = _vector_env(1, cfg, action_type)
     out = _run_chunk(env, [(0, int(seed))], [pol], action_type, record=True)
     tr = out["traces"]

@@ -15,7 +15,7 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import NetworkRule
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
-from .harness import CHOICE_NAMES, _bound, evaluate_many, policy_name
+from .harness import CHOICE_NAMES, bind_policy, evaluate_many, policy_name
 from .statistics import paired_difference
 from .tuning import tune_many
 
@@ -228,7 +228,7 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
 
     from trackenv.envs.line import TampingLine
 
-    pols = [_bound(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
     fig = Figure(figsize=(10 * len(pols), 4.5))
     axes = fig.subplots(1, len(pols), sharey=True, squeeze=False)[0]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year

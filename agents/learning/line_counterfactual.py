@@ -157,7 +157,7 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     from trackenv.envs.line import TampingLineVectorEnv
     from trackenv.envs.line_episode import LineBatch
 
-    from ..evaluation.harness import _bound
+    from ..evaluation.harness import bind_policy
     from ..rules.choices import choice_view, remember_work
     from .line_policy import (
         ADVISOR_FEATURES,
@@ -182,8 +182,8 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
         raise ValueError(f"pricing the choices {choices!r} with the choice features needs a choice rule as advisor")
     c = config
     E, S, H = len(seeds), c.n_sections, c.horizon_steps
-    policy = _bound(policy, c)
-    advisor = None if advisor is None else _bound(advisor, c)
+    policy = bind_policy(policy, c)
+    advisor = None if advisor is None else bind_policy(advisor, c)
     names = [n for n, _ in FEATURES] + (list(ADVISOR_FEATURES) + list(CHOICE_FEATURES) if extended else [])
     rng = np.random.default_rng(seed)
     env = TampingLineVectorEnv(E, c, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(c))

@@ -12,7 +12,7 @@ from trackenv.envs.choices import DRAINAGE, INSPECT, NOTHING, RENEW, SPOT_TAMP, 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv.envs.problems import problem_config
-from trackenv_agents.evaluation.harness import _bound
+from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.learning.line_counterfactual import section_counterfactuals
 from trackenv_agents.learning.line_policy import (
     FEATURES,
@@ -96,7 +96,7 @@ def test_choice_agent_answers_codes_the_env_applies_as_asked():
 
 
 def test_forks_with_choices_are_the_envs_section_costs_under_the_other_choice():
-    rule = _bound(RULE, CFG)
+    rule = bind_policy(RULE, CFG)
     seeds = [3, 4]
     data = section_counterfactuals(CFG, seeds, rule, advisor=rule, focus_rate=0.4, other_rate=0.1, seed=1)
     n = len(data["q_do"])

@@ -6,7 +6,7 @@ import pytest
 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation.harness import _bound
+from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.learning.line_counterfactual import section_counterfactuals
 from trackenv_agents.rules.line import GroupedThreshold
 
@@ -31,7 +31,7 @@ def _section_cost_to_go(cfg, seed, policy, others, j, t, first):
 
 
 def test_forks_are_the_envs_section_costs_under_the_other_choice():
-    rule = _bound(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), CFG)
+    rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), CFG)
     seeds = [3, 4]
     data = section_counterfactuals(CFG, seeds, rule, focus_rate=0.3, other_rate=0.05, seed=1)
     n = len(data["q_do"])

@@ -11,7 +11,7 @@ from fork_replays import rule_plans, section_cost
 from trackenv.envs.choices import DRAINAGE, INSPECT, NOTHING, RENEW, SPOT_TAMP, SURVEY, TAMP
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation.harness import _bound
+from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.learning.line_counterfactual import (
     flipped_choices,
     marginal_possession,
@@ -87,7 +87,7 @@ SPOTS = ChoiceThreshold(trigger_mm=1.5, include_mm=1.0, spot_peak_mm=4.0, survey
 def test_forks_of_spot_tamping_and_drainage_are_the_envs_section_costs(cfg, rule, choices):
     """A spot-only step pays its share of the possession on the defects line; the recording car's runs date the
     forks' measurements as the env's do (the rule reads their age); a fork asks for no work over capacity."""
-    rule = _bound(rule, cfg)
+    rule = bind_policy(rule, cfg)
     seeds = [3, 4]
     data = section_counterfactuals(cfg, seeds, rule, advisor=rule, focus_rate=0.5, other_rate=0.2, seed=1,
                                    choices=choices)
@@ -119,7 +119,7 @@ def test_the_forks_find_the_drainage_of_a_wet_section():
     wet saves what their wet spots cost when left to work (hundreds of k€ where the settlement runs away), and the
     forks ask about drainage only where a survey found the section wet (the rule drains nothing)."""
     cfg = scenario("wet", n_sections=4, capacity=3, horizon_years=4.0, segment_length_m=12.0)
-    rule = _bound(NO_DRAIN, cfg)
+    rule = bind_policy(NO_DRAIN, cfg)
     data = section_counterfactuals(cfg, [3, 4, 5, 6], rule, advisor=rule, focus_rate=1.0, other_rate=0.5, seed=2,
                                    choices=("drainage",))
     assert (data["features"][:, NAMES.index("surveyed_wet")] == 1).all() and not data["did"].any()
@@ -130,7 +130,7 @@ def test_the_forks_find_the_drainage_of_a_wet_section():
 
 def test_tamping_alone_priced_with_the_choice_features():
     """A network with the choice features on a line where only the tamping is learnt: its samples carry them."""
-    rule = _bound(SPOTS, WET)
+    rule = bind_policy(SPOTS, WET)
     data = section_counterfactuals(WET, [3], rule, advisor=rule, seed=1, choice_features=True)
     assert data["features"].shape == (len(data["q_do"]), len(NAMES)) and (data["choice"] == 0).all()
     assert (data["features"][:, -2:] == 0).all()  # asked about the tamping

@@ -7,7 +7,7 @@ import pytest
 from trackenv.envs.choices import CHOICES, code
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation.harness import CHOICE_NAMES, _bound, evaluate_many
+from trackenv_agents.evaluation.harness import CHOICE_NAMES, bind_policy, evaluate_many
 from trackenv_agents.rules import problems
 from trackenv_agents.rules.choices import (
     CHOICE_RULES,
@@ -37,7 +37,7 @@ def _obs(S=6, **keys):
 
 
 def _act(rule, obs, config=CFG):
-    return _bound(rule, config).predict(obs)[0][0]
+    return bind_policy(rule, config).predict(obs)[0][0]
 
 
 def test_a_surveyed_wet_section_gets_drainage():
@@ -93,8 +93,8 @@ def test_the_spot_only_grid_and_with_spot_tamping_off_the_grouped_threshold():
            "years_since_tamping": np.full((4, 6), 2.0), "tampings": np.zeros((4, 6)),
            "measurement_age": np.full((4, 1), 0.25), "tampings_since_renewal": np.zeros((4, 6)),
            "section_measurement_age": np.full((4, 6), 0.25), "register": np.zeros((4, 6))}
-    off = _bound(ChoiceThresholdSpotOnly(**base, **choices_off(ChoiceThresholdSpotOnly)), CFG).predict(obs)[0]
-    tamp = _bound(GroupedThreshold(**base), CFG.replace(choices=("tamp",), surveyed_share=0.0)).predict(obs)[0]
+    off = bind_policy(ChoiceThresholdSpotOnly(**base, **choices_off(ChoiceThresholdSpotOnly)), CFG).predict(obs)[0]
+    tamp = bind_policy(GroupedThreshold(**base), CFG.replace(choices=("tamp",), surveyed_share=0.0)).predict(obs)[0]
     assert off.any() and (off == np.where(tamp, code("tamp"), 0)).all()
 
 
@@ -121,7 +121,7 @@ def test_masks_disabled_choices_and_work_too_soon_after_the_last():
 def test_the_rule_remembers_its_spot_tamping_until_a_measurement_after_it():
     """A spot tamping leaves no trace in the observation: the rule's state keeps it, so the peak measured before
     it asks for no second spot tamping, and a measurement after it is read again."""
-    rule = _bound(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}), CFG)
+    rule = bind_policy(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}), CFG)
     obs = _obs(section_peak=[13, 4, 4, 4, 4, 4])
     obs["time"][:] = 0.25  # step 1 of 4
     a, state = rule.predict(obs, state=None, episode_start=np.array([True]))
@@ -138,7 +138,7 @@ def test_the_rule_remembers_its_spot_tamping_until_a_measurement_after_it():
 def test_a_high_peak_just_tamped_is_inspected_and_then_spot_tamped_if_it_stands():
     """The rule remembers the peak it tamped a section on; the next step (the measurement stale) it inspects the
     section, and on the trolley's fresh peak, still high while the SD is low, it asks for a spot tamping."""
-    rule = _bound(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, check_peak_mm=12.0, trigger_mm=3.5,
+    rule = bind_policy(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, check_peak_mm=12.0, trigger_mm=3.5,
                                   include_mm=3.0), CFG)
     obs = _obs(section_sd=[4.0, 1, 1, 1, 1, 1], section_peak=[18, 4, 4, 4, 4, 4])
     obs["time"][:] = 0.25
@@ -153,7 +153,7 @@ def test_a_high_peak_just_tamped_is_inspected_and_then_spot_tamped_if_it_stands(
                  "section_sd": np.array([[1.5, 1, 1, 1, 1, 1]]), "section_peak": np.array([[16.0, 4, 4, 4, 4, 4]])}
     assert rule.predict(inspected, state=state, episode_start=np.array([False]))[0][0].tolist() == [
         code("spot_tamp"), 0, 0, 0, 0, 0]
-    quiet = _bound(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, trigger_mm=3.5, include_mm=3.0), CFG)
+    quiet = bind_policy(ChoiceThreshold(**{**OFF, "spot_peak_mm": 12.0}, trigger_mm=3.5, include_mm=3.0), CFG)
     _, s = quiet.predict(obs, state=None, episode_start=np.array([True]))
     assert quiet.predict(tamped, state=s, episode_start=np.array([False]))[0][0].tolist() == [0] * 6
 
@@ -176,7 +176,7 @@ def test_every_grid_point_gives_valid_codes_within_capacity(cls):
                "years_since_tamping": rng.uniform(0.5, 3, (3, 6)), "time": np.full((3, 1), 0.5),
                "measurement_age": np.full((3, 1), 0.25), "tampings_since_renewal": rng.integers(0, 8, (3, 6)),
                "section_measurement_age": rng.uniform(0, 1, (3, 6)), "register": np.zeros((3, 6))}
-        a, state = _bound(cls(**params), CFG).predict(obs)
+        a, state = bind_policy(cls(**params), CFG).predict(obs)
         assert a.shape == (3, 6) and a.dtype == np.int8 and state.shape == (3, 3, 6)
         work = np.array([0.0] + [CFG.choice_work[n] for n in CHOICES[1:]])[a].sum(axis=1)
         assert (work <= CFG.capacity).all() and a.min() >= 0 and a.max() < len(CHOICES)
@@ -204,7 +204,7 @@ def test_the_harness_counts_the_applied_choices():
         for i, seed in enumerate((3, 4)):
             env = TampingLine(cfg, action_type="choices")
             obs, _ = env.reset(seed=seed)
-            pol_b, state, counts = _bound(pol, cfg), None, dict.fromkeys(CHOICE_NAMES, 0)
+            pol_b, state, counts = bind_policy(pol, cfg), None, dict.fromkeys(CHOICE_NAMES, 0)
             for t in range(cfg.horizon_steps):
                 a, state = pol_b.predict(obs, state=state, episode_start=np.array([t == 0]))
                 obs, _, _, _, info = env.step(a)

@@ -5,7 +5,7 @@ import pytest
 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
-from trackenv_agents.evaluation.harness import _bound, evaluate_many
+from trackenv_agents.evaluation.harness import bind_policy, evaluate_many
 from trackenv_agents.evaluation.line_compare import SECTION_CLASSES, class_breakdown, parse_seeds, scenario_of
 from trackenv_agents.evaluation.line_hindsight import (
     TrueStateRule,
@@ -48,7 +48,7 @@ def _obs(n_envs=3, S=6, seed=0):
 def test_actions_are_binary_and_within_capacity(name):
     cls = LINE_HEURISTICS[name]
     for params in cls.param_grid():
-        pol = _bound(cls(**params), CFG)
+        pol = bind_policy(cls(**params), CFG)
         a, state = pol.predict(_obs())
         assert a.shape == (3, 6) and set(np.unique(a)) <= {0, 1} and state is None
         assert (a.sum(axis=1) <= CFG.capacity).all()
@@ -65,7 +65,7 @@ def test_rules_read_a_section_tamped_since_the_recording_run_as_fresh():
     for name, params in (("section-threshold", {"threshold_mm": 2.0}),
                          ("grouped-threshold", {"trigger_mm": 3.0, "include_mm": 0.5}),
                          ("budgeted-worst-first", {"every_years": 0.25, "n_worst": 2, "min_sd_mm": 0.5})):
-        pol = _bound(LINE_HEURISTICS[name](**params), CFG)
+        pol = bind_policy(LINE_HEURISTICS[name](**params), CFG)
         assert pol.predict(obs)[0][0, 0] == 0
         if name == "grouped-threshold":
             assert not pol.predict(obs)[0].any()  # nothing else triggers a campaign
@@ -86,7 +86,7 @@ def test_rules_read_a_section_tamped_since_the_recording_run_as_fresh():
 
 def test_uniform_periodic_covers_the_line_once_per_interval():
     cfg = scenario("small", horizon_years=4.0)
-    pol = _bound(UniformPeriodic(interval_years=2.0), cfg)
+    pol = bind_policy(UniformPeriodic(interval_years=2.0), cfg)
     obs = _obs(1)
     counts = np.zeros(6, int)
     for t in range(cfg.horizon_steps):
@@ -97,7 +97,7 @@ def test_uniform_periodic_covers_the_line_once_per_interval():
 
 def test_register_periodic_tamps_zones_more_often():
     cfg = scenario("small", horizon_years=6.0)
-    pol = _bound(RegisterPeriodic(plain_years=6.0, zone_years=1.5), cfg)
+    pol = bind_policy(RegisterPeriodic(plain_years=6.0, zone_years=1.5), cfg)
     obs = _obs(1)
     obs["register"][:] = [[0, 1, 0, 2, 0, 0]]
     counts = np.zeros(6, int)
@@ -227,7 +227,7 @@ def test_recorded_rule_schedules_are_the_rules_own_under_another_recording_and_c
     exact = {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0}
     rule = SectionThreshold(threshold_mm=1.0)
     ((sched,),) = recorded_rule_schedules(cfg, [3], [rule], designs=(exact, {"measurement_interval": 4}))
-    own, _ = replay(cfg.replace(**exact), 3, _bound(rule, cfg.replace(**exact)))
+    own, _ = replay(cfg.replace(**exact), 3, bind_policy(rule, cfg.replace(**exact)))
     assert sched.shape == (cfg.horizon_steps, 6) and sched.any() and np.array_equal(sched, own)  # cfg's design skipped
     _, sched_cost = replay(cfg, 3, sched.astype(bool))  # the same schedule is feasible on the episode as cfg records it
     h = hindsight_bound(cfg, 3, np.zeros_like(sched, bool), rounds=0, sd_thresholds_mm=(), peak_fractions=(np.inf,),
