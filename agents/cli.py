@@ -665,6 +665,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.argv = list(sys.argv[2:] if argv is None else argv[1:])  # the command as given, for the files it writes
+    import trackenv  # noqa: F401  (first, so that its OpenMP wait policy reaches torch too: trackenv._openmp)
+
     try:
         return int(args.func(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:

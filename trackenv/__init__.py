@@ -7,6 +7,7 @@ settlement loop; ``trackenv.envs`` (its ids registered on import: ``trackenv/Tam
 
 from importlib import metadata as _metadata
 
+from ._openmp import prefer_passive_wait as _prefer_passive_wait
 from .degradation import DegradationHistory, IterationRecord, RunawayError, RunawayWarning, TrackDegradation
 from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
 from .physics.dynamics import PassResult, receptance, simulate_pass, simulate_passes, static_deflection
@@ -24,6 +25,8 @@ from .physics.settlement import (
 )
 from .physics.track import Track
 from .physics.vehicle import Car, Train, VehicleSystem, Wheelset
+
+_prefer_passive_wait()  # the imports above start no OpenMP runtime (numba starts one at its first parallel call)
 
 try:  # one source for the version: pyproject.toml, read back from the installed distribution's metadata
     __version__ = _metadata.version("trackenv")
