@@ -1,10 +1,12 @@
 """Static window ends (``window_ends="static"``): the track beyond each end of the moving window carries its static
-stiffness, condensed onto the end node, and the bays the window takes in start as the static extension of its end.
+stiffness and its damping, condensed onto the end node, and the bays the window takes in start as the static
+extension of its end.
 
-Checked from the closed form up: the condensed stiffness and the extension are the dense Schur complement and
-−K_aa⁻¹ K_ab; the static start with static ends is the whole track's static deflection at any margin (clamped ends
-are stiffer); where the window covers the track nothing changes; and at the margin recommended for static ends,
-4 decay lengths, a pass stays within the fast path's 1 % of the whole-track model across the soft/stiff sweep."""
+Checked from the closed form up: the condensed stiffness, damping and extension are the dense Schur complement,
+Tᵀ C T with T = −K_aa⁻¹ K_ab, and T; the static start with static ends is the whole track's static deflection at
+any margin (clamped ends are stiffer); where the window covers the track nothing changes; and at the margin
+recommended for static ends, 3 decay lengths, a pass stays within the fast path's 1 % of the whole-track model
+across the soft/stiff sweep."""
 
 from __future__ import annotations
 
@@ -13,43 +15,46 @@ import pytest
 
 from trackenv.physics import dynamics
 from trackenv.physics.dynamics import simulate_pass, simulate_passes, window_margin
-from trackenv.physics.track import Track
+from trackenv.physics.track import PER_SLEEPER_FIELDS, Track
 from trackenv.physics.vehicle import Wheelset
-from trackenv.physics.window_ends import outside_stiffness, outside_transfer
+from trackenv.physics.window_ends import outside_damping, outside_stiffness, outside_transfer
 
 V80 = 80 / 3.6
 LOADED = Wheelset(mass=1800.0, static_load=100e3)
-STATIC_ENDS_DECAY_LENGTHS = 4.0  # the margin recommended for static ends (experiments/physics_window_ends.py)
+STATIC_ENDS_DECAY_LENGTHS = 3.0  # the margin recommended for static ends (experiments/physics_window_ends.py)
 TOLERANCE = 0.01  # the fast path's tolerance against the whole track (tests/physics/test_dynamics.py)
 
 
 def varied_track(elements_per_bay: int = 2) -> Track:
     """A short track whose supports change from sleeper to sleeper: a voided sleeper, a soft stretch, graded pads."""
-    t = Track.seed(elements_per_bay=elements_per_bay).with_voided_sleeper(10).scaled(ballast_stiffness=0.3,
-                                                                                     from_sleeper=30)
-    return t.replace(pad_stiffness=np.linspace(1e8, 5e8, t.n_sleepers))
+    seed = Track.seed(elements_per_bay=elements_per_bay)
+    t = seed.replace(**{f: getattr(seed, f)[:24] for f in PER_SLEEPER_FIELDS})
+    t = t.with_voided_sleeper(6).scaled(ballast_stiffness=0.3, from_sleeper=15)
+    return t.replace(pad_stiffness=np.linspace(1e8, 5e8, 24), pad_damping=np.linspace(1e4, 5e4, 24))
 
 
 @pytest.mark.parametrize("elements_per_bay", [2, 3])
 def test_condensed_stiffness_and_extension_are_the_dense_schur_complement(elements_per_bay):
     t = varied_track(elements_per_bay)
-    k_dense = t.matrices()[2].toarray()
+    _, c_dense, k_dense = (m.toarray() for m in t.matrices())
     lay, n = t.dof_layout, t.n_dof
     stiffness = outside_stiffness(t.banded_matrices()[2], lay)
+    damping = outside_damping(t)
     transfer = outside_transfer(t.banded_matrices()[2], lay)
     bay_dofs = int(lay.sleeper[1] - lay.sleeper[0])
-    scale = np.abs(stiffness).max()
-    for s in range(t.n_sleepers):
+    for s in (0, 1, 2, 5, 6, 7, 14, 15, 16, 21, 22, 23):  # the ends, around the voided sleeper and the step
         w = int(lay.node_w[lay.sleeper_node[s]])
         node = [w, w + 1]
         for outside, columns in ((np.arange(0, w), slice(0, 3)), (np.arange(w + 3, n), slice(3, 6))):
-            coupling = k_dense[np.ix_(outside, node)]
+            schur, guyan = np.zeros((2, 2)), np.zeros((2, 2))  # the window reaches the track's end: nothing beyond
             if outside.size:
-                schur = -coupling.T @ np.linalg.solve(k_dense[np.ix_(outside, outside)], coupling)
-            else:  # the window reaches the track's end: nothing beyond it
-                schur = np.zeros((2, 2))
+                shape = -np.linalg.solve(k_dense[np.ix_(outside, outside)], k_dense[np.ix_(outside, node)])
+                schur = k_dense[np.ix_(node, outside)] @ shape
+                guyan = shape.T @ c_dense[np.ix_(outside, outside)] @ shape
             np.testing.assert_allclose(stiffness[s, columns], [schur[0, 0], schur[1, 0], schur[1, 1]],
-                                       rtol=0, atol=1e-12 * scale)
+                                       rtol=0, atol=1e-12 * np.abs(stiffness).max())
+            np.testing.assert_allclose(damping[s, columns], [guyan[0, 0], guyan[1, 0], guyan[1, 1]],
+                                       rtol=0, atol=1e-12 * np.abs(damping).max())
             assert schur[0, 0] < 0 or not outside.size  # softer than a clamped end
         beyond = np.arange(w + 3, n)
         if beyond.size:
@@ -92,7 +97,7 @@ SWEEP = {
 
 @pytest.mark.parametrize("name", SWEEP)
 def test_static_ends_keep_the_fast_paths_tolerance_with_a_shorter_window(name):
-    """At 4 decay lengths (6.5 with clamped ends), per-sleeper peak forces, the contact force, rail and wheel
+    """At 3 decay lengths (6.5 with clamped ends), per-sleeper peak forces, the contact force, rail and wheel
     displacement over the evaluated track (every axle 8 sleepers or more from the rail's free ends, past the
     start's transient) are within 1 % of the whole track; clamped ends at the same margin are not everywhere."""
     t = SWEEP[name]

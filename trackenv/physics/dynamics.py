@@ -25,7 +25,7 @@ from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
-from .window_ends import check_window_ends, outside_stiffness, outside_transfer
+from .window_ends import check_window_ends, outside_damping, outside_stiffness, outside_transfer
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
 SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
@@ -350,20 +350,24 @@ def _track_outside_stiffness(track: Track) -> np.ndarray:
 
 @functools.lru_cache(maxsize=256)
 def _track_ends(track: Track) -> np.ndarray:
-    """The kernel's static ends of ``track`` (n_sleepers, 6 + 2 bay_dofs): the outside's stiffness and the static
-    extension onto the next bay (:func:`~trackenv.physics.window_ends.outside_transfer`), kept per track object."""
+    """The static ends of ``track`` (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
+    and the static extension onto the next bay (:mod:`trackenv.physics.window_ends`), kept per track object."""
     transfer = outside_transfer(_track_stiffness(track), track.dof_layout)
-    out = np.concatenate([_track_outside_stiffness(track), transfer.reshape(track.n_sleepers, -1)], axis=1)
+    out = np.concatenate([_track_outside_stiffness(track), outside_damping(track),
+                          transfer.reshape(track.n_sleepers, -1)], axis=1)
     out.flags.writeable = False
     return out
 
 
-def _ends_stiffness(tracks: Sequence[Track], ends: str) -> np.ndarray:
+def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
     """The kernel's window ends per row (see :class:`_step.Rows`): zeros (rows, n_sleepers, 6) for clamped ends
-    ("rest"), the outside's static stiffness and extension (rows, n_sleepers, 6 + 2 bay_dofs) for "static"."""
+    ("rest"); for "static" (rows, n_sleepers, 12 + 2 bay_dofs) the outside's stiffness plus ``a1`` (Newmark's
+    a1) times its damping, that damping, and the extension."""
     if ends == "rest":
         return np.zeros((len(tracks), tracks[0].n_sleepers, 6))
-    return np.stack([_track_ends(t) for t in tracks])
+    out = np.stack([_track_ends(t) for t in tracks])
+    out[:, :, :6] += a1 * out[:, :, 6:12]
+    return out
 
 
 @functools.lru_cache(maxsize=256)
@@ -934,7 +938,7 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
     u, v, a, q, qd, qdd = (pack(x) for x in (state.u, state.v, state.a, state.q, state.qd, state.qdd))
     rows = _step.Rows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(pad_k),
                       pack(supports["pad_damping"]), pack(bal_k), pack(bal_c), z_packed, pack(sag),
-                      u, v, a, q, qd, qdd, pack(_ends_stiffness(batch.tracks, batch.ends)))
+                      u, v, a, q, qd, qdd, pack(_window_ends(batch.tracks, batch.ends, consts[1])))
     peaks = _step.Peaks(history(state.force), history(rail0), history(state.q[:, system.wheel_dofs]),
                         pack(peak_ballast), pack(peak_total))
     # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)

@@ -1,12 +1,15 @@
-"""The static stiffness of the track beyond a window's ends, condensed onto the end nodes.
+"""The track beyond a window's ends: its static stiffness and damping condensed onto the end nodes, its shape.
 
 The kernel integrates the track in a window that follows each axle group; outside it the track is held at rest.
 With ``window_ends="rest"`` the window's ends are clamped: the first rail node beyond each end does not move, so
 the window is stiffer than the track it stands for, and the deflection basin is cut short where the margin is
 short. With ``window_ends="static"`` each end's rail node carries instead the exact static stiffness of all the
 track beyond it (the rail's bending and, per sleeper, the pad and the ballast in series), condensed onto the end
-node's deflection and rotation: the outside track answers the end node's motion as it would in equilibrium. The
-mass and damping beyond the end are left out (the outside is a massless static spring).
+node's deflection and rotation: the outside track answers the end node's motion as it would in equilibrium. Its
+damping is condensed the same way, through the static shape the outside takes under the end node (a Guyan
+reduction): on soft, heavily damped ballast the outside's dampers carry much of its quasi-static motion. Its mass
+is left out. The bays a window takes in at its leading end start as the static extension of its end node, so the
+deflection basin continues across the end as the window moves (:func:`outside_transfer`).
 
 The condensation is a Schur complement. With the stiffness K split into the outside DOFs a and the end node's
 (w, θ) b, the outside adds −K_ba K_aa⁻¹ K_ab to the window's block K_bb (the window's matrix already holds K_bb,
@@ -16,9 +19,10 @@ of b in the columns of a, which the band limits to four. The factor of the track
 left end at once; the factor of the reversed track every right end. This is the bay-by-bay Riccati recursion of
 the outside's stiffness, carried out by LAPACK.
 
-In Newmark's effective form only the effective stiffness changes: the step solves
+In Newmark's effective form the step solves
 (K + a0 M + a1 C) u_{n+1} = F + M(a0 u + a2 u' + a3 u'') + C(a1 u + a4 u' + a5 u''), whose right-hand side has
-no K term, so a static spring at the end enters the window's factor and nothing else.
+no K term: the outside's stiffness enters the window's factor and nothing else; its damping enters the factor
+(times a1) and the right-hand side's C term at the end nodes.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .track import HALF_BANDWIDTH, DofLayout
+from .track import HALF_BANDWIDTH, PER_SLEEPER_FIELDS, DofLayout, Track
 
 WINDOW_ENDS = ("rest", "static")
 """What a window's ends stand on: "rest" (the track beyond is held at rest: clamped ends) or "static" (the track
@@ -89,6 +93,41 @@ def outside_transfer(k_band: np.ndarray, layout: DofLayout) -> np.ndarray:
             x[:, d] = np.where(inner, y / np.where(inner, diag, 1.0), 0.0)
         out[:, :, unit] = -x
     return out
+
+
+def outside_damping(track: Track) -> np.ndarray:
+    """The damping of the track beyond each possible window end, condensed onto the end node through the static
+    extension (a Guyan reduction: the outside moves as its static shape under the end node's motion), as what it
+    adds to the window's damping (n_sleepers, 6), columns as :func:`outside_stiffness`'s.
+
+    The outside's dampers are its pads and ballast; for the right end at sleeper s they are those of sleepers
+    s+1, s+2, ... and the condensed matrix follows bay by bay from the track's far end:
+    C_s = T_sᵀ D_{s+1} T_s + P_sᵀ C_{s+1} P_s, with T_s the extension onto the bay after s
+    (:func:`outside_transfer`), D_{s+1} the quadratic form of sleeper s+1's pad and ballast dampers on that bay's
+    DOFs and P_s the extension's rows of node s+1 (w, θ). The left ends are the right ends of the mirrored track
+    (the rotation changes sign). A static end carries it where the track's damping makes the outside's quasi-static
+    motion matter (soft, heavily damped ballast)."""
+    right = _right_damping(track)
+    mirror = track.replace(**{f: getattr(track, f)[::-1] for f in PER_SLEEPER_FIELDS})
+    left = _right_damping(mirror)[::-1] * np.array([1.0, -1.0, 1.0])  # θ → −θ in the mirror
+    return np.concatenate([left, right], axis=1)
+
+
+def _right_damping(track: Track) -> np.ndarray:
+    """Columns 3-5 of :func:`outside_damping` ((w, w), (θ, w), (θ, θ) of the right end at each sleeper)."""
+    lay = track.dof_layout
+    transfer = outside_transfer(track.banded_matrices()[2], lay)  # (n, bay_dofs, 2)
+    n, bay_dofs = transfer.shape[0], transfer.shape[1]
+    node = transfer[:, bay_dofs - 3]  # the next sleeper's rail node w (then θ, then the sleeper), per unit (w, θ)
+    sleeper = transfer[:, bay_dofs - 1]
+    pad, ballast = track.pad_damping, track.ballast_damping
+    out = np.zeros((n, 2, 2))
+    for s in range(n - 2, -1, -1):
+        relative = node[s] - sleeper[s]
+        d = pad[s + 1] * np.outer(relative, relative) + ballast[s + 1] * np.outer(sleeper[s], sleeper[s])
+        p = transfer[s, bay_dofs - 3 : bay_dofs - 1]  # node s+1's (w, θ) per unit (w, θ) of node s
+        out[s] = d + p.T @ out[s + 1] @ p
+    return np.stack([out[:, 0, 0], out[:, 1, 0], out[:, 1, 1]], axis=1)
 
 
 def _condensed(ab: np.ndarray, rows_w: np.ndarray, rows_t: np.ndarray, outside_end: np.ndarray) -> np.ndarray:
