@@ -108,7 +108,11 @@ _RUNNERS = {
 
 def run(mesh, drive, rows, peaks, reuse, width: int) -> None:
     """Integrate every chunk of the batch (``width`` rows each, one of :data:`WIDTHS`), filling the arrays in
-    place: on the calling thread for one chunk, else the chunks spread over numba's threads."""
+    place: on the calling thread for one chunk, else the chunks spread over numba's threads. Rows without
+    ``ends`` (None) get clamped ends (zeros)."""
+    if rows.ends is None:
+        n_sleepers = rows.pad_k.shape[1]
+        rows = rows._replace(ends=np.zeros((rows.u.shape[0], n_sleepers, 6, width)))
     _RUNNERS[(rows.u.shape[0] > 1, width)](mesh, drive, rows, peaks, reuse)
 
 

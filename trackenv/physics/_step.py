@@ -11,7 +11,12 @@ the window the track is integrated in full, outside it is at rest. The window is
 matrices (DOFs are numbered along the track) and moves by whole bays; the DOFs it leaves behind are set back to
 rest. Every quantity the caller sees (contact force, rail deflection, peak sleeper forces) is taken where the
 window is. With the window as long as the track this is the full model (the caller sizes the window from the
-track's decay length: ``dynamics.window_margin``).
+track's decay length: ``dynamics.window_margin``). The window's ends are clamped (the first rail node beyond is
+at rest), or, with static ends, each end's rail node carries the static stiffness of the track beyond it and its
+damping condensed through the static shape (in the window's factor and, the damping, in the predictor's right-hand
+side), and the bays the window takes in at its leading end start as the static extension of its end node
+(:mod:`trackenv.physics.window_ends`): the deflection basin then continues across the ends, and a shorter window
+keeps the long one's accuracy.
 
 Lockstep rows. The rows of a batch share the mesh, the vehicle, the speed and dt, so their windows move together;
 only the supports, the irregularity and the state differ. Every per-row array carries the rows *last*, and the
@@ -58,13 +63,19 @@ Drive.__doc__ = """What moves over the track, shared by every row: axle position
 Newmark constants a0..a7, contact law code and parameter, the vehicle's M, C, K_eff⁻¹ (nv, nv), its constant
 forces (nv,), the DOF of each wheel, the window group of each axle and the number of groups."""
 
-Rows = namedtuple("Rows", "mass_diag keff pad_k pad_c bal_k bal_c z sag u v a q qd qdd")
+Rows = namedtuple("Rows", "mass_diag keff pad_k pad_c bal_k bal_c z sag u v a q qd qdd ends", defaults=(None,))
 Rows.__doc__ = """Per-row inputs and state, chunk axis first and batch axis last: the diagonal of the track's
 mass matrix (chunks, n_dof, W) [kg] (rail and sleepers; ``Mesh.rail_mass`` holds the rest), effective stiffness
 in lower band storage (chunks, n_dof, B+1, W), pad and ballast stiffness and damping (chunks, n_sleepers, W), rail
 level under each wheel (chunks, n_steps+1, n_axles, W) [m] to which the kernel adds the static sag ``sag``
 (chunks, n_dof, W) of settled supports, and the track and vehicle state u, v, a (chunks, n_dof, W), q, qd, qdd
-(chunks, nv, W), all updated in place."""
+(chunks, nv, W), all updated in place; ``ends`` (chunks, n_sleepers, 6, W): what the track beyond a window's
+end adds to the window's effective stiffness where the window starts (columns 0-2) or ends (3-5) at each sleeper,
+the (w, w), (θ, w), (θ, θ) entries of its end node (zeros, or None for :func:`trackenv.physics._kernel.run` to
+fill with zeros: clamped ends); for static ends (chunks, n_sleepers, 12 + 2 bay_dofs, W): columns 0-5 the
+outside's static stiffness plus a1 times its condensed damping, 6-11 that damping, which also enters the
+predictor's right-hand side (:func:`_end_damping`), and from 12 the static extension of each sleeper's rail node
+onto the bay after it, which a window's leading end takes in (:mod:`trackenv.physics.window_ends`)."""
 
 Reuse = namedtuple("Reuse", "factor factor_window columns columns_window")
 Reuse.__doc__ = """Window factors and bay columns kept from pass to pass over one track at one dt (the effective
@@ -82,15 +93,17 @@ Peaks.__doc__ = """Per-row outputs (chunks, ..., W): contact force, rail and whe
 
 
 @njit(inline="always", fastmath=FASTMATH)
-def _factor(keff, lo, m, L, inv_diag, s, W):
-    """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row; L[i, k] = L(i, i-k) and
-    inv_diag[i*W + b] = 1 / L(i, i) (flat)."""
+def _factor(keff, end_lo, end_hi, lo, m, L, inv_diag, s, W):
+    """Banded Cholesky of keff[lo:lo+m] (lower band storage) for every row, with the outside track's stiffness
+    added at the window's end nodes (``end_lo``, ``end_hi``: (6, W), see :func:`_end_entry`); L[i, k] = L(i, i-k)
+    and inv_diag[i*W + b] = 1 / L(i, i) (flat)."""
     for i in range(m):
         kmax = min(i, B)
         for k in range(kmax, 0, -1):
             j = i - k
             for b in range(W):
                 s[b] = keff[lo + i, k, b]
+            _add_end_entry(s, end_lo, end_hi, i, k, m, W)
             for c in range(max(i - B, 0), j):
                 for b in range(W):
                     s[b] -= L[i, i - c, b] * L[j, j - c, b]
@@ -98,12 +111,41 @@ def _factor(keff, lo, m, L, inv_diag, s, W):
                 L[i, k, b] = s[b] * inv_diag[j * W + b]
         for b in range(W):
             s[b] = keff[lo + i, 0, b]
+        _add_end_entry(s, end_lo, end_hi, i, 0, m, W)
         for c in range(max(i - B, 0), i):
             for b in range(W):
                 s[b] -= L[i, i - c, b] * L[i, i - c, b]
         for b in range(W):
             L[i, 0, b] = np.sqrt(s[b])
             inv_diag[i * W + b] = 1.0 / L[i, 0, b]
+
+
+@njit(inline="always", fastmath=FASTMATH)
+def _end_entry(i, k, m):
+    """Which entry of the ends' stiffness adds to the window's entry (i, i-k): 0-2 the first rail node's (w, w),
+    (θ, w), (θ, θ) (the window starts with its w, θ), 3-5 the last rail node's (the window ends with its w, θ and
+    its sleeper); -1 none."""
+    if i == 0:
+        return 0
+    if i == 1:
+        return 2 - k if k <= 1 else -1
+    if i == m - 3 and k == 0:
+        return 3
+    if i == m - 2 and k <= 1:
+        return 5 - k
+    return -1
+
+
+@njit(inline="always", fastmath=FASTMATH)
+def _add_end_entry(s, end_lo, end_hi, i, k, m, W):
+    """s[b] += the ends' stiffness at the window's entry (i, i-k), for every row (exact where it is zero)."""
+    e = _end_entry(i, k, m)
+    if e >= 3:
+        for b in range(W):
+            s[b] += end_hi[e, b]
+    elif e >= 0:
+        for b in range(W):
+            s[b] += end_lo[e, b]
 
 
 @njit(inline="always", fastmath=FASTMATH)
@@ -300,11 +342,28 @@ def _local(dof, base, epb):
     return off
 
 
-Window = namedtuple("Window", "u v a pred rhs qdamp mass_diag pad_k pad_c bal_k bal_c peak_ballast peak_total")
+Window = namedtuple("Window",
+                    "u v a pred rhs qdamp mass_diag pad_k pad_c bal_k bal_c peak_ballast peak_total ends")
 Window.__doc__ = """One chunk's track arrays as the window steps see them: state u, v, a and the predictor pred, flat
 (n_dof*W); the padded right-hand side rhs ((n_dof + 2B)*W, see :func:`_mass_times`), the damping term qdamp and
-the mass diagonal, flat; pads, ballast and peak sleeper forces (n_sleepers, W). Each a distinct array (see
-:class:`_NoAliasCompiler`)."""
+the mass diagonal, flat; pads, ballast and peak sleeper forces (n_sleepers, W); the window ends (see
+:class:`Rows`). Each a distinct array (see :class:`_NoAliasCompiler`)."""
+
+
+@njit(inline="always", fastmath=FASTMATH)
+def _end_damping(end_lo, end_hi, pred, qdamp, lo, hi, W):
+    """The damping the track beyond the window's ends puts on its end nodes, in the predictor's right-hand side:
+    pred += C_end (a1 u + a4 v + a5 a) at the first rail node's (w, θ) (``end_lo[6:9]``: (w, w), (θ, w), (θ, θ))
+    and the last one's (``end_hi[9:12]``), every row (see :class:`Rows`)."""
+    for b in range(W):
+        w, t = lo * W + b, (lo + 1) * W + b
+        qw, qt = qdamp[w], qdamp[t]
+        pred[w] += end_lo[6, b] * qw + end_lo[7, b] * qt
+        pred[t] += end_lo[7, b] * qw + end_lo[8, b] * qt
+        w, t = (hi - 3) * W + b, (hi - 2) * W + b
+        qw, qt = qdamp[w], qdamp[t]
+        pred[w] += end_hi[9, b] * qw + end_hi[10, b] * qt
+        pred[t] += end_hi[10, b] * qw + end_hi[11, b] * qt
 
 
 @njit(inline="always", fastmath=FASTMATH)
@@ -341,6 +400,8 @@ def _predict_window(win, mesh, drive, fw, bw, inv_diag, lo, hi, s_lo, s_hi, bay_
         for g in range(s_hi + 1 - s_lo):
             w_at = (lo + g * bay_dofs) * W
             damp_lanes(win.pred, win.qdamp, cp[g], cb[g], w_at, w_at + sleeper_shift * W, W)
+    if win.ends.shape[1] > 6:  # static ends: the outside's damping on the end nodes
+        _end_damping(win.ends[s_lo], win.ends[s_hi], pred, qdamp, lo, hi, W)
     # triangular sweeps
     _solve_rows(fw, bw, inv_diag, m, pred[lo * W : hi * W], W)
 
@@ -491,9 +552,10 @@ def _place_axles(x_axle, step, node_w, elem_len, z_axle, sag, elem_of, shape, ed
 
 
 @njit(inline="always", fastmath=FASTMATH)
-def _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W):
-    """The pre-scaled factor of group ``c``'s window [lo, hi): read back from ``reuse`` where a one-row pass kept
-    it (``keep``) for this window, else factored, and kept where ``keep``."""
+def _window_factor(keff, end_lo, end_hi, reuse, wk, c, lo, hi, bay_min, keep, W):
+    """The pre-scaled factor of group ``c``'s window [lo, hi), its ends' stiffness ``end_lo``, ``end_hi`` added
+    (see :func:`_factor`): read back from ``reuse`` where a one-row pass kept it (``keep``) for this window, else
+    factored, and kept where ``keep``."""
     m = hi - lo
     Fw, Bw, invd = wk.Fw[c], wk.Bw[c], wk.invd[c]
     if keep and reuse.factor_window[bay_min, 0] == lo and reuse.factor_window[bay_min, 1] == hi:
@@ -503,7 +565,7 @@ def _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W):
             _copy(kept[B + 1 + k], Bw[k], m)
         _copy(kept[2 * B + 2], invd, m)
         return
-    _factor(keff, lo, m, wk.Ls, invd, wk.scratch, W)
+    _factor(keff, end_lo, end_hi, lo, m, wk.Ls, invd, wk.scratch, W)
     _scale(wk.Ls, invd, m, Fw, Bw, W)
     if keep:
         kept = reuse.factor[bay_min]
@@ -563,8 +625,28 @@ def _bay_columns_rows(mesh, wk, c, j, bay, lo, hi, W):
             colk[f] = tmp[f]
 
 
+@njit(inline="always", fastmath=FASTMATH)
+def _take_in(ends, u, v, a, node_w, sleeper_node, s_from, s_to, W):
+    """The state of the bays a window's leading end takes in, after sleepers s_from .. s_to - 1, for every row:
+    each bay's DOFs (those after its first sleeper, up to the next sleeper's) are the static extension of its
+    first rail node's w and θ (``ends[s, 12 + 2d + 0/1]``, see :func:`trackenv.physics.window_ends.outside_transfer`),
+    in u, v and a, bay after bay (each from the node the bay before it set). A bay's DOFs follow its first node's
+    w, θ and sleeper (:class:`trackenv.physics.track.DofLayout`)."""
+    bay_dofs = (ends.shape[1] - 12) // 2
+    for s in range(s_from, s_to):
+        node = node_w[sleeper_node[s]]
+        t = ends[s]
+        for d in range(bay_dofs):
+            f = (node + 3 + d) * W
+            for b in range(W):
+                tw, tt = t[12 + 2 * d, b], t[13 + 2 * d, b]
+                u[f + b] = tw * u[node * W + b] + tt * u[(node + 1) * W + b]
+                v[f + b] = tw * v[node * W + b] + tt * v[(node + 1) * W + b]
+                a[f + b] = tw * a[node * W + b] + tt * a[(node + 1) * W + b]
+
+
 @kernel_jit(fastmath=FASTMATH, pipeline_class=_CalledCompiler)
-def _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W):
+def _move_window(mesh, drive, keff, ends, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W):
     """Move group ``c``'s window to span ``margin_bays`` sleepers beyond its bays [bay_min, bay_max]: the DOFs
     left behind come to rest, and the new window's factor and its axles' bay columns are built (or read back).
     Runs only when a group enters a new bay: called, not inlined, so that the step loop stays small."""
@@ -576,6 +658,8 @@ def _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_m
     s_hi = min(n_sleepers - 1, bay_max + 1 + margin_bays)
     lo = node_w[sleeper_node[s_lo]]
     hi = sleeper_dof[s_hi] + 1
+    if ends.shape[1] > 12 and hi_c[c] >= 0:  # static ends: the bays taken in continue the end's static basin
+        _take_in(ends, u, v, a, node_w, sleeper_node, wk.s_hi_c[c], s_hi, W)
     if lo_c[c] >= 0:  # DOFs left behind come to rest
         for f in range(lo_c[c] * W, min(lo, hi_c[c]) * W):
             u[f] = 0.0
@@ -586,7 +670,7 @@ def _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_m
     wk.s_lo_c[c] = s_lo
     wk.s_hi_c[c] = s_hi
     keep = W == 1 and hi - lo <= m_cap  # one row: this window's factor and columns are kept across passes
-    _window_factor(keff, reuse, wk, c, lo, hi, bay_min, keep, W)
+    _window_factor(keff, ends[s_lo], ends[s_hi], reuse, wk, c, lo, hi, bay_min, keep, W)
     for j in range(cluster_of_axle.shape[0]):
         if cluster_of_axle[j] != c:
             continue
@@ -754,11 +838,11 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
     n = rows.u.shape[1]
     u, v, a = rows.u[ch].reshape(n * W), rows.v[ch].reshape(n * W), rows.a[ch].reshape(n * W)
     q, qd, qdd = rows.q[ch], rows.qd[ch], rows.qdd[ch]
-    z_axle, sag, keff = rows.z[ch], rows.sag[ch], rows.keff[ch]
+    z_axle, sag, keff, ends = rows.z[ch], rows.sag[ch], rows.keff[ch], rows.ends[ch]
     out_force, out_rail, out_wheel = peaks.force[ch], peaks.rail[ch], peaks.wheel[ch]
     win = Window(u, v, a, np.zeros(n * W), np.zeros((n + 2 * B) * W), np.zeros(n * W),
                  rows.mass_diag[ch].reshape(n * W), rows.pad_k[ch], rows.pad_c[ch], rows.bal_k[ch], rows.bal_c[ch],
-                 peaks.ballast[ch], peaks.total[ch])  # rhs padded by B DOFs each side (see _mass_times)
+                 peaks.ballast[ch], peaks.total[ch], ends)  # rhs padded by B DOFs each side (see _mass_times)
     node_w, sleeper_node, epb = mesh.node_w, mesh.sleeper_node, mesh.epb
     n_sleepers, elem_len = mesh.n_sleepers, mesh.elem_len
     x_axle, consts, law, param, n_clusters = drive.x_axle, drive.consts, drive.law, drive.param, drive.n_clusters
@@ -790,7 +874,7 @@ def _run_chunk(mesh, drive, rows, peaks, reuse, ch, W):
                     changed = changed or bay != bay_cache[j]
                     bay_min, bay_max = min(bay_min, bay), max(bay_max, bay)
             if changed:
-                _move_window(mesh, drive, keff, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W)
+                _move_window(mesh, drive, keff, ends, reuse, u, v, a, m_cap, wk, c, bay_min, bay_max, W)
         # ---- where the axles' element DOFs sit among their bay's columns
         for j in range(n_axles):
             basej = node_w[sleeper_node[bay_cache[j]]]

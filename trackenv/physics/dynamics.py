@@ -25,6 +25,7 @@ from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
+from .window_ends import check_window_ends, outside_damping, outside_stiffness, outside_transfer
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
 SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
@@ -339,9 +340,56 @@ def _stiffness_factor(track: Track) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=256)
-def _track_window_factors(track: Track, windows: tuple) -> list[tuple[int, int, np.ndarray]]:
-    """:func:`_window_factors` of ``track``'s stiffness, kept per track and windows."""
-    return _window_factors(_track_stiffness(track), windows)
+def _track_outside_stiffness(track: Track) -> np.ndarray:
+    """:func:`~trackenv.physics.window_ends.outside_stiffness` of ``track`` (n_sleepers, 6), kept per track
+    object (read-only)."""
+    out = outside_stiffness(_track_stiffness(track), track.dof_layout)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _track_ends(track: Track) -> np.ndarray:
+    """The static ends of ``track`` (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
+    and the static extension onto the next bay (:mod:`trackenv.physics.window_ends`), kept per track object."""
+    transfer = outside_transfer(_track_stiffness(track), track.dof_layout)
+    out = np.concatenate([_track_outside_stiffness(track), outside_damping(track),
+                          transfer.reshape(track.n_sleepers, -1)], axis=1)
+    out.flags.writeable = False
+    return out
+
+
+def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
+    """The kernel's window ends per row (see :class:`_step.Rows`): zeros (rows, n_sleepers, 6) for clamped ends
+    ("rest"); for "static" (rows, n_sleepers, 12 + 2 bay_dofs) the outside's stiffness plus ``a1`` (Newmark's
+    a1) times its damping, that damping, and the extension."""
+    if ends == "rest":
+        return np.zeros((len(tracks), tracks[0].n_sleepers, 6))
+    out = np.stack([_track_ends(t) for t in tracks])
+    out[:, :, :6] += a1 * out[:, :, 6:12]
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _track_window_factors(track: Track, windows: tuple, ends: str = "rest") -> list[tuple[int, int, np.ndarray]]:
+    """:func:`_window_factors` of ``track``'s stiffness, kept per track, windows and ends."""
+    k_band = _track_stiffness(track)
+    if ends == "rest":
+        return _window_factors(k_band, windows)
+    outside, lay = _track_outside_stiffness(track), track.dof_layout
+    bay_dofs = int(lay.sleeper[1] - lay.sleeper[0])
+    out = []
+    for lo, hi in windows:
+        band = k_band[lo:hi].copy()
+        first, last = outside[lo // bay_dofs, :3], outside[(hi - 3) // bay_dofs, 3:]
+        band[0, 0] += first[0]  # the window's first rail node (w, θ) and its last (w, θ, then its sleeper)
+        band[1, 1] += first[1]
+        band[1, 0] += first[2]
+        band[-3, 0] += last[0]
+        band[-2, 1] += last[1]
+        band[-2, 0] += last[2]
+        out += _window_factors(band, [(0, hi - lo)])
+    return [(lo, hi, factor) for (lo, hi), (_, _, factor) in zip(windows, out)]
 
 
 _NO_REUSE = _step.Reuse(np.zeros((0, 2 * _step.B + 3, 0)), np.zeros((0, 2), dtype=np.int64),
@@ -357,12 +405,13 @@ def _store_shapes(track: Track, m_cap: int) -> tuple[tuple[int, int, int], tuple
 
 
 @functools.lru_cache(maxsize=16)
-def _kept_factors(track: Track, dt: float, m_cap: int) -> _step.Reuse:
+def _kept_factors(track: Track, dt: float, m_cap: int, ends: str = "rest") -> _step.Reuse:
     """The kernel's store of window factors and bay columns for one-row passes over ``track`` at ``dt`` (windows
     of up to ``m_cap`` DOFs), kept per track object, dt and window size: the effective stiffness K + a0 M + a1 C
     is the same in every such pass, so each window's factor and each bay's columns are computed once, by the
     same arithmetic, and read back in later passes (bit-identical; an episode's or the paper loop's passes run
-    over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each."""
+    over one model track). ~1.5 MB for the env's 60 m track; 16 tracks at most, of up to 8 MB each. The window
+    ends (``ends``, see :func:`simulate_passes`) change the factors: each kind is kept apart."""
     factor_shape, columns_shape = _store_shapes(track, m_cap)
     n = track.n_sleepers
     return _step.Reuse(np.zeros(factor_shape), np.full((n, 2), -1, dtype=np.int64),
@@ -386,14 +435,14 @@ _REUSE_MAX_BYTES = 8 * 2**20
 
 
 def _one_row_reuse(track: Track, dt: float, axle_offsets: np.ndarray, cluster: np.ndarray,
-                   margin: int) -> _step.Reuse:
+                   margin: int, ends: str = "rest") -> _step.Reuse:
     """What a one-row pass over ``track`` keeps for the next one (:func:`_kept_factors`), or nothing
     (``_NO_REUSE``) where its windows or its store would exceed the bounds above."""
     m_cap = _window_dof_bound(track, axle_offsets, cluster, margin)
     store_bytes = 8 * sum(math.prod(shape) for shape in _store_shapes(track, m_cap))
     if m_cap > _REUSE_MAX_DOFS or store_bytes > _REUSE_MAX_BYTES:
         return _NO_REUSE
-    return _kept_factors(track, float(dt), m_cap)
+    return _kept_factors(track, float(dt), m_cap, ends)
 
 
 def _window_factors(k_band: np.ndarray, windows) -> list[tuple[int, int, np.ndarray]]:
@@ -423,7 +472,7 @@ WINDOW_AVERAGING_SLEEPERS = 5  # β from the softest stretch of this many suppor
 WINDOW_MIN_BETA_SPACING = 0.4  # softer than this (decay length > 2.5 bays): the whole track moves, no window
 
 
-def window_margin(track: Track) -> int | None:
+def window_margin(track: Track, decay_lengths: float = WINDOW_DECAY_LENGTHS) -> int | None:
     """Sleeper bays of track the kernel integrates on each side of an axle group, from the track's decay length.
 
     The rail's deflection decays like e^{-βx}, β = (k_f / 4EI)^¼, with k_f the pad and ballast in series per
@@ -433,14 +482,17 @@ def window_margin(track: Track) -> int | None:
     and a transition zone this keeps the fast path within 1 % of the full model. Soft track needs more decay
     lengths than stiff (its dynamic response reaches further than the static one): below β·s =
     WINDOW_MIN_BETA_SPACING (1e6 N/m ballast: 2.6 % off with a 22-bay window on 60 m) the whole track is
-    integrated. None (the whole track) there and where the window would cover half the track anyway."""
+    integrated. None (the whole track) there and where the window would cover half the track anyway.
+    ``decay_lengths`` sets another margin (a shorter one suits ``window_ends="static"``: see
+    :mod:`trackenv.physics.window_ends`)."""
+    decay_lengths = check_scalar("decay_lengths", decay_lengths, low=0.5, high=100.0)
     k = track.support_stiffness
     n = min(WINDOW_AVERAGING_SLEEPERS, k.size)
     k_f = np.convolve(k, np.ones(n) / n, mode="valid").min() / track.sleeper_spacing
     beta = (k_f / (4.0 * track.rail_bending_stiffness)) ** 0.25
     if beta * track.sleeper_spacing < WINDOW_MIN_BETA_SPACING:
         return None
-    margin = max(2, math.ceil(WINDOW_DECAY_LENGTHS / (beta * track.sleeper_spacing) - 1e-9))
+    margin = max(2, math.ceil(decay_lengths / (beta * track.sleeper_spacing) - 1e-9))
     if 2 * margin + 2 >= track.n_sleepers / 2:
         return None
     return margin
@@ -535,6 +587,7 @@ def simulate_passes(
     x_start: float | None = None,
     x_end: float | None = None,
     window_bays: int | str | None = "auto",
+    window_ends: str = "rest",
     sleeper_force_measure: str = "ballast",
     support_settlement=None,
     backend: str = "numba",
@@ -557,7 +610,11 @@ def simulate_passes(
     on the rail from the first to the last sleeper). ``window_bays``: sleeper bays of track integrated ahead of
     the leading and behind the trailing axle of each axle group; "auto" (default): sized per row from the
     track's decay length (:func:`window_margin`; rows that need different windows run as separate groups, so a
-    row's result does not depend on its batch); None: the whole track.
+    row's result does not depend on its batch); None: the whole track. ``window_ends``: what the window's ends
+    stand on, "rest" (default: the track beyond is held at rest, the ends clamped) or "static" (each end's rail
+    node carries the static stiffness of all the track beyond it, :mod:`trackenv.physics.window_ends`: the
+    deflection basin is right at any margin, so a shorter window keeps more of the full model's accuracy; the
+    numba backend only).
     ``support_settlement``: None or (n_rows, n_sleepers) permanent settlement of the ballast under each sleeper
     [m]: the base of each ballast spring is lowered by it and the rail bends over the settled supports. By
     superposition (the track is linear) the rail's static sag becomes the wheel's irregularity and the
@@ -577,12 +634,15 @@ def simulate_passes(
     check_choice("start", start, START_OPTIONS)
     dt = auto_time_step(tracks[0], system, speed, law) if auto else check_time_step(dt, contact_period(system, law))
     check_window_bays(window_bays)
+    check_window_ends(window_ends)
+    if window_ends != "rest" and backend != "numba":
+        raise ValueError(f"window_ends={window_ends!r} needs backend='numba' (the {backend} backend has clamped ends)")
     tracks, irr_rows = _batch_rows(tracks, irregularities)
     settlement = None if support_settlement is None else _settlement_rows(support_settlement, len(tracks), tracks[0])
     margins = _row_margins(tracks, window_bays)
     x_start, x_end = _pass_range(tracks[0], system, start, margins, x_start, x_end)
     options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure,
-                   backend=backend, device=device)
+                   backend=backend, device=device, window_ends=window_ends)
     groups: dict = {}
     for b, margin in enumerate(margins):
         groups.setdefault(margin, []).append(b)
@@ -593,7 +653,7 @@ def simulate_passes(
                         dt="auto" if auto else dt, window_bays=margin, **options)
         return results
     batch = _Batch(tracks, irr_rows, settlement, system, law, speed, dt, start, x_start, x_end, margins[0],
-                   sleeper_force_measure, backend=backend, device=device)
+                   sleeper_force_measure, backend=backend, device=device, ends=window_ends)
     results, lost = _simulate_batch(batch)
     if auto and dt > DT_REFERENCE_S and lost:
         # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
@@ -606,7 +666,7 @@ def simulate_passes(
 class _Batch:
     """A validated batch: each row's track, irregularity and settled supports (or None), and the pass every row
     runs: vehicle, contact law, speed [m/s], dt [s], start, leading-axle range [m], window margin in bays (None:
-    the whole track) and the sleeper-force measure."""
+    the whole track), the sleeper-force measure and the window's ends (``window_ends``)."""
 
     tracks: list[Track]
     irregularities: list
@@ -623,6 +683,7 @@ class _Batch:
     keep_factors: bool = True  # a one-row pass keeps its window factors for the next pass over its track
     backend: str = "numba"  # the integration's backend (BACKENDS) and, for torch, its device
     device: object = None
+    ends: str = "rest"  # what the windows' ends stand on (window_ends.WINDOW_ENDS)
 
     @property
     def margin_bays(self) -> int:
@@ -832,7 +893,7 @@ def _static_start(batch: _Batch, track: Track, windows: tuple, start_points: lis
     displacements and the wheel loads."""
     system, law = batch.system, batch.law
     loads = system.static_wheel_loads.copy()
-    factors = _track_window_factors(track, windows)
+    factors = _track_window_factors(track, windows, batch.ends)
     for _ in range(4):
         f = np.zeros(track.n_dof)
         for (dofs, shp), p in zip(start_points, loads):
@@ -874,15 +935,17 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
                         np.linalg.inv(system.stiffness + consts[0] * system.mass + consts[1] * system.damping),
                         system.force.astype(float), system.wheel_dofs.astype(np.int64), cluster,
                         int(cluster.max()) + 1)
+    u, v, a, q, qd, qdd = (pack(x) for x in (state.u, state.v, state.a, state.q, state.qd, state.qdd))
     rows = _step.Rows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(pad_k),
                       pack(supports["pad_damping"]), pack(bal_k), pack(bal_c), z_packed, pack(sag),
-                      *(pack(x) for x in (state.u, state.v, state.a, state.q, state.qd, state.qdd)))
+                      u, v, a, q, qd, qdd, pack(_window_ends(batch.tracks, batch.ends, consts[1])))
     peaks = _step.Peaks(history(state.force), history(rail0), history(state.q[:, system.wheel_dofs]),
                         pack(peak_ballast), pack(peak_total))
     # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
     one_row = n_chunks == 1 and width == 1
     keep = one_row and batch.keep_factors
-    reuse = _one_row_reuse(t0, batch.dt, system.axle_offsets, cluster, batch.margin_bays) if keep else _NO_REUSE
+    reuse = (_one_row_reuse(t0, batch.dt, system.axle_offsets, cluster, batch.margin_bays, batch.ends) if keep
+             else _NO_REUSE)
     return mesh, drive, rows, peaks, reuse, width
 
 
@@ -984,7 +1047,8 @@ def _check_steady_start(track: Track, x0: np.ndarray, margin: int) -> None:
 
 def _steady_key(batch: _Batch, track: Track) -> tuple:
     """What a row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
-    law, speed, dt, the window, where the leading axle stands in its bay at the start, and the backend."""
+    law, speed, dt, the window and its ends, where the leading axle stands in its bay at the start, and the
+    backend."""
     entry = tuple(float(getattr(track, name)[0]) for name in _SUPPORT_FIELDS)
     rail = (track.sleeper_spacing, track.rail_bending_stiffness, track.rail_mass, track.elements_per_bay)
     system = batch.system
@@ -992,7 +1056,7 @@ def _steady_key(batch: _Batch, track: Track) -> tuple:
                                                        system.wheel_dofs, system.axle_offsets))
     phase = batch.x_start - math.floor(batch.x_start / track.sleeper_spacing) * track.sleeper_spacing
     return (entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase,
-            batch.backend)  # (the backends round differently: each keeps its own)
+            batch.backend, batch.ends)  # (the backends round differently: each keeps its own)
 
 
 _SUPPORT_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
@@ -1034,7 +1098,7 @@ def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
                for t in tracks]
     runs = _Batch(uniform, [None] * len(uniform), None, system, batch.law, batch.speed, batch.dt, "static",
                   x_start, x_start + batch.speed * (n_steps * batch.dt), margin, "ballast", keep_factors=False,
-                  backend=batch.backend, device=batch.device)
+                  backend=batch.backend, device=batch.device, ends=batch.ends)
     run = _integrate(runs)
     n = len(uniform)
     u, v, a, q, qd, qdd = (_unpack(x, n) for x in (run.final.u, run.final.v, run.final.a, run.final.q,
