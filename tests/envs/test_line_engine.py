@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import trackenv  # noqa: F401  (registers the envs)
+from trackenv.envs.line import TampingLine, TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
 from trackenv.envs.line_episode import LineBatch
 from trackenv.physics.dynamics import simulate_passes
@@ -91,6 +92,20 @@ def test_the_fast_engines_forces_are_those_of_a_converged_approach():
                  for name, b, options in (("fast", fast, groups[0][1]), ("classic", classic, {}))}
         assert error["fast"] < TOLERANCE
         assert error["fast"] < error["classic"]
+
+
+def test_a_vector_row_with_the_fast_engine_is_the_single_env():
+    """Each segment's options (and steady state) are its own track's: a line's numbers do not depend on the other
+    lines of its batch."""
+    config = LineConfig(**BASE, engine="fast")
+    vec, single = TampingLineVectorEnv(2, config), TampingLine(config)
+    vec.reset(seed=5)
+    single.reset(seed=6)
+    for k in range(2):
+        action = np.eye(4, dtype=np.int8)[k]
+        obs, reward, *_ = vec.step(np.stack([action, action]))
+        s_obs, s_reward, *_ = single.step(action)
+        assert reward[1] == s_reward and all(np.array_equal(obs[key][1], s_obs[key]) for key in s_obs)
 
 
 def test_a_bad_engine_is_refused_naming_the_field():

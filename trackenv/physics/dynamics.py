@@ -572,7 +572,8 @@ def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
 START_OPTIONS = ("static", "rest", "steady")
 BACKENDS = ("numba", "torch")
 STEADY_RUN_BAYS = 40  # sleeper bays the steady state is integrated over, from a static start (see _steady_states)
-_STEADY_CACHE_SIZE = 256  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase)
+_STEADY_CACHE_SIZE = 4096  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase;
+# about 7 kB each on the line's segments: the long line's 250 segments and two wheelsets, 8 lines, hold 4000)
 
 
 def simulate_passes(
@@ -1083,9 +1084,10 @@ def _steady_states(batch: _Batch) -> list[_SteadyState]:
             _STEADY_STATES[key] = state
     for key in keys:
         _STEADY_STATES.move_to_end(key)
+    states = [_STEADY_STATES[k] for k in keys]  # (before the oldest are dropped: a batch may hold more keys)
     while len(_STEADY_STATES) > _STEADY_CACHE_SIZE:
         _STEADY_STATES.popitem(last=False)
-    return [_STEADY_STATES[k] for k in keys]
+    return states
 
 
 def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
