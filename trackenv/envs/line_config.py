@@ -169,9 +169,9 @@ class LineConfig(ConfigBase):
     the periodic steady state 3 bays before the segment, windows of 3 decay lengths whose ends carry the static
     stiffness of the track beyond them, and each pass ending 3 bays after the segment (as
     :class:`~trackenv.degradation.TrackDegradation`'s); its approach zone (:attr:`approach_sleepers`) is sized
-    for the softest segment the line is taken to draw (:data:`SOFTEST_BALLAST_SHARE`). About 1.5 times the
-    classic passes' throughput, with sleeper forces closer to a converged approach's (the physics-engine page
-    of the documentation gives the figures).
+    for the softest segment the line is taken to draw (:data:`SOFTEST_BALLAST_SHARE`). Its line steps run about
+    1.5 times as fast, with sleeper forces closer to a converged approach's; an episode's cost moves by a few
+    hundredths of a percent (the physics-engine page of the documentation gives the figures).
 
     **Per section** (``per_section``: a mapping of some of :data:`PER_SECTION_BOUNDS` to one value per section;
     a field left out is the line's everywhere; needs ``sections_per_segment`` = 1, as each section then has a
