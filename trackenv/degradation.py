@@ -34,6 +34,7 @@ from .physics.dynamics import (
     lapack_lower,
     simulate_passes,
 )
+from .physics.engine import CLASSIC_ENGINE, PassEngine, check_engine
 from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState, implicit_settlement_step
 from .physics.tamping import TampingModel, TampingResult, tamp
 from .physics.timestep import check_dt_option
@@ -146,9 +147,11 @@ class TrackDegradation:
     :meth:`check_runaway`); ``interpolation``: how the per-sleeper level becomes the rail's level between
     sleepers with ``feedback="irregularity"``: "cubic" (natural cubic spline through the sleeper values) or
     "linear" (straight between sleepers: the paper's reading, GENSYS takes a two-column table of position and
-    displacement); see :meth:`rail_level`. Remaining keywords go to :func:`simulate_passes` (``dt``, default
-    "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy contract; ``contact``,
-    ``sleeper_force_measure``, ``window_bays``).
+    displacement); see :meth:`rail_level`; ``engine``: how each pass runs, a
+    :class:`~trackenv.physics.engine.PassEngine` or its name ("classic", the default, or "fast"; its steady start
+    falls back to the static one where its window does not fit in the approach zone). Remaining keywords go to
+    :func:`simulate_passes` (``dt``, default "auto": the step of :mod:`trackenv.physics.timestep`'s accuracy
+    contract; ``contact``, ``sleeper_force_measure``, ``window_bays``).
     """
 
     def __init__(
@@ -168,6 +171,7 @@ class TrackDegradation:
         feedback: str = "irregularity",
         on_runaway: str = "warn",
         interpolation: str = "cubic",
+        engine: PassEngine | str = CLASSIC_ENGINE,
         **pass_options,
     ) -> None:
         if not isinstance(track, Track):
@@ -198,6 +202,7 @@ class TrackDegradation:
         self.feedback = check_choice("feedback", feedback, FEEDBACKS)
         self.on_runaway = check_choice("on_runaway", on_runaway, ON_RUNAWAY)
         self.interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
+        self.engine = check_engine(engine)
         self._differential: list[float] = []  # differential settlement increment per iteration [m]
         n = track.n_sleepers
         self.n_extra = self.zone_sleepers(track.sleeper_spacing, self.system.span, approach_sleepers)
@@ -497,23 +502,31 @@ def simulate_batch(sims: list[TrackDegradation]) -> list[PassResult]:
             s.vehicle != s0.vehicle
             or s.speed != s0.speed
             or s.pass_options != s0.pass_options
+            or s.engine != s0.engine
             or (s.model_track.n_sleepers != s0.model_track.n_sleepers)
         ):
-            raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options and length")
+            raise ValueError("simulate_batch needs simulators with the same vehicle, speed, options, engine and length")
     if any(s.feedback != s0.feedback for s in sims):
         raise ValueError("simulate_batch needs simulators with the same feedback")
+    groups: dict = {}  # rows whose engine options differ (a steady start that does not fit) run apart
+    for b, s in enumerate(sims):
+        options = s.engine.options_for(s.model_track, s.vehicle, s.n_extra)
+        groups.setdefault(tuple(sorted(options.items())), []).append(b)
+    results: list = [None] * len(sims)
+    for key, rows in groups.items():
+        for b, res in zip(rows, _simulate_group([sims[b] for b in rows], dict(key))):
+            results[b] = res
+    return results
+
+
+def _simulate_group(sims: list[TrackDegradation], engine_options: dict) -> list[PassResult]:
+    """One batched pass for simulators that share every option (:func:`simulate_batch`)."""
+    s0 = sims[0]
+    options = {**s0.pass_options, **engine_options}
     if s0.feedback == "irregularity":
         rails = [s.rail_level() for s in sims]
-        return simulate_passes(
-            [s.model_track for s in sims], s0.vehicle, s0.speed, rails, x_end=s0.pass_end, **s0.pass_options
-        )
+        return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, rails, x_end=s0.pass_end,
+                               **options)
     profiles = np.stack([s.model_irregularity() for s in sims])
-    return simulate_passes(
-        [s.model_track for s in sims],
-        s0.vehicle,
-        s0.speed,
-        None,
-        support_settlement=profiles,
-        x_end=s0.pass_end,
-        **s0.pass_options,
-    )
+    return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, None, support_settlement=profiles,
+                           x_end=s0.pass_end, **options)

@@ -27,6 +27,7 @@ from ..physics._checks import (
     check_time_steps,
 )
 from ..physics.contact import HertzContact
+from ..physics.engine import ENGINES
 from ..physics.timestep import DT_REFERENCE_S, auto_time_step, check_dt_option
 from ..physics.track import Track
 from ..physics.vehicle import GRAVITY, Car, Wheelset
@@ -37,8 +38,15 @@ if TYPE_CHECKING:
     from .line_file import LineDescription
 
 SLEEPER_SPACING_M = 0.6
-#: sleepers of the approach (and of the exit) zone added to each end of a segment in its passes
+#: sleepers of the approach (and of the exit) zone added to each end of a segment in its passes (the classic
+#: engine's; the fast engine's may be longer: :attr:`LineConfig.approach_sleepers`)
 APPROACH_SLEEPERS = 10
+#: the engines a line's passes can run with (``LineConfig.engine``; :mod:`trackenv.physics.engine`)
+LINE_ENGINES = tuple(ENGINES)
+#: the fast engine's approach is sized for a segment whose softest five supports have this share of the line's
+#: ballast stiffness (about nine log-SDs below the mean of the default field) [assumption]; a softer segment's
+#: passes start from static equilibrium instead (:meth:`~trackenv.physics.engine.PassEngine.options_for`)
+SOFTEST_BALLAST_SHARE = 0.25
 REGISTER_CLASSES = ("plain", "transition", "switch_or_crossing")
 OVER_CAPACITY = ("clip", "raise")
 #: How a local defect's rate factor meets a known zone's (transition, switch or crossing) on its sleepers:
@@ -154,7 +162,16 @@ class LineConfig(ConfigBase):
     never-maintained section past the model's validity.
     ``dt``: time step of the passes [s] or "auto" (default: per vehicle type and speed, the coarsest step that
     keeps the peak forces within 0.5 % of dt = 1e-4 s, the contract of :mod:`trackenv.physics.timestep`; 4e-4 s
-    for the coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h).
+    for the coach wheelset and 3.2e-4 s for the freight wheelset at 100 km/h). ``engine`` (one of
+    :data:`LINE_ENGINES`): how the passes run (:mod:`trackenv.physics.engine`). "classic" (the default, which
+    every saved result used): static equilibrium at the start of a :data:`APPROACH_SLEEPERS`-sleeper approach
+    zone, windows of 6.5 decay lengths with clamped ends, each pass running to the end of the exit zone. "fast":
+    the periodic steady state 3 bays before the segment, windows of 3 decay lengths whose ends carry the static
+    stiffness of the track beyond them, and each pass ending 3 bays after the segment (as
+    :class:`~trackenv.degradation.TrackDegradation`'s); its approach zone (:attr:`approach_sleepers`) is sized
+    for the softest segment the line is taken to draw (:data:`SOFTEST_BALLAST_SHARE`). Its line steps run about
+    1.5 times as fast, with sleeper forces closer to a converged approach's; an episode's cost moves by a few
+    hundredths of a percent (the physics-engine page of the documentation gives the figures).
 
     **Per section** (``per_section``: a mapping of some of :data:`PER_SECTION_BOUNDS` to one value per section;
     a field left out is the line's everywhere; needs ``sections_per_segment`` = 1, as each section then has a
@@ -254,6 +271,7 @@ class LineConfig(ConfigBase):
     local_defect_in_zone: str = "multiply"
     limits: tuple = ()
     dt: float | str = "auto"
+    engine: str = "classic"
     per_section: tuple = ()
     line: LineDescription | None = None
 
@@ -330,6 +348,7 @@ class LineConfig(ConfigBase):
         c("contact_sensor_noise", low=0.0, high=1.0)
         self._check_choices()
         object.__setattr__(self, "dt", check_dt_option(self.dt))
+        check_choice("engine", self.engine, LINE_ENGINES)
         self._check_pass_time_steps()
 
     def _check_per_section(self) -> None:
@@ -506,10 +525,24 @@ class LineConfig(ConfigBase):
         return int(round(self.horizon_years * self.steps_per_year))
 
     def pass_length_m(self, span_m: float = 0.0) -> float:
-        """How far the leading axle of a vehicle of axle span ``span_m`` [m] travels in a pass over a segment [m]:
-        from the span to the end of the modelled track, the segment with :data:`APPROACH_SLEEPERS` sleepers
-        more at each end (a wheelset has no span)."""
-        return (self.n_sleepers - 1 + 2 * APPROACH_SLEEPERS) * SLEEPER_SPACING_M - span_m
+        """How far the leading axle of a vehicle of axle span ``span_m`` [m] travels in a pass over a segment [m]
+        at most: from the span to the end of the modelled track, the segment with :attr:`approach_sleepers`
+        sleepers more at each end (a wheelset has no span; the fast engine's passes run less of it)."""
+        return (self.n_sleepers - 1 + 2 * self.approach_sleepers) * SLEEPER_SPACING_M - span_m
+
+    @property
+    def approach_sleepers(self) -> int:
+        """Sleepers of the approach (and of the exit) zone added to each end of a segment for its passes:
+        :data:`APPROACH_SLEEPERS` with the classic engine; with the fast engine at least that, and as many as
+        its steady start needs on a segment softened to :data:`SOFTEST_BALLAST_SHARE` of its ballast stiffness
+        (the same for every segment, so that a batch's model tracks share their length)."""
+        engine = ENGINES[self.engine]
+        if engine.start != "steady":
+            return APPROACH_SLEEPERS
+        track = Track.realistic(self.segment_length_m)
+        softest = track.replace(ballast_stiffness=track.ballast_stiffness * (self.ballast_stiffness_factor
+                                                                             * SOFTEST_BALLAST_SHARE))
+        return max(APPROACH_SLEEPERS, *(engine.approach_sleepers(softest, v) for v in self.vehicles()))
 
     def section_values(self, name: str) -> np.ndarray:
         """(n_sections,) the value of the line field ``name`` (one of :data:`PER_SECTION_BOUNDS`) on each

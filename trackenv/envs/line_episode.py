@@ -24,6 +24,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from ..degradation import INFLUENCE_BAND, TrackDegradation
 from ..physics.dynamics import simulate_passes
+from ..physics.engine import CLASSIC_ENGINE, ENGINES
 from ..physics.geometry import (
     classify,
     d1_filter,
@@ -58,7 +59,7 @@ from .common import SHARED_BOUNDS, clip_observation, clipped_values
 from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
 from .info import step_info
-from .line_config import APPROACH_SLEEPERS, REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
+from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
 
 COST_KEYS = LineConfig.cost_keys()
 #: The largest wheel/rail force the model is taken to represent, in static wheel loads: impact forces at dipped
@@ -199,7 +200,9 @@ class LineBatch:
         self.vehicles = c.vehicles()
         self.p_exp = float(dict(c.law_params).get("force_exponent", 1.0))
         self.model_tracks: list[Track | None] = [None] * GR
-        self.n_extra = APPROACH_SLEEPERS
+        #: how the passes run (``config.engine``), and the sleepers of approach and exit around each segment
+        self.engine = ENGINES[c.engine]
+        self.n_extra = c.approach_sleepers
         # per segment
         self.influence = np.zeros((GR, n, n))
         self.offset = np.zeros((GR, n))
@@ -467,7 +470,7 @@ class LineBatch:
             for i in voided[j]:
                 track = track.with_voided_sleeper(int(i), residual_support=c.voided_residual_support)
             sim = TrackDegradation(track, p_vehicle, law=self.law, feedback="support",
-                                   approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
+                                   approach_sleepers=self.n_extra, dt=c.dt)
             self.model_tracks[rs.start + j] = sim.model_track
             self.influence[rs.start + j] = sim.support_influence
         # the settlement since the last tamping: advance the fresh state over its age at the mean load
@@ -594,7 +597,7 @@ class LineBatch:
             track = base.replace(ballast_stiffness=model.ballast_stiffness[own] / old_k[j] * new_k[j],
                                  ballast_damping=model.ballast_damping[own])
             sim = TrackDegradation(track, self.vehicles[0], law=self.law, feedback="support",
-                                   approach_sleepers=APPROACH_SLEEPERS, dt=c.dt)
+                                   approach_sleepers=self.n_extra, dt=c.dt)
             self.model_tracks[rs.start + j] = sim.model_track
             self.influence[rs.start + j] = sim.support_influence
         self.register[r] = o.register
@@ -632,17 +635,32 @@ class LineBatch:
         bays = np.zeros((len(segs), n))
         for k, v in enumerate(self.vehicles):
             for pass_speed in np.unique(speed[mix[:, k] > 0]):  # none: no traffic of this type, no pass
-                rows = np.flatnonzero((speed == pass_speed) & (mix[:, k] > 0))
-                res = simulate_passes([self.model_tracks[segs[i]] for i in rows], v, float(pass_speed), None,
-                                      support_settlement=prof[rows], dt=c.dt)
-                forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
-                # over the segment's own bays: the approach and exit zones (and the pass's start from rest, whose
-                # ringing is larger than what a local defect adds) are not the section's
-                bay = np.stack([r.contact_force_profile()[ne : ne + n] for r in res])
-                contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
-                if self._profiles_needed:
-                    bays[rows] = np.maximum(bays[rows], bay)
+                for rows, options in self._pass_groups(segs, (speed == pass_speed) & (mix[:, k] > 0), v):
+                    res = simulate_passes([self.model_tracks[segs[i]] for i in rows], v, float(pass_speed), None,
+                                          support_settlement=prof[rows], dt=c.dt, **options)
+                    forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
+                    # over the segment's own bays: the approach and exit zones (and the pass's start, whose
+                    # ringing is larger than what a local defect adds) are not the section's
+                    bay = np.stack([r.contact_force_profile()[ne : ne + n] for r in res])
+                    contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
+                    if self._profiles_needed:
+                        bays[rows] = np.maximum(bays[rows], bay)
         return self._equivalent(forces, mix), contact, bays
+
+    def _pass_groups(self, segs: np.ndarray, selected: np.ndarray, vehicle) -> list[tuple[np.ndarray, dict]]:
+        """The rows of ``segs`` ``selected`` (bool) for a pass of ``vehicle``, grouped by the engine's options
+        for their model tracks (:meth:`~trackenv.physics.engine.PassEngine.options_for`; the classic engine's are
+        its defaults, one group): (rows, options) per group, each row's options its own track's alone."""
+        rows = np.flatnonzero(selected)
+        if self.engine == CLASSIC_ENGINE:
+            return [(rows, {})] if rows.size else []
+        n, s = self.config.n_sleepers, SLEEPER_SPACING_M
+        x_end = TrackDegradation.pass_end_position((n - 1) * s, s, vehicle.system().span, self.n_extra)
+        groups: dict = {}
+        for i in rows:
+            options = self.engine.options_for(self.model_tracks[segs[i]], vehicle, self.n_extra)
+            groups.setdefault(tuple(sorted(options.items())), []).append(i)
+        return [(np.array(group), {**dict(key), "x_end": x_end}) for key, group in groups.items()]
 
     def _contact(self, segs: np.ndarray, contact: np.ndarray, bays: np.ndarray) -> None:
         """Keep the contact forces of a pass over ``segs``: per sleeper bay, and per section (the segment's largest

@@ -572,7 +572,8 @@ def _mass_diagonals(mb: np.ndarray) -> np.ndarray:
 START_OPTIONS = ("static", "rest", "steady")
 BACKENDS = ("numba", "torch")
 STEADY_RUN_BAYS = 40  # sleeper bays the steady state is integrated over, from a static start (see _steady_states)
-_STEADY_CACHE_SIZE = 256  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase)
+_STEADY_CACHE_SIZE = 4096  # steady states kept (one per track entry, vehicle, speed, dt, window and start phase;
+# about 7 kB each on the line's segments: the long line's 250 segments and two wheelsets, 8 lines, hold 4000)
 
 
 def simulate_passes(
@@ -588,6 +589,7 @@ def simulate_passes(
     x_end: float | None = None,
     window_bays: int | str | None = "auto",
     window_ends: str = "rest",
+    window_decay_lengths: float = WINDOW_DECAY_LENGTHS,
     sleeper_force_measure: str = "ballast",
     support_settlement=None,
     backend: str = "numba",
@@ -614,7 +616,8 @@ def simulate_passes(
     stand on, "rest" (default: the track beyond is held at rest, the ends clamped) or "static" (each end's rail
     node carries the static stiffness of all the track beyond it, :mod:`trackenv.physics.window_ends`: the
     deflection basin is right at any margin, so a shorter window keeps more of the full model's accuracy; the
-    numba backend only).
+    numba backend only). ``window_decay_lengths``: the margin "auto" sizes, in the track's decay lengths
+    (:func:`window_margin`; :class:`~trackenv.physics.engine.PassEngine` bundles it with the start and the ends).
     ``support_settlement``: None or (n_rows, n_sleepers) permanent settlement of the ballast under each sleeper
     [m]: the base of each ballast spring is lowered by it and the rail bends over the settled supports. By
     superposition (the track is linear) the rail's static sag becomes the wheel's irregularity and the
@@ -635,11 +638,12 @@ def simulate_passes(
     dt = auto_time_step(tracks[0], system, speed, law) if auto else check_time_step(dt, contact_period(system, law))
     check_window_bays(window_bays)
     check_window_ends(window_ends)
+    window_decay_lengths = check_scalar("window_decay_lengths", window_decay_lengths, low=0.5, high=100.0)
     if window_ends != "rest" and backend != "numba":
         raise ValueError(f"window_ends={window_ends!r} needs backend='numba' (the {backend} backend has clamped ends)")
     tracks, irr_rows = _batch_rows(tracks, irregularities)
     settlement = None if support_settlement is None else _settlement_rows(support_settlement, len(tracks), tracks[0])
-    margins = _row_margins(tracks, window_bays)
+    margins = _row_margins(tracks, window_bays, window_decay_lengths)
     x_start, x_end = _pass_range(tracks[0], system, start, margins, x_start, x_end)
     options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure,
                    backend=backend, device=device, window_ends=window_ends)
@@ -724,10 +728,11 @@ def _batch_rows(tracks: list[Track], irregularities) -> tuple[list[Track], list[
     return tracks, irr_rows
 
 
-def _row_margins(tracks: list[Track], window_bays) -> list[int | None]:
-    """Each row's window margin in bays (None: the whole track): ``window_bays``, or with "auto" its track's own."""
+def _row_margins(tracks: list[Track], window_bays, decay_lengths: float) -> list[int | None]:
+    """Each row's window margin in bays (None: the whole track): ``window_bays``, or with "auto" its track's own
+    at ``decay_lengths`` decay lengths."""
     if isinstance(window_bays, str):
-        return [window_margin(t) for t in tracks]
+        return [window_margin(t, decay_lengths) for t in tracks]
     return [None if window_bays is None else int(window_bays)] * len(tracks)
 
 
@@ -1013,7 +1018,8 @@ def _steady_start(batch: _Batch, x0: np.ndarray, z0: list) -> _State:
 STEADY_LEAD_BAYS = 3  # bays a steady start's leading axle runs before the evaluated track (0.03 % from converged)
 
 
-def steady_approach_sleepers(tracks: Track | Sequence[Track], vehicle, lead_bays: float = STEADY_LEAD_BAYS) -> int:
+def steady_approach_sleepers(tracks: Track | Sequence[Track], vehicle, lead_bays: float = STEADY_LEAD_BAYS,
+                             decay_lengths: float = WINDOW_DECAY_LENGTHS) -> int:
     """Sleepers of approach to add before an evaluated track (copies of its first sleeper, as
     ``Track.extended``) for passes with ``start="steady"`` at their default ``x_start``: the vehicle's span, the
     window behind its trailing axle (:func:`window_margin` + 1.5 bays) and ``lead_bays`` bays that the leading
@@ -1021,10 +1027,11 @@ def steady_approach_sleepers(tracks: Track | Sequence[Track], vehicle, lead_bays
     approach. With the default lead the peak forces are within 0.03 % of 40 sleepers of approach on the cases of
     ``tests/physics/test_steady_start.py`` (today's 10 sleepers from static equilibrium: up to 0.65 %, and 5.9 %
     at 200 km/h). For a batch, the most its tracks need; the model track also needs 4 sleepers or more after the
-    evaluated track (the window's margin is then the one computed here)."""
+    evaluated track (the window's margin is then the one computed here). ``decay_lengths``: the window's margin
+    in decay lengths, as the passes' ``window_decay_lengths``."""
     tracks = _as_tracks(tracks)
     lead = check_scalar("lead_bays", lead_bays, low=0.0, high=1000.0)
-    margins = [window_margin(t.extended(20, 20)) for t in tracks]
+    margins = [window_margin(t.extended(20, 20), decay_lengths) for t in tracks]
     widest = max((m for m in margins if m is not None), default=None)
     if widest is None or None in margins:
         raise ValueError("track too soft for a moving window: the steady start needs one (use start='static')")
@@ -1077,9 +1084,10 @@ def _steady_states(batch: _Batch) -> list[_SteadyState]:
             _STEADY_STATES[key] = state
     for key in keys:
         _STEADY_STATES.move_to_end(key)
+    states = [_STEADY_STATES[k] for k in keys]  # (before the oldest are dropped: a batch may hold more keys)
     while len(_STEADY_STATES) > _STEADY_CACHE_SIZE:
         _STEADY_STATES.popitem(last=False)
-    return [_STEADY_STATES[k] for k in keys]
+    return states
 
 
 def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
