@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, LINE_PRETRAINED_FILE, SHIPPED_AGENTS
+from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS
 
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
@@ -151,13 +151,23 @@ def _one_step_of_each_problem() -> None:
         env.close()
 
 
+def shipped_agent_for(env_id: str) -> str:
+    """The shipped agent `evaluate` scores on ``env_id`` by default: the agent of the lines with every choice
+    (``cpi-choice-agent``) on an id with every choice, else the tamp-or-wait agent (``cpi-agent``)."""
+    from .evaluation.line_compare import action_type_of
+
+    return CHOICE_AGENT_NAME if action_type_of(env_id) == "choices" else LINE_AGENT_NAME
+
+
 def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
-    """The trained line policy scored next to the line rules: ``--model``, else the shipped one if there is one
-    (the same policy on every scenario: its network is shared over sections)."""
+    """The trained line policy scored next to the line rules: ``--model`` (named ``cpi-agent``), else the shipped
+    agent of the id (:func:`shipped_agent_for`) if its file is there (the same policy on every scenario: its
+    network is shared over sections)."""
     if args.policy == "rules":
         return {}
     _existing(args.model, "--model")
-    path = Path(args.model) if args.model else LINE_PRETRAINED_FILE
+    name = LINE_AGENT_NAME if args.model else shipped_agent_for(args.env)
+    path = Path(args.model) if args.model else SHIPPED_AGENTS[name]
     if not path.exists():
         if args.policy == "agent":
             raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass "
@@ -165,7 +175,7 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
         return {}
     from .learning.line import load_line_trained
 
-    return {LINE_AGENT_NAME: load_line_trained(path, name=LINE_AGENT_NAME)}
+    return {name: load_line_trained(path, name=name)}
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -551,15 +561,17 @@ def build_parser() -> argparse.ArgumentParser:
     sp = command("evaluate", "score the tuned rules and the trained agent on held-out episodes, paired")
     out(sp, "results/line_compare")
     sp.add_argument("--env", default="trackenv/TampingLine-v0", metavar="ID",
-                    help="the preset: trackenv/TampingLine-v0 (default), ...Small-v0, ...Hard-v0, or the 60 m track "
-                         "trackenv/Tamping-v1")
+                    help="the preset: trackenv/TampingLine-v0 (default), ...Small-v0, ...Hard-v0, the 60 m track "
+                         "trackenv/Tamping-v1, the ids with every choice (trackenv/TampingLine-v1, ...Wet-v0, "
+                         "...Defects-v0) or the network trackenv/TampingNetwork-v0")
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes: A:B (seeds A..B-1) or a,b,c (default 0:8)")
     sp.add_argument("--policy", choices=("all", "agent", "rules"), default="all",
                     help="which policies to score: the rules and the trained agent (default), or one of them")
     sp.add_argument("--model", default=None, metavar="ZIP",
                     help=f"a trained per-section policy (default: the shipped {LINE_AGENT_NAME}, "
-                         "agents/learning/pretrained/ppo_tamping_line.zip)")
+                         f"agents/learning/pretrained/ppo_tamping_line.zip; on the ids with every choice "
+                         f"{CHOICE_AGENT_NAME}, agents/learning/pretrained/cpi_choice_line.zip)")
     sp.add_argument("--rules", default=None, metavar="NAMES",
                     help="score only these rules, comma-separated (e.g. grouped-threshold,uniform-periodic; "
                          "default: all)")
@@ -578,8 +590,9 @@ def build_parser() -> argparse.ArgumentParser:
                                 "against the best tuned rule and the hindsight bound")
     out(sp, "results/leaderboard")
     sp.add_argument("--env", default=None, metavar="ID[,ID...]",
-                    help="the scenarios (default: trackenv/TampingLineSmall-v0, trackenv/TampingLine-v0, "
-                         "trackenv/TampingLineHard-v0, trackenv/Tamping-v1)")
+                    help="the scenarios (default: the suite of agents/evaluation/leaderboard.py DEFAULT_SUITE: the "
+                         "three lines, the 60 m track, the three lines with every choice and the network "
+                         "trackenv/TampingNetwork-v0)")
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes of every scenario: A:B (seeds A..B-1) or a,b,c (default: each "
                          "scenario's, agents/evaluation/leaderboard.py DEFAULT_SEEDS)")

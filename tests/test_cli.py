@@ -155,6 +155,40 @@ def test_evaluate_line_rules_option(monkeypatch, capsys):
     assert err.count("\n") == 1 and "per-section actions" in err
 
 
+def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
+    """`trackenv evaluate` scores the agent of the lines with every choice on an id with every choice, the
+    tamp-or-wait agent elsewhere (the network's lines are tamp-or-wait), and a ``--model`` under the
+    tamp-or-wait agent's name."""
+    pytest.importorskip("stable_baselines3")
+    import trackenv_agents.evaluation.line_compare as lc
+    from trackenv_agents.cli import shipped_agent_for
+    from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED
+
+    assert {env: shipped_agent_for(env) for env in ("trackenv/TampingLine-v0", "trackenv/Tamping-v1",
+                                                    "trackenv/TampingNetwork-v0", "trackenv/TampingLine-v1",
+                                                    "trackenv/TampingLineWet-v0", "trackenv/TampingLineDefects-v0")} \
+        == {"trackenv/TampingLine-v0": "cpi-agent", "trackenv/Tamping-v1": "cpi-agent",
+            "trackenv/TampingNetwork-v0": "cpi-agent", "trackenv/TampingLine-v1": "cpi-choice-agent",
+            "trackenv/TampingLineWet-v0": "cpi-choice-agent", "trackenv/TampingLineDefects-v0": "cpi-choice-agent"}
+    seen = {}
+
+    def fake(env_id, **kw):
+        seen.update(kw)
+        return {"env": env_id, "scenario": "wet", "seeds": [0], "tuned_from": "-", "results": []}
+
+    monkeypatch.setattr(lc, "line_comparison", fake)
+    assert main(["evaluate", "--env", "trackenv/TampingLineWet-v0", "--seeds", "0:1", "--json"]) == 0
+    (name, agent), = seen["extra"].items()
+    assert name == "cpi-choice-agent" and agent.name == name and agent.choices  # a choice rule as its advisor
+    assert main(["evaluate", "--env", "trackenv/TampingLine-v0", "--seeds", "0:1", "--json"]) == 0
+    (name, agent), = seen["extra"].items()
+    assert name == "cpi-agent" and not agent.choices
+    assert main(["evaluate", "--env", "trackenv/TampingLineWet-v0", "--seeds", "0:1", "--json",
+                 "--model", str(DEFAULT_LINE_PRETRAINED)]) == 0
+    assert list(seen["extra"]) == ["cpi-agent"]
+    capsys.readouterr()
+
+
 def test_hyperparams_file_is_the_one_agents_train_reads():
     pytest.importorskip("stable_baselines3")
     from trackenv_agents.cli import HYPERPARAMS_FILE
@@ -345,10 +379,10 @@ def test_leaderboard_policies_name_both_shipped_line_agents():
     import json
 
     from trackenv_agents import cli
-    from trackenv_agents.learning.line import DEFAULT_CHOICE_PRETRAINED, line_meta_path
+    from trackenv_agents.learning.line import DEFAULT_CHOICE_PRETRAINED, DEFAULT_LINE_PRETRAINED, line_meta_path
 
     rules, agents = cli._leaderboard_policies("grouped-threshold,cpi-agent,cpi-choice-agent", ["grouped-threshold"])
     assert rules == ["grouped-threshold"]
-    assert agents == {"cpi-agent": str(cli.LINE_PRETRAINED_FILE), "cpi-choice-agent": str(DEFAULT_CHOICE_PRETRAINED)}
+    assert agents == {"cpi-agent": str(DEFAULT_LINE_PRETRAINED), "cpi-choice-agent": str(DEFAULT_CHOICE_PRETRAINED)}
     assert all(Path(path).is_file() for path in agents.values())
     assert json.loads(line_meta_path(DEFAULT_CHOICE_PRETRAINED).read_text())["advisor"] == "choice-threshold"

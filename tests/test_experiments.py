@@ -111,3 +111,38 @@ def test_choice_agent_script_loads_every_shipped_agent_and_an_agent_with_another
     mixed = mod._policy("cpi-agent@choice-threshold", config)
     assert mixed.name == "cpi-agent@choice-threshold" and mixed.advisor.name == "choice-threshold"
     assert mod._policy("choice-threshold", config).name == "choice-threshold"
+
+
+def test_network_agent_script_builds_network_policies_and_pairs_them_with_the_best_rule(tmp_path):
+    """``experiments/network_agent.py``: each name a NetworkRule over the rule (the line's tuned parameters) or
+    the shipped agent; the report pairs every policy with the cheapest rule on the seeds all of them have, and
+    never takes an agent as the reference."""
+    import json
+
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.rules import NetworkRule, tuned_params_for
+
+    mod = _script("network_agent")
+    built = mod.network_policies(NetworkConfig(), ["grouped-threshold", "cpi-agent"])
+    assert list(built) == ["network(grouped-threshold)", "network(cpi-agent)"]
+    assert all(isinstance(p, NetworkRule) for p in built.values())
+    tuned = tuned_params_for(NetworkConfig().line_config)["grouped-threshold"]
+    assert built["network(grouped-threshold)"].line_rule.params == tuned
+    with pytest.raises(SystemExit, match="unknown"):
+        mod.network_policies(NetworkConfig(), ["no-such-policy"])
+    costs = {"network(grouped-threshold)": [100.0, 200.0, 300.0], "network(section-threshold)": [110.0, 190.0, 330.0],
+             "network(cpi-agent)": [90.0, 150.0, 250.0]}  # the agent cheapest, the grouped threshold the best rule
+    for name, values in costs.items():
+        seeds = range(len(values) + (name == "network(cpi-agent)"))  # one seed more: left out of the pairing
+        extra = [999.0] if name == "network(cpi-agent)" else []
+        (tmp_path / f"{name}.json").write_text(json.dumps({
+            "policy": name, "costs": {str(s): c for s, c in zip(seeds, values + extra, strict=True)},
+            "runs": [{"policies": list(costs), "seeds": [0, 2], "wall_s": 1.0, "cpu_s": 2.0}]}))
+    payload = mod.report(tmp_path)
+    assert payload["best_rule"] == "network(grouped-threshold)" and payload["n_episodes"] == 3
+    rows = {r["policy"]: r for r in payload["results"]}
+    assert rows["network(cpi-agent)"]["vs_best_rule"]["mean_difference"] == pytest.approx(-110.0 / 3)
+    assert rows["network(cpi-agent)"]["relative_to_best_rule"] == pytest.approx(-110.0 / 600)
+    assert rows["network(section-threshold)"]["better_fraction"] == pytest.approx(1 / 3)
+    assert payload["wall_s"] == 1.0 and payload["cpu_s"] == 2.0  # one run, kept in every policy's file
+    assert json.loads((tmp_path / "report.json").read_text()) == payload

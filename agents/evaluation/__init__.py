@@ -35,6 +35,7 @@ from .line_compare import (
     parse_seeds,
     plot_line_episode,
     run_calibration,
+    scenario_config,
     scenario_of,
 )
 from .line_hindsight import (
@@ -63,7 +64,8 @@ __all__ = [
     "tune", "tune_many", "plot_comparison", "RayExecutor",
     # the comparison of policies on a preset (.line_compare)
     "SECTION_CLASSES", "class_breakdown", "format_line_table",
-    "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "scenario_of",
+    "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "scenario_config",
+    "scenario_of",
     # the line's hindsight bound (.line_hindsight)
     "RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",
     "replay", "replay_schedules", "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows",

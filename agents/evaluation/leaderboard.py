@@ -8,6 +8,11 @@ held-out seed (:func:`~.harness.evaluate_many`, the same seeds for every policy:
 reports the mean cost with its 95 % CI, the paired difference to the best tuned rule, the immediate-action count
 and the tampings per section class (:func:`~.line_compare.class_breakdown`).
 
+**The network** (``trackenv/TampingNetwork-v0``: lines that share one tamping machine) is scored with the policies
+of its line, each run on every line by :class:`~trackenv_agents.rules.network.NetworkRule` (which keeps the machine
+on its line while the line policy asks for work there): the tuned rules of the network's line, each with that
+line's tuned parameters, and the agents that fit that line, named ``network(<policy>)``.
+
 **The normalised score** is the share of the gap from the best tuned rule to the hindsight bound that a policy
 closes, paired per episode e::
 
@@ -23,8 +28,9 @@ the held-out seeds themselves: the score's zero is the strongest rule the suite 
 **The bound** is :func:`~.line_hindsight.hindsight_bounds` per episode, from the best rule's schedule with every
 scored rule's schedule as a candidate (:data:`BOUND_SEARCH`), never above the best rule's own cost (its schedule is
 always a candidate). The engine prices sections apart only where each section is its own segment and there is no
-annual budget: on the 60 m track (six sections share one segment) and on the hard line (an annual budget) the
-score is null, and the bound entry says why. A search costs seconds per episode, so each episode's bound is kept
+annual budget and no machine shared between lines: on the 60 m track (six sections share one segment), on the
+hard line (an annual budget) and on the network (one machine for three lines) the score is null, and the bound
+entry says why. A search costs seconds per episode, so each episode's bound is kept
 under ``DIR/bounds/`` keyed by (scenario, seed, a hash of the config and the search settings), and the saved
 searches of ``experiments/searches/`` are reused for the seeds they cover once their schedules replay, in the env
 as it is now, at the cost they were saved with.
@@ -42,18 +48,22 @@ from typing import Any
 
 import numpy as np
 
+from trackenv.envs.network import NetworkConfig
+
 from .harness import EvaluationResult, evaluate_many
-from .line_compare import SECTION_CLASSES, class_breakdown, scenario_of
+from .line_compare import SECTION_CLASSES, class_breakdown, scenario_config, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
 __all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable",
-           "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score", "run_leaderboard"]
+           "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score", "on_network", "policy_label",
+           "run_leaderboard"]
 
-#: The scenarios of the default leaderboard: the three lines, the 60 m track, and the three lines with every
-#: choice (the default line, the wet line, the line of short defects).
+#: The scenarios of the default leaderboard: the three lines, the 60 m track, the three lines with every
+#: choice (the default line, the wet line, the line of short defects) and the network of three default lines.
 DEFAULT_SUITE: tuple[str, ...] = ("trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v0",
                                   "trackenv/TampingLineHard-v0", "trackenv/Tamping-v1", "trackenv/TampingLine-v1",
-                                  "trackenv/TampingLineWet-v0", "trackenv/TampingLineDefects-v0")
+                                  "trackenv/TampingLineWet-v0", "trackenv/TampingLineDefects-v0",
+                                  "trackenv/TampingNetwork-v0")
 
 #: The default held-out seeds per scenario (none of them a training or tuning seed, which start at 1000): as many
 #: as the whole default command scores in about a quarter of an hour on 2 cores (an episode of the hard line costs
@@ -69,6 +79,9 @@ DEFAULT_SEEDS: dict[str, tuple[int, ...]] = {
     "trackenv/TampingLine-v1": tuple(range(0, 16)),
     "trackenv/TampingLineWet-v0": tuple(range(0, 12)),
     "trackenv/TampingLineDefects-v0": tuple(range(0, 12)),
+    # an episode of the network (three default lines) costs about 3.5 s a policy: with the five tuned rules and
+    # the shipped agent, some 3 minutes
+    "trackenv/TampingNetwork-v0": tuple(range(0, 8)),
 }
 
 #: The settings of the hindsight search behind the bound (:func:`~.line_hindsight.hindsight_bounds`): one round of
@@ -111,7 +124,10 @@ def normalised_score(rule_cost: np.ndarray, policy_cost: np.ndarray, bound_cost:
 
 def bound_unavailable(config: Any) -> str | None:
     """Why the per-section hindsight bound cannot be computed for ``config`` (None where it can): the search prices
-    each section apart, which needs one section per segment and no annual budget."""
+    each section apart, which needs one section per segment, no annual budget and a machine of the line's own."""
+    if isinstance(config, NetworkConfig):
+        return (f"{config.n_lines} lines share one tamping machine (its line each step, its moves between lines): "
+                "the per-section hindsight search prices each section apart, not the shared machine")
     if getattr(config, "sections_per_segment", 1) != 1:
         return (f"{config.sections_per_segment} sections share one segment: their costs are not separable, so the "
                 "per-section hindsight search does not apply")
@@ -242,17 +258,33 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
 def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """The ``agents`` that can be scored on ``config``, and why each other one cannot: a policy with
     ``unfit_for(config)`` (a baseline that sees the observation of the line it was trained on,
-    :class:`~trackenv_agents.learning.baselines.TrainedPolicy`) is scored where that returns None only."""
+    :class:`~trackenv_agents.learning.baselines.TrainedPolicy`) is scored where that returns None only. On a
+    network the question is asked of its line (each agent runs on every line, :func:`on_network`)."""
+    line = config.line_config if isinstance(config, NetworkConfig) else config
     here: dict[str, Any] = {}
     unfit: dict[str, str] = {}
     for label, agent in agents.items():
         check = getattr(agent, "unfit_for", None)
-        reason = check(config) if callable(check) else None
+        reason = check(line) if callable(check) else None
         if reason is None:
             here[label] = agent
         else:
             unfit[label] = reason
     return here, unfit
+
+
+def on_network(policy: Any, config: Any) -> Any:
+    """``policy`` as it plays ``config``: on a network, a line policy run on every line by a
+    :class:`~trackenv_agents.rules.network.NetworkRule`; on a line, itself."""
+    from ..rules.network import NetworkRule
+
+    return NetworkRule(policy) if isinstance(config, NetworkConfig) else policy
+
+
+def policy_label(label: str, config: Any) -> str:
+    """The name of the policy ``label`` on ``config``'s rows: ``network(<label>)`` on a network (the name of its
+    :class:`~trackenv_agents.rules.network.NetworkRule`), else ``label``."""
+    return f"network({label})" if isinstance(config, NetworkConfig) else label
 
 
 def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:
@@ -288,26 +320,25 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     the module docstring: "results" (one row per scenario and policy, the best rule first, then by mean cost),
     "bound" (per scenario), "seeds", "best_rule" (per scenario), "not_scored" (per scenario, the agents left out
     and why)."""
-    from trackenv.envs.line_config import scenario
-
     from ..rules.problems import rules_for, tuned_params_for
 
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
     for env_id in envs:
         name = scenario_of(env_id)
-        cfg = scenario(name, **overrides)
-        family, tuned = rules_for(cfg), tuned_params_for(cfg)
+        cfg = scenario_config(name, **overrides)
+        line = cfg.line_config if isinstance(cfg, NetworkConfig) else cfg
+        family, tuned = rules_for(line), tuned_params_for(line)
         wanted = list(rules) if rules is not None else [n for n in tuned if n in family]
         unknown = [n for n in wanted if n not in family]
         if unknown or not wanted:
             raise ValueError(f"rules must name some of {sorted(family)}, got {list(wanted)}")
         here, unfit = fitting_agents(agents or {}, cfg)
-        pols = [family[n](**tuned.get(n, {})) for n in wanted] + list(here.values())
+        pols = [on_network(p, cfg) for p in [family[n](**tuned.get(n, {})) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
         results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
                                 executor=executor)
         for r, label in zip(results[len(wanted):], here, strict=True):
-            r.policy = label
+            r.policy = policy_label(label, cfg)
         rule_results = sorted(results[:len(wanted)], key=lambda r: float(r.cost.mean()))
         best = rule_results[0]
         reason = None if bound else "not computed (--no-bound)"

@@ -42,6 +42,13 @@ def scenario_of(env_id: str) -> str:
     return kwargs["scenario"]
 
 
+def scenario_config(name: str, **overrides: Any) -> LineConfig | NetworkConfig:
+    """The config of a preset named by :func:`scenario_of`, with ``overrides`` (fields of the line config, and on
+    the network its own fields): the default network (:class:`~trackenv.envs.network.NetworkConfig`) for
+    ``"network"``, else the line preset."""
+    return NetworkConfig.coerce(None, **overrides) if name == "network" else scenario(name, **overrides)
+
+
 def action_type_of(env_id: str) -> str:
     """The action type registered for ``env_id`` ("choices" on the ids with every choice, else "multibinary")."""
     import gymnasium as gym
@@ -76,8 +83,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     name = scenario_of(env_id)
     network = name == "network"
     action_type = "multibinary" if network else action_type_of(env_id)
-    cfg = NetworkConfig.coerce(None, **overrides) if network else scenario(name, **overrides)
-    line_cfg = cfg.line_config if network else cfg
+    cfg = scenario_config(name, **overrides)
+    line_cfg = cfg.line_config if isinstance(cfg, NetworkConfig) else cfg
     if network and retune:
         raise ValueError("--retune: the network's rules take the tuned parameters of its line (NetworkRule); "
                          "they are not tuned on the network")

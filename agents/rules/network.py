@@ -1,9 +1,17 @@
 """The line's rules on a network of lines that share one tamping machine (``trackenv/TampingNetwork-v0``).
 
-:class:`NetworkRule` runs a line rule (:mod:`.line`; default :class:`~.line.SectionThreshold`) on every line of
-the network, as if each had its own machine, then sends the one machine where the requests are: it keeps the
-requests of the machine's line while that line has any, and otherwise asks for every line's, which moves the
-machine to the line with the most (the env's rule) without asking it to leave a line with work left.
+:class:`NetworkRule` runs a line policy on every line of the network, as if each had its own machine, then sends
+the one machine where the requests are: it keeps the requests of the machine's line while that line has any, and
+otherwise asks for every line's, which moves the machine to the line with the most (the env's rule) without
+asking it to leave a line with work left. The line policy is a line rule (:mod:`.line`; default
+:class:`~.line.SectionThreshold`) or any policy of the line with SB3's ``predict`` on batched line observations:
+the shipped line agent (:class:`~trackenv_agents.learning.line_policy.LineAgent`) plays the network this way.
+
+The line policy is asked without a recurrent state: it cannot know which of its requests the machine worked (a
+line the machine is not on has its requests dropped), so a memory of the work it asked for would be wrong there.
+The policies played here keep none that matters on the network's tamping-only lines (the rules are stateless;
+a choice agent's memory of its track work only repeats the ``years_since_tamping`` gap that it reads from the
+observation anyway).
 """
 
 from __future__ import annotations
@@ -13,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .base import Heuristic, as_batch
-from .line import LineHeuristic, SectionThreshold
+from .line import SectionThreshold
 
 __all__ = ["NetworkRule", "line_view"]
 
@@ -34,22 +42,32 @@ def line_view(obs: dict[str, np.ndarray], n_lines: int) -> dict[str, np.ndarray]
 
 
 class NetworkRule(Heuristic):
-    """A line rule on every line, the machine kept on its line while the rule asks for work there (see the
+    """A line policy on every line, the machine kept on its line while the policy asks for work there (see the
     module docstring). ``line_rule``: a line heuristic (default: :class:`~.line.SectionThreshold` at its default
-    threshold); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity."""
+    threshold) or any line policy with SB3's ``predict``, a ``name`` and a ``params`` dict (a trained line
+    agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity."""
 
     name = "network"
 
-    def __init__(self, line_rule: LineHeuristic | None = None) -> None:
+    def __init__(self, line_rule: Any = None) -> None:
         self.line_rule = line_rule if line_rule is not None else SectionThreshold()
-        super().__init__(line_rule=self.line_rule.name, **self.line_rule.params)
-        # one name per line rule, e.g. "network(grouped-threshold)", where results are keyed by policy name (the
+        line_name = str(getattr(self.line_rule, "name", None) or type(self.line_rule).__name__)
+        super().__init__(line_rule=line_name, **dict(getattr(self.line_rule, "params", None) or {}))
+        # one name per line policy, e.g. "network(grouped-threshold)", where results are keyed by policy name (the
         # base class's name is a class attribute; this one is the instance's)
-        self.__dict__["name"] = f"network({self.line_rule.name})"
+        self.__dict__["name"] = f"network({line_name})"
 
     def bind(self, config: Any) -> NetworkRule:
-        """A copy whose line rule knows the calendar and capacity of the network's line config."""
-        return type(self)(self.line_rule.bind(config.line_config))
+        """A copy whose line policy knows the calendar and capacity of the network's line config (a policy
+        without ``bind`` is taken as it is)."""
+        bind = getattr(self.line_rule, "bind", None)
+        return type(self)(bind(config.line_config) if callable(bind) else self.line_rule)
+
+    def reset(self) -> None:
+        """The line policy's reset, where it has one."""
+        reset = getattr(self.line_rule, "reset", None)
+        if callable(reset):
+            reset()
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         b, batched = as_batch(obs)

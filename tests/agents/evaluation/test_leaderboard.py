@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from trackenv.envs.line_config import scenario
+from trackenv.envs.network import NetworkConfig
 from trackenv_agents.evaluation.leaderboard import (
     bound_unavailable,
     format_leaderboard,
@@ -70,6 +71,7 @@ def test_bound_applies_only_where_sections_are_priced_apart() -> None:
     assert bound_unavailable(scenario("default")) is None
     assert "share one segment" in bound_unavailable(scenario("track60"))
     assert "annual budget" in bound_unavailable(scenario("hard"))
+    assert "share one tamping machine" in bound_unavailable(NetworkConfig())
 
 
 def test_the_scenarios_with_choices_have_a_bound_searched_over_their_choices(tmp_path) -> None:
@@ -170,6 +172,35 @@ def test_unknown_rule_is_refused(tmp_path) -> None:
         run_leaderboard([ENV], rules=["no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
 
 
+def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp_path) -> None:
+    """On the network every rule and agent runs on every line through NetworkRule (named network(...)), the
+    best of its rules is the reference, an agent's row is its NetworkRule's episodes, and there is no bound."""
+    from trackenv_agents.evaluation.harness import evaluate_many
+    from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
+    from trackenv_agents.rules import GroupedThreshold, NetworkRule
+
+    net = "trackenv/TampingNetwork-v0"
+    assert net in DEFAULT_SUITE and len(DEFAULT_SEEDS[net]) >= 8
+    tiny = {"line_config": "small", "n_lines": 2, "horizon_years": 1.5}
+    class Eager(GroupedThreshold):  # a line policy that is no tuned rule
+        name = "eager"
+
+    agent = Eager(trigger_mm=1.0, include_mm=0.5)
+    payload = run_leaderboard([net], rules=RULES, agents={"eager": agent}, seeds=SEEDS, out_dir=tmp_path, **tiny)
+    rows = {r["policy"]: r for r in payload["results"]}
+    assert set(rows) == {"network(grouped-threshold)", "network(section-threshold)", "network(eager)"}
+    assert payload["best_rule"][net] == min(("network(grouped-threshold)", "network(section-threshold)"),
+                                            key=lambda name: rows[name]["mean_cost"])
+    assert all(r["normalised_score"] is None and r["normalised_score_ci"] is None for r in rows.values())
+    bound = payload["bound"][net]
+    assert bound["available"] is False and "share one tamping machine" in bound["reason"]
+    (direct,) = evaluate_many([NetworkRule(agent)], NetworkConfig.coerce(None, **tiny), SEEDS)
+    assert rows["network(eager)"]["episode_costs"] == direct.cost.tolist()
+    assert rows["network(eager)"]["params"]["line_rule"] == "eager"
+    assert "No normalised score: 2 lines share one tamping machine" in format_leaderboard(payload)
+    assert not (tmp_path / "bounds").exists()
+
+
 @pytest.mark.slow
 def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
     """Episodes and searches as Ray tasks (a local Ray, 2 CPUs): the same rows and bound as in one process."""
@@ -206,7 +237,9 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     assert len(baselines) == 3
     line = "trackenv/TampingLine-v0"
     assert baselines <= {r["policy"] for r in saved["results"] if r["env"] == line}
-    assert all(set(saved["not_scored"][env]) == (set() if env == line else baselines) for env in DEFAULT_SUITE)
+    # the network's lines are the default line: the baselines play each of its lines
+    here = (line, "trackenv/TampingNetwork-v0")
+    assert all(set(saved["not_scored"][env]) == (set() if env in here else baselines) for env in DEFAULT_SUITE)
     assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
     page = (root / "docs" / "leaderboard.md").read_text()
     assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page

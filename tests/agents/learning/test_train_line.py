@@ -109,13 +109,14 @@ def test_cli_scores_the_given_line_policy_and_skips_a_missing_shipped_one(tmp_pa
 
     import trackenv_agents.cli as cli
 
-    assert cli.LINE_PRETRAINED_FILE == DEFAULT_LINE_PRETRAINED
-    monkeypatch.setattr(cli, "LINE_PRETRAINED_FILE", tmp_path / "none.zip")
-    args = argparse.Namespace(policy="all", model=None)
+    assert cli.SHIPPED_AGENTS["cpi-agent"] == DEFAULT_LINE_PRETRAINED
+    monkeypatch.setitem(cli.SHIPPED_AGENTS, "cpi-agent", tmp_path / "none.zip")
+    line = "trackenv/TampingLine-v0"
+    args = argparse.Namespace(policy="all", model=None, env=line)
     assert cli._line_policies(args) == {}
     with pytest.raises(cli.UsageError, match="no trained line policy"):
-        cli._line_policies(argparse.Namespace(policy="agent", model=None))
-    assert cli._line_policies(argparse.Namespace(policy="rules", model="whatever.zip")) == {}
+        cli._line_policies(argparse.Namespace(policy="agent", model=None, env=line))
+    assert cli._line_policies(argparse.Namespace(policy="rules", model="whatever.zip", env=line)) == {}
 
 
 @pytest.mark.parametrize("name", ["small", "default", "hard"])

@@ -2,11 +2,13 @@
 where the most is; its actions through the network env and the evaluation harness."""
 
 import numpy as np
+import pytest
 
 from trackenv.envs.network import NetworkConfig
 from trackenv.envs.network_env import TampingNetwork
 from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.rules import NetworkRule, SectionThreshold
+from trackenv_agents.rules.network import line_view
 
 S = 4
 
@@ -43,3 +45,59 @@ def test_runs_on_the_env_and_the_harness():
     assert result.cost.shape == (2,) and (result.cost > 0).all()
     assert np.allclose(result.cost, -result.sum_rewards, rtol=1e-12, atol=0)
     assert set(result.cost_parts) == set(NetworkConfig.cost_keys())
+
+
+def _shipped_agent():
+    pytest.importorskip("stable_baselines3")
+    from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, load_line_trained
+
+    return load_line_trained(DEFAULT_LINE_PRETRAINED, name="cpi-agent")
+
+
+def test_the_shipped_line_agent_plays_the_network_with_valid_actions():
+    """The tamp-or-wait agent on every line of three: its actions are the network's MultiBinary, each line's
+    requests are the agent's own on that line (never more than the line's capacity), and while the machine's
+    line has requests no other line's are asked for."""
+    agent = _shipped_agent()
+    env = TampingNetwork(line_config="small", n_lines=3, horizon_years=4.0)
+    rule = NetworkRule(agent).bind(env.config)
+    assert rule.name == "network(cpi-agent)" and rule.params == {"line_rule": "cpi-agent"}
+    line = agent.bind(env.config.line_config)
+    obs, _ = env.reset(seed=4)
+    asked = 0
+    for _ in range(env.config.horizon_steps):
+        act, _ = rule.predict(obs)
+        assert act.dtype == np.int8 and env.action_space.contains(act)
+        own = line.predict(line_view({k: v[None] for k, v in obs.items()}, 3))[0]  # (3 lines, 6 sections)
+        per_line = act.reshape(3, 6)
+        assert (per_line <= own).all() and (per_line.sum(axis=1) <= env.config.capacity).all()
+        here = int(obs["machine_line"].argmax())
+        if own[here].any():
+            assert np.array_equal(per_line[here], own[here]) and per_line.sum() == own[here].sum()
+        else:
+            assert np.array_equal(per_line, own)
+        asked += int(act.sum())
+        obs, *_ = env.step(act)
+    assert asked > 0  # the agent asked for work on this episode: the checks above saw requests
+
+
+def test_on_a_one_line_network_the_agent_is_the_line_agent():
+    """With one line the machine never leaves it, so the network policy asks what the line agent asks, and its
+    episode costs what the line agent's costs on the same line, bit for bit."""
+    from trackenv.envs.line_config import scenario
+    from trackenv.envs.network import line_seeds
+
+    agent = _shipped_agent()
+    config = NetworkConfig.coerce(None, line_config="small", n_lines=1, horizon_years=1.5)
+    env = TampingNetwork(config)
+    rule, line = NetworkRule(agent).bind(config), agent.bind(config.line_config)
+    obs, _ = env.reset(seed=5)
+    for _ in range(config.horizon_steps):
+        act, _ = rule.predict(obs)
+        assert np.array_equal(act, line.predict({k: v for k, v in obs.items() if k != "machine_line"})[0])
+        obs, *_ = env.step(act)
+    seeds = [5, 6]
+    (on_network,) = evaluate_many([NetworkRule(agent)], config, seeds=seeds, batch_size=2)
+    line_cfg = scenario("small", horizon_years=1.5)
+    (alone,) = evaluate_many([agent], line_cfg, seeds=[line_seeds(np.random.default_rng(s), 1)[0] for s in seeds])
+    assert np.array_equal(on_network.cost, alone.cost) and on_network.section_tampings.sum() > 0
