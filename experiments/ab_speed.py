@@ -29,6 +29,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,12 +90,24 @@ _UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s
           "seed": "passes/s"}
 
 
-def order(pairs: int) -> list[str]:
-    """The run order A B B A A B … for ``pairs`` pairs: every pair has one run of each, and the first of a pair
-    alternates, so that a steady drift of the machine over the whole run favours neither version."""
+def rounds(variants: Sequence[str], pairs: int) -> list[str]:
+    """The run order of ``variants`` over ``pairs`` rounds: every round runs each once, in order in even rounds and
+    reversed in odd ones (A B B A A B … for two), so that a steady drift of the machine over the whole run favours
+    none of them."""
     if pairs < 1:
         raise ValueError(f"pairs must be >= 1, got {pairs!r}")
-    return [x for p in range(pairs) for x in (("base", "new") if p % 2 == 0 else ("new", "base"))]
+    return [x for p in range(pairs) for x in (variants if p % 2 == 0 else variants[::-1])]
+
+
+def order(pairs: int) -> list[str]:
+    """The run order A B B A A B … of the base and the new version (:func:`rounds`)."""
+    return rounds(("base", "new"), pairs)
+
+
+def json_run(args: Sequence[str]) -> dict:
+    """The JSON object a fresh process ``args`` prints on its last line (its timing of one variant)."""
+    out = subprocess.run(list(args), check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
 
 
 def summary(base: list[float], new: list[float]) -> dict:

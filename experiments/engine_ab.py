@@ -21,12 +21,12 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from ab_speed import json_run, rounds  # experiments/ab_speed.py: the scripts run from experiments/
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "saved" / "engine_ab.json"
@@ -65,13 +65,10 @@ def time_engine(engine: str, budget_s: float) -> dict:
 
 def speed(pairs: int, budget_s: float) -> dict:
     runs: dict = {e: [] for e in ENGINES}
-    for i in range(pairs):
-        for engine in ENGINES if i % 2 == 0 else ENGINES[::-1]:
-            out = subprocess.run([sys.executable, __file__, "time", "--engine", engine, "--budget", str(budget_s)],
-                                 check=True, capture_output=True, text=True).stdout
-            rec = json.loads(out.strip().splitlines()[-1])
-            runs[engine].append(rec)
-            print(json.dumps(rec), flush=True)
+    for engine in rounds(ENGINES, pairs):
+        rec = json_run([sys.executable, __file__, "time", "--engine", engine, "--budget", str(budget_s)])
+        runs[engine].append(rec)
+        print(json.dumps(rec), flush=True)
     keys = ("line_steps_per_s", "vector8_env_steps_per_s", "line_cpu_s_per_step", "vector8_cpu_s_per_vector_step")
     med = {e: {k: statistics.median(r[k] for r in v) for k in keys} for e, v in runs.items()}
     pair_ratios = {k: [f[k] / c[k] for c, f in zip(runs["classic"], runs["fast"])] for k in keys[:2]}

@@ -39,12 +39,12 @@ import json
 import math
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from ab_speed import json_run, rounds  # experiments/ab_speed.py: the scripts run from experiments/
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "saved" / "physics_window_ends.json"
@@ -183,14 +183,11 @@ def time_layout(layout: str, repeats: int) -> dict:
 
 def ab(pairs: int, repeats: int) -> dict:
     runs: dict = {k: [] for k in LAYOUTS}
-    for i in range(pairs):
-        for layout in LAYOUTS if i % 2 == 0 else LAYOUTS[::-1]:
-            out = subprocess.run([sys.executable, __file__, "time", "--layout", layout, "--repeats", str(repeats)],
-                                 check=True, capture_output=True, text=True).stdout
-            rec = json.loads(out.strip().splitlines()[-1])
-            runs[layout].append(rec)
-            print(f"{layout} {rec['line_steps_per_s']:7.2f} line-steps/s  cpu {1e3 * rec['cpu_s_per_step']:6.1f} "
-                  f"ms/step  first {rec['first_step_ms']:6.0f} ms  load {rec['load']:.2f}", flush=True)
+    for layout in rounds(LAYOUTS, pairs):
+        rec = json_run([sys.executable, __file__, "time", "--layout", layout, "--repeats", str(repeats)])
+        runs[layout].append(rec)
+        print(f"{layout} {rec['line_steps_per_s']:7.2f} line-steps/s  cpu {1e3 * rec['cpu_s_per_step']:6.1f} "
+              f"ms/step  first {rec['first_step_ms']:6.0f} ms  load {rec['load']:.2f}", flush=True)
     med = {k: statistics.median(r["line_steps_per_s"] for r in v) for k, v in runs.items()}
     cpu = {k: statistics.median(r["cpu_s_per_step"] for r in v) for k, v in runs.items()}
     loads = [r["load"] for v in runs.values() for r in v]
@@ -230,13 +227,10 @@ def time_env(layout: str, budget_s: float) -> dict:
 
 def env_ab(pairs: int, budget_s: float) -> dict:
     runs: dict = {k: [] for k in ENV_LAYOUTS}
-    for i in range(pairs):
-        for layout in ENV_LAYOUTS if i % 2 == 0 else ENV_LAYOUTS[::-1]:
-            out = subprocess.run([sys.executable, __file__, "time-env", "--layout", layout, "--budget", str(budget_s)],
-                                 check=True, capture_output=True, text=True).stdout
-            rec = json.loads(out.strip().splitlines()[-1])
-            runs[layout].append(rec)
-            print(json.dumps(rec), flush=True)
+    for layout in rounds(ENV_LAYOUTS, pairs):
+        rec = json_run([sys.executable, __file__, "time-env", "--layout", layout, "--budget", str(budget_s)])
+        runs[layout].append(rec)
+        print(json.dumps(rec), flush=True)
     keys = ("line_env_steps_per_s", "line_vector_env_8_steps_per_s")
     med = {k: {m: statistics.median(r[m] for r in v) for m in keys} for k, v in runs.items()}
     new = ENV_LAYOUTS[1]

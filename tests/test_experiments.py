@@ -74,6 +74,7 @@ def test_ab_speed_alternates_the_versions_and_summarises_the_pairs():
     runs = ab.order(3)
     assert runs == ["base", "new", "new", "base", "base", "new"]
     assert runs.count("base") == runs.count("new") == 3
+    assert ab.rounds(("a", "b", "c"), 2) == ["a", "b", "c", "c", "b", "a"]  # the engine and window A/Bs' order
     rep = ab.summary([100.0, 110.0, 90.0], [105.0, 99.0, 99.0])
     assert rep["median_base"] == 100.0 and rep["median_new"] == 99.0
     np.testing.assert_allclose(rep["ratios"], [1.05, 0.9, 1.1])
