@@ -4,6 +4,7 @@ speed drifts.
     python experiments/ab_speed.py --base 782868f                      # the working tree against a commit
     python experiments/ab_speed.py --base main~3 --new main --figure env --pairs 6
     python experiments/ab_speed.py --base 782868f --figure vector --envs 32 --out results/ab_vector32.json
+    python experiments/ab_speed.py --base d1499ed --figure line --new-kwargs '{"engine": "fast"}'
 
 A single `trackenv bench` figure moves by ±10–30 % with the machine's load and clock from one minute to the next,
 more than most changes it is meant to judge. Here each version runs in its own process, one after the other,
@@ -11,12 +12,15 @@ in the order A B B A A B … (so that a drift over the run favours neither), eac
 process after a warm-up; the report gives both medians, the median of the per-pair ratios (new / base) and how
 many pairs favour the new version. ``--base`` and ``--new`` are git revisions checked out as temporary worktrees
 (``--new`` defaults to the working tree itself); each worktree compiles the kernel the first time it runs (a few
-minutes, untimed), and is removed at the end. Figures (``--figure``):
+minutes, untimed), and is removed at the end. ``--new-kwargs`` (a JSON object) gives the new version's env
+keyword arguments the base may not know, e.g. an engine option. Figures (``--figure``):
 
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
 * ``env``: env steps per second of ``trackenv/Tamping-v1`` (random actions);
 * ``line``: line-steps per second of ``trackenv/TampingLine-v0`` (random actions);
+* ``line_vector``: line-steps per second of the default line's native vector env (``--envs`` lines, random
+  actions);
 * ``seed``: passes per second of the seed pass at dt = 1e-4 (the benchmark's ``seed_pass``).
 """
 
@@ -38,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 _GYM_STEPS = """
 import time, gymnasium as gym
 import trackenv.envs
-env = gym.make("ENV_ID"); env.reset(seed=0); env.action_space.seed(0)
+env = gym.make("ENV_ID"{kwargs}); env.reset(seed=0); env.action_space.seed(0)
 for _ in range(WARM): env.step(env.action_space.sample())
 t = time.perf_counter()
 for _ in range({steps}):
@@ -73,6 +77,15 @@ if __name__ == "__main__":
 """,
     "env": _GYM_STEPS.replace("ENV_ID", "trackenv/Tamping-v1").replace("WARM", "5"),
     "line": _GYM_STEPS.replace("ENV_ID", "trackenv/TampingLine-v0").replace("WARM", "3"),
+    "line_vector": """
+import time
+from trackenv.envs.line import TampingLineVectorEnv
+env = TampingLineVectorEnv({envs}, scenario="default"{kwargs}); env.reset(seed=0); env.action_space.seed(0)
+for _ in range(3): env.step(env.action_space.sample())
+t = time.perf_counter()
+for _ in range({steps}): env.step(env.action_space.sample())
+print({envs} * {steps} / (time.perf_counter() - t))
+""",
     "seed": """
 import time
 from trackenv.physics.dynamics import simulate_pass
@@ -87,7 +100,9 @@ print({steps} / (time.perf_counter() - t))
 }
 FIGURES = tuple(_SNIPPETS)
 _UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s", "line": "line-steps/s",
-          "seed": "passes/s"}
+          "line_vector": "line-steps/s", "seed": "passes/s"}
+#: the figures whose env takes keyword arguments (``--new-kwargs``)
+_TAKES_KWARGS = ("env", "line", "line_vector")
 
 
 def rounds(variants: Sequence[str], pairs: int) -> list[str]:
@@ -141,6 +156,20 @@ def _run(tree: Path, code: str) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def _keyword_arguments(text: str, figure: str, parser: argparse.ArgumentParser) -> dict:
+    """``--new-kwargs`` as a dict of names to JSON values (an error naming the option if it is not one, or if the
+    figure's env takes none)."""
+    try:
+        given = json.loads(text)
+    except json.JSONDecodeError as e:
+        parser.error(f"--new-kwargs must be a JSON object, got {text!r} ({e})")
+    if not isinstance(given, dict) or not all(isinstance(k, str) and k.isidentifier() for k in given):
+        parser.error(f"--new-kwargs must be a JSON object of keyword names, got {text!r}")
+    if given and figure not in _TAKES_KWARGS:
+        parser.error(f"--new-kwargs applies to the figures {list(_TAKES_KWARGS)}, not {figure!r}")
+    return given
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", required=True, help="git revision of the base version")
@@ -151,12 +180,19 @@ def main(argv: list[str] | None = None) -> dict:
                         help="steps (passes for seed) per run (default: vector/sharded 40, env 300, line 60, seed 20)")
     parser.add_argument("--envs", type=int, default=32, help="envs of the vector figures (default 32)")
     parser.add_argument("--workers", type=int, default=2, help="processes of the sharded figure (default 2)")
+    parser.add_argument("--new-kwargs", default="{}",
+                        help="JSON object of keyword arguments for the new version's env (figures env, line, "
+                             "line_vector), e.g. '{\"engine\": \"fast\"}'")
     parser.add_argument("--out", default="", help="write the JSON report here")
     args = parser.parse_args(argv)
     if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
         parser.error("pairs, steps, envs and workers must be >= 1")
-    steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "seed": 20}[args.figure]
-    code = _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers)
+    new_kwargs = _keyword_arguments(args.new_kwargs, args.figure, parser)
+    steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "line_vector": 10,
+                           "seed": 20}[args.figure]
+    codes = {side: _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers,
+                                                 kwargs="".join(f", {k}={v!r}" for k, v in given.items()))
+             for side, given in (("base", {}), ("new", new_kwargs))}
     runs = order(args.pairs)
     with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
         trees = {"base": _checkout(args.base, Path(tmp) / "base")}
@@ -164,17 +200,17 @@ def main(argv: list[str] | None = None) -> dict:
         try:
             for name, tree in trees.items():  # compile (or load) each version's kernel, untimed
                 print(f"warming {name} ({tree}) ...", file=sys.stderr, flush=True)
-                _run(tree, code)
+                _run(tree, codes[name])
             figures: dict[str, list[float]] = {"base": [], "new": []}
             for i, name in enumerate(runs):
-                figures[name].append(_run(trees[name], code))
+                figures[name].append(_run(trees[name], codes[name]))
                 print(f"run {i + 1}/{len(runs)} {name}: {figures[name][-1]:.2f}", file=sys.stderr, flush=True)
         finally:
             for tree in trees.values():
                 if tree != ROOT:
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
     report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
-              "new_rev": args.new or "working tree",
+              "new_rev": args.new or "working tree", "new_kwargs": new_kwargs,
               "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
               **summary(figures["base"], figures["new"])}
     print(f"{args.figure} ({report['unit']}), {report['pairs']} pairs: base {report['median_base']:.2f}, new "

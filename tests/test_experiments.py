@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 from pathlib import Path
 
@@ -83,6 +84,18 @@ def test_ab_speed_alternates_the_versions_and_summarises_the_pairs():
         ab.order(0)
     with pytest.raises(ValueError, match="equal, non-empty"):
         ab.summary([1.0], [])
+
+
+def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
+    ab = _script("ab_speed")
+    parser = argparse.ArgumentParser()
+    assert ab._keyword_arguments('{"engine": "fast"}', "line", parser) == {"engine": "fast"}
+    code = ab._SNIPPETS["line_vector"].format(envs=8, steps=2, workers=1, kwargs=", engine='fast'")
+    assert "TampingLineVectorEnv(8, scenario=\"default\", engine='fast')" in code
+    for text, figure in (("[1]", "line"), ("{not json", "line"), ('{"engine": "fast"}', "seed"),
+                         ('{"1x": 2}', "line")):
+        with pytest.raises(SystemExit):
+            ab._keyword_arguments(text, figure, parser)
     with pytest.raises(ValueError, match="equal, non-empty"):
         ab.summary([], [])
 
