@@ -17,7 +17,8 @@ keyword arguments the base may not know, e.g. an engine option. Figures (``--fig
 
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
-* ``env``: env steps per second of ``trackenv/Tamping-v1`` (random actions);
+* ``env``: env steps per second of ``--env-id`` (default ``trackenv/Tamping-v1``; ``--base-env-id`` for a base that
+  registered it under another id), random actions;
 * ``line``: line-steps per second of ``trackenv/TampingLine-v0`` (random actions);
 * ``line_vector``: line-steps per second of the default line's native vector env (``--envs`` lines, random
   actions);
@@ -75,7 +76,7 @@ if __name__ == "__main__":
     print({envs} * {steps} / (time.perf_counter() - t))
     env.close()
 """,
-    "env": _GYM_STEPS.replace("ENV_ID", "trackenv/Tamping-v1").replace("WARM", "5"),
+    "env": _GYM_STEPS.replace("ENV_ID", "{env_id}").replace("WARM", "5"),
     "line": _GYM_STEPS.replace("ENV_ID", "trackenv/TampingLine-v0").replace("WARM", "3"),
     "line_vector": """
 import time
@@ -180,6 +181,8 @@ def main(argv: list[str] | None = None) -> dict:
                         help="steps (passes for seed) per run (default: vector/sharded 40, env 300, line 60, seed 20)")
     parser.add_argument("--envs", type=int, default=32, help="envs of the vector figures (default 32)")
     parser.add_argument("--workers", type=int, default=2, help="processes of the sharded figure (default 2)")
+    parser.add_argument("--env-id", default="trackenv/Tamping-v1", help="the env figure's id (default Tamping-v1)")
+    parser.add_argument("--base-env-id", default=None, help="the env figure's id on the base (default --env-id)")
     parser.add_argument("--new-kwargs", default="{}",
                         help="JSON object of keyword arguments for the new version's env (figures env, line, "
                              "line_vector), e.g. '{\"engine\": \"fast\"}'")
@@ -190,7 +193,9 @@ def main(argv: list[str] | None = None) -> dict:
     new_kwargs = _keyword_arguments(args.new_kwargs, args.figure, parser)
     steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "line_vector": 10,
                            "seed": 20}[args.figure]
+    env_ids = {"base": args.base_env_id or args.env_id, "new": args.env_id}
     codes = {side: _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers,
+                                                 env_id=env_ids[side],
                                                  kwargs="".join(f", {k}={v!r}" for k, v in given.items()))
              for side, given in (("base", {}), ("new", new_kwargs))}
     runs = order(args.pairs)
@@ -211,6 +216,7 @@ def main(argv: list[str] | None = None) -> dict:
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
     report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
               "new_rev": args.new or "working tree", "new_kwargs": new_kwargs,
+              **({"env_ids": env_ids} if args.figure == "env" else {}),
               "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
               **summary(figures["base"], figures["new"])}
     print(f"{args.figure} ({report['unit']}), {report['pairs']} pairs: base {report['median_base']:.2f}, new "

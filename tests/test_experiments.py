@@ -92,6 +92,8 @@ def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
     assert ab._keyword_arguments('{"engine": "fast"}', "line", parser) == {"engine": "fast"}
     code = ab._SNIPPETS["line_vector"].format(envs=8, steps=2, workers=1, kwargs=", engine='fast'")
     assert "TampingLineVectorEnv(8, scenario=\"default\", engine='fast')" in code
+    code = ab._SNIPPETS["env"].format(envs=1, steps=2, workers=1, env_id="trackenv/Tamping-v0", kwargs="")
+    assert 'gym.make("trackenv/Tamping-v0")' in code
     for text, figure in (("[1]", "line"), ("{not json", "line"), ('{"engine": "fast"}', "seed"),
                          ('{"1x": 2}', "line")):
         with pytest.raises(SystemExit):
