@@ -146,12 +146,12 @@ def _run(tree: Path, code: str) -> float:
     """The figure printed by ``code`` run in a fresh process on the trackenv of ``tree``."""
     check = f"import trackenv, sys; assert trackenv.__file__.startswith({str(tree)!r}), trackenv.__file__\n"
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:  # a file: spawn needs a __main__
-        f.write(check + code)
-    try:
-        out = subprocess.run([sys.executable, f.name], cwd=tree, env=env, capture_output=True, text=True)
-    finally:
-        os.unlink(f.name)
+    # a file (spawn needs a __main__) in a folder of its own: the script's folder leads sys.path, and a stray
+    # module in the shared temporary folder (a select.py, say) would shadow the standard library's
+    with tempfile.TemporaryDirectory(prefix="ab_speed_run_") as folder:
+        script = Path(folder) / "figure.py"
+        script.write_text(check + code)
+        out = subprocess.run([sys.executable, str(script)], cwd=tree, env=env, capture_output=True, text=True)
     if out.returncode != 0:
         raise RuntimeError(f"the figure failed in {tree}:\n{out.stderr[-2000:]}")
     return float(out.stdout.strip().splitlines()[-1])
