@@ -370,7 +370,9 @@ class _LineTrainer:
             fit = fit_choices(self.model, pooled, s.reward_scale, epochs=s.fit_epochs, margin=s.fit_margin,
                               seed=seed + it)
             pi["line_steps"] += n_episodes * H
-            pi["fork_steps"] += int(np.sum(H - d["step"]))
+            # a fork is one segment where each carries one section, else its whole line (line_forks)
+            pi["fork_steps"] += int(np.sum(H - d["step"])) * (1 if config.sections_per_segment == 1
+                                                               else config.n_segments)
             rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
                                    "other_choice_cheaper": float(np.mean((d["q_do"] < d["q_skip"]) != d["did"])),
                                    "samples_per_choice": {name: int(np.sum(d["choice"] == i))
@@ -453,8 +455,8 @@ class _LineTrainer:
         return {"iterations": pi["history"], "policy_iteration_seconds": pi["seconds"],
                 "policy_runs_line_steps": pi["line_steps"], "fork_segment_steps": pi["fork_steps"],
                 # what the physics did per second of the policy iteration: line-steps of the policies' own runs,
-                # and the forks' section-steps counted as line-steps (a line-step is n_sections section-steps)
-                "line_steps_per_second": (pi["line_steps"] + pi["fork_steps"] / config.n_sections)
+                # and the forks' segment-steps counted as line-steps (a line-step is n_segments segment-steps)
+                "line_steps_per_second": (pi["line_steps"] + pi["fork_steps"] / config.n_segments)
                 / max(pi["seconds"], 1e-9),
                 "baseline": None if b is None else {"policy": b.policy, "params": b.params,
                                                     "mean_cost": float(b.cost.mean()), "seeds": b.seeds.tolist()},
@@ -465,17 +467,22 @@ class _LineTrainer:
 
 
 def _line_env_id(config: LineConfig) -> str:
-    """The registered TampingLine id whose preset ``config`` is (any horizon), else :data:`LINE_ENV_ID` (the
-    hyper-parameter file's entry): what a saved policy's metadata says it was trained on."""
+    """The registered id whose line preset ``config`` is (any horizon; a TampingLine id, or ``trackenv/Tamping-v1``
+    for the 60 m track), else :data:`LINE_ENV_ID` (the hyper-parameter file's entry): what a saved policy's
+    metadata says it was trained on."""
     import gymnasium as gym
 
     import trackenv  # noqa: F401  (registers the ids)
-    from trackenv.envs.line_config import scenario
+    from trackenv.envs.line_config import SCENARIOS, scenario
 
-    for env_id, spec in sorted(gym.registry.items()):
-        name = spec.kwargs.get("scenario")
-        if str(spec.entry_point).endswith(":TampingLine") and name and config.replace(horizon_years=10.0) == scenario(
-                name):
+    from ..evaluation.line_compare import scenario_of
+
+    for env_id in sorted(gym.registry):
+        try:
+            name = scenario_of(env_id)
+        except ValueError:  # not an id of a line preset
+            continue
+        if name in SCENARIOS and config.replace(horizon_years=10.0) == scenario(name):
             return env_id
     return LINE_ENV_ID
 
