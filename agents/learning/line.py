@@ -7,9 +7,12 @@
   2. Each iteration runs the current policy on ``episodes_per_iteration`` new training episodes and prices the
      other choice of a random subset of its decisions by forking that one section and letting the policy go on
      deciding for it (:func:`~trackenv_agents.learning.line_counterfactual.section_counterfactuals`: exact replays on
-     common random numbers). The network is then fitted to the cheaper choice over every decision priced so far,
-     weighted by what is at stake (:func:`~trackenv_agents.learning.imitation.fit_choices`): one step of approximate
-     policy iteration per iteration, the data of all earlier policies kept (as AggreVaTe does).
+     common random numbers); where sections share a physics segment (the 60 m track, ``"track60"``) the fork is
+     the whole line, priced at the whole line's cost
+     (:func:`~trackenv_agents.learning.line_counterfactual.line_forks`). The network is then fitted to the cheaper
+     choice over every decision priced so far, weighted by what is at stake
+     (:func:`~trackenv_agents.learning.imitation.fit_choices`): one step of approximate policy iteration per
+     iteration, the data of all earlier policies kept (as AggreVaTe does).
   3. After each iteration the policy is scored on the held-out ``eval_seeds`` through the harness, paired with
      the advisor on the same episodes (common random numbers); the best iteration is kept (``best_model.zip``).
   4. ``n_timesteps`` > 0 adds MaskablePPO on :class:`~trackenv_agents.learning.sb3_vec.SectionAgentsVecEnv`
