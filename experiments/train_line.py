@@ -9,6 +9,10 @@ the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamp
 ``trackenv evaluate --env trackenv/TampingLine-v0`` then scores next to the rules.
 ``trackenv train --env trackenv/TampingLine-v0`` runs the same training.
 
+The 60 m track (``trackenv/Tamping-v1``, six 10 m sections on one physics segment): ``--scenario track60`` (each
+decision priced forks the whole line, :func:`~trackenv_agents.learning.line_counterfactual.line_forks`);
+``--export`` then copies it to ``agents/learning/pretrained/cpi_track60.zip`` (``cpi-track60-agent``).
+
 The lines with every choice: ``--scenario wet --advisor choice-threshold`` trains the network's tamping with the
 wet line's tuned choice rule as advisor (the agent answers in choice codes, the rule's other choices with its
 tamping); ``--export`` then copies it to ``agents/learning/pretrained/cpi_choice_line.zip`` (``cpi-choice-agent``).
@@ -28,11 +32,13 @@ from trackenv_agents.learning.line import (
     train_line,
 )
 from trackenv_agents.learning.tamping import DEFAULT_TRAIN_SEED
+from trackenv_agents.shipped import TRACK60_PRETRAINED_FILE
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", choices=["small", "default", "hard", "choices", "wet", "defects"], default="default")
+    p.add_argument("--scenario", choices=["small", "default", "hard", "choices", "wet", "defects", "track60"],
+                   default="default", help="the line preset (track60: the 60 m track of trackenv/Tamping-v1)")
     p.add_argument("--advisor", default=None,
                    help="the advisor rule (default: ppo.yml's); a choice rule (choice-threshold) on the lines with "
                         "every choice")
@@ -56,7 +62,7 @@ def main(argv=None) -> None:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--export", action="store_true",
                    help=f"copy the best iteration to {DEFAULT_LINE_PRETRAINED} ({DEFAULT_CHOICE_PRETRAINED} with a "
-                        "choice rule as advisor)")
+                        f"choice rule as advisor, {TRACK60_PRETRAINED_FILE} on track60)")
     a = p.parse_args(argv)
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.line_compare import parse_seeds
@@ -89,7 +95,8 @@ def main(argv=None) -> None:
         from trackenv_agents.rules.choices import CHOICE_RULES
 
         choice = a.advisor in CHOICE_RULES
-        dest = DEFAULT_CHOICE_PRETRAINED if choice else DEFAULT_LINE_PRETRAINED
+        dest = TRACK60_PRETRAINED_FILE if a.scenario == "track60" else (
+            DEFAULT_CHOICE_PRETRAINED if choice else DEFAULT_LINE_PRETRAINED)
         model = best if best.exists() else path
         print(f"exported {model} to {export_line_policy(model, dest)}")
 

@@ -162,3 +162,21 @@ def test_network_agent_script_builds_network_policies_and_pairs_them_with_the_be
     assert rows["network(section-threshold)"]["better_fraction"] == pytest.approx(1 / 3)
     assert payload["wall_s"] == 1.0 and payload["cpu_s"] == 2.0  # one run, kept in every policy's file
     assert json.loads((tmp_path / "report.json").read_text()) == payload
+
+
+def test_train_line_trains_on_the_60_m_track(tmp_path, capsys):
+    """``train_line.py --scenario track60``: the 60 m track's sections share a segment, so its decisions are priced
+    by whole-line forks; one short iteration runs, scored on held-out episodes against the 60 m track's rule, and
+    the saved policy says it was trained on trackenv/Tamping-v1."""
+    import json
+
+    _script("train_line").main(["--scenario", "track60", "--horizon-years", "1", "--iterations", "1", "--episodes",
+                                "2", "--eval-seeds", "10000:10002", "--out", str(tmp_path), "--no-progress"])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    (it,) = summary["iterations"]
+    assert it["samples"] > 0 and summary["fork_segment_steps"] > 0
+    assert summary["baseline"]["policy"] == "grouped-threshold" and summary["baseline"]["params"] == {
+        "trigger_mm": 3.0, "include_mm": 1.0}  # the 60 m track's tuned rule
+    meta = json.loads((tmp_path / "model_meta.json").read_text())
+    assert meta["env_id"] == "trackenv/Tamping-v1" and meta["config"]["sections_per_segment"] == 6
+    assert "iteration 0: held-out" in capsys.readouterr().out

@@ -7,9 +7,12 @@
   2. Each iteration runs the current policy on ``episodes_per_iteration`` new training episodes and prices the
      other choice of a random subset of its decisions by forking that one section and letting the policy go on
      deciding for it (:func:`~trackenv_agents.learning.line_counterfactual.section_counterfactuals`: exact replays on
-     common random numbers). The network is then fitted to the cheaper choice over every decision priced so far,
-     weighted by what is at stake (:func:`~trackenv_agents.learning.imitation.fit_choices`): one step of approximate
-     policy iteration per iteration, the data of all earlier policies kept (as AggreVaTe does).
+     common random numbers); where sections share a physics segment (the 60 m track, ``"track60"``) the fork is
+     the whole line, priced at the whole line's cost
+     (:func:`~trackenv_agents.learning.line_counterfactual.line_forks`). The network is then fitted to the cheaper
+     choice over every decision priced so far, weighted by what is at stake
+     (:func:`~trackenv_agents.learning.imitation.fit_choices`): one step of approximate policy iteration per
+     iteration, the data of all earlier policies kept (as AggreVaTe does).
   3. After each iteration the policy is scored on the held-out ``eval_seeds`` through the harness, paired with
      the advisor on the same episodes (common random numbers); the best iteration is kept (``best_model.zip``).
   4. ``n_timesteps`` > 0 adds MaskablePPO on :class:`~trackenv_agents.learning.sb3_vec.SectionAgentsVecEnv`
@@ -370,7 +373,9 @@ class _LineTrainer:
             fit = fit_choices(self.model, pooled, s.reward_scale, epochs=s.fit_epochs, margin=s.fit_margin,
                               seed=seed + it)
             pi["line_steps"] += n_episodes * H
-            pi["fork_steps"] += int(np.sum(H - d["step"]))
+            # a fork is one segment where each carries one section, else its whole line (line_forks)
+            pi["fork_steps"] += int(np.sum(H - d["step"])) * (1 if config.sections_per_segment == 1
+                                                               else config.n_segments)
             rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
                                    "other_choice_cheaper": float(np.mean((d["q_do"] < d["q_skip"]) != d["did"])),
                                    "samples_per_choice": {name: int(np.sum(d["choice"] == i))
@@ -453,8 +458,8 @@ class _LineTrainer:
         return {"iterations": pi["history"], "policy_iteration_seconds": pi["seconds"],
                 "policy_runs_line_steps": pi["line_steps"], "fork_segment_steps": pi["fork_steps"],
                 # what the physics did per second of the policy iteration: line-steps of the policies' own runs,
-                # and the forks' section-steps counted as line-steps (a line-step is n_sections section-steps)
-                "line_steps_per_second": (pi["line_steps"] + pi["fork_steps"] / config.n_sections)
+                # and the forks' segment-steps counted as line-steps (a line-step is n_segments segment-steps)
+                "line_steps_per_second": (pi["line_steps"] + pi["fork_steps"] / config.n_segments)
                 / max(pi["seconds"], 1e-9),
                 "baseline": None if b is None else {"policy": b.policy, "params": b.params,
                                                     "mean_cost": float(b.cost.mean()), "seeds": b.seeds.tolist()},
@@ -465,17 +470,22 @@ class _LineTrainer:
 
 
 def _line_env_id(config: LineConfig) -> str:
-    """The registered TampingLine id whose preset ``config`` is (any horizon), else :data:`LINE_ENV_ID` (the
-    hyper-parameter file's entry): what a saved policy's metadata says it was trained on."""
+    """The registered id whose line preset ``config`` is (any horizon; a TampingLine id, or ``trackenv/Tamping-v1``
+    for the 60 m track), else :data:`LINE_ENV_ID` (the hyper-parameter file's entry): what a saved policy's
+    metadata says it was trained on."""
     import gymnasium as gym
 
     import trackenv  # noqa: F401  (registers the ids)
-    from trackenv.envs.line_config import scenario
+    from trackenv.envs.line_config import SCENARIOS, scenario
 
-    for env_id, spec in sorted(gym.registry.items()):
-        name = spec.kwargs.get("scenario")
-        if str(spec.entry_point).endswith(":TampingLine") and name and config.replace(horizon_years=10.0) == scenario(
-                name):
+    from ..evaluation.line_compare import scenario_of
+
+    for env_id in sorted(gym.registry):
+        try:
+            name = scenario_of(env_id)
+        except ValueError:  # not an id of a line preset
+            continue
+        if name in SCENARIOS and config.replace(horizon_years=10.0) == scenario(name):
             return env_id
     return LINE_ENV_ID
 

@@ -20,6 +20,16 @@ plus the possession wherever the section tamps in a step no other section of its
 possession). Approximation: the other sections keep what they did on the policy's run (a fork does not move
 their campaigns), and a fork ignores the annual budget (the default line has none).
 
+**Where sections share a physics segment** (``sections_per_segment`` > 1, e.g. the 60 m track, ``"track60"``, six
+10 m sections on one segment) a section's tamping lifts its neighbours' track too, so a section cannot be forked
+alone. There a decision priced forks its **whole line** (:func:`line_forks`: an exact copy of the line's state and
+pre-drawn noise, so both branches see the same future draws): the fork makes the other choice on the section and
+the policy's choices on the line's other sections at that step, then the policy decides every section of the fork
+from the next step on (its campaigns may move). Both choices are priced at the whole line's cost to go: every
+section's costs and the possession, as the env charges them (the annual budget included). The same decisions are
+drawn, at the same rates, as one-section forks would draw; a policy with a recurrent state is refused there (a
+fork could not tell what it remembers of the other choice).
+
 **With every choice** (a config whose action type is the choice codes,
 :func:`~trackenv.envs.choices.action_type_for`) a decision priced is one choice of
 :data:`~trackenv_agents.learning.line_policy.LEARNABLE_CHOICES` made or not (``choices``: which are priced):
@@ -48,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["flipped_choices", "marginal_possession", "section_counterfactuals"]
+__all__ = ["flipped_choices", "line_forks", "marginal_possession", "section_counterfactuals"]
 
 
 def marginal_possession(config: Any, codes: np.ndarray, lines: np.ndarray, sections: np.ndarray,
@@ -185,6 +195,9 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     policy = bind_policy(policy, c)
     advisor = None if advisor is None else bind_policy(advisor, c)
     names = [n for n, _ in FEATURES] + (list(ADVISOR_FEATURES) + list(CHOICE_FEATURES) if extended else [])
+    if c.sections_per_segment > 1:
+        return _line_fork_counterfactuals(c, seeds, policy, advisor, choices, extended, names, focus_rate, other_rate,
+                                          seed, progress)
     rng = np.random.default_rng(seed)
     env = TampingLineVectorEnv(E, c, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(c))
     obs, _ = env.reset(seed=seeds)
@@ -217,13 +230,8 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
         new_rows = []
         for k, choice in enumerate(choices):
             feats = section_features(obs, advisor, advice, choice if extended else None)
-            other = flipped_choices(choice, codes, advice)
-            did = _made(choice, codes)
-            rate = _query_rates(feats, names, did, focus_rate, other_rate, choice, advice)
-            # the other choice must fit the step's possession with the line's other track work (the env's capacity)
-            fits = line_work - work_on_sections(work, codes, lengths) + work_on_sections(work, other, lengths) \
-                <= c.capacity + 1e-9
-            ask = allowed & fits & open_[choice] & (other != codes) & (rng.random((E, S)) < rate)
+            ask, other, did, rate = _asked(c, choice, codes, advice, feats, names, allowed & open_[choice], line_work,
+                                           rng, focus_rate, other_rate)
             # forks of this step: copies of the sections as they are now, making the other choice
             b_new, j_new = np.nonzero(ask)
             new = np.arange(n_forks, n_forks + b_new.size)
@@ -297,6 +305,26 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
             "seed": np.asarray(seeds)[f_line[rows]], "step": f_step[rows], "section": f_sec[rows]}
 
 
+def _asked(config: Any, choice: str, codes: np.ndarray, advice: np.ndarray | None, features: np.ndarray,
+           names: Sequence[str], may_ask: np.ndarray, line_work: np.ndarray, rng: np.random.Generator,
+           focus_rate: float, other_rate: float) -> tuple[np.ndarray, ...]:
+    """Which decisions ``choice`` of the step's ``codes`` (E, S) to price: ``(ask, other, did, rate)``, each (E, S):
+    the decisions drawn from ``rng`` at their rate (:func:`_query_rates`) among those ``may_ask`` allows whose flip
+    (:func:`flipped_choices`) changes the code and fits the step's possession with the line's other track work
+    (``line_work`` (E, 1): the step's work in tamping-section equivalents; the env's capacity); the other choice;
+    whether the policy made the choice; the rate."""
+    from trackenv.envs.choices import work_on_sections, work_per_code
+
+    work, lengths = work_per_code(config.choice_work), config.length_factors
+    other = flipped_choices(choice, codes, advice)
+    did = _made(choice, codes)
+    rate = _query_rates(features, names, did, focus_rate, other_rate, choice, advice)
+    fits = line_work - work_on_sections(work, codes, lengths) + work_on_sections(work, other, lengths) \
+        <= config.capacity + 1e-9
+    ask = may_ask & fits & (other != codes) & (rng.random(codes.shape) < rate)
+    return ask, other, did, rate
+
+
 def _made(choice: str, codes: np.ndarray) -> np.ndarray:
     """Bool, shaped like ``codes``: the sections whose codes make the choice ``choice`` (a tamping: a tamping or a
     renewal)."""
@@ -307,3 +335,151 @@ def _made(choice: str, codes: np.ndarray) -> np.ndarray:
     if choice == "tamp":
         return tamping_codes(codes)
     return np.asarray(codes) == (SPOT_TAMP if choice == "spot_tamp" else DRAINAGE)
+
+
+def line_forks(config: Any, seeds: Sequence[int], policy: Any,
+               choose: Callable[[int, dict[str, np.ndarray], np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+               progress: Callable[[int], Any] | None = None) -> dict[str, np.ndarray]:
+    """Run ``policy`` (SB3 ``predict`` on batched line observations, deterministic, without a recurrent state;
+    bound to ``config``) on the episodes ``seeds`` of ``config`` (one batch), and fork whole lines of it: at each
+    step ``t``, ``choose(t, obs, codes, allowed)`` (the step's observation, the policy's codes and the sections
+    that may get track work, each (E, S)) names the lines
+    to fork (n,) and each fork's codes at that step (n, S); a fork is an exact copy of its line as it is then
+    (:meth:`~trackenv.envs.line_episode.LineBatch.get_state`: its physics and its pre-drawn residuals and
+    measurement errors, so both branches see the same future draws), makes those codes at ``t`` and from
+    ``t + 1`` on every section of it, the forked one included, does what ``policy`` decides on the fork's line.
+
+    Each branch pays what the env charges its whole line (every section's costs and the possession, k€; the
+    env's reward with the sign turned), from ``t`` to the horizon. Returns ``line`` and ``step`` (n,) of every
+    fork in the order chosen, ``cost`` (n,) the fork's cost to go, ``applied`` (n, S) the codes the env carried
+    out at the fork's step (over capacity it drops some), ``to_go`` (H, E) the policy's own line's cost from each
+    step on, and ``codes`` (H, E, S) the codes the env carried out on the policy's run. A fork whose codes are
+    the policy's at its step costs exactly what the policy's run costs from there.
+
+    Why whole lines: where several sections share a physics segment (``sections_per_segment`` > 1) a section's
+    work changes its neighbours' track, so a section cannot be forked alone
+    (:meth:`~trackenv.envs.line_episode.LineBatch.copy_rows` refuses)."""
+    from gymnasium.vector import AutoresetMode
+
+    from trackenv.envs.choices import action_type_for
+    from trackenv.envs.line import TampingLineVectorEnv
+    from trackenv.envs.line_episode import LineBatch
+
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must not be empty")
+    c = config
+    E, S, H = len(seeds), c.n_sections, c.horizon_steps
+    env = TampingLineVectorEnv(E, c, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(c))
+    obs, _ = env.reset(seed=seeds)
+    base, keys = env.batch, list(obs)
+    forks = LineBatch(c, 4 * E)
+    f_line, f_step = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    f_cost, f_applied = np.zeros(0), np.zeros((0, S), dtype=np.int64)
+    to_go, base_codes = np.zeros((H, E)), np.zeros((H, E, S), dtype=np.int64)
+    for t in range(H):
+        codes, state = policy.predict(obs, state=None, episode_start=np.full(E, t == 0))
+        if state is not None:
+            raise ValueError("forks of whole lines need a policy without a recurrent state (got a state of type "
+                             f"{type(state).__name__}): a fork could not tell what its policy remembers of the "
+                             "other choice")
+        codes = np.asarray(codes, dtype=np.int64).reshape(E, S)
+        lines, first = choose(t, obs, codes, base.allowed().reshape(E, S))
+        lines, first = np.asarray(lines, dtype=np.int64), np.asarray(first, dtype=np.int64).reshape(-1, S)
+        if lines.size != len(first):
+            raise ValueError(f"choose gave {lines.size} lines and {len(first)} rows of codes")
+        old = np.arange(f_line.size)
+        forks = _with_room(forks, old.size, old.size + lines.size)
+        new = np.arange(old.size, old.size + lines.size)
+        for row, line in zip(new, lines, strict=True):
+            forks.set_state(int(row), base.get_state(int(line)))
+        want = np.zeros((forks.n_lines, S), dtype=np.int64)
+        want[new] = first
+        if old.size:  # the forks made earlier: their policy decides on their own lines
+            seen = [forks.observation(int(b)) for b in old]
+            decided, _ = policy.predict({k: np.stack([o[k] for o in seen]) for k in keys}, state=None,
+                                        episode_start=np.zeros(old.size, dtype=bool))
+            want[old] = np.asarray(decided, dtype=np.int64).reshape(old.size, S)
+        f_line, f_step = np.concatenate([f_line, lines]), np.concatenate([f_step, np.full(lines.size, t)])
+        f_cost = np.concatenate([f_cost, np.zeros(lines.size)])
+        live = np.arange(f_line.size)
+        if live.size:
+            rewards, _, infos = forks.advance(want, live.tolist(), [])
+            f_cost -= rewards[live]
+            f_applied = np.concatenate([f_applied, np.array([infos[int(b)]["section_choices"] for b in new],
+                                                            dtype=np.int64).reshape(-1, S)])
+        obs, reward, _, _, info = env.step(codes.astype(np.int8))
+        to_go[:t + 1] -= np.asarray(reward, dtype=float)  # summed in the order a fork sums its own
+        base_codes[t] = np.asarray(info["section_choices"], dtype=np.int64)
+        if progress is not None:
+            progress(1)
+    env.close()
+    return {"line": f_line, "step": f_step, "cost": f_cost, "applied": f_applied,
+            "to_go": to_go, "codes": base_codes}
+
+
+def _with_room(forks: Any, used: int, needed: int) -> Any:
+    """``forks`` (a LineBatch whose first ``used`` lines are in play) if it has ``needed`` lines, else a batch of
+    twice as many (or ``needed``) with those lines copied over exactly."""
+    if needed <= forks.n_lines:
+        return forks
+    from trackenv.envs.line_episode import LineBatch
+
+    grown = LineBatch(forks.config, max(2 * forks.n_lines, needed))
+    for line in range(used):
+        grown.set_state(line, forks.get_state(line))
+    return grown
+
+
+def _line_fork_counterfactuals(config: Any, seeds: list[int], policy: Any, advisor: Any, choices: tuple[str, ...],
+                               extended: bool, names: list[str], focus_rate: float, other_rate: float, seed: int,
+                               progress: Callable[[int], Any] | None) -> dict[str, np.ndarray]:
+    """:func:`section_counterfactuals` where sections share a segment: each decision priced forks its whole line
+    (:func:`line_forks`; the line's other sections make the policy's choices at the step, and from the next step
+    on the policy decides every section of the fork), and both choices are priced at the whole line's cost to go
+    (every section and the possession), with the same decisions drawn as one-section forks would be."""
+    from trackenv.envs.choices import work_on_sections, work_per_code
+
+    from .line_policy import choice_open, section_features
+
+    c = config
+    rng = np.random.default_rng(seed)
+    work = work_per_code(c.choice_work)
+    asked: dict[str, list] = {k: [] for k in ("features", "choice", "did", "weight", "section", "own",
+                                                      "first")}
+
+    def choose(t: int, obs: dict[str, np.ndarray], codes: np.ndarray,
+               allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        E = codes.shape[0]
+        advice = None if advisor is None else np.asarray(
+            advisor.predict(obs, state=None, episode_start=np.full(E, t == 0))[0], dtype=np.int64).reshape(codes.shape)
+        line_work = work_on_sections(work, codes, c.length_factors).sum(axis=1, keepdims=True)
+        lines, firsts = [], []
+        for k, choice in enumerate(choices):
+            feats = section_features(obs, advisor, advice, choice if extended else None)
+            may = allowed & (np.ones(codes.shape, bool) if advice is None else choice_open(choice, obs, advice))
+            ask, other, did, rate = _asked(c, choice, codes, advice, feats, names, may, line_work, rng, focus_rate,
+                                           other_rate)
+            b, j = np.nonzero(ask)
+            first = codes[b].copy()
+            first[np.arange(b.size), j] = other[b, j]
+            for key, value in (("features", feats[b, j]), ("choice", np.full(b.size, k)), ("did", did[b, j]),
+                               ("weight", 1.0 / rate[b, j]), ("section", j), ("own", codes[b, j]),
+                               ("first", other[b, j])):
+                asked[key].append(value)
+            lines.append(b)
+            firsts.append(first)
+        return np.concatenate(lines), np.concatenate(firsts)
+
+    run = line_forks(c, seeds, policy, choose, progress)
+    d = {k: np.concatenate(v) for k, v in asked.items()}
+    line, step, section = run["line"], run["step"], d["section"]
+    # a choice the env did not carry out as asked (over capacity), on either branch, is not a sample
+    valid = (run["codes"][step, line, section] == d["own"]) \
+        & (run["applied"][np.arange(line.size), section] == d["first"])
+    did = d["did"].astype(bool)[valid]
+    q_policy, q_other = run["to_go"][step, line][valid], run["cost"][valid]
+    return {"features": d["features"].astype(np.float32)[valid], "choice": d["choice"].astype(np.int64)[valid],
+            "q_do": np.where(did, q_policy, q_other), "q_skip": np.where(did, q_other, q_policy), "did": did,
+            "weight": d["weight"][valid], "seed": np.asarray(seeds)[line[valid]], "step": step[valid],
+            "section": section[valid]}

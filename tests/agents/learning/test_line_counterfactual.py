@@ -7,7 +7,7 @@ import pytest
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.harness import bind_policy
-from trackenv_agents.learning.line_counterfactual import section_counterfactuals
+from trackenv_agents.learning.line_counterfactual import line_forks, section_counterfactuals
 from trackenv_agents.rules.line import GroupedThreshold
 
 CFG = scenario("small", horizon_years=2.0)
@@ -56,3 +56,91 @@ def test_forks_are_the_envs_section_costs_under_the_other_choice():
         assert q_other == pytest.approx(other, rel=1e-9) and q_own == pytest.approx(own, rel=1e-9)
     with pytest.raises(ValueError, match="focus_rate"):
         section_counterfactuals(CFG, seeds, rule, focus_rate=0.0)
+
+
+# the 60 m track cut to 30 m in 3 sections of one segment over 2 years of quarters (8 steps)
+SHARED = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+                  horizon_years=2.0)
+
+
+def _line_cost_to_go(cfg, seed, policy, t, first):
+    """The whole line's cost from step t in the env (every section and the possession) when it makes the codes
+    ``first`` at step t and ``policy`` decides every other step."""
+    env = TampingLine(cfg)
+    obs, _ = env.reset(seed=seed)
+    cost = 0.0
+    for step in range(cfg.horizon_steps):
+        a = np.asarray(first, dtype=np.int8) if step == t else policy.predict(obs)[0]
+        obs, reward, *_ = env.step(a)
+        if step >= t:
+            cost -= reward
+    return cost
+
+
+def test_a_whole_line_fork_of_the_policys_own_choice_is_its_run_and_another_choice_is_not():
+    rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), SHARED)
+    picked = {}
+
+    def choose(t, obs, codes, allowed):
+        # every line at steps 2 and 5: once as the policy chooses, once with section 1 flipped
+        if t not in (2, 5):
+            return np.zeros(0, dtype=np.int64), np.zeros((0, SHARED.n_sections), dtype=np.int64)
+        flipped = codes.copy()
+        flipped[:, 1] = 1 - flipped[:, 1]
+        lines = np.arange(len(codes))
+        picked[t] = flipped
+        return np.concatenate([lines, lines]), np.concatenate([codes, flipped])
+
+    run = line_forks(SHARED, [3, 4], rule, choose)
+    assert run["line"].tolist() == [0, 1, 0, 1, 0, 1, 0, 1] and run["step"].tolist() == [2] * 4 + [5] * 4
+    own = run["to_go"][run["step"], run["line"]]
+    same, other = np.array([0, 1, 4, 5]), np.array([2, 3, 6, 7])
+    np.testing.assert_array_equal(run["cost"][same], own[same])  # exactly: the same episode, copied
+    assert (run["cost"][other] != own[other]).all()
+    for k in other:  # the other choice, as the env prices it when the line replays it
+        t, line = int(run["step"][k]), int(run["line"][k])
+        assert run["cost"][k] == pytest.approx(_line_cost_to_go(SHARED, [3, 4][line], rule, t, picked[t][line]),
+                                               rel=1e-9)
+    np.testing.assert_array_equal(run["applied"][other], np.concatenate([picked[2], picked[5]]))
+
+
+def test_shared_segment_counterfactuals_price_the_whole_line():
+    rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), SHARED)
+    seeds = [3, 4, 5]
+    data = section_counterfactuals(SHARED, seeds, rule, focus_rate=0.5, other_rate=0.3, seed=1)
+    n = len(data["q_do"])
+    assert n > 5 and data["features"].shape[0] == n and (data["weight"] >= 1.0).all()
+    assert not np.allclose(data["q_do"], data["q_skip"])
+    for k in np.random.default_rng(0).choice(n, size=3, replace=False):
+        s, t, j, acted = int(data["seed"][k]), int(data["step"][k]), int(data["section"][k]), bool(data["did"][k])
+        env = TampingLine(SHARED)
+        obs, _ = env.reset(seed=s)
+        for _ in range(t):
+            obs, *_ = env.step(rule.predict(obs)[0])
+        codes = np.asarray(rule.predict(obs)[0], dtype=np.int64)
+        assert bool(codes[j]) == acted
+        flipped = codes.copy()
+        flipped[j] = 1 - flipped[j]
+        q_own, q_other = (data["q_do"][k], data["q_skip"][k]) if acted else (data["q_skip"][k], data["q_do"][k])
+        assert q_own == pytest.approx(_line_cost_to_go(SHARED, s, rule, t, codes), rel=1e-9)
+        assert q_other == pytest.approx(_line_cost_to_go(SHARED, s, rule, t, flipped), rel=1e-9)
+
+
+class _Remembers:
+    """A policy with a recurrent state: whole-line forks refuse it."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        n = len(obs["section_sd"])
+        return np.zeros((n, SHARED.n_sections), dtype=np.int8), np.zeros((n, 1, SHARED.n_sections))
+
+
+def test_whole_line_forks_refuse_what_they_cannot_price():
+    with pytest.raises(ValueError, match="recurrent state"):
+        section_counterfactuals(SHARED, [3], _Remembers())
+    rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), SHARED)
+    with pytest.raises(ValueError, match="2 lines and 1 rows"):
+        line_forks(SHARED, [3], rule, lambda t, obs, codes, allowed: (np.zeros(2, dtype=np.int64), codes))
+    with pytest.raises(ValueError, match="copy_rows forks single sections"):
+        from trackenv.envs.line_episode import LineBatch
+
+        LineBatch(SHARED, 2).copy_rows(np.array([0]), LineBatch(SHARED, 1), np.array([0]))
