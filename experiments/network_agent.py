@@ -9,7 +9,8 @@ there, else goes where most is asked: ``network(<policy>)``) and/or ``value`` (i
 is worth most: ``network-by-value(<policy>)``). The seeds run in chunks (``--chunk``), each chunk's costs merged
 into ``DIR/<policy>.json`` as it ends, so a long run keeps what it has done; ``--report`` pairs every policy with
 the best rule among those scored (the lowest mean cost on the seeds every policy has; ``--against`` another
-reference): mean cost and the paired difference, each with a 95 % bootstrap CI, into ``DIR/report.json``.
+reference, into ``DIR/report-vs-<reference>.json``): mean cost and the paired difference, each with a 95 %
+bootstrap CI, into ``DIR/report.json``.
 ``--tune`` scores the value dispatch's parameter grid (:data:`DISPATCH_GRID`) on training episodes instead,
 paired with the requests dispatch, into ``DIR/tuning.json``.
 
@@ -127,7 +128,7 @@ def report(out: Path, against: str | None = None) -> dict:
     from trackenv_agents.shipped import SHIPPED_AGENTS
 
     runs = {json.loads(p.read_text())["policy"]: json.loads(p.read_text())
-            for p in sorted(out.glob("*.json")) if p.name not in ("report.json", "tuning.json")}
+            for p in sorted(out.glob("*.json")) if not p.name.startswith(("report", "tuning"))}
     if not runs:
         raise SystemExit(f"no scored policy in {out}")
     seeds = sorted(set.intersection(*(set(map(int, r["costs"])) for r in runs.values())))
@@ -154,7 +155,8 @@ def report(out: Path, against: str | None = None) -> dict:
     payload = {"env": "trackenv/TampingNetwork-v0", "n_episodes": len(seeds), "seeds": [seeds[0], seeds[-1]],
                "best_rule": best, "results": rows, "runs": chunks,
                "wall_s": sum(run["wall_s"] for run in chunks), "cpu_s": sum(run["cpu_s"] for run in chunks)}
-    (out / "report.json").write_text(json.dumps(payload, indent=1) + "\n")
+    (out / ("report.json" if against is None else f"report-vs-{against}.json")).write_text(
+        json.dumps(payload, indent=1) + "\n")
     return payload
 
 

@@ -173,5 +173,7 @@ def test_network_agent_script_scores_the_value_dispatch_and_pairs_against_a_chos
     rows = {r["policy"]: r for r in payload["results"]}
     assert payload["best_rule"] == "network(grouped-threshold)"
     assert rows["network-by-value(cpi-agent)"]["vs_best_rule"]["mean_difference"] == pytest.approx(-95.0)
+    assert json.loads((tmp_path / "report-vs-network(grouped-threshold).json").read_text()) == payload
+    assert mod.report(tmp_path)["best_rule"] == "network-by-value(grouped-threshold)"  # the saved reports not read
     with pytest.raises(SystemExit, match="--against"):
         mod.report(tmp_path, against="network(no-such-policy)")
