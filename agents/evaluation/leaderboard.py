@@ -50,6 +50,7 @@ import numpy as np
 
 from trackenv.envs.network import NetworkConfig
 
+from ..rules.network import NETWORK_DISPATCH
 from .harness import EvaluationResult, evaluate_many
 from .line_compare import SECTION_CLASSES, class_breakdown, scenario_config, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
@@ -271,11 +272,6 @@ def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any],
         else:
             unfit[label] = reason
     return here, unfit
-
-
-#: how the machine of the network's rows is dispatched (:class:`~trackenv_agents.rules.network.NetworkRule`'s
-#: ``dispatch``: "requests" or "value")
-NETWORK_DISPATCH = "requests"
 
 
 def on_network(policy: Any, config: Any, dispatch: str = NETWORK_DISPATCH) -> Any:

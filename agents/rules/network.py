@@ -29,10 +29,13 @@ from .base import Heuristic, as_batch
 from .dispatch import ValueDispatch
 from .line import SectionThreshold
 
-__all__ = ["DISPATCHES", "NetworkRule", "line_view", "network_label"]
+__all__ = ["DISPATCHES", "NETWORK_DISPATCH", "NetworkRule", "line_view", "network_label"]
 
 #: the dispatches of :class:`NetworkRule`: by the count of requests (the env's own rule), or by their value
 DISPATCHES = ("requests", "value")
+#: the dispatch the comparisons play the network with (the leaderboard's network rows, ``trackenv evaluate --env
+#: trackenv/TampingNetwork-v0``)
+NETWORK_DISPATCH = "requests"
 
 
 def network_label(line_name: str, dispatch: str | ValueDispatch = "requests") -> str:
