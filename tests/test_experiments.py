@@ -180,3 +180,33 @@ def test_train_line_trains_on_the_60_m_track(tmp_path, capsys):
     meta = json.loads((tmp_path / "model_meta.json").read_text())
     assert meta["env_id"] == "trackenv/Tamping-v1" and meta["config"]["sections_per_segment"] == 6
     assert "iteration 0: held-out" in capsys.readouterr().out
+
+
+def test_network_agent_script_scores_the_value_dispatch_and_pairs_against_a_chosen_reference(tmp_path):
+    """``--dispatch value`` names each policy ``network-by-value(<policy>)``; the shipped agent by value is never
+    the reference; ``--against`` pairs every policy with the reference named, and an unknown one is refused."""
+    import json
+
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.rules.dispatch import ValueDispatch
+
+    mod = _script("network_agent")
+    built = mod.network_policies(NetworkConfig(), ["grouped-threshold", "cpi-agent"], ("requests", "value"))
+    assert list(built) == ["network(grouped-threshold)", "network(cpi-agent)", "network-by-value(grouped-threshold)",
+                           "network-by-value(cpi-agent)"]
+    assert built["network-by-value(cpi-agent)"].dispatch == ValueDispatch()
+    costs = {"network(grouped-threshold)": [100.0, 200.0], "network-by-value(grouped-threshold)": [90.0, 200.0],
+             "network-by-value(cpi-agent)": [50.0, 60.0]}
+    for name, values in costs.items():
+        (tmp_path / f"{name}.json").write_text(json.dumps({
+            "policy": name, "costs": {str(s): c for s, c in enumerate(values)},
+            "runs": [{"policies": list(costs), "seeds": [0, 1], "wall_s": 1.0, "cpu_s": 2.0}]}))
+    assert mod.report(tmp_path)["best_rule"] == "network-by-value(grouped-threshold)"
+    payload = mod.report(tmp_path, against="network(grouped-threshold)")
+    rows = {r["policy"]: r for r in payload["results"]}
+    assert payload["best_rule"] == "network(grouped-threshold)"
+    assert rows["network-by-value(cpi-agent)"]["vs_best_rule"]["mean_difference"] == pytest.approx(-95.0)
+    assert json.loads((tmp_path / "report-vs-network(grouped-threshold).json").read_text()) == payload
+    assert mod.report(tmp_path)["best_rule"] == "network-by-value(grouped-threshold)"  # the saved reports not read
+    with pytest.raises(SystemExit, match="--against"):
+        mod.report(tmp_path, against="network(no-such-policy)")

@@ -50,13 +50,14 @@ import numpy as np
 
 from trackenv.envs.network import NetworkConfig
 
+from ..rules.network import NETWORK_DISPATCH
 from .harness import EvaluationResult, evaluate_many
 from .line_compare import SECTION_CLASSES, class_breakdown, scenario_config, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
-__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "SAVED_SEARCHES", "bound_unavailable",
-           "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score", "on_network", "policy_label",
-           "run_leaderboard"]
+__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "NETWORK_DISPATCH", "SAVED_SEARCHES",
+           "bound_unavailable", "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score",
+           "on_network", "policy_label", "run_leaderboard"]
 
 #: The scenarios of the default leaderboard: the three lines, the 60 m track, the three lines with every
 #: choice (the default line, the wet line, the line of short defects) and the network of three default lines.
@@ -273,18 +274,21 @@ def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any],
     return here, unfit
 
 
-def on_network(policy: Any, config: Any) -> Any:
+def on_network(policy: Any, config: Any, dispatch: str = NETWORK_DISPATCH) -> Any:
     """``policy`` as it plays ``config``: on a network, a line policy run on every line by a
-    :class:`~trackenv_agents.rules.network.NetworkRule`; on a line, itself."""
+    :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch``; on a line, itself."""
     from ..rules.network import NetworkRule
 
-    return NetworkRule(policy) if isinstance(config, NetworkConfig) else policy
+    return NetworkRule(policy, dispatch) if isinstance(config, NetworkConfig) else policy
 
 
-def policy_label(label: str, config: Any) -> str:
-    """The name of the policy ``label`` on ``config``'s rows: ``network(<label>)`` on a network (the name of its
-    :class:`~trackenv_agents.rules.network.NetworkRule`), else ``label``."""
-    return f"network({label})" if isinstance(config, NetworkConfig) else label
+def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH) -> str:
+    """The name of the policy ``label`` on ``config``'s rows: on a network the name of its
+    :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (``network(<label>)`` by requests), else
+    ``label``."""
+    from ..rules.network import network_label
+
+    return network_label(label, dispatch) if isinstance(config, NetworkConfig) else label
 
 
 def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:

@@ -44,15 +44,12 @@ from trackenv.envs.line_config import LineConfig
 
 from ..rules.base import as_batch
 from ..rules.choices import fresh_memory, remember_work
-from ..rules.line import stale_measurement
+from ..rules.line import FRESH_SD_MM, projected_geometry, stale_measurement
 
 __all__ = ["ADVISOR_FEATURES", "CHOICE_FEATURES", "FEATURES", "FEATURE_CLIP", "FRESH_SD_MM", "LEARNABLE_CHOICES",
            "LineAgent", "choice_open", "compose_choices", "is_choice_rule", "may_tamp", "n_features", "remember_work",
            "section_features", "tamping_codes"]
 
-#: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
-#: β = 0.24 (the documentation's line-problem page, calibration) at a 3 mm SD before.
-FRESH_SD_MM = 0.9
 #: Features are clipped to [0, FEATURE_CLIP] after scaling: typical values are O(1), and a rare extreme (a wet
 #: spot at 19 mm of SD, a section untended for 12 years) must not drive the network far beyond its training data.
 FEATURE_CLIP = 4.0
@@ -167,11 +164,7 @@ def section_features(obs: Mapping[str, Any], advisor: Any = None, advice: np.nda
     B, S = sd.shape
     age = o["measurement_age"].reshape(B, 1)
     stale = np.asarray(stale_measurement(o), dtype=bool)
-    since = np.maximum(o["years_since_tamping"] - age, 0.25)  # from the last tamping to the recording run
-    growth = np.where(stale, 0.0, np.maximum(sd - FRESH_SD_MM, 0.0) / since)
-    projected = np.where(stale, FRESH_SD_MM, sd + growth * age)
-    ratio = np.where(sd > 1e-6, projected / np.maximum(sd, 1e-6), 1.0)
-    projected_peak = np.where(stale, 0.0, peak * ratio)
+    growth, projected, projected_peak = projected_geometry(o)
     reg = np.rint(o["register"]).astype(int).clip(0, 2)
     count = o["tampings_since_renewal"]
     # the worst projected SD among the *other* sections: the largest, or the second largest for the worst one

@@ -33,8 +33,8 @@ from trackenv.envs.line_episode import fit_worst, keep_worst
 from .base import Heuristic, as_batch
 
 __all__ = ["BudgetedWorstFirst", "GroupedThreshold", "LINE_HEURISTICS", "RegisterPeriodic", "SectionThreshold",
-           "UniformPeriodic", "LineNoMaintenance", "LINE_TUNED_FILE", "line_tuned_params", "planner_view",
-           "stale_measurement"]
+           "UniformPeriodic", "LineNoMaintenance", "FRESH_SD_MM", "LINE_TUNED_FILE", "line_tuned_params",
+           "planner_view", "projected_geometry", "stale_measurement"]
 
 
 def stale_measurement(obs: Mapping[str, Any]) -> Any:
@@ -51,6 +51,32 @@ def stale_measurement(obs: Mapping[str, Any]) -> Any:
 
 #: float32 years are quarters (0.25 apart): this tolerance separates equal from one step apart
 STALE_TOLERANCE_YEARS = 1e-3
+
+
+#: The SD a tamping leaves a section at, for the growth estimate: α + β·SD before with the calibrated α = 0.14 mm,
+#: β = 0.24 (the documentation's line-problem page, calibration) at a 3 mm SD before.
+FRESH_SD_MM = 0.9
+
+
+def projected_geometry(obs: Mapping[str, Any], lead_years: float = 0.0) -> tuple[np.ndarray, ...]:
+    """(growth mm/year, projected SD mm, projected peak mm), each (batch, S) float64, of a batched line
+    observation: each section's SD growth since its last tamping as measured (from :data:`FRESH_SD_MM` over the
+    years from that tamping to the recording run, at least a quarter), and its SD and mean-to-peak carried on at
+    that growth over the measurement's age and ``lead_years`` more (the peak scaled like the SD). A section tamped
+    since the recording run (:func:`stale_measurement`) is taken as fresh: no growth, SD :data:`FRESH_SD_MM`,
+    peak 0. Why: the recording car runs once a year, so the measured state is up to a year old; the per-section
+    policy's features and the network's dispatch by value read the track from the same projection."""
+    o = {k: np.asarray(obs[k], dtype=np.float64) for k in ("section_sd", "section_peak", "years_since_tamping",
+                                                          "measurement_age")}
+    sd, peak = o["section_sd"], o["section_peak"]
+    age = o["measurement_age"].reshape(sd.shape[0], 1)
+    stale = np.asarray(stale_measurement(obs), dtype=bool)
+    since = np.maximum(o["years_since_tamping"] - age, 0.25)  # from the last tamping to the recording run
+    growth = np.where(stale, 0.0, np.maximum(sd - FRESH_SD_MM, 0.0) / since)
+    projected = np.where(stale, FRESH_SD_MM, sd + growth * (age + lead_years))
+    ratio = np.where(sd > 1e-6, projected / np.maximum(sd, 1e-6), 1.0)
+    projected_peak = np.where(stale, 0.0, peak * ratio)
+    return growth, projected, projected_peak
 
 
 def planner_view(obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:

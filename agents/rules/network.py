@@ -7,6 +7,11 @@ asking it to leave a line with work left. The line policy is a line rule (:mod:`
 :class:`~.line.SectionThreshold`) or any policy of the line with SB3's ``predict`` on batched line observations:
 the shipped line agent (:class:`~trackenv_agents.learning.line_policy.LineAgent`) plays the network this way.
 
+With ``dispatch="value"`` (or a :class:`~.dispatch.ValueDispatch` of other parameters) the machine goes where the
+requested work is worth most instead: the quality cost per step of each line's requested sections in their
+projected state, with a margin before it leaves a line that still asks for work (:mod:`.dispatch`); only the
+chosen line's requests are passed on, so the env's count of requests takes the machine there.
+
 The line policy is asked without a recurrent state: it cannot know which of its requests the machine worked (a
 line the machine is not on has its requests dropped), so a memory of the work it asked for would be wrong there.
 The policies played here keep none that matters on the network's tamping-only lines (the rules are stateless;
@@ -21,9 +26,23 @@ from typing import Any
 import numpy as np
 
 from .base import Heuristic, as_batch
+from .dispatch import ValueDispatch
 from .line import SectionThreshold
 
-__all__ = ["NetworkRule", "line_view"]
+__all__ = ["DISPATCHES", "NETWORK_DISPATCH", "NetworkRule", "line_view", "network_label"]
+
+#: the dispatches of :class:`NetworkRule`: by the count of requests (the env's own rule), or by their value
+DISPATCHES = ("requests", "value")
+#: the dispatch the comparisons play the network with (the leaderboard's network rows, ``trackenv evaluate --env
+#: trackenv/TampingNetwork-v0``)
+NETWORK_DISPATCH = "requests"
+
+
+def network_label(line_name: str, dispatch: str | ValueDispatch = "requests") -> str:
+    """The name of a :class:`NetworkRule` over the line policy ``line_name``: ``network(<line_name>)`` by
+    requests, ``network-by-value(<line_name>)`` by value (one name per policy where results are keyed by it)."""
+    by_value = isinstance(dispatch, ValueDispatch) or dispatch == "value"
+    return f"network-by-value({line_name})" if by_value else f"network({line_name})"
 
 
 def line_view(obs: dict[str, np.ndarray], n_lines: int) -> dict[str, np.ndarray]:
@@ -45,23 +64,39 @@ class NetworkRule(Heuristic):
     """A line policy on every line, the machine kept on its line while the policy asks for work there (see the
     module docstring). ``line_rule``: a line heuristic (default: :class:`~.line.SectionThreshold` at its default
     threshold) or any line policy with SB3's ``predict``, a ``name`` and a ``params`` dict (a trained line
-    agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity."""
+    agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity. ``dispatch``:
+    ``"requests"`` (default: the machine stays while its line asks, else goes where most sections are asked
+    for), ``"value"`` (:class:`~.dispatch.ValueDispatch` at its defaults) or a ValueDispatch; the value dispatch
+    prices the sections with the line's limits and costs, so it plays once bound. Its name is
+    ``network(<line policy>)`` by requests, ``network-by-value(<line policy>)`` by value."""
 
     name = "network"
 
-    def __init__(self, line_rule: Any = None) -> None:
+    def __init__(self, line_rule: Any = None, dispatch: str | ValueDispatch = "requests",
+                 line_config: Any = None) -> None:
         self.line_rule = line_rule if line_rule is not None else SectionThreshold()
+        if isinstance(dispatch, str):
+            if dispatch not in DISPATCHES:
+                raise ValueError(f"dispatch must be one of {list(DISPATCHES)} or a ValueDispatch, got {dispatch!r}")
+            dispatch = ValueDispatch() if dispatch == "value" else dispatch
+        elif not isinstance(dispatch, ValueDispatch):
+            raise ValueError(f"dispatch must be one of {list(DISPATCHES)} or a ValueDispatch, got "
+                             f"{type(dispatch).__name__}")
+        self.dispatch = dispatch
+        #: the network's line config (set by :meth:`bind`): the value dispatch's limits and costs
+        self.line_config = line_config
         line_name = str(getattr(self.line_rule, "name", None) or type(self.line_rule).__name__)
-        super().__init__(line_rule=line_name, **dict(getattr(self.line_rule, "params", None) or {}))
-        # one name per line policy, e.g. "network(grouped-threshold)", where results are keyed by policy name (the
-        # base class's name is a class attribute; this one is the instance's)
-        self.__dict__["name"] = f"network({line_name})"
+        extra = {"dispatch": "value", **dispatch.params()} if isinstance(dispatch, ValueDispatch) else {}
+        super().__init__(line_rule=line_name, **dict(getattr(self.line_rule, "params", None) or {}), **extra)
+        # the base class's name is a class attribute; this one is the instance's
+        self.__dict__["name"] = network_label(line_name, dispatch)
 
     def bind(self, config: Any) -> NetworkRule:
         """A copy whose line policy knows the calendar and capacity of the network's line config (a policy
-        without ``bind`` is taken as it is)."""
+        without ``bind`` is taken as it is), and whose dispatch knows that line's limits and costs."""
         bind = getattr(self.line_rule, "bind", None)
-        return type(self)(bind(config.line_config) if callable(bind) else self.line_rule)
+        return type(self)(bind(config.line_config) if callable(bind) else self.line_rule, self.dispatch,
+                          config.line_config)
 
     def reset(self) -> None:
         """The line policy's reset, where it has one."""
@@ -72,10 +107,23 @@ class NetworkRule(Heuristic):
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         b, batched = as_batch(obs)
         n_envs, n_lines = b["machine_line"].shape
-        want, _ = self.line_rule.predict(line_view(b, n_lines))
+        lines = line_view(b, n_lines)
+        want, _ = self.line_rule.predict(lines)
         want = np.asarray(want, dtype=bool).reshape(n_envs, n_lines, -1)
         here = b["machine_line"].argmax(axis=1)
-        busy = want[np.arange(n_envs), here].any(axis=1)
-        keep = np.where(busy[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
+        if isinstance(self.dispatch, ValueDispatch):
+            keep = np.arange(n_lines)[None, :] == self._value_target(self.dispatch, lines, want, here)[:, None]
+        else:
+            busy = want[np.arange(n_envs), here].any(axis=1)
+            keep = np.where(busy[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
         act = (want & keep[:, :, None]).reshape(n_envs, -1).astype(np.int8)
         return (act if batched else act[0]), state
+
+    def _value_target(self, dispatch: ValueDispatch, lines: dict[str, np.ndarray], want: np.ndarray,
+                      here: np.ndarray) -> np.ndarray:
+        """(n_envs,) the line ``dispatch`` serves this step."""
+        if self.line_config is None:
+            raise ValueError("NetworkRule(dispatch='value') prices the sections with the line's limits and costs: "
+                             "bind it to the network's config first (bind)")
+        values = dispatch.line_values(lines, want, self.line_config)
+        return dispatch.target(values, np.asarray(want.any(axis=2)), here)

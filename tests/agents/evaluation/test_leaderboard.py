@@ -243,3 +243,18 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
     page = (root / "docs" / "leaderboard.md").read_text()
     assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page
+
+
+def test_the_network_rows_name_the_dispatch_their_policies_play() -> None:
+    """``on_network`` and ``policy_label`` give the network's rows the NetworkRule of a dispatch and its name: by
+    requests (the default) ``network(<policy>)``, by value ``network-by-value(<policy>)``; on a line, the policy."""
+    from trackenv_agents.evaluation.leaderboard import NETWORK_DISPATCH, on_network, policy_label
+    from trackenv_agents.rules import GroupedThreshold
+
+    net, line = NetworkConfig(), scenario("default")
+    rule = GroupedThreshold()
+    assert NETWORK_DISPATCH == "requests"
+    assert on_network(rule, net).name == policy_label("grouped-threshold", net) == "network(grouped-threshold)"
+    by_value = on_network(rule, net, "value")
+    assert by_value.name == policy_label("grouped-threshold", net, "value") == "network-by-value(grouped-threshold)"
+    assert on_network(rule, line, "value") is rule and policy_label("grouped-threshold", line) == "grouped-threshold"
