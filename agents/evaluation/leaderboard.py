@@ -11,7 +11,8 @@ and the tampings per section class (:func:`~.line_compare.class_breakdown`).
 **The network** (``trackenv/TampingNetwork-v0``: lines that share one tamping machine) is scored with the policies
 of its line, each run on every line by :class:`~trackenv_agents.rules.network.NetworkRule` (which keeps the machine
 on its line while the line policy asks for work there): the tuned rules of the network's line, each with that
-line's tuned parameters, and the agents that fit that line, named ``network(<policy>)``.
+line's tuned parameters, and the agents that fit that line, dispatched by :data:`NETWORK_DISPATCH` and named
+after it (``network-by-value(<policy>)``).
 
 **The normalised score** is the share of the gap from the best tuned rule to the hindsight bound that a policy
 closes, paired per episode e::

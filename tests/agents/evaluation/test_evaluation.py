@@ -162,7 +162,8 @@ def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
 
 def test_the_network_comparison_runs_each_line_rule_on_every_line(tmp_path):
     """``trackenv evaluate --env trackenv/TampingNetwork-v0``: every line rule wrapped in a NetworkRule with the
-    line's tuned parameters, named after it, costs summing the lines' and the machine's moves."""
+    line's tuned parameters and dispatched by value, named after it, costs summing the lines' and the machine's
+    moves."""
     from trackenv.envs.network import NetworkConfig
 
     out = line_comparison("trackenv/TampingNetwork-v0", seeds=[0], rules=["no-maintenance", "section-threshold"],
@@ -172,7 +173,7 @@ def test_the_network_comparison_runs_each_line_rule_on_every_line(tmp_path):
     assert NetworkConfig.from_dict(out["config"]) == NetworkConfig(n_lines=2, line_config="small").replace(
         line_config=NetworkConfig(line_config="small").line_config.replace(horizon_years=0.5))
     by = {r["policy"]: r for r in out["results"]}
-    assert set(by) == {"network(no-maintenance)", "network(section-threshold)"}
-    assert by["network(no-maintenance)"]["tampings_per_km_year"] == 0.0
+    assert set(by) == {"network-by-value(no-maintenance)", "network-by-value(section-threshold)"}
+    assert by["network-by-value(no-maintenance)"]["tampings_per_km_year"] == 0.0
     with pytest.raises(ValueError, match="retune"):
         line_comparison("trackenv/TampingNetwork-v0", seeds=[0], retune=True, out_dir=str(tmp_path))

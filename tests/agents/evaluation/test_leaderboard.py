@@ -173,7 +173,8 @@ def test_unknown_rule_is_refused(tmp_path) -> None:
 
 
 def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp_path) -> None:
-    """On the network every rule and agent runs on every line through NetworkRule (named network(...)), the
+    """On the network every rule and agent runs on every line through NetworkRule (dispatched by value, named
+    network-by-value(...)), the
     best of its rules is the reference, an agent's row is its NetworkRule's episodes, and there is no bound."""
     from trackenv_agents.evaluation.harness import evaluate_many
     from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
@@ -188,15 +189,18 @@ def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp
     agent = Eager(trigger_mm=1.0, include_mm=0.5)
     payload = run_leaderboard([net], rules=RULES, agents={"eager": agent}, seeds=SEEDS, out_dir=tmp_path, **tiny)
     rows = {r["policy"]: r for r in payload["results"]}
-    assert set(rows) == {"network(grouped-threshold)", "network(section-threshold)", "network(eager)"}
-    assert payload["best_rule"][net] == min(("network(grouped-threshold)", "network(section-threshold)"),
+    assert set(rows) == {"network-by-value(grouped-threshold)", "network-by-value(section-threshold)",
+                         "network-by-value(eager)"}
+    assert payload["best_rule"][net] == min(("network-by-value(grouped-threshold)",
+                                             "network-by-value(section-threshold)"),
                                             key=lambda name: rows[name]["mean_cost"])
     assert all(r["normalised_score"] is None and r["normalised_score_ci"] is None for r in rows.values())
     bound = payload["bound"][net]
     assert bound["available"] is False and "share one tamping machine" in bound["reason"]
-    (direct,) = evaluate_many([NetworkRule(agent)], NetworkConfig.coerce(None, **tiny), SEEDS)
-    assert rows["network(eager)"]["episode_costs"] == direct.cost.tolist()
-    assert rows["network(eager)"]["params"]["line_rule"] == "eager"
+    config = NetworkConfig.coerce(None, **tiny)
+    (direct,) = evaluate_many([NetworkRule(agent, "value").bind(config)], config, SEEDS)
+    assert rows["network-by-value(eager)"]["episode_costs"] == direct.cost.tolist()
+    assert rows["network-by-value(eager)"]["params"]["line_rule"] == "eager"
     assert "No normalised score: 2 lines share one tamping machine" in format_leaderboard(payload)
     assert not (tmp_path / "bounds").exists()
 
@@ -247,14 +251,16 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
 
 def test_the_network_rows_name_the_dispatch_their_policies_play() -> None:
     """``on_network`` and ``policy_label`` give the network's rows the NetworkRule of a dispatch and its name: by
-    requests (the default) ``network(<policy>)``, by value ``network-by-value(<policy>)``; on a line, the policy."""
+    requests ``network(<policy>)``, by value (the default) ``network-by-value(<policy>)``; on a line, the
+    policy."""
     from trackenv_agents.evaluation.leaderboard import NETWORK_DISPATCH, on_network, policy_label
     from trackenv_agents.rules import GroupedThreshold
 
     net, line = NetworkConfig(), scenario("default")
     rule = GroupedThreshold()
-    assert NETWORK_DISPATCH == "requests"
-    assert on_network(rule, net).name == policy_label("grouped-threshold", net) == "network(grouped-threshold)"
-    by_value = on_network(rule, net, "value")
-    assert by_value.name == policy_label("grouped-threshold", net, "value") == "network-by-value(grouped-threshold)"
+    assert NETWORK_DISPATCH == "value"
+    by_requests = on_network(rule, net, "requests")
+    assert by_requests.name == policy_label("grouped-threshold", net, "requests") == "network(grouped-threshold)"
+    by_value = on_network(rule, net)
+    assert by_value.name == policy_label("grouped-threshold", net) == "network-by-value(grouped-threshold)"
     assert on_network(rule, line, "value") is rule and policy_label("grouped-threshold", line) == "grouped-threshold"
