@@ -34,7 +34,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,6 +124,23 @@ def json_run(args: Sequence[str]) -> dict:
     """The JSON object a fresh process ``args`` prints on its last line (its timing of one variant)."""
     out = subprocess.run(list(args), check=True, capture_output=True, text=True).stdout
     return json.loads(out.strip().splitlines()[-1])
+
+
+def timed_runs(variants: Sequence[str], pairs: int, args_of: Callable[[str], Sequence[str]],
+               show: Callable[[str, dict], str] = lambda variant, rec: json.dumps(rec)) -> dict[str, list[dict]]:
+    """Each variant's records, one per round (:func:`rounds`): the JSON object the fresh process ``args_of(variant)``
+    prints (:func:`json_run`), each printed as ``show(variant, record)`` as it ends (the A/B scripts' loop)."""
+    runs: dict[str, list[dict]] = {v: [] for v in variants}
+    for variant in rounds(variants, pairs):
+        runs[variant].append(json_run(args_of(variant)))
+        print(show(variant, runs[variant][-1]), flush=True)
+    return runs
+
+
+def load_range(runs: dict[str, list[dict]]) -> list[float]:
+    """[lowest, highest] load average over every record of ``runs`` (their ``"load"``)."""
+    loads = [r["load"] for records in runs.values() for r in records]
+    return [min(loads), max(loads)]
 
 
 def summary(base: list[float], new: list[float]) -> dict:

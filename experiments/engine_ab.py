@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from ab_speed import json_run, rounds  # experiments/ab_speed.py: the scripts run from experiments/
+from ab_speed import load_range, timed_runs  # experiments/ab_speed.py: the scripts run from experiments/
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "saved" / "engine_ab.json"
@@ -64,18 +64,14 @@ def time_engine(engine: str, budget_s: float) -> dict:
 
 
 def speed(pairs: int, budget_s: float) -> dict:
-    runs: dict = {e: [] for e in ENGINES}
-    for engine in rounds(ENGINES, pairs):
-        rec = json_run([sys.executable, __file__, "time", "--engine", engine, "--budget", str(budget_s)])
-        runs[engine].append(rec)
-        print(json.dumps(rec), flush=True)
+    runs = timed_runs(ENGINES, pairs,
+                      lambda engine: [sys.executable, __file__, "time", "--engine", engine, "--budget", str(budget_s)])
     keys = ("line_steps_per_s", "vector8_env_steps_per_s", "line_cpu_s_per_step", "vector8_cpu_s_per_vector_step")
     med = {e: {k: statistics.median(r[k] for r in v) for k in keys} for e, v in runs.items()}
     pair_ratios = {k: [f[k] / c[k] for c, f in zip(runs["classic"], runs["fast"])] for k in keys[:2]}
-    loads = [r["load"] for v in runs.values() for r in v]
     summary = {"median": med, "median_ratio": {k: statistics.median(v) for k, v in pair_ratios.items()},
                "cpu_ratio": {k: med["classic"][k] / med["fast"][k] for k in keys[2:]},
-               "pair_ratios": pair_ratios, "load_range": [min(loads), max(loads)], "pairs": pairs,
+               "pair_ratios": pair_ratios, "load_range": load_range(runs), "pairs": pairs,
                "budget_s": budget_s, "cpus": os.cpu_count(), "runs": runs}
     print(json.dumps({k: summary[k] for k in ("median", "median_ratio", "cpu_ratio", "load_range")}))
     return summary

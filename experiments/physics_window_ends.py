@@ -44,7 +44,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from ab_speed import json_run, rounds  # experiments/ab_speed.py: the scripts run from experiments/
+from ab_speed import load_range, timed_runs  # experiments/ab_speed.py: the scripts run from experiments/
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "saved" / "physics_window_ends.json"
@@ -182,18 +182,16 @@ def time_layout(layout: str, repeats: int) -> dict:
 
 
 def ab(pairs: int, repeats: int) -> dict:
-    runs: dict = {k: [] for k in LAYOUTS}
-    for layout in rounds(LAYOUTS, pairs):
-        rec = json_run([sys.executable, __file__, "time", "--layout", layout, "--repeats", str(repeats)])
-        runs[layout].append(rec)
-        print(f"{layout} {rec['line_steps_per_s']:7.2f} line-steps/s  cpu {1e3 * rec['cpu_s_per_step']:6.1f} "
-              f"ms/step  first {rec['first_step_ms']:6.0f} ms  load {rec['load']:.2f}", flush=True)
+    runs = timed_runs(LAYOUTS, pairs,
+                      lambda layout: [sys.executable, __file__, "time", "--layout", layout, "--repeats", str(repeats)],
+                      lambda layout, rec: f"{layout} {rec['line_steps_per_s']:7.2f} line-steps/s  cpu "
+                                          f"{1e3 * rec['cpu_s_per_step']:6.1f} ms/step  first "
+                                          f"{rec['first_step_ms']:6.0f} ms  load {rec['load']:.2f}")
     med = {k: statistics.median(r["line_steps_per_s"] for r in v) for k, v in runs.items()}
     cpu = {k: statistics.median(r["cpu_s_per_step"] for r in v) for k, v in runs.items()}
-    loads = [r["load"] for v in runs.values() for r in v]
     summary = {"median_line_steps_per_s": med, "ratio_to_a": {k: med[k] / med["a"] for k in LAYOUTS},
                "median_cpu_s_per_step": cpu, "cpu_ratio_to_a": {k: cpu["a"] / cpu[k] for k in LAYOUTS},
-               "load_range": [min(loads), max(loads)], "pairs": pairs, "repeats": repeats, "runs": runs}
+               "load_range": load_range(runs), "pairs": pairs, "repeats": repeats, "runs": runs}
     print(json.dumps({k: summary[k] for k in ("median_line_steps_per_s", "ratio_to_a", "median_cpu_s_per_step",
                                               "cpu_ratio_to_a", "load_range")}))
     return summary
@@ -226,17 +224,14 @@ def time_env(layout: str, budget_s: float) -> dict:
 
 
 def env_ab(pairs: int, budget_s: float) -> dict:
-    runs: dict = {k: [] for k in ENV_LAYOUTS}
-    for layout in rounds(ENV_LAYOUTS, pairs):
-        rec = json_run([sys.executable, __file__, "time-env", "--layout", layout, "--budget", str(budget_s)])
-        runs[layout].append(rec)
-        print(json.dumps(rec), flush=True)
+    runs = timed_runs(ENV_LAYOUTS, pairs,
+                      lambda layout: [sys.executable, __file__, "time-env", "--layout", layout, "--budget",
+                                      str(budget_s)])
     keys = ("line_env_steps_per_s", "line_vector_env_8_steps_per_s")
     med = {k: {m: statistics.median(r[m] for r in v) for m in keys} for k, v in runs.items()}
     new = ENV_LAYOUTS[1]
     summary = {"median": med, "ratio": {m: med[new][m] / med["a"][m] for m in keys},
-               "load_range": [min(r["load"] for v in runs.values() for r in v),
-                              max(r["load"] for v in runs.values() for r in v)], "pairs": pairs, "runs": runs}
+               "load_range": load_range(runs), "pairs": pairs, "runs": runs}
     print(json.dumps({k: summary[k] for k in ("median", "ratio", "load_range")}))
     return summary
 

@@ -86,6 +86,20 @@ def test_ab_speed_alternates_the_versions_and_summarises_the_pairs():
         ab.summary([1.0], [])
 
 
+def test_ab_speed_timed_runs_collect_each_variants_records_in_the_alternating_order(capsys):
+    import sys
+
+    ab = _script("ab_speed")
+    code = "import json, sys; print('noise'); print(json.dumps({'v': sys.argv[1], 'load': float(sys.argv[2])}))"
+    loads = iter([1.0, 3.0, 2.0, 0.5])
+    runs = ab.timed_runs(("a", "b"), 2, lambda v: [sys.executable, "-c", code, v, str(next(loads))],
+                         lambda v, rec: f"{v}:{rec['load']}")
+    assert runs == {"a": [{"v": "a", "load": 1.0}, {"v": "a", "load": 0.5}],
+                    "b": [{"v": "b", "load": 3.0}, {"v": "b", "load": 2.0}]}  # run order a b b a
+    assert capsys.readouterr().out.split() == ["a:1.0", "b:3.0", "b:2.0", "a:0.5"]
+    assert ab.load_range(runs) == [0.5, 3.0]
+
+
 def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
     ab = _script("ab_speed")
     parser = argparse.ArgumentParser()
