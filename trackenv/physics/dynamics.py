@@ -25,7 +25,7 @@ from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
-from .window_ends import check_window_ends, outside_damping, outside_stiffness, outside_transfer
+from .window_ends import check_window_ends, static_ends
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
 SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
@@ -339,24 +339,41 @@ def _stiffness_factor(track: Track) -> np.ndarray:
     return factor
 
 
-@functools.lru_cache(maxsize=256)
+_STATIC_ENDS_CACHE_SIZE = 256  # tracks whose static ends are kept (as the per-track caches above)
+_STATIC_ENDS: collections.OrderedDict = collections.OrderedDict()  # track -> its static ends, least recent first
+
+
+def _track_ends(tracks: Sequence[Track]) -> list[np.ndarray]:
+    """The static ends of each track (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
+    and the static extension onto the next bay (:func:`~trackenv.physics.window_ends.static_ends`), kept per track
+    object (read-only; the most recent :data:`_STATIC_ENDS_CACHE_SIZE`): an episode's passes over its model tracks
+    compute them once, the tracks missing as one batch."""
+    return _kept(_STATIC_ENDS, list(tracks), _STATIC_ENDS_CACHE_SIZE,
+                 lambda missing: list(static_ends(missing, batched_bands(missing)[2])))
+
+
 def _track_outside_stiffness(track: Track) -> np.ndarray:
-    """:func:`~trackenv.physics.window_ends.outside_stiffness` of ``track`` (n_sleepers, 6), kept per track
-    object (read-only)."""
-    out = outside_stiffness(_track_stiffness(track), track.dof_layout)
-    out.flags.writeable = False
-    return out
+    """:func:`~trackenv.physics.window_ends.outside_stiffness` of ``track`` (n_sleepers, 6), read-only: the first
+    columns of its static ends (:func:`_track_ends`)."""
+    return _track_ends([track])[0][:, :6]
 
 
-@functools.lru_cache(maxsize=256)
-def _track_ends(track: Track) -> np.ndarray:
-    """The static ends of ``track`` (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
-    and the static extension onto the next bay (:mod:`trackenv.physics.window_ends`), kept per track object."""
-    transfer = outside_transfer(_track_stiffness(track), track.dof_layout)
-    out = np.concatenate([_track_outside_stiffness(track), outside_damping(track),
-                          transfer.reshape(track.n_sleepers, -1)], axis=1)
-    out.flags.writeable = False
-    return out
+def _kept(cache: collections.OrderedDict, keys: list, size: int, compute: Callable[[list], list]) -> list:
+    """The value of each of ``keys`` in ``cache`` (an OrderedDict, least recently used first), the keys missing
+    computed at once by ``compute`` (their list, without repeats, to their values), made read-only and kept; the
+    cache is then cut to its ``size`` most recent entries (after the values are read: a batch may hold more)."""
+    missing = list(dict.fromkeys(k for k in keys if k not in cache))
+    if missing:
+        for key, value in zip(missing, compute(missing), strict=True):
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            cache[key] = value
+    for key in keys:
+        cache.move_to_end(key)
+    values = [cache[k] for k in keys]
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return values
 
 
 def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
@@ -365,7 +382,7 @@ def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
     a1) times its damping, that damping, and the extension."""
     if ends == "rest":
         return np.zeros((len(tracks), tracks[0].n_sleepers, 6))
-    out = np.stack([_track_ends(t) for t in tracks])
+    out = np.stack(_track_ends(tracks))
     out[:, :, :6] += a1 * out[:, :, 6:12]
     return out
 
@@ -887,6 +904,8 @@ def _start_state(batch: _Batch, x0: np.ndarray, cluster: np.ndarray, start_point
             state.qdd[b] = np.linalg.solve(system.mass, system.force - system.stiffness @ state.q[b])
         return state
     windows = tuple(_window_dofs(t0, x0[cluster == c], batch.margin_bays) for c in range(int(cluster.max()) + 1))
+    if batch.ends == "static":  # the rows' static ends as one batch (each row's start reads its outside stiffness)
+        _track_ends(batch.tracks)
     for b in range(n_rows):
         state.u[b], state.q[b], state.force[b] = _static_start(batch, batch.tracks[b], windows, start_points, z0[b])
     return state
@@ -1078,16 +1097,9 @@ def _steady_states(batch: _Batch) -> list[_SteadyState]:
     contact law), ending with its leading axle where the row's pass starts in its bay. The keys missing are
     integrated as one batch."""
     keys = [_steady_key(batch, t) for t in batch.tracks]
-    missing = {k: t for k, t in zip(keys, batch.tracks) if k not in _STEADY_STATES}
-    if missing:
-        for key, state in zip(missing, _integrate_steady(batch, list(missing.values()))):
-            _STEADY_STATES[key] = state
-    for key in keys:
-        _STEADY_STATES.move_to_end(key)
-    states = [_STEADY_STATES[k] for k in keys]  # (before the oldest are dropped: a batch may hold more keys)
-    while len(_STEADY_STATES) > _STEADY_CACHE_SIZE:
-        _STEADY_STATES.popitem(last=False)
-    return states
+    track_of = dict(zip(keys, batch.tracks))  # a track of each key (any: its entry, all the run reads, is in it)
+    return _kept(_STEADY_STATES, keys, _STEADY_CACHE_SIZE,
+                 lambda missing: _integrate_steady(batch, [track_of[k] for k in missing]))
 
 
 def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
