@@ -12,9 +12,10 @@ in the order A B B A A B … (so that a drift over the run favours neither), eac
 process after a warm-up; the report gives both medians, the median of the per-pair ratios (new / base) and how
 many pairs favour the new version. ``--base`` and ``--new`` are git revisions checked out as temporary worktrees
 (``--new`` defaults to the working tree itself); each worktree compiles the kernel the first time it runs (a few
-minutes, untimed), and is removed at the end. ``--new-kwargs`` (a JSON object) gives the new version's env
-keyword arguments the base may not know, e.g. an engine option; ``--base-kwargs`` the base's (both versions on one
-engine: ``--base-kwargs '{"engine": "fast"}' --new-kwargs '{"engine": "fast"}'``). Figures (``--figure``):
+minutes, untimed), and is removed at the end (``--base-dir DIR`` keeps the base's, to be reused). ``--new-kwargs``
+(a JSON object) gives the new version's env keyword arguments the base may not know, e.g. an engine option;
+``--base-kwargs`` the base's (both on one engine: ``--base-kwargs '{"engine": "fast"}' --new-kwargs '{"engine":
+"fast"}'``). Figures (``--figure``):
 
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
@@ -160,6 +161,20 @@ def _checkout(rev: str, where: Path) -> Path:
     return where
 
 
+def _kept_checkout(rev: str, where: Path) -> Path:
+    """A checkout of ``rev`` at ``where`` that outlives the run (``--base-dir``): made if absent, else reused if it
+    holds ``rev`` (its compiled kernel with it: the next runs compile nothing)."""
+    if not where.exists():
+        return _checkout(rev, where)
+    def commit(*args: str) -> str:
+        return subprocess.run(["git", *args], check=True, capture_output=True, text=True).stdout.strip()
+    held = commit("-C", str(where), "rev-parse", "HEAD")
+    wanted = commit("-C", str(ROOT), "rev-parse", f"{rev}^{{commit}}")
+    if held != wanted:
+        raise SystemExit(f"--base-dir {where} holds {held[:10]}, not --base {rev} ({wanted[:10]})")
+    return where
+
+
 def _run(tree: Path, code: str) -> float:
     """The figure printed by ``code`` run in a fresh process on the trackenv of ``tree``."""
     check = f"import trackenv, sys; assert trackenv.__file__.startswith({str(tree)!r}), trackenv.__file__\n"
@@ -215,6 +230,9 @@ def main(argv: list[str] | None = None) -> dict:
                              "line_vector), e.g. '{\"engine\": \"fast\"}'")
     parser.add_argument("--base-kwargs", default="{}",
                         help="JSON object of keyword arguments for the base version's env (as --new-kwargs)")
+    parser.add_argument("--base-dir", default=None,
+                        help="check the base out here and keep it, with its compiled kernel, for later runs (a "
+                             "checkout of --base already there is reused)")
     parser.add_argument("--out", default="", help="write the JSON report here")
     args = parser.parse_args(argv)
     if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
@@ -228,7 +246,8 @@ def main(argv: list[str] | None = None) -> dict:
                          workers=args.workers)
     runs = order(args.pairs)
     with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
-        trees = {"base": _checkout(args.base, Path(tmp) / "base")}
+        trees = {"base": _kept_checkout(args.base, Path(args.base_dir)) if args.base_dir
+                 else _checkout(args.base, Path(tmp) / "base")}
         trees["new"] = ROOT if args.new is None else _checkout(args.new, Path(tmp) / "new")
         try:
             for name, tree in trees.items():  # compile (or load) each version's kernel, untimed
@@ -239,8 +258,8 @@ def main(argv: list[str] | None = None) -> dict:
                 figures[name].append(_run(trees[name], codes[name]))
                 print(f"run {i + 1}/{len(runs)} {name}: {figures[name][-1]:.2f}", file=sys.stderr, flush=True)
         finally:
-            for tree in trees.values():
-                if tree != ROOT:
+            for name, tree in trees.items():
+                if tree != ROOT and not (name == "base" and args.base_dir):
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
     report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
               "new_rev": args.new or "working tree", "base_kwargs": base_kwargs, "new_kwargs": new_kwargs,
