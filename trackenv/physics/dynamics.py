@@ -892,16 +892,18 @@ def _settled_statics(batch: _Batch, start_points: list, z_rows: list) -> tuple[n
     if batch.settlement is None:
         return sag, static_ballast, static_total
     g = batch.settlement
-    for b, t in enumerate(batch.tracks):
-        f = np.zeros(t0.n_dof)
-        f[lay.sleeper] = t.ballast_stiffness * g[b]
-        u0, info = _PBTRS(_stiffness_factor(t), f, lower=1)
+    ballast, pad = (np.stack([getattr(t, name) for t in batch.tracks]) for name in ("ballast_stiffness",
+                                                                                    "pad_stiffness"))
+    f = np.zeros((n_rows, t0.n_dof))
+    f[:, lay.sleeper] = ballast * g
+    for b, t in enumerate(batch.tracks):  # one solve per row: each row's own factor
+        u0, info = _PBTRS(_stiffness_factor(t), f[b], lower=1)
         _lapack_info("pbtrs", info)
         sag[b] = u0
         z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
-        us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
-        static_ballast[b] = t.ballast_stiffness * (us - g[b])
-        static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
+    us, uw = sag[:, lay.sleeper], sag[:, lay.node_w[lay.sleeper_node]]
+    static_ballast[...] = ballast * (us - g)
+    static_total[...] = static_ballast + pad * (uw - us)
     return sag, static_ballast, static_total
 
 
