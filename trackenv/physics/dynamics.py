@@ -566,7 +566,20 @@ def _pack(x: np.ndarray, n_chunks: int, width: int) -> np.ndarray:
     if pad:
         x = np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
     x = x.reshape((n_chunks, width) + x.shape[1:])
-    return np.ascontiguousarray(np.moveaxis(x, 1, -1))
+    return np.ascontiguousarray(x.transpose(_batch_last(x.ndim)))
+
+
+@functools.cache
+def _batch_last(ndim: int) -> tuple[int, ...]:
+    """The axes of ``np.moveaxis(x, 1, -1)`` for an array of ``ndim`` axes, as a transpose takes them (the packing
+    runs a dozen times a pass: the axes are worked out once)."""
+    return (0, *range(2, ndim), 1)
+
+
+@functools.cache
+def _batch_second(ndim: int) -> tuple[int, ...]:
+    """The axes of ``np.moveaxis(x, -1, 1)`` for an array of ``ndim`` axes (the inverse of :func:`_batch_last`)."""
+    return (0, ndim - 1, *range(1, ndim - 1))
 
 
 def _packed_history(first: np.ndarray, n_steps: int, n_chunks: int, width: int) -> np.ndarray:
@@ -584,7 +597,7 @@ def _row(x: np.ndarray, b: int, width: int) -> np.ndarray:
 
 def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
     """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
-    x = np.moveaxis(x, -1, 1)
+    x = x.transpose(_batch_second(x.ndim))
     return np.ascontiguousarray(x.reshape((-1,) + x.shape[2:])[:n_rows])
 
 
