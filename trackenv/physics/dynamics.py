@@ -1021,7 +1021,7 @@ class _TrackRows:
     ballast_damping: np.ndarray
 
 
-_TRACK_ROWS_CACHE_SIZE = 8  # batches of tracks kept (~0.6 MB each for a line's 12 segments, ~7 MB for 256 rows)
+_TRACK_ROWS_CACHE_SIZE = 8  # batches of tracks kept (~0.3 MB for a line's 12 segments, ~7 MB for 256 rows)
 _TRACK_ROWS: collections.OrderedDict = collections.OrderedDict()  # (tracks, dt, ends, layout) -> _TrackRows
 
 
