@@ -12,8 +12,10 @@ in the order A B B A A B … (so that a drift over the run favours neither), eac
 process after a warm-up; the report gives both medians, the median of the per-pair ratios (new / base) and how
 many pairs favour the new version. ``--base`` and ``--new`` are git revisions checked out as temporary worktrees
 (``--new`` defaults to the working tree itself); each worktree compiles the kernel the first time it runs (a few
-minutes, untimed), and is removed at the end. ``--new-kwargs`` (a JSON object) gives the new version's env
-keyword arguments the base may not know, e.g. an engine option. Figures (``--figure``):
+minutes, untimed), and is removed at the end (``--base-dir DIR`` keeps the base's, to be reused). ``--new-kwargs``
+(a JSON object) gives the new version's env keyword arguments the base may not know, e.g. an engine option;
+``--base-kwargs`` the base's (both on one engine: ``--base-kwargs '{"engine": "fast"}' --new-kwargs '{"engine":
+"fast"}'``). Figures (``--figure``):
 
 * ``vector``: env steps per second of the native vector env (``--envs`` envs, random actions, ``--steps``);
 * ``sharded``: the same split over ``--workers`` processes (versions that have ``ShardedVectorEnv``);
@@ -159,6 +161,20 @@ def _checkout(rev: str, where: Path) -> Path:
     return where
 
 
+def _kept_checkout(rev: str, where: Path) -> Path:
+    """A checkout of ``rev`` at ``where`` that outlives the run (``--base-dir``): made if absent, else reused if it
+    holds ``rev`` (its compiled kernel with it: the next runs compile nothing)."""
+    if not where.exists():
+        return _checkout(rev, where)
+    def commit(*args: str) -> str:
+        return subprocess.run(["git", *args], check=True, capture_output=True, text=True).stdout.strip()
+    held = commit("-C", str(where), "rev-parse", "HEAD")
+    wanted = commit("-C", str(ROOT), "rev-parse", f"{rev}^{{commit}}")
+    if held != wanted:
+        raise SystemExit(f"--base-dir {where} holds {held[:10]}, not --base {rev} ({wanted[:10]})")
+    return where
+
+
 def _run(tree: Path, code: str) -> float:
     """The figure printed by ``code`` run in a fresh process on the trackenv of ``tree``."""
     check = f"import trackenv, sys; assert trackenv.__file__.startswith({str(tree)!r}), trackenv.__file__\n"
@@ -188,6 +204,15 @@ def _keyword_arguments(text: str, figure: str, parser: argparse.ArgumentParser) 
     return given
 
 
+def figure_codes(figure: str, env_ids: dict[str, str], kwargs: dict[str, dict], *, steps: int, envs: int,
+                 workers: int) -> dict[str, str]:
+    """Each version's code for ``figure`` ("base", "new"): the figure's snippet with that version's env id and env
+    keyword arguments (``env_ids``, ``kwargs``: by version)."""
+    return {side: _SNIPPETS[figure].format(envs=envs, steps=steps, workers=workers, env_id=env_ids[side],
+                                           kwargs="".join(f", {k}={v!r}" for k, v in kwargs[side].items()))
+            for side in ("base", "new")}
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", required=True, help="git revision of the base version")
@@ -203,21 +228,26 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--new-kwargs", default="{}",
                         help="JSON object of keyword arguments for the new version's env (figures env, line, "
                              "line_vector), e.g. '{\"engine\": \"fast\"}'")
+    parser.add_argument("--base-kwargs", default="{}",
+                        help="JSON object of keyword arguments for the base version's env (as --new-kwargs)")
+    parser.add_argument("--base-dir", default=None,
+                        help="check the base out here and keep it, with its compiled kernel, for later runs (a "
+                             "checkout of --base already there is reused)")
     parser.add_argument("--out", default="", help="write the JSON report here")
     args = parser.parse_args(argv)
     if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
         parser.error("pairs, steps, envs and workers must be >= 1")
     new_kwargs = _keyword_arguments(args.new_kwargs, args.figure, parser)
+    base_kwargs = _keyword_arguments(args.base_kwargs, args.figure, parser)
     steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "line_vector": 10,
                            "seed": 20}[args.figure]
     env_ids = {"base": args.base_env_id or args.env_id, "new": args.env_id}
-    codes = {side: _SNIPPETS[args.figure].format(envs=args.envs, steps=steps, workers=args.workers,
-                                                 env_id=env_ids[side],
-                                                 kwargs="".join(f", {k}={v!r}" for k, v in given.items()))
-             for side, given in (("base", {}), ("new", new_kwargs))}
+    codes = figure_codes(args.figure, env_ids, {"base": base_kwargs, "new": new_kwargs}, steps=steps, envs=args.envs,
+                         workers=args.workers)
     runs = order(args.pairs)
     with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
-        trees = {"base": _checkout(args.base, Path(tmp) / "base")}
+        trees = {"base": _kept_checkout(args.base, Path(args.base_dir)) if args.base_dir
+                 else _checkout(args.base, Path(tmp) / "base")}
         trees["new"] = ROOT if args.new is None else _checkout(args.new, Path(tmp) / "new")
         try:
             for name, tree in trees.items():  # compile (or load) each version's kernel, untimed
@@ -228,11 +258,11 @@ def main(argv: list[str] | None = None) -> dict:
                 figures[name].append(_run(trees[name], codes[name]))
                 print(f"run {i + 1}/{len(runs)} {name}: {figures[name][-1]:.2f}", file=sys.stderr, flush=True)
         finally:
-            for tree in trees.values():
-                if tree != ROOT:
+            for name, tree in trees.items():
+                if tree != ROOT and not (name == "base" and args.base_dir):
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
     report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
-              "new_rev": args.new or "working tree", "new_kwargs": new_kwargs,
+              "new_rev": args.new or "working tree", "base_kwargs": base_kwargs, "new_kwargs": new_kwargs,
               **({"env_ids": env_ids} if args.figure == "env" else {}),
               "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
               **summary(figures["base"], figures["new"])}

@@ -116,6 +116,17 @@ def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
         ab.summary([], [])
 
 
+def test_ab_speed_gives_each_version_its_own_env_id_and_keywords():
+    ab = _script("ab_speed")
+    codes = ab.figure_codes("env", {"base": "trackenv/Tamping-v0", "new": "trackenv/Tamping-v1"},
+                            {"base": {"engine": "classic"}, "new": {"engine": "fast"}}, steps=2, envs=1, workers=1)
+    assert 'gym.make("trackenv/Tamping-v0", engine=\'classic\')' in codes["base"]
+    assert 'gym.make("trackenv/Tamping-v1", engine=\'fast\')' in codes["new"]
+    codes = ab.figure_codes("line", {"base": "", "new": ""}, {"base": {"engine": "fast"}, "new": {}}, steps=2,
+                            envs=1, workers=1)
+    assert "engine='fast'" in codes["base"] and "engine=" not in codes["new"]
+
+
 
 def test_robustness_conditions_each_move_one_field_of_the_default_line_and_are_valid():
     from trackenv.envs.line_config import scenario

@@ -4,6 +4,7 @@ loss of contact, batching, and the moving-window fast path against the plain ful
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 import scipy.signal
 from reference import load_vector, reference_pass
 
+from trackenv.physics import dynamics
 from trackenv.physics.contact import LinearContact
 from trackenv.physics.dynamics import (
     batched_bands,
@@ -91,6 +93,39 @@ def test_batched_bands_are_each_tracks_own_bands():
         for rows, own in zip(batch, track.banded_matrices(), strict=True):
             np.testing.assert_array_equal(rows[r], own)
     assert not np.array_equal(batch[2][0], batch[2][1])
+
+
+def _kept_track_arrays() -> list[np.ndarray]:
+    """Every array of the one batch of track arrays the set-up keeps."""
+    (kept,) = dynamics._TRACK_ROWS.values()
+    return [getattr(kept, field.name) for field in dataclasses.fields(kept)]
+
+
+def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
+    """The set-up keeps a batch's track arrays in the kernel's layout, its tracks' window ends and margins: passes
+    that find them kept are bit for bit those that build them, and the kernel leaves the kept arrays as they were."""
+    base = Track.realistic(30.0)
+    tracks = [base.scaled(ballast_stiffness=f) for f in (0.6, 1.0, 1.7)]
+    level = 1e-3 * np.cos(np.arange(base.n_sleepers) * 0.9)
+    kw = dict(window_ends="static", window_decay_lengths=3.0, support_settlement=level)
+
+    def passes():
+        return simulate_passes(tracks, LOADED, V80, **kw)
+
+    dynamics._TRACK_ROWS.clear()
+    dynamics._STATIC_ENDS.clear()
+    first = passes()
+    kept = [x.copy() for x in _kept_track_arrays()]
+    again = passes()
+    for a, b in zip(first, again, strict=True):
+        np.testing.assert_array_equal(a.contact_force, b.contact_force)
+        np.testing.assert_array_equal(a.sleeper_force, b.sleeper_force)
+    for before, now in zip(kept, _kept_track_arrays(), strict=True):
+        np.testing.assert_array_equal(before, now)
+    dynamics._TRACK_ROWS.clear()
+    dynamics._STATIC_ENDS.clear()
+    fresh = passes()
+    np.testing.assert_array_equal(fresh[2].contact_force, first[2].contact_force)
 
 
 def test_result_shapes_and_time_grid():

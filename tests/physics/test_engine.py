@@ -55,6 +55,15 @@ def test_the_steady_start_sits_its_lead_bays_before_the_evaluated_track_or_falls
     assert FAST_ENGINE.approach_sleepers(soft, WHEEL) > 10
 
 
+def test_the_options_of_a_track_are_kept_and_each_caller_gets_its_own_dict():
+    track = Track.realistic(18.0).extended(10, 10)
+    options = FAST_ENGINE.options_for(track, WHEEL, 10)
+    options["start"] = "rest"  # a caller's change stays its own
+    assert FAST_ENGINE.options_for(track, WHEEL, 10) == {**options, "start": "steady"}
+    assert FAST_ENGINE.options_for(track, WHEEL, 12)["x_start"] > FAST_ENGINE.options_for(track, WHEEL, 10)["x_start"]
+    assert CLASSIC_ENGINE.options_for(track, WHEEL, 10) == CLASSIC_ENGINE.pass_options
+
+
 def test_the_settlement_loop_runs_with_the_fast_engine():
     track = Track.realistic(12.0)
     level = 1e-3 * np.cos(np.arange(track.n_sleepers) * 0.9)

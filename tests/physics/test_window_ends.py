@@ -17,7 +17,7 @@ from trackenv.physics import dynamics
 from trackenv.physics.dynamics import simulate_pass, simulate_passes, window_margin
 from trackenv.physics.track import PER_SLEEPER_FIELDS, Track
 from trackenv.physics.vehicle import Wheelset
-from trackenv.physics.window_ends import outside_damping, outside_stiffness, outside_transfer
+from trackenv.physics.window_ends import outside_damping, outside_stiffness, outside_transfer, static_ends
 
 V80 = 80 / 3.6
 LOADED = Wheelset(mass=1800.0, static_load=100e3)
@@ -62,6 +62,24 @@ def test_condensed_stiffness_and_extension_are_the_dense_schur_complement(elemen
             np.testing.assert_allclose(transfer[s], extension, rtol=0, atol=1e-12)
         else:
             assert not transfer[s].any()
+
+
+@pytest.mark.parametrize("elements_per_bay", [2, 3])
+def test_static_ends_of_a_batch_are_each_tracks_own_bit_for_bit(elements_per_bay):
+    """The batch's ends (every step vectorised over its tracks) are, track by track, the outside's stiffness,
+    damping and extension that each track has alone, bit for bit: the tracks differ in every support property."""
+    base = varied_track(elements_per_bay)
+    rng = np.random.default_rng(5)
+    tracks = [base.replace(**{f: getattr(base, f) * rng.uniform(0.3, 3.0, base.n_sleepers) for f in PER_SLEEPER_FIELDS})
+              for _ in range(3)] + [base]
+    ends = static_ends(tracks, np.stack([t.banded_matrices()[2] for t in tracks]))
+    lay = base.dof_layout
+    for row, t in zip(ends, tracks, strict=True):
+        k = t.banded_matrices()[2]
+        alone = np.concatenate([outside_stiffness(k, lay), outside_damping(t),
+                                outside_transfer(k, lay).reshape(t.n_sleepers, -1)], axis=1)
+        np.testing.assert_array_equal(row, alone)
+    assert not np.array_equal(ends[0], ends[1])
 
 
 def test_static_ends_give_the_whole_tracks_static_deflection_at_any_margin():

@@ -54,19 +54,25 @@ def check_scalar(
     """Return ``value`` as float, or raise ValueError naming ``name`` and the allowed range.
 
     Accepts Python and numpy real numbers (and 0-d arrays of them); refuses strings (``"1.5"`` is not converted:
-    a config read as text must be parsed where it is read), bools (``True`` is not 1.0) and complex numbers."""
-    rng = _range_text(low, high, low_inclusive, high_inclusive)
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value[()]
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a real number in {rng}, got {_describe(value)}")
-    v = float(value)
+    a config read as text must be parsed where it is read), bools (``True`` is not 1.0) and complex numbers. A
+    Python float, the common case (the passes check several per call), skips the type tests; the range's text is
+    written only for an error."""
+    if type(value) is float:
+        v = value
+    else:
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            value = value[()]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            rng = _range_text(low, high, low_inclusive, high_inclusive)
+            raise ValueError(f"{name} must be a real number in {rng}, got {_describe(value)}")
+        v = float(value)
     if not math.isfinite(v):
+        rng = _range_text(low, high, low_inclusive, high_inclusive)
         raise ValueError(f"{name} must be a finite number in {rng}, got {value!r}")
     lo_ok = low is None or (v >= low if low_inclusive else v > low)
     hi_ok = high is None or (v <= high if high_inclusive else v < high)
     if not (lo_ok and hi_ok):
-        raise ValueError(f"{name} must lie in {rng}, got {v:g}")
+        raise ValueError(f"{name} must lie in {_range_text(low, high, low_inclusive, high_inclusive)}, got {v:g}")
     return v
 
 

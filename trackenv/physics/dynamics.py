@@ -12,6 +12,7 @@ from __future__ import annotations
 import collections
 import functools
 import math
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -25,7 +26,7 @@ from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
-from .window_ends import check_window_ends, outside_damping, outside_stiffness, outside_transfer
+from .window_ends import check_window_ends, static_ends
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
 SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
@@ -339,24 +340,41 @@ def _stiffness_factor(track: Track) -> np.ndarray:
     return factor
 
 
-@functools.lru_cache(maxsize=256)
+_STATIC_ENDS_CACHE_SIZE = 256  # tracks whose static ends are kept (as the per-track caches above)
+_STATIC_ENDS: collections.OrderedDict = collections.OrderedDict()  # track -> its static ends, least recent first
+
+
+def _track_ends(tracks: Sequence[Track]) -> list[np.ndarray]:
+    """The static ends of each track (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
+    and the static extension onto the next bay (:func:`~trackenv.physics.window_ends.static_ends`), kept per track
+    object (read-only; the most recent :data:`_STATIC_ENDS_CACHE_SIZE`): an episode's passes over its model tracks
+    compute them once, the tracks missing as one batch."""
+    return _kept(_STATIC_ENDS, list(tracks), _STATIC_ENDS_CACHE_SIZE,
+                 lambda missing: list(static_ends(missing, batched_bands(missing)[2])))
+
+
 def _track_outside_stiffness(track: Track) -> np.ndarray:
-    """:func:`~trackenv.physics.window_ends.outside_stiffness` of ``track`` (n_sleepers, 6), kept per track
-    object (read-only)."""
-    out = outside_stiffness(_track_stiffness(track), track.dof_layout)
-    out.flags.writeable = False
-    return out
+    """:func:`~trackenv.physics.window_ends.outside_stiffness` of ``track`` (n_sleepers, 6), read-only: the first
+    columns of its static ends (:func:`_track_ends`)."""
+    return _track_ends([track])[0][:, :6]
 
 
-@functools.lru_cache(maxsize=256)
-def _track_ends(track: Track) -> np.ndarray:
-    """The static ends of ``track`` (n_sleepers, 12 + 2 bay_dofs): the outside's stiffness, its condensed damping
-    and the static extension onto the next bay (:mod:`trackenv.physics.window_ends`), kept per track object."""
-    transfer = outside_transfer(_track_stiffness(track), track.dof_layout)
-    out = np.concatenate([_track_outside_stiffness(track), outside_damping(track),
-                          transfer.reshape(track.n_sleepers, -1)], axis=1)
-    out.flags.writeable = False
-    return out
+def _kept(cache: collections.OrderedDict, keys: list, size: int, compute: Callable[[list], list]) -> list:
+    """The value of each of ``keys`` in ``cache`` (an OrderedDict, least recently used first), the keys missing
+    computed at once by ``compute`` (their list, without repeats, to their values), made read-only and kept; the
+    cache is then cut to its ``size`` most recent entries (after the values are read: a batch may hold more)."""
+    missing = list(dict.fromkeys(k for k in keys if k not in cache))
+    if missing:
+        for key, value in zip(missing, compute(missing), strict=True):
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            cache[key] = value
+    for key in keys:
+        cache.move_to_end(key)
+    values = [cache[k] for k in keys]
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return values
 
 
 def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
@@ -365,7 +383,7 @@ def _window_ends(tracks: Sequence[Track], ends: str, a1: float) -> np.ndarray:
     a1) times its damping, that damping, and the extension."""
     if ends == "rest":
         return np.zeros((len(tracks), tracks[0].n_sleepers, 6))
-    out = np.stack([_track_ends(t) for t in tracks])
+    out = np.stack(_track_ends(tracks))
     out[:, :, :6] += a1 * out[:, :, 6:12]
     return out
 
@@ -486,16 +504,29 @@ def window_margin(track: Track, decay_lengths: float = WINDOW_DECAY_LENGTHS) -> 
     ``decay_lengths`` sets another margin (a shorter one suits ``window_ends="static"``: see
     :mod:`trackenv.physics.window_ends`)."""
     decay_lengths = check_scalar("decay_lengths", decay_lengths, low=0.5, high=100.0)
-    k = track.support_stiffness
-    n = min(WINDOW_AVERAGING_SLEEPERS, k.size)
-    k_f = np.convolve(k, np.ones(n) / n, mode="valid").min() / track.sleeper_spacing
-    beta = (k_f / (4.0 * track.rail_bending_stiffness)) ** 0.25
+    beta = _softest_beta(track)
     if beta * track.sleeper_spacing < WINDOW_MIN_BETA_SPACING:
         return None
     margin = max(2, math.ceil(decay_lengths / (beta * track.sleeper_spacing) - 1e-9))
     if 2 * margin + 2 >= track.n_sleepers / 2:
         return None
     return margin
+
+
+_SOFTEST_BETA: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # track -> β of its softest stretch [1/m]
+
+
+def _softest_beta(track: Track) -> float:
+    """β = (k_f / 4EI)^¼ [1/m] on the softest stretch of WINDOW_AVERAGING_SLEEPERS supports of ``track``
+    (:func:`window_margin`), kept while the track object lives: every pass over a model track, and the env's
+    choice of each pass's options, read it."""
+    beta = _SOFTEST_BETA.get(track)
+    if beta is None:
+        k = track.support_stiffness
+        n = min(WINDOW_AVERAGING_SLEEPERS, k.size)
+        k_f = np.convolve(k, np.ones(n) / n, mode="valid").min() / track.sleeper_spacing
+        beta = _SOFTEST_BETA[track] = (k_f / (4.0 * track.rail_bending_stiffness)) ** 0.25
+    return beta
 
 
 def check_window_bays(window_bays) -> None:
@@ -535,7 +566,20 @@ def _pack(x: np.ndarray, n_chunks: int, width: int) -> np.ndarray:
     if pad:
         x = np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
     x = x.reshape((n_chunks, width) + x.shape[1:])
-    return np.ascontiguousarray(np.moveaxis(x, 1, -1))
+    return np.ascontiguousarray(x.transpose(_batch_last(x.ndim)))
+
+
+@functools.cache
+def _batch_last(ndim: int) -> tuple[int, ...]:
+    """The axes of ``np.moveaxis(x, 1, -1)`` for an array of ``ndim`` axes, as a transpose takes them (the packing
+    runs a dozen times a pass: the axes are worked out once)."""
+    return (0, *range(2, ndim), 1)
+
+
+@functools.cache
+def _batch_second(ndim: int) -> tuple[int, ...]:
+    """The axes of ``np.moveaxis(x, -1, 1)`` for an array of ``ndim`` axes (the inverse of :func:`_batch_last`)."""
+    return (0, ndim - 1, *range(1, ndim - 1))
 
 
 def _packed_history(first: np.ndarray, n_steps: int, n_chunks: int, width: int) -> np.ndarray:
@@ -553,7 +597,7 @@ def _row(x: np.ndarray, b: int, width: int) -> np.ndarray:
 
 def _unpack(x: np.ndarray, n_rows: int) -> np.ndarray:
     """The inverse of :func:`_pack`: (chunks, ..., width) -> (rows, ...)."""
-    x = np.moveaxis(x, -1, 1)
+    x = x.transpose(_batch_second(x.ndim))
     return np.ascontiguousarray(x.reshape((-1,) + x.shape[2:])[:n_rows])
 
 
@@ -861,16 +905,18 @@ def _settled_statics(batch: _Batch, start_points: list, z_rows: list) -> tuple[n
     if batch.settlement is None:
         return sag, static_ballast, static_total
     g = batch.settlement
-    for b, t in enumerate(batch.tracks):
-        f = np.zeros(t0.n_dof)
-        f[lay.sleeper] = t.ballast_stiffness * g[b]
-        u0, info = _PBTRS(_stiffness_factor(t), f, lower=1)
+    ballast, pad = (np.stack([getattr(t, name) for t in batch.tracks]) for name in ("ballast_stiffness",
+                                                                                    "pad_stiffness"))
+    f = np.zeros((n_rows, t0.n_dof))
+    f[:, lay.sleeper] = ballast * g
+    for b, t in enumerate(batch.tracks):  # one solve per row: each row's own factor
+        u0, info = _PBTRS(_stiffness_factor(t), f[b], lower=1)
         _lapack_info("pbtrs", info)
         sag[b] = u0
         z_rows[b][0] += [shp @ u0[dofs] for dofs, shp in start_points]
-        us, uw = u0[lay.sleeper], u0[lay.node_w[lay.sleeper_node]]
-        static_ballast[b] = t.ballast_stiffness * (us - g[b])
-        static_total[b] = static_ballast[b] + t.pad_stiffness * (uw - us)
+    us, uw = sag[:, lay.sleeper], sag[:, lay.node_w[lay.sleeper_node]]
+    static_ballast[...] = ballast * (us - g)
+    static_total[...] = static_ballast + pad * (uw - us)
     return sag, static_ballast, static_total
 
 
@@ -887,6 +933,8 @@ def _start_state(batch: _Batch, x0: np.ndarray, cluster: np.ndarray, start_point
             state.qdd[b] = np.linalg.solve(system.mass, system.force - system.stiffness @ state.q[b])
         return state
     windows = tuple(_window_dofs(t0, x0[cluster == c], batch.margin_bays) for c in range(int(cluster.max()) + 1))
+    if batch.ends == "static":  # the rows' static ends as one batch (each row's start reads its outside stiffness)
+        _track_ends(batch.tracks)
     for b in range(n_rows):
         state.u[b], state.q[b], state.force[b] = _static_start(batch, batch.tracks[b], windows, start_points, z0[b])
     return state
@@ -919,11 +967,9 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
     arguments of :func:`_kernel.run`, (mesh, drive, rows, peaks, reuse, width)."""
     t0, system, lay = batch.tracks[0], batch.system, batch.tracks[0].dof_layout
     consts = newmark_constants(batch.dt)
-    mb, cb, kb = batched_bands(batch.tracks)
-    supports = {name: np.stack([getattr(t, name) for t in batch.tracks])
-                for name in ("pad_stiffness", "pad_damping", "ballast_stiffness", "ballast_damping")}
+    track = _track_rows(batch, n_chunks, width)
     ws, ds = lay.node_w[lay.sleeper_node], lay.sleeper
-    bal_k, bal_c, pad_k = supports["ballast_stiffness"], supports["ballast_damping"], supports["pad_stiffness"]
+    bal_k, bal_c, pad_k = track.ballast_stiffness, track.ballast_damping, track.pad_stiffness
     peak_ballast = bal_k * state.u[:, ds]
     if batch.start == "steady":  # the supports move at the start: their dampers carry force too
         peak_ballast = peak_ballast + bal_c * state.v[:, ds]
@@ -931,19 +977,16 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
     rail0 = np.stack([[shp @ u[dofs] for dofs, shp in start_points] for u in state.u])
     pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
     history = functools.partial(_packed_history, n_steps=x_axle.shape[0] - 1, n_chunks=n_chunks, width=width)
-    mesh = _step.Mesh(lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
-                      float(t0.element_length), int(t0.elements_per_bay), int(t0.n_sleepers), batch.margin_bays,
-                      _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness,
-                                                  t0.rail_mass)[0]))
+    mesh = _step.Mesh(track.node_w, track.sleeper_dof, track.sleeper_node, float(t0.element_length),
+                      int(t0.elements_per_bay), int(t0.n_sleepers), batch.margin_bays, track.rail_mass)
     drive = _step.Drive(np.ascontiguousarray(x_axle), consts, int(batch.law.code), float(batch.law.parameter),
                         np.array(system.mass, dtype=float), np.array(system.damping, dtype=float),
                         np.linalg.inv(system.stiffness + consts[0] * system.mass + consts[1] * system.damping),
                         system.force.astype(float), system.wheel_dofs.astype(np.int64), cluster,
                         int(cluster.max()) + 1)
     u, v, a, q, qd, qdd = (pack(x) for x in (state.u, state.v, state.a, state.q, state.qd, state.qdd))
-    rows = _step.Rows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(pad_k),
-                      pack(supports["pad_damping"]), pack(bal_k), pack(bal_c), z_packed, pack(sag),
-                      u, v, a, q, qd, qdd, pack(_window_ends(batch.tracks, batch.ends, consts[1])))
+    rows = _step.Rows(track.mass_diag, track.keff, track.pad_k, track.pad_c, track.bal_k, track.bal_c, z_packed,
+                      pack(sag), u, v, a, q, qd, qdd, track.ends)
     peaks = _step.Peaks(history(state.force), history(rail0), history(state.q[:, system.wheel_dofs]),
                         pack(peak_ballast), pack(peak_total))
     # one row: its window factors and bay columns are kept for the next pass (batches keep nothing)
@@ -952,6 +995,62 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
     reuse = (_one_row_reuse(t0, batch.dt, system.axle_offsets, cluster, batch.margin_bays, batch.ends) if keep
              else _NO_REUSE)
     return mesh, drive, rows, peaks, reuse, width
+
+
+@dataclass(frozen=True, eq=False)
+class _TrackRows:
+    """What a batch's tracks give the kernel, whatever runs over them: the rows' mass diagonal, effective stiffness
+    K + a0 M + a1 C, pad and ballast stiffness and damping and window ends in the kernel's layout (the fields of
+    :class:`_step.Rows` of these names); the DOF layout's node_w, sleeper and sleeper_node (int64) and the rail's
+    mass diagonals (those of :class:`_step.Mesh`); and the supports row by row (rows, n_sleepers) that the start's
+    peak forces read."""
+
+    mass_diag: np.ndarray
+    keff: np.ndarray
+    pad_k: np.ndarray
+    pad_c: np.ndarray
+    bal_k: np.ndarray
+    bal_c: np.ndarray
+    ends: np.ndarray
+    node_w: np.ndarray
+    sleeper_dof: np.ndarray
+    sleeper_node: np.ndarray
+    rail_mass: np.ndarray
+    pad_stiffness: np.ndarray
+    ballast_stiffness: np.ndarray
+    ballast_damping: np.ndarray
+
+
+_TRACK_ROWS_CACHE_SIZE = 8  # batches of tracks kept (~0.3 MB for a line's 12 segments, ~7 MB for 256 rows)
+_TRACK_ROWS: collections.OrderedDict = collections.OrderedDict()  # (tracks, dt, ends, layout) -> _TrackRows
+
+
+def _track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
+    """:class:`_TrackRows` of ``batch`` in the layout (``n_chunks``, ``width``), kept per sequence of track objects,
+    dt, window ends and layout (the most recent :data:`_TRACK_ROWS_CACHE_SIZE`): an env's passes run over the same
+    model tracks step after step, and the kernel only reads these arrays (the torch backend, which hands them to
+    torch, gets its own)."""
+    if batch.backend != "numba":
+        return _build_track_rows(batch, n_chunks, width)
+    key = (tuple(batch.tracks), batch.dt, batch.ends, n_chunks, width)
+    return _kept(_TRACK_ROWS, [key], _TRACK_ROWS_CACHE_SIZE,
+                 lambda missing: [_build_track_rows(batch, n_chunks, width)])[0]
+
+
+def _build_track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
+    """:class:`_TrackRows` of ``batch``, assembled (:func:`batched_bands`, :func:`_window_ends`) and packed."""
+    t0, lay = batch.tracks[0], batch.tracks[0].dof_layout
+    consts = newmark_constants(batch.dt)
+    mb, cb, kb = batched_bands(batch.tracks)
+    supports = {name: np.stack([getattr(t, name) for t in batch.tracks])
+                for name in ("pad_stiffness", "pad_damping", "ballast_stiffness", "ballast_damping")}
+    pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    return _TrackRows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(supports["pad_stiffness"]),
+                      pack(supports["pad_damping"]), pack(supports["ballast_stiffness"]),
+                      pack(supports["ballast_damping"]), pack(_window_ends(batch.tracks, batch.ends, consts[1])),
+                      lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
+                      _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]),
+                      supports["pad_stiffness"], supports["ballast_stiffness"], supports["ballast_damping"])
 
 
 def _results(batch: _Batch, run: _Run) -> list[PassResult]:
@@ -1052,42 +1151,35 @@ def _check_steady_start(track: Track, x0: np.ndarray, margin: int) -> None:
         )
 
 
-def _steady_key(batch: _Batch, track: Track) -> tuple:
-    """What a row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
+def _steady_keys(batch: _Batch) -> list[tuple]:
+    """What each row's steady state depends on: its entry's supports, the rail and mesh, the vehicle, the contact
     law, speed, dt, the window and its ends, where the leading axle stands in its bay at the start, and the
-    backend."""
-    entry = tuple(float(getattr(track, name)[0]) for name in _SUPPORT_FIELDS)
-    rail = (track.sleeper_spacing, track.rail_bending_stiffness, track.rail_mass, track.elements_per_bay)
-    system = batch.system
+    backend. All but the entry are the batch's (its rows share the rail and mesh), built once."""
+    t0, system = batch.tracks[0], batch.system
+    rail = (t0.sleeper_spacing, t0.rail_bending_stiffness, t0.rail_mass, t0.elements_per_bay)
     vehicle = tuple(np.asarray(x).tobytes() for x in (system.mass, system.damping, system.stiffness, system.force,
                                                        system.wheel_dofs, system.axle_offsets))
-    phase = batch.x_start - math.floor(batch.x_start / track.sleeper_spacing) * track.sleeper_spacing
-    return (entry, rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase,
-            batch.backend, batch.ends)  # (the backends round differently: each keeps its own)
+    phase = batch.x_start - math.floor(batch.x_start / t0.sleeper_spacing) * t0.sleeper_spacing
+    shared = (rail, vehicle, (batch.law.code, batch.law.parameter), batch.speed, batch.dt, batch.margin, phase,
+              batch.backend, batch.ends)  # (the backends round differently: each keeps its own)
+    return [(tuple(float(getattr(t, name)[0]) for name in _SUPPORT_FIELDS),) + shared for t in batch.tracks]
 
 
 _SUPPORT_FIELDS = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
 
 
 def _steady_states(batch: _Batch) -> list[_SteadyState]:
-    """Each row's steady state, computed once per key (:func:`_steady_key`) and kept.
+    """Each row's steady state, computed once per key (:func:`_steady_keys`) and kept.
 
     The steady state is the periodic response of the vehicle running over a track that continues the row's first
     sleeper for ever. It is found by integrating: the vehicle starts in static equilibrium on a uniform track of
     the entry's supports, clear of its ends, and runs ``STEADY_RUN_BAYS`` bays (with the row's window, dt and
     contact law), ending with its leading axle where the row's pass starts in its bay. The keys missing are
     integrated as one batch."""
-    keys = [_steady_key(batch, t) for t in batch.tracks]
-    missing = {k: t for k, t in zip(keys, batch.tracks) if k not in _STEADY_STATES}
-    if missing:
-        for key, state in zip(missing, _integrate_steady(batch, list(missing.values()))):
-            _STEADY_STATES[key] = state
-    for key in keys:
-        _STEADY_STATES.move_to_end(key)
-    states = [_STEADY_STATES[k] for k in keys]  # (before the oldest are dropped: a batch may hold more keys)
-    while len(_STEADY_STATES) > _STEADY_CACHE_SIZE:
-        _STEADY_STATES.popitem(last=False)
-    return states
+    keys = _steady_keys(batch)
+    track_of = dict(zip(keys, batch.tracks))  # a track of each key (any: its entry, all the run reads, is in it)
+    return _kept(_STEADY_STATES, keys, _STEADY_CACHE_SIZE,
+                 lambda missing: _integrate_steady(batch, [track_of[k] for k in missing]))
 
 
 def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:

@@ -21,6 +21,7 @@ row's result never depends on its batch).
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -84,7 +85,16 @@ class PassEngine:
         ``approach_sleepers`` sleepers of approach: :attr:`pass_options`, and with the steady start the leading
         axle's start ``x_start``, ``lead_bays`` before the evaluated track. Where the steady start's window does
         not fit in the approach (or the track is too soft for a moving window) the pass starts from static
-        equilibrium at the track's start instead."""
+        equilibrium at the track's start instead. Kept per track object while it lives (with the engine, vehicle and
+        approach): the envs ask for every segment's options at every step."""
+        kept = _OPTIONS.setdefault(model_track, {})
+        key = (self, vehicle, approach_sleepers)
+        if key not in kept:
+            kept[key] = self._options_for(model_track, vehicle, approach_sleepers)
+        return dict(kept[key])
+
+    def _options_for(self, model_track: Track, vehicle, approach_sleepers: int) -> dict:
+        """:meth:`options_for`, worked out."""
         options = self.pass_options
         if self.start != "steady":
             return options
@@ -95,6 +105,9 @@ class PassEngine:
             return {**options, "start": "static"}
         return {**options, "x_start": (approach_sleepers - self.lead_bays) * s}
 
+
+#: model track -> {(engine, vehicle, approach sleepers): its pass options}, while the track lives
+_OPTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 CLASSIC_ENGINE = PassEngine()
 FAST_ENGINE = PassEngine(start="steady", window_ends="static", decay_lengths=FAST_DECAY_LENGTHS)
