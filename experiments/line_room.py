@@ -1,4 +1,6 @@
-"""Room to learn on TampingLine: tuned rules vs the best uniform periodic rule vs a per-section hindsight bound.
+"""Room to learn on TampingLine: tuned rules vs the best uniform periodic rule vs a hindsight bound (per section;
+on the 60 m track, ``--scenario track60``, whose six sections share one segment, of the whole line:
+:mod:`trackenv_agents.evaluation.line_hindsight_whole`).
 
 1. Grid-tune every line heuristic on training seeds (``--n-train``, seeds 1000+).
 2. Score the tuned rules on held-out seeds (``--n-test``, seeds 0+) with 95 % CIs and paired differences.
@@ -10,8 +12,9 @@
 
 Searches of other seeds (``--test-start``) merge with ``line_room_summary.py``.
 
-Writes results/line_room.json (and the tuned parameters to agents/rules/line_tuned_heuristics.json with
-``--save-tuned``); progress goes to stdout (run it with a log file in the background).
+Writes results/line_room.json (and the tuned parameters to the scenario's file of
+:data:`trackenv_agents.rules.problems.TUNED_FILES` with ``--save-tuned``; ``--use-saved`` reads them from there);
+progress goes to stdout (run it with a log file in the background).
 """
 
 from __future__ import annotations
@@ -32,7 +35,8 @@ from trackenv_agents.evaluation.line_hindsight import (
 )
 from trackenv_agents.evaluation.statistics import paired_difference
 from trackenv_agents.evaluation.tuning import tune_many
-from trackenv_agents.rules.line import LINE_HEURISTICS, LINE_TUNED_FILE, UniformPeriodic
+from trackenv_agents.rules.line import LINE_HEURISTICS, UniformPeriodic
+from trackenv_agents.rules.problems import tuned_file_for
 
 
 def main(argv=None) -> dict:
@@ -61,14 +65,14 @@ def main(argv=None) -> dict:
     classes = [c for n, c in LINE_HEURISTICS.items() if n != "no-maintenance"]
     train = list(range(1000, 1000 + args.n_train))
     if args.use_saved:
-        saved = json.loads(LINE_TUNED_FILE.read_text())
+        saved = json.loads(tuned_file_for(cfg).read_text())
         best, train = saved["params"], saved["train_seeds"]
     else:
         tuned = tune_many(classes, cfg, train, args.batch_size, progress=True)
         best = {classes[i].name: t["best_params"] for i, t in tuned.items()}
     print("tuned", json.dumps(best), f"{time.time() - t0:.0f}s", flush=True)
     if args.save_tuned and not args.use_saved:
-        LINE_TUNED_FILE.write_text(json.dumps({"scenario": args.scenario, "train_seeds": train, "params": best},
+        tuned_file_for(cfg).write_text(json.dumps({"scenario": args.scenario, "train_seeds": train, "params": best},
                                               indent=1) + "\n")
     pols = [LINE_HEURISTICS[n](**p) for n, p in best.items()]
     test = list(range(args.test_start, args.test_start + args.n_test))

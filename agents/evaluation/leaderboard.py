@@ -28,10 +28,10 @@ the held-out seeds themselves: the score's zero is the strongest rule the suite 
 
 **The bound** is :func:`~.line_hindsight.hindsight_bounds` per episode, from the best rule's schedule with every
 scored rule's schedule as a candidate (:data:`BOUND_SEARCH`), never above the best rule's own cost (its schedule is
-always a candidate). The engine prices sections apart only where each section is its own segment and there is no
-annual budget and no machine shared between lines: on the 60 m track (six sections share one segment), on the
-hard line (an annual budget) and on the network (one machine for three lines) the score is null, and the bound
-entry says why. A search costs seconds per episode, so each episode's bound is kept
+always a candidate). Where sections share a segment (the 60 m track) it is the whole-line search
+(:mod:`.line_hindsight_whole`). The per-section search needs no annual budget and no machine shared between
+lines: on the hard line (an annual budget) and on the network (one machine for three lines) the score is null, and
+the bound entry says why. A search costs seconds per episode, so each episode's bound is kept
 under ``DIR/bounds/`` keyed by (scenario, seed, a hash of the config and the search settings), and the saved
 searches of ``experiments/searches/`` are reused for the seeds they cover once their schedules replay, in the env
 as it is now, at the cost they were saved with.
@@ -125,15 +125,13 @@ def normalised_score(rule_cost: np.ndarray, policy_cost: np.ndarray, bound_cost:
 
 
 def bound_unavailable(config: Any) -> str | None:
-    """Why the per-section hindsight bound cannot be computed for ``config`` (None where it can): the search prices
-    each section apart, which needs one section per segment, no annual budget and a machine of the line's own."""
+    """Why the hindsight bound cannot be computed for ``config`` (None where it can): the per-section search prices
+    each section apart, which needs no annual budget and a machine of the line's own; where sections share a
+    segment the whole-line search prices whole lines (:mod:`.line_hindsight_whole`)."""
     if isinstance(config, NetworkConfig):
         return (f"{config.n_lines} lines share one tamping machine (its line each step, its moves between lines): "
                 "the per-section hindsight search prices each section apart, not the shared machine")
-    if getattr(config, "sections_per_segment", 1) != 1:
-        return (f"{config.sections_per_segment} sections share one segment: their costs are not separable, so the "
-                "per-section hindsight search does not apply")
-    if config.annual_budget > 0:
+    if config.annual_budget > 0 and config.sections_per_segment == 1:
         return (f"an annual budget ({config.annual_budget:g} k€) couples the sections' schedules, which the "
                 "per-section hindsight search prices apart")
     return None

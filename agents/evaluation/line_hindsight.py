@@ -496,9 +496,20 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
     besides tamping, the closed-loop rules are extended by :func:`choice_rules` (``choice_search``: its keyword
     arguments) and the local search swaps and adds the enabled track work (tamp, spot tamp, renew). Returns per
     episode {"seed", "cost", "replayed_cost", "schedule" ((H, S) int8 codes), "search" (the best total after
-    each stage), "start_cost" (the base schedule's total), "options" (candidates replayed per section)}."""
+    each stage), "start_cost" (the base schedule's total), "options" (candidates replayed per section)}.
+
+    Where sections share a physics segment (``sections_per_segment`` > 1) they cannot be priced apart: the search
+    is then the whole-line one of :mod:`.line_hindsight_whole` (tamping only), in the same format."""
     from tqdm.auto import tqdm
 
+    if config.sections_per_segment > 1:  # sections not separable: the whole-line search
+        from .line_hindsight_whole import whole_line_bounds
+
+        if choice_search is not None:
+            raise ValueError("the whole-line hindsight search (sections sharing a segment) is tamping only: "
+                             "choice_search must be None")
+        return whole_line_bounds(config, episodes, rounds=rounds, sd_thresholds_mm=sd_thresholds_mm,
+                                 peak_fractions=peak_fractions, stop_steps=stop_steps, progress=progress)
     S, H = config.n_sections, config.horizon_steps
     if config.annual_budget > 0:
         raise ValueError(f"the hindsight search prices sections independently and cannot keep an annual budget; "

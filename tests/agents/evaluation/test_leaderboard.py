@@ -66,10 +66,10 @@ def test_score_is_null_without_a_gap_and_refuses_unpaired_costs() -> None:
         normalised_score(rule, rule[:1], rule)
 
 
-def test_bound_applies_only_where_sections_are_priced_apart() -> None:
+def test_bound_applies_where_sections_or_whole_lines_are_priced() -> None:
     assert bound_unavailable(scenario("small")) is None
     assert bound_unavailable(scenario("default")) is None
-    assert "share one segment" in bound_unavailable(scenario("track60"))
+    assert bound_unavailable(scenario("track60")) is None  # the whole-line search
     assert "annual budget" in bound_unavailable(scenario("hard"))
     assert "share one tamping machine" in bound_unavailable(NetworkConfig())
 
