@@ -10,8 +10,8 @@ that would rather wait can leave it, though all of them leaving would save the p
 flips does not add up to better campaigns.
 
 So a decision priced here is the step's **whole campaign** on one line (:func:`campaign_candidates`): the
-policy's own, no campaign, the policy's with one section added or dropped, and the campaigns of the k sections
-with the highest projected SD, k = 1 .. S. Each is a fork of the whole line
+policy's own, no campaign, the policy's with its marginal section added or dropped, and the campaign a grouped
+threshold would make now. Each is a fork of the whole line
 (:func:`~trackenv_agents.learning.line_counterfactual.line_forks`: an exact copy of the line and its pre-drawn
 noise) that makes that campaign at the step and lets the policy decide from the next step on, priced at the
 whole line's cost to go (every section and the possession, as the env charges them). Each section of the line
@@ -31,34 +31,47 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["campaign_candidates", "campaign_counterfactuals"]
+__all__ = ["CAMPAIGN_INCLUDE_MM", "campaign_candidates", "campaign_counterfactuals"]
+
+#: mm: the projected SD from which a section joins the grouped campaign priced at a step (the 60 m track's tuned
+#: grouped threshold includes from 1.0 mm) [assumption: one fixed level, not the advisor's own parameter].
+CAMPAIGN_INCLUDE_MM = 1.0
 
 
-def campaign_candidates(tamped: np.ndarray, allowed: np.ndarray, priority: np.ndarray, work: np.ndarray,
-                        capacity: float) -> list[np.ndarray]:
+def campaign_candidates(tamped: np.ndarray, allowed: np.ndarray, projected_sd_mm: np.ndarray, work: np.ndarray,
+                        capacity: float, include_mm: float = CAMPAIGN_INCLUDE_MM) -> list[np.ndarray]:
     """The campaigns to price on one line at one step, each an (S,) bool of the sections tamped, other than the
-    policy's own ``tamped`` (S,) and without repeats: none; the policy's with one ``allowed`` section added or one
-    dropped; the k allowed sections of the highest ``priority`` (the projected SD), k = 1 .. their number. A
-    campaign whose ``work`` (S,) (a tamping's, in tamping-section equivalents) sums over ``capacity`` is left
-    out (the env would not carry it out as asked)."""
+    policy's own ``tamped`` (S,) and without repeats: none; the policy's with its marginal sections, the worst
+    ``allowed`` section it leaves out added and the least worst it takes dropped (by ``projected_sd_mm``); and
+    the campaign a grouped threshold would make now, every allowed section projected at ``include_mm`` or more
+    (at least the worst). A campaign whose ``work`` (S,) (a tamping's, in tamping-section equivalents) sums over
+    ``capacity`` is left out (the env would not carry it out as asked).
+
+    Why so few: each branch is priced on one sampled future, and the cheapest of many branches is cheap partly by
+    luck; a section's two prices (the cheapest branch with it and without) stay comparable only if neither side
+    has many more branches to pick from."""
     tamped, allowed = np.asarray(tamped, bool), np.asarray(allowed, bool)
-    S = tamped.size
-    options = [np.zeros(S, bool)]
-    for j in range(S):
-        if tamped[j] or allowed[j]:
-            flip = tamped.copy()
-            flip[j] = not tamped[j]
-            options.append(flip)
-    ranked = [j for j in np.argsort(-np.asarray(priority, float), kind="stable") if allowed[j]]
-    for k in range(1, len(ranked) + 1):
-        top = np.zeros(S, bool)
-        top[ranked[:k]] = True
-        options.append(top)
+    sd = np.asarray(projected_sd_mm, float)
+    options = [np.zeros_like(tamped)]
+    left_out = np.nonzero(allowed & ~tamped)[0]
+    if left_out.size:
+        added = tamped.copy()
+        added[left_out[np.argmax(sd[left_out])]] = True
+        options.append(added)
+    taken = np.nonzero(tamped)[0]
+    if taken.size:
+        dropped = tamped.copy()
+        dropped[taken[np.argmin(sd[taken])]] = False
+        options.append(dropped)
+    if allowed.any():
+        grouped = allowed & (sd >= include_mm)
+        grouped[np.nonzero(allowed)[0][np.argmax(sd[allowed])]] = True
+        options.append(grouped)
     seen = {tamped.tobytes()}
     kept = []
     for option in options:
         key = option.tobytes()
-        if key in seen or (option & ~tamped & ~allowed).any() or work[option].sum() > capacity + 1e-9:
+        if key in seen or work[option].sum() > capacity + 1e-9:
             continue
         seen.add(key)
         kept.append(option)
@@ -67,12 +80,17 @@ def campaign_candidates(tamped: np.ndarray, allowed: np.ndarray, priority: np.nd
 
 def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advisor: Any = None,
                              focus_rate: float = 0.5, other_rate: float = 0.1, seed: int = 0,
-                             progress: Callable[[int], Any] | None = None) -> dict[str, np.ndarray]:
+                             progress: Callable[[int], Any] | None = None,
+                             alternatives: int | None = 1) -> dict[str, np.ndarray]:
     """Run ``policy`` on the episodes ``seeds`` of ``config`` (a tamp-or-wait line; SB3 ``predict``, without a
     recurrent state) and price whole campaigns (:func:`campaign_candidates`) at a random subset of its line-steps:
     each with probability ``focus_rate`` where a campaign is in question (a section of it is, by the single-flip
     rule :func:`~trackenv_agents.learning.line_counterfactual._query_rates`), else ``other_rate``; drawn from
-    ``seed``. ``advisor``: the rule whose choice the features carry (as the policy sees it).
+    ``seed``. ``advisor``: the rule whose choice the features carry (as the policy sees it). ``alternatives``: how
+    many of the candidates are priced at a line-step, drawn at random (None: every one). With one, a section's two
+    prices are its line's own run and one other campaign, each on the same sampled future: an unbiased sample of
+    the difference, as a single flip's; with more, the cheapest of several branches is cheap partly by luck
+    (it favours the side with more branches).
 
     Returns arrays over the sections of the priced line-steps that some branch tamps, in the form
     :func:`~trackenv_agents.learning.line_counterfactual.section_counterfactuals` gives (so
@@ -87,6 +105,8 @@ def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, adv
     from .line_policy import FEATURES, section_features, tamping_codes
 
     c = config
+    if alternatives is not None and alternatives < 1:
+        raise ValueError(f"alternatives must be >= 1 or None, got {alternatives!r}")
     if action_type_for(c) == "choices":
         raise ValueError("campaign forks price tamp-or-wait lines; this config's actions are choice codes")
     for name, rate in (("focus_rate", focus_rate), ("other_rate", other_rate)):
@@ -96,6 +116,7 @@ def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, adv
     advisor = None if advisor is None else bind_policy(advisor, c)
     names = [n for n, _ in FEATURES]
     sd_column = names.index("projected_sd_mm")
+    sd_scale = dict(FEATURES)["projected_sd_mm"]  # the feature is the SD over its scale
     rng = np.random.default_rng(seed)
     work = work_on_sections(work_per_code(c.choice_work), np.full(c.n_sections, TAMP), c.length_factors)
     picked: dict[str, list] = {k: [] for k in ("features", "rate", "line", "step")}
@@ -110,7 +131,10 @@ def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, adv
         rate = _query_rates(feats, names, tamped, focus_rate, other_rate).max(axis=1)
         lines, firsts = [], []
         for b in np.nonzero(rng.random(E) < rate)[0]:
-            options = campaign_candidates(tamped[b], allowed[b], feats[b, :, sd_column], work, c.capacity)
+            options = campaign_candidates(tamped[b], allowed[b], feats[b, :, sd_column] * sd_scale, work,
+                                          c.capacity)
+            if alternatives is not None and len(options) > alternatives:
+                options = [options[i] for i in np.sort(rng.choice(len(options), alternatives, replace=False))]
             for option in options:
                 lines.append(b)
                 firsts.append(np.where(option, TAMP, 0))
@@ -129,7 +153,9 @@ def _cheapest_per_section(run: dict[str, np.ndarray], picked: dict[str, list],
                           seeds: Sequence[int]) -> dict[str, np.ndarray]:
     """The samples of :func:`campaign_counterfactuals` from its forks ``run`` (:func:`line_forks`) and the
     line-steps ``picked``: per section, the cheapest branch with it tamped and without, as the env carried the
-    branches out (``applied``; the policy's own run is a branch)."""
+    branches out (``applied``; the policy's own run is a branch). The sections whose choice differs between the
+    branches share the line-step's weight (each gets 1 / their number of it): the cost difference of one
+    campaign decision counts once, as a single flip's does, not once per section it moves."""
     from .line_policy import tamping_codes
 
     out: dict[str, list] = {k: [] for k in ("features", "q_do", "q_skip", "did", "weight", "seed", "step",
@@ -140,12 +166,13 @@ def _cheapest_per_section(run: dict[str, np.ndarray], picked: dict[str, list],
         own = tamping_codes(run["codes"][t, line])
         tamps = np.vstack([own[None], tamping_codes(run["applied"][mine])])
         costs = np.concatenate([[run["to_go"][t, line]], run["cost"][mine]])
+        shared = max(int(np.sum(tamps.any(axis=0) & ~tamps.all(axis=0))), 1)  # the sections the branches move
         for j in range(tamps.shape[1]):
             with_j, without_j = costs[tamps[:, j]], costs[~tamps[:, j]]
             if not (with_j.size and without_j.size):
                 continue
             for key, value in (("features", feats[j]), ("q_do", with_j.min()), ("q_skip", without_j.min()),
-                               ("did", own[j]), ("weight", 1.0 / rate), ("seed", seeds[line]), ("step", t),
+                               ("did", own[j]), ("weight", 1.0 / rate / shared), ("seed", seeds[line]), ("step", t),
                                ("section", j), ("branches", costs.size)):
                 out[key].append(value)
     n = len(out["q_do"])
