@@ -12,6 +12,8 @@ the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamp
 The 60 m track (``trackenv/Tamping-v1``, six 10 m sections on one physics segment): ``--scenario track60`` (each
 decision priced forks the whole line, :func:`~trackenv_agents.learning.line_counterfactual.line_forks`);
 ``--export`` then copies it to ``agents/learning/pretrained/cpi_track60.zip`` (``cpi-track60-agent``).
+``--campaign`` prices whole campaigns there instead of single sections' choices
+(:func:`~trackenv_agents.learning.line_campaigns.campaign_counterfactuals`).
 
 The lines with every choice: ``--scenario wet --advisor choice-threshold`` trains the network's tamping with the
 wet line's tuned choice rule as advisor (the agent answers in choice codes, the rule's other choices with its
