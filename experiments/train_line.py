@@ -12,6 +12,8 @@ the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamp
 The 60 m track (``trackenv/Tamping-v1``, six 10 m sections on one physics segment): ``--scenario track60`` (each
 decision priced forks the whole line, :func:`~trackenv_agents.learning.line_counterfactual.line_forks`);
 ``--export`` then copies it to ``agents/learning/pretrained/cpi_track60.zip`` (``cpi-track60-agent``).
+``--campaign`` prices whole campaigns there instead of single sections' choices
+(:func:`~trackenv_agents.learning.line_campaigns.campaign_counterfactuals`).
 
 The lines with every choice: ``--scenario wet --advisor choice-threshold`` trains the network's tamping with the
 wet line's tuned choice rule as advisor (the agent answers in choice codes, the rule's other choices with its
@@ -58,6 +60,9 @@ def main(argv=None) -> None:
                         "agents/learning/pretrained/ppo_tamping_line.zip)")
     p.add_argument("--learn-choices", action="store_true",
                    help="the network also decides spot tamping and drainage (with a choice rule as advisor)")
+    p.add_argument("--campaign", action="store_true",
+                   help="price whole campaigns (track60: line_campaigns.campaign_counterfactuals) instead of "
+                        "single sections' other choices")
     p.add_argument("--out", default="runs/ppo_line")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--export", action="store_true",
@@ -70,13 +75,14 @@ def main(argv=None) -> None:
     config = scenario(a.scenario, **({"horizon_years": a.horizon_years} if a.horizon_years else {}))
     t0 = time.time()
     hyperparams = a.hyperparams
-    if a.advisor is not None or a.learn_choices:
+    if a.advisor is not None or a.learn_choices or a.campaign:
         from trackenv_agents.learning.line import LINE_ENV_ID, LINE_ZOO
         from trackenv_agents.learning.tamping import load_hyperparams
 
         given = load_hyperparams(a.hyperparams, env_id=LINE_ENV_ID, schema=LINE_ZOO) if a.hyperparams else {}
         hyperparams = {**given, **({"advisor": a.advisor} if a.advisor is not None else {}),
-                       **({"learn_choices": True} if a.learn_choices else {})}
+                       **({"learn_choices": True} if a.learn_choices else {}),
+                       **({"campaign_forks": True} if a.campaign else {})}
     path = train_line(config, total_timesteps=a.timesteps, n_envs=a.n_envs, seed=a.seed, out_dir=a.out,
                       hyperparams=hyperparams, progress=not a.no_progress, eval_seeds=parse_seeds(a.eval_seeds),
                       iterations=a.iterations, episodes_per_iteration=a.episodes, init_policy=a.init)

@@ -222,6 +222,9 @@ class _LineTrainer:
             if not is_choice_rule(self.advisor):
                 raise ValueError(f"learn_choices needs a choice rule as advisor, got {s.advisor!r}")
             self.learned = tuple(c for c in LEARNABLE_CHOICES if c == "tamp" or c in config.choices)
+        if s.campaign_forks and (config.sections_per_segment == 1 or s.learn_choices):
+            raise ValueError("campaign_forks prices the tamping of sections that share a segment "
+                             f"(sections_per_segment > 1, got {config.sections_per_segment}), without learn_choices")
         self.env = SectionAgentsVecEnv(s.n_envs, config, seed=seed + 1_000_000, reward_scale=s.reward_scale,
                                        advisor=self.advisor, choice_features=s.learn_choices)
         self.model = self.AlgoClass("MlpPolicy", self.env, seed=seed, tensorboard_log=str(run_dir), verbose=0,
@@ -347,6 +350,7 @@ class _LineTrainer:
     def _policy_iteration(self, pi: dict[str, Any]) -> None:
         """Iterations ``pi["done"]`` to the settings' last, each checkpointed (``pi`` is updated in place)."""
         from .imitation import fit_choices
+        from .line_campaigns import campaign_counterfactuals
         from .line_counterfactual import section_counterfactuals
 
         s, config, seed = self.s, self.config, self.seed
@@ -363,10 +367,11 @@ class _LineTrainer:
         for it in range(pi["done"], s.iterations):
             t_it = time.time()
             seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
-            d = section_counterfactuals(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
-                                        other_rate=s.other_rate, seed=seed + it,
-                                        progress=bar.update if bar is not None else None, choices=self.learned,
-                                        choice_features=s.learn_choices)
+            priced = campaign_counterfactuals if s.campaign_forks else section_counterfactuals
+            more = {} if s.campaign_forks else {"choices": self.learned, "choice_features": s.learn_choices}
+            d = priced(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
+                       other_rate=s.other_rate, seed=seed + it, progress=bar.update if bar is not None else None,
+                       **more)
             t_forks = time.time() - t_it
             pi["data"].append(d)
             pooled = {k: np.concatenate([x[k] for x in pi["data"]]) for k in d}
@@ -374,8 +379,7 @@ class _LineTrainer:
                               seed=seed + it)
             pi["line_steps"] += n_episodes * H
             # a fork is one segment where each carries one section, else its whole line (line_forks)
-            pi["fork_steps"] += int(np.sum(H - d["step"])) * (1 if config.sections_per_segment == 1
-                                                               else config.n_segments)
+            pi["fork_steps"] += _fork_steps(d, H, config)
             rec: dict[str, Any] = {"iteration": it, "seeds": [seeds[0], seeds[-1]], "samples": int(d["step"].size),
                                    "other_choice_cheaper": float(np.mean((d["q_do"] < d["q_skip"]) != d["did"])),
                                    "samples_per_choice": {name: int(np.sum(d["choice"] == i))
@@ -488,6 +492,17 @@ def _line_env_id(config: LineConfig) -> str:
         if name in SCENARIOS and config.replace(horizon_years=10.0) == scenario(name):
             return env_id
     return LINE_ENV_ID
+
+
+def _fork_steps(samples: dict[str, np.ndarray], horizon_steps: int, config: LineConfig) -> int:
+    """Segment-steps the forks behind ``samples`` ran: a fork is one segment where each carries one section, else
+    its whole line (line_forks); campaign forks (``branches``) are per line-step, each branch but the policy's."""
+    if "branches" in samples:
+        _, first = np.unique(np.stack([samples["seed"], samples["step"]]), axis=1, return_index=True)
+        return int(np.sum((samples["branches"][first] - 1) * (horizon_steps - samples["step"][first]))) \
+            * config.n_segments
+    return int(np.sum(horizon_steps - samples["step"])) * (1 if config.sections_per_segment == 1
+                                                           else config.n_segments)
 
 
 def _run_started_from(run_dir: Path) -> bool:

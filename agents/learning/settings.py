@@ -274,3 +274,5 @@ class LineSettings(AlgoSettings):
     fit_margin: float = _num(1.0, 0.0, 1e9, doc="k€: below it the policy keeps its own choice")
     learn_choices: bool = _flag(False, doc="the network also decides spot tamping and drainage, priced in the "
                                            "forks (with a choice rule as advisor, on a line that enables them)")
+    campaign_forks: bool = _flag(False, doc="price whole campaigns instead of single sections' other choices (where "
+                                            "sections share a segment: line_campaigns.campaign_counterfactuals)")
