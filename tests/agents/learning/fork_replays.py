@@ -1,14 +1,33 @@
 """Env replays the forks' tests compare the forks with: the choice rule's own episodes (per seed the codes it
-played at each step and its memory before each step), and one section's cost from a step on under another
-choice there."""
+played at each step and its memory before each step), one section's cost from a step on under another choice
+there, and a whole line's cost from a step on (where sections share a segment, :data:`SHARED`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from trackenv.envs import scenario
 from trackenv.envs.choices import IS_TRACK_WORK, SPOT_TAMP
 from trackenv.envs.line import TampingLine
 from trackenv_agents.rules.choices import choice_view, remember_work
+
+# the 60 m track cut to 30 m in 3 sections of one segment over 2 years of quarters (8 steps)
+SHARED = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+                  horizon_years=2.0)
+
+
+def line_cost_to_go(cfg, seed, policy, t, first) -> float:
+    """The whole line's cost from step t in the env (every section and the possession) when it makes the codes
+    ``first`` at step t and ``policy`` decides every other step."""
+    env = TampingLine(cfg)
+    obs, _ = env.reset(seed=seed)
+    cost = 0.0
+    for step in range(cfg.horizon_steps):
+        a = np.asarray(first, dtype=np.int8) if step == t else policy.predict(obs)[0]
+        obs, reward, *_ = env.step(a)
+        if step >= t:
+            cost -= reward
+    return cost
 
 
 def rule_plans(cfg, rule, seeds) -> tuple[dict, dict]:

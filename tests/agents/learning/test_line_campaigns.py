@@ -6,30 +6,13 @@ import itertools
 
 import numpy as np
 import pytest
+from fork_replays import SHARED, line_cost_to_go
 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.learning.line_campaigns import campaign_candidates, campaign_counterfactuals
 from trackenv_agents.rules.line import GroupedThreshold
-
-# the 60 m track cut to 30 m in 3 sections of one segment over 2 years of quarters (8 steps)
-SHARED = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
-                  horizon_years=2.0)
-
-
-def _line_cost_to_go(cfg, seed, policy, t, first):
-    """The whole line's cost from step t in the env when it makes the codes ``first`` at step t and ``policy``
-    decides every other step."""
-    env = TampingLine(cfg)
-    obs, _ = env.reset(seed=seed)
-    cost = 0.0
-    for step in range(cfg.horizon_steps):
-        a = np.asarray(first, dtype=np.int8) if step == t else policy.predict(obs)[0]
-        obs, reward, *_ = env.step(a)
-        if step >= t:
-            cost -= reward
-    return cost
 
 
 def test_candidates_are_none_the_marginal_sections_and_the_grouped_campaign_within_capacity():
@@ -69,7 +52,7 @@ def test_campaign_prices_are_the_cheapest_env_replays_with_and_without_the_secti
             obs, *_ = env.step(rule.predict(obs)[0])
         own = np.asarray(rule.predict(obs)[0], dtype=np.int64)
         assert bool(own[j]) == bool(data["did"][k])
-        every = {c: _line_cost_to_go(SHARED, s, rule, t, c) for c in itertools.product((0, 1), repeat=S)}
+        every = {c: line_cost_to_go(SHARED, s, rule, t, c) for c in itertools.product((0, 1), repeat=S)}
         with_j = [v for c, v in every.items() if c[j]]
         without_j = [v for c, v in every.items() if not c[j]]
         # each price is one campaign's exact replay, no cheaper than the best campaign on its side
@@ -93,7 +76,7 @@ def test_one_alternative_a_step_pairs_the_policys_run_with_one_campaign():
         obs, *_ = env.step(rule.predict(obs)[0])
     own = rule.predict(obs)[0]
     mine, other = (data["q_do"][k], data["q_skip"][k]) if data["did"][k] else (data["q_skip"][k], data["q_do"][k])
-    assert mine == pytest.approx(_line_cost_to_go(SHARED, s, rule, t, own), rel=1e-9)
+    assert mine == pytest.approx(line_cost_to_go(SHARED, s, rule, t, own), rel=1e-9)
     same_step = (data["seed"] == s) & (data["step"] == t)  # every section that differs shares the one other branch
     assert np.allclose(np.where(data["did"], data["q_skip"], data["q_do"])[same_step], other, rtol=0, atol=0)
 

@@ -3,6 +3,7 @@ makes the other choice and the policy goes on deciding for it, the other section
 
 import numpy as np
 import pytest
+from fork_replays import SHARED, line_cost_to_go
 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
@@ -58,23 +59,6 @@ def test_forks_are_the_envs_section_costs_under_the_other_choice():
         section_counterfactuals(CFG, seeds, rule, focus_rate=0.0)
 
 
-# the 60 m track cut to 30 m in 3 sections of one segment over 2 years of quarters (8 steps)
-SHARED = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
-                  horizon_years=2.0)
-
-
-def _line_cost_to_go(cfg, seed, policy, t, first):
-    """The whole line's cost from step t in the env (every section and the possession) when it makes the codes
-    ``first`` at step t and ``policy`` decides every other step."""
-    env = TampingLine(cfg)
-    obs, _ = env.reset(seed=seed)
-    cost = 0.0
-    for step in range(cfg.horizon_steps):
-        a = np.asarray(first, dtype=np.int8) if step == t else policy.predict(obs)[0]
-        obs, reward, *_ = env.step(a)
-        if step >= t:
-            cost -= reward
-    return cost
 
 
 def test_a_whole_line_fork_of_the_policys_own_choice_is_its_run_and_another_choice_is_not():
@@ -99,7 +83,7 @@ def test_a_whole_line_fork_of_the_policys_own_choice_is_its_run_and_another_choi
     assert (run["cost"][other] != own[other]).all()
     for k in other:  # the other choice, as the env prices it when the line replays it
         t, line = int(run["step"][k]), int(run["line"][k])
-        assert run["cost"][k] == pytest.approx(_line_cost_to_go(SHARED, [3, 4][line], rule, t, picked[t][line]),
+        assert run["cost"][k] == pytest.approx(line_cost_to_go(SHARED, [3, 4][line], rule, t, picked[t][line]),
                                                rel=1e-9)
     np.testing.assert_array_equal(run["applied"][other], np.concatenate([picked[2], picked[5]]))
 
@@ -122,8 +106,8 @@ def test_shared_segment_counterfactuals_price_the_whole_line():
         flipped = codes.copy()
         flipped[j] = 1 - flipped[j]
         q_own, q_other = (data["q_do"][k], data["q_skip"][k]) if acted else (data["q_skip"][k], data["q_do"][k])
-        assert q_own == pytest.approx(_line_cost_to_go(SHARED, s, rule, t, codes), rel=1e-9)
-        assert q_other == pytest.approx(_line_cost_to_go(SHARED, s, rule, t, flipped), rel=1e-9)
+        assert q_own == pytest.approx(line_cost_to_go(SHARED, s, rule, t, codes), rel=1e-9)
+        assert q_other == pytest.approx(line_cost_to_go(SHARED, s, rule, t, flipped), rel=1e-9)
 
 
 class _Remembers:
