@@ -190,17 +190,17 @@ def _run(tree: Path, code: str) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
-def _keyword_arguments(text: str, figure: str, parser: argparse.ArgumentParser) -> dict:
-    """``--new-kwargs`` as a dict of names to JSON values (an error naming the option if it is not one, or if the
-    figure's env takes none)."""
+def _keyword_arguments(text: str, figure: str, parser: argparse.ArgumentParser, option: str = "--new-kwargs") -> dict:
+    """The value of ``option`` (``--new-kwargs`` or ``--base-kwargs``) as a dict of names to JSON values (an error
+    naming the option if it is not one, or if the figure's env takes none)."""
     try:
         given = json.loads(text)
     except json.JSONDecodeError as e:
-        parser.error(f"--new-kwargs must be a JSON object, got {text!r} ({e})")
+        parser.error(f"{option} must be a JSON object, got {text!r} ({e})")
     if not isinstance(given, dict) or not all(isinstance(k, str) and k.isidentifier() for k in given):
-        parser.error(f"--new-kwargs must be a JSON object of keyword names, got {text!r}")
+        parser.error(f"{option} must be a JSON object of keyword names, got {text!r}")
     if given and figure not in _TAKES_KWARGS:
-        parser.error(f"--new-kwargs applies to the figures {list(_TAKES_KWARGS)}, not {figure!r}")
+        parser.error(f"{option} applies to the figures {list(_TAKES_KWARGS)}, not {figure!r}")
     return given
 
 
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.pairs < 1 or args.envs < 1 or args.workers < 1 or (args.steps is not None and args.steps < 1):
         parser.error("pairs, steps, envs and workers must be >= 1")
     new_kwargs = _keyword_arguments(args.new_kwargs, args.figure, parser)
-    base_kwargs = _keyword_arguments(args.base_kwargs, args.figure, parser)
+    base_kwargs = _keyword_arguments(args.base_kwargs, args.figure, parser, "--base-kwargs")
     steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "line_vector": 10,
                            "seed": 20}[args.figure]
     env_ids = {"base": args.base_env_id or args.env_id, "new": args.env_id}

@@ -100,7 +100,7 @@ def test_ab_speed_timed_runs_collect_each_variants_records_in_the_alternating_or
     assert ab.load_range(runs) == [0.5, 3.0]
 
 
-def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
+def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones(capsys):
     ab = _script("ab_speed")
     parser = argparse.ArgumentParser()
     assert ab._keyword_arguments('{"engine": "fast"}', "line", parser) == {"engine": "fast"}
@@ -112,6 +112,9 @@ def test_ab_speed_gives_the_new_version_its_env_keywords_and_refuses_bad_ones():
                          ('{"1x": 2}', "line")):
         with pytest.raises(SystemExit):
             ab._keyword_arguments(text, figure, parser)
+    with pytest.raises(SystemExit):
+        ab._keyword_arguments("[1]", "line", parser, "--base-kwargs")
+    assert "--base-kwargs must be a JSON object" in capsys.readouterr().err
     with pytest.raises(ValueError, match="equal, non-empty"):
         ab.summary([], [])
 
