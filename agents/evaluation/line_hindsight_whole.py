@@ -38,7 +38,7 @@ tamping is refused (the 60 m track has none).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -80,7 +80,7 @@ class TrueStateCampaignRule:
 
 def _closeness(a: TrueStateCampaignRule, b: TrueStateCampaignRule) -> int:
     """How many fields two rules share (a rule forks from the closest earlier one: they part late, if at all)."""
-    return sum(getattr(a, f) == getattr(b, f) for f in ("trigger_mm", "include_mm", "peak_fraction", "stop_steps"))
+    return sum(getattr(a, f.name) == getattr(b, f.name) for f in fields(a))
 
 
 def _parents(seeds: list[int], candidates: list[tuple[int, Any]],
