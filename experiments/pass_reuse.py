@@ -1,16 +1,19 @@
 """Pass reuse on the line (``LineConfig.pass_reuse_tolerance_m``, fast engine): how many passes it skips and
 what it changes, per tolerance.
 
-    python experiments/pass_reuse.py --seeds 8 --tolerances-mm 0.02,0.05,0.1,0.2   # saved to experiments/saved/
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.02,0.05,0.1,0.2,0.3,0.4,0.5,1.0
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.3 --policy random    # what ab_speed's line steps
 
-One episode of ``TampingLine-v0`` per seed under the grouped-threshold rule with its tuned parameters, with the
-fast engine and no reuse (the reference), then with each tolerance. Per tolerance: the share of segment passes
-skipped (reused) over the episodes' steps (the reset's passes are always computed and not counted); the
-episode cost's relative change against the reference (mean and largest |Δ|); the decisions that differ (the
-section-steps whose action differs, and the episodes with any); and the error of the reused sleeper forces:
-at every step, each reused segment's equivalent sleeper forces against a fresh pass at its current level
-(computed aside, changing nothing), the largest |Δ| relative to the fresh pass's largest sleeper force of the
-segment, and the same for its contact force.
+One episode of ``TampingLine-v0`` per seed under the grouped-threshold rule with its tuned parameters (or, with
+``--policy random``, random actions, the action space seeded with the episode's seed: what the ``line`` figures
+of ``experiments/ab_speed.py`` step; saved under their own name), with the fast engine and no reuse (the
+reference), then with each tolerance. Per tolerance: the share of segment passes skipped (reused) over the
+episodes' steps (the reset's passes are always computed and not counted); the episode cost's relative change
+against the reference (mean and largest |Δ|); the decisions that differ (the section-steps whose action
+differs, and the episodes with any); and the error of the reused sleeper forces: at every step, each reused
+segment's equivalent sleeper forces against a fresh pass at its current level (computed aside, changing
+nothing), the largest |Δ| relative to the fresh pass's largest sleeper force of the segment, and the same for
+its contact force.
 """
 
 from __future__ import annotations
@@ -55,20 +58,22 @@ class PassRecorder:
         return force, contact, bays
 
 
-def episode(seed: int, tolerance_m: float, compare: bool) -> dict:
-    """One episode under the tuned grouped-threshold rule: its cost, its actions, and the passes' record."""
+def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule") -> dict:
+    """One episode under the tuned grouped-threshold rule (or random actions): its cost, its actions, and the
+    passes' record."""
     import gymnasium as gym
 
     sys.path.insert(0, str(ROOT))
     from agents.rules.line import GroupedThreshold, line_tuned_params
 
     env = gym.make(ENV_ID, engine="fast", pass_reuse_tolerance_m=tolerance_m)
-    policy = GroupedThreshold(**line_tuned_params()["grouped-threshold"])
+    rule = GroupedThreshold(**line_tuned_params()["grouped-threshold"])
+    env.action_space.seed(seed)
     obs, _ = env.reset(seed=seed)
     record = PassRecorder(env.unwrapped.engine, compare)
     cost, actions, done = 0.0, [], False
     while not done:
-        action = policy.predict(obs, deterministic=True)[0]
+        action = rule.predict(obs, deterministic=True)[0] if policy == "rule" else env.action_space.sample()
         actions.append(np.asarray(action).ravel().tolist())
         obs, reward, terminated, truncated, _ = env.step(action)
         cost -= float(reward)
@@ -85,11 +90,11 @@ def quantiles(values: list[float]) -> dict:
             "max": float(v.max())}
 
 
-def measure(seeds: list[int], tolerances_mm: list[float]) -> dict:
-    reference = {s: episode(s, 0.0, False) for s in seeds}
+def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule") -> dict:
+    reference = {s: episode(s, 0.0, False, policy) for s in seeds}
     rows = []
     for tol in tolerances_mm:
-        runs = {s: episode(s, tol * 1e-3, True) for s in seeds}
+        runs = {s: episode(s, tol * 1e-3, True, policy) for s in seeds}
         relative = [(runs[s]["cost"] - reference[s]["cost"]) / reference[s]["cost"] for s in seeds]
         differ = [int(np.sum(np.asarray(runs[s]["actions"]) != np.asarray(reference[s]["actions"]))) for s in seeds]
         row = {
@@ -108,7 +113,8 @@ def measure(seeds: list[int], tolerances_mm: list[float]) -> dict:
         rows.append(row)
         print(json.dumps({k: v for k, v in row.items() if k != "episodes"}), flush=True)
     steps = len(reference[seeds[0]]["actions"])
-    return {"env_id": ENV_ID, "engine": "fast", "policy": "grouped-threshold (tuned)", "seeds": seeds,
+    return {"env_id": ENV_ID, "engine": "fast", "seeds": seeds,
+            "policy": "grouped-threshold (tuned)" if policy == "rule" else "random actions",
             "steps_per_episode": steps, "section_decisions": steps * len(reference[seeds[0]]["actions"][0]) *
             len(seeds), "reference_costs": {s: reference[s]["cost"] for s in seeds},
             "load_average_1min_end": os.getloadavg()[0], "tolerances": rows}
@@ -118,10 +124,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=8, help="episodes, seeds 0 .. seeds - 1 (default 8)")
     parser.add_argument("--tolerances-mm", default="0.02,0.05,0.1,0.2")
-    parser.add_argument("--out", default=str(OUT))
+    parser.add_argument("--policy", choices=("rule", "random"), default="rule")
+    parser.add_argument("--out", default=None, help="default: experiments/saved/pass_reuse.json (pass_reuse_random"
+                                                    ".json with --policy random)")
     args = parser.parse_args()
-    result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")])
-    Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+    result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")], args.policy)
+    out = args.out or (OUT if args.policy == "rule" else OUT.with_name("pass_reuse_random.json"))
+    Path(out).write_text(json.dumps(result, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import pytest
 from same_results import assert_same
 
 import trackenv  # noqa: F401  (registers the envs)
+from trackenv.envs.choices import DRAINAGE, NOTHING, RENEW, SPOT_TAMP, TAMP
 from trackenv.envs.line import TampingLine, TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
 from trackenv.envs.line_episode import LineBatch
@@ -85,7 +86,7 @@ def test_on_a_pass_is_reused_within_the_tolerance_and_a_tamped_segment_is_comput
     assert not np.isnan(batch.computed_level).any()  # the reset's pass was kept
     kept = batch.computed_force.copy()
     calls = computed_segments(batch, monkeypatch)
-    force, contact, bays = batch._passes(np.arange(4))
+    force, contact, _ = batch._passes(np.arange(4))
     assert calls == []  # nothing has moved since the reset's pass: every segment reused
     np.testing.assert_array_equal(force, kept)
     np.testing.assert_array_equal(contact, batch.computed_contact)
@@ -97,6 +98,21 @@ def test_on_a_pass_is_reused_within_the_tolerance_and_a_tamped_segment_is_comput
     np.testing.assert_array_equal(batch.computed_level[[0, 1, 3]], level[[0, 1, 3]])
     batch.traffic()
     assert [c.tolist() for c in calls] == [[2]]  # the tamped segment alone
+
+
+@pytest.mark.parametrize(("work", "computed"), [(TAMP, [1]), (RENEW, [1]), (SPOT_TAMP, [1]), (DRAINAGE, []),
+                                                (NOTHING, [])])
+def test_work_on_the_track_computes_the_next_pass(monkeypatch, work, computed):
+    """Tamping, renewal and spot tamping change the level: the next pass is computed whatever the tolerance;
+    drainage changes the rates only, and keeps the kept pass."""
+    batch = started(1e-3)
+    calls = computed_segments(batch, monkeypatch)
+    codes = np.full(4, NOTHING)
+    codes[1] = work
+    batch.work_rows(codes, 0)
+    assert np.isnan(batch.computed_level[1]).all() == bool(computed)  # cleared, whatever the lift
+    batch.traffic()
+    assert [c.tolist() for c in calls] == ([computed] if computed else [])
 
 
 def test_the_reused_level_is_that_of_the_last_computed_pass_not_the_previous_step(monkeypatch):
