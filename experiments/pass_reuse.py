@@ -1,8 +1,8 @@
 """Pass reuse on the line (``LineConfig.pass_reuse_tolerance_m``, fast engine): how many passes it skips and
 what it changes, per tolerance.
 
-    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.02,0.05,0.1,0.2,0.3,0.4,0.5,1.0
-    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.3 --policy random    # what ab_speed's line steps
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.1,0.2,0.3,0.4,0.5,0.75,1.0,1.25,1.5,2.0
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.3,1.0 --policy random    # what ab_speed's line steps
 
 One episode of ``TampingLine-v0`` per seed under the grouped-threshold rule with its tuned parameters (or, with
 ``--policy random``, random actions, the action space seeded with the episode's seed: what the ``line`` figures
@@ -12,8 +12,9 @@ episodes' steps (the reset's passes are always computed and not counted); the ep
 against the reference (mean and largest |Δ|); the decisions that differ (the section-steps whose action
 differs, and the episodes with any); and the error of the reused sleeper forces: at every step, each reused
 segment's equivalent sleeper forces against a fresh pass at its current level (computed aside, changing
-nothing), the largest |Δ| relative to the fresh pass's largest sleeper force of the segment, and the same for
-its contact force.
+nothing), the largest |Δ| relative to the fresh pass's largest sleeper force of the segment, the same for the
+kept forces without the static correction (``uncorrected_force_error``: what the correction removes), and the
+same for its contact force.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ class PassRecorder:
         self.batch, self.compare, self.passes = batch, compare, batch._passes
         self.asked = self.reused = 0
         self.force_error: list[float] = []  # per reused segment-step: max |ΔF| / max F of the fresh pass
+        self.uncorrected_error: list[float] = []  # the same for the kept forces without the static correction
         self.contact_error: list[float] = []  # per reused segment-step: |Δ contact| / fresh contact
         batch._passes = self
 
@@ -54,6 +56,9 @@ class PassRecorder:
             fresh_force, fresh_contact, _ = self.batch._computed_passes(segs[reusable])
             scale = fresh_force.max(axis=1)
             self.force_error += list(np.abs(force[reusable] - fresh_force).max(axis=1) / scale)
+            kept = self.batch.computed_force[segs[reusable]].transpose(1, 0, 2)
+            uncorrected = self.batch._equivalent(kept, self.batch.axle_mix[segs[reusable]])
+            self.uncorrected_error += list(np.abs(uncorrected - fresh_force).max(axis=1) / scale)
             self.contact_error += list(np.abs(contact[reusable] - fresh_contact) / fresh_contact)
         return force, contact, bays
 
@@ -79,7 +84,8 @@ def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule") 
         cost -= float(reward)
         done = terminated or truncated
     return {"cost": cost, "actions": actions, "asked": record.asked, "reused": record.reused,
-            "force_error": record.force_error, "contact_error": record.contact_error}
+            "force_error": record.force_error, "uncorrected_error": record.uncorrected_error,
+            "contact_error": record.contact_error}
 
 
 def quantiles(values: list[float]) -> dict:
@@ -105,6 +111,7 @@ def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule") 
             "max_abs_relative": max(abs(x) for x in relative),
             "section_steps_differing": sum(differ), "episodes_differing": sum(d > 0 for d in differ),
             "force_error": quantiles([e for r in runs.values() for e in r["force_error"]]),
+            "uncorrected_force_error": quantiles([e for r in runs.values() for e in r["uncorrected_error"]]),
             "contact_error": quantiles([e for r in runs.values() for e in r["contact_error"]]),
             "episodes": [{"seed": s, "cost": runs[s]["cost"], "reference_cost": reference[s]["cost"],
                           "relative": rel, "section_steps_differing": d, "skipped_share": runs[s]["reused"] /
