@@ -24,6 +24,10 @@ minutes, untimed), and is removed at the end (``--base-dir DIR`` keeps the base'
 * ``line``: line-steps per second of ``trackenv/TampingLine-v0`` (random actions);
 * ``line_vector``: line-steps per second of the default line's native vector env (``--envs`` lines, random
   actions);
+* ``line_rule``, ``line_vector_rule``: the same two, stepping whole episodes (at least ``--steps`` env steps)
+  under the grouped-threshold rule with its tuned parameters (:data:`RULE_MM`, written out here so that any
+  version runs it): a line's realistic steps, where few sections are tamped at once (random actions tamp up
+  to the capacity every step);
 * ``seed``: passes per second of the seed pass at dt = 1e-4 (the benchmark's ``seed_pass``).
 """
 
@@ -52,6 +56,16 @@ for _ in range({steps}):
     _, _, te, tr, _ = env.step(env.action_space.sample())
     if te or tr: env.reset()
 print({steps} / (time.perf_counter() - t))
+"""
+#: the grouped-threshold rule's tuned parameters on the default line (trigger, include) [mm]:
+#: agents/rules/line_tuned_heuristics.json
+RULE_MM = (3.5, 1.75)
+# the rule on the observed section SD [mm] (one line or a batch of lines), as agents.rules.line.GroupedThreshold
+_RULE = f"""
+import numpy as np
+def act(obs):
+    sd = np.asarray(obs["section_sd"])
+    return ((sd >= {RULE_MM[0]}).any(axis=-1, keepdims=True) & (sd >= {RULE_MM[1]})).astype(np.int8)
 """
 _SNIPPETS = {
     "vector": """
@@ -89,6 +103,31 @@ t = time.perf_counter()
 for _ in range({steps}): env.step(env.action_space.sample())
 print({envs} * {steps} / (time.perf_counter() - t))
 """,
+    "line_rule": _RULE + """
+import time, gymnasium as gym
+import trackenv.envs
+env = gym.make("trackenv/TampingLine-v0"{kwargs})
+obs, _ = env.reset(seed=0); env.step(act(obs))
+steps, episode, t = 0, 1, time.perf_counter()
+while steps < {steps}:
+    obs, _ = env.reset(seed=episode); episode += 1; done = False
+    while not done:
+        obs, _, te, tr, _ = env.step(act(obs)); steps += 1; done = te or tr
+print(steps / (time.perf_counter() - t))
+""",
+    "line_vector_rule": _RULE + """
+import time
+from trackenv.envs.line import TampingLineVectorEnv
+env = TampingLineVectorEnv({envs}, scenario="default"{kwargs}); obs, _ = env.reset(seed=0)
+obs, *_ = env.step(act(obs))
+steps, t = 0, time.perf_counter()
+obs, _ = env.reset(seed=1)
+while steps < {steps}:  # the lines end together (one horizon): whole episodes, each next one reset here
+    obs, _, te, tr, _ = env.step(act(obs)); steps += 1
+    if (te | tr).all() and steps < {steps}: obs, _ = env.reset(seed=steps)
+    elif (te | tr).all(): break
+print({envs} * steps / (time.perf_counter() - t))
+""",
     "seed": """
 import time
 from trackenv.physics.dynamics import simulate_pass
@@ -103,9 +142,10 @@ print({steps} / (time.perf_counter() - t))
 }
 FIGURES = tuple(_SNIPPETS)
 _UNITS = {"vector": "env steps/s", "sharded": "env steps/s", "env": "env steps/s", "line": "line-steps/s",
-          "line_vector": "line-steps/s", "seed": "passes/s"}
+          "line_vector": "line-steps/s", "line_rule": "line-steps/s", "line_vector_rule": "line-steps/s",
+          "seed": "passes/s"}
 #: the figures whose env takes keyword arguments (``--new-kwargs``)
-_TAKES_KWARGS = ("env", "line", "line_vector")
+_TAKES_KWARGS = ("env", "line", "line_vector", "line_rule", "line_vector_rule")
 
 
 def rounds(variants: Sequence[str], pairs: int) -> list[str]:
@@ -220,7 +260,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--figure", choices=FIGURES, default="vector", help="what to time (default: vector)")
     parser.add_argument("--pairs", type=int, default=8, help="pairs of runs (default 8)")
     parser.add_argument("--steps", type=int, default=None,
-                        help="steps (passes for seed) per run (default: vector/sharded 40, env 300, line 60, seed 20)")
+                        help="steps (passes for seed) per run (default: vector/sharded 40, env 300, line 60, "
+                             "line_rule 80, line_vector_rule 40, seed 20)")
     parser.add_argument("--envs", type=int, default=32, help="envs of the vector figures (default 32)")
     parser.add_argument("--workers", type=int, default=2, help="processes of the sharded figure (default 2)")
     parser.add_argument("--env-id", default="trackenv/Tamping-v1", help="the env figure's id (default Tamping-v1)")
@@ -240,7 +281,7 @@ def main(argv: list[str] | None = None) -> dict:
     new_kwargs = _keyword_arguments(args.new_kwargs, args.figure, parser)
     base_kwargs = _keyword_arguments(args.base_kwargs, args.figure, parser, "--base-kwargs")
     steps = args.steps or {"vector": 40, "sharded": 40, "env": 300, "line": 60, "line_vector": 10,
-                           "seed": 20}[args.figure]
+                           "line_rule": 80, "line_vector_rule": 40, "seed": 20}[args.figure]
     env_ids = {"base": args.base_env_id or args.env_id, "new": args.env_id}
     codes = figure_codes(args.figure, env_ids, {"base": base_kwargs, "new": new_kwargs}, steps=steps, envs=args.envs,
                          workers=args.workers)

@@ -172,6 +172,16 @@ class LineConfig(ConfigBase):
     for the softest segment the line is taken to draw (:data:`SOFTEST_BALLAST_SHARE`). Its line steps run about
     1.5 times as fast, with sleeper forces closer to a converged approach's; an episode's cost moves by a few
     hundredths of a percent (the physics-engine page of the documentation gives the figures).
+    ``pass_reuse_tolerance_m`` [m] (0, the default: off, every segment's passes run every step): a segment's
+    pass results are those of its last computed pass while its level differs from the level of that pass by less
+    than this, once the mean of the difference is removed (a uniform shift moves the rail with its supports,
+    approach and exit zones included, and changes no force); a tamping, spot tamping or renewal, and a new
+    episode, compute the next pass afresh. The kept sleeper forces (per vehicle type) are corrected by the static
+    redistribution of the level change since (the segment's support influence times the change), the contact
+    force and profile are kept as computed. The change is measured against the computed pass, not the previous
+    step, so the reused pass's level is at most the tolerance off. In [0, 2e-3]; 1e-3 is the largest tolerance
+    whose episode costs stay within 0.1 % of computing every pass (the physics-engine page of the documentation
+    gives its accuracy and speed).
 
     **Per section** (``per_section``: a mapping of some of :data:`PER_SECTION_BOUNDS` to one value per section;
     a field left out is the line's everywhere; needs ``sections_per_segment`` = 1, as each section then has a
@@ -272,6 +282,7 @@ class LineConfig(ConfigBase):
     limits: tuple = ()
     dt: float | str = "auto"
     engine: str = "classic"
+    pass_reuse_tolerance_m: float = 0.0
     per_section: tuple = ()
     line: LineDescription | None = None
 
@@ -349,6 +360,7 @@ class LineConfig(ConfigBase):
         self._check_choices()
         object.__setattr__(self, "dt", check_dt_option(self.dt))
         check_choice("engine", self.engine, LINE_ENGINES)
+        c("pass_reuse_tolerance_m", low=0.0, high=2e-3)
         self._check_pass_time_steps()
 
     def _check_per_section(self) -> None:

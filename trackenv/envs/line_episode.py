@@ -91,7 +91,7 @@ def _lognormal(z: np.ndarray, cv: float) -> np.ndarray:
 #: The arrays of :class:`LineBatch` with a leading axis of segments, and those indexed (step, segment).
 _SEGMENT_FIELDS = ("influence", "offset", "u", "cyc", "base_rate", "wet_onset", "wet_mask", "wet_active",
                    "measured_level", "contact_profile", "d1", "traffic_factor", "pass_speed", "axle_mix",
-                   "defect_near")
+                   "defect_near", "computed_level", "computed_force", "computed_contact", "computed_bays")
 _SEGMENT_NOISE = ("tamp_noise",)
 #: The arrays with a leading axis of sections, and those indexed (step, section).
 _SECTION_FIELDS = ("count", "tampings", "register", "last_tamped", "measured_sd", "measured_peak", "contact_force",
@@ -218,6 +218,12 @@ class LineBatch:
         self.contact_profile = np.zeros((GR, n))  # largest wheel/rail force over each sleeper bay [N]
         self.d1 = np.zeros((GR, n))
         self.tamp_noise = np.zeros((H + 1, GR, n))
+        #: each segment's last computed pass (``pass_reuse_tolerance_m``): its level (NaN: none to reuse), its
+        #: sleeper forces per vehicle type [N], largest contact force [N] and contact force per sleeper bay [N]
+        self.computed_level = np.full((GR, n), np.nan)
+        self.computed_force = np.zeros((GR, len(self.vehicles), n))
+        self.computed_contact = np.zeros(GR)
+        self.computed_bays = np.zeros((GR, n))
         self._section_traffic(c, S, R)
         # per section
         self.count = np.zeros(G, dtype=np.int64)  # tampings since renewal
@@ -386,6 +392,7 @@ class LineBatch:
         for b in lines:
             self._draw(b, rngs[b])
         segs = np.concatenate([np.arange(self.segments(b).start, self.segments(b).stop) for b in lines])
+        self.computed_level[segs] = np.nan  # new model tracks: nothing to reuse
         self._quality(segs)
         mask = np.zeros(self.n_lines, dtype=bool)
         mask[lines] = True
@@ -622,16 +629,64 @@ class LineBatch:
         return self.K > 1 or self.config.profiles
 
     def _passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The passes over the segments ``segs`` (:meth:`_computed_passes`): with ``pass_reuse_tolerance_m`` > 0,
+        those of a segment whose level is within the tolerance of its last computed pass's (:meth:`_reusable`)
+        are that pass's results with its sleeper forces corrected for the settlement since (:meth:`_kept_forces`),
+        the others are computed and kept for later steps."""
+        tolerance = self.config.pass_reuse_tolerance_m
+        if tolerance == 0.0:
+            return self._computed_passes(segs)
+        fresh = segs[~self._reusable(segs, tolerance)]
+        if fresh.size:
+            forces, contact, bays = self._vehicle_passes(fresh)
+            self.computed_level[fresh] = self.level[fresh]
+            self.computed_force[fresh] = forces.transpose(1, 0, 2)
+            self.computed_contact[fresh], self.computed_bays[fresh] = contact, bays
+        force = self._equivalent(self._kept_forces(segs), self.axle_mix[segs])
+        return force, self.computed_contact[segs], self.computed_bays[segs]
+
+    def _kept_forces(self, segs: np.ndarray) -> np.ndarray:
+        """(vehicle types, segs, n) the sleeper forces of each segment's last computed pass [N], corrected by the
+        static redistribution of the level change since: F + S·(level − kept level), S the segment's
+        :attr:`influence`. A tenth of a millimetre of differential settlement moves a sleeper's support force by
+        kilonewtons (the ballast's stiffness is ~1e8 N/m), which the kept pass alone misses; the track is linear,
+        so the static change is the same under a wheel's peak, its dynamic part (and the contact force) aside. A
+        uniform change moves none (S·1 ≈ 0: the approach and exit zones settle with the end sleepers). Exactly
+        the kept forces for a segment computed this step (its change is zero)."""
+        change = self.level[segs] - self.computed_level[segs]
+        static = np.einsum("sij,sj->si", self.influence[segs], change)
+        return self.computed_force[segs].transpose(1, 0, 2) + static[None]
+
+    def _reusable(self, segs: np.ndarray, tolerance: float) -> np.ndarray:
+        """(segs,) bool: the segments whose level differs from that of their last computed pass by less than
+        ``tolerance`` [m] at every sleeper once the mean difference is removed. A uniform shift changes none of a
+        pass's forces (the approach and exit zones repeat the end levels, so the whole modelled track moves); a
+        tilt or any other shape does, even a straight one (it kinks against the level zones). A segment's model
+        track, speed and traffic mix are those of its computed pass: the model track is replaced only by a new
+        episode, which clears the level (NaN: never reusable), and the speed and mix are the config's, copied with
+        the rows (:meth:`copy_rows`, :meth:`set_state`) as the kept results are. Tamping, spot tamping and renewal
+        clear it too, so a worked segment's next pass is always computed."""
+        change = self.level[segs] - self.computed_level[segs]
+        change -= change.mean(axis=1, keepdims=True)
+        return np.abs(change).max(axis=1) < tolerance
+
+    def _computed_passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The passes over the segments ``segs`` computed now (:meth:`_vehicle_passes`), with the equivalent sleeper
+        force of each segment's traffic mix (segs, n) [N]; reads the state, writes nothing."""
+        forces, contact, bays = self._vehicle_passes(segs)
+        return self._equivalent(forces, self.axle_mix[segs]), contact, bays
+
+    def _vehicle_passes(self, segs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One batched pass per vehicle type and speed with traffic over the segments ``segs`` (each segment at
-        its own speed): the equivalent sleeper force (segs, n), the largest contact force over each segment's own
-        sleeper bays [N] and, where needed (:attr:`_profiles_needed`; else zeros), the largest over each sleeper bay
-        (segs, n) [N]."""
+        its own speed): the sleeper forces per vehicle type (vehicle types, segs, n) [N] (zeros for a type without
+        traffic on the segment), the largest contact force over each segment's own sleeper bays [N] and, where
+        needed (:attr:`_profiles_needed`; else zeros), the largest over each sleeper bay (segs, n) [N]."""
         c = self.config
         n, ne = c.n_sleepers, self.n_extra
         lv = self.level[segs]
         prof = np.concatenate([np.repeat(lv[:, :1], ne, 1), lv, np.repeat(lv[:, -1:], ne, 1)], axis=1)
         speed, mix = self.pass_speed[segs], self.axle_mix[segs]
-        forces, contact = np.zeros((2, len(segs), n)), np.zeros(len(segs))
+        forces, contact = np.zeros((len(self.vehicles), len(segs), n)), np.zeros(len(segs))
         bays = np.zeros((len(segs), n))
         for k, v in enumerate(self.vehicles):
             for pass_speed in np.unique(speed[mix[:, k] > 0]):  # none: no traffic of this type, no pass
@@ -645,7 +700,7 @@ class LineBatch:
                     contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
                     if self._profiles_needed:
                         bays[rows] = np.maximum(bays[rows], bay)
-        return self._equivalent(forces, mix), contact, bays
+        return forces, contact, bays
 
     def _pass_groups(self, segs: np.ndarray, selected: np.ndarray, vehicle) -> list[tuple[np.ndarray, dict]]:
         """The rows of ``segs`` ``selected`` (bool) for a pass of ``vehicle``, grouped by the engine's options
@@ -857,6 +912,7 @@ class LineBatch:
         sleepers = self._on_sleepers(t)[segs]
         e = self.tamp_noise[np.minimum(seg_step, c.horizon_steps), segs]
         new = restored_level(self.level[segs], sleepers, self.tm, e, self._on_sleepers(renew)[segs])
+        self.computed_level[segs] = np.nan  # worked: the next pass is computed
         if self.K == 1:
             self.offset[segs] = new
             self.sd_after_tamping[segs] = self._segment_sd(d1_filter(new, SLEEPER_SPACING_M), segs)
@@ -895,6 +951,7 @@ class LineBatch:
         np.logical_or.at(sleepers, np.searchsorted(segs, seg_of), window)
         e = self.tamp_noise[np.minimum(step_t[secs[first]], c.horizon_steps), segs]
         new = restored_level(self.level[segs], sleepers, self.tm, e, np.zeros_like(sleepers))
+        self.computed_level[segs] = np.nan  # worked: the next pass is computed
         self.offset[segs] = np.where(sleepers, new, self.offset[segs])
         self.u[segs] = np.where(sleepers, 0.0, self.u[segs])
         self.cyc[segs] = np.where(sleepers, 0.0, self.cyc[segs])

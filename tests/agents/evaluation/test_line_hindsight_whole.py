@@ -26,8 +26,10 @@ TINY = scenario("track60", n_sections=2, segment_length_m=20.0, sections_per_seg
 NO_RULES = {"sd_thresholds_mm": (), "peak_fractions": (np.inf,), "stop_steps": (0,)}
 
 
-def test_forked_whole_line_replays_equal_replays_from_the_start_and_the_env():
-    cfg = TINY
+#: pass reuse (fast engine) keeps results as episode state: forks and replays must carry them
+@pytest.mark.parametrize("passes", [{}, {"engine": "fast", "pass_reuse_tolerance_m": 1e-4}])
+def test_forked_whole_line_replays_equal_replays_from_the_start_and_the_env(passes):
+    cfg = TINY.replace(**passes)
     H, S = cfg.horizon_steps, cfg.n_sections
     rng = np.random.default_rng(0)
     cands = [(s, rng.random((H, S)) < 0.3) for s in (3, 5) for _ in range(3)]

@@ -130,8 +130,10 @@ def test_harness_scores_line_heuristics_with_cost_parts():
     assert class_breakdown(res[1])["line"]["campaigns_per_episode"] > 0
 
 
-def test_hindsight_search_is_exact_and_no_worse_than_its_start():
-    cfg = scenario("small", horizon_years=1.0)
+#: pass reuse (fast engine) keeps results as episode state: forks and replays must carry them
+@pytest.mark.parametrize("passes", [{}, {"engine": "fast", "pass_reuse_tolerance_m": 1e-4}])
+def test_hindsight_search_is_exact_and_no_worse_than_its_start(passes):
+    cfg = scenario("small", horizon_years=1.0, **passes)
     plan = np.zeros((cfg.horizon_steps, 6), bool)
     plan[0, :3] = True
     env = TampingLine(cfg)

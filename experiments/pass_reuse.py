@@ -1,0 +1,144 @@
+"""Pass reuse on the line (``LineConfig.pass_reuse_tolerance_m``, fast engine): how many passes it skips and
+what it changes, per tolerance.
+
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.1,0.2,0.3,0.4,0.5,0.75,1.0,1.25,1.5,2.0
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.3,1.0 --policy random    # what ab_speed's line steps
+
+One episode of ``TampingLine-v0`` per seed under the grouped-threshold rule with its tuned parameters (or, with
+``--policy random``, random actions, the action space seeded with the episode's seed: what the ``line`` figures
+of ``experiments/ab_speed.py`` step; saved under their own name), with the fast engine and no reuse (the
+reference), then with each tolerance. Per tolerance: the share of segment passes skipped (reused) over the
+episodes' steps (the reset's passes are always computed and not counted); the episode cost's relative change
+against the reference (mean and largest |Δ|); the decisions that differ (the section-steps whose action
+differs, and the episodes with any); and the error of the reused sleeper forces: at every step, each reused
+segment's equivalent sleeper forces against a fresh pass at its current level (computed aside, changing
+nothing), the largest |Δ| relative to the fresh pass's largest sleeper force of the segment, the same for the
+kept forces without the static correction (``uncorrected_force_error``: what the correction removes), and the
+same for its contact force.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments" / "saved" / "pass_reuse.json"
+ENV_ID = "trackenv/TampingLine-v0"
+
+
+class PassRecorder:
+    """Wraps a batch's ``_passes``: counts the segment passes asked for and those reused, and compares each
+    reused segment's results with a fresh pass (:meth:`~trackenv.envs.line_episode.LineBatch._computed_passes`,
+    which reads the state and writes nothing)."""
+
+    def __init__(self, batch, compare: bool) -> None:
+        self.batch, self.compare, self.passes = batch, compare, batch._passes
+        self.asked = self.reused = 0
+        self.force_error: list[float] = []  # per reused segment-step: max |ΔF| / max F of the fresh pass
+        self.uncorrected_error: list[float] = []  # the same for the kept forces without the static correction
+        self.contact_error: list[float] = []  # per reused segment-step: |Δ contact| / fresh contact
+        batch._passes = self
+
+    def __call__(self, segs: np.ndarray):
+        tolerance = self.batch.config.pass_reuse_tolerance_m
+        reusable = self.batch._reusable(segs, tolerance) if tolerance > 0 else np.zeros(len(segs), bool)
+        force, contact, bays = self.passes(segs)
+        self.asked += len(segs)
+        self.reused += int(reusable.sum())
+        if self.compare and reusable.any():
+            fresh_force, fresh_contact, _ = self.batch._computed_passes(segs[reusable])
+            scale = fresh_force.max(axis=1)
+            self.force_error += list(np.abs(force[reusable] - fresh_force).max(axis=1) / scale)
+            kept = self.batch.computed_force[segs[reusable]].transpose(1, 0, 2)
+            uncorrected = self.batch._equivalent(kept, self.batch.axle_mix[segs[reusable]])
+            self.uncorrected_error += list(np.abs(uncorrected - fresh_force).max(axis=1) / scale)
+            self.contact_error += list(np.abs(contact[reusable] - fresh_contact) / fresh_contact)
+        return force, contact, bays
+
+
+def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule") -> dict:
+    """One episode under the tuned grouped-threshold rule (or random actions): its cost, its actions, and the
+    passes' record."""
+    import gymnasium as gym
+
+    sys.path.insert(0, str(ROOT))
+    from agents.rules.line import GroupedThreshold, line_tuned_params
+
+    env = gym.make(ENV_ID, engine="fast", pass_reuse_tolerance_m=tolerance_m)
+    rule = GroupedThreshold(**line_tuned_params()["grouped-threshold"])
+    env.action_space.seed(seed)
+    obs, _ = env.reset(seed=seed)
+    record = PassRecorder(env.unwrapped.engine, compare)
+    cost, actions, done = 0.0, [], False
+    while not done:
+        action = rule.predict(obs, deterministic=True)[0] if policy == "rule" else env.action_space.sample()
+        actions.append(np.asarray(action).ravel().tolist())
+        obs, reward, terminated, truncated, _ = env.step(action)
+        cost -= float(reward)
+        done = terminated or truncated
+    return {"cost": cost, "actions": actions, "asked": record.asked, "reused": record.reused,
+            "force_error": record.force_error, "uncorrected_error": record.uncorrected_error,
+            "contact_error": record.contact_error}
+
+
+def quantiles(values: list[float]) -> dict:
+    if not values:
+        return {"n": 0}
+    v = np.asarray(values)
+    return {"n": int(v.size), "median": float(np.median(v)), "p99": float(np.quantile(v, 0.99)),
+            "max": float(v.max())}
+
+
+def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule") -> dict:
+    reference = {s: episode(s, 0.0, False, policy) for s in seeds}
+    rows = []
+    for tol in tolerances_mm:
+        runs = {s: episode(s, tol * 1e-3, True, policy) for s in seeds}
+        relative = [(runs[s]["cost"] - reference[s]["cost"]) / reference[s]["cost"] for s in seeds]
+        differ = [int(np.sum(np.asarray(runs[s]["actions"]) != np.asarray(reference[s]["actions"]))) for s in seeds]
+        row = {
+            "tolerance_mm": tol,
+            "skipped_share": sum(r["reused"] for r in runs.values()) / sum(r["asked"] for r in runs.values()),
+            "mean_relative": statistics.mean(relative),
+            "mean_abs_relative": statistics.mean(abs(x) for x in relative),
+            "max_abs_relative": max(abs(x) for x in relative),
+            "section_steps_differing": sum(differ), "episodes_differing": sum(d > 0 for d in differ),
+            "force_error": quantiles([e for r in runs.values() for e in r["force_error"]]),
+            "uncorrected_force_error": quantiles([e for r in runs.values() for e in r["uncorrected_error"]]),
+            "contact_error": quantiles([e for r in runs.values() for e in r["contact_error"]]),
+            "episodes": [{"seed": s, "cost": runs[s]["cost"], "reference_cost": reference[s]["cost"],
+                          "relative": rel, "section_steps_differing": d, "skipped_share": runs[s]["reused"] /
+                          runs[s]["asked"]} for s, rel, d in zip(seeds, relative, differ, strict=True)],
+        }
+        rows.append(row)
+        print(json.dumps({k: v for k, v in row.items() if k != "episodes"}), flush=True)
+    steps = len(reference[seeds[0]]["actions"])
+    return {"env_id": ENV_ID, "engine": "fast", "seeds": seeds,
+            "policy": "grouped-threshold (tuned)" if policy == "rule" else "random actions",
+            "steps_per_episode": steps, "section_decisions": steps * len(reference[seeds[0]]["actions"][0]) *
+            len(seeds), "reference_costs": {s: reference[s]["cost"] for s in seeds},
+            "load_average_1min_end": os.getloadavg()[0], "tolerances": rows}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=8, help="episodes, seeds 0 .. seeds - 1 (default 8)")
+    parser.add_argument("--tolerances-mm", default="0.02,0.05,0.1,0.2")
+    parser.add_argument("--policy", choices=("rule", "random"), default="rule")
+    parser.add_argument("--out", default=None, help="default: experiments/saved/pass_reuse.json (pass_reuse_random"
+                                                    ".json with --policy random)")
+    args = parser.parse_args()
+    result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")], args.policy)
+    out = args.out or (OUT if args.policy == "rule" else OUT.with_name("pass_reuse_random.json"))
+    Path(out).write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
