@@ -3,8 +3,10 @@ what it changes, per tolerance.
 
     python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.1,0.2,0.3,0.4,0.5,0.75,1.0,1.25,1.5,2.0
     python experiments/pass_reuse.py --seeds 16 --tolerances-mm 0.3,1.0 --policy random    # what ab_speed's line steps
+    python experiments/pass_reuse.py --seeds 16 --tolerances-mm 1.0 --env trackenv/TampingLineDefects-v0
 
-One episode of ``TampingLine-v0`` per seed under the grouped-threshold rule with its tuned parameters (or, with
+One episode of ``TampingLine-v0`` (or ``--env``, a line id: saved as ``pass_reuse_<scenario>.json``) per seed under
+the id's tuned grouped-threshold rule, or its choice rule where the id has every choice (or, with
 ``--policy random``, random actions, the action space seeded with the episode's seed: what the ``line`` figures
 of ``experiments/ab_speed.py`` step; saved under their own name), with the fast engine and no reuse (the
 reference), then with each tolerance. Per tolerance: the share of segment passes skipped (reused) over the
@@ -63,16 +65,24 @@ class PassRecorder:
         return force, contact, bays
 
 
-def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule") -> dict:
-    """One episode under the tuned grouped-threshold rule (or random actions): its cost, its actions, and the
-    passes' record."""
+def rule_name(config) -> str:
+    """The rule an id's episodes run: its choice rule where it has more choices than tamping, else the grouped
+    threshold (each with the id's shipped tuned parameters)."""
+    return "grouped-threshold" if tuple(config.choices) == ("tamp",) else "choice-threshold"
+
+
+def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule", env_id: str = ENV_ID) -> dict:
+    """One episode under the id's tuned rule (:func:`rule_name`; or random actions): its cost, its actions, and
+    the passes' record."""
     import gymnasium as gym
 
     sys.path.insert(0, str(ROOT))
-    from agents.rules.line import GroupedThreshold, line_tuned_params
+    from agents.rules.problems import rules_for, tuned_params_for
 
-    env = gym.make(ENV_ID, engine="fast", pass_reuse_tolerance_m=tolerance_m)
-    rule = GroupedThreshold(**line_tuned_params()["grouped-threshold"])
+    env = gym.make(env_id, engine="fast", pass_reuse_tolerance_m=tolerance_m)
+    config = env.unwrapped.config
+    name = rule_name(config)
+    rule = rules_for(config)[name](**tuned_params_for(config)[name])
     env.action_space.seed(seed)
     obs, _ = env.reset(seed=seed)
     record = PassRecorder(env.unwrapped.engine, compare)
@@ -96,11 +106,11 @@ def quantiles(values: list[float]) -> dict:
             "max": float(v.max())}
 
 
-def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule") -> dict:
-    reference = {s: episode(s, 0.0, False, policy) for s in seeds}
+def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule", env_id: str = ENV_ID) -> dict:
+    reference = {s: episode(s, 0.0, False, policy, env_id) for s in seeds}
     rows = []
     for tol in tolerances_mm:
-        runs = {s: episode(s, tol * 1e-3, True, policy) for s in seeds}
+        runs = {s: episode(s, tol * 1e-3, True, policy, env_id) for s in seeds}
         relative = [(runs[s]["cost"] - reference[s]["cost"]) / reference[s]["cost"] for s in seeds]
         differ = [int(np.sum(np.asarray(runs[s]["actions"]) != np.asarray(reference[s]["actions"]))) for s in seeds]
         row = {
@@ -120,8 +130,11 @@ def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule") 
         rows.append(row)
         print(json.dumps({k: v for k, v in row.items() if k != "episodes"}), flush=True)
     steps = len(reference[seeds[0]]["actions"])
-    return {"env_id": ENV_ID, "engine": "fast", "seeds": seeds,
-            "policy": "grouped-threshold (tuned)" if policy == "rule" else "random actions",
+    import gymnasium as gym
+
+    config = gym.make(env_id).unwrapped.config
+    return {"env_id": env_id, "engine": "fast", "seeds": seeds,
+            "policy": f"{rule_name(config)} (tuned)" if policy == "rule" else "random actions",
             "steps_per_episode": steps, "section_decisions": steps * len(reference[seeds[0]]["actions"][0]) *
             len(seeds), "reference_costs": {s: reference[s]["cost"] for s in seeds},
             "load_average_1min_end": os.getloadavg()[0], "tolerances": rows}
@@ -132,11 +145,18 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=8, help="episodes, seeds 0 .. seeds - 1 (default 8)")
     parser.add_argument("--tolerances-mm", default="0.02,0.05,0.1,0.2")
     parser.add_argument("--policy", choices=("rule", "random"), default="rule")
+    parser.add_argument("--env", default=ENV_ID, help=f"a line id (default {ENV_ID})")
     parser.add_argument("--out", default=None, help="default: experiments/saved/pass_reuse.json (pass_reuse_random"
                                                     ".json with --policy random)")
     args = parser.parse_args()
-    result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")], args.policy)
+    result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")], args.policy,
+                     args.env)
     out = args.out or (OUT if args.policy == "rule" else OUT.with_name("pass_reuse_random.json"))
+    if args.env != ENV_ID:
+        import gymnasium as gym
+
+        suffix = "" if args.policy == "rule" else "_random"
+        out = args.out or OUT.with_name(f"pass_reuse_{gym.spec(args.env).kwargs['scenario']}{suffix}.json")
     Path(out).write_text(json.dumps(result, indent=1) + "\n")
 
 

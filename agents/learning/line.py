@@ -474,8 +474,9 @@ class _LineTrainer:
 
 
 def _line_env_id(config: LineConfig) -> str:
-    """The registered id whose line preset ``config`` is (any horizon; a TampingLine id, or ``trackenv/Tamping-v1``
-    for the 60 m track), else :data:`LINE_ENV_ID` (the hyper-parameter file's entry): what a saved policy's
+    """The registered id whose line preset ``config`` is (any horizon or engine:
+    :func:`~trackenv_agents.rules.problems.as_preset`; a TampingLine id, or ``trackenv/Tamping-v1`` for the 60 m
+    track), else :data:`LINE_ENV_ID` (the hyper-parameter file's entry): what a saved policy's
     metadata says it was trained on."""
     import gymnasium as gym
 
@@ -483,13 +484,14 @@ def _line_env_id(config: LineConfig) -> str:
     from trackenv.envs.line_config import SCENARIOS, scenario
 
     from ..evaluation.line_compare import scenario_of
+    from ..rules.problems import as_preset
 
     for env_id in sorted(gym.registry):
         try:
             name = scenario_of(env_id)
         except ValueError:  # not an id of a line preset
             continue
-        if name in SCENARIOS and config.replace(horizon_years=10.0) == scenario(name):
+        if name in SCENARIOS and as_preset(config) == scenario(name):
             return env_id
     return LINE_ENV_ID
 

@@ -35,11 +35,23 @@ def rules_for(config: Any) -> dict[str, Any]:
     return {**LINE_HEURISTICS, **CHOICE_RULES}
 
 
+#: fields that say how a line's passes are computed, not what the line is, at their presets' values
+_HOW_COMPUTED = {"engine": "classic", "pass_reuse_tolerance_m": 0.0}
+
+
+def as_preset(config: LineConfig) -> LineConfig:
+    """``config`` as a shipped preset would be written if it is one: a 10-year horizon, and the fields that say
+    how its passes are computed (the engine, pass reuse) at the presets' values. A preset stays the same line,
+    with the same tuned parameters and id, over any horizon and either engine."""
+    return config.replace(horizon_years=10.0, **_HOW_COMPUTED)
+
+
 def tuned_file_for(config: LineConfig) -> Path:
-    """The tuned-parameter file of ``config``: its preset's where it is a shipped preset (any horizon), else the
-    default line's."""
+    """The tuned-parameter file of ``config``: its preset's where it is a shipped preset (:func:`as_preset`),
+    else the default line's."""
+    plain = as_preset(config)
     for name, path in TUNED_FILES.items():
-        if config.replace(horizon_years=10.0) == scenario(name) and path.exists():
+        if plain == scenario(name) and path.exists():
             return path
     return LINE_TUNED_FILE
 

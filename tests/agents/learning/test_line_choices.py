@@ -142,6 +142,7 @@ def test_training_with_a_choice_rule_as_advisor_saves_a_choice_agent(tmp_path):
     meta = json.loads(line_meta_path(path).read_text())
     assert meta["advisor"] == "choice-threshold" and meta["env_id"] == "trackenv/TampingLine-v0"  # not a preset
     assert _line_env_id(scenario("wet", horizon_years=2.0)) == "trackenv/TampingLineWet-v0"
+    assert _line_env_id(scenario("wet", engine="fast", pass_reuse_tolerance_m=1e-3)) == "trackenv/TampingLineWet-v0"
     agent = load_line_trained(path).bind(cfg)
     assert agent.choices
     env = TampingLine(cfg, action_type="choices")

@@ -189,6 +189,12 @@ def test_the_rules_of_a_config_and_their_tuned_files():
     assert problems.rules_for(CFG) == {**LINE_HEURISTICS, **CHOICE_RULES}
     for name in ("choices", "wet", "defects"):
         assert problems.tuned_file_for(scenario(name)) == problems.TUNED_FILES[name]
+        # how the passes are computed does not make another line: the preset keeps its tuned parameters
+        fast = scenario(name).replace(engine="fast", pass_reuse_tolerance_m=1e-3)
+        assert problems.tuned_file_for(fast) == problems.TUNED_FILES[name]
+        # what the line is does: another traffic is no shipped preset
+        heavier = scenario(name).replace(annual_mgt=scenario(name).annual_mgt * 1.5)
+        assert problems.tuned_file_for(heavier) == problems.LINE_TUNED_FILE
 
 
 def test_the_harness_counts_the_applied_choices():
