@@ -25,6 +25,9 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
 * ``line_env`` / ``line_vector_env``: the same for ``trackenv/TampingLine-v0`` (12 sections of 200 m, each a
   30 m physics segment) and its native :class:`~trackenv.envs.line.TampingLineVectorEnv` with 8 lines, with
   ``pass_share``: the share of the step's wall time spent in the batched passes (the physics);
+  ``line_env_fast``: ``TampingLine-v0`` with the faster opt-in options (:data:`FAST_LINE`: the fast engine and
+  pass reuse at 1 mm), random actions as the others (which tamp about half the line every step: under a tuned
+  rule reuse skips more, see the performance page of the documentation);
 * every env figure carries ``profile``: the shares of its wall time spent in the compiled kernel, the pass set-up
   around it (irregularity, matrices, static start), the settlement step, the D1/quality computation and the rest
   (:data:`PROFILE_STAGES`; :func:`format_profile` renders them as the documentation's performance table).
@@ -57,6 +60,9 @@ __all__ = ["run_benchmarks", "format_benchmarks", "format_profile"]
 SPEED = 80 / 3.6
 DT = 1e-4
 BATCH_SIZES = (1, 16, 64)
+#: the line's faster opt-in options (:class:`~trackenv.envs.line_config.LineConfig`): the fast engine, and pass
+#: reuse at the tolerance the performance page of the documentation measured
+FAST_LINE: dict[str, Any] = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
 VECTOR_ENVS = (8, 32)
 # vector steps per native (and sharded) vector-env figure: 60 steps of 32 envs take ~3-4 s here; at 20 (~1 s) a
 # figure followed the machine's minute-to-minute drift (+-10 %) more than the code
@@ -241,15 +247,15 @@ class _StageTimer:
         return {k: v / wall_s for k, v in parts.items()}
 
 
-def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v1") -> dict:
-    """Random-action steps per second of the env ``env_id``, or why it is unavailable (line envs: with the share
-    of the time spent in the passes)."""
+def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v1", **make_kwargs: Any) -> dict:
+    """Random-action steps per second of the env ``env_id`` (made with ``make_kwargs``), or why it is
+    unavailable (line envs: with the share of the time spent in the passes)."""
     try:
         import gymnasium
 
         import trackenv.envs  # noqa: F401  (registers the environment)
 
-        env = gymnasium.make(env_id)
+        env = gymnasium.make(env_id, **make_kwargs)
     except Exception as exc:  # the environment is optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
     try:
@@ -269,7 +275,7 @@ def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping
                     resets += 1
             wall = time.perf_counter() - t0
         profile = timer.profile(wall)
-        return {"status": "ok", "env_id": env_id, "steps": done_steps, "wall_s": wall,
+        return {"status": "ok", "env_id": env_id, "make_kwargs": make_kwargs, "steps": done_steps, "wall_s": wall,
                 "steps_per_s": done_steps / wall, "episodes_ended": resets, "first_reset_s": reset_s,
                 "profile": profile, "pass_share": profile["kernel"] + profile["pass_setup"],
                 "load_average_1min": _load_average()}
@@ -377,6 +383,9 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
             SHARDED_ENVS, 3 if quick else VECTOR_STEPS, 10.0 if quick else 60.0, workers=SHARDED_WORKERS)
     tell("line_env")
     out["line_env"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0")
+    tell("line_env_fast")
+    out["line_env_fast"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0",
+                                      **FAST_LINE)
     out["line_vector_env"] = {}
     for n in LINE_VECTOR_ENVS:
         tell(f"line_vector_env_{n}")
@@ -390,7 +399,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "vector_env_32_sharded", "line_env", "line_vector_env_8", "state")
+          "vector_env_32_sharded", "line_env", "line_env_fast", "line_vector_env_8", "state")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -481,6 +490,9 @@ def format_benchmarks(d: dict) -> str:
                                    ("trackenv/TampingLine-v0", d.get("line_env"), lines_)):
         if e is not None:
             rows.append(_env_row(env_id, e))
+        if env_id == "trackenv/TampingLine-v0" and d.get("line_env_fast") is not None:
+            label, value, note = _env_row(env_id, d["line_env_fast"])
+            rows.append((label.replace("(random actions)", "fast + reuse (random actions)"), value, note))
         rows += [_vector_row(label, v) for label, v in vector_rows]
     for name, s in d.get("state", {}).items():
         rows.append((f"state API, {name}: get_state", f"{s['get_state']['median_s'] * 1e3:.3f} ms",

@@ -68,3 +68,16 @@ def test_state_benchmark_times_both_problems_snapshots():
     for figures in out.values():
         assert figures["get_state"]["median_s"] > 0 and figures["set_state"]["median_s"] > 0
         assert figures["pickled_bytes"] > 10_000  # the arrays of an episode, not an empty shell
+
+
+def test_the_fast_line_figure_runs_the_line_with_the_fast_options():
+    """``line_env_fast`` makes the line with :data:`FAST_LINE` (the fast engine and pass reuse), which the config
+    accepts as given, and reports them with its figure."""
+    from trackenv_studies.bench import FAST_LINE, STAGES, _bench_env
+
+    out = _bench_env(1, 30.0, env_id="trackenv/TampingLine-v0", **FAST_LINE)
+    assert out["status"] == "ok", out.get("reason")
+    assert out["make_kwargs"] == FAST_LINE and out["steps"] == 1
+    cfg = gymnasium.make("trackenv/TampingLine-v0", **FAST_LINE).unwrapped.config
+    assert (cfg.engine, cfg.pass_reuse_tolerance_m) == (FAST_LINE["engine"], FAST_LINE["pass_reuse_tolerance_m"])
+    assert STAGES.index("line_env_fast") == STAGES.index("line_env") + 1
