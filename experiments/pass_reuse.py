@@ -156,7 +156,8 @@ def main() -> None:
         import gymnasium as gym
 
         suffix = "" if args.policy == "rule" else "_random"
-        out = args.out or OUT.with_name(f"pass_reuse_{gym.spec(args.env).kwargs['scenario']}{suffix}.json")
+        name = gym.spec(args.env).kwargs.get("scenario") or args.env.split("/")[-1]
+        out = args.out or OUT.with_name(f"pass_reuse_{name}{suffix}.json")
     Path(out).write_text(json.dumps(result, indent=1) + "\n")
 
 
