@@ -151,14 +151,18 @@ def main() -> None:
     args = parser.parse_args()
     result = measure(list(range(args.seeds)), [float(t) for t in args.tolerances_mm.split(",")], args.policy,
                      args.env)
-    out = args.out or (OUT if args.policy == "rule" else OUT.with_name("pass_reuse_random.json"))
-    if args.env != ENV_ID:
-        import gymnasium as gym
+    Path(args.out or default_out(args.env, args.policy)).write_text(json.dumps(result, indent=1) + "\n")
 
-        suffix = "" if args.policy == "rule" else "_random"
-        name = gym.spec(args.env).kwargs.get("scenario") or args.env.split("/")[-1]
-        out = args.out or OUT.with_name(f"pass_reuse_{name}{suffix}.json")
-    Path(out).write_text(json.dumps(result, indent=1) + "\n")
+
+def default_out(env_id: str, policy: str) -> Path:
+    """Where a run is saved: ``pass_reuse.json`` for the default line, else ``pass_reuse_<name>.json`` (a line
+    preset's scenario name, or the id's name), with ``_random`` before the suffix under random actions."""
+    import gymnasium as gym
+
+    import trackenv  # noqa: F401  (registers the ids)
+
+    name = "" if env_id == ENV_ID else "_" + (gym.spec(env_id).kwargs.get("scenario") or env_id.split("/")[-1])
+    return OUT.with_name(f"pass_reuse{name}{'_random' if policy == 'random' else ''}.json")
 
 
 if __name__ == "__main__":

@@ -437,10 +437,12 @@ def format_profile(d: dict) -> str:
     return "\n".join(lines)
 
 
-def _env_row(env_id: str, e: dict) -> tuple[str, str, str]:
+def _env_row(env_id: str, e: dict, variant: str = "") -> tuple[str, str, str]:
+    """The row of an env figure; ``variant`` names the options it was made with (after the id)."""
+    name = f"env {env_id}" + (f" {variant}" if variant else "")
     if e["status"] != "ok":
-        return (f"env {env_id}", "unavailable", e["reason"][:80])
-    return (f"env {env_id} (random actions)", f"{e['steps_per_s']:.1f} steps/s",
+        return (name, "unavailable", e["reason"][:80])
+    return (f"{name} (random actions)", f"{e['steps_per_s']:.1f} steps/s",
             f"{e['steps']} steps, {e['episodes_ended']} episodes ended" + _in_passes(e) + _load(e))
 
 
@@ -491,8 +493,7 @@ def format_benchmarks(d: dict) -> str:
         if e is not None:
             rows.append(_env_row(env_id, e))
         if env_id == "trackenv/TampingLine-v0" and d.get("line_env_fast") is not None:
-            label, value, note = _env_row(env_id, d["line_env_fast"])
-            rows.append((label.replace("(random actions)", "fast + reuse (random actions)"), value, note))
+            rows.append(_env_row(env_id, d["line_env_fast"], "fast + reuse"))
         rows += [_vector_row(label, v) for label, v in vector_rows]
     for name, s in d.get("state", {}).items():
         rows.append((f"state API, {name}: get_state", f"{s['get_state']['median_s'] * 1e3:.3f} ms",
