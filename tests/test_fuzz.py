@@ -256,6 +256,36 @@ def test_choice_env_seed_and_action(choice_env: TampingLine, seed, action) -> No
         assert choice_env.observation_space.contains(out[0])
 
 
+@pytest.fixture(scope="module")
+def reuse_env() -> TampingLine:
+    """The choice line on the fast engine with pass reuse at its largest tolerance, so that most steps reuse."""
+    return TampingLine(CHOICE_CFG.replace(engine="fast", pass_reuse_tolerance_m=2e-3), action_type="choices")
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 15)
+@given(seed=st.integers(0, 2**32), actions=st.lists(mostly(valid_choices, 6), min_size=2, max_size=4))
+def test_pass_reuse_env_steps_finitely(reuse_env: TampingLine, seed, actions) -> None:
+    """Several steps of fuzzed choices (waits, which reuse the kept passes, between tampings, spot tampings,
+    drainage, renewals and inspections, which compute afresh) with pass reuse on: each step refuses a bad action
+    naming it, or gives finite observations, reward and kept forces."""
+    reuse_env.reset(seed=seed)
+    for action in actions:
+        t0 = time.perf_counter()
+        try:
+            obs, reward, terminated, truncated, _ = reuse_env.step(action)
+        except (ValueError, TypeError) as e:
+            _fast(t0, "TampingLine.step (pass reuse)")
+            _assert_names(e, ["action"])
+            continue
+        _assert_finite(obs, reward)
+        assert reuse_env.observation_space.contains(obs)
+        if terminated or truncated:
+            break
+    batch = reuse_env.unwrapped.batch
+    kept = ~np.isnan(batch.computed_level).any(axis=-1)
+    assert np.isfinite(batch.computed_force[kept]).all()
+
+
 TRACK_KEYS = ["pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping"]
 SCALAR_KEYS = ["sleeper_spacing", "rail_bending_stiffness", "rail_mass", "elements_per_bay"]
 positive = mostly(st.one_of(st.floats(min_value=1e2, max_value=1e9), st.floats(min_value=1e-3, max_value=1e13)), 10)
