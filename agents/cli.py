@@ -103,10 +103,19 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 bar.update(1)
             bar.set_postfix_str(name)
 
-        result = run_benchmarks(quick=args.quick, progress=step)
+        result = run_benchmarks(quick=args.quick, progress=step, line_policy=_tuned_line_rule())
         bar.update(bar.total - bar.n)
     _emit(args, result, format_benchmarks(result))
     return 0
+
+
+def _tuned_line_rule() -> Any:
+    """The default line's grouped threshold with its shipped tuned parameters (the bench's realistic policy)."""
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.rules.line import GroupedThreshold
+    from trackenv_agents.rules.problems import tuned_params_for
+
+    return GroupedThreshold(**tuned_params_for(scenario("default"))[GroupedThreshold.name])
 
 
 def cmd_compile(args: argparse.Namespace) -> int:

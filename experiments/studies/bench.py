@@ -28,6 +28,9 @@ loads it from numba's cache), measured with :func:`time.perf_counter`.
   ``line_env_fast``: ``TampingLine-v0`` with the faster opt-in options (:data:`FAST_LINE`: the fast engine and
   pass reuse at 1 mm), random actions as the others (which tamp about half the line every step: under a tuned
   rule reuse skips more, see the performance page of the documentation);
+* ``line_env_rule`` / ``line_env_fast_rule``: the default line, plain and with :data:`FAST_LINE`, over whole
+  episodes under a policy given to :func:`run_benchmarks` (``trackenv bench``: the tuned grouped threshold),
+  the line's realistic load: under the tuned rule a campaign about once a year, so most steps tamp nothing;
 * every env figure carries ``profile``: the shares of its wall time spent in the compiled kernel, the pass set-up
   around it (irregularity, matrices, static start), the settlement step, the D1/quality computation and the rest
   (:data:`PROFILE_STAGES`; :func:`format_profile` renders them as the documentation's performance table).
@@ -69,6 +72,7 @@ VECTOR_ENVS = (8, 32)
 VECTOR_STEPS = 60
 SHARDED_ENVS, SHARDED_WORKERS = 32, 2  # the vector env split over processes (on machines with >= 2 cores)
 LINE_VECTOR_ENVS = (8,)
+LINE_EPISODE_STEPS = 80  # two 10-year episodes of 40 quarterly steps: the realistic figures step whole episodes
 
 
 def _loaded_wheelset() -> Wheelset:
@@ -247,9 +251,12 @@ class _StageTimer:
         return {k: v / wall_s for k, v in parts.items()}
 
 
-def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v1", **make_kwargs: Any) -> dict:
-    """Random-action steps per second of the env ``env_id`` (made with ``make_kwargs``), or why it is
-    unavailable (line envs: with the share of the time spent in the passes)."""
+def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping-v1", policy: Any = None,
+               **make_kwargs: Any) -> dict:
+    """Steps per second of the env ``env_id`` (made with ``make_kwargs``), or why it is unavailable (line envs:
+    with the share of the time spent in the passes). Random actions, or ``policy``'s (an object whose
+    ``predict(obs)`` returns ``(action, state)``, as the rules and stable-baselines3 models do)."""
+    actions = "random actions" if policy is None else getattr(policy, "name", None) or repr(policy)
     try:
         import gymnasium
 
@@ -258,24 +265,29 @@ def _bench_env(steps: int, time_budget_s: float, env_id: str = "trackenv/Tamping
         env = gymnasium.make(env_id, **make_kwargs)
     except Exception as exc:  # the environment is optional here: report, do not fail
         return {"status": "unavailable", "reason": f"{type(exc).__name__}: {exc}"}
+    def act(obs: Any) -> Any:
+        return env.action_space.sample() if policy is None else policy.predict(obs)[0]
+
     try:
         env.action_space.seed(0)
         t0 = time.perf_counter()
-        env.reset(seed=0)
+        obs, _ = env.reset(seed=0)
         reset_s = time.perf_counter() - t0
-        env.step(env.action_space.sample())  # warm-up
+        obs = env.step(act(obs))[0]  # warm-up
         done_steps, resets = 0, 0
         with _StageTimer() as timer:
             t0 = time.perf_counter()
             while done_steps < steps and time.perf_counter() - t0 < time_budget_s:
-                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                obs, _, terminated, truncated, _ = env.step(act(obs))
                 done_steps += 1
                 if terminated or truncated:
-                    env.reset()
+                    obs, _ = env.reset()
                     resets += 1
             wall = time.perf_counter() - t0
         profile = timer.profile(wall)
-        return {"status": "ok", "env_id": env_id, "make_kwargs": make_kwargs, "steps": done_steps, "wall_s": wall,
+        return {"status": "ok", "env_id": env_id, "make_kwargs": make_kwargs, "actions": actions,
+                "policy": None if policy is None else repr(policy),
+                "steps": done_steps, "wall_s": wall,
                 "steps_per_s": done_steps / wall, "episodes_ended": resets, "first_reset_s": reset_s,
                 "profile": profile, "pass_share": profile["kernel"] + profile["pass_setup"],
                 "load_average_1min": _load_average()}
@@ -348,12 +360,16 @@ def _bench_state(repeats: int) -> dict:
     return out
 
 
-def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
+def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None = None,
+                   line_policy: Any = None) -> dict:
     """Run every benchmark and return the figures with the machine they ran on (JSON-ready).
 
     ``quick``: fewer repeats (3 instead of 7 for single passes; 2 instead of 5 for batches and the paper
     loop) and fewer env steps, for a smoke test; the figures are then rougher. ``progress``: called with the
-    name of each benchmark as it starts (e.g. to advance a progress bar; see :data:`STAGES`).
+    name of each benchmark as it starts (e.g. to advance a progress bar; see :data:`STAGES`). ``line_policy``:
+    the policy of the line's realistic figures (``line_env_rule``, ``line_env_fast_rule``: whole episodes of the
+    default line under it, plain and with :data:`FAST_LINE`; the ``trackenv bench`` command gives the tuned
+    grouped threshold); without one they are reported unavailable.
     """
     rep = 3 if quick else 7
     rep_batch = 2 if quick else 5
@@ -386,6 +402,11 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
     tell("line_env_fast")
     out["line_env_fast"] = _bench_env(3 if quick else 40, 10.0 if quick else 60.0, env_id="trackenv/TampingLine-v0",
                                       **FAST_LINE)
+    for name, options in (("line_env_rule", {}), ("line_env_fast_rule", FAST_LINE)):
+        tell(name)
+        out[name] = (_bench_env(3 if quick else LINE_EPISODE_STEPS, 10.0 if quick else 60.0,
+                                env_id="trackenv/TampingLine-v0", policy=line_policy, **options)
+                     if line_policy is not None else {"status": "unavailable", "reason": "no line_policy given"})
     out["line_vector_env"] = {}
     for n in LINE_VECTOR_ENVS:
         tell(f"line_vector_env_{n}")
@@ -399,7 +420,8 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
 
 
 STAGES = ("seed_pass", "seed_pass_auto", "batch", "car", "paper_b", "env", "vector_env_8", "vector_env_32",
-          "vector_env_32_sharded", "line_env", "line_env_fast", "line_vector_env_8", "state")
+          "vector_env_32_sharded", "line_env", "line_env_fast", "line_env_rule", "line_env_fast_rule",
+          "line_vector_env_8", "state")
 """The benchmarks :func:`run_benchmarks` runs, in order (what ``progress`` is called with)."""
 
 
@@ -442,7 +464,7 @@ def _env_row(env_id: str, e: dict, variant: str = "") -> tuple[str, str, str]:
     name = f"env {env_id}" + (f" {variant}" if variant else "")
     if e["status"] != "ok":
         return (name, "unavailable", e["reason"][:80])
-    return (f"{name} (random actions)", f"{e['steps_per_s']:.1f} steps/s",
+    return (f"{name} ({e.get('actions', 'random actions')})", f"{e['steps_per_s']:.1f} steps/s",
             f"{e['steps']} steps, {e['episodes_ended']} episodes ended" + _in_passes(e) + _load(e))
 
 
@@ -492,8 +514,11 @@ def format_benchmarks(d: dict) -> str:
                                    ("trackenv/TampingLine-v0", d.get("line_env"), lines_)):
         if e is not None:
             rows.append(_env_row(env_id, e))
-        if env_id == "trackenv/TampingLine-v0" and d.get("line_env_fast") is not None:
-            rows.append(_env_row(env_id, d["line_env_fast"], "fast + reuse"))
+        if env_id == "trackenv/TampingLine-v0":
+            for key, variant in (("line_env_fast", "fast + reuse"), ("line_env_rule", ""),
+                                 ("line_env_fast_rule", "fast + reuse")):
+                if d.get(key) is not None:
+                    rows.append(_env_row(env_id, d[key], variant))
         rows += [_vector_row(label, v) for label, v in vector_rows]
     for name, s in d.get("state", {}).items():
         rows.append((f"state API, {name}: get_state", f"{s['get_state']['median_s'] * 1e3:.3f} ms",

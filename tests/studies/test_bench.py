@@ -81,3 +81,28 @@ def test_the_fast_line_figure_runs_the_line_with_the_fast_options():
     cfg = gymnasium.make("trackenv/TampingLine-v0", **FAST_LINE).unwrapped.config
     assert (cfg.engine, cfg.pass_reuse_tolerance_m) == (FAST_LINE["engine"], FAST_LINE["pass_reuse_tolerance_m"])
     assert STAGES.index("line_env_fast") == STAGES.index("line_env") + 1
+
+
+def test_the_line_rule_figures_step_the_policy_given():
+    """``line_env_rule`` steps the line with the policy's actions: every step asks it, from the observation the
+    previous step returned, and the figure names it."""
+    from trackenv_studies.bench import STAGES, _bench_env
+
+    class Waits:
+        def __init__(self) -> None:
+            self.seen: list[float] = []
+
+        def predict(self, obs):
+            self.seen.append(float(obs["time"][0]))
+            return np.zeros(obs["section_sd"].shape, dtype=np.int8), None
+
+        def __repr__(self) -> str:
+            return "Waits()"
+
+    policy = Waits()
+    out = _bench_env(2, 30.0, env_id="trackenv/TampingLine-v0", policy=policy)
+    assert out["status"] == "ok", out.get("reason")
+    assert out["actions"] == out["policy"] == "Waits()" and out["steps"] == 2
+    assert len(policy.seen) == 3 and policy.seen == sorted(policy.seen) and policy.seen[0] < policy.seen[-1]
+    assert STAGES.index("line_env_rule") == STAGES.index("line_env_fast") + 1
+    assert STAGES.index("line_env_fast_rule") == STAGES.index("line_env_rule") + 1
