@@ -113,6 +113,7 @@ def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
         return simulate_passes(tracks, LOADED, V80, **kw)
 
     dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
     dynamics._STATIC_ENDS.clear()
     first = passes()
     kept = [x.copy() for x in _kept_track_arrays()]
@@ -123,6 +124,7 @@ def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
     for before, now in zip(kept, _kept_track_arrays(), strict=True):
         np.testing.assert_array_equal(before, now)
     dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
     dynamics._STATIC_ENDS.clear()
     fresh = passes()
     np.testing.assert_array_equal(fresh[2].contact_force, first[2].contact_force)
@@ -552,6 +554,33 @@ def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
         others += [eleven[b - 3]] if 3 <= b < 14 else []
         for other in others:
             for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
+                np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
+
+
+@pytest.mark.parametrize("width", dynamics._kernel.WIDTHS)
+def test_every_chunk_width_gives_each_rows_own_pass(width):
+    """Each width the kernel is compiled for runs a batch of that many rows as one chunk (one thread) or as chunks
+    of fewer rows (all threads), the last padded: every row is bit for bit its own pass run alone."""
+    import numba
+
+    t = Track.seed()
+    rng = np.random.default_rng(width)
+    rows = 5e-4 * rng.standard_normal((width, t.n_sleepers))
+    tracks = [t.scaled(ballast_stiffness=f, from_sleeper=int(k))
+              for f, k in zip(rng.uniform(0.5, 2.0, width), rng.integers(0, 20, width))]
+    kw = dict(x_start=6.0, x_end=9.0, support_settlement=np.abs(rows), start="rest")
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert dynamics._chunking(width) == (1, width)
+        one_chunk = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    finally:
+        numba.set_num_threads(threads)
+    spread = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    for b in range(width):
+        single = simulate_pass(tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": np.abs(rows[b])})
+        for other in (one_chunk[b], spread[b]):
+            for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force"):
                 np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
 
 
