@@ -1072,7 +1072,7 @@ def _build_row_arrays(tracks: list[Track], dt: float, ends: str) -> list[tuple[n
     mb, cb, kb = batched_bands(tracks)
     keff = kb + consts[0] * mb + consts[1] * cb
     window_ends = _window_ends(tracks, ends, consts[1])
-    out = []
+    out: list[tuple[np.ndarray, ...]] = []
     for b, t in enumerate(tracks):
         row = (mb[b, :, 0].copy(), keff[b], t.pad_stiffness, t.pad_damping, t.ballast_stiffness, t.ballast_damping,
                window_ends[b])
