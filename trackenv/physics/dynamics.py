@@ -828,9 +828,10 @@ def _simulate_batch(batch: _Batch) -> tuple[list[PassResult], list[int]]:
     """Integrate every row of ``batch``; its results, and the rows where a wheel lost contact."""
     run = _integrate(batch)
     n_rows = len(batch.tracks)
-    force = run.peaks.force  # (chunks, n_steps + 1, n_axles, width): each chunk's steps after the first, as one run
-    lowest = force[:, 1:].reshape(force.shape[0], -1, force.shape[-1]).min(axis=1)
-    lost = np.flatnonzero(lowest.reshape(-1)[:n_rows] <= 0.0).tolist()
+    after_start = run.peaks.force[:, 1:]  # (chunks, n_steps, n_axles, width)
+    if after_start.min() > 0.0:  # every wheel kept contact (the usual case): one pass over the whole history
+        return _results(batch, run), []
+    lost = np.flatnonzero(after_start.min(axis=(1, 2)).reshape(-1)[:n_rows] <= 0.0).tolist()
     return _results(batch, run), lost
 
 
@@ -1042,44 +1043,64 @@ def _track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
 def _build_track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
     """:class:`_TrackRows` of ``batch``: its tracks' rows (:func:`_track_row_arrays`) stacked and packed."""
     t0, lay = batch.tracks[0], batch.tracks[0].dof_layout
-    columns = [np.stack(column) for column in zip(*_track_row_arrays(batch.tracks, batch.dt, batch.ends), strict=True)]
-    mass_diag, keff, pad_k, pad_c, bal_k, bal_c, ends = columns
+    stacked = np.stack(_track_row_arrays(batch.tracks, batch.dt, batch.ends))  # (rows, the fields' sizes summed)
+    fields = _row_fields(t0.n_sleepers, t0.n_dof, int(lay.sleeper[1] - lay.sleeper[0]), batch.ends)
+    mass_diag, keff, pad_k, pad_c, bal_k, bal_c, ends = (stacked[:, a:b].reshape((-1,) + s) for a, b, s in fields)
     pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
+    node_w, sleeper, sleeper_node, rail_mass = _mesh_arrays(t0.n_sleepers, t0.elements_per_bay, t0.element_length,
+                                                           t0.rail_bending_stiffness, t0.rail_mass)
     return _TrackRows(pack(mass_diag), pack(keff), pack(pad_k), pack(pad_c), pack(bal_k), pack(bal_c), pack(ends),
-                      lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
-                      _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass,
-                                                  copy=False)[0]),
-                      pad_k, bal_k, bal_c)
+                      node_w, sleeper, sleeper_node, rail_mass, pad_k, bal_k, bal_c)
+
+
+@functools.lru_cache(maxsize=16)
+def _mesh_arrays(n_sleepers: int, epb: int, element_length: float, ei: float,
+                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The mesh's fields of :class:`_TrackRows` (node_w, sleeper, sleeper_node as int64, the rail's mass
+    diagonals), built once per mesh and shared by its passes, which only read them."""
+    from .track import DofLayout
+
+    lay = DofLayout.build(n_sleepers, epb)
+    return (lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
+            _mass_diagonals(_rail_bands(lay, element_length, ei, mass, copy=False)[0]))
+
+
+@functools.lru_cache(maxsize=16)
+def _row_fields(n: int, n_dof: int, bay_dofs: int, ends: str) -> list[tuple[int, int, tuple[int, ...]]]:
+    """Where each field of a kept row (:func:`_track_row_arrays`) lies in it, for a mesh of ``n`` sleepers,
+    ``n_dof`` DOFs and ``bay_dofs`` DOFs a bay, and window ends ``ends``: (start, stop, shape) of the mass
+    diagonal, the effective stiffness, the pad and ballast stiffness and damping and the window ends, in order."""
+    end_columns = 6 if ends == "rest" else 12 + 2 * bay_dofs
+    shapes = [(n_dof,), (n_dof, HALF_BANDWIDTH + 1), (n,), (n,), (n,), (n,), (n, end_columns)]
+    stops = np.cumsum([math.prod(shape) for shape in shapes]).tolist()
+    return [(stop - math.prod(shape), stop, shape) for stop, shape in zip(stops, shapes, strict=True)]
 
 
 _ROW_ARRAYS_CACHE_SIZE = 512  # tracks whose rows are kept (~25 kB each on a line's segment: 32 lines of 12 fit)
-_ROW_ARRAYS: collections.OrderedDict = collections.OrderedDict()  # (track, dt, ends) -> its rows, least recent first
+_ROW_ARRAYS: collections.OrderedDict = collections.OrderedDict()  # (track, dt, ends) -> its row, least recent first
 
 
-def _track_row_arrays(tracks: Sequence[Track], dt: float, ends: str) -> list[tuple[np.ndarray, ...]]:
+def _track_row_arrays(tracks: Sequence[Track], dt: float, ends: str) -> list[np.ndarray]:
     """Each track's row of :class:`_TrackRows` (mass diagonal, effective stiffness K + a0 M + a1 C, pad and ballast
-    stiffness and damping, window ends), unpacked and read-only, kept per track object, dt and window ends (the
-    most recent :data:`_ROW_ARRAYS_CACHE_SIZE`): a batch whose composition changes from pass to pass (pass reuse
-    computes only some segments) assembles its rows from those kept; the tracks missing are built as one batch
-    (:func:`batched_bands`, :func:`_window_ends`: element by element, the same numbers in any batch)."""
+    stiffness and damping, window ends) as one flat, read-only array (:func:`_row_fields` says where each lies),
+    kept per track object, dt and window ends (the most recent :data:`_ROW_ARRAYS_CACHE_SIZE`): a batch whose
+    composition changes from pass to pass (pass reuse computes only some segments) assembles its rows from those
+    kept, one stack for all the fields; the tracks missing are built as one batch (:func:`batched_bands`,
+    :func:`_window_ends`: element by element, the same numbers in any batch)."""
     return _kept(_ROW_ARRAYS, [(t, dt, ends) for t in tracks], _ROW_ARRAYS_CACHE_SIZE,
                  lambda missing: _build_row_arrays([key[0] for key in missing], dt, ends))
 
 
-def _build_row_arrays(tracks: list[Track], dt: float, ends: str) -> list[tuple[np.ndarray, ...]]:
+def _build_row_arrays(tracks: list[Track], dt: float, ends: str) -> list[np.ndarray]:
     """:func:`_track_row_arrays` of ``tracks``, assembled as one batch."""
     consts = newmark_constants(dt)
     mb, cb, kb = batched_bands(tracks)
-    keff = kb + consts[0] * mb + consts[1] * cb
-    window_ends = _window_ends(tracks, ends, consts[1])
-    out: list[tuple[np.ndarray, ...]] = []
-    for b, t in enumerate(tracks):
-        row = (mb[b, :, 0].copy(), keff[b], t.pad_stiffness, t.pad_damping, t.ballast_stiffness, t.ballast_damping,
-               window_ends[b])
-        for arr in (row[0], row[1], row[6]):
-            arr.flags.writeable = False
-        out.append(row)
-    return out
+    fields = (mb[:, :, 0], kb + consts[0] * mb + consts[1] * cb,
+              *(np.stack([getattr(t, name) for t in tracks]) for name in ("pad_stiffness", "pad_damping",
+                                                                           "ballast_stiffness", "ballast_damping")),
+              _window_ends(tracks, ends, consts[1]))
+    rows = np.concatenate([field.reshape(len(tracks), -1) for field in fields], axis=1)
+    return list(rows)
 
 
 def _results(batch: _Batch, run: _Run) -> list[PassResult]:
