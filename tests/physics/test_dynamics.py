@@ -130,6 +130,28 @@ def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
     np.testing.assert_array_equal(fresh[2].contact_force, first[2].contact_force)
 
 
+def test_a_batch_of_other_composition_assembles_kept_rows_bit_for_bit():
+    """Each track's kernel rows are kept per track: a batch of another composition (a subset, in another order, as
+    pass reuse leaves it) assembles its arrays from those kept, and its passes are bit for bit those of the same
+    batch built afresh; the kept rows are read-only and the cache stays within its bound."""
+    base = Track.realistic(30.0)
+    tracks = [base.scaled(ballast_stiffness=f) for f in (0.6, 1.0, 1.7, 1.3)]
+    level = 1e-3 * np.cos(np.arange(base.n_sleepers) * 0.9)
+    kw = dict(window_ends="static", window_decay_lengths=3.0, support_settlement=level)
+    simulate_passes(tracks, LOADED, V80, **kw)  # every track's rows kept
+    subset = [tracks[3], tracks[0]]
+    kept = simulate_passes(subset, LOADED, V80, **kw)
+    assert all(not row.flags.writeable for row in dynamics._ROW_ARRAYS.values())
+    assert len(dynamics._ROW_ARRAYS) <= dynamics._ROW_ARRAYS_CACHE_SIZE
+    dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
+    dynamics._STATIC_ENDS.clear()
+    fresh = simulate_passes(subset, LOADED, V80, **kw)
+    for a, b in zip(kept, fresh, strict=True):
+        for name in ("contact_force", "rail_displacement", "sleeper_force", "pad_plus_ballast_force"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
 def test_result_shapes_and_time_grid():
     res = smooth_pass()
     t = Track.seed()

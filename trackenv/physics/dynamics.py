@@ -1100,7 +1100,7 @@ def _build_row_arrays(tracks: list[Track], dt: float, ends: str) -> list[np.ndar
                                                                            "ballast_stiffness", "ballast_damping")),
               _window_ends(tracks, ends, consts[1]))
     rows = np.concatenate([field.reshape(len(tracks), -1) for field in fields], axis=1)
-    return list(rows)
+    return [row.copy() for row in rows]  # each its own array: a row kept does not keep its batch's alive
 
 
 def _results(batch: _Batch, run: _Run) -> list[PassResult]:
