@@ -113,6 +113,7 @@ def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
         return simulate_passes(tracks, LOADED, V80, **kw)
 
     dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
     dynamics._STATIC_ENDS.clear()
     first = passes()
     kept = [x.copy() for x in _kept_track_arrays()]
@@ -123,9 +124,32 @@ def test_a_batchs_kept_track_arrays_give_the_passes_of_a_fresh_process():
     for before, now in zip(kept, _kept_track_arrays(), strict=True):
         np.testing.assert_array_equal(before, now)
     dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
     dynamics._STATIC_ENDS.clear()
     fresh = passes()
     np.testing.assert_array_equal(fresh[2].contact_force, first[2].contact_force)
+
+
+def test_a_batch_of_other_composition_assembles_kept_rows_bit_for_bit():
+    """Each track's kernel rows are kept per track: a batch of another composition (a subset, in another order, as
+    pass reuse leaves it) assembles its arrays from those kept, and its passes are bit for bit those of the same
+    batch built afresh; the kept rows are read-only and the cache stays within its bound."""
+    base = Track.realistic(30.0)
+    tracks = [base.scaled(ballast_stiffness=f) for f in (0.6, 1.0, 1.7, 1.3)]
+    level = 1e-3 * np.cos(np.arange(base.n_sleepers) * 0.9)
+    kw = dict(window_ends="static", window_decay_lengths=3.0, support_settlement=level)
+    simulate_passes(tracks, LOADED, V80, **kw)  # every track's rows kept
+    subset = [tracks[3], tracks[0]]
+    kept = simulate_passes(subset, LOADED, V80, **kw)
+    assert all(not row.flags.writeable for row in dynamics._ROW_ARRAYS.values())
+    assert len(dynamics._ROW_ARRAYS) <= dynamics._ROW_ARRAYS_CACHE_SIZE
+    dynamics._TRACK_ROWS.clear()
+    dynamics._ROW_ARRAYS.clear()
+    dynamics._STATIC_ENDS.clear()
+    fresh = simulate_passes(subset, LOADED, V80, **kw)
+    for a, b in zip(kept, fresh, strict=True):
+        for name in ("contact_force", "rail_displacement", "sleeper_force", "pad_plus_ballast_force"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
 def test_result_shapes_and_time_grid():
@@ -552,6 +576,33 @@ def test_lockstep_rows_do_not_depend_on_batch_size_or_threads():
         others += [eleven[b - 3]] if 3 <= b < 14 else []
         for other in others:
             for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force", "irregularity"):
+                np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
+
+
+@pytest.mark.parametrize("width", dynamics._kernel.WIDTHS)
+def test_every_chunk_width_gives_each_rows_own_pass(width):
+    """Each width the kernel is compiled for runs a batch of that many rows as one chunk (one thread) or as chunks
+    of fewer rows (all threads), the last padded: every row is bit for bit its own pass run alone."""
+    import numba
+
+    t = Track.seed()
+    rng = np.random.default_rng(width)
+    rows = 5e-4 * rng.standard_normal((width, t.n_sleepers))
+    tracks = [t.scaled(ballast_stiffness=f, from_sleeper=int(k))
+              for f, k in zip(rng.uniform(0.5, 2.0, width), rng.integers(0, 20, width))]
+    kw = dict(x_start=6.0, x_end=9.0, support_settlement=np.abs(rows), start="rest")
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert dynamics._chunking(width) == (1, width)
+        one_chunk = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    finally:
+        numba.set_num_threads(threads)
+    spread = simulate_passes(tracks, LOADED, V80, rows, **kw)
+    for b in range(width):
+        single = simulate_pass(tracks[b], LOADED, V80, rows[b], **{**kw, "support_settlement": np.abs(rows[b])})
+        for other in (one_chunk[b], spread[b]):
+            for name in ("contact_force", "rail_displacement", "wheel_displacement", "sleeper_force"):
                 np.testing.assert_array_equal(getattr(other, name), getattr(single, name), err_msg=name)
 
 

@@ -148,11 +148,11 @@ def _rail_bands_cached(n_sleepers: int, epb: int, element_length: float, ei: flo
     return rail_bands(DofLayout.build(n_sleepers, epb), element_length, ei, mass)
 
 
-def _rail_bands(lay, element_length: float, ei: float, mass: float):
-    """M, C, K of the bare rail (no supports), assembled once per mesh."""
-    return tuple(
-        b.copy() for b in _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length, ei, mass)
-    )
+def _rail_bands(lay, element_length: float, ei: float, mass: float, *, copy: bool = True):
+    """M, C, K of the bare rail (no supports), assembled once per mesh: copies, or with ``copy=False`` the kept
+    arrays themselves, for callers that only read them."""
+    kept = _rail_bands_cached(lay.sleeper.size, int(lay.sleeper_node[1]), element_length, ei, mass)
+    return tuple(b.copy() for b in kept) if copy else kept
 
 
 def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -160,7 +160,7 @@ def batched_bands(tracks: Sequence[Track]) -> tuple[np.ndarray, np.ndarray, np.n
     tracks added at once (each row is ``Track.banded_matrices``, the same numbers)."""
     t0 = tracks[0]
     lay = t0.dof_layout
-    rail = _rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)
+    rail = _rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass, copy=False)
     m, c, k = (np.repeat(band[None], len(tracks), axis=0) for band in rail)
     names = ("pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping")
     add_supports(m, c, k, lay, *(np.stack([getattr(t, name) for t in tracks]) for name in names))
@@ -828,7 +828,10 @@ def _simulate_batch(batch: _Batch) -> tuple[list[PassResult], list[int]]:
     """Integrate every row of ``batch``; its results, and the rows where a wheel lost contact."""
     run = _integrate(batch)
     n_rows = len(batch.tracks)
-    lost = np.flatnonzero(run.peaks.force[:, 1:].min(axis=(1, 2)).reshape(-1)[:n_rows] <= 0.0).tolist()
+    after_start = run.peaks.force[:, 1:]  # (chunks, n_steps, n_axles, width)
+    if after_start.min() > 0.0:  # every wheel kept contact (the usual case): one pass over the whole history
+        return _results(batch, run), []
+    lost = np.flatnonzero(after_start.min(axis=(1, 2)).reshape(-1)[:n_rows] <= 0.0).tolist()
     return _results(batch, run), lost
 
 
@@ -1038,19 +1041,66 @@ def _track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
 
 
 def _build_track_rows(batch: _Batch, n_chunks: int, width: int) -> _TrackRows:
-    """:class:`_TrackRows` of ``batch``, assembled (:func:`batched_bands`, :func:`_window_ends`) and packed."""
+    """:class:`_TrackRows` of ``batch``: its tracks' rows (:func:`_track_row_arrays`) stacked and packed."""
     t0, lay = batch.tracks[0], batch.tracks[0].dof_layout
-    consts = newmark_constants(batch.dt)
-    mb, cb, kb = batched_bands(batch.tracks)
-    supports = {name: np.stack([getattr(t, name) for t in batch.tracks])
-                for name in ("pad_stiffness", "pad_damping", "ballast_stiffness", "ballast_damping")}
+    stacked = np.stack(_track_row_arrays(batch.tracks, batch.dt, batch.ends))  # (rows, the fields' sizes summed)
+    fields = _row_fields(t0.n_sleepers, t0.n_dof, int(lay.sleeper[1] - lay.sleeper[0]), batch.ends)
+    mass_diag, keff, pad_k, pad_c, bal_k, bal_c, ends = (stacked[:, a:b].reshape((-1,) + s) for a, b, s in fields)
     pack = functools.partial(_pack, n_chunks=n_chunks, width=width)
-    return _TrackRows(pack(mb[:, :, 0]), pack(kb + consts[0] * mb + consts[1] * cb), pack(supports["pad_stiffness"]),
-                      pack(supports["pad_damping"]), pack(supports["ballast_stiffness"]),
-                      pack(supports["ballast_damping"]), pack(_window_ends(batch.tracks, batch.ends, consts[1])),
-                      lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
-                      _mass_diagonals(_rail_bands(lay, t0.element_length, t0.rail_bending_stiffness, t0.rail_mass)[0]),
-                      supports["pad_stiffness"], supports["ballast_stiffness"], supports["ballast_damping"])
+    node_w, sleeper, sleeper_node, rail_mass = _mesh_arrays(t0.n_sleepers, t0.elements_per_bay, t0.element_length,
+                                                           t0.rail_bending_stiffness, t0.rail_mass)
+    return _TrackRows(pack(mass_diag), pack(keff), pack(pad_k), pack(pad_c), pack(bal_k), pack(bal_c), pack(ends),
+                      node_w, sleeper, sleeper_node, rail_mass, pad_k, bal_k, bal_c)
+
+
+@functools.lru_cache(maxsize=16)
+def _mesh_arrays(n_sleepers: int, epb: int, element_length: float, ei: float,
+                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The mesh's fields of :class:`_TrackRows` (node_w, sleeper, sleeper_node as int64, the rail's mass
+    diagonals), built once per mesh and shared by its passes, which only read them."""
+    from .track import DofLayout
+
+    lay = DofLayout.build(n_sleepers, epb)
+    return (lay.node_w.astype(np.int64), lay.sleeper.astype(np.int64), lay.sleeper_node.astype(np.int64),
+            _mass_diagonals(_rail_bands(lay, element_length, ei, mass, copy=False)[0]))
+
+
+@functools.lru_cache(maxsize=16)
+def _row_fields(n: int, n_dof: int, bay_dofs: int, ends: str) -> list[tuple[int, int, tuple[int, ...]]]:
+    """Where each field of a kept row (:func:`_track_row_arrays`) lies in it, for a mesh of ``n`` sleepers,
+    ``n_dof`` DOFs and ``bay_dofs`` DOFs a bay, and window ends ``ends``: (start, stop, shape) of the mass
+    diagonal, the effective stiffness, the pad and ballast stiffness and damping and the window ends, in order."""
+    end_columns = 6 if ends == "rest" else 12 + 2 * bay_dofs
+    shapes = [(n_dof,), (n_dof, HALF_BANDWIDTH + 1), (n,), (n,), (n,), (n,), (n, end_columns)]
+    stops = np.cumsum([math.prod(shape) for shape in shapes]).tolist()
+    return [(stop - math.prod(shape), stop, shape) for stop, shape in zip(stops, shapes, strict=True)]
+
+
+_ROW_ARRAYS_CACHE_SIZE = 512  # tracks whose rows are kept (~25 kB each on a line's segment: 32 lines of 12 fit)
+_ROW_ARRAYS: collections.OrderedDict = collections.OrderedDict()  # (track, dt, ends) -> its row, least recent first
+
+
+def _track_row_arrays(tracks: Sequence[Track], dt: float, ends: str) -> list[np.ndarray]:
+    """Each track's row of :class:`_TrackRows` (mass diagonal, effective stiffness K + a0 M + a1 C, pad and ballast
+    stiffness and damping, window ends) as one flat, read-only array (:func:`_row_fields` says where each lies),
+    kept per track object, dt and window ends (the most recent :data:`_ROW_ARRAYS_CACHE_SIZE`): a batch whose
+    composition changes from pass to pass (pass reuse computes only some segments) assembles its rows from those
+    kept, one stack for all the fields; the tracks missing are built as one batch (:func:`batched_bands`,
+    :func:`_window_ends`: element by element, the same numbers in any batch)."""
+    return _kept(_ROW_ARRAYS, [(t, dt, ends) for t in tracks], _ROW_ARRAYS_CACHE_SIZE,
+                 lambda missing: _build_row_arrays([key[0] for key in missing], dt, ends))
+
+
+def _build_row_arrays(tracks: list[Track], dt: float, ends: str) -> list[np.ndarray]:
+    """:func:`_track_row_arrays` of ``tracks``, assembled as one batch."""
+    consts = newmark_constants(dt)
+    mb, cb, kb = batched_bands(tracks)
+    fields = (mb[:, :, 0], kb + consts[0] * mb + consts[1] * cb,
+              *(np.stack([getattr(t, name) for t in tracks]) for name in ("pad_stiffness", "pad_damping",
+                                                                           "ballast_stiffness", "ballast_damping")),
+              _window_ends(tracks, ends, consts[1]))
+    rows = np.concatenate([field.reshape(len(tracks), -1) for field in fields], axis=1)
+    return [row.copy() for row in rows]  # each its own array: a row kept does not keep its batch's alive
 
 
 def _results(batch: _Batch, run: _Run) -> list[PassResult]:
@@ -1192,10 +1242,9 @@ def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
     bays_on = math.ceil((system.span + (margin + 2) * s + travel - batch.x_start) / s)
     x_start = batch.x_start + bays_on * s - travel
     n_sleepers = int((x_start + travel) / s) + margin + 4
-    scalars = dict(sleeper_spacing=s, rail_bending_stiffness=t0.rail_bending_stiffness, rail_mass=t0.rail_mass,
-                   elements_per_bay=t0.elements_per_bay)
-    uniform = [Track.uniform(n_sleepers, **{name: float(getattr(t, name)[0]) for name in _SUPPORT_FIELDS}, **scalars)
-               for t in tracks]
+    scalars = (s, t0.rail_bending_stiffness, t0.rail_mass, t0.elements_per_bay)
+    uniform = _uniform_tracks([(n_sleepers, tuple(float(getattr(t, name)[0]) for name in _SUPPORT_FIELDS), scalars)
+                               for t in tracks])
     runs = _Batch(uniform, [None] * len(uniform), None, system, batch.law, batch.speed, batch.dt, "static",
                   x_start, x_start + batch.speed * (n_steps * batch.dt), margin, "ballast", keep_factors=False,
                   backend=batch.backend, device=batch.device, ends=batch.ends)
@@ -1206,6 +1255,24 @@ def _integrate_steady(batch: _Batch, tracks: list[Track]) -> list[_SteadyState]:
     force = _unpack(run.peaks.force[:, -1], n)
     x_lead = float(run.x_axle[-1, 0] + system.axle_offsets[0])
     return [_SteadyState(u[b], v[b], a[b], q[b], qd[b], qdd[b], force[b], x_lead) for b in range(n)]
+
+
+_UNIFORM_CACHE_SIZE = 256  # uniform tracks kept (a line's entries, run over by each of its vehicle types)
+_UNIFORM: collections.OrderedDict = collections.OrderedDict()  # (n_sleepers, supports, rail) -> its Track
+
+
+def _uniform_tracks(keys: list[tuple]) -> list[Track]:
+    """The uniform tracks of the steady runs (:func:`_integrate_steady`), one per key (n_sleepers, the supports of
+    :data:`_SUPPORT_FIELDS`, (spacing, EI, rail mass, elements per bay)), kept as objects (the most recent
+    :data:`_UNIFORM_CACHE_SIZE`): another vehicle's steady run over the same entries finds the same tracks, and
+    with them their static ends and kept rows (the per-track caches), instead of building equal tracks anew."""
+    return _kept(_UNIFORM, keys, _UNIFORM_CACHE_SIZE, lambda missing: [_uniform_track(*key) for key in missing])
+
+
+def _uniform_track(n_sleepers: int, supports: tuple, rail: tuple) -> Track:
+    spacing, ei, rail_mass, epb = rail
+    return Track.uniform(n_sleepers, **dict(zip(_SUPPORT_FIELDS, supports, strict=True)), sleeper_spacing=spacing,
+                         rail_bending_stiffness=ei, rail_mass=rail_mass, elements_per_bay=epb)
 
 
 def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularity = None, **options) -> PassResult:
