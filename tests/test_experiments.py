@@ -238,3 +238,16 @@ def test_network_agent_script_scores_the_value_dispatch_and_pairs_against_a_chos
     assert mod.report(tmp_path)["best_rule"] == "network-by-value(grouped-threshold)"  # the saved reports not read
     with pytest.raises(SystemExit, match="--against"):
         mod.report(tmp_path, against="network(no-such-policy)")
+
+
+def test_engine_switch_scores_like_the_leaderboard_and_finds_each_shipped_bound():
+    """The normalised score is the paired sums' ratio (the leaderboard's), the relative changes are of the means,
+    and every scenario it compares has exactly one shipped bound file."""
+    mod = _script("engine_switch")
+    rows = {"rule": np.array([100.0, 200.0]), "agent": np.array([90.0, 200.0]), "bound": np.array([80.0, 150.0]),
+            "evaluation_s": 1.5}
+    s = mod.summary(rows)
+    assert s["normalised_score"] == pytest.approx(10.0 / 70.0)
+    assert s["agent_vs_rule"] == pytest.approx(290.0 / 300.0 - 1) and s["bound_vs_rule"] == pytest.approx(-70.0 / 300)
+    for name in mod.SCENARIOS:
+        assert mod.bound_file(name).name.startswith(f"{name}_")
