@@ -1,20 +1,21 @@
-"""What the leaderboard's rows would become if the line's faster options were the defaults: the tuned grouped
-threshold, the shipped agent and the saved hindsight bounds on the leaderboard's episodes, under the classic
-engine (today's default) and under ``engine="fast"`` with ``pass_reuse_tolerance_m=1e-3``.
+"""What the leaderboard's rows would become if the line's faster options were the defaults: the tuned rule, the
+shipped agent and the saved hindsight bounds on the leaderboard's episodes, under the classic engine (today's
+default) and under ``engine="fast"`` with ``pass_reuse_tolerance_m=1e-3``.
 
-    python experiments/engine_switch.py                                  # the default line, the small line, 60 m
+    python experiments/engine_switch.py                                  # every scenario whose bound ships
     python experiments/engine_switch.py --scenario default --out results/engine_switch.json
 
-Per scenario (a tamping-only preset whose bound ships in ``experiments/saved/leaderboard/bounds/``): its seeds
-and bound schedules are the cached ones; the grouped threshold (the preset's tuned parameters) and ``cpi-agent``
-run on those episodes under each engine, and each saved schedule is replayed under each engine, capped at the
-rule's cost there (as the leaderboard caps it). Reported per engine: the mean costs, the agent's and the bound's
-change against the rule and the agent's normalised score (the share of the rule-to-bound gap it closes, paired
-sums, as the leaderboard computes it); across the engines: each policy's per-episode cost change (mean and
-largest |Δ|), the episodes where a replayed schedule costs more than the rule under the fast engine (where a
-bound would need a new search rather than a replay), and the wall time of the two evaluations. The classic
-replays must reproduce the cached costs (checked). The schedules were searched under the classic engine: under
-the fast one they are found schedules, not a fresh search's.
+Per scenario (a preset whose bound ships in ``experiments/saved/leaderboard/bounds/``): its seeds and bound
+schedules are the cached ones; the tuned rule (the grouped threshold, or the choice rule on the lines with every
+choice, with the preset's tuned parameters) and the shipped agent (``cpi-agent``, or ``cpi-choice-agent`` on the
+lines with every choice) run on those episodes under each engine, and each saved schedule is replayed under each
+engine, capped at the rule's cost there (as the leaderboard caps it). Reported per engine: the mean costs, the
+agent's and the bound's change against the rule and the agent's normalised score (the share of the rule-to-bound
+gap it closes, paired sums, as the leaderboard computes it); across the engines: each policy's per-episode cost
+change (mean and largest |Δ|), the episodes where a replayed schedule costs more than the rule under the fast
+engine (where a bound would need a new search rather than a replay), and the wall time of the two evaluations.
+The classic replays must reproduce the cached costs (checked). The schedules were searched under the classic
+engine: under the fast one they are found schedules, not a fresh search's.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 BOUNDS = ROOT / "experiments" / "saved" / "leaderboard" / "bounds"
 OUT = ROOT / "experiments" / "saved" / "engine_switch.json"
-SCENARIOS = ("default", "small", "track60")
+SCENARIOS = ("default", "small", "track60", "choices", "wet", "defects")
 FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
 
 
@@ -66,13 +67,24 @@ def summary(rows: dict) -> dict:
             "evaluation_s": float(rows["evaluation_s"])}
 
 
+def reference_policies(config) -> list:
+    """The tuned rule and the shipped agent of ``config``: the choice rule and ``cpi-choice-agent`` where it enables
+    more than tamping, else the grouped threshold and ``cpi-agent``."""
+    from trackenv_agents.learning.line import load_line_trained
+    from trackenv_agents.rules.problems import rules_for, tuned_params_for
+    from trackenv_agents.shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS
+
+    choices = tuple(config.choices) != ("tamp",)
+    rule = "choice-threshold" if choices else "grouped-threshold"
+    agent = CHOICE_AGENT_NAME if choices else LINE_AGENT_NAME
+    return [rules_for(config)[rule](**tuned_params_for(config)[rule]),
+            load_line_trained(SHIPPED_AGENTS[agent], name=agent)]
+
+
 def compare(scenario_name: str) -> dict:
     """Both engines on a scenario's leaderboard episodes (see the module docstring)."""
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.line_hindsight import schedule_from_rows
-    from trackenv_agents.learning.line import load_line_trained
-    from trackenv_agents.rules.line import GroupedThreshold
-    from trackenv_agents.rules.problems import tuned_params_for
 
     path = bound_file(scenario_name)
     episodes = json.loads(path.read_text())["episodes"]
@@ -80,7 +92,7 @@ def compare(scenario_name: str) -> dict:
     plans = [schedule_from_rows(episodes[str(s)]["schedule"]) for s in seeds]
     cached = np.array([episodes[str(s)]["cost"] for s in seeds])
     classic = scenario(scenario_name)
-    policies = [GroupedThreshold(**tuned_params_for(classic)["grouped-threshold"]), load_line_trained()]
+    policies = reference_policies(classic)
     rows = {"classic": engine_rows(classic, seeds, plans, policies),
             "fast+reuse": engine_rows(classic.replace(**FAST), seeds, plans, policies)}
     if not np.allclose(rows["classic"]["replayed"], cached, rtol=1e-6, atol=0.0):
@@ -100,7 +112,7 @@ def compare(scenario_name: str) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenario", action="append", choices=SCENARIOS,
-                        help="a tamping-only scenario with a shipped bound (repeatable; default: all three)")
+                        help="a scenario with a shipped bound (repeatable; default: all of them)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args(argv)
     results = []
