@@ -68,15 +68,14 @@ def summary(rows: dict) -> dict:
 
 
 def reference_policies(config) -> list:
-    """The tuned rule and the shipped agent of ``config``: the choice rule and ``cpi-choice-agent`` where it enables
-    more than tamping, else the grouped threshold and ``cpi-agent``."""
+    """The main rule (:func:`~trackenv_agents.rules.problems.main_rule`) with its tuned parameters and the shipped
+    agent of ``config``: ``cpi-choice-agent`` where it enables more than tamping, else ``cpi-agent``."""
     from trackenv_agents.learning.line import load_line_trained
-    from trackenv_agents.rules.problems import rules_for, tuned_params_for
+    from trackenv_agents.rules.problems import main_rule, rules_for, tuned_params_for
     from trackenv_agents.shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS
 
-    choices = tuple(config.choices) != ("tamp",)
-    rule = "choice-threshold" if choices else "grouped-threshold"
-    agent = CHOICE_AGENT_NAME if choices else LINE_AGENT_NAME
+    rule = main_rule(config)
+    agent = LINE_AGENT_NAME if rule == "grouped-threshold" else CHOICE_AGENT_NAME
     return [rules_for(config)[rule](**tuned_params_for(config)[rule]),
             load_line_trained(SHIPPED_AGENTS[agent], name=agent)]
 

@@ -65,23 +65,18 @@ class PassRecorder:
         return force, contact, bays
 
 
-def rule_name(config) -> str:
-    """The rule an id's episodes run: its choice rule where it has more choices than tamping, else the grouped
-    threshold (each with the id's shipped tuned parameters)."""
-    return "grouped-threshold" if tuple(config.choices) == ("tamp",) else "choice-threshold"
-
-
 def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule", env_id: str = ENV_ID) -> dict:
-    """One episode under the id's tuned rule (:func:`rule_name`; or random actions): its cost, its actions, and
-    the passes' record."""
+    """One episode under the id's main rule with its tuned parameters
+    (:func:`~trackenv_agents.rules.problems.main_rule`; or random actions): its cost, its actions, and the passes'
+    record."""
     import gymnasium as gym
 
     sys.path.insert(0, str(ROOT))
-    from agents.rules.problems import rules_for, tuned_params_for
+    from agents.rules.problems import main_rule, rules_for, tuned_params_for
 
     env = gym.make(env_id, engine="fast", pass_reuse_tolerance_m=tolerance_m)
     config = env.unwrapped.config
-    name = rule_name(config)
+    name = main_rule(config)
     rule = rules_for(config)[name](**tuned_params_for(config)[name])
     env.action_space.seed(seed)
     obs, _ = env.reset(seed=seed)
@@ -132,9 +127,11 @@ def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule", 
     steps = len(reference[seeds[0]]["actions"])
     import gymnasium as gym
 
+    from agents.rules.problems import main_rule
+
     config = gym.make(env_id).unwrapped.config
     return {"env_id": env_id, "engine": "fast", "seeds": seeds,
-            "policy": f"{rule_name(config)} (tuned)" if policy == "rule" else "random actions",
+            "policy": f"{main_rule(config)} (tuned)" if policy == "rule" else "random actions",
             "steps_per_episode": steps, "section_decisions": steps * len(reference[seeds[0]]["actions"][0]) *
             len(seeds), "reference_costs": {s: reference[s]["cost"] for s in seeds},
             "load_average_1min_end": os.getloadavg()[0], "tolerances": rows}

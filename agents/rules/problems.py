@@ -35,6 +35,12 @@ def rules_for(config: Any) -> dict[str, Any]:
     return {**LINE_HEURISTICS, **CHOICE_RULES}
 
 
+def main_rule(config: LineConfig) -> str:
+    """The name of ``config``'s main rule, the one comparisons on it run: the choice rule where it enables more
+    than tamping, else the grouped threshold."""
+    return "grouped-threshold" if tuple(config.choices) == ("tamp",) else "choice-threshold"
+
+
 #: fields that say how a line's passes are computed, not what the line is, at their presets' values
 _HOW_COMPUTED = {"engine": "classic", "pass_reuse_tolerance_m": 0.0}
 

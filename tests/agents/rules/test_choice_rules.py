@@ -241,3 +241,11 @@ def test_trackenv_evaluate_scores_the_choice_rules_and_reports_the_choices(tmp_p
         assert list(r["choices"]) == ["tamp", "spot_tamp", "drainage", "renew", "inspect", "survey"]
     assert by["grouped-threshold"]["choices"]["tamp"] == by["grouped-threshold"]["section_tampings"]
     assert all(by["grouped-threshold"]["choices"][n] == 0 for n in CHOICE_NAMES if n != "tamp")
+
+
+def test_main_rule_is_the_choice_rule_where_the_config_has_choices_and_one_of_its_rules():
+    for name in ("default", "small", "track60", "choices", "wet", "defects"):
+        config = scenario(name)
+        rule = problems.main_rule(config)
+        assert rule in problems.rules_for(config)
+        assert (rule == "choice-threshold") == (tuple(config.choices) != ("tamp",))
