@@ -113,10 +113,9 @@ def _tuned_line_rule() -> Any:
     """The default line's grouped threshold with its shipped tuned parameters (the bench's realistic policy; its
     own defaults where none ship)."""
     from trackenv.envs.line_config import scenario
-    from trackenv_agents.rules.line import GroupedThreshold
-    from trackenv_agents.rules.problems import tuned_params_for
+    from trackenv_agents.rules.problems import tuned_rule
 
-    return GroupedThreshold(**tuned_params_for(scenario("default")).get(GroupedThreshold.name, {}))
+    return tuned_rule(scenario("default"), "grouped-threshold")
 
 
 def cmd_compile(args: argparse.Namespace) -> int:

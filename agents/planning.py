@@ -57,15 +57,13 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
     of ``scenario`` (default: those of the preset ``config`` is, else the default line's), a shipped agent by its
     name (:data:`~trackenv_agents.shipped.SHIPPED_AGENTS`: ``cpi-agent``, ``cpi-choice-agent``) or a trained
     per-section policy by the path of its ``.zip``; ValueError for another."""
-    from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_params_for
+    from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_rule
 
     rules = rules_for(config)
     if name in rules:
         if scenario is not None and TUNED_FILES.get(scenario, Path()).is_file():
-            params = line_tuned_params(TUNED_FILES[scenario])
-        else:
-            params = tuned_params_for(config)
-        return rules[name](**params.get(name, {})).bind(config)
+            return rules[name](**line_tuned_params(TUNED_FILES[scenario]).get(name, {})).bind(config)
+        return tuned_rule(config, name).bind(config)
     if name in SHIPPED_AGENTS or name.endswith(".zip"):
         from .learning.line import load_line_trained
 

@@ -82,7 +82,7 @@ def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_na
 
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.harness import evaluate_one
-    from trackenv_agents.rules import LINE_HEURISTICS, tuned_params_for
+    from trackenv_agents.rules import tuned_rule
 
     curves = {name: curve(run) for name, run in runs.items()}
     if keep_others and out_json.is_file():
@@ -94,7 +94,7 @@ def cmd_curves(runs: dict[str, Path], out_json: Path, out_png: Path, scenario_na
     seeds = next((c["evaluation"]["seeds"] for c in curves.values() if "evaluation" in c), list(range(10_000, 10_008)))
     config = scenario(scenario_name)
     rule = "grouped-threshold"
-    ref = evaluate_one(LINE_HEURISTICS[rule](**tuned_params_for(config).get(rule, {})), config, seeds)
+    ref = evaluate_one(tuned_rule(config, rule), config, seeds)
     payload = {"scenario": scenario_name, "curves": curves,
                "reference": {"policy": rule, "seeds": seeds, "mean_return": -float(ref.cost.mean())}}
     fig = Figure(figsize=(7.5, 6.0))

@@ -35,11 +35,11 @@ OUT = Path(__file__).resolve().parent / "saved" / "choice_agent"
 def _policy(name: str, config):
     from trackenv_agents.learning.line import load_line_trained
     from trackenv_agents.learning.line_policy import LineAgent
-    from trackenv_agents.rules import rules_for, tuned_params_for
+    from trackenv_agents.rules import rules_for, tuned_rule
 
     rules = rules_for(config)
     if name in rules:
-        return rules[name](**tuned_params_for(config).get(name, {}))
+        return tuned_rule(config, name)
     agent, _, advisor = name.partition("@")  # AGENT@RULE: the agent's network with another advisor
     path = SHIPPED_AGENTS.get(agent, Path(agent))
     loaded = load_line_trained(path, name=agent if agent in SHIPPED_AGENTS else path.stem)

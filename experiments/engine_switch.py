@@ -71,12 +71,12 @@ def reference_policies(config) -> list:
     """The main rule (:func:`~trackenv_agents.rules.problems.main_rule`) with its tuned parameters and the shipped
     agent of ``config``: ``cpi-choice-agent`` where it enables more than tamping, else ``cpi-agent``."""
     from trackenv_agents.learning.line import load_line_trained
-    from trackenv_agents.rules.problems import main_rule, rules_for, tuned_params_for
+    from trackenv_agents.rules.problems import main_rule, tuned_rule
     from trackenv_agents.shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS
 
     rule = main_rule(config)
     agent = LINE_AGENT_NAME if rule == "grouped-threshold" else CHOICE_AGENT_NAME
-    return [rules_for(config)[rule](**tuned_params_for(config)[rule]),
+    return [tuned_rule(config, rule, require_tuned=True),
             load_line_trained(SHIPPED_AGENTS[agent], name=agent)]
 
 

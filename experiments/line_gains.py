@@ -30,7 +30,7 @@ from trackenv_agents.evaluation.line_compare import SECTION_CLASSES, class_break
 from trackenv_agents.evaluation.line_hindsight import saved_schedules
 from trackenv_agents.evaluation.statistics import paired_difference
 from trackenv_agents.learning.line import load_line_trained
-from trackenv_agents.rules.line import LINE_HEURISTICS, line_tuned_params
+from trackenv_agents.rules.problems import tuned_rule
 
 SEARCHES = Path(__file__).resolve().parent / "searches"
 
@@ -141,8 +141,8 @@ def main(argv=None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     agent = load_line_trained(a.model, name="ppo")
-    tuned = line_tuned_params()
-    rule = LINE_HEURISTICS["grouped-threshold"](**tuned["grouped-threshold"])
+    nominal = scenario("default")
+    rule = tuned_rule(nominal, "grouped-threshold", require_tuned=True)
     payload: dict = {"model": a.model or "shipped"}
     if a.compare:
         payload["gains"] = gains_from_comparison(Path(a.compare))
@@ -153,7 +153,7 @@ def main(argv=None) -> dict:
         print(json.dumps({k: g[k] for k in ("vs_rule", "per_class_paired", "hindsight")}, default=float), flush=True)
     if a.generalisation:
         rules = {"grouped-threshold": rule,
-                 "uniform-periodic": LINE_HEURISTICS["uniform-periodic"](**tuned["uniform-periodic"])}
+                 "uniform-periodic": tuned_rule(nominal, "uniform-periodic", require_tuned=True)}
         payload["generalisation"] = generalisation(agent, rules, a.generalisation, a.batch_size)
     payload["wall_seconds"] = time.time() - t0
     (out / "line_gains.json").write_text(json.dumps(payload, indent=1, default=float))

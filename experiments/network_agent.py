@@ -47,15 +47,15 @@ def network_policies(config, names: list[str], dispatches: tuple = ("requests",)
     shipped agent run on every line by a :class:`~trackenv_agents.rules.network.NetworkRule`, under each of
     ``dispatches`` (its ``dispatch`` argument), in that order."""
     from trackenv_agents.learning.line import load_line_trained
-    from trackenv_agents.rules import rules_for, tuned_params_for
+    from trackenv_agents.rules import rules_for, tuned_rule
     from trackenv_agents.rules.network import NetworkRule
     from trackenv_agents.shipped import SHIPPED_AGENTS
 
-    rules, tuned = rules_for(config.line_config), tuned_params_for(config.line_config)
+    rules = rules_for(config.line_config)
     unknown = [n for n in names if n not in rules and n not in SHIPPED_AGENTS]
     if unknown:
         raise SystemExit(f"--policies: unknown {unknown}; give rules of {sorted(rules)} or {sorted(SHIPPED_AGENTS)}")
-    lines = [rules[n](**tuned.get(n, {})) if n in rules else load_line_trained(SHIPPED_AGENTS[n], name=n)
+    lines = [tuned_rule(config.line_config, n) if n in rules else load_line_trained(SHIPPED_AGENTS[n], name=n)
              for n in names]
     built = [NetworkRule(line, dispatch) for dispatch in dispatches for line in lines]
     return {p.name: p for p in built}

@@ -72,12 +72,12 @@ def episode(seed: int, tolerance_m: float, compare: bool, policy: str = "rule", 
     import gymnasium as gym
 
     sys.path.insert(0, str(ROOT))
-    from agents.rules.problems import main_rule, rules_for, tuned_params_for
+    from agents.rules.problems import main_rule, tuned_rule
 
     env = gym.make(env_id, engine="fast", pass_reuse_tolerance_m=tolerance_m)
     config = env.unwrapped.config
     name = main_rule(config)
-    rule = rules_for(config)[name](**tuned_params_for(config)[name])
+    rule = tuned_rule(config, name, require_tuned=True)
     env.action_space.seed(seed)
     obs, _ = env.reset(seed=seed)
     record = PassRecorder(env.unwrapped.engine, compare)

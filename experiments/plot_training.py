@@ -17,7 +17,7 @@ from pathlib import Path
 from trackenv.envs import scenario
 from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.learning.tamping import DEFAULT_EVAL_SEEDS
-from trackenv_agents.rules import LINE_HEURISTICS, tuned_params_for
+from trackenv_agents.rules import tuned_rule
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -37,8 +37,7 @@ def main(argv: list[str] | None = None) -> dict:
     import matplotlib.pyplot as plt
 
     config = scenario("track60")
-    tuned = tuned_params_for(config)
-    policies = [LINE_HEURISTICS[name](**tuned.get(name, {})) for name in args.references]
+    policies = [tuned_rule(config, name) for name in args.references]
     refs = evaluate_many(policies, config, DEFAULT_EVAL_SEEDS, batch_size=len(DEFAULT_EVAL_SEEDS) * len(policies))
     fig, ax = plt.subplots(figsize=(7, 4))
     curves = {}

@@ -32,8 +32,7 @@ from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.evaluation.line_compare import parse_seeds
 from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_difference
 from trackenv_agents.learning.line import load_line_trained
-from trackenv_agents.rules.line import LINE_HEURISTICS
-from trackenv_agents.rules.problems import tuned_params_for
+from trackenv_agents.rules.problems import tuned_rule
 
 #: (name, overrides of the default line): the nominal line first, then one condition moved at a time
 CONDITIONS: tuple[tuple[str, dict], ...] = (
@@ -53,8 +52,8 @@ AGENT = "cpi-agent"
 
 def policies() -> list:
     """The shipped agent and the shipped tuned rules (parameters of the nominal default line)."""
-    params = tuned_params_for(scenario("default"))
-    return [load_line_trained(name=AGENT)] + [LINE_HEURISTICS[n](**params[n]) for n in RULES]
+    nominal = scenario("default")
+    return [load_line_trained(name=AGENT)] + [tuned_rule(nominal, n, require_tuned=True) for n in RULES]
 
 
 def run_condition(name: str, overrides: dict, seeds: list[int], batch_size: int) -> dict:

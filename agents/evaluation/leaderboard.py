@@ -323,7 +323,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     the module docstring: "results" (one row per scenario and policy, the best rule first, then by mean cost),
     "bound" (per scenario), "seeds", "best_rule" (per scenario), "not_scored" (per scenario, the agents left out
     and why)."""
-    from ..rules.problems import rules_for, tuned_params_for
+    from ..rules.problems import rules_for, tuned_params_for, tuned_rule
 
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
     for env_id in envs:
@@ -336,7 +336,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         if unknown or not wanted:
             raise ValueError(f"rules must name some of {sorted(family)}, got {list(wanted)}")
         here, unfit = fitting_agents(agents or {}, cfg)
-        pols = [on_network(p, cfg) for p in [family[n](**tuned.get(n, {})) for n in wanted] + list(here.values())]
+        pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
         results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
                                 executor=executor)

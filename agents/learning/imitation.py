@@ -24,19 +24,17 @@ from gymnasium import spaces
 from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import ProblemConfig
 
-from ..rules import rules_for, tuned_params_for
+from ..rules import rules_for, tuned_rule
 from .actions import RANKED
 
 
 def teacher_policy(rule: str, config: ProblemConfig, params: dict[str, Any] | None = None):
     """The heuristic ``rule`` with ``params`` (default: the tuned parameters of ``config``'s preset,
-    :func:`~trackenv_agents.rules.tuned_params_for`), bound to ``config``'s planning calendar."""
+    :func:`~trackenv_agents.rules.tuned_rule`), bound to ``config``'s planning calendar."""
     rules = rules_for(config)
     if rule not in rules:
         raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
-    if params is None:
-        params = tuned_params_for(config).get(rule, {})
-    return rules[rule](**params).bind(config)
+    return (tuned_rule(config, rule) if params is None else rules[rule](**params)).bind(config)
 
 
 def teacher_to_agent_actions(sections: np.ndarray, action_type: str) -> np.ndarray:

@@ -19,7 +19,7 @@ from .line import (
     stale_measurement,
 )
 from .network import NetworkRule
-from .problems import TUNED_FILES, rules_for, tuned_params_for
+from .problems import TUNED_FILES, rules_for, tuned_params_for, tuned_rule
 
 __all__ = [
     "Heuristic", "RandomPolicy", "as_batch",
@@ -27,5 +27,5 @@ __all__ = [
     "LINE_HEURISTICS", "LINE_TUNED_FILE", "BudgetedWorstFirst", "GroupedThreshold", "LineNoMaintenance",
     "RegisterPeriodic", "SectionThreshold", "UniformPeriodic", "line_tuned_params", "planner_view",
     "stale_measurement",
-    "NetworkRule", "TUNED_FILES", "rules_for", "tuned_params_for",
+    "NetworkRule", "TUNED_FILES", "rules_for", "tuned_params_for", "tuned_rule",
 ]

@@ -66,3 +66,18 @@ def tuned_params_for(config: Any) -> dict[str, dict[str, Any]]:
     """The shipped tuned parameters of ``config``'s rules, by rule name ({} where none ship)."""
     rules_for(config)
     return line_tuned_params(tuned_file_for(config))
+
+
+def tuned_rule(config: Any, name: str, *, require_tuned: bool = False) -> Any:
+    """The rule ``name`` of ``config``'s family (:func:`rules_for`) with ``config``'s shipped tuned parameters
+    (:func:`tuned_params_for`), not yet bound to the config's calendar. Where none ship for it, the rule's own
+    defaults, or ValueError with ``require_tuned`` (a comparison that must run the tuned rule, not a stand-in).
+    An unknown ``name`` is a ValueError naming the family's rules."""
+    family = rules_for(config)
+    if name not in family:
+        raise ValueError(f"rule must be one of {sorted(family)}, got {name!r}")
+    tuned = tuned_params_for(config)
+    if require_tuned and name not in tuned:
+        raise ValueError(f"rule {name!r}: no tuned parameters ship for this config ({tuned_file_for(config).name} "
+                         f"holds {sorted(tuned)})")
+    return family[name](**tuned.get(name, {}))

@@ -197,3 +197,20 @@ def test_tuned_parameters_are_those_of_the_preset_at_any_horizon_else_the_defaul
     assert problems.tuned_params_for(scenario("small")) == default_line
     monkeypatch.setitem(problems.TUNED_FILES, "track60", tmp_path / "missing.json")
     assert problems.tuned_params_for(scenario("track60")) == default_line
+
+
+def test_tuned_rule_is_the_rule_with_its_shipped_parameters_and_names_what_is_missing(tmp_path, monkeypatch):
+    mine = tmp_path / "track60.json"
+    mine.write_text(json.dumps({"params": {"section-threshold": {"threshold_mm": 2.5}}}))
+    monkeypatch.setitem(problems.TUNED_FILES, "track60", mine)
+    rule = problems.tuned_rule(scenario("track60"), "section-threshold", require_tuned=True)
+    assert isinstance(rule, SectionThreshold) and rule.params == {"threshold_mm": 2.5}
+    # none ship for this rule here: its own defaults, or a clear error where the tuned rule is required
+    assert problems.tuned_rule(scenario("track60"), "grouped-threshold").params == GroupedThreshold().params
+    with pytest.raises(ValueError, match="no tuned parameters ship.*section-threshold"):
+        problems.tuned_rule(scenario("track60"), "grouped-threshold", require_tuned=True)
+    # a choice rule is no rule of a tamp-only line; on a line with choices it is, with that line's parameters
+    with pytest.raises(ValueError, match="rule must be one of .*'grouped-threshold'.*got 'choice-threshold'"):
+        problems.tuned_rule(scenario("default"), "choice-threshold")
+    shipped = problems.tuned_params_for(scenario("defects"))["choice-threshold"]
+    assert problems.tuned_rule(scenario("defects"), "choice-threshold").params == shipped
