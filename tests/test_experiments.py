@@ -251,3 +251,27 @@ def test_engine_switch_scores_like_the_leaderboard_and_finds_each_shipped_bound(
     assert s["agent_vs_rule"] == pytest.approx(290.0 / 300.0 - 1) and s["bound_vs_rule"] == pytest.approx(-70.0 / 300)
     for name in mod.SCENARIOS:
         assert mod.bound_file(name).name.startswith(f"{name}_")
+
+
+def test_track60_room_replays_a_schedule_exactly_and_its_end_stop_does_no_late_work():
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.evaluation.harness import evaluate_many
+    from trackenv_agents.rules.line import GroupedThreshold
+
+    mod = _script("track60_room")
+    config = scenario("track60", horizon_years=3.0)
+    seeds = [3000, 3003]
+    rule = GroupedThreshold(trigger_mm=1.0, include_mm=0.5)  # a low trigger: work within these 3 years
+    own = evaluate_many([rule], config, seeds, batch_size=2)[0]
+    assert own.tamped[:, :-6].any() and own.tamped[:, -6:].any()  # work before the stop and within it
+    stop = 6
+    played, ended = evaluate_many([mod.SchedulePlayer(list(own.tamped), config.horizon_steps),
+                                   mod.EndStop(rule.params["trigger_mm"], rule.params["include_mm"], stop)],
+                                  config, seeds, batch_size=2)
+    np.testing.assert_allclose(played.cost, own.cost, rtol=0, atol=1e-9)  # the rule's own schedule, replayed
+    assert not ended.tamped[:, -stop:].any()
+    np.testing.assert_array_equal(ended.tamped[:, :-stop], own.tamped[:, :-stop])  # the same rule before that
+    row = mod.summary(own)
+    assert row["sections_tamped"] == own.tamped.sum() / 2 and row["mean_cost"] == pytest.approx(own.cost.mean())
+    with pytest.raises(ValueError, match="one batch"):
+        evaluate_many([mod.SchedulePlayer(list(own.tamped), config.horizon_steps)], config, seeds, batch_size=1)
