@@ -31,6 +31,7 @@ the reference that scores are normalised to.
 from __future__ import annotations
 
 import itertools
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -40,8 +41,10 @@ from trackenv.envs.line_config import LineConfig
 from .base import as_batch
 from .line import LineHeuristic
 
-__all__ = ["ModelPredictive"]
+__all__ = ["MAX_PLANS", "ModelPredictive", "interval_square_sums"]
 
+#: the most plans the planner prices in a step (max_campaigns = 3 over 40 steps: 10 701; 4 over 40: 102 091)
+MAX_PLANS = 120_000
 #: years since tamping at or below which a section counts as tamped in the step just run (one quarter, as float32)
 _JUST_TAMPED_YEARS = 0.25 + 1e-3
 
@@ -109,6 +112,10 @@ class ModelPredictive(LineHeuristic):
         """Every plan of at most ``max_campaigns`` campaign steps (sorted tuples, the empty plan first) as padded
         arrays, with each plan's sub-plans (what one section may take of its campaigns) by index."""
         m = self.params["max_campaigns"]
+        count = sum(math.comb(horizon_steps, k) for k in range(m + 1))
+        if count > MAX_PLANS:
+            raise ValueError(f"max_campaigns={m} over a horizon of {horizon_steps} steps makes {count} plans, more "
+                             f"than {MAX_PLANS} (fewer campaigns, or a shorter horizon)")
         plans = [()] + [p for k in range(1, m + 1) for p in itertools.combinations(range(horizon_steps), k)]
         index = {p: i for i, p in enumerate(plans)}
         self.plan_steps = np.full((len(plans), m), horizon_steps, dtype=np.int64)
@@ -181,14 +188,15 @@ class ModelPredictive(LineHeuristic):
         sd = np.asarray(b["section_sd"], dtype=float)
         years_since = np.asarray(b["years_since_tamping"], dtype=float)
         step = self._step(b)
-        fresh = state is None or (episode_start is not None and np.asarray(episode_start).any())
-        if fresh:
+        if state is None or state[0].shape[0] != sd.shape[0]:  # a first step, or another batch: the SD of now only
             history, since = sd[:, None], np.zeros(sd.shape, dtype=np.int64)
         else:
             history, since = state
             keep = self.params["window_steps"]
             history = np.concatenate([history, sd[:, None]], axis=1)[:, -(keep + 1):]
             since = np.where(years_since <= _JUST_TAMPED_YEARS, 0, since + 1)
+            if episode_start is not None:  # a row whose episode starts now forgets the last one's slopes
+                since = np.where(np.asarray(episode_start, dtype=bool).reshape(-1, 1), 0, since)
         growth = self._growth(history, since)
         want = np.array([[step[i] in tamped for tamped in self.plan(sd[i], growth[i], int(step[i]))[2]]
                          for i in range(sd.shape[0])], dtype=bool)

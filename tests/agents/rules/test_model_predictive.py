@@ -82,6 +82,8 @@ def test_it_checks_its_parameters_and_its_config():
         ModelPredictive(tamped_sd_slope=1.5)
     with pytest.raises(ValueError, match="max_campaigns must be an integer"):
         ModelPredictive(max_campaigns=0)
+    with pytest.raises(ValueError, match="max_campaigns=4 over a horizon of 80 steps makes .* plans, more than"):
+        ModelPredictive(max_campaigns=4).bind(scenario("track60", horizon_years=20.0))
     with pytest.raises(ValueError, match="measurement_interval must be 1 and sd_noise_mm 0"):
         ModelPredictive().bind(scenario("default"))
     with pytest.raises(ValueError, match="bind the planner"):
@@ -101,3 +103,8 @@ def test_it_plays_episodes_through_the_harness_keeping_its_history():
            "time": np.zeros(1, np.float32)}
     action, state = bound.predict(obs)  # no state: the current SD only, at the prior growth
     assert action.shape == (6,) and state[0].shape == (1, 1, 6)
+    later = {**obs, "section_sd": np.full(6, 1.2, dtype=np.float32), "time": np.full(1, 0.1, np.float32)}
+    _, (history, since) = bound.predict(later, state)
+    assert history.shape == (1, 2, 6) and (since == 1).all()  # a slope from two observations
+    _, (_, since) = bound.predict(later, state, episode_start=np.array([True]))
+    assert (since == 0).all()  # a new episode: no slope from the last one's SD
