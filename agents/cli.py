@@ -169,22 +169,29 @@ def shipped_agent_for(env_id: str) -> str:
 
 
 def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
-    """The trained line policy scored next to the line rules: ``--model`` (named ``cpi-agent``), else the shipped
-    agent of the id (:func:`shipped_agent_for`) if its file is there (the same policy on every scenario: its
-    network is shared over sections)."""
+    """The policies scored next to the line rules: the trained line policy, ``--model`` (named ``cpi-agent``),
+    else the shipped agent of the id (:func:`shipped_agent_for`) if its file is there (the same policy on every
+    scenario: its network is shared over sections); with ``--policy all``, also the model-predictive planner
+    where the preset measures every step without error (the 60 m track)."""
     if args.policy == "rules":
         return {}
     _existing(args.model, "--model")
     name = LINE_AGENT_NAME if args.model else shipped_agent_for(args.env)
     path = Path(args.model) if args.model else SHIPPED_AGENTS[name]
-    if not path.exists():
-        if args.policy == "agent":
-            raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass "
-                             "--model")
-        return {}
-    from .learning.line import load_line_trained
+    out: dict[str, Any] = {}
+    if path.exists():
+        from .learning.line import load_line_trained
 
-    return {name: load_line_trained(path, name=name)}
+        out[name] = load_line_trained(path, name=name)
+    elif args.policy == "agent":
+        raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass --model")
+    if args.policy == "all":
+        from .evaluation.line_compare import scenario_config, scenario_of
+        from .rules.model_predictive import ModelPredictive
+
+        if ModelPredictive.unfit_reason(scenario_config(scenario_of(args.env))) is None:
+            out[ModelPredictive.name] = ModelPredictive()
+    return out
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -576,7 +583,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes: A:B (seeds A..B-1) or a,b,c (default 0:8)")
     sp.add_argument("--policy", choices=("all", "agent", "rules"), default="all",
-                    help="which policies to score: the rules and the trained agent (default), or one of them")
+                    help="which policies to score: the rules and the trained agent, with the model-predictive "
+                         "planner where the preset measures every step without error (the 60 m track) (default), "
+                         "or the rules or the agent alone")
     sp.add_argument("--model", default=None, metavar="ZIP",
                     help=f"a trained per-section policy (default: the shipped {LINE_AGENT_NAME}, "
                          f"agents/learning/pretrained/ppo_tamping_line.zip; on the ids with every choice "

@@ -9,7 +9,12 @@ that first decision is ever carried out.
 The forecast, per section: its SD grows linearly at the slope it showed over the last ``window_steps`` steps since
 its last tamping (``prior_growth_mm_per_step`` before two observations); a tamping leaves
 ``tamped_sd_offset_mm + tamped_sd_slope`` × the SD before it, and the SD then grows ``regrowth_factor`` times as
-fast (fresh ballast consolidates). The price of a plan is what the env charges for it within the horizon: the
+fast (fresh ballast consolidates). A section's own tamping corrects its slope: once the planner has seen one of
+its tampings, the slope is half the prior and half what that tamping did (some sections gain little from a
+tamping, and a planner that trusts the prior there tamps them again and again). A campaign also takes the
+neighbours of the sections it tamps whose SD is at least ``neighbour_mm``: the sections of the 60 m track share
+one track, and a section left untamped beside a lifted one gets a step at their boundary, which the per-section
+forecast does not see. The price of a plan is what the env charges for it within the horizon: the
 possession per campaign, the tamping per section tamped, and each step's geometry cost of every section, quadratic
 in its SD over the alert limit of its speed band. Costs after the horizon do not count, so the planner does no work
 whose benefit comes too late, as the life-cycle cost asks. Speed restrictions and immediate actions are not
@@ -19,8 +24,8 @@ Why: on the 60 m track the cost is the geometry cost, quadratic in the SD, and t
 until a section's SD reaches its trigger; a plan that weighs the SD's squared growth against a campaign's fixed
 price tamps at other times and not at the end of the horizon. The model's parameters were fitted to the grouped
 threshold's tampings on training episodes (an SD after tamping of 0.06 + 0.44 × the SD before, regrowth 1.26 times
-the growth before); the defaults are the slope and regrowth factor that ``experiments/model_predictive.py`` chose
-on training episodes of the 60 m track (0.44 and 1.5).
+the growth before); the defaults are the slope, regrowth factor and neighbour SD that
+``experiments/model_predictive.py`` chose on training episodes of the 60 m track (0.44, 1.5 and 1.0 mm).
 
 The planner reads the SD history it has been shown through SB3's ``state`` (the evaluation harness passes it back
 each step and restarts it at ``episode_start``); called without a state it knows the current SD only and forecasts
@@ -71,11 +76,12 @@ class ModelPredictive(LineHeuristic):
 
     def __init__(self, tamped_sd_slope: float = 0.44, tamped_sd_offset_mm: float = 0.06, regrowth_factor: float = 1.5,
                  window_steps: int = 4, prior_growth_mm_per_step: float = 0.04, max_campaigns: int = 3,
-                 **kw: Any) -> None:
+                 neighbour_mm: float = 1.0, **kw: Any) -> None:
         for key, value, low, high in (("tamped_sd_slope", tamped_sd_slope, 0.0, 1.0),
                                       ("tamped_sd_offset_mm", tamped_sd_offset_mm, 0.0, 5.0),
                                       ("regrowth_factor", regrowth_factor, 0.1, 10.0),
-                                      ("prior_growth_mm_per_step", prior_growth_mm_per_step, 0.0, 5.0)):
+                                      ("prior_growth_mm_per_step", prior_growth_mm_per_step, 0.0, 5.0),
+                                      ("neighbour_mm", neighbour_mm, 0.0, 100.0)):
             if not low <= float(value) <= high:
                 raise ValueError(f"{key} must be in [{low}, {high}], got {value!r}")
         for key, value, high in (("window_steps", window_steps, 40), ("max_campaigns", max_campaigns, 4)):
@@ -84,16 +90,25 @@ class ModelPredictive(LineHeuristic):
         super().__init__(tamped_sd_slope=float(tamped_sd_slope), tamped_sd_offset_mm=float(tamped_sd_offset_mm),
                          regrowth_factor=float(regrowth_factor), window_steps=int(window_steps),
                          prior_growth_mm_per_step=float(prior_growth_mm_per_step), max_campaigns=int(max_campaigns),
-                         **kw)
+                         neighbour_mm=float(neighbour_mm), **kw)
         self.costs: dict[str, Any] | None = None
 
-    def bind(self, config: Any) -> ModelPredictive:
+    @staticmethod
+    def unfit_reason(config: Any) -> str | None:
+        """Why the planner cannot plan ``config`` (None where it can): it needs a line whose SD is measured every
+        step without error."""
         if not isinstance(config, LineConfig):
-            raise ValueError(f"config must be a LineConfig, got {type(config).__name__}")
+            return f"config must be a LineConfig, got {type(config).__name__}"
         if config.measurement_interval != 1 or config.sd_noise_mm > 0.0:
-            raise ValueError("model-predictive forecasts from an SD measured every step without error; this config "
-                             f"measures every {config.measurement_interval} steps with sd_noise_mm="
-                             f"{config.sd_noise_mm} (measurement_interval must be 1 and sd_noise_mm 0)")
+            return ("model-predictive forecasts from an SD measured every step without error; this config measures "
+                    f"every {config.measurement_interval} steps with sd_noise_mm={config.sd_noise_mm} "
+                    "(measurement_interval must be 1 and sd_noise_mm 0)")
+        return None
+
+    def bind(self, config: Any) -> ModelPredictive:
+        why = self.unfit_reason(config)
+        if why is not None:
+            raise ValueError(why)
         bound = super().bind(config)
         assert isinstance(bound, ModelPredictive)
         factors = np.asarray(config.length_factors, dtype=float)
@@ -135,8 +150,10 @@ class ModelPredictive(LineHeuristic):
                               (history[:, -1] - history[:, -1 - k]) / k, growth)
         return np.maximum(growth, 0.0)
 
-    def _section_costs(self, sd: np.ndarray, growth: np.ndarray, plans: np.ndarray, step: int) -> np.ndarray:
-        """(plans, S) each section's cost [k€] to the horizon if tamped at exactly the steps of each plan."""
+    def _section_costs(self, sd: np.ndarray, growth: np.ndarray, plans: np.ndarray, step: int,
+                       slope: np.ndarray) -> np.ndarray:
+        """(plans, S) each section's cost [k€] to the horizon if tamped at exactly the steps of each plan (``slope``:
+        each section's SD after a tamping per mm of SD before)."""
         p, horizon = self.params, self.horizon_steps
         n_plans, n_sections = plans.shape[0], sd.size
         v = np.broadcast_to(sd, (n_plans, n_sections)).copy()  # the SD at the end of step ref
@@ -151,7 +168,7 @@ class ModelPredictive(LineHeuristic):
                 break
             tamped = end < horizon
             before = v + h * (end - 1 - ref)
-            v = np.where(tamped, p["tamped_sd_offset_mm"] + p["tamped_sd_slope"] * before, v)
+            v = np.where(tamped, p["tamped_sd_offset_mm"] + slope * before, v)
             h = np.where(tamped, p["regrowth_factor"] * growth, h)
             ref = np.where(tamped, end - 1, ref)
             start = end  # a padded step (the horizon) leaves nothing after it to count
@@ -159,17 +176,19 @@ class ModelPredictive(LineHeuristic):
         n_tampings = (plans < horizon).sum(axis=1, keepdims=True)
         return squares * self.costs["geometry"] + n_tampings * self.costs["tamping"]
 
-    def plan(self, sd: np.ndarray, growth: np.ndarray,
-             step: int) -> tuple[float, tuple[int, ...], list[tuple[int, ...]]]:
+    def plan(self, sd: np.ndarray, growth: np.ndarray, step: int,
+             slope: np.ndarray | None = None) -> tuple[float, tuple[int, ...], list[tuple[int, ...]]]:
         """The cheapest plan for one line from ``step`` on, given each section's SD (S,) [mm] at the end of the
-        step before and its growth per step [mm]: its forecast cost to the horizon [k€], its campaign steps, and per
+        step before, its growth per step [mm] and its SD after a tamping per mm before (``slope``; None: the
+        ``tamped_sd_slope`` of every section): its forecast cost to the horizon [k€], its campaign steps, and per
         section the steps at which it is tamped."""
         assert self.costs is not None
+        slope = np.full(sd.shape, self.params["tamped_sd_slope"]) if slope is None else slope
         horizon = self.horizon_steps
         live = np.flatnonzero(self.plan_steps[:, 0] >= step)  # the empty plan, and plans of the remaining steps
         position = np.full(len(self.plan_steps), -1)
         position[live] = np.arange(live.size)
-        per_section = self._section_costs(sd, growth, self.plan_steps[live], step)
+        per_section = self._section_costs(sd, growth, self.plan_steps[live], step, slope)
         subs = position[self.sub_plans[live]]  # (plans, sub-plans): every sub-plan of a live plan is live
         options = per_section[subs]  # (plans, sub-plans, S)
         total = options.min(axis=1).sum(axis=1) + self.costs["possession"] * self.plan_sizes[live]
@@ -188,17 +207,29 @@ class ModelPredictive(LineHeuristic):
         sd = np.asarray(b["section_sd"], dtype=float)
         years_since = np.asarray(b["years_since_tamping"], dtype=float)
         step = self._step(b)
+        prior = self.params["tamped_sd_slope"]
         if state is None or state[0].shape[0] != sd.shape[0]:  # a first step, or another batch: the SD of now only
-            history, since = sd[:, None], np.zeros(sd.shape, dtype=np.int64)
+            history, since, slope = sd[:, None], np.zeros(sd.shape, dtype=np.int64), np.full(sd.shape, prior)
         else:
-            history, since = state
+            history, since, slope = state
+            just = years_since <= _JUST_TAMPED_YEARS
+            # a section tamped in the step just run shows what a tamping does to it: its SD after over its SD before
+            # (one step's growth included, so an overestimate) moves its own slope half-way from the prior
+            seen = (sd - self.params["tamped_sd_offset_mm"]) / np.maximum(history[:, -1], 0.05)
+            slope = np.where(just, 0.5 * (prior + np.clip(seen, 0.0, 2.0)), slope)
             keep = self.params["window_steps"]
             history = np.concatenate([history, sd[:, None]], axis=1)[:, -(keep + 1):]
-            since = np.where(years_since <= _JUST_TAMPED_YEARS, 0, since + 1)
-            if episode_start is not None:  # a row whose episode starts now forgets the last one's slopes
-                since = np.where(np.asarray(episode_start, dtype=bool).reshape(-1, 1), 0, since)
+            since = np.where(just, 0, since + 1)
+            if episode_start is not None:  # a row whose episode starts now forgets the last one's sections
+                start = np.asarray(episode_start, dtype=bool).reshape(-1, 1)
+                since, slope = np.where(start, 0, since), np.where(start, prior, slope)
         growth = self._growth(history, since)
-        want = np.array([[step[i] in tamped for tamped in self.plan(sd[i], growth[i], int(step[i]))[2]]
+        want = np.array([[step[i] in tamped for tamped in self.plan(sd[i], growth[i], int(step[i]), slope[i])[2]]
                          for i in range(sd.shape[0])], dtype=bool)
+        if self.params["neighbour_mm"] > 0.0:  # a campaign also takes the neighbours of its sections at this SD
+            near = np.zeros_like(want)
+            near[:, 1:] |= want[:, :-1]
+            near[:, :-1] |= want[:, 1:]
+            want |= near & (sd >= self.params["neighbour_mm"])
         act = np.asarray(self._cap(want, b), dtype=np.int8)
-        return (act if batched else act[0]), (history, since)
+        return (act if batched else act[0]), (history, since, slope)

@@ -117,6 +117,11 @@ def test_cli_scores_the_given_line_policy_and_skips_a_missing_shipped_one(tmp_pa
     with pytest.raises(cli.UsageError, match="no trained line policy"):
         cli._line_policies(argparse.Namespace(policy="agent", model=None, env=line))
     assert cli._line_policies(argparse.Namespace(policy="rules", model="whatever.zip", env=line)) == {}
+    # the 60 m track measures every step without error: the model-predictive planner joins the rules there
+    track60 = "trackenv/Tamping-v1"
+    assert list(cli._line_policies(argparse.Namespace(policy="all", model=None, env=track60))) == ["model-predictive"]
+    only_agent = argparse.Namespace(policy="agent", model=str(DEFAULT_LINE_PRETRAINED), env=track60)
+    assert list(cli._line_policies(only_agent)) == ["cpi-agent"]
 
 
 @pytest.mark.parametrize("name", ["small", "default", "hard"])

@@ -104,7 +104,24 @@ def test_it_plays_episodes_through_the_harness_keeping_its_history():
     action, state = bound.predict(obs)  # no state: the current SD only, at the prior growth
     assert action.shape == (6,) and state[0].shape == (1, 1, 6)
     later = {**obs, "section_sd": np.full(6, 1.2, dtype=np.float32), "time": np.full(1, 0.1, np.float32)}
-    _, (history, since) = bound.predict(later, state)
+    _, (history, since, slope) = bound.predict(later, state)
     assert history.shape == (1, 2, 6) and (since == 1).all()  # a slope from two observations
-    _, (_, since) = bound.predict(later, state, episode_start=np.array([True]))
+    assert (slope == bound.params["tamped_sd_slope"]).all()  # no tamping seen: the prior
+    _, (_, since, _) = bound.predict(later, state, episode_start=np.array([True]))
     assert (since == 0).all()  # a new episode: no slope from the last one's SD
+    # a section tamped in the step just run (a quarter since) that barely improved: its own slope rises
+    tamped = {**later, "years_since_tamping": np.array([0.25, 2.1, 2.1, 2.1, 2.1, 2.1], np.float32),
+              "section_sd": np.array([0.96, 1.2, 1.2, 1.2, 1.2, 1.2], np.float32)}
+    _, (_, since, slope) = bound.predict(tamped, state)
+    assert since[0, 0] == 0 and slope[0, 0] == pytest.approx(0.5 * (0.44 + 0.9 / 1.0))
+    assert (slope[0, 1:] == 0.44).all()
+
+
+def test_a_campaign_takes_the_neighbours_of_its_sections_from_their_sd():
+    config = scenario("track60")
+    obs = {"section_sd": np.array([0.3, 1.5, 6.0, 0.5, 1.2, 0.2], np.float32),
+           "years_since_tamping": np.full(6, 3.0, np.float32), "time": np.zeros(1, np.float32)}
+    alone, _ = ModelPredictive(neighbour_mm=0.0).bind(config).predict(obs)
+    grouped, _ = ModelPredictive(neighbour_mm=1.0).bind(config).predict(obs)
+    assert alone[2] == 1 and grouped[2] == 1  # the rough section is tamped now
+    assert grouped[1] == 1 and grouped[3] == alone[3]  # its neighbour at 1.5 mm joins; the one at 0.5 mm does not
