@@ -189,7 +189,7 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
         from .evaluation.line_compare import scenario_config, scenario_of
         from .rules.model_predictive import ModelPredictive
 
-        if ModelPredictive.unfit_reason(scenario_config(scenario_of(args.env))) is None:
+        if ModelPredictive.unfit_for(scenario_config(scenario_of(args.env))) is None:
             out[ModelPredictive.name] = ModelPredictive()
     return out
 
@@ -227,11 +227,14 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
     """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent),
-    ``cpi-choice-agent`` (the shipped agent of the lines with every choice),
-    ``baselines`` (the committed baselines of experiments/saved/baselines/) or paths of trained policies (a .zip
+    ``cpi-choice-agent`` (the shipped agent of the lines with every choice), ``model-predictive`` (the planner,
+    scored where a scenario measures every step without error), ``baselines`` (the committed baselines of
+    experiments/saved/baselines/) or paths of trained policies (a .zip
     of stable-baselines3, a folder of experiments/train_rllib.py; the kind is told by the files there,
     :func:`~trackenv_agents.learning.baselines.baseline_kind`). Returns the rules (None: all tuned) and the agents
     by name -> path; an unknown name, a missing path or one that holds no trained policy is a UsageError."""
+    from .rules.model_predictive import ModelPredictive
+
     rules: list[str] = []
     agents: dict[str, str] = {}
     every_rule = False
@@ -243,6 +246,8 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
         elif item in SHIPPED_AGENTS:
             _existing(str(SHIPPED_AGENTS[item]), f"--policies {item}")
             agents[item] = str(SHIPPED_AGENTS[item])
+        elif item == ModelPredictive.name:  # no file: built where it is loaded
+            agents[item] = item
         elif item == "baselines":
             from .learning.baselines import SAVED_BASELINES, saved_baselines
 
@@ -263,8 +268,8 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             agents[item if taken else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{LINE_AGENT_NAME}, {CHOICE_AGENT_NAME} or the path of a trained policy (.zip, or a "
-                             "folder of experiments/train_rllib.py)")
+                             f"{LINE_AGENT_NAME}, {CHOICE_AGENT_NAME}, {ModelPredictive.name} or the path of a "
+                             "trained policy (.zip, or a folder of experiments/train_rllib.py)")
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
                          "or a rule name")
@@ -302,8 +307,10 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     agents: dict[str, Any] = {}
     if agent_files:
         from .learning.baselines import load_baseline
+        from .rules.model_predictive import ModelPredictive
 
-        agents = {name: load_baseline(path, name=name) for name, path in agent_files.items()}
+        agents = {name: ModelPredictive() if path == ModelPredictive.name else load_baseline(path, name=name)
+                  for name, path in agent_files.items()}
     executor = _executor(args)
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()

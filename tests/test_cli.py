@@ -388,3 +388,19 @@ def test_leaderboard_policies_name_both_shipped_line_agents():
     assert agents == {"cpi-agent": str(DEFAULT_LINE_PRETRAINED), "cpi-choice-agent": str(DEFAULT_CHOICE_PRETRAINED)}
     assert all(Path(path).is_file() for path in agents.values())
     assert json.loads(line_meta_path(DEFAULT_CHOICE_PRETRAINED).read_text())["advisor"] == "choice-threshold"
+
+
+def test_leaderboard_policies_name_the_planner_and_it_is_scored_only_where_it_fits():
+    """`--policies rules,model-predictive`: the model-predictive planner, scored on a scenario that measures every
+    step without error (the 60 m track) and listed as not scored elsewhere, with the reason."""
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents import cli
+    from trackenv_agents.evaluation.leaderboard import fitting_agents
+    from trackenv_agents.rules.model_predictive import ModelPredictive
+
+    rules, agents = cli._leaderboard_policies("rules,model-predictive", ["grouped-threshold"])
+    assert rules is None and agents == {"model-predictive": "model-predictive"}
+    planner = {"model-predictive": ModelPredictive()}
+    assert list(fitting_agents(planner, scenario("track60"))[0]) == ["model-predictive"]
+    here, unfit = fitting_agents(planner, scenario("default"))
+    assert here == {} and "measurement_interval must be 1" in unfit["model-predictive"]

@@ -94,9 +94,9 @@ class ModelPredictive(LineHeuristic):
         self.costs: dict[str, Any] | None = None
 
     @staticmethod
-    def unfit_reason(config: Any) -> str | None:
+    def unfit_for(config: Any) -> str | None:
         """Why the planner cannot plan ``config`` (None where it can): it needs a line whose SD is measured every
-        step without error."""
+        step without error (the leaderboard asks it of every scenario, as of a trained baseline)."""
         if not isinstance(config, LineConfig):
             return f"config must be a LineConfig, got {type(config).__name__}"
         if config.measurement_interval != 1 or config.sd_noise_mm > 0.0:
@@ -106,7 +106,7 @@ class ModelPredictive(LineHeuristic):
         return None
 
     def bind(self, config: Any) -> ModelPredictive:
-        why = self.unfit_reason(config)
+        why = self.unfit_for(config)
         if why is not None:
             raise ValueError(why)
         bound = super().bind(config)
