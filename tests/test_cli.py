@@ -404,3 +404,16 @@ def test_leaderboard_policies_name_the_planner_and_it_is_scored_only_where_it_fi
     assert list(fitting_agents(planner, scenario("track60"))[0]) == ["model-predictive"]
     here, unfit = fitting_agents(planner, scenario("default"))
     assert here == {} and "measurement_interval must be 1" in unfit["model-predictive"]
+
+
+def test_the_leaderboard_says_why_each_policy_is_not_scored_grouped_by_reason():
+    from trackenv_agents.evaluation.leaderboard import format_leaderboard
+
+    payload = {"results": [], "bound": {"x": {"available": False, "reason": "none here"}}, "seeds": {"x": [0]},
+               "command": "c", "best_rule": {"x": "grouped-threshold"},
+               "not_scored": {"x": {"b": "trained on another line: n_sections 12 (here 6)", "a": "trained on another "
+                                    "line: capacity 6 (here 3)", "model-predictive": "needs an SD measured every "
+                                    "step without error: this config measures every 4 steps"}}}
+    table = format_leaderboard(payload)
+    assert "Not scored here (each sees the observation of the line it was trained on): a, b." in table
+    assert "Not scored here (needs an SD measured every step without error): model-predictive." in table

@@ -388,6 +388,10 @@ def _ci(lo: float, hi: float, signed: bool = False) -> str:
     return f"[{f.format(lo)}, {f.format(hi)}]"
 
 
+#: how the tables say why a policy is not scored on a scenario, by the head of its ``unfit_for`` reason
+_UNFIT_HEADS = {"trained on another line": "each sees the observation of the line it was trained on"}
+
+
 def format_leaderboard(payload: dict[str, Any]) -> str:
     """The leaderboard as Markdown: per scenario a table of its policies (the best rule first), the bound's line,
     and the command that wrote it."""
@@ -423,9 +427,12 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
         else:
             out += ["", f"No normalised score: {b['reason']}."]
         unfit = payload.get("not_scored", {}).get(env_id) or {}
-        if unfit:
-            out += ["", "Not scored here (each sees the observation of the line it was trained on): "
-                        + ", ".join(sorted(unfit)) + "."]
+        by_reason: dict[str, list[str]] = {}
+        for name, why in sorted(unfit.items()):  # grouped by the reason's head, the text before its colon
+            head = why.split(":")[0]
+            by_reason.setdefault(_UNFIT_HEADS.get(head, head), []).append(name)
+        for head, names in sorted(by_reason.items()):
+            out += ["", f"Not scored here ({head}): " + ", ".join(names) + "."]
         out.append("")
     out += ["IA: section-steps at the immediate-action limit, all episodes together. Normalised score: "
             "Σ(rule − policy) / Σ(rule − bound) over the paired episodes (0 = the best tuned rule, 1 = the "

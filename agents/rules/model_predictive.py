@@ -100,9 +100,9 @@ class ModelPredictive(LineHeuristic):
         if not isinstance(config, LineConfig):
             return f"config must be a LineConfig, got {type(config).__name__}"
         if config.measurement_interval != 1 or config.sd_noise_mm > 0.0:
-            return ("model-predictive forecasts from an SD measured every step without error; this config measures "
-                    f"every {config.measurement_interval} steps with sd_noise_mm={config.sd_noise_mm} "
-                    "(measurement_interval must be 1 and sd_noise_mm 0)")
+            return ("needs an SD measured every step without error: model-predictive forecasts from it, and this "
+                    f"config measures every {config.measurement_interval} steps with sd_noise_mm="
+                    f"{config.sd_noise_mm} (measurement_interval must be 1 and sd_noise_mm 0)")
         return None
 
     def bind(self, config: Any) -> ModelPredictive:
