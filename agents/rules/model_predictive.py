@@ -50,8 +50,9 @@ __all__ = ["MAX_PLANS", "ModelPredictive", "interval_square_sums"]
 
 #: the most plans the planner prices in a step (max_campaigns = 3 over 40 steps: 10 701; 4 over 40: 102 091)
 MAX_PLANS = 120_000
-#: years since tamping at or below which a section counts as tamped in the step just run (one quarter, as float32)
-_JUST_TAMPED_YEARS = 0.25 + 1e-3
+#: margin on the years since tamping (float32 in the observation) within which a section counts as tamped in the
+#: step just run (one step's years)
+_YEARS_TOLERANCE = 1e-3
 
 
 def interval_square_sums(v: np.ndarray, h: np.ndarray, ref: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -212,7 +213,7 @@ class ModelPredictive(LineHeuristic):
             history, since, slope = sd[:, None], np.zeros(sd.shape, dtype=np.int64), np.full(sd.shape, prior)
         else:
             history, since, slope = state
-            just = years_since <= _JUST_TAMPED_YEARS
+            just = years_since <= 1.0 / self.steps_per_year + _YEARS_TOLERANCE
             # a section tamped in the step just run shows what a tamping does to it: its SD after over its SD before
             # (one step's growth included, so an overestimate) moves its own slope half-way from the prior
             seen = (sd - self.params["tamped_sd_offset_mm"]) / np.maximum(history[:, -1], 0.05)
