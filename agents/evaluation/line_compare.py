@@ -169,23 +169,16 @@ def class_breakdown(result: Any) -> dict[str, dict[str, float | None]]:
 
 def agent_headline(payload: dict[str, Any], name: str) -> str | None:
     """One line: the policy ``name`` against the best tuned rule, paired per episode (mean difference, its 95 %
-    CI and the relative change), from a :func:`line_comparison` payload: from each episode's costs where the payload
-    has them (whichever policy is the best), else from the paired differences against the best (None where
-    neither of the two is the best)."""
+    CI and the relative change), from each episode's costs in a :func:`line_comparison` payload (whichever policy
+    is the best of the table); None where either row lacks them."""
     by = {r["policy"]: r for r in payload["results"]}
     rule = payload.get("best_rule")
     if name not in by or rule not in by or name == rule:
         return None
-    agent_d, rule_d = by[name]["vs_best"], by[rule]["vs_best"]
-    if "episode_costs" in by[name] and "episode_costs" in by[rule]:  # paired per episode, whichever is the best
-        d = np.asarray(by[name]["episode_costs"], dtype=float) - np.asarray(by[rule]["episode_costs"], dtype=float)
-        diff, (low, high) = float(d.mean()), bootstrap_ci(d)
-    elif agent_d is None and rule_d is not None:  # the agent is the best: the rule's difference, turned round
-        diff, low, high = -rule_d["mean_difference"], -rule_d["ci_high"], -rule_d["ci_low"]
-    elif rule_d is None and agent_d is not None:
-        diff, low, high = agent_d["mean_difference"], agent_d["ci_low"], agent_d["ci_high"]
-    else:
+    if "episode_costs" not in by[name] or "episode_costs" not in by[rule]:
         return None
+    d = np.asarray(by[name]["episode_costs"], dtype=float) - np.asarray(by[rule]["episode_costs"], dtype=float)
+    diff, (low, high) = float(d.mean()), bootstrap_ci(d)
     pct = 100.0 * diff / by[rule]["mean_cost"]
     return (f"{name} vs the best tuned rule ({rule}), paired over {len(payload['seeds'])} episodes: {diff:+.1f} k€ "
             f"[{low:+.1f}, {high:+.1f}] per episode, {pct:+.1f} %")
