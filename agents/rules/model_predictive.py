@@ -42,6 +42,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from trackenv.envs.line_config import LineConfig
+from trackenv.physics._checks import check_int, check_scalar
 
 from .base import as_batch
 from .line import LineHeuristic
@@ -78,20 +79,15 @@ class ModelPredictive(LineHeuristic):
     def __init__(self, tamped_sd_slope: float = 0.44, tamped_sd_offset_mm: float = 0.06, regrowth_factor: float = 1.5,
                  window_steps: int = 4, prior_growth_mm_per_step: float = 0.04, max_campaigns: int = 3,
                  neighbour_mm: float = 1.0, **kw: Any) -> None:
-        for key, value, low, high in (("tamped_sd_slope", tamped_sd_slope, 0.0, 1.0),
-                                      ("tamped_sd_offset_mm", tamped_sd_offset_mm, 0.0, 5.0),
-                                      ("regrowth_factor", regrowth_factor, 0.1, 10.0),
-                                      ("prior_growth_mm_per_step", prior_growth_mm_per_step, 0.0, 5.0),
-                                      ("neighbour_mm", neighbour_mm, 0.0, 100.0)):
-            if not low <= float(value) <= high:
-                raise ValueError(f"{key} must be in [{low}, {high}], got {value!r}")
-        for key, value, high in (("window_steps", window_steps, 40), ("max_campaigns", max_campaigns, 4)):
-            if int(value) != value or not 1 <= int(value) <= high:
-                raise ValueError(f"{key} must be an integer in [1, {high}], got {value!r}")
-        super().__init__(tamped_sd_slope=float(tamped_sd_slope), tamped_sd_offset_mm=float(tamped_sd_offset_mm),
-                         regrowth_factor=float(regrowth_factor), window_steps=int(window_steps),
-                         prior_growth_mm_per_step=float(prior_growth_mm_per_step), max_campaigns=int(max_campaigns),
-                         neighbour_mm=float(neighbour_mm), **kw)
+        super().__init__(
+            tamped_sd_slope=check_scalar("tamped_sd_slope", tamped_sd_slope, low=0.0, high=1.0),
+            tamped_sd_offset_mm=check_scalar("tamped_sd_offset_mm", tamped_sd_offset_mm, low=0.0, high=5.0),
+            regrowth_factor=check_scalar("regrowth_factor", regrowth_factor, low=0.1, high=10.0),
+            window_steps=check_int("window_steps", window_steps, low=1, high=40),
+            prior_growth_mm_per_step=check_scalar("prior_growth_mm_per_step", prior_growth_mm_per_step, low=0.0,
+                                                  high=5.0),
+            max_campaigns=check_int("max_campaigns", max_campaigns, low=1, high=4),
+            neighbour_mm=check_scalar("neighbour_mm", neighbour_mm, low=0.0, high=100.0), **kw)
         self.costs: dict[str, Any] | None = None
 
     @staticmethod

@@ -78,10 +78,16 @@ def test_it_tamps_what_pays_and_nothing_whose_benefit_comes_after_the_horizon():
 
 
 def test_it_checks_its_parameters_and_its_config():
-    with pytest.raises(ValueError, match="tamped_sd_slope must be in"):
+    with pytest.raises(ValueError, match=r"tamped_sd_slope must lie in \[0, 1\], got 1.5"):
         ModelPredictive(tamped_sd_slope=1.5)
-    with pytest.raises(ValueError, match="max_campaigns must be an integer"):
+    with pytest.raises(ValueError, match="regrowth_factor must be a real number"):
+        ModelPredictive(regrowth_factor="1.5")  # text is not read as a number
+    with pytest.raises(ValueError, match="neighbour_mm must be a finite number"):
+        ModelPredictive(neighbour_mm=float("nan"))
+    with pytest.raises(ValueError, match=r"max_campaigns must be an integer in \[1, 4\], got 0"):
         ModelPredictive(max_campaigns=0)
+    with pytest.raises(ValueError, match="window_steps must be an integer"):
+        ModelPredictive(window_steps=True)
     with pytest.raises(ValueError, match="max_campaigns=4 over a horizon of 80 steps makes .* plans, more than"):
         ModelPredictive(max_campaigns=4).bind(scenario("track60", horizon_years=20.0))
     with pytest.raises(ValueError, match="measurement_interval must be 1 and sd_noise_mm 0"):
