@@ -131,15 +131,32 @@ def test_ab_speed_gives_each_version_its_own_env_id_and_keywords():
 
 
 
-def test_robustness_conditions_each_move_one_field_of_the_default_line_and_are_valid():
+def test_robustness_conditions_each_move_one_field_of_their_scenario_and_are_valid():
     from trackenv.envs.line_config import scenario
 
     mod = _script("robustness")
-    nominal = scenario("default").to_dict()
-    assert mod.CONDITIONS[0] == ("nominal", {})
-    for name, overrides in mod.CONDITIONS[1:]:
-        moved = scenario("default", **overrides).to_dict()  # validated at construction
-        assert {k for k in nominal if nominal[k] != moved[k]} == set(overrides), name
+    for name, (conditions, others) in mod.SCENARIOS.items():
+        nominal = scenario(name).to_dict()
+        assert conditions[0] == ("nominal", {}) and others[0] == mod.AGENT
+        for label, overrides in conditions[1:]:
+            moved = scenario(name, **overrides).to_dict()  # validated at construction
+            assert {k for k in nominal if nominal[k] != moved[k]} == set(overrides), (name, label)
+    assert [p.name for p in mod.policies("track60")][:2] == [mod.AGENT, "model-predictive"]
+
+
+def test_robustness_table_pairs_each_policy_with_the_best_rule_also_from_a_saved_run_of_the_agent_alone():
+    mod = _script("robustness")
+    diff = {"mean_difference": -5.0, "ci_low": -8.0, "ci_high": -2.0}
+    costs = {p: {"mean_cost": c} for p, c in (("cpi-agent", 95.0), ("model-predictive", 90.0),
+                                              ("grouped-threshold", 100.0), ("uniform-periodic", 120.0))}
+    row = {"condition": "nominal", "costs": costs, "best_rule": "grouped-threshold",
+           "agent_minus_best_rule": diff, "agent_vs_best_rule_relative": -0.05,
+           "vs_best_rule": {"cpi-agent": {**diff, "relative": -0.05},
+                            "model-predictive": {**diff, "mean_difference": -10.0, "relative": -0.1}}}
+    text = mod.table([row])
+    assert "model-predictive − best rule" in text and "-10.0 [-8.0, -2.0] (-10.0 % vs grouped-threshold)" in text
+    saved = {k: v for k, v in row.items() if k != "vs_best_rule"}  # a row written before the planner's column
+    assert "| nominal | 95.0 | 100.0 | 120.0 | -5.0 [-8.0, -2.0] (-5.0 % vs grouped-threshold) |" in mod.table([saved])
 
 
 def test_choice_agent_script_loads_every_shipped_agent_and_an_agent_with_another_advisor():
