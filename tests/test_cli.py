@@ -128,6 +128,58 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
     assert seen["executor"] is None and json.loads(capsys.readouterr().out)["ray"] is None
 
 
+def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(monkeypatch, capsys, tmp_path):
+    """``--engine`` and ``--pass-reuse-mm`` (mm on the command line, metres in the config) reach `evaluate`'s
+    comparison as config overrides and the table's first line names them; `train` builds the line's config (and
+    the 60 m track's) with them; none given: no override (the presets' classic engine, every saved result's).
+    Out of range or with --resume: one line and exit status 2. (The two engines' costs are compared in
+    tests/envs/test_line_engine.py and tests/envs/test_line_pass_reuse.py.)"""
+    import trackenv_agents.evaluation.line_compare as lc
+    import trackenv_agents.learning.line as line_learning
+    import trackenv_agents.learning.tamping as tamping
+    from trackenv.envs.line_config import LINE_ENGINES, MAX_PASS_REUSE_TOLERANCE_M
+    from trackenv_agents import cli
+
+    assert cli.ENGINES == LINE_ENGINES and cli.MAX_PASS_REUSE_MM == MAX_PASS_REUSE_TOLERANCE_M * 1e3
+    seen = {}
+
+    def fake(env_id, **kw):
+        seen.clear()
+        seen.update(kw)
+        config = lc.scenario_config(lc.scenario_of(env_id), **{k: v for k, v in kw.items() if k in
+                                                               ("engine", "pass_reuse_tolerance_m")}).to_dict()
+        return {"env": env_id, "scenario": "small", "seeds": [0], "tuned_from": "shipped", "results": [],
+                "config": config}
+
+    monkeypatch.setattr(lc, "line_comparison", fake)
+    argv = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--policy", "rules"]
+    assert main([*argv, "--engine", "fast", "--pass-reuse-mm", "1"]) == 0
+    assert seen["engine"] == "fast" and seen["pass_reuse_tolerance_m"] == pytest.approx(1e-3)
+    assert capsys.readouterr().out.splitlines()[0].endswith("parameters shipped, engine fast, pass reuse 1 mm")
+    assert main(argv) == 0
+    assert "engine" not in seen and "pass_reuse_tolerance_m" not in seen
+    assert capsys.readouterr().out.splitlines()[0].endswith("parameters shipped")
+    assert main([*argv, "--pass-reuse-mm", "2.5"]) == 2
+    assert "--pass-reuse-mm must be in [0, 2] mm, got 2.5" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:  # argparse's own choice check
+        main([*argv, "--engine", "quick"])
+    assert exit_.value.code == 2 and "--engine: invalid choice: 'quick'" in capsys.readouterr().err
+
+    configs = []
+    monkeypatch.setattr(line_learning, "train_line", lambda config, **kw: configs.append(config) or tmp_path / "m.zip")
+    monkeypatch.setattr(cli, "_line_payload", lambda path, wall, out: ({}, ""))
+    assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--engine", "fast", "--pass-reuse-mm", "0.5"]) == 0
+    assert configs[-1].engine == "fast" and configs[-1].pass_reuse_tolerance_m == pytest.approx(5e-4)
+    assert configs[-1].n_sections == lc.scenario_config("small").n_sections
+    assert main(["train", "--env", "trackenv/TampingLineSmall-v0"]) == 0
+    assert configs[-1] == "small"  # no override: the preset by name, as before
+    monkeypatch.setattr(tamping, "train", lambda **kw: configs.append(kw["config"]) or tmp_path / "m.zip")
+    assert main(["train", "--engine", "fast"]) == 0
+    assert configs[-1].engine == "fast" and configs[-1].sections_per_segment == 6  # the 60 m track
+    assert main(["train", "--resume", str(tmp_path), "--engine", "fast"]) == 2
+    assert "a resumed run keeps the config it was started with" in capsys.readouterr().err
+
+
 def test_evaluate_line_rules_option(monkeypatch, capsys):
     """`--rules a,b` reaches the comparison as a list, on any preset; an unknown rule name is refused by the
     comparison, naming the rules there are, and an id without per-section actions in one line."""

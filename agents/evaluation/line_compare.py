@@ -189,10 +189,22 @@ CHOICE_COLUMNS = {"tamp": "tamp", "spot_tamp": "spot", "drainage": "drain", "ren
                   "survey": "surv"}
 
 
+def engine_note(config: dict[str, Any]) -> str:
+    """", engine fast, pass reuse 1 mm" for a config (its ``to_dict``; a network's line inside it) whose passes run
+    otherwise than every preset's (the classic engine, every pass computed); "" for those."""
+    line = config.get("line_config", config)
+    notes = []
+    if line.get("engine", "classic") != "classic":
+        notes.append(f"engine {line['engine']}")
+    if line.get("pass_reuse_tolerance_m", 0.0):
+        notes.append(f"pass reuse {line['pass_reuse_tolerance_m'] * 1e3:g} mm")
+    return "".join(f", {n}" for n in notes)
+
+
 def format_line_table(payload: dict[str, Any]) -> str:
     w = max([27] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
     lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
-             f"{payload['tuned_from']}",
+             f"{payload['tuned_from']}{engine_note(payload.get('config', {}))}",
              f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
              f"{'IA':>4s} " + " ".join(f"{CHOICE_COLUMNS[c]:>5s}" for c in CHOICE_NAMES) + "  params"]
     for r in payload["results"]:
