@@ -595,7 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--pass-reuse-mm", type=_positive(float, zero=True), default=None, metavar="MM",
                         help=f"reuse a segment's last pass while its level has changed by less than MM mm at every "
                              f"sleeper, in [0, {MAX_PASS_REUSE_MM:g}] (0: off, every preset's default; with "
-                             f"--engine fast, 1 mm evaluates the default line about 3.5 times as fast, costs within "
+                             f"--engine fast, 1 mm evaluates the default line about 3 times as fast, costs within "
                              f"a quarter of a percent)")
 
     sp = command("validate", "static, receptance and moving-wheelset checks against closed forms, with plots")
