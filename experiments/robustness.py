@@ -43,28 +43,29 @@ from trackenv_agents.learning.line import load_line_trained
 from trackenv_agents.rules.model_predictive import ModelPredictive
 from trackenv_agents.rules.problems import tuned_rule
 
-#: (name, overrides of the default line): the nominal line first, then one condition moved at a time
-CONDITIONS: tuple[tuple[str, dict], ...] = (
-    ("nominal", {}),
-    ("tonnage -50 %", {"annual_mgt": 7.5}),
-    ("tonnage +50 %", {"annual_mgt": 22.5}),
-    ("ballast stiffness x0.5", {"ballast_stiffness_factor": 0.5}),
-    ("ballast stiffness x2", {"ballast_stiffness_factor": 2.0}),
-    ("speed 70 km/h", {"speed_kmh": 70.0}),
-    ("speed 140 km/h", {"speed_kmh": 140.0}),
+
+def physical_conditions(scenario_name: str) -> tuple[tuple[str, dict], ...]:
+    """(name, overrides of the preset ``scenario_name``): the nominal track first, then its tonnage −50 % and +50 %,
+    ballast stiffness ×0.5 and ×2, and speed 70 and 140 km/h, one at a time."""
+    mgt = scenario(scenario_name).annual_mgt
+    return (
+        ("nominal", {}),
+        ("tonnage -50 %", {"annual_mgt": 0.5 * mgt}),
+        ("tonnage +50 %", {"annual_mgt": 1.5 * mgt}),
+        ("ballast stiffness x0.5", {"ballast_stiffness_factor": 0.5}),
+        ("ballast stiffness x2", {"ballast_stiffness_factor": 2.0}),
+        ("speed 70 km/h", {"speed_kmh": 70.0}),
+        ("speed 140 km/h", {"speed_kmh": 140.0}),
+    )
+
+
+#: the default line's conditions (15 MGT a year nominal), with its recording interval moved too
+CONDITIONS: tuple[tuple[str, dict], ...] = physical_conditions("default") + (
     ("recording car twice a year", {"measurement_interval": 2}),
     ("recording car every 2 years", {"measurement_interval": 8}),
 )
-#: the same on the 60 m track (40 MGT a year nominal; its SD is measured every step)
-TRACK60_CONDITIONS: tuple[tuple[str, dict], ...] = (
-    ("nominal", {}),
-    ("tonnage -50 %", {"annual_mgt": 20.0}),
-    ("tonnage +50 %", {"annual_mgt": 60.0}),
-    ("ballast stiffness x0.5", {"ballast_stiffness_factor": 0.5}),
-    ("ballast stiffness x2", {"ballast_stiffness_factor": 2.0}),
-    ("speed 70 km/h", {"speed_kmh": 70.0}),
-    ("speed 140 km/h", {"speed_kmh": 140.0}),
-)
+#: the same on the 60 m track (40 MGT a year nominal; its SD is measured every step, so no recording interval)
+TRACK60_CONDITIONS = physical_conditions("track60")
 RULES = ("grouped-threshold", "uniform-periodic")
 AGENT = "cpi-agent"
 #: per scenario: its conditions and the policies other than the rules, each paired with the best rule
