@@ -360,8 +360,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .planning import line_policy, plan_config, plan_line
 
     line = load_line(args.line)
+    overrides = engine_overrides(args)
     # an unknown policy or scenario before the fit and the futures
-    line_policy(args.policy, plan_config(line, args.scenario), args.scenario)
+    line_policy(args.policy, plan_config(line, args.scenario, **overrides), args.scenario)
     t0 = time.perf_counter()
     progress = None
     if not args.json:
@@ -370,7 +371,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         bar = tqdm(total=int(round(args.years * 4)), desc="plan (quarters)", file=sys.stderr, leave=False)
         progress = bar.update
     plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
-                     scenario=args.scenario, progress=progress)
+                     scenario=args.scenario, progress=progress, **overrides)
     if progress is not None:
         bar.close()
     files = plan.write(Path(args.out or "results/plan"))
@@ -697,6 +698,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sampled futures (what the file does not know drawn again in each)")
     sp.add_argument("--seed", type=_positive(int, zero=True), default=0, metavar="N",
                     help="future i is the episode of seed N + i")
+    engine(sp)
     sp.set_defaults(func=cmd_plan)
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")

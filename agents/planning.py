@@ -99,8 +99,8 @@ class LinePlan:
     """A plan (:func:`plan_line`): ``choice_share`` (quarters, sections, choices) the share of futures in which
     each section gets each choice (indexed by code, :data:`~trackenv.envs.choices.CHOICES`) in each quarter,
     ``costs`` (futures, quarters) k€, ``parts`` the cost parts per future (k€, summed over the plan), ``dates``
-    the first day of each quarter, the ``fit`` of the line's history, and the ``scenario`` and ``choices`` the
-    line was planned with."""
+    the first day of each quarter, the ``fit`` of the line's history, and the ``scenario``, ``choices``,
+    ``engine`` and ``pass_reuse_tolerance_m`` (m) the line was planned with."""
 
     line: Any
     policy: str
@@ -114,6 +114,8 @@ class LinePlan:
     fit: Any
     scenario: str = "default"
     choices: tuple[str, ...] = ("tamp",)
+    engine: str = "classic"
+    pass_reuse_tolerance_m: float = 0.0
 
     @property
     def share(self) -> np.ndarray:
@@ -141,7 +143,8 @@ class LinePlan:
             quarters.append({**row, "cost_mean_keur": float(c.mean())})
         return {
             "line": self.line.name, "as_of": self.line.as_of, "policy": self.policy, "scenario": self.scenario,
-            "years": self.years, "futures": self.futures, "seed": self.seed, "quarters": quarters,
+            "years": self.years, "futures": self.futures, "seed": self.seed, "engine": self.engine,
+            "pass_reuse_mm": self.pass_reuse_tolerance_m * 1e3, "quarters": quarters,
             "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
                           "p90": float(np.quantile(total, 0.9))},
             "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
@@ -151,9 +154,12 @@ class LinePlan:
     def table(self) -> str:
         """The plan as text: per quarter its mean cost and the sections recommended for each choice, then the cost
         forecast."""
+        from .evaluation.line_compare import engine_note
+
         d = self.to_dict()
+        engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
         lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {self.years:g} years, "
-                 f"{self.futures} futures",
+                 f"{self.futures} futures{engine}",
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
@@ -289,4 +295,4 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     dates = tuple((start + dt.timedelta(days=round(q * 365.25 / cfg.steps_per_year))).isoformat()
                   for q in range(steps))
     return LinePlan(cfg.line, policy, float(years), futures, seed, dates, share, costs, parts, fit, scenario,
-                    tuple(cfg.choices))
+                    tuple(cfg.choices), cfg.engine, cfg.pass_reuse_tolerance_m)

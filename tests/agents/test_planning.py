@@ -134,3 +134,25 @@ def test_a_choice_rule_needs_a_scenario_with_the_choices(tmp_path, capsys):
     assert main(["plan", str(write(tmp_path)), "--policy", "choice-threshold"]) == 2
     err = capsys.readouterr().err
     assert "unknown policy 'choice-threshold'" in err and "grouped-threshold" in err
+
+
+def test_the_engine_options_reach_the_plan_and_are_named(tmp_path, capsys):
+    """``--engine fast --pass-reuse-mm 1`` plan on the faster passes (the config fields, the JSON and the table's
+    first line say so); none given: the preset's classic engine, every pass computed; out of range: one line and
+    exit status 2. Both plan the same tampings here and cost within a percent (the engines' costs are compared in
+    tests/envs/test_line_engine.py and tests/envs/test_line_pass_reuse.py)."""
+    line = write(tmp_path)
+    argv = ["plan", str(line), "--years", "1", "--futures", "2", "--json", "--out", str(tmp_path / "plan")]
+    assert main([*argv, "--engine", "fast", "--pass-reuse-mm", "1"]) == 0
+    fast = json.loads(capsys.readouterr().out)
+    assert fast["engine"] == "fast" and fast["pass_reuse_mm"] == pytest.approx(1.0)
+    assert main(argv) == 0
+    classic = json.loads(capsys.readouterr().out)
+    assert classic["engine"] == "classic" and classic["pass_reuse_mm"] == 0.0
+    assert [q["tamp"] for q in fast["quarters"]] == [q["tamp"] for q in classic["quarters"]]
+    assert fast["cost_keur"]["mean"] == pytest.approx(classic["cost_keur"]["mean"], rel=1e-2)
+    plan = plan_line(line, years=0.5, futures=2, engine="fast", pass_reuse_tolerance_m=5e-4)
+    assert plan.table().splitlines()[0].endswith("2 futures, engine fast, pass reuse 0.5 mm")
+    assert plan_line(line, years=0.5, futures=2).table().splitlines()[0].endswith("2 futures")
+    assert main([*argv, "--pass-reuse-mm", "3"]) == 2
+    assert "--pass-reuse-mm must be in [0, 2] mm, got 3" in capsys.readouterr().err
