@@ -362,7 +362,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     line = load_line(args.line)
     overrides = engine_overrides(args)
     # an unknown policy or scenario before the fit and the futures
-    line_policy(args.policy, plan_config(line, args.scenario, **overrides), args.scenario)
+    line_policy(args.policy, plan_config(line, args.scenario, years=args.years, **overrides), args.scenario)
     t0 = time.perf_counter()
     progress = None
     if not args.json:
@@ -385,7 +385,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from .evaluation.line_compare import parse_seeds, run_calibration
 
-    overrides = {"horizon_years": args.horizon_years} if args.horizon_years else {}
+    overrides = {"horizon_years": args.horizon_years} if args.horizon_years is not None else {}
     result = run_calibration(args.scenario, parse_seeds(args.seeds), args.threshold,
                              out_dir=args.out or "results/line_calibration", progress=not args.json, **overrides)
     result.pop("trajectories", None)
@@ -706,8 +706,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--scenario", default="default", choices=("small", "default", "hard", "wet", "defects"),
                     help="line scenario")
     sp.add_argument("--seeds", default="2000:2004", metavar="A:B", help="episodes: A:B or a,b,c")
-    sp.add_argument("--threshold", type=float, default=2.0, help="SD [mm] at which the rule tamps a section")
-    sp.add_argument("--horizon-years", type=float, default=None, help="shorter or longer episodes")
+    sp.add_argument("--threshold", type=_positive(float), default=2.0,
+                    help="SD [mm] at which the rule tamps a section")
+    sp.add_argument("--horizon-years", type=_positive(float), default=None,
+                    help="shorter or longer episodes (years; default: the scenario's)")
     sp.set_defaults(func=cmd_calibrate)
 
     hp = _hyperparam_defaults()

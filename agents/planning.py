@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.choices import CHOICES, action_type_for
-from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS
+from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS, LineConfig
+from trackenv.physics._checks import check_scalar
 
 from .shipped import SHIPPED_AGENTS
 
@@ -76,15 +77,19 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
                      "trained per-section policy (.zip)")
 
 
-def plan_config(line: Any, scenario: str = "default", **config: Any) -> Any:
+def plan_config(line: Any, scenario: str = "default", years: float | None = None, **config: Any) -> Any:
     """The :class:`~trackenv.envs.line_config.LineConfig` of ``line`` (a line file's path or a
     :class:`~trackenv.envs.line_file.LineDescription`) modelled as on the preset ``scenario``
-    (:data:`PLAN_SCENARIOS`), with further ``config`` fields."""
+    (:data:`PLAN_SCENARIOS`), with further ``config`` fields; ``years``: the plan's, its horizon (checked under
+    that name: at least one step, at most 100)."""
     from trackenv.envs.line_config import scenario as preset
 
     if scenario not in PLAN_SCENARIOS:
         raise ValueError(f"scenario must be one of {', '.join(PLAN_SCENARIOS)} (those that take the line's sections "
                          f"and traffic from its file), got {scenario!r}")
+    if years is not None:
+        steps_per_year = config.get("steps_per_year", LineConfig.steps_per_year)
+        config["horizon_years"] = check_scalar("years", years, low=1.0 / steps_per_year, high=100.0)
     return preset(scenario, line=line, **config)
 
 
@@ -261,7 +266,7 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from trackenv.envs.line import TampingLineVectorEnv
     from trackenv.envs.line_fit import history_fit
 
-    cfg = plan_config(line, scenario, horizon_years=years, **config)
+    cfg = plan_config(line, scenario, years=years, **config)
     rule = line_policy(policy, cfg, scenario)
     steps = cfg.horizon_steps
     trained = trained_horizon_years(rule)

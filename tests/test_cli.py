@@ -379,7 +379,10 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--env", "trackenv/Nope-v0"], "'trackenv/Nope-v0' is not a registered env id"),
     (["--seeds", "5:2"], "--seeds A:B needs B > A"),
-    (["--seeds", "a:b"], "invalid literal"),
+    (["--seeds", "a:b"], "--seeds must be A:B with B > A, or a,b,c: whole numbers >= 0, each once; got 'a:b'"),
+    (["--seeds", "1,2,1"], "--seeds must be A:B with B > A"),
+    (["--seeds", ","], "--seeds must be A:B with B > A"),
+    (["--seeds=-3:2"], "--seeds must be A:B with B > A"),
     (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
     (["--policies", "cpi-agent"], "--policies names no rule"),
     (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
@@ -391,6 +394,24 @@ def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, t
     err = capsys.readouterr().err
     assert err.startswith("trackenv leaderboard: ") and message in err and err.count("\n") == 1
     assert not (tmp_path / "leaderboard.json").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--threshold", "-1"], "argument --threshold: must be a number > 0, got -1"),
+    (["--horizon-years", "0"], "argument --horizon-years: must be a number > 0, got 0"),
+    (["--seeds", "3"], None),  # a valid list of one seed is no error: checked below with a short horizon
+])
+def test_calibrate_bad_input_is_refused_by_name(argv, message, capsys, tmp_path):
+    """A threshold or horizon at or below zero is refused by argparse (exit status 2, the option named) instead of
+    running a degenerate rule or silently keeping the scenario's horizon; a horizon shorter than a step by the
+    config, naming its field."""
+    if message is None:
+        assert main(["calibrate", *argv, "--horizon-years", "0.1", "--out", str(tmp_path)]) == 2
+        assert "horizon_years must lie in [0.25, 100], got 0.1" in capsys.readouterr().err
+        return
+    with pytest.raises(SystemExit) as exit_:
+        main(["calibrate", *argv, "--out", str(tmp_path)])
+    assert exit_.value.code == 2 and message in capsys.readouterr().err
 
 
 def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):

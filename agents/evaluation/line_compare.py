@@ -60,13 +60,24 @@ def action_type_of(env_id: str) -> str:
 
 
 def parse_seeds(text: str) -> list[int]:
-    """'A:B' -> A..B-1; 'a,b,c' -> those."""
+    """'A:B' -> A..B-1; 'a,b,c' -> those. Whole numbers >= 0 (Gymnasium's seeds), at least one, each once (an
+    episode listed twice would count twice in the paired statistics); anything else is a ValueError naming
+    ``--seeds``."""
+    form = f"--seeds must be A:B with B > A, or a,b,c: whole numbers >= 0, each once; got {text!r}"
+    parts = text.split(":") if ":" in text else [v for v in text.split(",") if v.strip()]
+    try:
+        values = [int(v) for v in parts]
+    except ValueError:
+        raise ValueError(form) from None
     if ":" in text:
-        a, b = (int(v) for v in text.split(":"))
-        if b <= a:
+        if len(values) != 2:
+            raise ValueError(form)
+        if values[1] <= values[0]:
             raise ValueError(f"--seeds A:B needs B > A, got {text!r}")
-        return list(range(a, b))
-    return [int(v) for v in text.split(",") if v]
+        values = list(range(*values))
+    if not values or min(values) < 0 or len(set(values)) != len(values):
+        raise ValueError(form)
+    return values
 
 
 def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | None = None,

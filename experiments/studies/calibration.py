@@ -22,6 +22,7 @@ from gymnasium.vector import AutoresetMode
 
 from trackenv.envs.line import TampingLineVectorEnv
 from trackenv.envs.line_config import LineConfig
+from trackenv.physics._checks import check_scalar
 
 #: Published ranges the figures are compared with (low, high, source); [unverified] where the figure could not be
 #: traced to its primary source (the documentation's line-problem page lists them).
@@ -74,6 +75,7 @@ def calibrate(config: LineConfig | None = None, seeds: Sequence[int] = (2000, 20
               threshold_mm: float = 2.0, progress: Any = None) -> dict[str, Any]:
     """The calibration table: emergent figures vs :data:`PUBLISHED` (see the module docstring)."""
     cfg = LineConfig.coerce(config)
+    threshold_mm = check_scalar("threshold_mm", threshold_mm, low=0.0, low_inclusive=False)
     free = run_line(cfg, seeds, None, progress)
     rule = run_line(cfg, seeds, threshold_mm, progress)
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year

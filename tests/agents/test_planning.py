@@ -156,3 +156,13 @@ def test_the_engine_options_reach_the_plan_and_are_named(tmp_path, capsys):
     assert plan_line(line, years=0.5, futures=2).table().splitlines()[0].endswith("2 futures")
     assert main([*argv, "--pass-reuse-mm", "3"]) == 2
     assert "--pass-reuse-mm must be in [0, 2] mm, got 3" in capsys.readouterr().err
+
+
+def test_the_years_are_checked_under_their_own_name(tmp_path, capsys):
+    """Less than a quarter (one model step) or more than 100 years: an error naming ``years`` (the config's
+    horizon is what it sets), before the fit and the futures."""
+    for bad in (0.1, 101.0):
+        with pytest.raises(ValueError, match=r"years must lie in \[0.25, 100\]"):
+            plan_line(write(tmp_path), years=bad, futures=1)
+    assert main(["plan", str(write(tmp_path)), "--years", "0.2"]) == 2
+    assert capsys.readouterr().err == "trackenv plan: years must lie in [0.25, 100], got 0.2\n"

@@ -21,3 +21,15 @@ def test_run_line_records_every_step_of_each_episode_to_its_end():
     np.testing.assert_array_equal(out["sd"][:, 1], np.array(sd))  # the last step too, not a new episode's first
     np.testing.assert_array_equal(out["tamped"][:, 1], np.array(tamped))
     assert out["tamped"].any()
+
+
+def test_calibrate_refuses_a_threshold_that_is_no_sd():
+    """A threshold at or below zero (every section tamped every step) is no calibration rule: an error naming it,
+    before any episode runs."""
+    import pytest
+
+    from trackenv_studies.calibration import calibrate
+
+    for bad in (-1.0, 0.0, float("nan")):
+        with pytest.raises(ValueError, match="threshold_mm must"):
+            calibrate(scenario("small", horizon_years=0.5), [1], threshold_mm=bad)

@@ -267,7 +267,10 @@ def test_hindsight_variants_move_drop_and_add_one_tamping():
 
 
 def test_cli_helpers():
-    assert parse_seeds("3:6") == [3, 4, 5] and parse_seeds("1,4") == [1, 4]
+    assert parse_seeds("3:6") == [3, 4, 5] and parse_seeds("1,4") == [1, 4] and parse_seeds(" 2, 0,") == [2, 0]
+    for bad in ("1:2:3", "1.5:3", "a", "", ",", "-2:1", "-1", "4,4", "3:3"):
+        with pytest.raises(ValueError, match="--seeds"):
+            parse_seeds(bad)
     assert scenario_of("trackenv/TampingLineSmall-v0") == "small"
     assert scenario_of("trackenv/Tamping-v1") == "track60"  # the 60 m track is a preset of the one env
     for env_id in ("trackenv/TampingDiscrete-v1", "trackenv/TampingRanked-v1"):  # not per-section actions
