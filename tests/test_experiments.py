@@ -292,3 +292,32 @@ def test_track60_room_replays_a_schedule_exactly_and_its_end_stop_does_no_late_w
     assert row["sections_tamped"] == own.tamped.sum() / 2 and row["mean_cost"] == pytest.approx(own.cost.mean())
     with pytest.raises(ValueError, match="one batch"):
         evaluate_many([mod.SchedulePlayer(list(own.tamped), config.horizon_steps)], config, seeds, batch_size=1)
+
+
+def test_line_information_designs_change_what_is_seen_not_the_track():
+    """Each recording design changes only the measurement fields: the same seed gives the same true state under
+    every design (so the designs are paired with each other and with the bound), while what the observation
+    shows differs; the scores are the leaderboard's (paired sums) and the bound file is the default line's."""
+    from trackenv.envs.line import TampingLine
+    from trackenv.envs.line_config import scenario
+
+    mod = _script("line_information")
+    assert all(set(f) <= {"measurement_interval", "sd_noise_mm", "peak_noise_mm"} for f in mod.DESIGNS.values())
+    assert all(g["include_mm"] < g["trigger_mm"] for g in mod.GRID)
+    seeds, plans = mod.bound_schedules()
+    assert len(seeds) == len(plans) >= 16
+    base = scenario("default", horizon_years=1.0)
+    true, seen = [], []
+    for fields in mod.DESIGNS.values():
+        env = TampingLine(base.replace(**fields))
+        obs, info = env.reset(seed=5)
+        for t in range(3):
+            obs, _, _, _, info = env.step(np.eye(base.n_sections, dtype=np.int8)[t])
+        true.append(info["section_sd_m"])
+        seen.append(obs["section_sd"])
+    for t in true[1:]:
+        np.testing.assert_array_equal(t, true[0])
+    assert not np.allclose(seen[0], seen[-1])  # once a year with error against every step without
+    s = mod.score(np.array([90.0, 200.0]), np.array([100.0, 200.0]), np.array([80.0, 150.0]))
+    assert s["normalised_score"] == pytest.approx(10.0 / 70.0) and s["mean_keur"] == pytest.approx(145.0)
+    assert s["vs_reference"]["mean"] == pytest.approx(-5.0) and s["vs_reference"]["relative"] == pytest.approx(-5 / 150)
