@@ -413,7 +413,7 @@ def _line_payload(path: Path, wall: float, out: Path) -> tuple[dict[str, Any], s
     return payload, human
 
 
-def cmd_train_line(args: argparse.Namespace) -> int:
+def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """`trackenv train --env trackenv/TampingLine-v0`: counterfactual policy iteration (and MaskablePPO for
     --timesteps line-steps) on the line, held-out evaluation paired with the advisor rule."""
     if args.algo:
@@ -424,7 +424,6 @@ def cmd_train_line(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     out = Path(args.out or "runs/ppo_line")
-    overrides = engine_overrides(args)
     config = scenario_config(scenario_of(args.env), **overrides) if overrides else scenario_of(args.env)
     path = train_line(config, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
                       out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
@@ -482,18 +481,18 @@ def cmd_train_resume(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     _existing(args.hyperparams, "--hyperparams")
     _existing(args.resume, "--resume", folder=True)
+    overrides = engine_overrides(args)
     if args.resume is not None:
-        if engine_overrides(args):
+        if overrides:
             raise UsageError("--engine and --pass-reuse-mm: a resumed run keeps the config it was started with")
         return cmd_train_resume(args)
     if args.env is not None and args.env != DEFAULT_ENV_ID:
-        return cmd_train_line(args)
+        return cmd_train_line(args, overrides)
     if args.iterations is not None:
         raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
     from .learning.tamping import train
 
     t0 = time.perf_counter()
-    overrides = engine_overrides(args)
     config = None
     if overrides:
         from trackenv.envs.line_config import scenario

@@ -40,15 +40,17 @@ ROOT = Path(__file__).resolve().parents[1]
 BOUNDS = ROOT / "experiments" / "saved" / "leaderboard" / "bounds"
 OUT = ROOT / "experiments" / "saved" / "line_information.json"
 FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
-#: recording designs: what the recording car tells (the preset's measurement fields they change)
+#: recording designs by their ``--design`` name: what the recording car tells (the preset's measurement fields
+#: they change)
 DESIGNS: dict[str, dict[str, float]] = {
-    "once a year (the preset)": {},
-    "twice a year": {"measurement_interval": 2},
-    "every quarter": {"measurement_interval": 1},
-    "every quarter, no error": {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0},
+    "preset": {},
+    "twice": {"measurement_interval": 2},
+    "quarterly": {"measurement_interval": 1},
+    "perfect": {"measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0},
 }
-SHORT = {"preset": "once a year (the preset)", "twice": "twice a year", "quarterly": "every quarter",
-         "perfect": "every quarter, no error"}
+#: each design's name in the tables and the saved JSON
+LABELS = {"preset": "once a year (the preset)", "twice": "twice a year", "quarterly": "every quarter",
+          "perfect": "every quarter, no error"}
 #: the grouped threshold's (trigger, include) grid [mm], include below the trigger: wider and lower than the rule's
 #: own ``param_grid`` (a fresher view may tamp earlier)
 GRID = [{"trigger_mm": t, "include_mm": i} for t in (1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0)
@@ -100,9 +102,9 @@ def train_agent(config, advisor_params: dict, out_dir: Path) -> Path:
 
 
 def run(designs: list[str], train_seeds: list[int], progress: bool = True, agents_dir: Path | None = None) -> dict:
-    """Tune and score every design (see the module docstring); with ``agents_dir``, also train the line's
-    policy iteration under each design with its tuned rule as advisor (into ``agents_dir/<design>``) and score
-    it (``"trained"``)."""
+    """Tune and score every design of ``designs`` (names of :data:`DESIGNS`; see the module docstring); with
+    ``agents_dir``, also train the line's policy iteration under each design with its tuned rule as advisor (into
+    ``agents_dir/<design>``) and score it (``"trained"``)."""
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.harness import evaluate_many
     from trackenv_agents.evaluation.line_hindsight import replay_schedules
@@ -125,19 +127,19 @@ def run(designs: list[str], train_seeds: list[int], progress: bool = True, agent
            "bound": {"mean_keur": float(bound.mean()), "vs_reference": paired(bound, reference),
                      "costs": bound.tolist()},
            "designs": {}}
-    for name in designs:
-        cfg = base.replace(**DESIGNS[name])
+    for design in designs:
+        name = LABELS[design]
+        cfg = base.replace(**DESIGNS[design])
         tuned = tune_many([GroupedThreshold], cfg, train_seeds, batch_size=32, progress=progress, grids=[GRID])[0]
         policies = {"rule": GroupedThreshold(**tuned["best_params"]), LINE_AGENT_NAME: agent}
         if ModelPredictive.unfit_for(cfg) is None:
             policies["model-predictive"] = ModelPredictive(**PLANNER)
         if agents_dir is not None:
-            folder = agents_dir / next(k for k, v in SHORT.items() if v == name)
             t1 = time.perf_counter()
-            policies["trained"] = load_line_trained(train_agent(cfg, tuned["best_params"], folder))
+            policies["trained"] = load_line_trained(train_agent(cfg, tuned["best_params"], agents_dir / design))
             out.setdefault("training_s", {})[name] = time.perf_counter() - t1
         results = evaluate_many(list(policies.values()), cfg, seeds, progress=progress, desc=name)
-        out["designs"][name] = {"fields": DESIGNS[name], "tuned_params": tuned["best_params"],
+        out["designs"][name] = {"fields": DESIGNS[design], "tuned_params": tuned["best_params"],
                                 "train_mean_keur": tuned["best_mean_cost"]}
         for key, r in zip(policies, results, strict=True):
             out["designs"][name][key] = {**score(r.cost, reference, bound), "costs": r.cost.tolist()}
@@ -153,16 +155,16 @@ def main(argv: list[str] | None = None) -> int:
     from trackenv_agents.evaluation.line_compare import parse_seeds
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--design", action="append", choices=sorted(SHORT),
+    parser.add_argument("--design", action="append", choices=sorted(DESIGNS),
                         help="a recording design (repeatable; default: all): " +
-                             ", ".join(f"{k} = {v}" for k, v in SHORT.items()))
+                             ", ".join(f"{k} = {v}" for k, v in LABELS.items()))
     parser.add_argument("--train-seeds", default="1000:1016", help="the tuning's episodes, A:B or a,b,c")
     parser.add_argument("--train-agent", default=None, metavar="DIR",
                         help="also train the policy iteration under each design (its tuned rule as advisor; about 5 "
                              "minutes a design) into DIR/<design>, and score it")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args(argv)
-    designs = [SHORT[d] for d in args.design] if args.design else list(DESIGNS)
+    designs = args.design or list(DESIGNS)
     result = run(designs, parse_seeds(args.train_seeds), agents_dir=None if args.train_agent is None
                  else Path(args.train_agent))
     given = sys.argv[1:] if argv is None else argv

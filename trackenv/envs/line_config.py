@@ -43,6 +43,8 @@ SLEEPER_SPACING_M = 0.6
 APPROACH_SLEEPERS = 10
 #: the engines a line's passes can run with (``LineConfig.engine``; :mod:`trackenv.physics.engine`)
 LINE_ENGINES = tuple(ENGINES)
+#: the longest ``LineConfig.horizon_years`` [years] (the shortest is one step)
+MAX_HORIZON_YEARS = 100.0
 #: the largest ``LineConfig.pass_reuse_tolerance_m`` [m] (1 mm is the largest whose episode costs stay within 0.1 %
 #: of computing every pass)
 MAX_PASS_REUSE_TOLERANCE_M = 2e-3
@@ -328,7 +330,7 @@ class LineConfig(ConfigBase):
             c(name, low=lo, high=hi)
         c("freight_axle_load_t", low=5.0, high=40.0)
         ci("steps_per_year", low=1, high=52)
-        c("horizon_years", low=1.0 / self.steps_per_year, high=100.0)
+        c("horizon_years", low=1.0 / self.steps_per_year, high=MAX_HORIZON_YEARS)
         ci("measurement_interval", low=1, high=1000)
         c("sd_noise_mm", low=0.0, high=10.0)
         c("peak_noise_mm", low=0.0, high=50.0)
