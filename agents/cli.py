@@ -124,19 +124,21 @@ def _tuned_line_rule() -> Any:
 def cmd_compile(args: argparse.Namespace) -> int:
     """Build every compiled entry of the pass kernel that a call would otherwise compile on first use (numba keeps
     them in its on-disk cache beside the package), one line per entry on stderr."""
-    from trackenv.physics.kernels import compile_kernels, kernel_entries, missing_kernels
+    from trackenv.physics.kernels import compile_kernels, kernel_entries, missing_kernels, usable_cores
 
     t0 = time.perf_counter()
     todo = missing_kernels(args.widths)
+    jobs = min(args.jobs or usable_cores(), len({e.width for e in todo}) or 1)
     if not args.json:
         print(f"trackenv compile: {len(todo)} of {len(kernel_entries(args.widths))} pass-kernel entries to compile"
-              + (" (once per install; a few minutes of one core)" if todo else ""), file=sys.stderr)
+              + (f" (once per install; a few minutes, {jobs} process{'es' * (jobs > 1)} at once)" if todo else ""),
+              file=sys.stderr)
 
     def report(p: Any) -> None:
         if p.seconds is not None and not args.json:
             print(f"  {p}", file=sys.stderr)
 
-    built = compile_kernels(args.widths, progress=report)
+    built = compile_kernels(args.widths, progress=report, jobs=jobs)
     if not args.widths:  # the settlement solver and the D1 filter compile on first use too: one step of each problem
         if not args.json:
             print("  warming the settlement solver and the D1 filter (one step of each problem)", file=sys.stderr)
@@ -615,6 +617,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = command("compile", "build every compiled entry of the physics kernel up front (make setup runs it)")
     sp.add_argument("--widths", type=_widths, default=None, metavar="W,W",
                     help="only these batch widths (rows per chunk; default: all)")
+    sp.add_argument("--jobs", type=_positive(int), default=None, metavar="N",
+                    help="compile up to N widths at once, each in its own process (default: the usable cores)")
     sp.set_defaults(func=cmd_compile)
 
     sp = command("bench", "speed of the dynamics, the settlement loop and the env")

@@ -13,24 +13,11 @@ def warm_dynamics_kernel():
     """Load (or, on a fresh machine, compile) every entry of the dynamics kernel once per session, before the
     first test, so that its compile cost lands here once instead of inside whichever test happens to run first.
     Each (serial/parallel, batch width) pair is its own compiled entry (see trackenv.physics._kernel) and the
-    suite uses them all; cold, their compilation is most of the suite's time, so a second process compiles the
-    entries of the chunks of 6 to 16 rows while this one compiles those of one and four rows (they share numba's
-    on-disk cache; the two entries of a width share their chunk integrator, so a width is compiled in one
-    process), then this one loads them."""
-    import subprocess
-    import sys
+    suite uses them all; cold, their compilation is most of the suite's time, so the widths compile in two
+    worker processes at once (as ``trackenv compile`` does), and this one then loads them from numba's cache."""
+    from trackenv.physics.kernels import compile_kernels
 
-    from trackenv.physics.dynamics import KERNEL_ENTRIES, warm_kernel
-
-    wide = [e for e in KERNEL_ENTRIES if e[1] >= 6]  # cold: 99 s in all, against 116 s with the 6 rows here
-    helper = subprocess.Popen(
-        [sys.executable, "-c", f"from trackenv.physics.dynamics import warm_kernel; warm_kernel({wide!r})"]
-    )
-    try:
-        warm_kernel([e for e in KERNEL_ENTRIES if e not in wide])
-    finally:
-        helper.wait()
-    warm_kernel(wide)  # compiled by the helper: loaded from the cache (or compiled here if it failed)
+    compile_kernels(load=True, jobs=2)
     # the compiled inverse of the root-solved settlement laws (trackenv.physics._implicit), one entry
     from trackenv.physics.settlement import SatoLaw
 

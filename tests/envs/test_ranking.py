@@ -176,12 +176,14 @@ def test_maskable_ppo_learns_on_ranked_choices() -> None:
     pytest.importorskip("sb3_contrib")
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.utils import get_action_masks
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     venv = DummyVecEnv([lambda: make_ranked("trackenv/TampingLineWet-v0", flat=True, **SMALL)])
     venv.reset()
     assert get_action_masks(venv).shape == (1, len(INTERVENTIONS) * 5)
     model = MaskablePPO("MlpPolicy", venv, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.set_logger(Logger(None, []))  # SB3's default logger makes a folder in the system's temp dir per learn()
     model.learn(16)
     obs = venv.reset()
     action, _ = model.predict(obs, action_masks=get_action_masks(venv), deterministic=True)

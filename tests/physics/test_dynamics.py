@@ -622,7 +622,7 @@ def test_sleeper_mass_of_a_row_enters_its_pass():
 
 
 def test_warm_kernel_reaches_every_compiled_entry():
-    """The session fixture warms every entry through warm_kernel: each must then hold its compiled code (a batch
+    """warm_kernel loads (or compiles) every entry: each must then hold its compiled code in this process (a batch
     that warm_kernel sizes wrongly would leave an entry to compile inside a test), and bad entries are refused."""
     import numba
 

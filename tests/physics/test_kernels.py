@@ -83,9 +83,56 @@ def test_the_cache_stamp_covers_every_kernel_module():
     }
     assert compiling <= set(_pipeline.KERNEL_MODULES) and "_implicit.py" not in _pipeline.KERNEL_MODULES
     assert _pipeline.SOURCE_DIGEST == _pipeline._source_digest()
-    for dispatcher in [*_kernel._RUNNERS.values(), _kernel._run_chunk_shared]:
+    for dispatcher in _kernel._RUNNERS.values():
         stamp = dispatcher._cache._impl.locator.get_source_stamp()
         assert isinstance(dispatcher._cache, _pipeline._KernelCache) and stamp[1] == _pipeline.SOURCE_DIGEST
+
+
+def test_no_cache_file_is_written_by_two_compiling_processes():
+    """Processes that compile different widths at once write only their entries' caches, one per entry: the chunk
+    integrator shared by a width's two entries, whose copies of every width would share one cache index, keeps
+    none of its own (it is linked into each entry's cached code)."""
+    from numba.core.caching import NullCache
+
+    assert isinstance(_kernel._run_chunk_shared._cache, NullCache)
+    paths = [runner._cache._cache_file._index_path for runner in _kernel._RUNNERS.values()]
+    assert len(set(paths)) == len(_kernel._RUNNERS)
+
+
+def test_jobs_send_each_width_to_a_worker_and_load_the_rest_here(monkeypatch):
+    """With jobs > 1 the widths to compile go to the workers, one row first, then the widest, a width's serial
+    entry before its parallel one; with ``load`` every entry this process lacks is then loaded here from the
+    cache, numbered after the workers' entries."""
+    missing = {(False, 4), (True, 4), (False, 8), (True, 1)}
+    monkeypatch.setattr(_kernel, "is_loaded", lambda key, sig: key not in missing | {(False, 6)})
+    monkeypatch.setattr(_kernel, "is_cached", lambda key, sig: key not in missing)
+    loaded, sent = [], []
+    monkeypatch.setattr(_kernel, "build", lambda key, sig: loaded.append(key))
+    monkeypatch.setattr(kernels, "_compile_in_workers",
+                        lambda groups, jobs, total, progress: sent.append((groups, jobs, total)))
+    events = []
+    built = kernels.compile_kernels([1, 4, 6, 8], progress=events.append, load=True, jobs=4)
+    assert sorted(built) == sorted(KernelEntry(*k) for k in missing)
+    assert loaded == [(True, 1), (False, 4), (True, 4), (False, 6), (False, 8)]
+    groups = [[KernelEntry(True, 1)], [KernelEntry(False, 8)], [KernelEntry(False, 4), KernelEntry(True, 4)]]
+    assert sent == [(groups, 3, 9)]
+    assert [(e.index, e.total, e.from_cache) for e in events[::2]] == [(i, 9, True) for i in range(5, 10)]
+    assert kernels.compile_kernels([1, 4, 6, 8], jobs=4) == sorted(built, key=lambda e: (e.width, e.parallel))
+    assert len(sent) == 2 and len(loaded) == 5  # without load: nothing loaded here
+    with pytest.raises(ValueError, match="jobs must be an integer >= 1"):
+        kernels.compile_kernels([4], jobs=0)
+
+
+def test_workers_compile_or_load_in_their_own_processes():
+    """The worker pool itself (spawned processes, each building its group; here entries already in the cache, so
+    each worker only loads them): a start and an end for every entry, with the worker's time."""
+    events = []
+    groups = [[KernelEntry(False, 6)], [KernelEntry(False, 1)]]
+    kernels._compile_in_workers(groups, 2, 2, events.append)
+    starts = [(e.index, e.entry) for e in events if e.seconds is None]
+    ends = [(e.index, e.entry) for e in events if e.seconds is not None]
+    assert starts == [(1, KernelEntry(False, 6)), (2, KernelEntry(False, 1))] and sorted(ends) == starts
+    assert all(e.total == 2 for e in events) and all(e.seconds >= 0 for e in events if e.seconds is not None)
 
 
 def test_physics_compiles_without_printing(capsys):

@@ -7,14 +7,17 @@ ones spread them over numba's threads. The entries are written out, not generate
 keeps each one (:func:`trackenv.physics._pipeline.kernel_jit`).
 
 The serial one-row entry, the single pass, inlines the chunk integrator; every other entry calls the copy of its
-width (:func:`_run_chunk_shared`), compiled once per width through the wide-vector pipeline, so that a width's
-serial and parallel entries share its compile time.
+width (:func:`_run_chunk_shared`), compiled once per width and process through the wide-vector pipeline, so that a
+width's serial and parallel entries share its compile time. That copy is linked into each entry's cached code and
+is not cached on its own: its copies of all widths would share one cache index, which processes compiling
+different widths at once (``trackenv compile``'s workers) would each rewrite; the entries' own caches are one per
+entry and never shared.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import literally, prange
+from numba import literally, njit, prange
 
 from ._pipeline import FASTMATH, _WideCompiler, kernel_jit
 from ._step import _run_chunk
@@ -23,7 +26,7 @@ from ._step import _run_chunk
 WIDTHS = (1, 4, 6, 8, 16)
 
 
-@kernel_jit(fastmath=FASTMATH, pipeline_class=_WideCompiler)
+@njit(fastmath=FASTMATH, pipeline_class=_WideCompiler)  # not cached on its own: see the module's docstring
 def _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, W):
     """:func:`_run_chunk` compiled once per width ``W`` (a literal, so a compile-time constant in each compiled
     copy) and called by both the serial and the parallel entry of that width. ``ch`` is int64 from either entry

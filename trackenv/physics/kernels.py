@@ -130,14 +130,27 @@ def compile_kernels(
     progress: Callable[[CompileProgress], None] | None = None,
     *,
     load: bool = False,
+    jobs: int = 1,
 ) -> list[KernelEntry]:
     """Build every reachable entry for ``widths`` (default: all) that a call would compile, and return them.
 
     With ``load`` the entries already in numba's on-disk cache are loaded into this process too (cheap), so that
     no later call in it pays even that. ``progress`` is called with a :class:`CompileProgress` as each entry starts
     and as it is done. Compiling every entry takes several minutes of one core on a fresh install; entries of one
-    width share most of it (the parallel entry reuses the serial one's chunk integrator)."""
-    return build_entries(kernel_entries(widths), progress, load=load)
+    width share most of it (the parallel entry reuses the serial one's chunk integrator). ``jobs`` > 1 compiles
+    the widths in up to that many worker processes at once (:func:`usable_cores` is what the machine offers);
+    the code they leave in the cache is the code one process compiles."""
+    return build_entries(kernel_entries(widths), progress, load=load, jobs=jobs)
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system reports it)."""
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def build_entries(
@@ -145,21 +158,91 @@ def build_entries(
     progress: Callable[[CompileProgress], None] | None = None,
     *,
     load: bool = False,
+    jobs: int = 1,
 ) -> list[KernelEntry]:
     """:func:`compile_kernels` for a list of entries."""
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     signature = _signature()
     todo = [(e, _kernel.is_cached((e.parallel, e.width), signature)) for e in entries
             if not _kernel.is_loaded((e.parallel, e.width), signature)]
     if not load:
         todo = [(e, cached) for e, cached in todo if not cached]
-    for index, (entry, cached) in enumerate(todo, start=1):
+    to_compile = [e for e, cached in todo if not cached]
+    groups = _width_groups(to_compile)
+    first, total = 1, len(todo)
+    if jobs > 1 and len(groups) > 1:  # compiled by worker processes; with ``load`` then loaded here, from the cache
+        todo = [(e, True) for e, _ in todo] if load else []
+        first, total = len(to_compile) + 1, len(to_compile) + len(todo)
+        _compile_in_workers(groups, min(jobs, len(groups)), total, progress)
+    for index, (entry, cached) in enumerate(todo, start=first):
         if progress is not None:
-            progress(CompileProgress(entry, index, len(todo), cached))
+            progress(CompileProgress(entry, index, total, cached))
         began = time.perf_counter()
         _kernel.build((entry.parallel, entry.width), signature)
         if progress is not None:
-            progress(CompileProgress(entry, index, len(todo), cached, time.perf_counter() - began))
-    return [e for e, cached in todo if not cached]
+            progress(CompileProgress(entry, index, total, cached, time.perf_counter() - began))
+    return to_compile
+
+
+def _width_groups(entries: list[KernelEntry]) -> list[list[KernelEntry]]:
+    """``entries`` by width, the longest to compile first: one row (its serial entry inlines the chunk integrator,
+    so the width compiles it twice), then the widest; serial before parallel within a width (the parallel entry
+    reuses the chunk integrator the serial one compiled)."""
+    widths = sorted({e.width for e in entries}, key=lambda w: (w != 1, -w))
+    return [sorted(e for e in entries if e.width == w) for w in widths]
+
+
+def _compile_in_workers(groups: list[list[KernelEntry]], jobs: int, total: int,
+                        progress: Callable[[CompileProgress], None] | None) -> None:
+    """Compile each group of entries (one width) in a worker process, ``jobs`` at a time, into numba's on-disk
+    cache (each entry's cache is its own: no two workers write the same file); ``progress`` hears each entry start
+    as its group is handed to a worker and end when the group is done."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    numbered, index = [], 1
+    for group in groups:
+        numbered.append([(index + i, e) for i, e in enumerate(group)])
+        index += len(group)
+    pending = list(reversed(numbered))
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        running: dict = {}
+
+        def submit() -> None:
+            group = pending.pop()
+            for i, e in group:
+                if progress is not None:
+                    progress(CompileProgress(e, i, total, False))
+            running[pool.submit(_compile_group, [(e.parallel, e.width) for _, e in group])] = group
+
+        while pending and len(running) < jobs:
+            submit()
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                group = running.pop(future)
+                try:
+                    seconds = future.result()
+                except Exception as error:  # a worker that died or failed: say which entries
+                    raise RuntimeError(f"compiling the pass kernel for {', '.join(str(e) for _, e in group)} in a "
+                                       f"worker process failed: {error!r}") from error
+                for (i, e), s in zip(group, seconds, strict=True):
+                    if progress is not None:
+                        progress(CompileProgress(e, i, total, False, s))
+                if pending:
+                    submit()
+
+
+def _compile_group(keys: list[tuple[bool, int]]) -> list[float]:
+    """In a worker process: compile each entry (parallel, width) in order into numba's on-disk cache; the
+    seconds each took."""
+    signature, seconds = _signature(), []
+    for key in keys:
+        began = time.perf_counter()
+        _kernel.build(key, signature)
+        seconds.append(time.perf_counter() - began)
+    return seconds
 
 
 @functools.lru_cache(maxsize=1)

@@ -135,11 +135,13 @@ def test_maskable_ppo_runs_on_adapter(tmp_path, small_config):
     pytest.importorskip("sb3_contrib")
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.utils import get_action_masks
+    from stable_baselines3.common.logger import Logger
 
     env = TampingSB3VecEnv(2, small_config.replace(dt=2e-4), action_type="discrete", seed=0)
     env.reset()
     assert get_action_masks(env).shape == (2, small_config.n_sections + 1)
     model = MaskablePPO("MultiInputPolicy", env, n_steps=4, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.set_logger(Logger(None, []))  # SB3's default logger makes a folder in the system's temp dir per learn()
     model.learn(8)
     assert model.num_timesteps >= 8
 
