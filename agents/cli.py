@@ -323,6 +323,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     for env_id in envs:
         scenario_of(env_id)  # an unknown id: one line, before anything slow
     seeds = parse_seeds(args.seeds) if args.seeds else None
+    overrides = engine_overrides(args)
     rules, agent_files = _leaderboard_policies(args.policies, list(LINE_HEURISTICS))
     agents: dict[str, Any] = {}
     if agent_files:
@@ -337,7 +338,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     try:
         with _stdout_to_stderr():
             payload = run_leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
-                                  out_dir=out, executor=executor, progress=not args.json)
+                                      out_dir=out, executor=executor, progress=not args.json, **overrides)
     finally:
         if executor is not None:
             executor.close()
@@ -675,6 +676,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "a per-section policy on every line)")
     sp.add_argument("--no-bound", action="store_true",
                     help="skip the hindsight bound (the normalised scores are then null)")
+    engine(sp)
     sp.add_argument("--ray", action="store_true", help="run the episodes and the bound's searches as tasks on a "
                                                       "local Ray (trackenv[ray])")
     sp.add_argument("--ray-address", default=None, metavar="ADDR",

@@ -388,6 +388,7 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
     (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
     (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
     (["--policies", f"rules,{HERE / 'conftest.py'}"], "conftest.py: a trained policy is a .zip (stable-baselines3) or"),
+    (["--pass-reuse-mm", "3"], "--pass-reuse-mm must be in [0, 2] mm, got 3"),
 ])
 def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, tmp_path):
     assert main(["leaderboard", *argv, "--out", str(tmp_path)]) == 2
@@ -432,7 +433,25 @@ def test_leaderboard_ray_reaches_the_leaderboard(monkeypatch, capsys, tmp_path):
     assert main(["leaderboard", "--ray", "--policies", "rules", "--json", "--out", str(tmp_path)]) == 0
     assert isinstance(seen["executor"], RayExecutor) and seen["envs"] == list(lb.DEFAULT_SUITE)
     assert seen["agents"] == {} and seen["rules"] is None and seen["bound"] is True
+    assert "engine" not in seen and "pass_reuse_tolerance_m" not in seen  # the presets' passes unless asked
     assert json.loads(capsys.readouterr().out)["ray"] == "local"
+
+
+def test_leaderboard_engine_options_reach_every_scenarios_config(monkeypatch, capsys, tmp_path):
+    """`--engine fast --pass-reuse-mm 1` are config overrides of every scenario (what they do to the bound:
+    tests/agents/evaluation/test_leaderboard.py)."""
+    import trackenv_agents.evaluation.leaderboard as lb
+
+    seen = {}
+
+    def fake(envs, **kw):
+        seen.update(kw)
+        return {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
+
+    monkeypatch.setattr(lb, "run_leaderboard", fake)
+    argv = ["leaderboard", "--engine", "fast", "--pass-reuse-mm", "1", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    assert seen["engine"] == "fast" and seen["pass_reuse_tolerance_m"] == pytest.approx(1e-3)
 
 
 def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):

@@ -53,7 +53,7 @@ from trackenv.envs.network import NetworkConfig
 
 from ..rules.network import NETWORK_DISPATCH
 from .harness import EvaluationResult, evaluate_many
-from .line_compare import SECTION_CLASSES, class_breakdown, scenario_config, scenario_of
+from .line_compare import SECTION_CLASSES, class_breakdown, engine_note, scenario_config, scenario_of
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
 __all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "NETWORK_DISPATCH", "SAVED_SEARCHES",
@@ -100,6 +100,10 @@ BOUND_CHUNK = 8
 
 #: The saved hindsight searches (``experiments/line_room.py`` results) reused for the seeds they cover.
 SAVED_SEARCHES = Path(__file__).resolve().parents[2] / "experiments" / "searches"
+
+#: The bound cache of the documented leaderboard (its ``--out experiments/saved/leaderboard``): where a config
+#: whose passes run otherwise than the presets' (``--engine fast``, pass reuse) finds the schedules to replay.
+SHIPPED_BOUNDS = Path(__file__).resolve().parents[2] / "experiments" / "saved" / "leaderboard" / "bounds"
 
 
 def normalised_score(rule_cost: np.ndarray, policy_cost: np.ndarray, bound_cost: np.ndarray,
@@ -209,14 +213,43 @@ def _saved_bounds(config: Any, scenario_name: str, seeds: list[int], searches: P
             for k, c in zip(keep, replayed, strict=True) if abs(c - costs[k]) <= 1e-6 * abs(costs[k])}
 
 
+def _replayed_bounds(config: Any, scenario_name: str, seeds: list[int],
+                     folders: Sequence[Path]) -> dict[int, dict[str, Any]]:
+    """For a config whose passes run otherwise than the presets' (the fast engine, pass reuse): the bounds of the
+    same line computed as the presets compute it (:func:`~..rules.problems.computed_as_presets`) found in the
+    bound caches of ``folders`` (the first that has a seed), their schedules replayed under ``config`` (source
+    "replayed"). A bound is the cost of a schedule a search found, not a proven optimum; a schedule found under
+    the classic engine and replayed under this one is such a schedule, at a fraction of a new search's cost
+    (a minute an episode on the lines with every choice). {} for a config computed as the presets'."""
+    from ..rules.problems import computed_as_presets
+    from .line_hindsight import replay_schedules, schedule_from_rows
+
+    if not hasattr(config, "engine") or computed_as_presets(config) == config:
+        return {}
+    twin, rows = computed_as_presets(config), {}
+    for folder in folders:
+        path = _cache_path(twin, scenario_name, Path(folder))
+        if path.exists():
+            episodes = json.loads(path.read_text())["episodes"]
+            rows.update({s: episodes[str(s)]["schedule"] for s in seeds if s not in rows and str(s) in episodes})
+    if not rows:
+        return {}
+    have = sorted(rows)
+    costs = replay_schedules(config, have, [schedule_from_rows(rows[s]) for s in have])
+    return {s: {"seed": s, "cost": float(c), "schedule": rows[s], "source": "replayed"}
+            for s, c in zip(have, costs, strict=True)}
+
+
 def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationResult], cache_dir: str | Path,
-                   executor: Any = None, searches: Path | None = SAVED_SEARCHES) -> dict[str, Any]:
+                   executor: Any = None, searches: Path | None = SAVED_SEARCHES,
+                   shipped: Path | None = SHIPPED_BOUNDS) -> dict[str, Any]:
     """The hindsight bound of each episode of ``rules`` (the scored rules' results on common seeds, the best
-    first): from the cache under ``cache_dir``, else a saved search that replays (``searches``), else a new search
-    (:data:`BOUND_SEARCH`, from the best rule's schedule with the others' as candidates, :data:`BOUND_CHUNK`
-    episodes a batch, through ``executor.map`` if given). Each bound is capped at the best rule's own cost. Returns
-    {"cost" (per seed, in ``rules[0].seeds`` order), "sources" (counts), "search_seconds_per_episode" (the new
-    searches' mean, None if none ran)}."""
+    first): from the cache under ``cache_dir``, else a saved search that replays (``searches``), else, for a
+    config whose passes run otherwise than the presets', the presets' bound replayed (:func:`_replayed_bounds`,
+    from the cache under ``cache_dir`` or ``shipped``), else a new search (:data:`BOUND_SEARCH`, from the best
+    rule's schedule with the others' as candidates, :data:`BOUND_CHUNK` episodes a batch, through ``executor.map``
+    if given). Each bound is capped at the best rule's own cost. Returns {"cost" (per seed, in ``rules[0].seeds``
+    order), "sources" (counts), "search_seconds_per_episode" (the new searches' mean, None if none ran)}."""
     best = rules[0]
     seeds = [int(s) for s in best.seeds]
     path = _cache_path(config, scenario_name, Path(cache_dir))
@@ -227,6 +260,10 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     if searches is not None and searches.is_dir():
         todo = [s for s in seeds if s not in found]
         found.update(_saved_bounds(config, scenario_name, todo, searches) if todo else {})
+    todo = [s for s in seeds if s not in found]
+    if todo:
+        folders = [Path(cache_dir)] + ([shipped] if shipped is not None else [])
+        found.update(_replayed_bounds(config, scenario_name, todo, folders))
     todo = [s for s in seeds if s not in found]
     seconds: list[float] = []
     if todo:
@@ -243,14 +280,14 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
             for h in out:
                 seconds.append(h.pop("search_seconds"))
                 found[h["seed"]] = h
-    if todo or any(v["source"] == "saved" for v in found.values()):
+    if todo or any(v["source"] in ("saved", "replayed") for v in found.values()):
         path.parent.mkdir(parents=True, exist_ok=True)
         keep = {**cached, **{s: {k: v for k, v in found[s].items() if k != "source"} for s in seeds}}
         path.write_text(json.dumps({"scenario": scenario_name, "config": config.to_dict(),
                                     "search": _search_settings(config),
                                     "episodes": {str(s): keep[s] for s in sorted(keep)}}, default=str) + "\n")
     cost = np.minimum([found[s]["cost"] for s in seeds], best.cost)
-    sources = {k: sum(found[s]["source"] == k for s in seeds) for k in ("cache", "saved", "search")}
+    sources = {k: sum(found[s]["source"] == k for s in seeds) for k in ("cache", "saved", "replayed", "search")}
     return {"cost": cost, "sources": sources,
             "search_seconds_per_episode": float(np.mean(seconds)) if seconds else None}
 
@@ -325,7 +362,8 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     and why)."""
     from ..rules.problems import rules_for, tuned_params_for, tuned_rule
 
-    payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {}}
+    payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
+                               "config_overrides": dict(overrides)}
     for env_id in envs:
         name = scenario_of(env_id)
         cfg = scenario_config(name, **overrides)
@@ -396,6 +434,12 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
     """The leaderboard as Markdown: per scenario a table of its policies (the best rule first), the bound's line,
     and the command that wrote it."""
     out = []
+    overrides = payload.get("config_overrides") or {}
+    note = engine_note({k: overrides[k] for k in ("engine", "pass_reuse_tolerance_m") if k in overrides})
+    if note:
+        out += [f"Passes computed otherwise than the presets' ({note[2:]}): costs differ from the classic engine's "
+                "by about a tenth of a percent; a bound marked *replayed* is the schedule the classic engine's "
+                "search found, replayed under these options.", ""]
     short = {"plain": "plain", "transition": "trans.", "switch_or_crossing": "switch", "hidden_wet_spot": "wet"}
     for env_id, seeds in payload["seeds"].items():
         rows = [r for r in payload["results"] if r["env"] == env_id]

@@ -49,7 +49,13 @@ def as_preset(config: LineConfig) -> LineConfig:
     """``config`` as a shipped preset would be written if it is one: a 10-year horizon, and the fields that say
     how its passes are computed (the engine, pass reuse) at the presets' values. A preset stays the same line,
     with the same tuned parameters and id, over any horizon and either engine."""
-    return config.replace(horizon_years=10.0, **_HOW_COMPUTED)
+    return computed_as_presets(config).replace(horizon_years=10.0)
+
+
+def computed_as_presets(config: LineConfig) -> LineConfig:
+    """``config`` with its passes computed as every preset computes them (the classic engine, every pass
+    computed): the same line, the config of every saved result."""
+    return config.replace(**_HOW_COMPUTED)
 
 
 def tuned_file_for(config: LineConfig) -> Path:

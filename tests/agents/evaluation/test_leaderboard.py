@@ -106,7 +106,7 @@ def test_best_rule_scores_zero_and_the_bound_search_is_cached(first) -> None:
     assert rows[0]["normalised_score"] == 0.0 and rows[0]["vs_best_rule"]["mean_difference"] == 0.0
     bound = payload["bound"][ENV]
     assert bound["available"] and bound["reason"] is None
-    assert bound["sources"] == {"cache": 0, "saved": 0, "search": len(SEEDS)}
+    assert bound["sources"] == {"cache": 0, "saved": 0, "replayed": 0, "search": len(SEEDS)}
     assert bound["search_seconds_per_episode"] > 0
     assert np.all(np.array(bound["episode_costs"]) <= np.array(rows[0]["episode_costs"]))
     assert len(list((out / "bounds").glob("small_*.json"))) == 1
@@ -119,7 +119,7 @@ def test_replaying_the_bound_scores_one(first) -> None:
     plans = [schedule_from_rows(cache["episodes"][str(s)]["schedule"]) for s in SEEDS]
     again = run_leaderboard([ENV], rules=RULES, agents={"replay-bound": ReplaySchedules(plans)}, seeds=SEEDS,
                         out_dir=out, searches=None, **TINY)
-    assert again["bound"][ENV]["sources"] == {"cache": len(SEEDS), "saved": 0, "search": 0}
+    assert again["bound"][ENV]["sources"] == {"cache": len(SEEDS), "saved": 0, "replayed": 0, "search": 0}
     assert again["bound"][ENV]["episode_costs"] == payload["bound"][ENV]["episode_costs"]
     row = next(r for r in again["results"] if r["policy"] == "replay-bound")
     assert again["bound"][ENV]["vs_best_rule"]["mean_difference"] < 0  # a gap to close
@@ -138,8 +138,35 @@ def test_saved_searches_are_reused_where_they_replay(first, tmp_path) -> None:
     searches.mkdir()
     (searches / "room.json").write_text(json.dumps({"scenario": "small", "hindsight": {"episodes": episodes}}))
     again = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path / "board", searches=searches, **TINY)
-    assert again["bound"][ENV]["sources"] == {"cache": 0, "saved": 1, "search": 1}
+    assert again["bound"][ENV]["sources"] == {"cache": 0, "saved": 1, "replayed": 0, "search": 1}
     assert again["bound"][ENV]["episode_costs"] == pytest.approx(payload["bound"][ENV]["episode_costs"])
+
+
+def test_faster_options_replay_the_classic_engines_bound(first, tmp_path) -> None:
+    """With the fast engine and pass reuse the bound is the classic search's schedules replayed under them (no new
+    search), capped at the best rule, cached under the faster config's own key; the table says so."""
+    from trackenv_agents.evaluation.line_hindsight import replay_schedules
+
+    payload, out = first
+    board = tmp_path / "board"
+    (board / "bounds").mkdir(parents=True)
+    for path in (out / "bounds").glob("small_*.json"):  # the classic run's cache, left as the fixture wrote it
+        (board / "bounds" / path.name).write_text(path.read_text())
+    fast = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
+    again = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=board, searches=None, **TINY, **fast)
+    bound = again["bound"][ENV]
+    assert bound["sources"] == {"cache": 0, "saved": 0, "replayed": len(SEEDS), "search": 0}
+    cache = json.loads(next((out / "bounds").glob("small_*.json")).read_text())["episodes"]
+    plans = [schedule_from_rows(cache[str(s)]["schedule"]) for s in SEEDS]
+    replayed = replay_schedules(scenario("small", **TINY, **fast), SEEDS, plans)
+    best = next(r for r in again["results"] if r["policy"] == again["best_rule"][ENV])
+    np.testing.assert_allclose(bound["episode_costs"], np.minimum(replayed, best["episode_costs"]), rtol=1e-12)
+    assert not np.allclose(best["episode_costs"], payload["results"][0]["episode_costs"], rtol=1e-9, atol=0)
+    table = format_leaderboard(again)
+    assert "engine fast, pass reuse 1 mm" in table and f"{len(SEEDS)} replayed" in table
+    assert len(list((board / "bounds").glob("small_*.json"))) == 2  # the faster config's own cache beside
+    third = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=board, searches=None, **TINY, **fast)
+    assert third["bound"][ENV]["sources"]["cache"] == len(SEEDS)
 
 
 def test_payload_schema_and_table(first) -> None:
