@@ -139,7 +139,9 @@ def compile_kernels(
     and as it is done. Compiling every entry takes several minutes of one core on a fresh install; entries of one
     width share most of it (the parallel entry reuses the serial one's chunk integrator). ``jobs`` > 1 compiles
     the widths in up to that many worker processes at once (:func:`usable_cores` is what the machine offers);
-    the code they leave in the cache is the code one process compiles."""
+    the code they leave in the cache is the code one process compiles. The workers are started by
+    multiprocessing's "spawn", which imports the calling script again: in a script, call it under
+    ``if __name__ == "__main__":``."""
     return build_entries(kernel_entries(widths), progress, load=load, jobs=jobs)
 
 
