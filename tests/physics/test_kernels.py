@@ -123,6 +123,29 @@ def test_jobs_send_each_width_to_a_worker_and_load_the_rest_here(monkeypatch):
         kernels.compile_kernels([4], jobs=0)
 
 
+def test_a_failed_worker_leaves_the_rest_to_this_process(monkeypatch):
+    """A worker that cannot start or dies is no dead end: a warning says so, and what is still missing compiles
+    in this process."""
+    missing = {(False, 4), (False, 8)}
+    monkeypatch.setattr(_kernel, "is_loaded", lambda key, sig: key not in missing)
+    monkeypatch.setattr(_kernel, "is_cached", lambda key, sig: key not in missing)
+    built = []
+
+    def build(key, sig):
+        built.append(key)
+        missing.discard(key)
+
+    def fail(groups, jobs, total, progress):
+        build((False, 8), None)  # one worker finished its width before the other failed
+        raise RuntimeError("compiling the pass kernel for serial chunks of 4 rows in a worker process failed")
+
+    monkeypatch.setattr(_kernel, "build", build)
+    monkeypatch.setattr(kernels, "_compile_in_workers", fail)
+    with pytest.warns(RuntimeWarning, match="chunks of 4 rows in a worker process failed; compiling what is missing"):
+        assert kernels.compile_kernels([4, 8], jobs=2) == [KernelEntry(False, 4), KernelEntry(False, 8)]
+    assert built == [(False, 8), (False, 4)] and not missing
+
+
 def test_workers_compile_or_load_in_their_own_processes():
     """The worker pool itself (spawned processes, each building its group; here entries already in the cache, so
     each worker only loads them): a start and an end for every entry, with the worker's time."""

@@ -165,18 +165,20 @@ def build_entries(
     """:func:`compile_kernels` for a list of entries."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
-    signature = _signature()
-    todo = [(e, _kernel.is_cached((e.parallel, e.width), signature)) for e in entries
-            if not _kernel.is_loaded((e.parallel, e.width), signature)]
-    if not load:
-        todo = [(e, cached) for e, cached in todo if not cached]
+    entries, signature = list(entries), _signature()
+    todo = _to_build(entries, signature, load)
     to_compile = [e for e, cached in todo if not cached]
     groups = _width_groups(to_compile)
     first, total = 1, len(todo)
     if jobs > 1 and len(groups) > 1:  # compiled by worker processes; with ``load`` then loaded here, from the cache
         todo = [(e, True) for e, _ in todo] if load else []
         first, total = len(to_compile) + 1, len(to_compile) + len(todo)
-        _compile_in_workers(groups, min(jobs, len(groups)), total, progress)
+        try:
+            _compile_in_workers(groups, min(jobs, len(groups)), total, progress)
+        except RuntimeError as error:  # a worker that could not start or died: what it left, compiled here
+            warnings.warn(f"{error}; compiling what is missing in this process", RuntimeWarning, stacklevel=3)
+            todo = _to_build(entries, signature, load)
+            first, total = 1, len(todo)
     for index, (entry, cached) in enumerate(todo, start=first):
         if progress is not None:
             progress(CompileProgress(entry, index, total, cached))
@@ -185,6 +187,14 @@ def build_entries(
         if progress is not None:
             progress(CompileProgress(entry, index, total, cached, time.perf_counter() - began))
     return to_compile
+
+
+def _to_build(entries: list[KernelEntry], signature: tuple, load: bool) -> list[tuple[KernelEntry, bool]]:
+    """The ``entries`` this process lacks, each with whether numba's on-disk cache holds it; those only cached
+    are left out unless ``load``."""
+    todo = [(e, _kernel.is_cached((e.parallel, e.width), signature)) for e in entries
+            if not _kernel.is_loaded((e.parallel, e.width), signature)]
+    return todo if load else [(e, cached) for e, cached in todo if not cached]
 
 
 def _width_groups(entries: list[KernelEntry]) -> list[list[KernelEntry]]:
