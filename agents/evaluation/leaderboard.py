@@ -101,8 +101,9 @@ BOUND_CHUNK = 8
 #: The saved hindsight searches (``experiments/line_room.py`` results) reused for the seeds they cover.
 SAVED_SEARCHES = Path(__file__).resolve().parents[2] / "experiments" / "searches"
 
-#: The bound cache of the documented leaderboard (its ``--out experiments/saved/leaderboard``): where a config
-#: whose passes run otherwise than the presets' (``--engine fast``, pass reuse) finds the schedules to replay.
+#: The bound cache of the documented leaderboard (its ``--out experiments/saved/leaderboard``), read after the
+#: output folder's own: the bounds of the same configs and search settings, and the schedules that a config whose
+#: passes run otherwise than the presets' (``--engine fast``, pass reuse) replays.
 SHIPPED_BOUNDS = Path(__file__).resolve().parents[2] / "experiments" / "saved" / "leaderboard" / "bounds"
 
 
@@ -244,9 +245,10 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
                    executor: Any = None, searches: Path | None = SAVED_SEARCHES,
                    shipped: Path | None = SHIPPED_BOUNDS) -> dict[str, Any]:
     """The hindsight bound of each episode of ``rules`` (the scored rules' results on common seeds, the best
-    first): from the cache under ``cache_dir``, else a saved search that replays (``searches``), else, for a
-    config whose passes run otherwise than the presets', the presets' bound replayed (:func:`_replayed_bounds`,
-    from the cache under ``cache_dir`` or ``shipped``), else a new search (:data:`BOUND_SEARCH`, from the best
+    first): from the cache under ``cache_dir`` or, for the same config and search settings, under ``shipped``
+    (the committed one), else a saved search that replays (``searches``), else, for a config whose passes run
+    otherwise than the presets', the presets' bound replayed (:func:`_replayed_bounds`, from the cache under
+    ``cache_dir`` or ``shipped``), else a new search (:data:`BOUND_SEARCH`, from the best
     rule's schedule with the others' as candidates, :data:`BOUND_CHUNK` episodes a batch, through ``executor.map``
     if given). Each bound is capped at the best rule's own cost. Returns {"cost" (per seed, in ``rules[0].seeds``
     order), "sources" (counts), "search_seconds_per_episode" (the new searches' mean, None if none ran)}."""
@@ -257,6 +259,11 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     if path.exists():
         cached = {int(k): v for k, v in json.loads(path.read_text())["episodes"].items()}
     found = {s: {**cached[s], "source": "cache"} for s in seeds if s in cached}
+    committed = None if shipped is None else _cache_path(config, scenario_name, shipped)
+    if committed is not None and committed.exists() and committed.resolve() != path.resolve():
+        episodes = json.loads(committed.read_text())["episodes"]
+        found.update({s: {**episodes[str(s)], "source": "cache"} for s in seeds
+                      if s not in found and str(s) in episodes})
     if searches is not None and searches.is_dir():
         todo = [s for s in seeds if s not in found]
         found.update(_saved_bounds(config, scenario_name, todo, searches) if todo else {})
@@ -351,15 +358,15 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
                     agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
                     out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
                     progress: bool = False, searches: Path | None = SAVED_SEARCHES,
-                    **overrides: Any) -> dict[str, Any]:
+                    shipped_bounds: Path | None = SHIPPED_BOUNDS, **overrides: Any) -> dict[str, Any]:
     """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; default all tuned
     rules) and ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds``
     (default :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
-    ``searches``, None: none). ``overrides`` change every scenario's config (e.g. a short ``horizon_years`` for
-    tests). An agent that does not fit a scenario (:func:`fitting_agents`) is left out there. The payload of
-    the module docstring: "results" (one row per scenario and policy, the best rule first, then by mean cost),
-    "bound" (per scenario), "seeds", "best_rule" (per scenario), "not_scored" (per scenario, the agents left out
-    and why)."""
+    ``searches``, the committed bound cache from ``shipped_bounds``; None: none). ``overrides`` change every
+    scenario's config (e.g. a short ``horizon_years`` for tests, or the engine's options). An agent that does not
+    fit a scenario (:func:`fitting_agents`) is left out there. The payload of the module docstring: "results" (one
+    row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
+    "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and why), "config_overrides"."""
     from ..rules.problems import rules_for, tuned_params_for, tuned_rule
 
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
@@ -388,7 +395,8 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         entry: dict[str, Any] = {"available": reason is None, "reason": reason}
         if reason is None:
             t0 = time.perf_counter()
-            b = episode_bounds(cfg, name, rule_results, Path(out_dir) / "bounds", executor, searches)
+            b = episode_bounds(cfg, name, rule_results, Path(out_dir) / "bounds", executor, searches,
+                               shipped_bounds)
             bound_cost = b["cost"]
             lo, hi = bootstrap_ci(bound_cost)
             gap = paired_difference(_as_result(best, bound_cost, "bound"), best)

@@ -142,6 +142,19 @@ def test_saved_searches_are_reused_where_they_replay(first, tmp_path) -> None:
     assert again["bound"][ENV]["episode_costs"] == pytest.approx(payload["bound"][ENV]["episode_costs"])
 
 
+def test_a_fresh_output_folder_reads_the_committed_bound_cache(first, tmp_path) -> None:
+    """The committed bound cache (here the first run's) serves a fresh output folder for the same config and
+    search settings, as its own cache would: no search; another config finds nothing there and searches."""
+    payload, out = first
+    again = run_leaderboard([ENV], rules=RULES, seeds=SEEDS, out_dir=tmp_path / "fresh", searches=None,
+                            shipped_bounds=out / "bounds", **TINY)
+    assert again["bound"][ENV]["sources"] == {"cache": len(SEEDS), "saved": 0, "replayed": 0, "search": 0}
+    assert again["bound"][ENV]["episode_costs"] == payload["bound"][ENV]["episode_costs"]
+    other = run_leaderboard([ENV], rules=RULES, seeds=SEEDS[:1], out_dir=tmp_path / "other", searches=None,
+                            shipped_bounds=out / "bounds", horizon_years=1.0)
+    assert other["bound"][ENV]["sources"]["search"] == 1
+
+
 def test_faster_options_replay_the_classic_engines_bound(first, tmp_path) -> None:
     """With the fast engine and pass reuse the bound is the classic search's schedules replayed under them (no new
     search), capped at the best rule, cached under the faster config's own key; the table says so."""
