@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-BOUNDS = ROOT / "experiments" / "saved" / "leaderboard" / "bounds"
 OUT = ROOT / "experiments" / "saved" / "engine_switch.json"
 SCENARIOS = ("default", "small", "track60", "choices", "wet", "defects")
 FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
@@ -37,9 +36,11 @@ FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
 
 def bound_file(scenario_name: str) -> Path:
     """The leaderboard's bound cache of a scenario (one file per scenario ships)."""
-    found = sorted(BOUNDS.glob(f"{scenario_name}_*.json"))
+    from trackenv_agents.evaluation.leaderboard import SHIPPED_BOUNDS
+
+    found = sorted(SHIPPED_BOUNDS.glob(f"{scenario_name}_*.json"))
     if len(found) != 1:
-        raise SystemExit(f"expected one bound file of {scenario_name!r} in {BOUNDS}, found {len(found)}")
+        raise SystemExit(f"expected one bound file of {scenario_name!r} in {SHIPPED_BOUNDS}, found {len(found)}")
     return found[0]
 
 

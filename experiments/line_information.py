@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-BOUNDS = ROOT / "experiments" / "saved" / "leaderboard" / "bounds"
 OUT = ROOT / "experiments" / "saved" / "line_information.json"
 FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
 #: recording designs by their ``--design`` name: what the recording car tells (the preset's measurement fields
@@ -63,11 +62,12 @@ PLANNER = {"neighbour_mm": 100.0}
 
 def bound_schedules() -> tuple[list[int], list[np.ndarray]]:
     """The leaderboard's default-line seeds and their saved bound schedules."""
+    from trackenv_agents.evaluation.leaderboard import SHIPPED_BOUNDS
     from trackenv_agents.evaluation.line_hindsight import schedule_from_rows
 
-    found = sorted(BOUNDS.glob("default_*.json"))
+    found = sorted(SHIPPED_BOUNDS.glob("default_*.json"))
     if len(found) != 1:
-        raise SystemExit(f"expected one bound file of the default line in {BOUNDS}, found {len(found)}")
+        raise SystemExit(f"expected one bound file of the default line in {SHIPPED_BOUNDS}, found {len(found)}")
     episodes = json.loads(found[0].read_text())["episodes"]
     seeds = sorted(int(s) for s in episodes)
     return seeds, [schedule_from_rows(episodes[str(s)]["schedule"]) for s in seeds]

@@ -13,11 +13,12 @@ def warm_dynamics_kernel():
     """Load (or, on a fresh machine, compile) every entry of the dynamics kernel once per session, before the
     first test, so that its compile cost lands here once instead of inside whichever test happens to run first.
     Each (serial/parallel, batch width) pair is its own compiled entry (see trackenv.physics._kernel) and the
-    suite uses them all; cold, their compilation is most of the suite's time, so the widths compile in two
-    worker processes at once (as ``trackenv compile`` does), and this one then loads them from numba's cache."""
-    from trackenv.physics.kernels import compile_kernels
+    suite uses them all; cold, their compilation is most of the suite's time, so the widths compile in worker
+    processes at once, one per usable core (as ``trackenv compile`` does), and this one then loads them from
+    numba's cache."""
+    from trackenv.physics.kernels import compile_kernels, usable_cores
 
-    compile_kernels(load=True, jobs=2)
+    compile_kernels(load=True, jobs=usable_cores())
     # the compiled inverse of the root-solved settlement laws (trackenv.physics._implicit), one entry
     from trackenv.physics.settlement import SatoLaw
 

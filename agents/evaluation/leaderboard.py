@@ -214,6 +214,13 @@ def _saved_bounds(config: Any, scenario_name: str, seeds: list[int], searches: P
             for k, c in zip(keep, replayed, strict=True) if abs(c - costs[k]) <= 1e-6 * abs(costs[k])}
 
 
+def _cached_episodes(path: Path) -> dict[int, dict[str, Any]]:
+    """The episodes of a bound cache file by seed ({} where there is no such file)."""
+    if not path.exists():
+        return {}
+    return {int(k): v for k, v in json.loads(path.read_text())["episodes"].items()}
+
+
 def _replayed_bounds(config: Any, scenario_name: str, seeds: list[int],
                      folders: Sequence[Path]) -> dict[int, dict[str, Any]]:
     """For a config whose passes run otherwise than the presets' (the fast engine, pass reuse): the bounds of the
@@ -225,14 +232,13 @@ def _replayed_bounds(config: Any, scenario_name: str, seeds: list[int],
     from ..rules.problems import computed_as_presets
     from .line_hindsight import replay_schedules, schedule_from_rows
 
-    if not hasattr(config, "engine") or computed_as_presets(config) == config:
+    twin = computed_as_presets(config) if hasattr(config, "engine") else config
+    if twin == config:
         return {}
-    twin, rows = computed_as_presets(config), {}
+    rows: dict[int, list] = {}
     for folder in folders:
-        path = _cache_path(twin, scenario_name, Path(folder))
-        if path.exists():
-            episodes = json.loads(path.read_text())["episodes"]
-            rows.update({s: episodes[str(s)]["schedule"] for s in seeds if s not in rows and str(s) in episodes})
+        episodes = _cached_episodes(_cache_path(twin, scenario_name, Path(folder)))
+        rows.update({s: episodes[s]["schedule"] for s in seeds if s not in rows and s in episodes})
     if not rows:
         return {}
     have = sorted(rows)
@@ -255,15 +261,10 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
     best = rules[0]
     seeds = [int(s) for s in best.seeds]
     path = _cache_path(config, scenario_name, Path(cache_dir))
-    cached: dict[int, dict[str, Any]] = {}
-    if path.exists():
-        cached = {int(k): v for k, v in json.loads(path.read_text())["episodes"].items()}
-    found = {s: {**cached[s], "source": "cache"} for s in seeds if s in cached}
-    committed = None if shipped is None else _cache_path(config, scenario_name, shipped)
-    if committed is not None and committed.exists() and committed.resolve() != path.resolve():
-        episodes = json.loads(committed.read_text())["episodes"]
-        found.update({s: {**episodes[str(s)], "source": "cache"} for s in seeds
-                      if s not in found and str(s) in episodes})
+    cached = _cached_episodes(path)
+    committed = {} if shipped is None else _cached_episodes(_cache_path(config, scenario_name, shipped))
+    known = {**committed, **cached}  # the output folder's own first (the same file where it is the committed one)
+    found = {s: {**known[s], "source": "cache"} for s in seeds if s in known}
     if searches is not None and searches.is_dir():
         todo = [s for s in seeds if s not in found]
         found.update(_saved_bounds(config, scenario_name, todo, searches) if todo else {})
