@@ -317,14 +317,14 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     the hindsight bound (agents/evaluation/leaderboard.py); writes DIR/leaderboard.json and DIR/leaderboard.md."""
     from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard
     from .evaluation.line_compare import parse_seeds, scenario_of
-    from .rules.line import LINE_HEURISTICS
+    from .rules.problems import every_rule
 
     envs = [e.strip() for e in args.env.split(",")] if args.env else list(DEFAULT_SUITE)
     for env_id in envs:
         scenario_of(env_id)  # an unknown id: one line, before anything slow
     seeds = parse_seeds(args.seeds) if args.seeds else None
     overrides = engine_overrides(args)
-    rules, agent_files = _leaderboard_policies(args.policies, list(LINE_HEURISTICS))
+    rules, agent_files = _leaderboard_policies(args.policies, list(every_rule()))
     agents: dict[str, Any] = {}
     if agent_files:
         from .learning.baselines import load_baseline

@@ -209,12 +209,12 @@ def time_env(layout: str, budget_s: float) -> dict:
     if layout != "a":
         decay_lengths = float(layout[1:])
 
-        def call(tracks, *args, **kwargs):
-            margin = max(dynamics.window_margin(t, decay_lengths) for t in tracks)
-            return dynamics.simulate_passes(tracks, *args, **{**kwargs, "window_bays": margin,
-                                                              "window_ends": "static"})
+        def call(batches):
+            return dynamics.simulate_pass_batches([
+                {**b, "window_bays": max(dynamics.window_margin(t, decay_lengths) for t in b["tracks"]),
+                 "window_ends": "static"} for b in batches])
 
-        line_episode.simulate_passes = call
+        line_episode.simulate_pass_batches = call
     cpu0 = time.process_time()
     line = bench._bench_env(1000, budget_s, env_id="trackenv/TampingLine-v0")
     vector = bench._bench_vector_env(8, 1000, budget_s, line=True)

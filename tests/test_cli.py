@@ -385,6 +385,8 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
     (["--seeds=-3:2"], "--seeds must be A:B with B > A"),
     (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
     (["--policies", "cpi-agent"], "--policies names no rule"),
+    (["--env", "trackenv/TampingLineSmall-v0", "--policies", "choice-threshold"],
+     "rules must name some of small's rules ['budgeted-worst-first',"),
     (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
     (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
     (["--policies", f"rules,{HERE / 'conftest.py'}"], "conftest.py: a trained policy is a .zip (stable-baselines3) or"),

@@ -10,7 +10,14 @@ from importlib import metadata as _metadata
 from ._openmp import prefer_passive_wait as _prefer_passive_wait
 from .degradation import DegradationHistory, IterationRecord, RunawayError, RunawayWarning, TrackDegradation
 from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
-from .physics.dynamics import PassResult, receptance, simulate_pass, simulate_passes, static_deflection
+from .physics.dynamics import (
+    PassResult,
+    receptance,
+    simulate_pass,
+    simulate_pass_batches,
+    simulate_passes,
+    static_deflection,
+)
 from .physics.settlement import (
     LAWS,
     AlvaHurtadoSeligLaw,
@@ -59,6 +66,7 @@ __all__ = [
     "make_law",
     "receptance",
     "simulate_pass",
+    "simulate_pass_batches",
     "simulate_passes",
     "static_deflection",
     "zhai_contact_constant",

@@ -360,27 +360,32 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
                     out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
                     progress: bool = False, searches: Path | None = SAVED_SEARCHES,
                     shipped_bounds: Path | None = SHIPPED_BOUNDS, **overrides: Any) -> dict[str, Any]:
-    """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; default all tuned
-    rules) and ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds``
-    (default :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
+    """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; on each scenario
+    those of its family, :func:`~trackenv_agents.rules.problems.rules_for`; default all tuned rules) and
+    ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds`` (default
+    :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
     ``searches``, the committed bound cache from ``shipped_bounds``; None: none). ``overrides`` change every
     scenario's config (e.g. a short ``horizon_years`` for tests, or the engine's options). An agent that does not
     fit a scenario (:func:`fitting_agents`) is left out there. The payload of the module docstring: "results" (one
     row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
     "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and why), "config_overrides"."""
-    from ..rules.problems import rules_for, tuned_params_for, tuned_rule
+    from ..rules.problems import every_rule, rules_for, tuned_params_for, tuned_rule
 
+    unknown = [n for n in rules or () if n not in every_rule()]
+    if unknown:
+        raise ValueError(f"rules must be among {sorted(every_rule())}, got unknown {unknown}")
+    configs = {env_id: scenario_config(scenario_of(env_id), **overrides) for env_id in envs}
+    lines = {env_id: cfg.line_config if isinstance(cfg, NetworkConfig) else cfg for env_id, cfg in configs.items()}
+    wanted_at = {env_id: [n for n in (rules if rules is not None else tuned_params_for(line)) if n in rules_for(line)]
+                 for env_id, line in lines.items()}
+    for env_id, wanted in wanted_at.items():  # (the rules of the choices apply only where a config enables them)
+        if not wanted:
+            family = sorted(rules_for(lines[env_id]))
+            raise ValueError(f"rules must name some of {scenario_of(env_id)}'s rules {family}, got {list(rules or [])}")
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
                                "config_overrides": dict(overrides)}
     for env_id in envs:
-        name = scenario_of(env_id)
-        cfg = scenario_config(name, **overrides)
-        line = cfg.line_config if isinstance(cfg, NetworkConfig) else cfg
-        family, tuned = rules_for(line), tuned_params_for(line)
-        wanted = list(rules) if rules is not None else [n for n in tuned if n in family]
-        unknown = [n for n in wanted if n not in family]
-        if unknown or not wanted:
-            raise ValueError(f"rules must name some of {sorted(family)}, got {list(wanted)}")
+        name, cfg, line, wanted = scenario_of(env_id), configs[env_id], lines[env_id], wanted_at[env_id]
         here, unfit = fitting_agents(agents or {}, cfg)
         pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]

@@ -32,6 +32,11 @@ def rules_for(config: Any) -> dict[str, Any]:
         raise ValueError(f"config must be a LineConfig, got {type(config).__name__}")
     if tuple(config.choices) == ("tamp",):
         return LINE_HEURISTICS
+    return every_rule()
+
+
+def every_rule() -> dict[str, Any]:
+    """Every rule class by name: the tamping rules and the rules that use the choices."""
     return {**LINE_HEURISTICS, **CHOICE_RULES}
 
 

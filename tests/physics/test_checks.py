@@ -108,14 +108,14 @@ def test_config_counts_the_time_steps_of_the_pass_the_env_runs(name, monkeypatch
     if name == "track60":  # a segment of 30 m, as the line's
         cfg = cfg.replace(n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3)
     counted = []
-    original = line_episode.simulate_passes
+    original = line_episode.simulate_pass_batches
 
-    def recording(tracks, vehicle, *args, **kwargs):
-        results = original(tracks, vehicle, *args, **kwargs)
-        counted.append((vehicle.system().span, {r.time.size - 1 for r in results}))
+    def recording(batches):
+        results = original(batches)
+        counted.extend((b["vehicle"].system().span, {r.time.size - 1 for r in res}) for b, res in zip(batches, results))
         return results
 
-    monkeypatch.setattr(line_episode, "simulate_passes", recording)
+    monkeypatch.setattr(line_episode, "simulate_pass_batches", recording)
     TrackEnv(cfg).reset(seed=0)
     assert len(counted) == (cfg.axle_passes_per_step() > 0).sum()  # one pass per vehicle type with traffic
     for span, steps in counted:

@@ -16,7 +16,7 @@ def test_stage_timer_profiles_env_steps_and_restores_the_functions():
     def wrapped():
         episode = trackenv.envs.line_episode
         return (trackenv.physics._kernel.run, trackenv.degradation.implicit_settlement_step,
-                episode.simulate_passes, episode.implicit_settlement_step, episode.d1_filter)
+                episode.simulate_pass_batches, episode.implicit_settlement_step, episode.d1_filter)
 
     before = wrapped()
     env = gymnasium.make("trackenv/Tamping-v1")
@@ -35,6 +35,29 @@ def test_stage_timer_profiles_env_steps_and_restores_the_functions():
     assert set(shares) == {key for key, _ in PROFILE_LABELS}
     assert all(v >= 0.0 for v in shares.values())
     assert np.isclose(sum(shares.values()), 1.0)  # the stages are disjoint and "other" is the rest
+
+
+def test_a_stage_running_in_two_threads_at_once_counts_its_wall_time_once():
+    """Kernels side by side (two threads) count the wall time during which either runs, not the sum of both."""
+    import threading
+
+    timer, barrier, spans = _StageTimer(), threading.Barrier(2, timeout=30), []
+
+    def kernel():
+        t0 = time.perf_counter()
+        barrier.wait()  # both calls run at once
+        time.sleep(0.05)
+        spans.append((t0, time.perf_counter()))
+
+    timed = timer._timed("kernel", kernel)
+    threads = [threading.Thread(target=timed) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    union = max(end for _, end in spans) - min(start for start, _ in spans)
+    assert max(end - start for start, end in spans) <= timer.seconds["kernel"] <= union + 0.01
+    assert timer.seconds["kernel"] < sum(end - start for start, end in spans)
 
 
 def test_format_profile_is_a_markdown_table_of_every_env_benchmark():

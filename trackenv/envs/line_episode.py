@@ -23,7 +23,7 @@ from gymnasium import spaces
 from scipy.ndimage import gaussian_filter1d
 
 from ..degradation import INFLUENCE_BAND, TrackDegradation
-from ..physics.dynamics import simulate_passes
+from ..physics.dynamics import simulate_pass_batches
 from ..physics.engine import CLASSIC_ENGINE, ENGINES
 from ..physics.geometry import (
     classify,
@@ -688,18 +688,21 @@ class LineBatch:
         speed, mix = self.pass_speed[segs], self.axle_mix[segs]
         forces, contact = np.zeros((len(self.vehicles), len(segs), n)), np.zeros(len(segs))
         bays = np.zeros((len(segs), n))
+        jobs, batches = [], []
         for k, v in enumerate(self.vehicles):
             for pass_speed in np.unique(speed[mix[:, k] > 0]):  # none: no traffic of this type, no pass
                 for rows, options in self._pass_groups(segs, (speed == pass_speed) & (mix[:, k] > 0), v):
-                    res = simulate_passes([self.model_tracks[segs[i]] for i in rows], v, float(pass_speed), None,
-                                          support_settlement=prof[rows], dt=c.dt, **options)
-                    forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
-                    # over the segment's own bays: the approach and exit zones (and the pass's start, whose
-                    # ringing is larger than what a local defect adds) are not the section's
-                    bay = np.stack([r.contact_force_profile()[ne : ne + n] for r in res])
-                    contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
-                    if self._profiles_needed:
-                        bays[rows] = np.maximum(bays[rows], bay)
+                    jobs.append((k, rows))
+                    batches.append(dict(tracks=[self.model_tracks[segs[i]] for i in rows], vehicle=v,
+                                        speed=float(pass_speed), support_settlement=prof[rows], dt=c.dt, **options))
+        for (k, rows), res in zip(jobs, simulate_pass_batches(batches), strict=True):
+            forces[k, rows] = np.stack([r.sleeper_force[ne : ne + n] for r in res])
+            # over the segment's own bays: the approach and exit zones (and the pass's start, whose ringing is
+            # larger than what a local defect adds) are not the section's
+            bay = np.stack([r.contact_force_profile()[ne : ne + n] for r in res])
+            contact[rows] = np.maximum(contact[rows], bay.max(axis=1))
+            if self._profiles_needed:
+                bays[rows] = np.maximum(bays[rows], bay)
         return forces, contact, bays
 
     def _pass_groups(self, segs: np.ndarray, selected: np.ndarray, vehicle) -> list[tuple[np.ndarray, dict]]:

@@ -35,61 +35,61 @@ def _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, W):
     _run_chunk(mesh, drive, rows, peaks, reuse, ch, W)
 
 
-@kernel_jit(fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, nogil=True)
 def _serial_1(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
         _run_chunk(mesh, drive, rows, peaks, reuse, ch, 1)
 
 
-@kernel_jit(fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, nogil=True)
 def _serial_4(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 4)
 
 
-@kernel_jit(fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, nogil=True)
 def _serial_6(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 6)
 
 
-@kernel_jit(fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, nogil=True)
 def _serial_8(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 8)
 
 
-@kernel_jit(fastmath=FASTMATH)
+@kernel_jit(fastmath=FASTMATH, nogil=True)
 def _serial_16(mesh, drive, rows, peaks, reuse):
     for ch in range(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, ch, 16)
 
 
-@kernel_jit(parallel=True, fastmath=FASTMATH)
+@kernel_jit(parallel=True, fastmath=FASTMATH, nogil=True)
 def _parallel_1(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 1)
 
 
-@kernel_jit(parallel=True, fastmath=FASTMATH)
+@kernel_jit(parallel=True, fastmath=FASTMATH, nogil=True)
 def _parallel_4(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 4)
 
 
-@kernel_jit(parallel=True, fastmath=FASTMATH)
+@kernel_jit(parallel=True, fastmath=FASTMATH, nogil=True)
 def _parallel_6(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 6)
 
 
-@kernel_jit(parallel=True, fastmath=FASTMATH)
+@kernel_jit(parallel=True, fastmath=FASTMATH, nogil=True)
 def _parallel_8(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 8)
 
 
-@kernel_jit(parallel=True, fastmath=FASTMATH)
+@kernel_jit(parallel=True, fastmath=FASTMATH, nogil=True)
 def _parallel_16(mesh, drive, rows, peaks, reuse):
     for ch in prange(rows.u.shape[0]):
         _run_chunk_shared(mesh, drive, rows, peaks, reuse, np.int64(ch), 16)

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.interpolate
 import scipy.linalg
 
-from . import _kernel, _step
+from . import _kernel, _side_by_side, _step
 from ._checks import check_array, check_choice, check_instance, check_scalar, check_speed, check_time_steps
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
@@ -672,6 +672,18 @@ def simulate_passes(
     torch (:mod:`trackenv.physics.torch_pass`) on ``device`` ("cpu", "cuda", ...; None: the CPU), within ~1e-9
     relative of the kernel (its window solves round differently).
     """
+    with _side_by_side.python_side():  # (see simulate_pass_batches)
+        return _simulate_passes(tracks, vehicle, speed, irregularities, dt=dt, contact=contact, start=start,
+                                x_start=x_start, x_end=x_end, window_bays=window_bays, window_ends=window_ends,
+                                window_decay_lengths=window_decay_lengths,
+                                sleeper_force_measure=sleeper_force_measure, support_settlement=support_settlement,
+                                backend=backend, device=device)
+
+
+def _simulate_passes(tracks, vehicle, speed, irregularities, *, dt, contact, start, x_start, x_end, window_bays,
+                     window_ends, window_decay_lengths, sleeper_force_measure, support_settlement, backend,
+                     device) -> list[PassResult]:
+    """:func:`simulate_passes`, its Python side held."""
     tracks = _as_tracks(tracks)
     check_choice("backend", backend, BACKENDS)
     system, law, speed = _vehicle_system(vehicle), _contact_law(contact), check_speed(speed)
@@ -846,7 +858,9 @@ def _integrate(batch: _Batch) -> _Run:
     from .kernels import announce_compile  # (kernels imports this module's helpers)
 
     announce_compile(arguments[2].u.shape[0] > 1, arguments[-1])
-    _kernel.run(*arguments)
+    reuse = arguments[4]
+    with _side_by_side.kernel_outside(None if reuse is _NO_REUSE else reuse):
+        _kernel.run(*arguments)
     return run
 
 
@@ -997,6 +1011,8 @@ def _kernel_arguments(batch: _Batch, state: _State, x_axle: np.ndarray, z_packed
     keep = one_row and batch.keep_factors
     reuse = (_one_row_reuse(t0, batch.dt, system.axle_offsets, cluster, batch.margin_bays, batch.ends) if keep
              else _NO_REUSE)
+    if _side_by_side.store_in_use(reuse):  # a pass beside this one writes it now: this one keeps nothing
+        reuse = _NO_REUSE
     return mesh, drive, rows, peaks, reuse, width
 
 
@@ -1285,6 +1301,19 @@ def simulate_pass(track: Track, vehicle, speed: float, irregularity: Irregularit
             raise ValueError(f"irregularity must be one profile (1-D), got shape {arr.shape}")
         return simulate_passes(track, vehicle, speed, [arr], **options)[0]
     return simulate_passes(track, vehicle, speed, None if irregularity is None else [irregularity], **options)[0]
+
+
+def simulate_pass_batches(batches: Sequence[dict]) -> list[list[PassResult]]:
+    """``[simulate_passes(**b) for b in batches]`` for independent batches (e.g. one per vehicle type or speed),
+    those of a few rows run side by side on the cores (:mod:`trackenv.physics._side_by_side`): each one's results
+    are those of its call alone, bit for bit. A batch is the keyword arguments of :func:`simulate_passes`."""
+    import numba
+
+    def rows(b: dict) -> int:
+        return len(_batch_rows(_as_tracks(b["tracks"]), b.get("irregularities"))[0])
+
+    threads = numba.get_num_threads() if all(b.get("backend", "numba") == "numba" for b in batches) else 1
+    return _side_by_side.run_side_by_side(batches, lambda b: simulate_passes(**b), rows, threads)
 
 
 KERNEL_ENTRIES = tuple(_kernel._RUNNERS)

@@ -208,8 +208,18 @@ def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
 
 
 def test_unknown_rule_is_refused(tmp_path) -> None:
-    with pytest.raises(ValueError, match="rules must name"):
-        run_leaderboard([ENV], rules=["no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
+    with pytest.raises(ValueError, match="rules must be among .*got unknown \\['no-such-rule'\\]"):
+        run_leaderboard([ENV], rules=["grouped-threshold", "no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
+
+
+def test_a_scenario_scores_the_named_rules_of_its_family(tmp_path) -> None:
+    """The rules of the choices apply only where a config enables them: named with a tamping rule, a tamping-only
+    scenario scores the tamping rule; named alone there, the scenario is refused by name."""
+    payload = run_leaderboard([ENV], rules=["choice-threshold", "grouped-threshold"], seeds=SEEDS[:1], bound=False,
+                              out_dir=tmp_path, **TINY)
+    assert [r["policy"] for r in payload["results"]] == ["grouped-threshold"]
+    with pytest.raises(ValueError, match="rules must name some of small's rules"):
+        run_leaderboard([ENV], rules=["choice-threshold"], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
 
 
 def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp_path) -> None:
