@@ -374,18 +374,19 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     unknown = [n for n in rules or () if n not in every_rule()]
     if unknown:
         raise ValueError(f"rules must be among {sorted(every_rule())}, got unknown {unknown}")
-    configs = {env_id: scenario_config(scenario_of(env_id), **overrides) for env_id in envs}
+    names = {env_id: scenario_of(env_id) for env_id in envs}
+    configs = {env_id: scenario_config(name, **overrides) for env_id, name in names.items()}
     lines = {env_id: cfg.line_config if isinstance(cfg, NetworkConfig) else cfg for env_id, cfg in configs.items()}
     wanted_at = {env_id: [n for n in (rules if rules is not None else tuned_params_for(line)) if n in rules_for(line)]
                  for env_id, line in lines.items()}
     for env_id, wanted in wanted_at.items():  # (the rules of the choices apply only where a config enables them)
         if not wanted:
             family = sorted(rules_for(lines[env_id]))
-            raise ValueError(f"rules must name some of {scenario_of(env_id)}'s rules {family}, got {list(rules or [])}")
+            raise ValueError(f"rules must name some of {names[env_id]}'s rules {family}, got {list(rules or [])}")
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
                                "config_overrides": dict(overrides)}
     for env_id in envs:
-        name, cfg, line, wanted = scenario_of(env_id), configs[env_id], lines[env_id], wanted_at[env_id]
+        name, cfg, line, wanted = names[env_id], configs[env_id], lines[env_id], wanted_at[env_id]
         here, unfit = fitting_agents(agents or {}, cfg)
         pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]

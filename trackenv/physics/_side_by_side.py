@@ -8,8 +8,8 @@ releases only while its kernel runs (:func:`kernel_outside`; the kernel's entrie
 caches of :mod:`trackenv.physics.dynamics` see one thread at a time, as in a plain call, and a row's result is
 the same, bit for bit, whether its batch runs alone or beside another. The one thing two running kernels could
 share is the store in which a one-row pass keeps its window factors for the next pass over its track: a store in
-use by a running kernel is marked (:func:`claim_store`), and a second pass over it meanwhile computes its factors
-afresh (the same arithmetic: the same numbers).
+use by a running kernel is marked (:func:`kernel_outside`, read by :func:`store_in_use`), and a second pass over
+it meanwhile computes its factors afresh (the same arithmetic: the same numbers).
 """
 
 from __future__ import annotations
@@ -66,14 +66,13 @@ def python_side() -> Iterator[None]:
 
 @contextlib.contextmanager
 def kernel_outside(store) -> Iterator[None]:
-    """Let other threads' Python side run while this thread's kernel runs (``store``: the one-row store of kept
-    factors the kernel writes, or None), then take the lock back."""
+    """Let other threads' Python side run while this thread's kernel runs (``store``: the store of kept factors
+    the kernel is handed, marked in use meanwhile), then take the lock back."""
     if not _holds():
         yield
         return
-    key = None if store is None else id(store)
-    if key is not None:
-        _STORES_IN_USE.add(key)
+    key = id(store)
+    _STORES_IN_USE.add(key)
     _HELD.held = False
     _LOCK.release()
     try:
@@ -103,13 +102,11 @@ def run_side_by_side(jobs: Sequence[Job], run: Callable[[Job], Result], rows: Ca
     first, one at a time with every thread. With fewer than two small jobs or two threads, in order here."""
     import numba
 
-    small = [] if threads < 2 or len(jobs) < 2 else [i for i, job in enumerate(jobs)
-                                                     if rows(job) <= SIDE_BY_SIDE_MAX_ROWS]
+    fits = [threads >= 2 and len(jobs) >= 2 and rows(job) <= SIDE_BY_SIDE_MAX_ROWS for job in jobs]
+    small = [i for i, fit in enumerate(fits) if fit]
     if len(small) < 2:
         return [run(job) for job in jobs]
-    results: list = [None] * len(jobs)  # (each filled below)
-    for i in sorted(set(range(len(jobs))) - set(small)):
-        results[i] = run(jobs[i])
+    results: list = [run(job) if not fit else None for job, fit in zip(jobs, fits, strict=True)]  # the large ones
     workers = min(threads, len(small))
     share = max(1, threads // workers)
 

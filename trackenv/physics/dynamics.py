@@ -858,8 +858,7 @@ def _integrate(batch: _Batch) -> _Run:
     from .kernels import announce_compile  # (kernels imports this module's helpers)
 
     announce_compile(arguments[2].u.shape[0] > 1, arguments[-1])
-    reuse = arguments[4]
-    with _side_by_side.kernel_outside(None if reuse is _NO_REUSE else reuse):
+    with _side_by_side.kernel_outside(arguments[4]):  # (the store of kept factors it writes, or _NO_REUSE)
         _kernel.run(*arguments)
     return run
 
