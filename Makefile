@@ -17,7 +17,8 @@ setup: $(BIN)/trackenv
 	$(BIN)/trackenv compile
 
 # the line first: the shipped agent against the best tuned rule and the calendar on 32 held-out episodes, paired;
-# then the 60 m track (the same rules and agent on the same engine), the paper's scenarios and the validation
+# then the 60 m track (its tuned rules, its shipped agent and the model-predictive planner on the same engine),
+# the paper's scenarios and the validation
 demo: setup
 	$(BIN)/trackenv evaluate --env trackenv/TampingLine-v0 --seeds 0:32 --rules grouped-threshold,uniform-periodic
 	$(BIN)/trackenv evaluate --env trackenv/Tamping-v1 --seeds 0:32 --out results/track60_compare

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS
+from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS, TRACK60_AGENT_NAME
 
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
@@ -166,10 +166,13 @@ def _one_step_of_each_problem() -> None:
 
 
 def shipped_agent_for(env_id: str) -> str:
-    """The shipped agent `evaluate` scores on ``env_id`` by default: the agent of the lines with every choice
-    (``cpi-choice-agent``) on an id with every choice, else the tamp-or-wait agent (``cpi-agent``)."""
-    from .evaluation.line_compare import action_type_of
+    """The shipped agent `evaluate` scores on ``env_id`` by default: the agent of the 60 m track
+    (``cpi-track60-agent``) there, the agent of the lines with every choice (``cpi-choice-agent``) on an id with
+    every choice, else the tamp-or-wait agent (``cpi-agent``)."""
+    from .evaluation.line_compare import action_type_of, scenario_of
 
+    if scenario_of(env_id) == "track60":
+        return TRACK60_AGENT_NAME
     return CHOICE_AGENT_NAME if action_type_of(env_id) == "choices" else LINE_AGENT_NAME
 
 
@@ -247,7 +250,8 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
     """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent),
-    ``cpi-choice-agent`` (the shipped agent of the lines with every choice), ``model-predictive`` (the planner,
+    ``cpi-choice-agent`` (the shipped agent of the lines with every choice), ``cpi-track60-agent`` (the shipped
+    agent of the 60 m track, scored where its planner advisor can plan), ``model-predictive`` (the planner,
     scored where a scenario measures every step without error), ``baselines`` (the committed baselines of
     experiments/saved/baselines/) or paths of trained policies (a .zip
     of stable-baselines3, a folder of experiments/train_rllib.py; the kind is told by the files there,
@@ -288,7 +292,7 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             agents[item if taken else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{LINE_AGENT_NAME}, {CHOICE_AGENT_NAME}, {ModelPredictive.name} or the path of a "
+                             f"{', '.join(SHIPPED_AGENTS)}, {ModelPredictive.name} or the path of a "
                              "trained policy (.zip, or a folder of experiments/train_rllib.py)")
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
@@ -641,7 +645,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--model", default=None, metavar="ZIP",
                     help=f"a trained per-section policy (default: the shipped {LINE_AGENT_NAME}, "
                          f"agents/learning/pretrained/ppo_tamping_line.zip; on the ids with every choice "
-                         f"{CHOICE_AGENT_NAME}, agents/learning/pretrained/cpi_choice_line.zip)")
+                         f"{CHOICE_AGENT_NAME}, agents/learning/pretrained/cpi_choice_line.zip; on the 60 m track "
+                         f"{TRACK60_AGENT_NAME}, agents/learning/pretrained/cpi_track60.zip)")
     sp.add_argument("--rules", default=None, metavar="NAMES",
                     help="score only these rules, comma-separated (e.g. grouped-threshold,uniform-periodic; "
                          "default: all)")
@@ -670,7 +675,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--policies", default=f"rules,{LINE_AGENT_NAME}", metavar="NAMES",
                     help="comma-separated: 'rules' (every tuned rule), rule names, "
                          f"{LINE_AGENT_NAME} (the shipped agent), {CHOICE_AGENT_NAME} (the shipped agent of the "
-                         "lines with every choice), baselines (those committed in "
+                         f"lines with every choice), {TRACK60_AGENT_NAME} (the shipped agent of the 60 m track, "
+                         "scored there only), model-predictive (the planner, scored where a scenario measures every "
+                         "step without error), baselines (those committed in "
                          "experiments/saved/baselines/), paths of trained policies (a stable-baselines3 "
                          ".zip, a folder of experiments/train_rllib.py; each scored on the line it was trained on, "
                          "a per-section policy on every line)")

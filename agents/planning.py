@@ -56,8 +56,9 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
     """The policy ``name`` bound to ``config``: a rule of the config (:func:`~trackenv_agents.rules.rules_for`:
     the tamping rules, and the choice rules where the config has more choices) with the shipped tuned parameters
     of ``scenario`` (default: those of the preset ``config`` is, else the default line's), a shipped agent by its
-    name (:data:`~trackenv_agents.shipped.SHIPPED_AGENTS`: ``cpi-agent``, ``cpi-choice-agent``) or a trained
-    per-section policy by the path of its ``.zip``; ValueError for another."""
+    name (:data:`~trackenv_agents.shipped.SHIPPED_AGENTS`: ``cpi-agent``, ``cpi-choice-agent``,
+    ``cpi-track60-agent``) or a trained per-section policy by the path of its ``.zip``; ValueError for another,
+    or for an agent that cannot run on ``config`` (its reason)."""
     from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_rule
 
     rules = rules_for(config)
@@ -72,6 +73,9 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
             agent = load_line_trained(SHIPPED_AGENTS.get(name, name), name=Path(name).stem)
         except FileNotFoundError as exc:
             raise ValueError(f"policy {name!r}: {exc}") from None
+        why = agent.unfit_for(config)
+        if why is not None:
+            raise ValueError(f"policy {name!r} cannot run on this line: {why}")
         return agent.bind(config)
     raise ValueError(f"unknown policy {name!r}; known: {', '.join([*rules, *SHIPPED_AGENTS])} or the path of a "
                      "trained per-section policy (.zip)")

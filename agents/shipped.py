@@ -17,10 +17,11 @@ LINE_PRETRAINED_FILE = PRETRAINED / "ppo_tamping_line.zip"
 CHOICE_AGENT_NAME = "cpi-choice-agent"
 CHOICE_PRETRAINED_FILE = PRETRAINED / "cpi_choice_line.zip"
 #: the same kind of network trained on the 60 m track (``trackenv/Tamping-v1``, six sections on one physics segment:
-#: each decision priced by forking the whole line), with the 60 m track's tuned grouped threshold as advisor: where
-#: ``experiments/train_line.py --scenario track60 --export`` writes it; not among :data:`SHIPPED_AGENTS` until one
-#: beats that rule on held-out episodes (none has yet: the documentation's agents page)
+#: each decision priced by forking the whole line), with the model-predictive planner as advisor (whose SD history
+#: is the agent's recurrent state); it runs where that planner can plan, a line measured every step without error
+#: (``experiments/train_line.py --scenario track60 --advisor model-predictive --export`` writes it)
 TRACK60_AGENT_NAME = "cpi-track60-agent"
 TRACK60_PRETRAINED_FILE = PRETRAINED / "cpi_track60.zip"
 #: name -> file of every shipped line agent
-SHIPPED_AGENTS: dict[str, Path] = {LINE_AGENT_NAME: LINE_PRETRAINED_FILE, CHOICE_AGENT_NAME: CHOICE_PRETRAINED_FILE}
+SHIPPED_AGENTS: dict[str, Path] = {LINE_AGENT_NAME: LINE_PRETRAINED_FILE, CHOICE_AGENT_NAME: CHOICE_PRETRAINED_FILE,
+                                   TRACK60_AGENT_NAME: TRACK60_PRETRAINED_FILE}

@@ -11,8 +11,9 @@ year). Here each is run, unchanged, on the default line with one condition moved
 * the recording car twice a year and every two years (``measurement_interval`` 2 and 8 steps).
 
 ``--scenario track60`` does the same on the 60 m track (``trackenv/Tamping-v1``: 40 MGT a year at 100 km/h, the SD
-measured every step), with the rules' parameters tuned there and the model-predictive planner
-(``model-predictive``, its model fitted and chosen on the nominal track) beside ``cpi-agent``: tonnage −50 % and
+measured every step), with the rules' parameters tuned there, the model-predictive planner (``model-predictive``,
+its model fitted and chosen on the nominal track) and the 60 m track's shipped agent (``cpi-track60-agent``, the
+planner as its advisor, trained on the nominal track) beside ``cpi-agent``: tonnage −50 % and
 +50 % (20 and 60 MGT), ballast stiffness ×0.5 and ×2, speed 70 and 140 km/h. (The planner needs the SD of every
 step, so the track has no recording-interval conditions.)
 
@@ -42,6 +43,7 @@ from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_differenc
 from trackenv_agents.learning.line import load_line_trained
 from trackenv_agents.rules.model_predictive import ModelPredictive
 from trackenv_agents.rules.problems import tuned_rule
+from trackenv_agents.shipped import TRACK60_AGENT_NAME, TRACK60_PRETRAINED_FILE
 
 
 def physical_conditions(scenario_name: str) -> tuple[tuple[str, dict], ...]:
@@ -71,15 +73,17 @@ AGENT = "cpi-agent"
 #: per scenario: its conditions and the policies other than the rules, each paired with the best rule
 SCENARIOS: dict[str, tuple[tuple[tuple[str, dict], ...], tuple[str, ...]]] = {
     "default": (CONDITIONS, (AGENT,)),
-    "track60": (TRACK60_CONDITIONS, (AGENT, ModelPredictive.name)),
+    "track60": (TRACK60_CONDITIONS, (AGENT, TRACK60_AGENT_NAME, ModelPredictive.name)),
 }
 
 
 def policies(scenario_name: str = "default") -> list:
-    """The shipped agent, the scenario's other policies (the planner on the 60 m track) and the shipped tuned rules
-    (parameters of the nominal scenario)."""
+    """The shipped agent, the scenario's other policies (on the 60 m track its own shipped agent and the planner)
+    and the shipped tuned rules (parameters of the nominal scenario)."""
     nominal = scenario(scenario_name)
-    others = [ModelPredictive()] if ModelPredictive.name in SCENARIOS[scenario_name][1] else []
+    named = SCENARIOS[scenario_name][1]
+    others = ([load_line_trained(TRACK60_PRETRAINED_FILE, name=TRACK60_AGENT_NAME)]
+              if TRACK60_AGENT_NAME in named else []) + ([ModelPredictive()] if ModelPredictive.name in named else [])
     return [load_line_trained(name=AGENT), *others] + [tuned_rule(nominal, n, require_tuned=True) for n in RULES]
 
 

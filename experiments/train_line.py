@@ -11,7 +11,9 @@ the best iteration (``best_model.zip``) to ``agents/learning/pretrained/ppo_tamp
 
 The 60 m track (``trackenv/Tamping-v1``, six 10 m sections on one physics segment): ``--scenario track60`` (each
 decision priced forks the whole line, :func:`~trackenv_agents.learning.line_counterfactual.line_forks`);
-``--export`` then copies it to ``agents/learning/pretrained/cpi_track60.zip`` (``cpi-track60-agent``).
+``--export`` then copies it to ``agents/learning/pretrained/cpi_track60.zip`` (``cpi-track60-agent``). The shipped
+one has the model-predictive planner as advisor (``--advisor model-predictive``: its SD history, which the forks
+carry on, is the agent's recurrent state); the documentation's agents page gives the command.
 ``--campaign`` prices whole campaigns there instead of single sections' choices
 (:func:`~trackenv_agents.learning.line_campaigns.campaign_counterfactuals`).
 
@@ -43,7 +45,7 @@ def main(argv=None) -> None:
                    default="default", help="the line preset (track60: the 60 m track of trackenv/Tamping-v1)")
     p.add_argument("--advisor", default=None,
                    help="the advisor rule (default: ppo.yml's); a choice rule (choice-threshold) on the lines with "
-                        "every choice")
+                        "every choice; model-predictive (the planner) on the 60 m track")
     p.add_argument("--horizon-years", type=float, default=None, help="shorter or longer episodes")
     p.add_argument("--iterations", type=int, default=None, help="policy iterations (default: hyperparams/ppo.yml)")
     p.add_argument("--episodes", type=int, default=None, help="training episodes per iteration (default: ppo.yml)")

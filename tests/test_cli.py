@@ -210,9 +210,9 @@ def test_evaluate_line_rules_option(monkeypatch, capsys):
 
 
 def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
-    """`trackenv evaluate` scores the agent of the lines with every choice on an id with every choice, the
-    tamp-or-wait agent elsewhere (the network's lines are tamp-or-wait), and a ``--model`` under the
-    tamp-or-wait agent's name."""
+    """`trackenv evaluate` scores the agent of the lines with every choice on an id with every choice, the 60 m
+    track's agent there, the tamp-or-wait agent elsewhere (the network's lines are tamp-or-wait), and a
+    ``--model`` under the tamp-or-wait agent's name."""
     pytest.importorskip("stable_baselines3")
     import trackenv_agents.evaluation.line_compare as lc
     from trackenv_agents.cli import shipped_agent_for
@@ -221,7 +221,7 @@ def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
     assert {env: shipped_agent_for(env) for env in ("trackenv/TampingLine-v0", "trackenv/Tamping-v1",
                                                     "trackenv/TampingNetwork-v0", "trackenv/TampingLine-v1",
                                                     "trackenv/TampingLineWet-v0", "trackenv/TampingLineDefects-v0")} \
-        == {"trackenv/TampingLine-v0": "cpi-agent", "trackenv/Tamping-v1": "cpi-agent",
+        == {"trackenv/TampingLine-v0": "cpi-agent", "trackenv/Tamping-v1": "cpi-track60-agent",
             "trackenv/TampingNetwork-v0": "cpi-agent", "trackenv/TampingLine-v1": "cpi-choice-agent",
             "trackenv/TampingLineWet-v0": "cpi-choice-agent", "trackenv/TampingLineDefects-v0": "cpi-choice-agent"}
     seen = {}
@@ -240,6 +240,10 @@ def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
     assert main(["evaluate", "--env", "trackenv/TampingLineWet-v0", "--seeds", "0:1", "--json",
                  "--model", str(DEFAULT_LINE_PRETRAINED)]) == 0
     assert list(seen["extra"]) == ["cpi-agent"]
+    assert main(["evaluate", "--env", "trackenv/Tamping-v1", "--seeds", "0:1", "--json"]) == 0
+    (name, agent), *planner = seen["extra"].items()
+    assert name == "cpi-track60-agent" and agent.advisor.name == "model-predictive" and agent.observation_state
+    assert [n for n, _ in planner] == ["model-predictive"]  # and the planner itself, where it can plan
     capsys.readouterr()
 
 

@@ -141,7 +141,7 @@ def test_robustness_conditions_each_move_one_field_of_their_scenario_and_are_val
         for label, overrides in conditions[1:]:
             moved = scenario(name, **overrides).to_dict()  # validated at construction
             assert {k for k in nominal if nominal[k] != moved[k]} == set(overrides), (name, label)
-    assert [p.name for p in mod.policies("track60")][:2] == [mod.AGENT, "model-predictive"]
+    assert [p.name for p in mod.policies("track60")][:3] == [mod.AGENT, "cpi-track60-agent", "model-predictive"]
 
 
 def test_robustness_table_pairs_each_policy_with_the_best_rule_also_from_a_saved_run_of_the_agent_alone():

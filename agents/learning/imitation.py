@@ -25,15 +25,19 @@ from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import ProblemConfig
 
 from ..rules import rules_for, tuned_rule
+from ..rules.problems import PLANNERS
 from .actions import RANKED
 
 
 def teacher_policy(rule: str, config: ProblemConfig, params: dict[str, Any] | None = None):
     """The heuristic ``rule`` with ``params`` (default: the tuned parameters of ``config``'s preset,
-    :func:`~trackenv_agents.rules.tuned_rule`), bound to ``config``'s planning calendar."""
+    :func:`~trackenv_agents.rules.tuned_rule`), bound to ``config``'s planning calendar; or a planner of
+    :data:`~trackenv_agents.rules.problems.PLANNERS` with ``params`` (default: its own)."""
+    if rule in PLANNERS:
+        return PLANNERS[rule](**(params or {})).bind(config)
     rules = rules_for(config)
     if rule not in rules:
-        raise ValueError(f"warm_start_rule must be one of {sorted(rules)}, got {rule!r}")
+        raise ValueError(f"warm_start_rule must be one of {sorted(rules) + sorted(PLANNERS)}, got {rule!r}")
     return (tuned_rule(config, rule) if params is None else rules[rule](**params)).bind(config)
 
 
@@ -70,12 +74,14 @@ def collect_demonstrations(env, teacher, action_type: str, n_episodes: int, gamm
     observations: list[dict[str, np.ndarray]] = []
     actions, rewards, dones = [], [], []
     completed = 0
+    state, starts = None, np.ones(n_envs, dtype=bool)  # a teacher with a recurrent state (a planner) keeps it
     while completed < rounds * n_envs:
-        sections, _ = teacher.predict(obs_raw)
+        sections, state = teacher.predict(obs_raw, state=state, episode_start=starts)
         act = teacher_to_agent_actions(sections, action_type)
         observations.append({k: np.array(v, copy=True) for k, v in obs_raw.items()})
         actions.append(act)
         obs, _, done, _ = env.step(act)
+        starts = done.copy()  # the env resets a finished episode: the next observation starts a new one
         rewards.append(env.get_original_reward().astype(np.float64))
         dones.append(done.copy())
         completed += int(done.sum())

@@ -216,6 +216,10 @@ class _LineTrainer:
         single_torch_thread()  # the physics (numba) wants the cores; the small network does not
         set_random_seed(seed)
         self.advisor = teacher_policy(s.advisor, config, None if s.advisor_params is None else dict(s.advisor_params))
+        if s.total_timesteps and getattr(self.advisor, "observation_state", False):
+            raise ValueError(f"total_timesteps must be 0 with the advisor {s.advisor!r}: the PPO stage's section "
+                             "agents ask their advisor on each observation alone, and this planner forecasts from "
+                             "the history it has been shown (its recurrent state)")
         #: the choices the network decides (learn_choices: those of LEARNABLE_CHOICES the config enables)
         self.learned: tuple[str, ...] = ("tamp",)
         if s.learn_choices:
@@ -552,8 +556,7 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
     """The line policy at ``path`` (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``), with SB3's
     ``predict`` on raw observations of any TampingLine scenario (its advisor rule rebuilt from the JSON beside
     it). FileNotFoundError if there is none; ValueError if it was trained on other features."""
-    from ..rules.choices import CHOICE_RULES
-    from ..rules.line import LINE_HEURISTICS
+    from ..rules.problems import advisor_rules
 
     path = Path(path) if path is not None else DEFAULT_LINE_PRETRAINED
     if not path.exists():
@@ -565,6 +568,6 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
         raise ValueError(f"{line_meta_path(path)}: trained on the features {meta.get('features')}, this version "
                          f"computes {_feature_names(advisor is not None, choice_features)}")
     model = _algo_class(meta["algo"]).load(str(path), device="cpu")
-    rule = None if advisor is None else (LINE_HEURISTICS | CHOICE_RULES)[advisor](**meta.get("advisor_params", {}))
+    rule = None if advisor is None else advisor_rules()[advisor](**meta.get("advisor_params", {}))
     return LineAgent(model.policy, name=name, advisor=rule, horizon_years=meta.get("config", {}).get("horizon_years"),
                      choice_features=choice_features, learned=tuple(meta.get("learned", ("tamp",))))

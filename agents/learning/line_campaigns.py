@@ -107,7 +107,7 @@ def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, adv
     from trackenv.envs.choices import TAMP, action_type_for, work_on_sections, work_per_code
 
     from ..evaluation.harness import bind_policy
-    from .line_counterfactual import _query_rates, line_forks
+    from .line_counterfactual import _query_rates, advice_along_run, line_forks
     from .line_policy import FEATURES, section_features, tamping_codes
 
     c = config
@@ -127,11 +127,12 @@ def campaign_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, adv
     work = work_on_sections(work_per_code(c.choice_work), np.full(c.n_sections, TAMP), c.length_factors)
     picked: dict[str, list] = {k: [] for k in ("features", "rate", "line", "step")}
 
+    advice_at = advice_along_run(advisor)
+
     def choose(t: int, obs: dict[str, np.ndarray], codes: np.ndarray,
                allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         E, S = codes.shape
-        advice = None if advisor is None else np.asarray(
-            advisor.predict(obs, state=None, episode_start=np.full(E, t == 0))[0], dtype=np.int64).reshape(E, S)
+        advice = advice_at(t, obs, (E, S))
         feats = section_features(obs, advisor, advice)
         tamped = tamping_codes(codes)
         rate = _query_rates(feats, names, tamped, focus_rate, other_rate).max(axis=1)

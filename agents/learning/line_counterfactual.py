@@ -219,6 +219,10 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
         codes, state = policy.predict(obs, state=before, episode_start=start)
         codes = np.asarray(codes, dtype=np.int64).reshape(E, S)
         per_section = isinstance(state, np.ndarray) and state.ndim == 3 and state.shape[::2] == (E, S)
+        if state is not None and not per_section:
+            raise ValueError("forks of single sections need a policy without a recurrent state or with one per "
+                             f"section ((lines, memory, sections) array; got {type(state).__name__}): a section's "
+                             "fork carries only its own section's memory")
         if per_section and f_memory is None:
             f_memory = np.zeros((room * S, state.shape[1]))
         advice = None if advisor is None else np.asarray(
@@ -340,14 +344,17 @@ def _made(choice: str, codes: np.ndarray) -> np.ndarray:
 def line_forks(config: Any, seeds: Sequence[int], policy: Any,
                choose: Callable[[int, dict[str, np.ndarray], np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
                progress: Callable[[int], Any] | None = None) -> dict[str, np.ndarray]:
-    """Run ``policy`` (SB3 ``predict`` on batched line observations, deterministic, without a recurrent state;
-    bound to ``config``) on the episodes ``seeds`` of ``config`` (one batch), and fork whole lines of it: at each
+    """Run ``policy`` (SB3 ``predict`` on batched line observations, deterministic; bound to ``config``; without a
+    recurrent state, or with one that remembers only what it was shown, ``policy.observation_state``) on the
+    episodes ``seeds`` of ``config`` (one batch), and fork whole lines of it: at each
     step ``t``, ``choose(t, obs, codes, allowed)`` (the step's observation, the policy's codes and the sections
     that may get track work, each (E, S)) names the lines
     to fork (n,) and each fork's codes at that step (n, S); a fork is an exact copy of its line as it is then
     (:meth:`~trackenv.envs.line_episode.LineBatch.get_state`: its physics and its pre-drawn residuals and
     measurement errors, so both branches see the same future draws), makes those codes at ``t`` and from
     ``t + 1`` on every section of it, the forked one included, does what ``policy`` decides on the fork's line.
+    A fork takes the policy's state as its line's run left it at ``t`` (it has seen the same observations; a state
+    that remembered the policy's own choices would misremember the fork's, hence the refusal of such a policy).
 
     Each branch pays what the env charges its whole line (every section's costs and the possession, k€; the
     env's reward with the sign turned), from ``t`` to the horizon. Returns ``line`` and ``step`` (n,) of every
@@ -377,10 +384,13 @@ def line_forks(config: Any, seeds: Sequence[int], policy: Any,
     f_line, f_step = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     f_cost, f_applied = np.zeros(0), np.zeros((0, S), dtype=np.int64)
     to_go, base_codes = np.zeros((H, E)), np.zeros((H, E, S), dtype=np.int64)
+    state: Any = None  # the policy's recurrent state on its own lines, and on the forks (rows as f_line)
+    f_state: Any = None
     for t in range(H):
-        codes, state = policy.predict(obs, state=None, episode_start=np.full(E, t == 0))
-        if state is not None:
-            raise ValueError("forks of whole lines need a policy without a recurrent state (got a state of type "
+        codes, state = policy.predict(obs, state=state, episode_start=np.full(E, t == 0))
+        if state is not None and not getattr(policy, "observation_state", False):
+            raise ValueError("forks of whole lines need a policy without a recurrent state, or one whose state "
+                             "remembers only what it was shown (observation_state; got a state of type "
                              f"{type(state).__name__}): a fork could not tell what its policy remembers of the "
                              "other choice")
         codes = np.asarray(codes, dtype=np.int64).reshape(E, S)
@@ -397,9 +407,11 @@ def line_forks(config: Any, seeds: Sequence[int], policy: Any,
         want[new] = first
         if old.size:  # the forks made earlier: their policy decides on their own lines
             seen = [forks.observation(int(b)) for b in old]
-            decided, _ = policy.predict({k: np.stack([o[k] for o in seen]) for k in keys}, state=None,
-                                        episode_start=np.zeros(old.size, dtype=bool))
+            decided, f_state = policy.predict({k: np.stack([o[k] for o in seen]) for k in keys}, state=f_state,
+                                              episode_start=np.zeros(old.size, dtype=bool))
             want[old] = np.asarray(decided, dtype=np.int64).reshape(old.size, S)
+        if state is not None:  # the new forks carry on their lines' state
+            f_state = _state_rows(state, lines) if not old.size else _state_join(f_state, _state_rows(state, lines))
         f_line, f_step = np.concatenate([f_line, lines]), np.concatenate([f_step, np.full(lines.size, t)])
         f_cost = np.concatenate([f_cost, np.zeros(lines.size)])
         live = np.arange(f_line.size)
@@ -416,6 +428,36 @@ def line_forks(config: Any, seeds: Sequence[int], policy: Any,
     env.close()
     return {"line": f_line, "step": f_step, "cost": f_cost, "applied": f_applied,
             "to_go": to_go, "codes": base_codes}
+
+
+def advice_along_run(advisor: Any) -> Callable[[int, dict[str, np.ndarray], tuple[int, int]], np.ndarray | None]:
+    """``advice(t, obs, shape)``: the advisor's codes (``shape``: lines, sections) on the observation of step ``t``
+    of a run of lines, asked step after step (None without an advisor). A planner whose state records what it was
+    shown (``observation_state``) carries it from call to call; a rule is asked on the observation alone."""
+    memory: list[Any] = [None]
+
+    def advice(t: int, obs: dict[str, np.ndarray], shape: tuple[int, int]) -> np.ndarray | None:
+        if advisor is None:
+            return None
+        told = memory[0] if getattr(advisor, "observation_state", False) else None
+        codes, memory[0] = advisor.predict(obs, state=told, episode_start=np.full(shape[0], t == 0))
+        return np.asarray(codes, dtype=np.int64).reshape(shape)
+
+    return advice
+
+
+def _state_rows(state: Any, rows: np.ndarray) -> Any:
+    """The rows ``rows`` of a recurrent state (an array with the batch first, or a tuple of them), copied."""
+    if isinstance(state, tuple):
+        return tuple(_state_rows(x, rows) for x in state)
+    return np.asarray(state)[rows].copy()
+
+
+def _state_join(first: Any, then: Any) -> Any:
+    """Two recurrent states of the same structure, the rows of ``first`` followed by those of ``then``."""
+    if isinstance(first, tuple):
+        return tuple(_state_join(a, b) for a, b in zip(first, then, strict=True))
+    return np.concatenate([first, then])
 
 
 def _with_room(forks: Any, used: int, needed: int) -> Any:
@@ -448,11 +490,11 @@ def _line_fork_counterfactuals(config: Any, seeds: list[int], policy: Any, advis
     asked: dict[str, list] = {k: [] for k in ("features", "choice", "did", "weight", "section", "own",
                                                       "first")}
 
+    advice_at = advice_along_run(advisor)
+
     def choose(t: int, obs: dict[str, np.ndarray], codes: np.ndarray,
                allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        E = codes.shape[0]
-        advice = None if advisor is None else np.asarray(
-            advisor.predict(obs, state=None, episode_start=np.full(E, t == 0))[0], dtype=np.int64).reshape(codes.shape)
+        advice = advice_at(t, obs, codes.shape)
         line_work = work_on_sections(work, codes, c.length_factors).sum(axis=1, keepdims=True)
         lines, firsts = [], []
         for k, choice in enumerate(choices):

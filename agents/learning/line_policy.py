@@ -231,6 +231,10 @@ class LineAgent:
     ``min_steps_between_tampings`` of the section's last) and fits the step's work in ``capacity``, worst measured
     SD first as the env does, so the env applies its codes as asked.
 
+    With a planner whose recurrent state records what it was shown as ``advisor`` (:attr:`observation_state`:
+    the model-predictive planner of the 60 m track, which forecasts from the SD history), that state is the
+    agent's ``state``, and the planner sees every step's observation whatever the network chose.
+
     ``choice_features``: the network was trained with the choice features (:data:`CHOICE_FEATURES`; a choice
     rule as advisor); ``learned``: the choices of :data:`LEARNABLE_CHOICES` it decides, each asked in turn, in
     place of the rule's (the tamping always; spot tamping and drainage where listed, which needs the choice
@@ -259,6 +263,20 @@ class LineAgent:
         self.params: dict[str, Any] = {}
         self._rng = rng
         self.horizon_years = horizon_years
+
+    @property
+    def observation_state(self) -> bool:
+        """Whether the agent has a recurrent state that remembers only what it was shown, never what it chose: its
+        advisor's, where that is a planner such as :class:`~trackenv_agents.rules.ModelPredictive` (outside choice
+        mode). A copy of a line may then carry the state on while it makes other choices (the line forks of the
+        policy iteration)."""
+        return not self.choices and bool(getattr(self.advisor, "observation_state", False))
+
+    def unfit_for(self, config: Any) -> str | None:
+        """Why the agent cannot run on ``config`` (None where it can): its advisor's reason, where the advisor is
+        a planner that plans some configs only (the model-predictive planner needs an SD measured every step)."""
+        check = getattr(self.advisor, "unfit_for", None)
+        return check(config) if callable(check) else None
 
     def bind(self, config: LineConfig) -> LineAgent:
         """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it: in
@@ -294,7 +312,11 @@ class LineAgent:
         if self.choices:
             act, state = self._predict_choices(b, state, episode_start, deterministic)
         else:
-            p = self.tamp_probability(b)
+            advice = None
+            if self.observation_state:  # the advisor's recurrent state, a record of what it was shown, is the agent's
+                advice, state = self.advisor.predict(b, state=state, episode_start=episode_start)
+                advice = np.asarray(advice, dtype=np.int64)
+            p = self.tamp_probability(b, advice)
             want = self._wants(p, deterministic)
             c = self.config
             if c is not None:
@@ -326,7 +348,8 @@ class LineAgent:
         return codes.astype(np.int8), remember_work(memory, codes, step[:, None], choice_view(b)["section_peak"])
 
     def reset(self) -> None:
-        """Nothing to forget: the policy is stateless (in choice mode, its memory is SB3's ``state``)."""
+        """Nothing to forget: the policy is stateless (in choice mode its memory, with a planner advisor the
+        planner's history, is SB3's ``state``)."""
 
 
 def _tuned_choice_rule(name: str, config: LineConfig) -> Any:

@@ -210,10 +210,9 @@ def _action_types() -> tuple[str, ...]:
 
 
 def _rules() -> tuple[str, ...]:
-    from ..rules.choices import CHOICE_RULES
-    from ..rules.line import LINE_HEURISTICS
+    from ..rules.problems import advisor_rules
 
-    return tuple(sorted(LINE_HEURISTICS | CHOICE_RULES))
+    return tuple(sorted(advisor_rules()))
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,10 @@ class ModelPredictive(LineHeuristic):
     without error (else ValueError)."""
 
     name: ClassVar[str] = "model-predictive"
+    #: its recurrent state remembers only what it was shown (the SD history), never what it chose: a copy of a line
+    #: may carry the state on and make other choices (the line forks of the policy iteration,
+    #: :func:`~trackenv_agents.learning.line_counterfactual.line_forks`)
+    observation_state: ClassVar[bool] = True
 
     def __init__(self, tamped_sd_slope: float = 0.44, tamped_sd_offset_mm: float = 0.06, regrowth_factor: float = 1.5,
                  window_steps: int = 4, prior_growth_mm_per_step: float = 0.04, max_campaigns: int = 3,

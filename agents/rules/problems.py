@@ -13,6 +13,7 @@ from trackenv.envs.line_config import LineConfig, scenario
 
 from .choices import CHOICE_RULES
 from .line import LINE_HEURISTICS, LINE_TUNED_FILE, line_tuned_params
+from .model_predictive import ModelPredictive
 
 _HERE = Path(__file__).resolve().parent
 #: preset name -> the file of its tuned parameters
@@ -38,6 +39,16 @@ def rules_for(config: Any) -> dict[str, Any]:
 def every_rule() -> dict[str, Any]:
     """Every rule class by name: the tamping rules and the rules that use the choices."""
     return {**LINE_HEURISTICS, **CHOICE_RULES}
+
+
+#: the planners a learner may take as its advisor besides the rules, by name: no members of the tuned family (their
+#: defaults were chosen on training episodes), each bound to the configs it can plan
+PLANNERS: dict[str, Any] = {ModelPredictive.name: ModelPredictive}
+
+
+def advisor_rules() -> dict[str, Any]:
+    """Every policy class a learner may take as its advisor, by name: the rules and the planners."""
+    return {**every_rule(), **PLANNERS}
 
 
 def main_rule(config: LineConfig) -> str:

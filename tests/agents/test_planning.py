@@ -89,6 +89,10 @@ def test_plan_refuses_an_unknown_policy_and_a_missing_file(tmp_path, capsys):
     assert "unknown policy 'greedy'" in capsys.readouterr().err
     assert main(["plan", str(tmp_path / "none.yaml")]) == 2
     assert "no such line file" in capsys.readouterr().err
+    # the 60 m track's agent plans with a planner that needs the SD of every step, which a line file's line lacks
+    assert main(["plan", str(write(tmp_path)), "--policy", "cpi-track60-agent"]) == 2
+    assert "policy 'cpi-track60-agent' cannot run on this line: needs an SD measured every step" in \
+        capsys.readouterr().err
 
 
 @pytest.mark.slow

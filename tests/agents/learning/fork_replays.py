@@ -30,6 +30,22 @@ def line_cost_to_go(cfg, seed, policy, t, first) -> float:
     return cost
 
 
+def line_cost_to_go_remembering(cfg, seed, policy, t, first) -> float:
+    """:func:`line_cost_to_go` for a policy with a recurrent state that records what it was shown: it is asked
+    every step, step t included (its state sees that step's observation), and carries its state on."""
+    env = TampingLine(cfg)
+    obs, _ = env.reset(seed=seed)
+    cost, state = 0.0, None
+    for step in range(cfg.horizon_steps):
+        codes, state = policy.predict({k: v[None] for k, v in obs.items()}, state=state,
+                                      episode_start=np.array([step == 0]))
+        a = np.asarray(first, dtype=np.int8) if step == t else np.asarray(codes[0], dtype=np.int8)
+        obs, reward, *_ = env.step(a)
+        if step >= t:
+            cost -= reward
+    return cost
+
+
 def rule_plans(cfg, rule, seeds) -> tuple[dict, dict]:
     """``rule`` (bound to ``cfg``) played on the episodes ``seeds``: ({seed: (steps, sections) codes applied},
     {seed: [its state before each step]})."""

@@ -3,13 +3,14 @@ makes the other choice and the policy goes on deciding for it, the other section
 
 import numpy as np
 import pytest
-from fork_replays import SHARED, line_cost_to_go
+from fork_replays import SHARED, line_cost_to_go, line_cost_to_go_remembering
 
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.harness import bind_policy
 from trackenv_agents.learning.line_counterfactual import line_forks, section_counterfactuals
 from trackenv_agents.rules.line import GroupedThreshold
+from trackenv_agents.rules.model_predictive import ModelPredictive
 
 CFG = scenario("small", horizon_years=2.0)
 
@@ -110,6 +111,14 @@ def test_shared_segment_counterfactuals_price_the_whole_line():
         assert q_other == pytest.approx(line_cost_to_go(SHARED, s, rule, t, flipped), rel=1e-9)
 
 
+class _RemembersTheLine:
+    """A policy whose recurrent state is one record per line (a tuple): single-section forks refuse it."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        n, S = np.shape(obs["section_sd"])
+        return np.zeros((n, S), dtype=np.int8), (np.zeros((n, 2, S)), np.zeros((n, S)))
+
+
 class _Remembers:
     """A policy with a recurrent state: whole-line forks refuse it."""
 
@@ -118,9 +127,43 @@ class _Remembers:
         return np.zeros((n, SHARED.n_sections), dtype=np.int8), np.zeros((n, 1, SHARED.n_sections))
 
 
+def test_whole_line_forks_carry_on_a_state_that_records_what_the_policy_was_shown():
+    """The model-predictive planner forecasts from the SD history it has seen (its recurrent state): a fork takes
+    its line's state as the run left it and carries it on, so it prices a flip as the env does when the line
+    replays the planner with its history."""
+    cheap = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
+                     horizon_years=2.0, possession_cost=0.3, tamping_cost_per_m=0.01)  # so that it tamps
+    planner = ModelPredictive(prior_growth_mm_per_step=0.0).bind(cheap)  # without its history: no growth seen
+    flips = {}
+
+    def choose(t, obs, codes, allowed):
+        if t not in (1, 3):
+            return np.zeros(0, dtype=np.int64), np.zeros((0, cheap.n_sections), dtype=np.int64)
+        flipped = codes.copy()
+        flipped[:, 0] = 1 - flipped[:, 0]
+        flips[t] = flipped
+        lines = np.arange(len(codes))
+        return np.concatenate([lines, lines]), np.concatenate([codes, flipped])
+
+    run = line_forks(cheap, [3, 4], planner, choose)
+    own = run["to_go"][run["step"], run["line"]]
+    same, other = np.array([0, 1, 4, 5]), np.array([2, 3, 6, 7])
+    np.testing.assert_array_equal(run["cost"][same], own[same])
+    for k in other:
+        t, line = int(run["step"][k]), int(run["line"][k])
+        assert run["cost"][k] == pytest.approx(
+            line_cost_to_go_remembering(cheap, [3, 4][line], planner, t, flips[t][line]), rel=1e-9)
+    # without its history the planner decides otherwise on some of these forks: the state matters here
+    stateless = [line_cost_to_go(cheap, [3, 4][int(run["line"][k])], planner, int(run["step"][k]),
+                                 flips[int(run["step"][k])][int(run["line"][k])]) for k in other]
+    assert not np.allclose(stateless, run["cost"][other], rtol=1e-9)
+
+
 def test_whole_line_forks_refuse_what_they_cannot_price():
     with pytest.raises(ValueError, match="recurrent state"):
         section_counterfactuals(SHARED, [3], _Remembers())
+    with pytest.raises(ValueError, match="forks of single sections"):  # a whole line's state, not a section's
+        section_counterfactuals(CFG, [3], _RemembersTheLine())
     rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), SHARED)
     with pytest.raises(ValueError, match="2 lines and 1 rows"):
         line_forks(SHARED, [3], rule, lambda t, obs, codes, allowed: (np.zeros(2, dtype=np.int64), codes))

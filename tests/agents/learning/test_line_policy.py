@@ -117,3 +117,46 @@ def test_line_agent_tamps_the_likely_sections_within_capacity_and_masks():
     assert agent.predict(batched)[0].shape == (2, 6)
     sampled = LineAgent(_Fixed(), rng=np.random.default_rng(0)).bind(CFG).predict(batched, deterministic=False)[0]
     assert sampled.shape == (2, 6) and sampled.sum(axis=1).max() <= CFG.capacity
+
+
+class _FollowsTheAdvisor(_Fixed):
+    """A stand-in SB3 policy that tamps exactly where the advisor does (its feature after the section's own)."""
+
+    def get_distribution(self, x):
+        import torch
+
+        p = x[:, len(NAMES)].clamp(0, 1)
+
+        class D:
+            distribution = torch.distributions.Categorical(probs=torch.stack([1 - p, p], dim=-1))
+
+        return D()
+
+
+def test_a_planner_advisor_keeps_its_history_as_the_agents_state():
+    """With the model-predictive planner as advisor the agent's recurrent state is the planner's record of the SD
+    history, fed every step's observation: a network that follows its advisor plays the planner's episode, state
+    for state; the agent is unfit where the planner cannot plan."""
+    from trackenv_agents.rules.model_predictive import ModelPredictive
+
+    track60 = scenario("track60")
+    planner = ModelPredictive().bind(track60)
+    agent = LineAgent(_FollowsTheAdvisor(), advisor=ModelPredictive()).bind(track60)
+    assert agent.observation_state and agent.unfit_for(track60) is None
+    assert "measured every step" in agent.unfit_for(scenario("default"))
+    assert not LineAgent(_Fixed(), advisor=None).observation_state and LineAgent(_Fixed()).unfit_for(CFG) is None
+    env = TampingLine(track60)
+    obs, _ = env.reset(seed=5)
+    mine = theirs = None
+    tamped = 0
+    for t in range(track60.horizon_steps):
+        batch = {k: v[None] for k, v in obs.items()}
+        start = np.array([t == 0])
+        act, mine = agent.predict(batch, state=mine, episode_start=start)
+        want, theirs = planner.predict(batch, state=theirs, episode_start=start)
+        np.testing.assert_array_equal(act, want)
+        for a, b in zip(mine, theirs, strict=True):
+            np.testing.assert_array_equal(a, b)
+        tamped += int(act.sum())
+        obs, *_ = env.step(act[0])
+    assert mine[0].shape[1] == 5 and tamped > 0  # a full window of history, and the planner tamped

@@ -46,6 +46,14 @@ def test_line_hyperparams_entry_and_its_schema(tmp_path):
     for key, value in (("reward_scale", 0.0), ("iterations", -1), ("focus_rate", 1.5), ("fit_margin", -1.0)):
         with pytest.raises(ValueError, match=key):
             train_line("small", hyperparams={key: value}, out_dir=tmp_path, progress=False, verbose=0)
+    with pytest.raises(ValueError, match="advisor must be one of"):
+        train_line("small", hyperparams={"advisor": "oracle"}, out_dir=tmp_path, progress=False, verbose=0)
+    # the planner may advise, where it can plan, and not the PPO stage (its section agents ask without a history)
+    with pytest.raises(ValueError, match="measured every step"):
+        train_line("small", hyperparams={"advisor": "model-predictive"}, out_dir=tmp_path, progress=False, verbose=0)
+    with pytest.raises(ValueError, match="total_timesteps must be 0"):
+        train_line("track60", total_timesteps=8, hyperparams={"advisor": "model-predictive"}, out_dir=tmp_path,
+                   progress=False, verbose=0)
 
 
 def test_saved_policy_loads_with_its_advisor_and_acts_the_same(tmp_path, fast_line):
@@ -111,6 +119,7 @@ def test_cli_scores_the_given_line_policy_and_skips_a_missing_shipped_one(tmp_pa
 
     assert cli.SHIPPED_AGENTS["cpi-agent"] == DEFAULT_LINE_PRETRAINED
     monkeypatch.setitem(cli.SHIPPED_AGENTS, "cpi-agent", tmp_path / "none.zip")
+    monkeypatch.setitem(cli.SHIPPED_AGENTS, "cpi-track60-agent", tmp_path / "none.zip")
     line = "trackenv/TampingLine-v0"
     args = argparse.Namespace(policy="all", model=None, env=line)
     assert cli._line_policies(args) == {}
@@ -140,3 +149,24 @@ def test_shipped_line_policy_loads_and_acts_within_the_lines_rules(name):
         assert action.sum() <= cfg.capacity and not (action.astype(bool) & ~env.action_masks()[1::2]).any()
         obs, _, _, _, info = env.step(action)
         assert not info["clipped"]
+
+
+def test_shipped_60m_agent_plays_with_its_planner_advisor():
+    """The shipped agent of the 60 m track: the network with the model-predictive planner as advisor, whose SD
+    history is its recurrent state; it runs where the planner can plan (a line measured every step)."""
+    from trackenv_agents.shipped import TRACK60_AGENT_NAME, TRACK60_PRETRAINED_FILE
+
+    agent = load_line_trained(TRACK60_PRETRAINED_FILE, name=TRACK60_AGENT_NAME)
+    assert agent.advisor.name == "model-predictive" and agent.observation_state
+    assert agent.unfit_for(scenario("default")) is not None
+    cfg = scenario("track60")
+    assert agent.unfit_for(cfg) is None
+    agent = agent.bind(cfg)
+    env = TampingLine(cfg)
+    obs, _ = env.reset(seed=3)
+    state = None
+    for t in range(3):
+        action, state = agent.predict({k: v[None] for k, v in obs.items()}, state=state,
+                                      episode_start=np.array([t == 0]))
+        assert action.shape == (1, cfg.n_sections) and state[0].shape[1] == t + 1  # the SD seen so far
+        obs, *_ = env.step(action[0])
