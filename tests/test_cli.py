@@ -17,8 +17,8 @@ HERE = Path(__file__).resolve().parent
 
 @pytest.mark.slow
 def test_evaluate_on_the_60m_track_prints_one_json_object(tmp_path, capsys):
-    """`trackenv evaluate --env trackenv/Tamping-v1`: two rules with their shipped parameters and the shipped
-    per-section agent (the same network on every preset) on two held-out episodes of the 60 m track, paired."""
+    """`trackenv evaluate --env trackenv/Tamping-v1`: two rules with their shipped parameters and the 60 m track's
+    shipped agent on two held-out episodes of the 60 m track, paired."""
     argv = ["evaluate", "--env", "trackenv/Tamping-v1", "--seeds", "0:2", "--rules", "uniform-periodic,no-maintenance",
             "--batch-size", "6", "--json", "--out", str(tmp_path)]
     assert main(argv) == 0
@@ -26,12 +26,13 @@ def test_evaluate_on_the_60m_track_prints_one_json_object(tmp_path, capsys):
     assert out["env"] == "trackenv/Tamping-v1" and out["scenario"] == "track60" and out["seeds"] == [0, 1]
     rows = out["results"]
     # with the model-predictive planner: the 60 m track measures every step without error
-    assert {row["policy"] for row in rows} == {"uniform-periodic", "no-maintenance", "cpi-agent", "model-predictive"}
+    assert {row["policy"] for row in rows} == {"uniform-periodic", "no-maintenance", "cpi-track60-agent",
+                                              "model-predictive"}
     for row in rows:
         assert row["n_episodes"] == 2 and row["ci_low"] <= row["mean_cost"] <= row["ci_high"]
     costs = [row["mean_cost"] for row in rows]
     assert costs == sorted(costs)
-    assert out["extra"] == ["cpi-agent", "model-predictive"]
+    assert out["extra"] == ["cpi-track60-agent", "model-predictive"]
     assert out["best_rule"] in {"uniform-periodic", "no-maintenance"}
     for name in ("line_compare.json", "line_compare.png", "line_episode.png"):
         assert (tmp_path / name).exists(), name

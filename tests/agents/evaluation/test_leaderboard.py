@@ -274,8 +274,9 @@ def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
 def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     """The documentation's tables are the committed leaderboard.md, which is the command's rendering of the
     committed leaderboard.json: its command, its default seeds and suite, every committed baseline scored on the
-    default line (where they were trained) and listed as not scored elsewhere, the model-predictive planner scored
-    on the 60 m track only (the one scenario measured every step without error), and the page that includes it."""
+    default line (where they were trained) and listed as not scored elsewhere, the model-predictive planner and the
+    60 m track's agent (the planner its advisor) scored on the 60 m track only (the one scenario measured every
+    step without error), and the page that includes it."""
     from pathlib import Path
 
     from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
@@ -284,7 +285,7 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     folder = root / "experiments" / "saved" / "leaderboard"
     saved = json.loads((folder / "leaderboard.json").read_text())
     command = ("trackenv leaderboard --out experiments/saved/leaderboard "
-               "--policies rules,cpi-agent,cpi-choice-agent,model-predictive,baselines")
+               "--policies rules,cpi-agent,cpi-choice-agent,cpi-track60-agent,model-predictive,baselines")
     assert saved["command"] == command
     assert saved["seeds"] == {env: list(DEFAULT_SEEDS[env]) for env in DEFAULT_SUITE}
     baselines = {p.stem for p in (root / "experiments" / "saved" / "baselines").iterdir()
@@ -294,10 +295,11 @@ def test_the_committed_leaderboard_is_the_default_commands_output() -> None:
     assert baselines <= {r["policy"] for r in saved["results"] if r["env"] == line}
     # the network's lines are the default line: the baselines play each of its lines
     here = (line, "trackenv/TampingNetwork-v0")
-    planner, track60 = {"model-predictive"}, "trackenv/Tamping-v1"
+    planner, track60 = {"model-predictive", "cpi-track60-agent"}, "trackenv/Tamping-v1"
     assert all(set(saved["not_scored"][env]) == (set() if env in here else baselines) | (
         set() if env == track60 else planner) for env in DEFAULT_SUITE)
-    assert {r["env"] for r in saved["results"] if r["policy"] == "model-predictive"} == {track60}
+    for name in planner:
+        assert {r["env"] for r in saved["results"] if r["policy"] == name} == {track60}
     assert (folder / "leaderboard.md").read_text() == format_leaderboard(saved)
     page = (root / "docs" / "leaderboard.md").read_text()
     assert command in page and '--8<-- "experiments/saved/leaderboard/leaderboard.md"' in page
