@@ -62,21 +62,26 @@ def test_forks_are_the_envs_section_costs_under_the_other_choice():
 
 
 
+def _own_and_flipped(steps, section, n_sections, flipped_at):
+    """A ``choose`` for :func:`line_forks`: every line forked at each of ``steps`` twice, once with the policy's
+    codes and once with ``section``'s flipped (kept in ``flipped_at[t]``); no fork at other steps."""
+
+    def choose(t, obs, codes, allowed):
+        if t not in steps:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, n_sections), dtype=np.int64)
+        flipped = codes.copy()
+        flipped[:, section] = 1 - flipped[:, section]
+        flipped_at[t] = flipped
+        lines = np.arange(len(codes))
+        return np.concatenate([lines, lines]), np.concatenate([codes, flipped])
+
+    return choose
+
+
 def test_a_whole_line_fork_of_the_policys_own_choice_is_its_run_and_another_choice_is_not():
     rule = bind_policy(GroupedThreshold(trigger_mm=1.5, include_mm=1.0), SHARED)
     picked = {}
-
-    def choose(t, obs, codes, allowed):
-        # every line at steps 2 and 5: once as the policy chooses, once with section 1 flipped
-        if t not in (2, 5):
-            return np.zeros(0, dtype=np.int64), np.zeros((0, SHARED.n_sections), dtype=np.int64)
-        flipped = codes.copy()
-        flipped[:, 1] = 1 - flipped[:, 1]
-        lines = np.arange(len(codes))
-        picked[t] = flipped
-        return np.concatenate([lines, lines]), np.concatenate([codes, flipped])
-
-    run = line_forks(SHARED, [3, 4], rule, choose)
+    run = line_forks(SHARED, [3, 4], rule, _own_and_flipped((2, 5), 1, SHARED.n_sections, picked))
     assert run["line"].tolist() == [0, 1, 0, 1, 0, 1, 0, 1] and run["step"].tolist() == [2] * 4 + [5] * 4
     own = run["to_go"][run["step"], run["line"]]
     same, other = np.array([0, 1, 4, 5]), np.array([2, 3, 6, 7])
@@ -135,17 +140,7 @@ def test_whole_line_forks_carry_on_a_state_that_records_what_the_policy_was_show
                      horizon_years=2.0, possession_cost=0.3, tamping_cost_per_m=0.01)  # so that it tamps
     planner = ModelPredictive(prior_growth_mm_per_step=0.0).bind(cheap)  # without its history: no growth seen
     flips = {}
-
-    def choose(t, obs, codes, allowed):
-        if t not in (1, 3):
-            return np.zeros(0, dtype=np.int64), np.zeros((0, cheap.n_sections), dtype=np.int64)
-        flipped = codes.copy()
-        flipped[:, 0] = 1 - flipped[:, 0]
-        flips[t] = flipped
-        lines = np.arange(len(codes))
-        return np.concatenate([lines, lines]), np.concatenate([codes, flipped])
-
-    run = line_forks(cheap, [3, 4], planner, choose)
+    run = line_forks(cheap, [3, 4], planner, _own_and_flipped((1, 3), 0, cheap.n_sections, flips))
     own = run["to_go"][run["step"], run["line"]]
     same, other = np.array([0, 1, 4, 5]), np.array([2, 3, 6, 7])
     np.testing.assert_array_equal(run["cost"][same], own[same])
