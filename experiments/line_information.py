@@ -55,9 +55,10 @@ LABELS = {"preset": "once a year (the preset)", "twice": "twice a year", "quarte
 GRID = [{"trigger_mm": t, "include_mm": i} for t in (1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0)
         for i in (0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0) if i < t]
 #: where the design measures every step without error, the model-predictive planner of the 60 m track also runs
-#: (its parameters as shipped, not tuned on the line; ``neighbour_mm`` at its maximum: the line's sections are
-#: separate segments, so a tamping leaves no step at a neighbour's boundary)
-PLANNER = {"neighbour_mm": 100.0}
+#: (its parameters as shipped when this experiment's results were saved, not tuned on the line; ``neighbour_mm``
+#: at its maximum: the line's sections are separate segments, so a tamping leaves no step at a neighbour's boundary)
+PLANNER = {"neighbour_mm": 100.0, "tamped_sd_slope": 0.44, "regrowth_factor": 1.5, "prior_growth_mm_per_step": 0.04,
+           "own_slope_weight": 0.5}
 
 
 def bound_schedules() -> tuple[list[int], list[np.ndarray]]:

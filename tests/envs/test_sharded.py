@@ -134,3 +134,12 @@ def test_sharded_env_errors_reach_the_caller() -> None:
     env.close()  # idempotent
     with pytest.raises(RuntimeError, match="closed"):
         env.reset()
+
+
+def test_default_threads_share_the_cores_this_process_may_run_on(monkeypatch) -> None:
+    import trackenv.envs.sharded as sharded
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)  # the machine's count is not what this process may use
+    monkeypatch.setattr(sharded, "usable_cores", lambda: 4)
+    with ShardedVectorEnv(partial(TampingVectorEnv, **SMALL), 2, workers=2) as env:
+        assert env.threads_per_worker == 2

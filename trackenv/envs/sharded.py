@@ -22,7 +22,6 @@ code, a script that builds this env at import time must guard it with ``if __nam
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import pickle
 import traceback
 import warnings
@@ -35,6 +34,7 @@ from gymnasium.vector import VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..physics._checks import check_choice, check_int
+from ..physics.kernels import usable_cores
 from ._seeding import vector_seeds
 from .batched import BatchedVectorEnv, check_vector_actions
 
@@ -148,9 +148,10 @@ class ShardedVectorEnv(VectorEnv):
 
     ``make_shard``: a picklable callable that builds a shard of ``n`` envs, ``make_shard(n)`` (e.g.
     ``functools.partial(TampingVectorEnv, config=cfg)``); ``workers`` in [1, num_envs];
-    ``threads_per_worker``: numba threads of each shard's physics (default: the machine's cores shared out,
-    at least 1); ``context``: the multiprocessing start method, "spawn" or "forkserver" ("fork" is refused: a
-    child forked from a process whose numba threads have run aborts).
+    ``threads_per_worker``: numba threads of each shard's physics (default: the cores this process may run
+    on, :func:`~trackenv.physics.kernels.usable_cores`, shared out, at least 1); ``context``: the
+    multiprocessing start method, "spawn" or "forkserver" ("fork" is refused: a child forked from a process
+    whose numba threads have run aborts).
     The spaces, ``config``, autoreset mode and render mode are those of the shards. Use :meth:`close` (or
     ``with``) to stop the workers."""
 
@@ -163,7 +164,7 @@ class ShardedVectorEnv(VectorEnv):
             raise ValueError(f"make_shard must be a callable that builds a shard of n envs, got {make_shard!r}")
         self.num_envs = check_int("num_envs", num_envs, low=1, high=4096)
         self.workers = check_int("workers", workers, low=1, high=self.num_envs)
-        cores = os.cpu_count() or 1
+        cores = usable_cores()
         threads = max(1, cores // self.workers) if threads_per_worker is None else threads_per_worker
         self.threads_per_worker = check_int("threads_per_worker", threads, low=1, high=1024)
         # not "fork": a child forked from a process whose numba threads have run (OpenMP) aborts

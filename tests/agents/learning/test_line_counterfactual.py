@@ -138,7 +138,8 @@ def test_whole_line_forks_carry_on_a_state_that_records_what_the_policy_was_show
     replays the planner with its history."""
     cheap = scenario("track60", n_sections=3, segment_length_m=30.0, sections_per_segment=3, capacity=3,
                      horizon_years=2.0, possession_cost=0.3, tamping_cost_per_m=0.01)  # so that it tamps
-    planner = ModelPredictive(prior_growth_mm_per_step=0.0).bind(cheap)  # without its history: no growth seen
+    # without its history: no growth seen, and no slope learnt from a section's own tamping
+    planner = ModelPredictive(prior_growth_mm_per_step=0.0, own_slope_weight=0.5).bind(cheap)
     flips = {}
     run = line_forks(cheap, [3, 4], planner, _own_and_flipped((1, 3), 0, cheap.n_sections, flips))
     own = run["to_go"][run["step"], run["line"]]

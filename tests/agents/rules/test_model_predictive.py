@@ -80,6 +80,8 @@ def test_it_tamps_what_pays_and_nothing_whose_benefit_comes_after_the_horizon():
 def test_it_checks_its_parameters_and_its_config():
     with pytest.raises(ValueError, match=r"tamped_sd_slope must lie in \[0, 1\], got 1.5"):
         ModelPredictive(tamped_sd_slope=1.5)
+    with pytest.raises(ValueError, match=r"own_slope_weight must lie in \[0, 1\], got -0.1"):
+        ModelPredictive(own_slope_weight=-0.1)
     with pytest.raises(ValueError, match="regrowth_factor must be a real number"):
         ModelPredictive(regrowth_factor="1.5")  # text is not read as a number
     with pytest.raises(ValueError, match="neighbour_mm must be a finite number"):
@@ -119,8 +121,12 @@ def test_it_plays_episodes_through_the_harness_keeping_its_history():
     tamped = {**later, "years_since_tamping": np.array([0.25, 2.1, 2.1, 2.1, 2.1, 2.1], np.float32),
               "section_sd": np.array([0.96, 1.2, 1.2, 1.2, 1.2, 1.2], np.float32)}
     _, (_, since, slope) = bound.predict(tamped, state)
-    assert since[0, 0] == 0 and slope[0, 0] == pytest.approx(0.5 * (0.44 + 0.9 / 1.0))
-    assert (slope[0, 1:] == 0.44).all()
+    prior = bound.params["tamped_sd_slope"]
+    assert since[0, 0] == 0 and (slope == prior).all()  # by default a tamping's outcome does not move the slope
+    learning = ModelPredictive(own_slope_weight=0.5).bind(config)
+    _, (_, since, slope) = learning.predict(tamped, state)
+    assert since[0, 0] == 0 and slope[0, 0] == pytest.approx(0.5 * (prior + 0.9 / 1.0))
+    assert (slope[0, 1:] == prior).all()
 
 
 def test_a_campaign_takes_the_neighbours_of_its_sections_from_their_sd():
