@@ -56,6 +56,7 @@ import numpy as np
 
 from trackenv.degradation import TrackDegradation
 from trackenv.physics.dynamics import simulate_pass, simulate_passes
+from trackenv.physics.kernels import usable_cores
 from trackenv.physics.track import Track
 from trackenv.physics.vehicle import Car, Wheelset
 
@@ -405,7 +406,7 @@ def run_benchmarks(quick: bool = False, progress: Callable[[str], None] | None =
         tell(f"vector_env_{n}")
         out["vector_env"][str(n)] = _bench_vector_env(n, 3 if quick else VECTOR_STEPS, 10.0 if quick else 60.0)
     out["vector_env_sharded"] = {}
-    if (os.cpu_count() or 1) >= SHARDED_WORKERS:
+    if usable_cores() >= SHARDED_WORKERS:  # the cores this process may run on, not the machine's count
         tell(f"vector_env_{SHARDED_ENVS}_sharded")
         out["vector_env_sharded"][str(SHARDED_ENVS)] = _bench_vector_env(
             SHARDED_ENVS, 3 if quick else VECTOR_STEPS, 10.0 if quick else 60.0, workers=SHARDED_WORKERS)
