@@ -320,19 +320,25 @@ def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any],
 
 def on_network(policy: Any, config: Any, dispatch: str = NETWORK_DISPATCH) -> Any:
     """``policy`` as it plays ``config``: on a network, a line policy run on every line by a
-    :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch``; on a line, itself."""
-    from ..rules.network import NetworkRule
+    :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (a trained line agent eager where the
+    machine stays: :func:`~trackenv_agents.rules.network.eager_for`); on a line, itself."""
+    from ..rules.network import NetworkRule, eager_for
 
-    return NetworkRule(policy, dispatch) if isinstance(config, NetworkConfig) else policy
+    if not isinstance(config, NetworkConfig):
+        return policy
+    return NetworkRule(policy, dispatch, eager_probability=eager_for(policy))
 
 
-def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH) -> str:
-    """The name of the policy ``label`` on ``config``'s rows: on a network the name of its
-    :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (``network(<label>)`` by requests), else
+def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH, policy: Any = None) -> str:
+    """The name of the policy ``label`` (``policy`` itself where given) on ``config``'s rows: on a network the
+    name of its :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (``network(<label>)`` by
+    requests; a trained line agent's with its eager probability, as :func:`on_network` plays it), else
     ``label``."""
-    from ..rules.network import network_label
+    from ..rules.network import eager_for, network_label
 
-    return network_label(label, dispatch) if isinstance(config, NetworkConfig) else label
+    if not isinstance(config, NetworkConfig):
+        return label
+    return network_label(label, dispatch, None if policy is None else eager_for(policy))
 
 
 def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:
@@ -393,7 +399,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
                                 executor=executor)
         for r, label in zip(results[len(wanted):], here, strict=True):
-            r.policy = policy_label(label, cfg)
+            r.policy = policy_label(label, cfg, policy=here[label])
         rule_results = sorted(results[:len(wanted)], key=lambda r: float(r.cost.mean()))
         best = rule_results[0]
         reason = None if bound else "not computed (--no-bound)"

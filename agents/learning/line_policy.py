@@ -41,6 +41,7 @@ from trackenv.envs.choices import (
     TAMP,
 )
 from trackenv.envs.line_config import LineConfig
+from trackenv.physics._checks import check_scalar
 
 from ..rules.base import as_batch
 from ..rules.choices import fresh_memory, remember_work
@@ -298,6 +299,25 @@ class LineAgent:
             t = torch.as_tensor(x.reshape(B * S, F), device=self.policy.device)
             p = self.policy.get_distribution(t).distribution.probs[:, 1]
         return p.cpu().numpy().reshape(B, S)
+
+    def requests(self, observation: Mapping[str, Any], probability: float = 0.5) -> np.ndarray:
+        """(batch, S) bool: the sections it asks to tamp when it asks from ``probability`` up instead of above one
+        half (a batched observation dict), never one the env would drop and at most ``capacity``, the most
+        probable, where bound to a config. What a network lets it do while the machine is on its line
+        (:class:`~trackenv_agents.rules.network.NetworkRule`'s ``eager_probability``): tamp now what it would ask
+        for soon. Deterministic; not for an agent whose advisor keeps a state (ValueError)."""
+        probability = check_scalar("probability", probability, low=0.0, high=1.0, low_inclusive=False)
+        if self.observation_state:
+            raise ValueError(f"{self.name}: requests() asks the network without the advisor's state, which this "
+                             f"agent's advisor ({getattr(self.advisor, 'name', None)}) keeps")
+        b, _ = as_batch(dict(observation))
+        p = self.tamp_probability(b)
+        want = p >= probability
+        if self.config is not None:
+            from trackenv.envs.line_episode import keep_worst
+
+            want = keep_worst(want & may_tamp(b, self.config), p, self.config.capacity)
+        return want
 
     def _wants(self, p: np.ndarray, deterministic: bool) -> np.ndarray:
         if deterministic:

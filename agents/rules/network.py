@@ -25,11 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from trackenv.physics._checks import check_scalar
+
 from .base import Heuristic, as_batch
 from .dispatch import ValueDispatch
 from .line import SectionThreshold
 
-__all__ = ["DISPATCHES", "NETWORK_DISPATCH", "NetworkRule", "line_view", "network_label"]
+__all__ = ["DISPATCHES", "NETWORK_DISPATCH", "NETWORK_EAGER_PROBABILITY", "NetworkRule", "eager_for", "line_view",
+           "network_label"]
 
 #: the dispatches of :class:`NetworkRule`: by the count of requests (the env's own rule), or by their value
 DISPATCHES = ("requests", "value")
@@ -37,13 +40,29 @@ DISPATCHES = ("requests", "value")
 #: trackenv/TampingNetwork-v0``): by value, cheaper than by requests for the tuned rules and the shipped agent
 #: alike on 200 held-out episodes (the documentation's network page)
 NETWORK_DISPATCH = "value"
+#: the probability from which a trained line agent is asked for work on the line the machine stays on, in the
+#: comparisons (:func:`eager_for`): chosen on training episodes 1000-1047 among 0.05-0.35 (the documentation's
+#: network page)
+NETWORK_EAGER_PROBABILITY = 0.15
 
 
-def network_label(line_name: str, dispatch: str | ValueDispatch = "requests") -> str:
+def eager_for(line_policy: Any) -> float | None:
+    """The ``eager_probability`` the comparisons play ``line_policy`` with on the network:
+    :data:`NETWORK_EAGER_PROBABILITY` for a policy that can be asked from a probability (a trained line agent's
+    ``requests``) and whose advisor keeps no state, None for the rules."""
+    if not callable(getattr(line_policy, "requests", None)) or getattr(line_policy, "observation_state", False):
+        return None
+    return NETWORK_EAGER_PROBABILITY
+
+
+def network_label(line_name: str, dispatch: str | ValueDispatch = "requests",
+                  eager_probability: float | None = None) -> str:
     """The name of a :class:`NetworkRule` over the line policy ``line_name``: ``network(<line_name>)`` by
-    requests, ``network-by-value(<line_name>)`` by value (one name per policy where results are keyed by it)."""
+    requests, ``network-by-value(<line_name>)`` by value, ``, eager <p>`` added inside the brackets with an
+    ``eager_probability`` (one name per policy where results are keyed by it)."""
     by_value = isinstance(dispatch, ValueDispatch) or dispatch == "value"
-    return f"network-by-value({line_name})" if by_value else f"network({line_name})"
+    inner = line_name if eager_probability is None else f"{line_name}, eager {eager_probability:g}"
+    return f"network-by-value({inner})" if by_value else f"network({inner})"
 
 
 def line_view(obs: dict[str, np.ndarray], n_lines: int) -> dict[str, np.ndarray]:
@@ -68,14 +87,24 @@ class NetworkRule(Heuristic):
     agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity. ``dispatch``:
     ``"requests"`` (default: the machine stays while its line asks, else goes where most sections are asked
     for), ``"value"`` (:class:`~.dispatch.ValueDispatch` at its defaults) or a ValueDispatch; the value dispatch
-    prices the sections with the line's limits and costs, so it plays once bound. Its name is
-    ``network(<line policy>)`` by requests, ``network-by-value(<line policy>)`` by value."""
+    prices the sections with the line's limits and costs, so it plays once bound. ``eager_probability`` (in
+    (0, 0.5]; None: off): the line the machine stays on asks for every section the line policy would tamp with
+    at least that probability (a line policy with ``requests``, e.g. a trained line agent; ValueError
+    otherwise). Its name is ``network(<line policy>)`` by requests, ``network-by-value(<line policy>)`` by value
+    (:func:`network_label`)."""
 
     name = "network"
 
     def __init__(self, line_rule: Any = None, dispatch: str | ValueDispatch = "requests",
-                 line_config: Any = None) -> None:
+                 line_config: Any = None, eager_probability: float | None = None) -> None:
         self.line_rule = line_rule if line_rule is not None else SectionThreshold()
+        if eager_probability is not None:
+            eager_probability = check_scalar("eager_probability", eager_probability, low=0.0, high=0.5,
+                                             low_inclusive=False)
+            if not callable(getattr(self.line_rule, "requests", None)):
+                raise ValueError(f"eager_probability needs a line policy that can be asked from a probability (a "
+                                 f"trained line agent's requests); {type(self.line_rule).__name__} cannot")
+        self.eager_probability = eager_probability
         if isinstance(dispatch, str):
             if dispatch not in DISPATCHES:
                 raise ValueError(f"dispatch must be one of {list(DISPATCHES)} or a ValueDispatch, got {dispatch!r}")
@@ -88,16 +117,18 @@ class NetworkRule(Heuristic):
         self.line_config = line_config
         line_name = str(getattr(self.line_rule, "name", None) or type(self.line_rule).__name__)
         extra = {"dispatch": "value", **dispatch.params()} if isinstance(dispatch, ValueDispatch) else {}
+        if eager_probability is not None:
+            extra["eager_probability"] = eager_probability
         super().__init__(line_rule=line_name, **dict(getattr(self.line_rule, "params", None) or {}), **extra)
         # the base class's name is a class attribute; this one is the instance's
-        self.__dict__["name"] = network_label(line_name, dispatch)
+        self.__dict__["name"] = network_label(line_name, dispatch, eager_probability)
 
     def bind(self, config: Any) -> NetworkRule:
         """A copy whose line policy knows the calendar and capacity of the network's line config (a policy
         without ``bind`` is taken as it is), and whose dispatch knows that line's limits and costs."""
         bind = getattr(self.line_rule, "bind", None)
         return type(self)(bind(config.line_config) if callable(bind) else self.line_rule, self.dispatch,
-                          config.line_config)
+                          config.line_config, self.eager_probability)
 
     def reset(self) -> None:
         """The line policy's reset, where it has one."""
@@ -112,12 +143,19 @@ class NetworkRule(Heuristic):
         want, _ = self.line_rule.predict(lines)
         want = np.asarray(want, dtype=bool).reshape(n_envs, n_lines, -1)
         here = b["machine_line"].argmax(axis=1)
+        rows = np.arange(n_envs)
         if isinstance(self.dispatch, ValueDispatch):
-            keep = np.arange(n_lines)[None, :] == self._value_target(self.dispatch, lines, want, here)[:, None]
+            target = self._value_target(self.dispatch, lines, want, here)
+            keep = np.arange(n_lines)[None, :] == target[:, None]
+            stay = target == here
         else:
-            busy = want[np.arange(n_envs), here].any(axis=1)
-            keep = np.where(busy[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
-        act = (want & keep[:, :, None]).reshape(n_envs, -1).astype(np.int8)
+            stay = want[rows, here].any(axis=1)  # its line asks: the machine stays and works there
+            keep = np.where(stay[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
+        act = want & keep[:, :, None]
+        if self.eager_probability is not None:  # where the machine stays, its line asks for what is due soon too
+            soon = np.asarray(self.line_rule.requests(lines, self.eager_probability), dtype=bool)
+            act[rows, here] |= soon.reshape(n_envs, n_lines, -1)[rows, here] & stay[:, None]
+        act = act.reshape(n_envs, -1).astype(np.int8)
         return (act if batched else act[0]), state
 
     def _value_target(self, dispatch: ValueDispatch, lines: dict[str, np.ndarray], want: np.ndarray,

@@ -320,3 +320,22 @@ def test_the_network_rows_name_the_dispatch_their_policies_play() -> None:
     by_value = on_network(rule, net)
     assert by_value.name == policy_label("grouped-threshold", net) == "network-by-value(grouped-threshold)"
     assert on_network(rule, line, "value") is rule and policy_label("grouped-threshold", line) == "grouped-threshold"
+
+
+def test_a_trained_agent_plays_the_network_eager() -> None:
+    """On the network a trained line agent plays eager where the machine stays (``eager_for``), and its row is
+    named so; a rule does not."""
+    pytest.importorskip("stable_baselines3")
+    from trackenv_agents.evaluation.leaderboard import on_network, policy_label
+    from trackenv_agents.learning.line import DEFAULT_LINE_PRETRAINED, load_line_trained
+    from trackenv_agents.rules import GroupedThreshold
+    from trackenv_agents.rules.network import NETWORK_EAGER_PROBABILITY
+
+    agent = load_line_trained(DEFAULT_LINE_PRETRAINED, name="cpi-agent")
+    net, line = NetworkConfig(), scenario("default")
+    played = on_network(agent, net)
+    assert played.eager_probability == NETWORK_EAGER_PROBABILITY
+    assert played.name == policy_label("cpi-agent", net, policy=agent) == (
+        f"network-by-value(cpi-agent, eager {NETWORK_EAGER_PROBABILITY:g})")
+    assert on_network(GroupedThreshold(), net).eager_probability is None
+    assert on_network(agent, line) is agent and policy_label("cpi-agent", line, policy=agent) == "cpi-agent"

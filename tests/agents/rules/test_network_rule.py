@@ -101,3 +101,77 @@ def test_on_a_one_line_network_the_agent_is_the_line_agent():
     line_cfg = scenario("small", horizon_years=1.5)
     (alone,) = evaluate_many([agent], line_cfg, seeds=[line_seeds(np.random.default_rng(s), 1)[0] for s in seeds])
     assert np.array_equal(on_network.cost, alone.cost) and on_network.section_tampings.sum() > 0
+
+
+def test_eager_needs_an_agent_and_a_probability_in_range():
+    with pytest.raises(ValueError, match="eager_probability needs a line policy"):
+        NetworkRule(SectionThreshold(), eager_probability=0.2)
+    agent = _shipped_agent()
+    for bad in (0.0, 0.6, float("nan")):
+        with pytest.raises(ValueError, match="eager_probability"):
+            NetworkRule(agent, "value", eager_probability=bad)
+    rule = NetworkRule(agent, "value", eager_probability=0.15)
+    assert rule.name == "network-by-value(cpi-agent, eager 0.15)" and rule.params["eager_probability"] == 0.15
+    bound = rule.bind(NetworkConfig.coerce(None, line_config="small", n_lines=2, horizon_years=1.0))
+    assert bound.eager_probability == 0.15 and bound.name == rule.name
+
+
+def test_eager_for_gives_the_agents_their_probability_and_the_rules_none():
+    from trackenv_agents.rules.network import NETWORK_EAGER_PROBABILITY, eager_for
+
+    assert eager_for(SectionThreshold()) is None
+    assert eager_for(_shipped_agent()) == NETWORK_EAGER_PROBABILITY
+
+
+def test_agent_requests_from_a_probability():
+    """``LineAgent.requests``: from one half it asks what ``predict`` asks; from a lower probability a superset
+    (up to the capacity), never a section the env would drop."""
+    from trackenv.envs.line import TampingLine
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.learning.line_policy import may_tamp
+
+    config = scenario("small")
+    agent = _shipped_agent().bind(config)
+    env = TampingLine(config)
+    obs, _ = env.reset(seed=3)
+    grew = False
+    for _ in range(12):
+        batch = {k: np.asarray(v)[None] for k, v in obs.items()}
+        half = agent.requests(batch, 0.5)[0]
+        low = agent.requests(batch, 0.1)[0]
+        assert np.array_equal(half, agent.predict(obs)[0].astype(bool))
+        assert low.sum() <= config.capacity and (low >= half).all() and not (low & ~may_tamp(batch, config)[0]).any()
+        grew |= bool(low.sum() > half.sum())
+        obs, *_ = env.step(agent.predict(obs)[0])
+    assert grew  # the lower probability asked for more somewhere
+    with pytest.raises(ValueError, match="probability"):
+        agent.requests({k: np.asarray(v)[None] for k, v in obs.items()}, 0.0)
+
+
+def test_eager_asks_more_only_on_the_line_the_machine_stays_on():
+    """Eager by value: where the dispatch keeps the machine on its line, that line asks for the agent's requests
+    from the eager probability as well as its own; no other line's requests change; where the machine leaves,
+    nothing is added."""
+    agent = _shipped_agent()
+    env = TampingNetwork(line_config="small", n_lines=3, horizon_years=4.0)
+    plain = NetworkRule(agent, "value").bind(env.config)
+    eager = NetworkRule(agent, "value", eager_probability=0.1).bind(env.config)
+    line = agent.bind(env.config.line_config)
+    obs, _ = env.reset(seed=4)
+    added = 0
+    for _ in range(env.config.horizon_steps):
+        a_plain, _ = plain.predict(obs)
+        a_eager, _ = eager.predict(obs)
+        here = int(obs["machine_line"].argmax())
+        p_lines, e_lines = a_plain.reshape(3, 6), a_eager.reshape(3, 6)
+        others = np.arange(3) != here
+        assert np.array_equal(p_lines[others], e_lines[others])
+        soon = line.requests(line_view({k: v[None] for k, v in obs.items()}, 3), 0.1)[here]
+        if p_lines[others].any():  # the dispatch sends the machine elsewhere: nothing added here
+            assert np.array_equal(e_lines[here], p_lines[here])
+        else:
+            assert np.array_equal(e_lines[here], p_lines[here] | soon)
+            added += int(e_lines[here].sum() - p_lines[here].sum())
+        assert env.action_space.contains(a_eager)
+        obs, *_ = env.step(a_eager)
+    assert added > 0  # the eager policy asked for more on this episode
