@@ -12,7 +12,8 @@ and the tampings per section class (:func:`~.line_compare.class_breakdown`).
 of its line, each run on every line by :class:`~trackenv_agents.rules.network.NetworkRule` (which keeps the machine
 on its line while the line policy asks for work there): the tuned rules of the network's line, each with that
 line's tuned parameters, and the agents that fit that line, dispatched by :data:`NETWORK_DISPATCH` and named
-after it (``network-by-value(<policy>)``).
+after it (``network-by-value(<policy>)``); a trained line agent plays eager where the machine stays
+(:func:`~trackenv_agents.rules.network.eager_for`: ``network-by-value(<agent>, eager 0.15)``).
 
 **The normalised score** is the share of the gap from the best tuned rule to the hindsight bound that a policy
 closes, paired per episode e::
