@@ -323,11 +323,9 @@ def on_network(policy: Any, config: Any, dispatch: str = NETWORK_DISPATCH) -> An
     """``policy`` as it plays ``config``: on a network, a line policy run on every line by a
     :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (a trained line agent eager where the
     machine stays: :func:`~trackenv_agents.rules.network.eager_for`); on a line, itself."""
-    from ..rules.network import NetworkRule, eager_for
+    from ..rules.network import network_play
 
-    if not isinstance(config, NetworkConfig):
-        return policy
-    return NetworkRule(policy, dispatch, eager_probability=eager_for(policy))
+    return network_play(policy, dispatch) if isinstance(config, NetworkConfig) else policy
 
 
 def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH, policy: Any = None) -> str:

@@ -13,7 +13,7 @@ from trackenv.envs.line_config import LineConfig, scenario
 from trackenv.envs.network import NetworkConfig
 
 from ..rules.line import LINE_HEURISTICS
-from ..rules.network import NETWORK_DISPATCH, NetworkRule, eager_for
+from ..rules.network import network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
 from .harness import CHOICE_NAMES, bind_policy, evaluate_many, policy_name
 from .statistics import bootstrap_ci, paired_difference
@@ -116,8 +116,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     pols += [family[n](**p) for n, p in params.items()]
     pols += list((extra or {}).values())
     if network:  # each line policy on every line, the one machine sent where the requests are
-        pols = [NetworkRule(p, NETWORK_DISPATCH, eager_probability=eager_for(p)) for p in pols]
-        extra = {k: NetworkRule(v, NETWORK_DISPATCH, eager_probability=eager_for(v)) for k, v in (extra or {}).items()}
+        pols = [network_play(p) for p in pols]
+        extra = {k: network_play(v) for k, v in (extra or {}).items()}
     seeds = seeds or list(range(8))
     res = evaluate_many(pols, cfg, seeds, action_type=action_type, batch_size=batch_size, progress=progress,
                         desc="test", executor=executor)

@@ -312,12 +312,16 @@ class LineAgent:
                              f"agent's advisor ({getattr(self.advisor, 'name', None)}) keeps")
         b, _ = as_batch(dict(observation))
         p = self.tamp_probability(b)
-        want = p >= probability
-        if self.config is not None:
-            from trackenv.envs.line_episode import keep_worst
+        return self._as_the_env_takes(p >= probability, p, b)
 
-            want = keep_worst(want & may_tamp(b, self.config), p, self.config.capacity)
-        return want
+    def _as_the_env_takes(self, want: np.ndarray, p: np.ndarray, obs: Mapping[str, Any]) -> np.ndarray:
+        """``want`` without the sections the env would drop and cut to the capacity, the most probable first, where
+        bound to a config (else as it is)."""
+        if self.config is None:
+            return want
+        from trackenv.envs.line_episode import keep_worst
+
+        return keep_worst(want & may_tamp(obs, self.config), p, self.config.capacity)
 
     def _wants(self, p: np.ndarray, deterministic: bool) -> np.ndarray:
         if deterministic:
@@ -337,14 +341,7 @@ class LineAgent:
                 advice, state = self.advisor.predict(b, state=state, episode_start=episode_start)
                 advice = np.asarray(advice, dtype=np.int64)
             p = self.tamp_probability(b, advice)
-            want = self._wants(p, deterministic)
-            c = self.config
-            if c is not None:
-                from trackenv.envs.line_episode import keep_worst
-
-                want &= may_tamp(b, c)
-                want = keep_worst(want, p, c.capacity)
-            act = want.astype(np.int8)
+            act = self._as_the_env_takes(self._wants(p, deterministic), p, b).astype(np.int8)
         return (act if batched else act[0]), state
 
     def _predict_choices(self, b: dict[str, np.ndarray], state: Any, episode_start: Any,

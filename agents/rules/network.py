@@ -32,7 +32,7 @@ from .dispatch import ValueDispatch
 from .line import SectionThreshold
 
 __all__ = ["DISPATCHES", "NETWORK_DISPATCH", "NETWORK_EAGER_PROBABILITY", "NetworkRule", "eager_for", "line_view",
-           "network_label"]
+           "network_label", "network_play"]
 
 #: the dispatches of :class:`NetworkRule`: by the count of requests (the env's own rule), or by their value
 DISPATCHES = ("requests", "value")
@@ -53,6 +53,12 @@ def eager_for(line_policy: Any) -> float | None:
     if not callable(getattr(line_policy, "requests", None)) or getattr(line_policy, "observation_state", False):
         return None
     return NETWORK_EAGER_PROBABILITY
+
+
+def network_play(line_policy: Any, dispatch: str | ValueDispatch = NETWORK_DISPATCH) -> NetworkRule:
+    """``line_policy`` as the comparisons play it on the network: on every line, the machine sent by ``dispatch``,
+    a trained line agent eager where the machine stays (:func:`eager_for`)."""
+    return NetworkRule(line_policy, dispatch, eager_probability=eager_for(line_policy))
 
 
 def network_label(line_name: str, dispatch: str | ValueDispatch = "requests",
