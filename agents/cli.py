@@ -426,12 +426,19 @@ def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     if args.algo:
         raise UsageError("--algo is for the 60 m track (Tamping-v1); the line's learner reads its algorithm from the "
                          "hyper-parameter file")
-    from .evaluation.line_compare import scenario_config, scenario_of
+    from trackenv.envs.line_config import scenario
+
+    from .evaluation.line_compare import scenario_of
     from .learning.line import train_line
 
+    name = scenario_of(args.env)
+    if name == "network":
+        raise UsageError(f"--env {args.env}: the learner trains a line's policy; train it on the network's line "
+                         "(--env trackenv/TampingLine-v0), and every line of the network plays it (trackenv "
+                         f"evaluate --env {args.env} --model PATH)")
     t0 = time.perf_counter()
     out = Path(args.out or "runs/ppo_line")
-    config = scenario_config(scenario_of(args.env), **overrides) if overrides else scenario_of(args.env)
+    config = scenario(name, **overrides) if overrides else name
     path = train_line(config, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
                       out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
                       iterations=args.iterations, verbose=0 if args.json else 1,

@@ -97,6 +97,9 @@ def test_train_line_options_are_refused_where_they_do_not_apply(capsys):
     assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--algo", "ppo"]) == 2
     assert "hyper-parameter file" in capsys.readouterr().err
     assert main(["train", "--env", "trackenv/Tamping-v9"]) == 2  # not a registered id
+    # the network's policy is a line's: trained on the line, played on every line of the network
+    assert main(["train", "--env", "trackenv/TampingNetwork-v0", "--iterations", "1"]) == 2
+    assert "train it on the network's line (--env trackenv/TampingLine-v0)" in capsys.readouterr().err
 
 
 def test_evaluate_ray_options_parse():

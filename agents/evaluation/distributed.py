@@ -41,7 +41,7 @@ class RayExecutor:
         self.num_cpus = num_cpus
         self.cpus_per_task = int(cpus_per_task)
         self._started = False
-        self._task = None
+        self._task: Any = None  # the Ray remote function, made on first use
 
     def _ray(self):
         try:

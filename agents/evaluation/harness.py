@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from trackenv.envs.batched import BatchedVectorEnv
 from trackenv.envs.choices import INTERVENTIONS, action_type_for, code
+from trackenv.envs.env import TrackVectorEnv
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
@@ -127,7 +127,7 @@ class EvaluationResult:
         }
 
 
-def _vector_env(n: int, cfg: Any, action_type: str) -> BatchedVectorEnv:
+def _vector_env(n: int, cfg: Any, action_type: str) -> TrackVectorEnv:
     """The native vector env of ``cfg``'s problem, in NEXT_STEP autoreset: no episode is started past the
     horizon and the last step's info stays in place (every problem follows the same conventions)."""
     return make_vector_env(cfg, n, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
@@ -144,7 +144,7 @@ def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
     return {k: v[idx] for k, v in obs.items()}
 
 
-def _run_chunk(env: BatchedVectorEnv, slots: list[tuple[int, int]], policies: Sequence[Any],
+def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequence[Any],
                action_type: str, record: bool = False, pbar: Any = None) -> dict[str, Any]:
     """Run one episode per slot (policy index, seed) to the horizon; per-env totals (and traces if record)."""
     cfg = env.config

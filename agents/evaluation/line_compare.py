@@ -109,10 +109,10 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     tuned_from = (f"shipped (agents/rules/{tuned_file_for(line_cfg).name})" if params
                   else f"tuned now on {n_train} seeds")
     if not params and classes:
-        t = tune_many(classes, cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor,
+        t = tune_many(classes, line_cfg, list(range(1000, 1000 + n_train)), batch_size, progress, executor=executor,
                       action_type=action_type)
         params = {classes[i].name: v["best_params"] for i, v in t.items()}
-    pols = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
+    pols: list[Any] = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
     pols += [family[n](**p) for n, p in params.items()]
     pols += list((extra or {}).values())
     if network:  # each line policy on every line, the one machine sent where the requests are
@@ -145,7 +145,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     # the best rule and the trained policy, side by side
     shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
     payload["episode_plot"] = (None if network else  # the network's lines: trackenv.render draws one line
-                               plot_line_episode(shown, cfg, seeds[0], str(out / "line_episode.png"), action_type))
+                               plot_line_episode(shown, line_cfg, seeds[0], str(out / "line_episode.png"), action_type))
     return payload
 
 
@@ -272,15 +272,17 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
             tam.append(info["tamped_sections"])
             cost -= r
         sd_, tam_, meas_ = np.array(sd), np.array(tam), np.array(meas)
-        reg = env.batch.register
+        batch = env.batch
+        assert batch is not None  # made by the reset
+        reg = batch.register
         for j in range(cfg.n_sections):
             col = f"C{j % 10}"
             ax.plot(years, sd_[:, j], color=col, lw=1.2 if reg[j] else 0.8,
                     label=f"s{j}" + {0: "", 1: " (transition)", 2: " (switch)"}[int(reg[j])])
             ax.plot(years, meas_[:, j], color=col, lw=0.5, ls=":")
-            for t in np.flatnonzero(tam_[:, j]):
-                ax.plot(years[t], sd_[t, j], "v", color=col, ms=6)
-        ax.axhline(env.batch.limits.sd_alert_m * 1e3, color="k", ls="--", lw=0.8, label="SD alert")
+            for step in np.flatnonzero(tam_[:, j]):
+                ax.plot(years[step], sd_[step, j], "v", color=col, ms=6)
+        ax.axhline(batch.limits.sd_alert_m * 1e3, color="k", ls="--", lw=0.8, label="SD alert")
         ax.set_xlabel("year")
         ax.set_title(f"{policy_name(pol)} on {cfg.n_sections} sections, seed {seed}: {cost:.0f} k€, "
                      f"{int(tam_.sum())} tampings in {int(tam_.any(axis=1).sum())} campaigns", fontsize=9)

@@ -303,8 +303,10 @@ def recorded_rule_schedules(config: Any, seeds: list[int], policies: list,
         if cfg == config:
             continue
         for r in evaluate_many(policies, cfg, seeds, batch_size=batch_size):
+            tamped = r.tamped
+            assert tamped is not None  # evaluate_many records every step's tampings
             for k in range(len(seeds)):
-                out[k].append(r.tamped[k])
+                out[k].append(tamped[k])
     return out
 
 
@@ -524,7 +526,9 @@ def hindsight_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]],
     swaps = swaps if len(swaps) > 1 else ()
     bar = tqdm(total=rounds + 2, desc=f"hindsight x{len(seeds)}", disable=not progress)
     pools = [[_Pool() for _ in range(S)] for _ in seeds]
-    cands, firsts = [], []  # an episode's candidates start with its base schedule's S columns
+    # (seed, section, schedule or rule); an episode's candidates start with its base schedule's S columns
+    cands: list[tuple[int, int, Any]] = []
+    firsts: list[int] = []
     for seed, base, extra in episodes:
         pols = [np.asarray(base, dtype=np.int8), np.zeros((H, S), dtype=np.int8),
                 *(np.asarray(x, dtype=np.int8) for x in extra)]

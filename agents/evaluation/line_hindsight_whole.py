@@ -206,7 +206,7 @@ def campaign_variants(plan: np.ndarray, restricted: np.ndarray) -> list[np.ndarr
                 v[at] = np.maximum(plan[t], plan[u])
                 v[gone] = NOTHING
                 out.append(v)
-    campaigns = plan.any(axis=1)
+    campaigns = np.asarray(plan.any(axis=1))
     for j in range(S):
         for column in _variants(plan[:, j], restricted[:, j], campaigns):
             v = plan.copy()
@@ -270,7 +270,7 @@ def whole_line_bounds(config: Any, episodes: list[tuple[int, np.ndarray, tuple]]
             seen[e].setdefault(a[n].tobytes(), (float(c[n]), a[n], r[n]))
 
     record(cands, cost, applied, restricted)
-    first = {}
+    first: dict[int, float] = {}
     for n, (seed, _) in enumerate(cands):
         first.setdefault(int(seed), float(cost[n]))  # each episode's first candidate: its base schedule
 

@@ -7,17 +7,20 @@ one vector env per batch whatever the number of candidates; the test seeds are n
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from trackenv.envs.line_config import LineConfig
-from trackenv.envs.problems import problem_config
+from trackenv.envs.problems import ProblemConfig, problem_config
 
 from .harness import TRAIN_SEEDS, evaluate_many
+
+if TYPE_CHECKING:
+    from ..rules.base import Heuristic
 
 __all__ = ["tune", "tune_many"]
 
 
-def tune(policy_cls: type, config: LineConfig | dict | str | None = None,
+def tune(policy_cls: type[Heuristic], config: LineConfig | dict | str | None = None,
          train_seeds: Iterable[int] = TRAIN_SEEDS, grid: Sequence[dict] | None = None, batch_size: int = 32,
          progress: bool = False, executor: Any = None, action_type: str = "multibinary") -> dict[str, Any]:
     """Grid search of ``policy_cls`` over ``grid`` (default ``policy_cls.param_grid()``) on ``train_seeds``
@@ -33,7 +36,7 @@ def tune(policy_cls: type, config: LineConfig | dict | str | None = None,
                      grids=[grid], executor=executor, action_type=action_type)[0]
 
 
-def tune_many(classes: Sequence[type], cfg: LineConfig, train_seeds: Sequence[int], batch_size: int,
+def tune_many(classes: Sequence[type[Heuristic]], cfg: ProblemConfig, train_seeds: Sequence[int], batch_size: int,
               progress: bool, grids: Sequence[Sequence[dict]] | None = None, executor: Any = None,
               action_type: str = "multibinary") -> dict[int, dict]:
     """:func:`tune` for several classes in one batched run, each over its grid (default its

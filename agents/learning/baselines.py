@@ -162,7 +162,7 @@ def _load_rllib(run_dir: Path, name: str) -> TrainedPolicy:
         from trackenv.envs.multiagent import line_parallel_env
 
         penv = line_parallel_env(env_id, **env_config)
-        config = penv.env.unwrapped.config
+        config = penv.env.get_wrapper_attr("config")
         policy = RLlibSectionPolicy(module, penv, config, name)
     else:
         from trackenv.envs.wrappers import make_ranked

@@ -372,7 +372,8 @@ class _LineTrainer:
             t_it = time.time()
             seeds = list(range(seed + it * n_episodes, seed + (it + 1) * n_episodes))
             priced = campaign_counterfactuals if s.campaign_forks else section_counterfactuals
-            more = {} if s.campaign_forks else {"choices": self.learned, "choice_features": s.learn_choices}
+            more: dict[str, Any] = ({} if s.campaign_forks
+                                    else {"choices": self.learned, "choice_features": s.learn_choices})
             d = priced(config, seeds, behaviour, advisor=self.advisor, focus_rate=s.focus_rate,
                        other_rate=s.other_rate, seed=seed + it, progress=bar.update if bar is not None else None,
                        **more)

@@ -181,9 +181,9 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must not be empty")
-    for name, rate in (("focus_rate", focus_rate), ("other_rate", other_rate)):
-        if not 0.0 < rate <= 1.0:
-            raise ValueError(f"{name} must be in (0, 1], got {rate!r}")
+    for name, value in (("focus_rate", focus_rate), ("other_rate", other_rate)):
+        if not 0.0 < value <= 1.0:
+            raise ValueError(f"{name} must be in (0, 1], got {value!r}")
     choices = tuple(choices)
     if not choices or not set(choices) <= set(LEARNABLE_CHOICES) or len(set(choices)) < len(choices):
         raise ValueError(f"choices must name distinct choices of {list(LEARNABLE_CHOICES)}, got {choices!r}")
@@ -202,6 +202,7 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
     env = TampingLineVectorEnv(E, c, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(c))
     obs, _ = env.reset(seed=seeds)
     base = env.batch
+    assert base is not None  # made by the reset
     room = E * H * len(choices)  # room for every decision of every episode to be priced
     forks = LineBatch(c, room)
     n_forks = 0
@@ -263,8 +264,8 @@ def section_counterfactuals(config: Any, seeds: Sequence[int], policy: Any, advi
         if old.size:
             at = np.arange(old.size)
             seen = {k: np.asarray(v)[f_line[old]].copy() for k, v in obs.items()}
-            for k, v in forks.section_entries(old, t).items():
-                seen[k][at, f_sec[old]] = v
+            for key, v in forks.section_entries(old, t).items():
+                seen[key][at, f_sec[old]] = v
             seen_state = None
             if f_memory is not None:
                 seen_state = np.asarray(before)[f_line[old]].copy()
@@ -380,6 +381,7 @@ def line_forks(config: Any, seeds: Sequence[int], policy: Any,
     env = TampingLineVectorEnv(E, c, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(c))
     obs, _ = env.reset(seed=seeds)
     base, keys = env.batch, list(obs)
+    assert base is not None  # made by the reset
     forks = LineBatch(c, 4 * E)
     f_line, f_step = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     f_cost, f_applied = np.zeros(0), np.zeros((0, S), dtype=np.int64)

@@ -40,6 +40,7 @@ from gymnasium.vector import VectorWrapper
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from trackenv.envs.line_config import LineConfig
+from trackenv.envs.network import NetworkConfig
 from trackenv.envs.problems import make_vector_env, problem_config
 from trackenv.envs.sharded import native_or_sharded
 from trackenv.envs.wrappers import RankedVectorActions, SectionVectorObservation, section_keys
@@ -54,7 +55,9 @@ def observation_keys(space: spaces.Dict, keep_per_sleeper: bool = True, n_sectio
     if keep_per_sleeper:
         return list(space.spaces)
     if n_sections is None:
-        n_sections = space.spaces["section_sd"].shape[0]
+        section_sd = space.spaces["section_sd"]
+        assert isinstance(section_sd, spaces.Box)  # every problem's observation is a Dict of Boxes
+        n_sections = section_sd.shape[0]
     return section_keys(space, n_sections)
 
 
@@ -109,14 +112,15 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
     """SB3 VecEnv of ``num_envs`` tamping episodes with batched physics (see the module docstring).
 
     ``config`` is a :class:`LineConfig`, a preset name ("small", "default", "hard", "track60"), a dict of its
-    fields, or None (the 60 m track); ``action_type`` is "multibinary", "discrete", "ranked", "choices" or
-    "ranked_choices" (:mod:`~trackenv_agents.learning.actions`); ``seed``
+    fields, None (the 60 m track) or a :class:`~trackenv.envs.network.NetworkConfig`; ``action_type`` is
+    "multibinary", "discrete", "ranked", "choices" or "ranked_choices" (:mod:`~trackenv_agents.learning.actions`;
+    those the config's ``agent_action_types`` offer: the network's own only); ``seed``
     (optional) seeds the first reset (env ``i`` gets ``seed + i``); ``workers`` > 1 splits the envs over that
     many processes (:class:`~trackenv.envs.sharded.ShardedVectorEnv`: the same results, the Python of the steps
     in parallel; call :meth:`close` when done).
     """
 
-    def __init__(self, num_envs: int = 8, config: LineConfig | dict | str | None = None, *,
+    def __init__(self, num_envs: int = 8, config: LineConfig | NetworkConfig | dict | str | None = None, *,
                  action_type: str = "multibinary", keep_per_sleeper: bool = True,
                  bootstrap_at_horizon: bool = False, seed: int | None = None, workers: int = 1) -> None:
         venv: Any
@@ -227,9 +231,12 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
         kept = state.get("ranked_obs")
         if kept is None and state.get("ranked_sd") is not None:  # a state taken before the choices: SDs only
             kept = {"section_sd": state["ranked_sd"]}
-        if (ranked is None) != (kept is None) or (ranked is not None and set(kept) != set(ranked._obs)):
-            raise ValueError("the state comes from an adapter of another action type")
-        if ranked is not None:
+        other = ValueError("the state comes from an adapter of another action type")
+        if (ranked is None) != (kept is None):
+            raise other
+        if ranked is not None and kept is not None:
+            if set(kept) != set(ranked._obs):
+                raise other
             ranked._obs = {k: np.array(v, copy=True) for k, v in kept.items()}
         self._reset_seeds()  # a seed set before would reseed the restored generators at the next reset
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -65,6 +65,9 @@ class NetworkConfig:
 
     The horizon, calendar and economics of each line are the line config's. Bad values raise ValueError naming
     the field and its range; an unknown key (:meth:`from_dict`, :meth:`replace`) raises naming it."""
+
+    #: the action parameterisations a learner may use on the network: its own (one flag per section of every line)
+    agent_action_types: ClassVar[tuple[str, ...]] = ("multibinary",)
 
     n_lines: int = 3
     line_config: Any = "default"

@@ -25,9 +25,10 @@ from .network import NetworkBatch, NetworkConfig, network_observation_space
 if TYPE_CHECKING:
     from .env import TrackVectorEnv
 
-ProblemConfig = LineConfig
 #: the config of any env of trackenv: a line (every preset) or a network of lines
 EnvConfig = LineConfig | NetworkConfig
+#: the config of a problem the harnesses run (evaluation, training, search): any env's
+ProblemConfig = EnvConfig
 
 
 @dataclass(frozen=True)

@@ -87,6 +87,34 @@ def test_adapter_over_the_line_env_and_fixed_reward_scale():
         VecScaleReward(raw, 0.0)
 
 
+def test_adapter_on_the_network_steps_as_the_network_env():
+    """The network is a problem the adapter takes (its learners' flat route): its own action only, and each env
+    of the adapter gives what the network env gives on the same seed and actions."""
+    import gymnasium as gym
+
+    from trackenv.envs.network import NetworkConfig
+
+    cfg = NetworkConfig(line_config="small", n_lines=2)
+    with pytest.raises(ValueError, match="action_type must be one of .'multibinary',. on NetworkConfig"):
+        TampingSB3VecEnv(2, cfg, action_type="ranked")
+    adapter = TampingSB3VecEnv(2, cfg, seed=11)
+    single = gym.make("trackenv/TampingNetwork-v0", config=cfg)
+    obs = adapter.reset()
+    first, _ = single.reset(seed=12)  # the adapter's second env: seed + 1
+    assert obs["machine_line"].shape == (2, 2)
+    for key, value in first.items():
+        np.testing.assert_array_equal(obs[key][1], value)
+    n = adapter.action_space.shape[0]
+    action = np.zeros((2, n), dtype=np.int8)
+    action[:, n // 2] = 1  # a section of the second line: the machine moves there
+    obs, rewards, _, infos = adapter.step(action)
+    expected, reward, _, _, info = single.step(action[1])
+    assert infos[1]["moved"] and info["moved"]
+    assert rewards[1] == pytest.approx(reward)
+    for key, value in expected.items():
+        np.testing.assert_array_equal(obs[key][1], value)
+
+
 def test_adapter_seeding_and_dropping_per_sleeper_keys(small_config):
     a = TampingSB3VecEnv(2, small_config, seed=7, keep_per_sleeper=False)
     b = TampingSB3VecEnv(2, small_config, keep_per_sleeper=False)
