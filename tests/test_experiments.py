@@ -270,6 +270,27 @@ def test_engine_switch_scores_like_the_leaderboard_and_finds_each_shipped_bound(
         assert mod.bound_file(name).name.startswith(f"{name}_")
 
 
+def test_bound_parts_replays_split_each_episodes_cost_into_its_parts_and_count_the_choices():
+    """The replayed parts of a schedule sum to what the env charges it (replay_schedules), and the choice counts
+    are the schedule's."""
+    from trackenv.envs.choices import CHOICES
+    from trackenv.envs.line_config import scenario
+    from trackenv_agents.evaluation.line_hindsight import replay_schedules
+
+    mod = _script("bound_parts")
+    config = scenario("wet", horizon_years=1.0)
+    seeds = [3, 4]
+    plans = np.random.default_rng(0).choice([0, 1, 3], size=(2, config.horizon_steps, config.n_sections),
+                                            p=[0.8, 0.1, 0.1]).astype(np.int8)
+    plans[:, 1:] = np.where(plans[:, :-1] != 0, 0, plans[:, 1:])  # no work on a section two steps running
+    parts, counts = mod.replay_parts(config, seeds, plans)
+    assert not any(k.startswith("_") for k in parts) and "drainage" in parts
+    np.testing.assert_allclose(sum(parts.values()), replay_schedules(config, seeds, list(plans)), rtol=1e-9)
+    assert counts.shape == (2, len(CHOICES) - 1)
+    assert counts[:, CHOICES.index("tamp") - 1].tolist() == (plans == 1).sum(axis=(1, 2)).tolist()
+    assert counts[:, CHOICES.index("drainage") - 1].tolist() == (plans == 3).sum(axis=(1, 2)).tolist()
+
+
 def test_track60_room_replays_a_schedule_exactly_and_its_end_stop_does_no_late_work():
     from trackenv.envs.line_config import scenario
     from trackenv_agents.evaluation.harness import evaluate_many
