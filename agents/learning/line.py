@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_config import SCENARIOS, LineConfig
 
 from ..shipped import CHOICE_PRETRAINED_FILE, LINE_PRETRAINED_FILE
 from .checkpoint import (
@@ -486,17 +486,17 @@ def _line_env_id(config: LineConfig) -> str:
     import gymnasium as gym
 
     import trackenv  # noqa: F401  (registers the ids)
-    from trackenv.envs.line_config import SCENARIOS, scenario
 
     from ..evaluation.line_compare import scenario_of
-    from ..rules.problems import as_preset
+    from ..rules.problems import preset_of
 
+    preset = preset_of(config)
     for env_id in sorted(gym.registry):
         try:
             name = scenario_of(env_id)
         except ValueError:  # not an id of a line preset
             continue
-        if name in SCENARIOS and as_preset(config) == scenario(name):
+        if preset is not None and name == preset:
             return env_id
     return LINE_ENV_ID
 
@@ -556,10 +556,37 @@ def export_line_policy(model_zip: str | Path, dest: str | Path = DEFAULT_LINE_PR
 def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> LineAgent:
     """The line policy at ``path`` (default the shipped ``agents/learning/pretrained/ppo_tamping_line.zip``), with SB3's
     ``predict`` on raw observations of any TampingLine scenario (its advisor rule rebuilt from the JSON beside
-    it). FileNotFoundError if there is none; ValueError if it was trained on other features."""
+    it). The JSON's ``preset_weights`` (preset name -> a saved policy's file beside it, of the same features,
+    advisor and learned choices) are the networks it plays on those presets (``LineAgent``'s
+    ``preset_policies``). FileNotFoundError if there is none; ValueError if it was trained on other features."""
     from ..rules.problems import advisor_rules
 
     path = Path(path) if path is not None else DEFAULT_LINE_PRETRAINED
+    meta, model = _load_line_policy(path)
+    advisor = meta.get("advisor")
+    rule = None if advisor is None else advisor_rules()[advisor](**meta.get("advisor_params", {}))
+    # what a preset's network must share with the agent's (a choice rule as advisor is tuned per config anyway)
+    same = ("features", "advisor", "learned") + (() if is_choice_rule(rule) else ("advisor_params",))
+    presets = {}
+    for preset, file in (meta.get("preset_weights") or {}).items():
+        other, network = _load_line_policy(path.with_name(file))
+        if preset not in SCENARIOS or any(other.get(k, _META_DEFAULTS.get(k)) != meta.get(k, _META_DEFAULTS.get(k))
+                                          for k in same):
+            raise ValueError(f"{line_meta_path(path)}: preset_weights {preset!r}: {file} must be a preset's "
+                             f"({sorted(SCENARIOS)}) network of the same {', '.join(same)}")
+        presets[preset] = network.policy
+    return LineAgent(model.policy, name=name, advisor=rule, horizon_years=meta.get("config", {}).get("horizon_years"),
+                     choice_features=CHOICE_FEATURES[0] in (meta.get("features") or []),
+                     learned=tuple(meta.get("learned", ("tamp",))), preset_policies=presets)
+
+
+#: the metadata's values where a file written before the key existed has none
+_META_DEFAULTS: dict[str, Any] = {"learned": ["tamp"]}
+
+
+def _load_line_policy(path: Path) -> tuple[dict[str, Any], Any]:
+    """The metadata and the model of the saved line policy at ``path``, its features checked against this
+    version's."""
     if not path.exists():
         raise FileNotFoundError(f"no trained line policy at {path}")
     meta = json.loads(line_meta_path(path).read_text())
@@ -568,7 +595,4 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
     if meta.get("features") != _feature_names(advisor is not None, choice_features):
         raise ValueError(f"{line_meta_path(path)}: trained on the features {meta.get('features')}, this version "
                          f"computes {_feature_names(advisor is not None, choice_features)}")
-    model = _algo_class(meta["algo"]).load(str(path), device="cpu")
-    rule = None if advisor is None else advisor_rules()[advisor](**meta.get("advisor_params", {}))
-    return LineAgent(model.policy, name=name, advisor=rule, horizon_years=meta.get("config", {}).get("horizon_years"),
-                     choice_features=choice_features, learned=tuple(meta.get("learned", ("tamp",))))
+    return meta, _algo_class(meta["algo"]).load(str(path), device="cpu")

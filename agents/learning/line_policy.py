@@ -239,12 +239,18 @@ class LineAgent:
     ``choice_features``: the network was trained with the choice features (:data:`CHOICE_FEATURES`; a choice
     rule as advisor); ``learned``: the choices of :data:`LEARNABLE_CHOICES` it decides, each asked in turn, in
     place of the rule's (the tamping always; spot tamping and drainage where listed, which needs the choice
-    features), each where :func:`choice_open` opens it."""
+    features), each where :func:`choice_open` opens it.
+
+    ``preset_policies``: networks of the same features and advisor trained on some shipped presets, by preset name
+    (:data:`~trackenv.envs.line_config.SCENARIOS`): bound to a config that is one of them
+    (:func:`~trackenv_agents.rules.problems.preset_of`), the agent plays that preset's network, elsewhere
+    ``policy``. Why: a network trained on the line it runs on can do better there than one trained elsewhere
+    (the short-defect line: the documentation's agents page)."""
 
     def __init__(self, policy: Any, name: str = "ppo", config: LineConfig | None = None,
                  rng: np.random.Generator | None = None, advisor: Any = None,
                  horizon_years: float | None = None, choice_features: bool = False,
-                 learned: tuple[str, ...] = ("tamp",)) -> None:
+                 learned: tuple[str, ...] = ("tamp",), preset_policies: Mapping[str, Any] | None = None) -> None:
         learned = tuple(learned)
         if learned[:1] != ("tamp",) or not set(learned) <= set(LEARNABLE_CHOICES):
             raise ValueError(f"learned must start with 'tamp' and name choices of {list(LEARNABLE_CHOICES)}, "
@@ -254,7 +260,9 @@ class LineAgent:
                              f"need choice_features=True (advisor {getattr(advisor, 'name', None)!r}, "
                              f"choice_features={choice_features!r}, learned={learned!r})")
         self.choice_features, self.learned = bool(choice_features), learned
-        self.policy = policy
+        self.default_policy = policy
+        self.preset_policies = dict(preset_policies or {})
+        self.policy = self._policy_for(config)
         self.name = name
         self.config = config
         self.choices = is_choice_rule(advisor)
@@ -281,9 +289,19 @@ class LineAgent:
 
     def bind(self, config: LineConfig) -> LineAgent:
         """This agent with ``config``'s possession capacity and tamping gap (and its advisor bound to it: in
-        choice mode, the config's tuned choice rule)."""
-        return LineAgent(self.policy, self.name, config, self._rng, self.advisor, self.horizon_years,
-                         self.choice_features, self.learned)
+        choice mode, the config's tuned choice rule), playing the network of ``config``'s preset where it has one
+        (``preset_policies``)."""
+        return LineAgent(self.default_policy, self.name, config, self._rng, self.advisor, self.horizon_years,
+                         self.choice_features, self.learned, self.preset_policies)
+
+    def _policy_for(self, config: LineConfig | None) -> Any:
+        """The network the agent plays on ``config``: its preset's where ``preset_policies`` has one, else the
+        default."""
+        if config is None or not self.preset_policies:
+            return self.default_policy
+        from ..rules.problems import preset_of
+
+        return self.preset_policies.get(preset_of(config) or "", self.default_policy)
 
     def tamp_probability(self, obs: Mapping[str, Any], advice: np.ndarray | None = None,
                          ask: str = "tamp") -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from trackenv.envs.line_config import LineConfig, scenario
+from trackenv.envs.line_config import SCENARIOS, LineConfig, scenario
 
 from .choices import CHOICE_RULES
 from .line import LINE_HEURISTICS, LINE_TUNED_FILE, line_tuned_params
@@ -74,14 +74,18 @@ def computed_as_presets(config: LineConfig) -> LineConfig:
     return config.replace(**_HOW_COMPUTED)
 
 
-def tuned_file_for(config: LineConfig) -> Path:
-    """The tuned-parameter file of ``config``: its preset's where it is a shipped preset (:func:`as_preset`),
-    else the default line's."""
+def preset_of(config: LineConfig) -> str | None:
+    """The name of the shipped preset (:data:`~trackenv.envs.line_config.SCENARIOS`) that ``config`` is, over any
+    horizon and either engine (:func:`as_preset`); None for any other line."""
     plain = as_preset(config)
-    for name, path in TUNED_FILES.items():
-        if plain == scenario(name) and path.exists():
-            return path
-    return LINE_TUNED_FILE
+    return next((name for name in SCENARIOS if plain == scenario(name)), None)
+
+
+def tuned_file_for(config: LineConfig) -> Path:
+    """The tuned-parameter file of ``config``: its preset's where it is a shipped preset (:func:`preset_of`) with
+    one, else the default line's."""
+    path = TUNED_FILES.get(preset_of(config) or "")
+    return path if path is not None and path.exists() else LINE_TUNED_FILE
 
 
 def tuned_params_for(config: Any) -> dict[str, dict[str, Any]]:

@@ -160,3 +160,39 @@ def test_a_planner_advisor_keeps_its_history_as_the_agents_state():
         tamped += int(act.sum())
         obs, *_ = env.step(act[0])
     assert mine[0].shape[1] == 5 and tamped > 0  # a full window of history, and the planner tamped
+
+
+def test_the_choice_agent_plays_its_presets_network_where_one_ships(tmp_path):
+    """The shipped choice agent's metadata names a network for the short-defect line (``preset_weights``): bound
+    to that preset (any horizon or engine) it plays it, bound to any other line the default one, and a bound agent
+    bound again to another line changes back. A preset network of other features or advisor, or an unknown
+    preset, is refused by name."""
+    import json
+    import shutil
+
+    from trackenv_agents.learning.line import line_meta_path, load_line_trained
+    from trackenv_agents.shipped import CHOICE_PRETRAINED_FILE, LINE_PRETRAINED_FILE
+
+    agent = load_line_trained(CHOICE_PRETRAINED_FILE, name="cpi-choice-agent")
+    assert set(agent.preset_policies) == {"defects"}
+    defects = agent.bind(scenario("defects", horizon_years=1.0, engine="fast"))
+    assert defects.policy is agent.preset_policies["defects"] and defects.name == "cpi-choice-agent"
+    assert agent.bind(scenario("wet")).policy is agent.default_policy
+    assert defects.bind(scenario("choices")).policy is agent.default_policy
+    obs, _ = TampingLineVectorEnv(2, scenario("defects", horizon_years=1.0), action_type="choices").reset(seed=[0, 1])
+    p_defects = defects.tamp_probability(obs)
+    p_default = agent.bind(scenario("defects").replace(annual_mgt=30.0)).tamp_probability(obs)  # no preset
+    assert not np.allclose(p_defects, p_default)  # two networks
+
+    for file, preset, why in ((LINE_PRETRAINED_FILE, "defects", "same features, advisor"),
+                              (CHOICE_PRETRAINED_FILE, "no-such-line", "a preset's")):
+        folder = tmp_path / why.split()[0]
+        folder.mkdir()
+        shutil.copy(CHOICE_PRETRAINED_FILE, folder / "agent.zip")
+        shutil.copy(file, folder / "other.zip")
+        shutil.copy(line_meta_path(file), line_meta_path(folder / "other.zip"))
+        meta = json.loads(line_meta_path(CHOICE_PRETRAINED_FILE).read_text())
+        meta["preset_weights"] = {preset: "other.zip"}
+        line_meta_path(folder / "agent.zip").write_text(json.dumps(meta))
+        with pytest.raises(ValueError, match=f"preset_weights '{preset}'.*{why}"):
+            load_line_trained(folder / "agent.zip")

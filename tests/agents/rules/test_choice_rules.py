@@ -195,6 +195,7 @@ def test_the_rules_of_a_config_and_their_tuned_files():
         # what the line is does: another traffic is no shipped preset
         heavier = scenario(name).replace(annual_mgt=scenario(name).annual_mgt * 1.5)
         assert problems.tuned_file_for(heavier) == problems.LINE_TUNED_FILE
+        assert problems.preset_of(fast.replace(horizon_years=2.0)) == name and problems.preset_of(heavier) is None
 
 
 def test_the_harness_counts_the_applied_choices():
