@@ -37,22 +37,12 @@ WAITING_DRAINAGE = ((1, 1.0), (1, 1.5), (1, 2.5), (2, 1.0), (2, 1.5), (2, 2.5))
 
 def replay_parts(config, seeds: list[int], plans: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Each (H, S) schedule of ``plans`` (episodes, H, S) run on its episode in the env: the cost parts per
-    episode (k€) and each choice's count per episode."""
-    from gymnasium.vector import AutoresetMode
+    episode (k€, :func:`~trackenv_agents.evaluation.line_hindsight.replay_schedule_parts`) and each choice's count
+    per episode."""
+    from trackenv.envs.choices import CHOICES
+    from trackenv_agents.evaluation.line_hindsight import replay_schedule_parts
 
-    from trackenv.envs.choices import CHOICES, action_type_for
-    from trackenv.envs.line import TampingLineVectorEnv
-
-    env = TampingLineVectorEnv(len(seeds), config, action_type=action_type_for(config),
-                               autoreset_mode=AutoresetMode.NEXT_STEP)
-    env.reset(seed=seeds)
-    parts: dict[str, np.ndarray] = {}
-    for t in range(config.horizon_steps):
-        _, _, _, _, info = env.step(plans[:, t])
-        for key, value in info["costs"].items():
-            if key.startswith("_"):  # the vector env's mask of where the entry is set
-                continue
-            parts[key] = parts.get(key, 0.0) + np.asarray(value, dtype=float)
+    _, parts = replay_schedule_parts(config, seeds, list(plans))
     counts = np.array([(plans == code).sum(axis=(1, 2)) for code in range(1, len(CHOICES))]).T
     return parts, counts
 

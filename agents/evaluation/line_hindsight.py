@@ -77,8 +77,8 @@ from trackenv.envs.choices import (
 )
 
 __all__ = ["DRAINAGE_TIMINGS", "RECORDING_DESIGNS", "TrueStateRule", "choice_rules", "hindsight_bound",
-           "hindsight_bounds", "recorded_rule_schedules", "replay", "replay_schedules", "replay_sections",
-           "room_summary", "saved_schedules", "schedule_from_rows", "schedule_rows"]
+           "hindsight_bounds", "recorded_rule_schedules", "replay", "replay_schedule_parts", "replay_schedules",
+           "replay_sections", "room_summary", "saved_schedules", "schedule_from_rows", "schedule_rows"]
 
 #: Recording designs whose rule schedules :func:`recorded_rule_schedules` offers as hindsight candidates: every
 #: step without error, and twice and once a year with the config's errors.
@@ -446,6 +446,13 @@ def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> 
     """Each (H, S) schedule of ``plans`` (choice codes, or bool: tamp) run on its episode of ``seeds`` in the env
     itself (one native vector env, NEXT_STEP autoreset); returns the episodes' costs (−Σ rewards, k€). The check
     of the per-section pricing."""
+    return replay_schedule_parts(config, seeds, plans)[0]
+
+
+def replay_schedule_parts(config: Any, seeds: list[int],
+                          plans: list[np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """:func:`replay_schedules`, and each episode's cost split into the parts of ``info["costs"]`` (k€): where a
+    schedule's cost goes."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv
@@ -455,10 +462,15 @@ def replay_schedules(config: Any, seeds: list[int], plans: list[np.ndarray]) -> 
     env.reset(seed=[int(s) for s in seeds])
     plans_ = np.stack([np.asarray(p, dtype=np.int8) for p in plans])
     cost = np.zeros(len(seeds))
+    parts: dict[str, np.ndarray] = {}
     for t in range(config.horizon_steps):
-        cost -= env.step(plans_[:, t])[1]
+        _, reward, _, _, info = env.step(plans_[:, t])
+        cost -= reward
+        for key, value in info["costs"].items():
+            if not key.startswith("_"):  # (the vector env's mask of where an entry is set)
+                parts[key] = parts.get(key, 0.0) + np.asarray(value, dtype=float)
     env.close()
-    return cost
+    return cost, parts
 
 
 class _Pool:

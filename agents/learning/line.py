@@ -259,7 +259,7 @@ class _LineTrainer:
         source = _algo_class(meta["algo"]).load(str(path), device="cpu")
         self.model.policy.load_state_dict(_widened_inputs(source.policy.state_dict(), self.model.policy.state_dict()))
         self.init_policy = str(path)
-        self.init_learned = tuple(meta.get("learned", ("tamp",)))
+        self.init_learned = tuple(_meta(meta, "learned"))
 
     def _agent(self, policy: Any, learned: tuple[str, ...] | None = None) -> LineAgent:
         """The line agent of ``policy`` with this run's advisor and features, deciding ``learned`` (default the
@@ -570,18 +570,22 @@ def load_line_trained(path: str | Path | None = None, name: str = "ppo") -> Line
     presets = {}
     for preset, file in (meta.get("preset_weights") or {}).items():
         other, network = _load_line_policy(path.with_name(file))
-        if preset not in SCENARIOS or any(other.get(k, _META_DEFAULTS.get(k)) != meta.get(k, _META_DEFAULTS.get(k))
-                                          for k in same):
+        if preset not in SCENARIOS or any(_meta(other, k) != _meta(meta, k) for k in same):
             raise ValueError(f"{line_meta_path(path)}: preset_weights {preset!r}: {file} must be a preset's "
                              f"({sorted(SCENARIOS)}) network of the same {', '.join(same)}")
         presets[preset] = network.policy
     return LineAgent(model.policy, name=name, advisor=rule, horizon_years=meta.get("config", {}).get("horizon_years"),
                      choice_features=CHOICE_FEATURES[0] in (meta.get("features") or []),
-                     learned=tuple(meta.get("learned", ("tamp",))), preset_policies=presets)
+                     learned=tuple(_meta(meta, "learned")), preset_policies=presets)
 
 
 #: the metadata's values where a file written before the key existed has none
 _META_DEFAULTS: dict[str, Any] = {"learned": ["tamp"]}
+
+
+def _meta(meta: dict[str, Any], key: str) -> Any:
+    """A saved line policy's metadata entry ``key``, or its default where the file predates it."""
+    return meta.get(key, _META_DEFAULTS.get(key))
 
 
 def _load_line_policy(path: Path) -> tuple[dict[str, Any], Any]:
