@@ -58,7 +58,7 @@ GRID = [{"trigger_mm": t, "include_mm": i} for t in (1.5, 2.0, 2.5, 3.0, 3.5, 4.
 #: (its parameters as shipped when this experiment's results were saved, not tuned on the line; ``neighbour_mm``
 #: at its maximum: the line's sections are separate segments, so a tamping leaves no step at a neighbour's boundary)
 PLANNER = {"neighbour_mm": 100.0, "tamped_sd_slope": 0.44, "regrowth_factor": 1.5, "prior_growth_mm_per_step": 0.04,
-           "own_slope_weight": 0.5}
+           "own_slope_weight": 0.5, "forecast_error_mm_per_step": 0.0}
 
 
 def bound_schedules() -> tuple[list[int], list[np.ndarray]]:

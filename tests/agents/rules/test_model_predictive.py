@@ -33,20 +33,24 @@ def _forecast_cost(planner: ModelPredictive, sd, growth, step, schedule) -> floa
     p, costs = planner.params, planner.costs
     total = costs["possession"] * schedule.any(axis=1).sum()
     for i in range(len(sd)):
-        v, h = sd[i], growth[i]
+        v, h, ahead = sd[i], growth[i], 0  # ahead: steps since the SD was last known (now, or a tamping)
         for k in range(planner.horizon_steps - step):
             if schedule[k, i]:
                 v = p["tamped_sd_offset_mm"] + p["tamped_sd_slope"] * v + p["regrowth_factor"] * growth[i]
                 h = p["regrowth_factor"] * growth[i]
                 total += costs["tamping"][i]
+                ahead = 1
             else:
                 v = v + h
-            total += costs["geometry"][i] * v * v
+                ahead += 1
+            # the expected square: the forecast's square plus the variance of an error grown by σ a step
+            total += costs["geometry"][i] * (v * v + (p["forecast_error_mm_per_step"] * ahead) ** 2)
     return float(total)
 
 
-def test_the_plan_is_the_cheapest_schedule_of_its_model_on_a_small_line():
-    planner = ModelPredictive(max_campaigns=2).bind(TRACK60)
+@pytest.mark.parametrize("error", [0.0, 0.05])
+def test_the_plan_is_the_cheapest_schedule_of_its_model_on_a_small_line(error):
+    planner = ModelPredictive(max_campaigns=2, forecast_error_mm_per_step=error).bind(TRACK60)
     planner.costs = {**planner.costs, "tamping": planner.costs["tamping"][:2],  # two of its sections: every
                      "geometry": planner.costs["geometry"][:2]}  # schedule of both can be priced here
     rng = np.random.default_rng(1)
@@ -77,6 +81,15 @@ def test_it_tamps_what_pays_and_nothing_whose_benefit_comes_after_the_horizon():
     assert planner.plan(rough, np.full(6, 0.1), last)[1] == ()  # one step of benefit does not pay a campaign
 
 
+def test_an_uncertain_forecast_makes_a_long_wait_dearer():
+    sd, growth = np.full(6, 1.5), np.full(6, 0.02)
+    certain = ModelPredictive().bind(TRACK60).plan(sd, growth, 0)
+    uncertain = ModelPredictive(forecast_error_mm_per_step=0.5).bind(TRACK60)
+    assert certain[1] == ()  # the mean forecast does not pay a campaign within the horizon
+    cost, campaigns, _ = uncertain.plan(sd, growth, 0)
+    assert campaigns != () and cost > certain[0]  # the error's variance does, and the line costs more
+
+
 def test_it_checks_its_parameters_and_its_config():
     with pytest.raises(ValueError, match=r"tamped_sd_slope must lie in \[0, 1\], got 1.5"):
         ModelPredictive(tamped_sd_slope=1.5)
@@ -86,6 +99,8 @@ def test_it_checks_its_parameters_and_its_config():
         ModelPredictive(regrowth_factor="1.5")  # text is not read as a number
     with pytest.raises(ValueError, match="neighbour_mm must be a finite number"):
         ModelPredictive(neighbour_mm=float("nan"))
+    with pytest.raises(ValueError, match=r"forecast_error_mm_per_step must lie in \[0, 1\], got -0.01"):
+        ModelPredictive(forecast_error_mm_per_step=-0.01)
     with pytest.raises(ValueError, match=r"max_campaigns must be an integer in \[1, 4\], got 0"):
         ModelPredictive(max_campaigns=0)
     with pytest.raises(ValueError, match="window_steps must be an integer"):
