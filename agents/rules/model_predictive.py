@@ -175,12 +175,13 @@ class ModelPredictive(LineHeuristic):
         ref = np.full((n_plans, 1), step - 1)
         start = np.full((n_plans, 1), step)
         squares = np.zeros((n_plans, n_sections))
-        error, zero = p["forecast_error_mm_per_step"], np.zeros((n_plans, n_sections))
+        error = p["forecast_error_mm_per_step"]
         for j in range(plans.shape[1] + 1):
             end = plans[:, j:j + 1] if j < plans.shape[1] else np.full((n_plans, 1), horizon)
             squares += interval_square_sums(v, h, ref, start, end)
-            if error:  # the expected square of an SD forecast whose error grows linearly since its start
-                squares += interval_square_sums(zero, error, ref, start, end)
+            if error:  # the variance of an error grown by σ a step since the plan's last known SD: the same for
+                # every section of a plan, (plans, 1) broadcast over them
+                squares += interval_square_sums(np.zeros(1), np.full(1, error), ref, start, end)
             if j == plans.shape[1]:
                 break
             tamped = end < horizon
