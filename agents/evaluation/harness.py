@@ -11,7 +11,9 @@ Per episode we collect the life-cycle cost (k€, the sum of ``info["costs"]`` =
 its parts, the number of section tampings, each section's applied choice in each step (``info["section_choices"]``,
 counted per name by :attr:`EvaluationResult.choices`: on the tamping-only problems ``tamp`` counts the tamped
 sections and the others stay 0),
-the immediate-action exceedances (section-steps in class 3) and the mean section SD at the end.
+the immediate-action exceedances (section-steps in class 3) and the mean section SD at the end; on a network
+(``info["moved"]``), what the shared tamping machine did each step (:attr:`EvaluationResult.machine_steps`:
+working, moving to another line, or idle).
 **Tampings per km-year** is the tamped length per length of track per year:
 ``section_tampings · section_length_km / (track_length_km · horizon_years) = section_tampings /
 (n_sections · horizon_years)``; 1.0 means the whole track is tamped once a year.
@@ -38,21 +40,24 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from trackenv.envs.choices import INTERVENTIONS, action_type_for, code
+from trackenv.envs.choices import INTERVENTIONS, IS_TRACK_WORK, action_type_for, code
 from trackenv.envs.env import TrackVectorEnv
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
 from .statistics import bootstrap_ci
 
 __all__ = [
-    "CHOICE_NAMES", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many", "evaluate_one",
-    "policy_name", "policy_params", "record_episode", "run_episodes",
+    "CHOICE_NAMES", "MACHINE_STEPS", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many",
+    "evaluate_one", "policy_name", "policy_params", "record_episode", "run_episodes",
 ]
 
 TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
 TEST_SEEDS: tuple[int, ...] = tuple(range(0, 200))
 #: the choices counted per episode (``EvaluationResult.choices``), by their names in ``info["choices"]``
 CHOICE_NAMES: tuple[str, ...] = INTERVENTIONS
+#: what a network's tamping machine does in a step (``EvaluationResult.machine_steps``): track work on its line,
+#: a move to another line (nothing worked anywhere), or neither
+MACHINE_STEPS: tuple[str, ...] = ("work", "move", "idle")
 
 
 def policy_name(policy: Any) -> str:
@@ -86,6 +91,8 @@ class EvaluationResult:
     tamped: np.ndarray | None = None  # the sections tamped in each step of each episode (episodes, steps, sections)
     # the choice code each section got in each step of each episode (episodes, steps, sections), int8
     section_choices: np.ndarray | None = None
+    # on a network: whether the machine moved to another line in each step of each episode (episodes, steps)
+    machine_moved: np.ndarray | None = None
 
     @property
     def choices(self) -> dict[str, np.ndarray]:
@@ -95,6 +102,17 @@ class EvaluationResult:
             return {}
         codes = np.asarray(self.section_choices)
         return {name: (codes == code(name)).sum(axis=(1, 2)) for name in CHOICE_NAMES}
+
+    @property
+    def machine_steps(self) -> dict[str, np.ndarray]:
+        """On a network, per name of :data:`MACHINE_STEPS`, the steps of each episode in which the shared machine
+        did track work on its line, moved to another line, or did neither ({} where the result has no machine:
+        a line, the 60 m track)."""
+        if self.machine_moved is None or self.section_choices is None:
+            return {}
+        moved = np.asarray(self.machine_moved, dtype=bool)
+        worked = IS_TRACK_WORK[np.asarray(self.section_choices)].any(axis=2) & ~moved
+        return {"work": worked.sum(axis=1), "move": moved.sum(axis=1), "idle": (~worked & ~moved).sum(axis=1)}
 
     @property
     def n_episodes(self) -> int:
@@ -109,6 +127,8 @@ class EvaluationResult:
     def summary(self) -> dict[str, Any]:
         lo, hi = bootstrap_ci(self.cost)
         counts = self.choices
+        machine = {"machine_steps": {k: float(v.mean()) for k, v in self.machine_steps.items()}} \
+            if self.machine_moved is not None else {}
         return {
             "policy": self.policy,
             "params": dict(self.params),
@@ -124,6 +144,7 @@ class EvaluationResult:
             "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
             "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
             "choices": {name: float(np.mean(counts[name])) if name in counts else 0.0 for name in CHOICE_NAMES},
+            **machine,
         }
 
 
@@ -165,6 +186,8 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
     chosen = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=np.int8)
+    moved = np.zeros((n, cfg.horizon_steps), dtype=bool)
+    has_machine = False
     section_cost = np.zeros((n, cfg.n_sections))  # each section's own costs (info["section_costs"])
     register = np.asarray(obs.get("register", np.zeros((n, cfg.n_sections))), dtype=np.int64)
     traces: dict[str, list] = {"section_sd_mm": [], "tamped": [], "cost": [], "year": []}
@@ -186,6 +209,9 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
         tampings += info["tamped_sections"].sum(axis=1)
         tamped[:, t] = info["tamped_sections"]
         chosen[:, t] = info["section_choices"]
+        if "moved" in info:  # a network: its machine's move
+            moved[:, t] = info["moved"]
+            has_machine = True
         section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
         if record:
@@ -201,7 +227,8 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
     return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed,
-            "final_sd": final_sd, "tamped": tamped, "section_choices": chosen, "section_cost": section_cost,
+            "final_sd": final_sd, "tamped": tamped, "section_choices": chosen,
+            "machine_moved": moved if has_machine else None, "section_cost": section_cost,
             "register": register, "wet_spot": wet, "traces": traces}
 
 
@@ -267,6 +294,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
     tamped, chosen = cat("tamped"), cat("section_choices")
+    moved = cat("machine_moved") if outs[0]["machine_moved"] is not None else None
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
     results = []
     for p, pol in enumerate(bound):
@@ -276,7 +304,8 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
             policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
-            tamped=tamped[m], section_choices=chosen[m], extra={k: v[m] for k, v in sections.items()}))
+            tamped=tamped[m], section_choices=chosen[m], machine_moved=None if moved is None else moved[m],
+            extra={k: v[m] for k, v in sections.items()}))
     return results
 
 

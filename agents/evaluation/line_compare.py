@@ -15,7 +15,7 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
-from .harness import CHOICE_NAMES, bind_policy, evaluate_many, policy_name
+from .harness import CHOICE_NAMES, MACHINE_STEPS, bind_policy, evaluate_many, policy_name
 from .statistics import bootstrap_ci, paired_difference
 from .tuning import tune_many
 
@@ -239,6 +239,11 @@ def format_line_table(payload: dict[str, Any]) -> str:
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
     lines.append("IA: section-steps at the immediate-action limit, all episodes together; tamp ... survey: applied "
                  "choices per episode (tamp, spot tamp, drainage, renewal, inspection, survey)")
+    machine = [r for r in payload["results"] if r.get("machine_steps")]
+    if machine:  # a network: what its one tamping machine did
+        lines.append("the machine's steps per episode: working on its line / moving to another / idle")
+        lines += [f"{r['policy']:{w}s} " + " / ".join(f"{r['machine_steps'][k]:4.1f}" for k in MACHINE_STEPS)
+                  for r in machine]
     lines += [headline for name in payload.get("extra", []) if (headline := agent_headline(payload, name))]
     if payload.get("episode_plot"):
         lines.append(f"plots: {payload['plot']}, {payload['episode_plot']} (episode {payload['seeds'][0]} under "

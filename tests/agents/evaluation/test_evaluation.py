@@ -177,3 +177,33 @@ def test_the_network_comparison_runs_each_line_rule_on_every_line(tmp_path):
     assert by["network-by-value(no-maintenance)"]["tampings_per_km_year"] == 0.0
     with pytest.raises(ValueError, match="retune"):
         line_comparison("trackenv/TampingNetwork-v0", seeds=[0], retune=True, out_dir=str(tmp_path))
+
+
+def test_the_machine_steps_of_a_network_are_those_its_env_reports():
+    """On a network each step of the machine is counted once, as working (track work on its line), moving
+    (``info["moved"]``) or idle, as a single env's rollout of the same seed reports them; a line has none."""
+    import gymnasium as gym
+
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.rules.network import NetworkRule
+
+    config = NetworkConfig(n_lines=2, line_config="small").replace(
+        line_config=NetworkConfig(line_config="small").line_config.replace(horizon_years=1.5))
+    rule = NetworkRule(SectionThreshold(threshold_mm=0.5))
+    result, idle_rule = evaluate_many([rule, NetworkRule(LineNoMaintenance())], config, [3, 4], batch_size=4)
+    steps = result.machine_steps
+    total = sum(steps.values())
+    assert set(steps) == {"work", "move", "idle"} and (total == config.horizon_steps).all()
+    assert idle_rule.machine_steps["idle"].tolist() == [config.horizon_steps] * 2
+    assert result.summary()["machine_steps"] == {k: float(v.mean()) for k, v in steps.items()}
+    env = gym.make("trackenv/TampingNetwork-v0", config=config)
+    obs, _ = env.reset(seed=4)
+    policy = rule.bind(config)
+    counted = {"work": 0, "move": 0, "idle": 0}
+    for _ in range(config.horizon_steps):
+        obs, _, _, _, info = env.step(policy.predict(obs)[0])
+        kind = "move" if info["moved"] else "work" if info["tamped_sections"].any() else "idle"
+        counted[kind] += 1
+    assert counted == {k: int(v[1]) for k, v in steps.items()}
+    assert counted["move"] > 0 and counted["work"] > 0  # the case tests both
+    assert "machine_steps" not in evaluate_one(LineNoMaintenance(), "small", [0]).summary()
