@@ -144,7 +144,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
     # the best rule and the trained policy, side by side
     shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
-    payload["episode_plot"] = (None if network else  # the network's lines: trackenv.render draws one line
+    payload["episode_plot"] = (plot_network_episode(shown, cfg, seeds[0], str(out / "network_episode.png"))
+                               if isinstance(cfg, NetworkConfig) else
                                plot_line_episode(shown, line_cfg, seeds[0], str(out / "line_episode.png"), action_type))
     return payload
 
@@ -293,6 +294,61 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
                      f"{int(tam_.sum())} tampings in {int(tam_.any(axis=1).sum())} campaigns", fontsize=9)
     axes[0].set_ylabel("SD of D1 level [mm] (solid true, dotted measured; ▼ tamping)")
     axes[0].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    return out_png
+
+
+def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: str) -> str:
+    """One network episode under each of ``policies`` (network policies with SB3-style ``predict``), a column
+    each: on top the shared machine's line in every step (● worked there, ▶ moved there, · idle), below it one
+    panel per line with the true SD of its sections (▼ tamped, at the SD it was tamped from); each column's cost
+    in its title."""
+    import gymnasium as gym
+    from matplotlib.figure import Figure
+
+    pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    n_lines, n_sections = cfg.n_lines, cfg.line_config.n_sections
+    fig = Figure(figsize=(8 * len(pols), 1.6 + 2.2 * n_lines))
+    axes = fig.subplots(n_lines + 1, len(pols), sharex=True, sharey="row", squeeze=False,
+                        gridspec_kw={"height_ratios": [0.6] + [1.0] * n_lines})
+    years = np.arange(cfg.horizon_steps + 1) / cfg.line_config.steps_per_year
+    for col, pol in enumerate(pols):
+        env = gym.make("trackenv/TampingNetwork-v0", config=cfg)
+        obs, info = env.reset(seed=seed)
+        sd, tamped, machine, kind, cost = [info["section_sd_m"] * 1e3], [], [], [], 0.0
+        for t in range(cfg.horizon_steps):
+            obs, r, _, _, info = env.step(pol.predict(obs, episode_start=np.array([t == 0]))[0])
+            sd.append(info["section_sd_m"] * 1e3)
+            tamped.append(info["tamped_sections"])
+            machine.append(info["machine_line"])
+            kind.append("move" if info["moved"] else "work" if info["tamped_sections"].any() else "idle")
+            cost -= float(r)
+        env.close()
+        sd_ = np.array(sd).reshape(-1, n_lines, n_sections)
+        tamped_ = np.array(tamped).reshape(-1, n_lines, n_sections)
+        top = axes[0, col]
+        start = years[:-1]  # step t runs from years[t]: the machine's line in it (a move's destination)
+        top.step(start, machine, where="post", color="0.6", lw=0.8)
+        for name, marker in (("work", "o"), ("move", ">"), ("idle", ".")):
+            at = np.array([k == name for k in kind])
+            top.plot(start[at], np.asarray(machine)[at], marker, color="k", ms=4, ls="none",
+                     label=f"{name} ({int(at.sum())} steps)")
+        top.set_yticks(range(n_lines))
+        top.set_ylim(-0.5, n_lines + 0.4)  # room for the legend above the top line
+        top.set_title(f"{policy_name(pol)}, seed {seed}: {cost:.0f} k€, {int(tamped_.sum())} tampings", fontsize=9)
+        top.legend(fontsize=6, ncol=3, loc="upper right")
+        for line in range(n_lines):
+            ax = axes[line + 1, col]
+            for j in range(n_sections):
+                colour = f"C{j % 10}"
+                ax.plot(years, sd_[:, line, j], color=colour, lw=0.8)
+                steps = np.flatnonzero(tamped_[:, line, j])
+                ax.plot(years[steps], sd_[steps, line, j], "v", color=colour, ms=4, ls="none")
+        axes[-1, col].set_xlabel("year")
+    axes[0, 0].set_ylabel("machine's line")
+    for line in range(n_lines):
+        axes[line + 1, 0].set_ylabel(f"line {line}: SD [mm]")
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
     return out_png

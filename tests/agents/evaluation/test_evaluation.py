@@ -169,7 +169,8 @@ def test_the_network_comparison_runs_each_line_rule_on_every_line(tmp_path):
     out = line_comparison("trackenv/TampingNetwork-v0", seeds=[0], rules=["no-maintenance", "section-threshold"],
                           batch_size=4, progress=False, out_dir=str(tmp_path), n_lines=2, line_config="small",
                           horizon_years=0.5)
-    assert out["scenario"] == "network" and out["episode_plot"] is None
+    assert out["scenario"] == "network" and out["episode_plot"].endswith("network_episode.png")
+    assert (tmp_path / "network_episode.png").stat().st_size > 0
     assert NetworkConfig.from_dict(out["config"]) == NetworkConfig(n_lines=2, line_config="small").replace(
         line_config=NetworkConfig(line_config="small").line_config.replace(horizon_years=0.5))
     by = {r["policy"]: r for r in out["results"]}
