@@ -48,7 +48,7 @@ from .statistics import bootstrap_ci
 
 __all__ = [
     "CHOICE_NAMES", "MACHINE_STEPS", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many",
-    "evaluate_one", "policy_name", "policy_params", "record_episode", "run_episodes",
+    "evaluate_one", "machine_activity", "policy_name", "policy_params", "record_episode", "run_episodes",
 ]
 
 TRAIN_SEEDS: tuple[int, ...] = tuple(range(1000, 1100))
@@ -58,6 +58,15 @@ CHOICE_NAMES: tuple[str, ...] = INTERVENTIONS
 #: what a network's tamping machine does in a step (``EvaluationResult.machine_steps``): track work on its line,
 #: a move to another line (nothing worked anywhere), or neither
 MACHINE_STEPS: tuple[str, ...] = ("work", "move", "idle")
+
+
+def machine_activity(moved: np.ndarray, section_choices: np.ndarray) -> dict[str, np.ndarray]:
+    """Per name of :data:`MACHINE_STEPS`, whether a network's machine did that in each step: ``moved`` (..., steps)
+    ``info["moved"]`` and ``section_choices`` (..., steps, sections) the applied codes; it works where some
+    section got track work and it did not move."""
+    moved = np.asarray(moved, dtype=bool)
+    worked = IS_TRACK_WORK[np.asarray(section_choices, dtype=np.int64)].any(axis=-1) & ~moved
+    return {"work": worked, "move": moved, "idle": ~worked & ~moved}
 
 
 def policy_name(policy: Any) -> str:
@@ -110,9 +119,7 @@ class EvaluationResult:
         a line, the 60 m track)."""
         if self.machine_moved is None or self.section_choices is None:
             return {}
-        moved = np.asarray(self.machine_moved, dtype=bool)
-        worked = IS_TRACK_WORK[np.asarray(self.section_choices)].any(axis=2) & ~moved
-        return {"work": worked.sum(axis=1), "move": moved.sum(axis=1), "idle": (~worked & ~moved).sum(axis=1)}
+        return {k: v.sum(axis=1) for k, v in machine_activity(self.machine_moved, self.section_choices).items()}
 
     @property
     def n_episodes(self) -> int:

@@ -15,7 +15,7 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
-from .harness import CHOICE_NAMES, MACHINE_STEPS, bind_policy, evaluate_many, policy_name
+from .harness import CHOICE_NAMES, MACHINE_STEPS, bind_policy, evaluate_many, machine_activity, policy_name
 from .statistics import bootstrap_ci, paired_difference
 from .tuning import tune_many
 
@@ -316,13 +316,14 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
     for col, pol in enumerate(pols):
         env = gym.make("trackenv/TampingNetwork-v0", config=cfg)
         obs, info = env.reset(seed=seed)
-        sd, tamped, machine, kind, cost = [info["section_sd_m"] * 1e3], [], [], [], 0.0
+        sd, tamped, machine, moved, chosen, cost = [info["section_sd_m"] * 1e3], [], [], [], [], 0.0
         for t in range(cfg.horizon_steps):
             obs, r, _, _, info = env.step(pol.predict(obs, episode_start=np.array([t == 0]))[0])
             sd.append(info["section_sd_m"] * 1e3)
             tamped.append(info["tamped_sections"])
             machine.append(info["machine_line"])
-            kind.append("move" if info["moved"] else "work" if info["tamped_sections"].any() else "idle")
+            moved.append(info["moved"])
+            chosen.append(info["section_choices"])
             cost -= float(r)
         env.close()
         sd_ = np.array(sd).reshape(-1, n_lines, n_sections)
@@ -330,8 +331,9 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
         top = axes[0, col]
         start = years[:-1]  # step t runs from years[t]: the machine's line in it (a move's destination)
         top.step(start, machine, where="post", color="0.6", lw=0.8)
-        for name, marker in (("work", "o"), ("move", ">"), ("idle", ".")):
-            at = np.array([k == name for k in kind])
+        activity = machine_activity(np.array(moved), np.array(chosen))
+        for name, marker in zip(MACHINE_STEPS, ("o", ">", "."), strict=True):
+            at = activity[name]
             top.plot(start[at], np.asarray(machine)[at], marker, color="k", ms=4, ls="none",
                      label=f"{name} ({int(at.sum())} steps)")
         top.set_yticks(range(n_lines))

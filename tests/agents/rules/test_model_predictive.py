@@ -83,7 +83,7 @@ def test_it_tamps_what_pays_and_nothing_whose_benefit_comes_after_the_horizon():
 
 def test_an_uncertain_forecast_makes_a_long_wait_dearer():
     sd, growth = np.full(6, 1.5), np.full(6, 0.02)
-    certain = ModelPredictive().bind(TRACK60).plan(sd, growth, 0)
+    certain = ModelPredictive(forecast_error_mm_per_step=0.0).bind(TRACK60).plan(sd, growth, 0)
     uncertain = ModelPredictive(forecast_error_mm_per_step=0.5).bind(TRACK60)
     assert certain[1] == ()  # the mean forecast does not pay a campaign within the horizon
     cost, campaigns, _ = uncertain.plan(sd, growth, 0)
