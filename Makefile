@@ -25,10 +25,12 @@ demo: setup
 	$(BIN)/trackenv paper
 	$(BIN)/trackenv validate
 
+# pytest in one worker process per core, at most 4 (pytest-xdist); the tests that start a local Ray share one
+# worker (their xdist_group); a plain `pytest` runs the suite in one process
 test: setup
 	$(BIN)/ruff check trackenv agents tests experiments
 	$(BIN)/mypy  # the library's types, as configured in pyproject.toml ([tool.mypy])
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --maxprocesses 4 --dist loadgroup
 
 docs: setup  # the documentation site into build/docs; --strict: any warning fails the build
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict

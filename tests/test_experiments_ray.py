@@ -14,6 +14,10 @@ import pytest
 pytest.importorskip("ray.rllib")
 pytest.importorskip("torch")
 
+# one local Ray at a time: with `make test`'s workers (pytest-xdist, --dist loadgroup) every test that starts
+# one runs in the same worker
+pytestmark = pytest.mark.xdist_group("ray")
+
 # the 60 m track (trackenv/Tamping-v1, the default env) cut to 30 m in 3 sections over 1 year: 4 steps
 TINY = {"n_sections": 3, "segment_length_m": 30.0, "sections_per_segment": 3, "capacity": 3, "horizon_years": 1.0}
 

@@ -8,6 +8,10 @@ import pytest
 
 pytest.importorskip("ray")
 
+# one local Ray at a time: with `make test`'s workers (pytest-xdist, --dist loadgroup) every test that starts
+# one runs in the same worker
+pytestmark = pytest.mark.xdist_group("ray")
+
 from trackenv.envs.line_config import scenario  # noqa: E402
 from trackenv_agents.evaluation.distributed import RayExecutor  # noqa: E402
 from trackenv_agents.evaluation.harness import evaluate_many  # noqa: E402

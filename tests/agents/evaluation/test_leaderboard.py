@@ -256,6 +256,7 @@ def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray at a time (tests/test_experiments_ray.py)
 def test_ray_gives_the_single_process_leaderboard(first, tmp_path) -> None:
     """Episodes and searches as Ray tasks (a local Ray, 2 CPUs): the same rows and bound as in one process."""
     pytest.importorskip("ray")
