@@ -302,14 +302,18 @@ def main(argv: list[str] | None = None) -> dict:
             for name, tree in trees.items():
                 if tree != ROOT and not (name == "base" and args.base_dir):
                     subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+    from trackenv_studies.bench import cpu_model  # the machine's processor, named with the figures
+
     report = {"figure": args.figure, "unit": _UNITS[args.figure], "base_rev": args.base,
               "new_rev": args.new or "working tree", "base_kwargs": base_kwargs, "new_kwargs": new_kwargs,
               **({"env_ids": env_ids} if args.figure == "env" else {}),
-              "steps": steps, "envs": args.envs, "order": runs, "load_average_1min": os.getloadavg()[0],
+              "steps": steps, "envs": args.envs, "order": runs, "processor": cpu_model(),
+              "load_average_1min": os.getloadavg()[0],
               **summary(figures["base"], figures["new"])}
     print(f"{args.figure} ({report['unit']}), {report['pairs']} pairs: base {report['median_base']:.2f}, new "
           f"{report['median_new']:.2f}, median ratio {report['median_ratio']:.3f} "
-          f"({report['new_faster']}/{report['pairs']} pairs favour new), load {report['load_average_1min']:.2f}")
+          f"({report['new_faster']}/{report['pairs']} pairs favour new), load {report['load_average_1min']:.2f}, "
+          f"{report['processor']}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(report, indent=2))

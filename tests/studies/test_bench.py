@@ -9,7 +9,7 @@ import trackenv.degradation
 import trackenv.envs  # noqa: F401  (registers the environments)
 import trackenv.envs.line_episode
 import trackenv.physics._kernel
-from trackenv_studies.bench import PROFILE_LABELS, _StageTimer, format_profile
+from trackenv_studies.bench import PROFILE_LABELS, _StageTimer, cpu_model, format_profile
 
 
 def test_stage_timer_profiles_env_steps_and_restores_the_functions():
@@ -129,3 +129,15 @@ def test_the_line_rule_figures_step_the_policy_given():
     assert len(policy.seen) == 3 and policy.seen == sorted(policy.seen) and policy.seen[0] < policy.seen[-1]
     assert STAGES.index("line_env_rule") == STAGES.index("line_env_fast") + 1
     assert STAGES.index("line_env_fast_rule") == STAGES.index("line_env_rule") + 1
+
+
+def test_the_machine_is_named_by_its_processor_model(tmp_path):
+    """The figures carry the processor's model name (the first "model name" of /proc/cpuinfo), not just the
+    architecture; without one, what the platform module knows."""
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R)  Processor @ 2.80GHz\n"
+                    "\nprocessor\t: 1\nmodel name\t: Intel(R) Xeon(R) Processor @ 2.80GHz\n")
+    assert cpu_model(str(info)) == "Intel(R) Xeon(R) Processor @ 2.80GHz"
+    info.write_text("processor\t: 0\nBogoMIPS\t: 50.00\n")  # e.g. an ARM machine's: no model name
+    assert cpu_model(str(info)) and cpu_model(str(info)) != "Intel(R) Xeon(R) Processor @ 2.80GHz"
+    assert cpu_model(str(tmp_path / "missing")) == cpu_model(str(info))
