@@ -94,6 +94,19 @@ def _loaded_after(imports: str) -> set[str]:
     return set(out.split())
 
 
+#: scipy's submodules that the library uses in a few functions only (the D1 filter's design, a PSD's variance,
+#: splines through profiles, correlated random fields): imported there, since loading them took ~0.9 s of the
+#: ~1.9 s of `import trackenv`, which every command, worker process and spawned env pays
+LOADED_ON_USE = ("scipy.signal", "scipy.stats", "scipy.integrate", "scipy.interpolate", "scipy.ndimage")
+
+
+def test_importing_the_library_leaves_the_slow_scipy_submodules_for_their_first_use():
+    loaded = _loaded_after("import trackenv, trackenv.envs")
+    assert not {m for m in loaded if _within(m, LOADED_ON_USE)}
+    used = _loaded_after("import numpy as np, trackenv; trackenv.physics.geometry.d1_filter(np.zeros(60), 0.6)")
+    assert "scipy.signal" in used  # the lazy import is where the filter is designed
+
+
 @pytest.mark.parametrize("layer", sorted(RULES))
 def test_no_layer_imports_what_sits_above_it(layer):
     modules = _modules(layer)

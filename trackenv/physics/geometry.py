@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import integrate, signal
 
 from trackenv.physics import _d1
 from trackenv.physics._checks import check_array, check_field, check_int, check_scalar, dataclass_from_dict
@@ -174,6 +173,8 @@ def psd_variance(psd: Callable, min_wavelength: float = 1.0, max_wavelength: flo
     def f(w: float) -> float:
         return float(_psd_values(psd, np.array([w]))[0])
 
+    from scipy import integrate  # here, not at import: scipy's submodules take most of `import trackenv`
+
     val, _ = integrate.quad(f, w_lo, w_hi, limit=200, epsrel=1e-10)
     return float(val)
 
@@ -278,6 +279,8 @@ def synthesize_profile(
 @functools.lru_cache(maxsize=64)
 def _bandpass_sos(spacing: float, band_lo: float, band_hi: float, order: int) -> tuple[np.ndarray, ...]:
     """Butterworth band-pass second-order sections and their unit-step steady-state filter state."""
+    from scipy import signal  # here, not at import (scipy.signal brings scipy.stats: ~0.6 s); the result is cached
+
     fs = 1.0 / spacing  # samples per metre
     sos = signal.butter(order, [1.0 / band_hi, 1.0 / band_lo], btype="bandpass", fs=fs, output="sos")
     zi = signal.sosfilt_zi(sos)
