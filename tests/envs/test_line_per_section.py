@@ -113,6 +113,8 @@ def test_without_per_section_values_every_section_has_the_lines():
      r"per_section\['section_length_m'\]\[1\] must lie in \[segment_length_m = 18, 1000\]"),
     ({"axle_load_t": (20.0,) * 4}, r"per_section: unknown field 'axle_load_t'"),
     ({"speed_kmh": "fast"}, r"per_section\['speed_kmh'\] must be 4 numbers"),
+    ({"annual_mgt": np.array(2.0)}, r"per_section\['annual_mgt'\] must be 4 numbers"),  # 0-d: no len()
+    ({"annual_mgt": np.full((4, 1), 15.0)}, r"per_section\['annual_mgt'\] must be 4 numbers"),
     ([1.0, 2.0], r"per_section must be a mapping"),
 ])
 def test_bad_per_section_values_are_refused_naming_the_field(per_section, message):
@@ -166,3 +168,13 @@ def test_the_masks_and_the_rules_count_a_sections_work_by_its_length():
                                            {"section_sd": np.array([[1.0, 2.0, 3.0, 0.5]])})
     assert tamp.tolist() == [[False, True, True, False]]  # the line rules count work too
     assert GroupedThreshold().bind(LineConfig(**BASE)).length_factors is None  # one length: sections, as before
+
+
+def test_sections_shorter_than_a_segment_need_several_sections_on_a_segment():
+    """One section per segment represents each section by a segment of its own track, at least 12 m long: shorter
+    sections (the 60 m track's 10 m ones) are refused naming sections_per_segment, not an empty range."""
+    from trackenv.envs.line_config import scenario
+
+    with pytest.raises(ValueError, match=r"section_length_m = 10 with sections_per_segment = 1.*>= 12 m"):
+        scenario("track60", sections_per_segment=1)
+    assert scenario("track60").sections_per_segment == 6

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from trackenv.physics.settlement import (
     LAWS,
+    MAX_FORCE_N,
     AlvaHurtadoSeligLaw,
     HettlerLaw,
     IndraratnaLaw,
@@ -173,6 +174,23 @@ def test_bad_inputs_name_the_argument(name: str) -> None:
         law.equivalent_cycles(5e4, -1e-3)
     with pytest.raises(ValueError, match="^settlement"):
         law.equivalent_cycles(5e4, np.nan)
+    with pytest.raises(ValueError, match=r"^force must be <= 1e\+07 everywhere"):  # a unit error, e.g. N·1e3
+        law.settlement(9.2e158, 0.0)  # overflowed to NaN in some laws before
+    with pytest.raises(ValueError, match=r"^force must be <= 1e\+07 everywhere"):
+        law.equivalent_cycles(2e7, 1e-3)
+    with pytest.raises(ValueError, match=r"force and cycles must broadcast to one shape, got shapes \(0,\) and \(2,\)"):
+        law.settlement([], [0.0, 0.0])
+    with pytest.raises(ValueError, match="force and settlement must broadcast"):
+        law.equivalent_cycles([5e4, 6e4, 7e4], [1e-3, 2e-3])
+
+
+def test_a_settlement_that_overflows_is_an_error_not_a_nan() -> None:
+    """A parameter far outside its usual range (a loaded area of 1e-300 m²) overflows the amplitude: the law
+    says so, naming itself and its parameters, rather than return inf or NaN."""
+    law = AlvaHurtadoSeligLaw(loaded_area=1e-300)
+    with pytest.raises(ValueError, match="alva_hurtado_selig: the settlement of forces up to 1e\\+05 N is not finite"):
+        law.settlement(1e5, [0.0, 1e6])
+    assert np.isfinite(AlvaHurtadoSeligLaw().settlement(MAX_FORCE_N, [0.0, 1e6])).all()
 
 
 @pytest.mark.parametrize("name", LAW_NAMES)

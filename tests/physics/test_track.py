@@ -137,6 +137,22 @@ def test_zero_stiffness_or_mass_rejected(name):
         Track.seed().replace(**{name: np.zeros(51)})
 
 
+def test_supports_too_soft_to_hold_the_rail_are_refused():
+    """Positive supports summing to less than 1e-9 of a rail element's stiffness (the rail floats; the matrix is
+    singular in floating point, and a Cholesky factorisation failed inside scipy) are refused naming both fields,
+    and the floor follows the rail and its mesh; a soft track far above it builds and deflects."""
+    kw = dict(pad_damping=0.0, sleeper_mass=1.0, ballast_damping=0.0)
+    with pytest.raises(ValueError, match="pad_stiffness and ballast_stiffness.*below 2.72 N/m"):
+        Track.uniform(3, pad_stiffness=1.0, ballast_stiffness=1e-277, **kw)
+    with pytest.raises(ValueError, match="rail would float"):
+        Track.uniform(30, pad_stiffness=200e6, ballast_stiffness=1e-2, **kw)
+    Track.uniform(30, pad_stiffness=200e6, ballast_stiffness=1.0, **kw)  # 30 N/m > 2.72: built
+    with pytest.raises(ValueError, match="rail would float"):  # a finer mesh: a stiffer element, a higher floor
+        Track.uniform(30, pad_stiffness=200e6, ballast_stiffness=1.0, elements_per_bay=8, **kw)
+    soft = Track.uniform(51, pad_stiffness=1e6, ballast_stiffness=1e6, **kw)
+    assert np.isfinite(static_deflection(soft)) and static_deflection(soft) > static_deflection(Track.seed())
+
+
 @pytest.mark.parametrize(
     "name,bad",
     [

@@ -43,6 +43,8 @@ SLEEPER_SPACING_M = 0.6
 APPROACH_SLEEPERS = 10
 #: the engines a line's passes can run with (``LineConfig.engine``; :mod:`trackenv.physics.engine`)
 LINE_ENGINES = tuple(ENGINES)
+#: the shortest segment of track [m] whose passes a line computes (``segment_length_m``; 20 sleepers at 0.6 m)
+MIN_SEGMENT_LENGTH_M = 12.0
 #: the longest ``LineConfig.horizon_years`` [years] (the shortest is one step)
 MAX_HORIZON_YEARS = 100.0
 #: the largest ``LineConfig.pass_reuse_tolerance_m`` [m] (1 mm is the largest whose episode costs stay within 0.1 %
@@ -308,7 +310,14 @@ class LineConfig(ConfigBase):
         self._check_per_section()
         K = self.sections_per_segment
         if K == 1:
-            bounded_by(self, "section_length_m", c, "segment_length_m", low=12.0, high=self.section_length_m)
+            if self.section_length_m < MIN_SEGMENT_LENGTH_M:  # [MIN, section_length_m] below would be empty
+                raise ValueError(f"section_length_m = {self.section_length_m:g} with sections_per_segment = 1: a "
+                                 f"section is then represented by a segment of its own track, at least "
+                                 f"{MIN_SEGMENT_LENGTH_M:g} m long (segment_length_m): lengthen the sections to "
+                                 f">= {MIN_SEGMENT_LENGTH_M:g} m or carry several on a segment "
+                                 f"(sections_per_segment > 1)")
+            bounded_by(self, "section_length_m", c, "segment_length_m", low=MIN_SEGMENT_LENGTH_M,
+                       high=self.section_length_m)
             lengths = self.section_values("section_length_m")
             if (lengths < self.segment_length_m).any():  # a section is represented by a segment of its track
                 j = int(np.argmin(lengths))
@@ -316,7 +325,7 @@ class LineConfig(ConfigBase):
                                  f"{self.segment_length_m:g}, {PER_SECTION_BOUNDS['section_length_m'][1]:g}] (a "
                                  f"section is represented by a segment of its track), got {lengths[j]:g}")
         else:  # the segment is its sections, end to end
-            c("segment_length_m", low=12.0, high=2000.0)
+            c("segment_length_m", low=MIN_SEGMENT_LENGTH_M, high=2000.0)
             if abs(self.segment_length_m - K * self.section_length_m) > 1e-9 * self.segment_length_m:
                 raise ValueError(f"segment_length_m must be sections_per_segment x section_length_m = "
                                  f"{K * self.section_length_m:g} when a segment carries several sections, "
@@ -386,7 +395,7 @@ class LineConfig(ConfigBase):
                 raise ValueError(f"per_section: unknown field {name!r}; allowed: {list(PER_SECTION_BOUNDS)}")
             values = items[name]
             if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") \
-                    or len(values) != self.n_sections:
+                    or getattr(values, "ndim", 1) != 1 or len(values) != self.n_sections:
                 raise ValueError(f"per_section[{name!r}] must be {self.n_sections} numbers (n_sections), got "
                                  f"{values!r}")
             lo, hi = PER_SECTION_BOUNDS[name]

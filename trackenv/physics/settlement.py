@@ -118,6 +118,18 @@ def _upper_brackets(kind: int, params: tuple[float, ...], y: np.ndarray) -> np.n
 
 
 _POSITIVE: dict[str, Any] = {"low": 0.0, "low_inclusive": False}
+#: the largest force [N] the laws take through their public methods: a hundred times a wheel's static load, far
+#: beyond any sleeper's or wheel's force in service (a larger one is a unit error, and overflows some laws)
+MAX_FORCE_N = 1e7
+
+
+def _one_shape(name_a: str, a: np.ndarray, name_b: str, b: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``a`` and ``b`` broadcast to one shape, or ValueError naming both and their shapes."""
+    try:
+        return np.broadcast_arrays(a, b)
+    except ValueError:
+        raise ValueError(f"{name_a} and {name_b} must broadcast to one shape, got shapes {a.shape} and "
+                         f"{b.shape}") from None
 
 
 class _SeparableLaw:
@@ -169,10 +181,16 @@ class _SeparableLaw:
         return float(self._growth(np.ones(1))[0])
 
     def settlement(self, force: ArrayLike, cycles: ArrayLike) -> np.ndarray:
-        """Settlement u = A(F)·g(N) [m], with g(N) = g(1)·N for N < 1 (see the module docstring)."""
-        f = check_array("force", force, low=0.0)
+        """Settlement u = A(F)·g(N) [m], with g(N) = g(1)·N for N < 1 (see the module docstring); ``force`` [N] in
+        [0, MAX_FORCE_N] and ``cycles`` >= 0, of shapes that broadcast."""
+        f = check_array("force", force, low=0.0, high=MAX_FORCE_N)
         n = check_array("cycles", cycles, low=0.0)
-        return self._settlement_of(*np.broadcast_arrays(f, n))
+        with np.errstate(over="ignore", invalid="ignore"):
+            u = self._settlement_of(*_one_shape("force", f, "cycles", n))
+        if not np.isfinite(u).all():  # a parameter far outside its usual range (a tiny area or reference)
+            raise ValueError(f"{self.name}: the settlement of forces up to {f.max():.3g} N is not finite with its "
+                             f"parameters {self.to_dict()}")
+        return u
 
     def equivalent_cycles(self, force: ArrayLike, settlement: ArrayLike) -> np.ndarray:
         """Cycles N with settlement(force, N) == ``settlement``: the exact inverse of :meth:`settlement` in N.
@@ -180,9 +198,9 @@ class _SeparableLaw:
         +inf where force == 0 and settlement > 0 (and where a bounded law cannot reach the settlement);
         0 where settlement == 0.
         """
-        f = check_array("force", force, low=0.0)
+        f = check_array("force", force, low=0.0, high=MAX_FORCE_N)
         u = check_array("settlement", settlement, low=0.0)
-        return self._equivalent_cycles_of(*np.broadcast_arrays(f, u))
+        return self._equivalent_cycles_of(*_one_shape("force", f, "settlement", u))
 
     # -------------------------------------------------------------- the same on validated arrays
     # :func:`advance_settlement` calls these many times a step on arrays it built itself (finite, >= 0, one
@@ -639,7 +657,7 @@ class SettlementState:
         (bounded) law cannot reach u under F, the settlement stays and the equivalent cycles become +inf.
         """
         dn = check_scalar("delta_cycles", delta_cycles, low=0.0)
-        f = check_array("force", force, low=0.0)
+        f = check_array("force", force, low=0.0, high=MAX_FORCE_N)
         n = self.n
         if f.ndim == 0:
             f = np.full(n, float(f))

@@ -34,6 +34,10 @@ PER_SLEEPER_MAX = {
     "ballast_damping": 1e9,
 }
 
+#: The least share of one rail element's bending stiffness (12·EI/l³) that the supports must sum to (pad and
+#: ballast in series, over every sleeper): below it the track's stiffness matrix is singular in floating point.
+SUPPORT_FLOOR_SHARE = 1e-9
+
 
 @dataclass(frozen=True, eq=False)
 class Track:
@@ -74,6 +78,22 @@ class Track:
         check_field(self, "rail_bending_stiffness", low=0.0, high=1e10, low_inclusive=False)
         check_field(self, "rail_mass", low=0.0, high=1e4, low_inclusive=False)
         check_int_field(self, "elements_per_bay", low=2, high=64)
+        self._check_supports_hold_the_rail()
+
+    def _check_supports_hold_the_rail(self) -> None:
+        """Refuse a track whose supports (pad and ballast in series, summed over the sleepers) are below
+        SUPPORT_FLOOR_SHARE of the bending stiffness of one rail element, 12·EI/l³: far below any track (a real
+        one's are 1e-4 to 1e-1 of it at each sleeper), but without it the rail floats and the assembled
+        stiffness matrix is singular in floating point (a Cholesky factorisation fails deep in scipy)."""
+        kp, kb = np.asarray(self.pad_stiffness), np.asarray(self.ballast_stiffness)
+        held = float(np.sum(kp * kb / (kp + kb)))
+        element = self.sleeper_spacing / self.elements_per_bay
+        floor = SUPPORT_FLOOR_SHARE * 12.0 * self.rail_bending_stiffness / element**3
+        if not held >= floor:
+            raise ValueError(f"pad_stiffness and ballast_stiffness: the supports in series sum to {held:.3g} N/m over "
+                             f"the {self.n_sleepers} sleepers, below {floor:.3g} N/m ({SUPPORT_FLOOR_SHARE:g} of a "
+                             f"rail element's bending stiffness 12·EI/l³ with rail_bending_stiffness, sleeper_spacing "
+                             f"and elements_per_bay as given): the rail would float on them")
 
     # ------------------------------------------------------------------ presets
     @classmethod
