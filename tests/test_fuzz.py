@@ -425,3 +425,54 @@ def test_track_degradation_refuses_or_advances_finitely(kw: dict, cycles) -> Non
         _assert_names(e, ["cycles", "dt", *kw])
         return
     assert np.all(np.isfinite(rec.settlement)) and math.isfinite(rec.max_contact_force)
+
+
+# --- line files: cells and values a user might type into the example line's files ---
+LINE_FILE_TEXT = ["", " ", "nan", "inf", "-1", "0", "1e308", "1e400", "abc", "yes", "no", "2026-13-45", "2026-02-30",
+                  "1,5", "null", "[]", "{}", "true", "S001", "plain", "2020-01-01", "3000-01-01", "12 mm", "007"]
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 100)  # ~15 ms an example
+@given(
+    edits=st.lists(st.tuples(st.sampled_from(["line", "sections", "history"]), st.integers(0, 10_000),
+                             st.integers(0, 20), st.sampled_from(LINE_FILE_TEXT)), min_size=1, max_size=3),
+)
+def test_a_line_file_loads_or_is_refused_in_one_line(edits) -> None:
+    """Any cell of the example line's CSV files, or any value of its YAML file, replaced by text a user might
+    type: the line loads and makes a config, or the loader refuses in one line naming the file (a config refusal
+    is a ValueError naming its field), never an error from inside yaml, csv or datetime."""
+    import tempfile
+    from pathlib import Path
+
+    from trackenv.envs.line_file import LineFileError, load_line
+    from trackenv.lines import EXAMPLE
+
+    texts = {"line": EXAMPLE.read_text(), "sections": (EXAMPLE.parent / "example_sections.csv").read_text(),
+             "history": (EXAMPLE.parent / "example_history.csv").read_text()}
+    for which, row, col, value in edits:
+        lines = texts[which].splitlines()
+        r = row % len(lines)
+        if which == "line":
+            if ":" in lines[r] and not lines[r].lstrip().startswith("#"):
+                lines[r] = lines[r].split(":", 1)[0] + ": " + value
+        else:
+            cells = lines[r].split(",")
+            cells[col % len(cells)] = f'"{value}"' if "," in value else value
+            lines[r] = ",".join(cells)
+        texts[which] = "\n".join(lines) + "\n"
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "example.yaml"
+        path.write_text(texts["line"])
+        (Path(folder) / "example_sections.csv").write_text(texts["sections"])
+        (Path(folder) / "example_history.csv").write_text(texts["history"])
+        try:
+            line = load_line(path)
+        except LineFileError as e:
+            event("refused")
+            assert "\n" not in str(e) and str(e).startswith(str(Path(folder))), str(e)
+            return
+        try:
+            scenario("default", line=line)
+        except ValueError as e:
+            event("config refused")
+            assert str(e), "a refusal says why"

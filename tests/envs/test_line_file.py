@@ -150,6 +150,9 @@ FAULTS = {
     "too many sections": (dict(sections=SECTIONS.splitlines()[1] + "\n"
                                + "".join(f"X{i},200,plain,no,,1,0\n" for i in range(300))),
                           ["sections (300 rows)", "n_sections must be an integer in [1, 256], got 300"]),
+    # YAML takes a date-shaped value for a date and fails to build one, outside its own errors
+    "impossible date in the line file": (dict(line=LINE.replace("as_of: 2026-01-01", "as_of: 2026-13-01")),
+                                         ["line.yaml, line", "'2026-13-01' is not a date", "month must be in 1..12"]),
     "unsupported schema": (dict(line="schema: 2\n" + LINE), ["line.yaml, schema: version 2 is not supported"]),
     "a list, not a mapping": (dict(line="- name\n- as_of\n"), ["line.yaml: a line file is a YAML mapping"]),
 }

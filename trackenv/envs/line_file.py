@@ -29,6 +29,7 @@ import datetime as dt
 import difflib
 import math
 import os
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -282,6 +283,8 @@ def load_line(path: str | os.PathLike[str]) -> LineDescription:
         where = f", line {mark.line + 1}" if mark is not None else ""
         problem = getattr(e, "problem", None) or "syntax error"
         raise LineFileError(f"{path}{where}: not valid YAML ({problem})") from None
+    except ValueError as e:  # YAML reads 2026-13-45 as a date and fails to build it, outside its own errors
+        raise LineFileError(f"{path}{_impossible_date(text)}: {e}") from None
     if doc is None:
         raise LineFileError(f"{path}: empty file; a line file is a YAML mapping of {_names(LINE_KEYS)}")
     if not isinstance(doc, dict):
@@ -291,6 +294,18 @@ def load_line(path: str | os.PathLike[str]) -> LineDescription:
     sections = _csv_rows(path, doc, "sections", SECTION_COLUMNS)
     history = _csv_rows(path, doc, "history", HISTORY_COLUMNS) if doc.get("history") is not None else []
     return _build(str(path), doc, sections, history)
+
+
+def _impossible_date(text: str) -> str:
+    """", line N: 'YYYY-MM-DD' is not a date" for the first date-shaped value of ``text`` that names no day of
+    the calendar (YAML takes it for a date and fails to build one), or "" where none is found."""
+    for number, line in enumerate(text.splitlines(), start=1):
+        for match in re.finditer(r"\b(\d{4})-(\d{1,2})-(\d{1,2})\b", line.split("#", 1)[0]):
+            try:
+                dt.date(*(int(g) for g in match.groups()))
+            except ValueError:
+                return f", line {number}: {match.group(0)!r} is not a date"
+    return ""
 
 
 def _read_text(path: Path, what: str, named_by: str = "") -> str:
