@@ -85,8 +85,7 @@ class Track:
         SUPPORT_FLOOR_SHARE of the bending stiffness of one rail element, 12·EI/l³: far below any track (a real
         one's are 1e-4 to 1e-1 of it at each sleeper), but without it the rail floats and the assembled
         stiffness matrix is singular in floating point (a Cholesky factorisation fails deep in scipy)."""
-        kp, kb = np.asarray(self.pad_stiffness), np.asarray(self.ballast_stiffness)
-        held = float(np.sum(kp * kb / (kp + kb)))
+        held = float(np.sum(self.support_stiffness))
         element = self.sleeper_spacing / self.elements_per_bay
         floor = SUPPORT_FLOOR_SHARE * 12.0 * self.rail_bending_stiffness / element**3
         if not held >= floor:
