@@ -65,6 +65,17 @@ def _existing(path: str | None, what: str, *, folder: bool = False) -> None:
         raise UsageError(f"{what}: no such {'folder' if folder else 'file'}: {path}")
 
 
+def _output_folder(path: str | None) -> None:
+    """Create the ``--out`` folder up front (with its parents), so that a path that cannot hold the results (a
+    file, a read-only place, a typo under a system folder) is refused in one line before the work, not after it."""
+    if path is None:
+        return
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out {path}: cannot create the folder ({exc.strerror or exc})") from None
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     from trackenv_studies.validation import format_checks, run_validation
 
@@ -771,6 +782,8 @@ def main(argv: list[str] | None = None) -> int:
     import trackenv  # noqa: F401  (first, so that its OpenMP wait policy reaches torch too: trackenv._openmp)
 
     try:
+        if getattr(args, "resume", None) is None:  # --resume refuses a different --out itself
+            _output_folder(getattr(args, "out", None))
         return int(args.func(args) or 0)
     except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f"trackenv {args.command}: {exc}", file=sys.stderr)

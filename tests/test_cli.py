@@ -334,6 +334,50 @@ def test_broken_hyperparams_file_gives_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "no_such_key" in err
 
 
+@pytest.mark.parametrize("text, suffix, message", [
+    ("root:x:0:0:root:/root:/bin/bash\n", ".json", "not a JSON object of hyper-parameters"),
+    ("a: [\n", ".yml", "not a YAML file"),
+    ("just words\n", ".yaml", "a mapping of env ids to entries, got str"),
+    ("trackenv/Tamping-v1: 3\n", ".yml", "the entry for 'trackenv/Tamping-v1' must be a mapping of settings"),
+])
+def test_a_hyperparams_file_that_is_not_one_is_refused_naming_it(tmp_path, capsys, text, suffix, message):
+    """A file of another kind, broken YAML, or YAML of the wrong shape: one line naming the file, exit 2."""
+    pytest.importorskip("stable_baselines3")
+    bad = tmp_path / f"hp{suffix}"
+    bad.write_text(text)
+    assert main(["train", "--hyperparams", str(bad), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(bad) in err and message in err, err
+
+
+@pytest.mark.parametrize("command", [["evaluate", "--seeds", "0:1"], ["calibrate"], ["paper"], ["validate"],
+                                     ["leaderboard", "--seeds", "0:1"], ["train"]])
+def test_an_out_folder_that_cannot_be_made_is_refused_before_the_work(command, tmp_path, capsys, monkeypatch):
+    """--out under a file: one line naming the folder, exit 2, and no command ran (it would have failed only when
+    it came to write)."""
+    import trackenv_agents.cli as cli
+
+    ran = []
+    for name in [n for n in vars(cli) if n.startswith("cmd_")]:
+        monkeypatch.setattr(cli, name, lambda args, name=name: ran.append(name) or 0)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    out = blocker / "results"
+    assert main([*command, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"trackenv {command[0]}: --out {out}: cannot create the folder (Not a directory)\n"
+    assert not ran
+
+
+def test_the_out_folder_is_made_with_its_parents(tmp_path, monkeypatch):
+    import trackenv_agents.cli as cli
+
+    monkeypatch.setattr(cli, "cmd_calibrate", lambda args: 0)
+    out = tmp_path / "deep" / "er"
+    assert main(["calibrate", "--out", str(out)]) == 0
+    assert out.is_dir()
+
+
 def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys, monkeypatch):
     """The heavy passes are stubbed: the command's printing is under test, not the physics."""
     import trackenv_studies.validation as val

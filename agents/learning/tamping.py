@@ -99,12 +99,24 @@ def load_hyperparams(path: str | Path | None = None, env_id: str = DEFAULT_ENV_I
     if path.suffix in (".yml", ".yaml"):
         import yaml
 
-        table = yaml.safe_load(path.read_text()) or {}
+        try:
+            table = yaml.safe_load(path.read_text()) or {}
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not a YAML file ({' '.join(str(exc).split())})") from None
+        if not isinstance(table, dict):
+            raise ValueError(f"{path}: an RL Zoo file is a mapping of env ids to entries, got {type(table).__name__}")
         if env_id not in table:
             raise ValueError(f"{path} has no entry for env id {env_id!r} (it has {sorted(table)})")
+        if not isinstance(table[env_id], dict):
+            raise ValueError(f"{path}: the entry for {env_id!r} must be a mapping of settings, got "
+                             f"{type(table[env_id]).__name__}")
         hp = from_zoo(table[env_id], schema)
     else:
-        hp = json.loads(path.read_text())
+        try:
+            hp = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not a JSON object of hyper-parameters ({exc}); a YAML file in RL Zoo's form "
+                             "needs the .yml or .yaml suffix") from None
     if not isinstance(hp, dict):
         raise ValueError(f"{path}: hyper-parameters must be a mapping of names to values, got {hp!r}")
     schema.settings.from_dict(hp)  # unknown keys and values out of range raise here, naming the file's key

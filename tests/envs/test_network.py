@@ -207,7 +207,9 @@ def test_state_round_trip_and_into_a_vector_row():
     ({"capacity": 0}, "capacity"),
     ({"move_cost": -1.0}, "move_cost"),
     ({"start_line": 2}, "start_line"),
-    ({"line_config": "nowhere"}, "unknown scenario"),
+    ({"line_config": "nowhere"}, "^line_config: unknown scenario"),
+    ({"line_config": {"n_sections": 2}}, r"^line_config: capacity must be an integer in \[1, 2\], got 6"),
+    ({"line_config": {"bogus": 1}}, r"^line_config: unknown LineConfig key\(s\) \['bogus'\]"),
     ({"line_config": 3}, "line_config"),
     ({"no_such_field": 1}, "no_such_field"),
 ])

@@ -185,11 +185,11 @@ def test_bad_inputs_name_the_argument(name: str) -> None:
 
 
 def test_a_settlement_that_overflows_is_an_error_not_a_nan() -> None:
-    """A parameter far outside its usual range (a loaded area of 1e-300 m²) overflows the amplitude: the law
+    """A coefficient far outside its usual range (Hettler's s of 1e306 mm/kN^a) overflows the amplitude: the law
     says so, naming itself and its parameters, rather than return inf or NaN."""
-    law = AlvaHurtadoSeligLaw(loaded_area=1e-300)
-    with pytest.raises(ValueError, match="alva_hurtado_selig: the settlement of forces up to 1e\\+05 N is not finite"):
-        law.settlement(1e5, [0.0, 1e6])
+    law = HettlerLaw(s=1e306)
+    with pytest.raises(ValueError, match="hettler: the settlement of forces up to 1e\\+07 N is not finite"):
+        law.settlement(1e7, [0.0, 1e6])
     assert np.isfinite(AlvaHurtadoSeligLaw().settlement(MAX_FORCE_N, [0.0, 1e6])).all()
 
 
@@ -233,6 +233,14 @@ def test_make_law_unknown_name_lists_the_known_ones() -> None:
         (AlvaHurtadoSeligLaw, "C", -1.0),
         (AlvaHurtadoSeligLaw, "loaded_area", 0.0),
         (AlvaHurtadoSeligLaw, "stress_unit", 0.0),
+        (AlvaHurtadoSeligLaw, "stress_unit", 0.5),
+        (AlvaHurtadoSeligLaw, "loaded_area", 1e-300),
+        (SeligWatersLaw, "loaded_area", 0.005),
+        (SeligWatersLaw, "loaded_area", 11.0),
+        (SeligWatersLaw, "reference_stress", 1e-3),
+        (SeligWatersLaw, "reference_stress", 2e9),
+        (SatoLaw, "reference_force", 0.5),
+        (ShentonLaw, "reference_force", 2e7),
         (SatoLaw, "alpha", 0.0),
         (SatoLaw, "beta", -1e-9),
         (SatoLaw, "gamma", -1e-3),

@@ -156,7 +156,10 @@ def _line_config(value: Any) -> LineConfig:
     if not isinstance(value, (LineConfig, dict, str)):
         raise ValueError(f"line_config must be a LineConfig, a dict of its fields or a preset name, got "
                          f"{type(value).__name__}")
-    return LineConfig.coerce(value)
+    try:
+        return LineConfig.coerce(value)
+    except ValueError as exc:
+        raise ValueError(f"line_config: {exc}") from None
 
 
 def line_seeds(rng: np.random.Generator, n_lines: int) -> list[int]:

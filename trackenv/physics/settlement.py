@@ -121,6 +121,12 @@ _POSITIVE: dict[str, Any] = {"low": 0.0, "low_inclusive": False}
 #: the largest force [N] the laws take through their public methods: a hundred times a wheel's static load, far
 #: beyond any sleeper's or wheel's force in service (a larger one is a unit error, and overflows some laws)
 MAX_FORCE_N = 1e7
+#: the ranges of the laws' scales, wide enough for every unit and sleeper in use, narrow enough that no force up
+#: to MAX_FORCE_N overflows: a reference force of 1 N to MAX_FORCE_N; a loaded ballast area of 0.01 m² (a 10 cm
+#: square, far below a half-sleeper's 0.3 m² base) to 10 m²; a stress (reference or unit) of 1 Pa to 1 GPa
+FORCE_SCALE_N = {"low": 1.0, "high": MAX_FORCE_N}
+AREA_M2 = {"low": 0.01, "high": 10.0}
+STRESS_PA = {"low": 1.0, "high": 1e9}
 
 
 def _one_shape(name_a: str, a: np.ndarray, name_b: str, b: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -230,13 +236,13 @@ class _SeparableLaw:
 
 class _PowerScaledLaw(_SeparableLaw):
     """Base of the cycle-only laws made force dependent by A(F) = (F / reference_force)^force_exponent, with
-    reference_force > 0 and force_exponent in (0, 4] (checked by :meth:`_check_force_scaling`)."""
+    reference_force in [1, 1e7] N and force_exponent in (0, 4] (checked by :meth:`_check_force_scaling`)."""
 
     reference_force: float
     force_exponent: float
 
     def _check_force_scaling(self) -> None:
-        check_field(self, "reference_force", **_POSITIVE)
+        check_field(self, "reference_force", **FORCE_SCALE_N)
         check_field(self, "force_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
@@ -321,7 +327,7 @@ class SeligWatersLaw(_SeparableLaw):
     (stresses in Pa, strains as fractions), so no unit conversion is needed.
 
     Valid ranges: epsilon_1 in (0, 0.1], beta in (0, 1], ballast_thickness in (0, 2] m,
-    loaded_area in (0, 10] m², reference_stress > 0 Pa, stress_exponent in (0, 4].
+    loaded_area in [0.01, 10] m², reference_stress in [1, 1e9] Pa, stress_exponent in (0, 4].
     """
 
     epsilon_1: float = 0.0035
@@ -336,8 +342,8 @@ class SeligWatersLaw(_SeparableLaw):
         check_field(self, "epsilon_1", low=0.0, high=0.1, low_inclusive=False)
         check_field(self, "beta", low=0.0, high=1.0, low_inclusive=False)
         check_field(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
-        check_field(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
-        check_field(self, "reference_stress", **_POSITIVE)
+        check_field(self, "loaded_area", **AREA_M2)
+        check_field(self, "reference_stress", **STRESS_PA)
         check_field(self, "stress_exponent", low=0.0, high=4.0, low_inclusive=False)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
@@ -388,7 +394,7 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
     gives the literal psi reading.
 
     Valid ranges: porosity in (0.382, 0.6), C in [0, 5], ballast_thickness in (0, 2] m,
-    loaded_area in (0, 10] m², stress_unit > 0 Pa.
+    loaded_area in [0.01, 10] m², stress_unit in [1, 1e9] Pa.
     """
 
     porosity: float = 0.45
@@ -402,8 +408,8 @@ class AlvaHurtadoSeligLaw(_SeparableLaw):
         check_field(self, "porosity", low=0.382, high=0.6, low_inclusive=False, high_inclusive=False)
         check_field(self, "C", low=0.0, high=5.0)
         check_field(self, "ballast_thickness", low=0.0, high=2.0, low_inclusive=False)
-        check_field(self, "loaded_area", low=0.0, high=10.0, low_inclusive=False)
-        check_field(self, "stress_unit", **_POSITIVE)
+        check_field(self, "loaded_area", **AREA_M2)
+        check_field(self, "stress_unit", **STRESS_PA)
 
     def _amplitude(self, force: np.ndarray) -> np.ndarray:
         """ε_1·h [m], the unit boundary of this law.
@@ -446,7 +452,7 @@ class SatoLaw(_PowerScaledLaw):
     The inverse has no closed form; it is found by a vectorised safeguarded Newton solve (g is increasing and
     concave). With beta = 0 the law is bounded by γ·(F/F_ref)^p and the inverse is +inf beyond that.
 
-    Valid ranges: alpha > 0, beta >= 0, gamma >= 0 with beta + gamma > 0, reference_force > 0,
+    Valid ranges: alpha > 0, beta >= 0, gamma >= 0 with beta + gamma > 0, reference_force in [1, 1e7] N,
     force_exponent in (0, 4].
     """
 
@@ -494,7 +500,7 @@ class ShentonLaw(_PowerScaledLaw):
     50 kN. SI coefficients: K1 [m], K2 [m/cycle], reference_force [N]. Inverse by the same vectorised Newton
     solve as :class:`SatoLaw`.
 
-    Valid ranges: K1 >= 0, K2 >= 0 with K1 + K2 > 0, reference_force > 0, force_exponent in (0, 4].
+    Valid ranges: K1 >= 0, K2 >= 0 with K1 + K2 > 0, reference_force in [1, 1e7] N, force_exponent in (0, 4].
     """
 
     K1: float = 1.5e-4
@@ -543,7 +549,7 @@ class IndraratnaLaw(_PowerScaledLaw):
     p = 1, giving u ≈ 3.5 mm after one million cycles at 50 kN. SI coefficients: a [m], b [m],
     reference_force [N].
 
-    Valid ranges: a > 0, b >= 0, reference_force > 0, force_exponent in (0, 4].
+    Valid ranges: a > 0, b >= 0, reference_force in [1, 1e7] N, force_exponent in (0, 4].
     """
 
     a: float = 1.0e-3
