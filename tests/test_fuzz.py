@@ -25,6 +25,8 @@ import trackenv as te
 from trackenv.envs.choices import INTERVENTIONS
 from trackenv.envs.line import TampingLine
 from trackenv.envs.line_config import LineConfig, scenario
+from trackenv.envs.network import NetworkConfig
+from trackenv.envs.network_env import TampingNetwork
 from trackenv.envs.tamping import TampingEnv
 from trackenv.envs.vector import TampingVectorEnv
 from trackenv.physics.settlement import LAWS, make_law
@@ -284,6 +286,94 @@ def test_pass_reuse_env_steps_finitely(reuse_env: TampingLine, seed, actions) ->
     batch = reuse_env.unwrapped.batch
     kept = ~np.isnan(batch.computed_level).any(axis=-1)
     assert np.isfinite(batch.computed_force[kept]).all()
+
+
+# the network: its config, and the env's seeds and actions on two lines of the short track (6 sections)
+NETWORK_FIELDS = [f.name for f in dataclasses.fields(NetworkConfig)]
+line_configs = st.sampled_from(["default", "small", "nowhere", {"n_sections": 2}, {"n_sections": 2, "capacity": 2},
+                                {"bogus": 1}, ENV_CFG])
+
+
+@FUZZ
+@given(st.dictionaries(st.sampled_from(NETWORK_FIELDS),
+                       mostly(st.one_of(st.integers(0, 20), st.floats(0, 100), line_configs), 2),
+                       min_size=1, max_size=3))
+def test_network_config_refuses_or_stores_canonical_values(kw: dict) -> None:
+    """A network config refuses naming a field it was given (a line config's own refusal is prefixed with
+    line_config; capacity's bound follows the line's sections), or stores its counts as int and its move cost as
+    a finite float."""
+    t0 = time.perf_counter()
+    try:
+        cfg = NetworkConfig(**kw)
+    except (ValueError, TypeError) as e:
+        _fast(t0, "NetworkConfig")
+        _assert_names(e, kw)
+        return
+    assert all(type(getattr(cfg, k)) is int for k in ("n_lines", "capacity", "start_line"))
+    assert type(cfg.move_cost) is float and math.isfinite(cfg.move_cost)
+    assert 1 <= cfg.capacity <= cfg.line_config.n_sections == cfg.sections_per_line
+
+
+valid_network_action = st.lists(st.integers(0, 1), min_size=6, max_size=6)
+network_actions = st.one_of(
+    mostly(st.one_of(valid_network_action, valid_network_action.map(np.array)), 3),
+    st.lists(st.integers(-1, 2), max_size=7),
+    st.lists(st.sampled_from([0, 1, 0.5, np.nan, True, "1", None]), min_size=6, max_size=6),
+)
+
+
+@pytest.fixture(scope="module")
+def network_env() -> TampingNetwork:
+    return TampingNetwork(NetworkConfig(n_lines=2, line_config=ENV_CFG))
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 25)
+@given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=network_actions)
+def test_network_env_seed_and_action(network_env: TampingNetwork, seed, action) -> None:
+    out = _reset_and_step(network_env, seed, action, "TampingNetwork.step")
+    if out is not None:
+        _assert_finite(*out)
+        assert network_env.observation_space.contains(out[0])
+
+
+@pytest.fixture(scope="module")
+def parallel_env():
+    pytest.importorskip("pettingzoo")
+    from trackenv.envs.multiagent import line_parallel_env
+
+    return line_parallel_env("trackenv/TampingLineSmall-v0", horizon_years=0.5)
+
+
+AGENTS = [f"section_{i}" for i in range(6)]  # the small line's sections
+joint_actions = st.one_of(
+    st.fixed_dictionaries({a: st.integers(0, 1) for a in AGENTS}),
+    st.dictionaries(st.sampled_from([*AGENTS, "section_99", "x"]), mostly(st.integers(-1, 3), 3)),
+    st.fixed_dictionaries({a: st.sampled_from([0, 1, np.int64(1), 1.0, 0.5, np.nan, True, None, "1", np.array(1)])
+                           for a in AGENTS}),
+    junk,
+)
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 25)
+@given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), actions=joint_actions)
+def test_parallel_env_seed_and_joint_action(parallel_env, seed, actions) -> None:
+    """The PettingZoo interface: a joint action is taken (finite rewards, observations in their spaces) or
+    refused quickly naming the action or an agent."""
+    assert parallel_env.possible_agents == AGENTS
+    try:
+        parallel_env.reset(seed=seed)
+    except (ValueError, TypeError) as e:
+        _assert_names(e, ["seed"])
+        parallel_env.reset(seed=0)
+    t0 = time.perf_counter()
+    try:
+        obs, rewards, _, _, _ = parallel_env.step(actions)
+    except (ValueError, TypeError, KeyError) as e:
+        _fast(t0, "LineParallelEnv.step")
+        _assert_names(e, ["action", "agent"])
+        return
+    assert all(np.isfinite(r) for r in rewards.values())
+    assert all(parallel_env.observation_space(a).contains(o) for a, o in obs.items())
 
 
 TRACK_KEYS = ["pad_stiffness", "pad_damping", "sleeper_mass", "ballast_stiffness", "ballast_damping"]
