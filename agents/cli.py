@@ -66,14 +66,27 @@ def _existing(path: str | None, what: str, *, folder: bool = False) -> None:
 
 
 def _output_folder(path: str | None) -> None:
-    """Create the ``--out`` folder up front (with its parents), so that a path that cannot hold the results (a
-    file, a read-only place, a typo under a system folder) is refused in one line before the work, not after it."""
+    """Refuse up front, in one line, an ``--out`` folder that cannot be made (under a file, in a read-only or
+    system place), rather than after the work when the results are written: the missing folders are made and
+    removed again, so that a command refused later for another reason leaves nothing behind."""
     if path is None:
         return
+    if Path(path).exists() and not Path(path).is_dir():
+        raise UsageError(f"--out {path}: a file, not a folder")
+    missing = []
+    folder = Path(path).absolute()
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
     try:
-        Path(path).mkdir(parents=True, exist_ok=True)
+        for made in reversed(missing):
+            made.mkdir()
     except OSError as exc:
         raise UsageError(f"--out {path}: cannot create the folder ({exc.strerror or exc})") from None
+    finally:
+        for made in missing:
+            if made.is_dir():
+                made.rmdir()
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -194,11 +207,13 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
     where the preset measures every step without error (the 60 m track)."""
     if args.policy == "rules":
         return {}
-    _existing(args.model, "--model")
+    _existing(args.model, "--model", folder=args.model is not None and not Path(args.model).suffix)
     name = LINE_AGENT_NAME if args.model else shipped_agent_for(args.env)
     path = Path(args.model) if args.model else SHIPPED_AGENTS[name]
     out: dict[str, Any] = {}
-    if path.exists():
+    if args.model:
+        out.update(_trained_model(path, args))
+    elif path.exists():
         from .learning.line import load_line_trained
 
         out[name] = load_line_trained(path, name=name)
@@ -211,6 +226,25 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
         if ModelPredictive.unfit_for(scenario_config(scenario_of(args.env))) is None:
             out[ModelPredictive.name] = ModelPredictive()
     return out
+
+
+def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
+    """``--model PATH`` by what the path holds (:func:`~.learning.baselines.baseline_kind`): a per-section policy
+    (``trackenv train --env ID``), named ``cpi-agent``, runs on any line; a model of ``trackenv train`` (SB3, with
+    its observation statistics) or an RLlib run, named by its folder and file, only on the line it was trained on,
+    or a network of that line (else one line saying which fields differ)."""
+    from .evaluation.leaderboard import fitting_agents
+    from .evaluation.line_compare import scenario_config, scenario_of
+    from .learning.baselines import baseline_kind, load_baseline
+
+    kind = baseline_kind(path)
+    if kind == "line":
+        return {LINE_AGENT_NAME: load_baseline(path, name=LINE_AGENT_NAME)}
+    policy = load_baseline(path, name=f"{path.parent.name}/{path.stem}" if path.suffix else path.name)
+    fit, unfit = fitting_agents({policy.name: policy}, scenario_config(scenario_of(args.env), **engine_overrides(args)))
+    if unfit:
+        raise UsageError(f"--model {path} cannot be scored on {args.env}: {unfit[policy.name]}")
+    return fit
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -380,7 +414,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     line = load_line(args.line)
     overrides = engine_overrides(args)
     # an unknown policy or scenario before the fit and the futures
-    line_policy(args.policy, plan_config(line, args.scenario, years=args.years, **overrides), args.scenario)
+    line_policy(args.policy, plan_config(line, args.scenario, years=args.years, **overrides), args.scenario,
+                years=args.years)
     t0 = time.perf_counter()
     progress = None
     if not args.json:
@@ -661,7 +696,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "planner where the preset measures every step without error (the 60 m track) (default), "
                          "or the rules or the agent alone")
     sp.add_argument("--model", default=None, metavar="ZIP",
-                    help=f"a trained per-section policy (default: the shipped {LINE_AGENT_NAME}, "
+                    help=f"a trained policy: a per-section policy of trackenv train --env ID (any line), a model of "
+                         f"trackenv train (the line it was trained on) or a folder of experiments/train_rllib.py "
+                         f"(default: the shipped {LINE_AGENT_NAME}, "
                          f"agents/learning/pretrained/ppo_tamping_line.zip; on the ids with every choice "
                          f"{CHOICE_AGENT_NAME}, agents/learning/pretrained/cpi_choice_line.zip; on the 60 m track "
                          f"{TRACK60_AGENT_NAME}, agents/learning/pretrained/cpi_track60.zip)")

@@ -52,13 +52,14 @@ PLAN_SCENARIOS = tuple(name for name, fields_ in SCENARIOS.items() if not set(fi
 DEFAULT_POLICY = "grouped-threshold"
 
 
-def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
+def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
     """The policy ``name`` bound to ``config``: a rule of the config (:func:`~trackenv_agents.rules.rules_for`:
     the tamping rules, and the choice rules where the config has more choices) with the shipped tuned parameters
     of ``scenario`` (default: those of the preset ``config`` is, else the default line's), a shipped agent by its
     name (:data:`~trackenv_agents.shipped.SHIPPED_AGENTS`: ``cpi-agent``, ``cpi-choice-agent``,
-    ``cpi-track60-agent``) or a trained per-section policy by the path of its ``.zip``; ValueError for another,
-    or for an agent that cannot run on ``config`` (its reason)."""
+    ``cpi-track60-agent``) or a trained policy by the path of its ``.zip`` (a per-section policy runs on any line;
+    a model of ``trackenv train`` only on the line it was trained on); ValueError for another, or for an agent
+    that cannot run on ``config`` (its reason), or that learnt on episodes shorter than a plan of ``years``."""
     from .rules import TUNED_FILES, line_tuned_params, rules_for, tuned_rule
 
     rules = rules_for(config)
@@ -67,18 +68,31 @@ def line_policy(name: str, config: Any, scenario: str | None = None) -> Any:
             return rules[name](**line_tuned_params(TUNED_FILES[scenario]).get(name, {})).bind(config)
         return tuned_rule(config, name).bind(config)
     if name in SHIPPED_AGENTS or name.endswith(".zip"):
-        from .learning.line import load_line_trained
+        from .learning.baselines import load_baseline
 
         try:
-            agent = load_line_trained(SHIPPED_AGENTS.get(name, name), name=Path(name).stem)
+            agent = load_baseline(SHIPPED_AGENTS.get(name, name), name=Path(name).stem)
         except FileNotFoundError as exc:
             raise ValueError(f"policy {name!r}: {exc}") from None
         why = agent.unfit_for(config)
         if why is not None:
             raise ValueError(f"policy {name!r} cannot run on this line: {why}")
-        return agent.bind(config)
+        trained = trained_horizon_years(agent)
+        if years is not None and trained is not None and years > trained:
+            raise ValueError(f"years: the policy {name!r} was trained on {trained:g}-year episodes; plan at most "
+                             f"{trained:g} years with it, got {years:g}")
+        bind = getattr(agent, "bind", None)
+        return bind(config) if callable(bind) else agent
+    from trackenv.envs.line_config import scenario as preset
+
+    from .rules.problems import every_rule
+
+    if name in every_rule():
+        with_choices = [s for s in PLAN_SCENARIOS if tuple(preset(s).choices) != ("tamp",)]
+        raise ValueError(f"policy {name!r} uses the choices beyond tamping: plan with --scenario "
+                         f"{', '.join(with_choices[:-1])} or {with_choices[-1]}")
     raise ValueError(f"unknown policy {name!r}; known: {', '.join([*rules, *SHIPPED_AGENTS])} or the path of a "
-                     "trained per-section policy (.zip)")
+                     "trained policy (.zip)")
 
 
 def plan_config(line: Any, scenario: str = "default", years: float | None = None, **config: Any) -> Any:
@@ -95,6 +109,10 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
         steps_per_year = config.get("steps_per_year", LineConfig.steps_per_year)
         config["horizon_years"] = check_scalar("years", years, low=1.0 / steps_per_year, high=MAX_HORIZON_YEARS)
     return preset(scenario, line=line, **config)
+
+
+def _years(years: float) -> str:
+    return f"{years:g} year{'' if years == 1 else 's'}"
 
 
 def trained_horizon_years(policy: Any) -> float | None:
@@ -167,7 +185,7 @@ class LinePlan:
 
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
-        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {self.years:g} years, "
+        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {_years(self.years)}, "
                  f"{self.futures} futures{engine}",
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
@@ -178,7 +196,7 @@ class LinePlan:
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
         c = d["cost_keur"]
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
-        lines.append(f"cost over {self.years:g} years: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
+        lines.append(f"cost over {_years(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
                      f"over 10-90 % of the futures ({parts})")
         fit = d["fit"]
         if fit["fitted"]:
@@ -271,15 +289,12 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from trackenv.envs.line_fit import history_fit
 
     cfg = plan_config(line, scenario, years=years, **config)
-    rule = line_policy(policy, cfg, scenario)
+    rule = line_policy(policy, cfg, scenario, years=years)
     steps = cfg.horizon_steps
     trained = trained_horizon_years(rule)
     if trained is not None:
         # a trained policy reads the time left in its training episode: the futures run in episodes of that
         # length, of which the plan takes its first ``years`` (the line goes on after the plan, as in training)
-        if years > trained:
-            raise ValueError(f"years: the policy {policy!r} was trained on {trained:g}-year episodes; plan at most "
-                             f"{trained:g} years with it, got {years:g}")
         cfg = cfg.replace(horizon_years=trained)
         rule = rule.bind(cfg)
     fit = history_fit(cfg)

@@ -38,6 +38,30 @@ def test_evaluate_on_the_60m_track_prints_one_json_object(tmp_path, capsys):
         assert (tmp_path / name).exists(), name
 
 
+BASELINE = Path(__file__).resolve().parents[1] / "experiments" / "saved" / "baselines" / "maskable-ppo-ranked.zip"
+
+
+def test_evaluate_scores_a_model_of_the_standard_libraries_and_refuses_it_on_another_line(tmp_path, capsys):
+    """`--model` takes what `trackenv train` writes (an SB3 .zip with its observation statistics), not only a
+    per-section policy: scored on the line it was trained on, named by its folder and file; refused in one line
+    naming the fields that differ on another line, or by `trackenv plan` on a line file."""
+    pytest.importorskip("sb3_contrib")
+    argv = ["evaluate", "--env", "trackenv/TampingLine-v0", "--model", str(BASELINE), "--policy", "agent",
+            "--seeds", "0:1", "--rules", "grouped-threshold", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["extra"] == ["baselines/maskable-ppo-ranked"]
+    assert {row["policy"] for row in out["results"]} == {"grouped-threshold", "baselines/maskable-ppo-ranked"}
+    argv[2] = "trackenv/TampingLineSmall-v0"
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"trackenv evaluate: --model {BASELINE} cannot be scored on trackenv/TampingLineSmall-v0: "
+                          "trained on another line: ") and err.count("\n") == 1
+    line = Path(__file__).resolve().parents[1] / "trackenv" / "lines" / "example.yaml"
+    assert main(["plan", str(line), "--policy", str(BASELINE), "--years", "0.5", "--out", str(tmp_path)]) == 2
+    assert "cannot run on this line: trained on another line" in capsys.readouterr().err
+
+
 def test_evaluate_prints_the_table_and_where_the_plots_are(tmp_path, capsys, monkeypatch):
     """The comparison itself is stubbed (it runs end to end in the test above): the printing is under test, and
     what reaches the comparison (the default env is the default line)."""
@@ -369,13 +393,19 @@ def test_an_out_folder_that_cannot_be_made_is_refused_before_the_work(command, t
     assert not ran
 
 
-def test_the_out_folder_is_made_with_its_parents(tmp_path, monkeypatch):
+def test_the_out_folder_check_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
+    """The check makes the missing folders and removes them again: a command that then writes nothing (refused
+    for another reason) leaves no folder; an --out that is a file is refused by name."""
     import trackenv_agents.cli as cli
 
-    monkeypatch.setattr(cli, "cmd_calibrate", lambda args: 0)
+    seen = []
+    monkeypatch.setattr(cli, "cmd_calibrate", lambda args: seen.append(Path(args.out).parent.is_dir()) or 0)
     out = tmp_path / "deep" / "er"
     assert main(["calibrate", "--out", str(out)]) == 0
-    assert out.is_dir()
+    assert seen == [False] and not (tmp_path / "deep").exists()
+    (tmp_path / "f").write_text("")
+    assert main(["calibrate", "--out", str(tmp_path / "f")]) == 2
+    assert capsys.readouterr().err == f"trackenv calibrate: --out {tmp_path / 'f'}: a file, not a folder\n"
 
 
 def test_validate_prints_pass_fail_per_check_and_where_it_wrote(tmp_path, capsys, monkeypatch):
