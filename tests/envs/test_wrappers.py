@@ -198,3 +198,20 @@ def test_tamping_only_ranked_wrappers_are_the_k_worst_by_a_plain_sort() -> None:
             if i == 0:
                 assert reward == base_reward
                 np.testing.assert_array_equal(info["tamped_sections"], base_info["tamped_sections"])
+
+
+@pytest.mark.parametrize("wrap", [
+    RankedActions,
+    SectionObservation,
+    MultiDiscreteActions,
+    lambda env: ActionMaskObservation(MultiDiscreteActions(env)),
+], ids=["ranked", "section", "multidiscrete", "mask"])
+@pytest.mark.filterwarnings("ignore:.*is different from the unwrapped version")  # the checker's note on any wrapper
+def test_gymnasiums_env_checker_passes_on_every_wrapper(wrap) -> None:
+    """Gymnasium's own checker on each learner wrapper over a registered id: it asks each wrapper to record its
+    constructor's arguments (so that a spec can rebuild the stack) and checks spaces, seeding and determinism."""
+    from gymnasium.utils.env_checker import check_env
+
+    env = wrap(gym.make("trackenv/Tamping-v1", config=CFG).unwrapped)
+    check_env(env, skip_render_check=True)
+    assert [w.name for w in env.spec.additional_wrappers][-1] == type(env).__name__

@@ -158,7 +158,7 @@ class _RankedForm:
 
 
 # --- single-env wrappers ---
-class RankedActions(gym.ActionWrapper):
+class RankedActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """Ranked actions over a ``MultiBinary(n_sections)`` env or one with the choices (see the module docstring).
 
     Tamp-or-wait: ``Discrete(n_sections + 1)``, ``k`` tamps the ``k`` sections with the largest ``section_sd``
@@ -173,7 +173,8 @@ class RankedActions(gym.ActionWrapper):
     Wrap the env's own Dict observation (apply observation wrappers outside this one)."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ActionWrapper.__init__(self, env)
         n = n_sections_of(env)
         self.n_sections = n
         self._form = _RankedForm("RankedActions", env.action_space, env.observation_space, n, choices_of(env))
@@ -204,11 +205,12 @@ class RankedActions(gym.ActionWrapper):
         return self._form.masks(1, lambda: _masks(self.env))[0]
 
 
-class SectionObservation(gym.ObservationWrapper):
+class SectionObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """The section-level observation: the keys of :func:`section_keys` (per-sleeper arrays dropped)."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
         self.keys = section_keys(env.observation_space, n_sections_of(env))
         self.observation_space = spaces.Dict({k: env.observation_space[k] for k in self.keys})  # type: ignore[index]
 
@@ -219,14 +221,15 @@ class SectionObservation(gym.ObservationWrapper):
         return _masks(self.env)
 
 
-class MultiDiscreteActions(gym.ActionWrapper):
+class MultiDiscreteActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """``MultiBinary(n)`` actions as ``MultiDiscrete([2] * n)`` (same meaning; the masks are the same pairs
     [may-not-tamp, may-tamp] per section that sb3-contrib expects for MultiDiscrete). An env whose actions are
     already ``MultiDiscrete`` (the choices) passes through unchanged, so one pipeline of wrappers serves both;
     any other action space raises TypeError."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ActionWrapper.__init__(self, env)
         space = env.action_space
         if isinstance(space, spaces.MultiDiscrete) and len(space.shape) == 1:
             self.action_space = space
@@ -244,12 +247,13 @@ class MultiDiscreteActions(gym.ActionWrapper):
         return _masks(self.env)
 
 
-class ActionMaskObservation(gym.ObservationWrapper):
+class ActionMaskObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """``Dict(action_mask=Box(0, 1, (mask size,)), observations=<the inner observation>)``: the mask as part of
     the observation, where RLlib's action-masking RLModule (``ActionMaskingTorchRLModule``) reads it."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
         size = _mask_size(env.action_space)
         self.observation_space = spaces.Dict({
             "action_mask": spaces.Box(0.0, 1.0, (size,), np.float32),
