@@ -204,11 +204,30 @@ def test_render_passes_through():
     assert without.render() is None
 
 
+def test_every_listed_id_is_a_parallel_env_and_the_list_is_the_documented_one():
+    """The ids the messages name are those the multi-agent page lists, and each builds a parallel env whose agents
+    are its sections (the 60 m track's six included)."""
+    from trackenv.envs.parallel import _line_env_ids
+
+    ids = _line_env_ids()
+    assert ids == sorted(["trackenv/Tamping-v1", "trackenv/TampingLine-v0", "trackenv/TampingLine-v1",
+                          "trackenv/TampingLineDefects-v0", "trackenv/TampingLineHard-v0",
+                          "trackenv/TampingLineLong-v0", "trackenv/TampingLineSmall-v0", "trackenv/TampingLineWet-v0"])
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "multi-agent.md").read_text()
+    assert all(f"`{env_id}`" in page for env_id in ids)
+    env = line_parallel_env("trackenv/Tamping-v1")
+    assert env.possible_agents == [agent_name(i) for i in range(6)]
+
+
 def test_errors():
     with pytest.raises(ValueError, match=r"env_id must name a TampingLine env \(one of .*TampingLineSmall-v0"):
         line_parallel_env("CartPole-v1")
-    with pytest.raises(ValueError, match=r"action space must be MultiBinary\(n_sections\).*got Discrete\(7\)"):
-        line_parallel_env("trackenv/TampingDiscrete-v1")  # a TampingLine (the 60 m track), but Discrete actions
+    # a TampingLine (the 60 m track), but Discrete actions: the ids that act in their own space are named
+    with pytest.raises(ValueError, match=r"'trackenv/TampingDiscrete-v1' acts in Discrete\(7\): one agent per section "
+                                         r"needs the line env's own actions.*as on trackenv/Tamping-v1, "):
+        line_parallel_env("trackenv/TampingDiscrete-v1")
+    with pytest.raises(ValueError, match=r"got 'trackenv/TampingNetwork-v0' \(TampingNetwork\)"):
+        line_parallel_env("trackenv/TampingNetwork-v0")
     env = line_parallel_env(SMALL, **SHORT)
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(_actions(JOINT[0]))

@@ -51,9 +51,17 @@ def possession_shares(shared_cost: float, worked: np.ndarray) -> np.ndarray:
 
 
 def _line_env_ids() -> list[str]:
-    """The registered ids whose entry point is TampingLine (for error messages)."""
-    line = ("trackenv.envs.line:TampingLine", TampingLine)
-    return sorted(env_id for env_id, spec in gym.registry.items() if spec.entry_point in line)
+    """The registered ids whose entry point is a TampingLine class (the lines and the 60 m track) acting in its own
+    action space (no discrete actions, no wrapper in the registration), for messages."""
+    from gymnasium.envs.registration import load_env_creator
+
+    def is_line(spec: Any) -> bool:
+        creator = load_env_creator(spec.entry_point) if isinstance(spec.entry_point, str) else spec.entry_point
+        own_actions = spec.kwargs.get("action_type") in (None, "multibinary", "choices")
+        return isinstance(creator, type) and issubclass(creator, TampingLine) and own_actions and \
+            not spec.additional_wrappers
+
+    return sorted(env_id for env_id, spec in gym.registry.items() if env_id.startswith("trackenv/") and is_line(spec))
 
 
 def _check_line_env(env: gym.Env) -> tuple[int, int]:
@@ -71,8 +79,9 @@ def _check_line_env(env: gym.Env) -> tuple[int, int]:
     elif n and space == spaces.MultiDiscrete([len(CHOICES)] * n):
         codes = len(CHOICES)
     else:
-        raise ValueError(f"{name!r}: the line env's action space must be MultiBinary(n_sections) or the choices "
-                         f"MultiDiscrete([{len(CHOICES)}] * n_sections) (a wrapper changed it?), got {space}")
+        raise ValueError(f"{name!r} acts in {space}: one agent per section needs the line env's own actions, "
+                         f"MultiBinary(n_sections) or the choices MultiDiscrete([{len(CHOICES)}] * n_sections), as on "
+                         f"{', '.join(_line_env_ids())} (without a wrapper that changes them)")
     if not isinstance(env.observation_space, spaces.Dict):
         raise ValueError(f"{name!r}: the line env's observation space must be a Dict, got {env.observation_space}")
     return n, codes
