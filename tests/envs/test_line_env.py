@@ -296,3 +296,17 @@ def test_the_50_km_line_runs_a_step():
     obs, reward, _, _, info = env.step(action)
     assert info["tamped_sections"].sum() <= 25 and info["clipped"]
     assert -reward == pytest.approx(info["cost"]) and np.isfinite(obs["section_sd"]).all()
+
+
+@pytest.mark.parametrize("env_id", ["trackenv/TampingLineSmall-v0", "trackenv/TampingLine-v1", "trackenv/Tamping-v1"])
+def test_every_info_key_and_cost_part_is_documented(env_id):
+    """The environments page lists every key of a step's info and every part of its costs (a key added to the
+    env and not to the page fails here)."""
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "index.md").read_text()
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    info = env.step(env.action_space.sample())[-1]
+    missing = [key for key in [*info, *info["costs"]] if f"`{key}`" not in page]
+    assert not missing, f"not on docs/environments/index.md: {missing}"
