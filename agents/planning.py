@@ -39,8 +39,7 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.choices import CHOICES, action_type_for
-from trackenv.envs.line_config import LINE_FILE_FIELDS, MAX_HORIZON_YEARS, SCENARIOS, LineConfig
-from trackenv.physics._checks import check_scalar
+from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS, LineConfig, check_horizon
 
 from .shipped import SHIPPED_AGENTS
 
@@ -99,7 +98,7 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
     """The :class:`~trackenv.envs.line_config.LineConfig` of ``line`` (a line file's path or a
     :class:`~trackenv.envs.line_file.LineDescription`) modelled as on the preset ``scenario``
     (:data:`PLAN_SCENARIOS`), with further ``config`` fields; ``years``: the plan's, its horizon (checked under
-    that name, in the config's range: at least one step, at most ``MAX_HORIZON_YEARS``)."""
+    that name, in the config's range: whole steps, at least one, at most ``MAX_HORIZON_YEARS``)."""
     from trackenv.envs.line_config import scenario as preset
 
     if scenario not in PLAN_SCENARIOS:
@@ -107,7 +106,7 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
                          f"and traffic from its file), got {scenario!r}")
     if years is not None:
         steps_per_year = config.get("steps_per_year", LineConfig.steps_per_year)
-        config["horizon_years"] = check_scalar("years", years, low=1.0 / steps_per_year, high=MAX_HORIZON_YEARS)
+        config["horizon_years"] = check_horizon("years", years, steps_per_year)
     return preset(scenario, line=line, **config)
 
 

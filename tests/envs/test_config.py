@@ -73,6 +73,16 @@ def test_unknown_key_raises_naming_it(key: str) -> None:
         gym.make("trackenv/Tamping-v1", **SMALL, **{key: 1})
 
 
+def test_a_horizon_between_whole_steps_is_refused_not_rounded() -> None:
+    """An episode is whole steps: 0.3 years of quarterly steps was 1 step (0.25 years) without a word; now the two
+    horizons of whole steps around it are named."""
+    with pytest.raises(ValueError, match=r"^horizon_years must be a whole number of steps of 0.25 years "
+                                         r"\(steps_per_year = 4\), got 0.3 \(1.2 steps\): 0.25 or 0.5$"):
+        LineConfig(horizon_years=0.3)
+    assert LineConfig(horizon_years=2.5).horizon_steps == 10
+    assert LineConfig(horizon_years=1 / 3, steps_per_year=3).horizon_steps == 1
+
+
 @pytest.mark.parametrize("field, value", [
     ("segment_length_m", float("nan")),
     ("segment_length_m", "long"),

@@ -11,6 +11,7 @@ switches and crossings (~5x per length), ÖBB / TU Graz (recording cars 2-4 time
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, fields
 from functools import partial
@@ -69,6 +70,20 @@ PER_SECTION_BOUNDS: dict[str, tuple[float, float]] = {
 #: differs per section.
 LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt", "freight_share",
                     "freight_axle_load_t", "per_section")
+
+
+def check_horizon(name: str, years: Any, steps_per_year: int) -> float:
+    """``years`` as a float horizon of whole steps of ``1 / steps_per_year`` years, from one step to
+    ``MAX_HORIZON_YEARS``; ValueError naming ``name`` with the two horizons of whole steps around it otherwise (an
+    episode is whole steps: a horizon between two is refused, not rounded)."""
+    years = check_scalar(name, years, low=1.0 / steps_per_year, high=MAX_HORIZON_YEARS)
+    steps = years * steps_per_year
+    if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
+        step = 1.0 / steps_per_year
+        raise ValueError(f"{name} must be a whole number of steps of {step:g} years (steps_per_year = "
+                         f"{steps_per_year}), got {years:g} ({steps:.3g} steps): {math.floor(steps) * step:g} or "
+                         f"{math.ceil(steps) * step:g}")
+    return years
 
 
 @dataclass(frozen=True)
@@ -210,11 +225,12 @@ class LineConfig(ConfigBase):
     :class:`~trackenv.envs.line_file.LineDescription`; the documentation's page "Lines from files"): the file
     sets :data:`LINE_FILE_FIELDS` (the number of sections, the line's section length, speed and traffic, and
     ``per_section``: the lengths, speeds, tonnages and freight shares that differ between its sections; giving
-    one of them as well is an error unless it equals the file's) and, per section, the register, known wet
+    one of them as well is an error unless it equals the file's or the field's default, which cannot be told
+    from leaving it out and gives way to the file's) and, per section, the register, known wet
     zones, years since tamping and tampings since renewal; where it gives a measured history the section's
     rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
     the file does not know is drawn per episode as without one. ``capacity`` is at most the file's number of
-    sections.
+    sections (a larger one, the default 6 on a file of 4 sections or any other, is cut to it).
     """
 
     n_sections: int = 12
@@ -339,7 +355,8 @@ class LineConfig(ConfigBase):
             c(name, low=lo, high=hi)
         c("freight_axle_load_t", low=5.0, high=40.0)
         ci("steps_per_year", low=1, high=52)
-        c("horizon_years", low=1.0 / self.steps_per_year, high=MAX_HORIZON_YEARS)
+        object.__setattr__(self, "horizon_years", check_horizon("horizon_years", self.horizon_years,
+                                                                self.steps_per_year))
         ci("measurement_interval", low=1, high=1000)
         c("sd_noise_mm", low=0.0, high=10.0)
         c("peak_noise_mm", low=0.0, high=50.0)
