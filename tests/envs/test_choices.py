@@ -465,3 +465,19 @@ def test_the_section_level_flat_and_mask_wrappers_take_the_choices():
     assert obs["action_mask"].shape == (4 * len(CHOICES),) and masked.observation_space.contains(obs)
     # the ranked form of the choices: one count per choice (tests/envs/test_ranking.py)
     assert RankedActions(base).action_space == gym.spaces.MultiDiscrete([5] * len(INTERVENTIONS))
+
+
+def test_a_line_files_known_wet_zones_read_as_surveyed_wet():
+    """A section the line file marks wet has its survey known from the start (section_survey = 1 on every seed),
+    so a rule that surveys what is not yet surveyed does not pay to survey it; the other sections keep the
+    scenario's drawn surveys."""
+    from pathlib import Path
+
+    example = Path(trackenv.__file__).parent / "lines" / "example.yaml"
+    cfg = scenario("wet", line=str(example), surveyed_share=0.0)
+    known = np.array([s.wet for s in cfg.line.sections])
+    env = TampingLine(cfg, action_type="choices")
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed)
+        assert known.any() and (obs["section_survey"][known] == 1).all()
+        assert (obs["section_survey"][~known] == -1).all()  # none drawn at surveyed_share 0

@@ -485,7 +485,7 @@ class LineBatch:
         self._settled_since(rs, age)
         self._apply_line_file(b)
         self.last_work[r] = self.last_tamped[r]
-        self.survey[r] = np.where(surveyed, self.wet_present()[r], -1)
+        self.survey[r] = np.where(surveyed | self._known_wet(), self.wet_present()[r], -1)
 
     def _rate_correlation(self) -> np.ndarray:
         """(S,) the AR(1) correlation of each section's rate factor with the one before it: exp(−d / L) over the
@@ -572,6 +572,15 @@ class LineBatch:
         if mean == 0:
             return [np.zeros(0, dtype=np.int64)] * R
         return [rng.integers(2, n - 2, size=int(rng.poisson(mean))) for _ in range(R)]
+
+    def _known_wet(self) -> np.ndarray:
+        """(S,) the sections whose wet zone the config's line file knows: their survey is known from the start
+        (a survey would find it), so a policy reads it as surveyed, not as a section to survey."""
+        if self.config.line is None:
+            return np.zeros(self.S, dtype=bool)
+        from .line_fit import line_overrides
+
+        return line_overrides(self.config).wet
 
     def _apply_line_file(self, b: int) -> None:
         """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
