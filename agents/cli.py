@@ -17,6 +17,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -408,6 +409,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     """Load the line first (a fault in it: one line, exit 2, before anything slow), then plan and write."""
     from trackenv.envs.line_file import load_line
+    from trackenv.envs.line_fit import FitWarning
 
     from .planning import line_policy, plan_config, plan_line
 
@@ -423,12 +425,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
         bar = tqdm(total=int(round(args.years * 4)), desc="plan (quarters)", file=sys.stderr, leave=False)
         progress = bar.update
-    plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
-                     scenario=args.scenario, progress=progress, **overrides)
+    with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
+        warnings.simplefilter("ignore", FitWarning)
+        plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
+                         scenario=args.scenario, progress=progress, **overrides)
     if progress is not None:
         bar.close()
+    notes = [f"{line.source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
+    for note in notes:
+        print(f"trackenv plan: warning: {note}", file=sys.stderr)
     files = plan.write(Path(args.out or "results/plan"))
-    payload = {**plan.to_dict(), "files": files, "wall_time_s": time.perf_counter() - t0}
+    payload = {**plan.to_dict(), "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
     _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
     return 0
 

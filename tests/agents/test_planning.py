@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -174,3 +175,19 @@ def test_the_years_are_checked_under_their_own_name(tmp_path, capsys):
             plan_line(write(tmp_path), years=bad, futures=1)
     assert main(["plan", str(write(tmp_path)), "--years", "0.2"]) == 2
     assert capsys.readouterr().err == "trackenv plan: years must lie in [0.25, 100], got 0.2\n"
+
+
+def test_the_fits_warnings_come_after_the_progress_bar_and_in_the_json(tmp_path, capsys):
+    """A line file whose rate factor contradicts its history: `trackenv plan` says so on its own line after the
+    progress bar (not inside it), once, and lists it under "warnings" in --json."""
+    from test_line_fit import SECTIONS
+    from test_line_fit import write as write_fit_line
+
+    line = write_fit_line(tmp_path / "line", sections=SECTIONS.replace("0.5,1.5,7,", "0.5,1.5,7,1.7"))
+    argv = ["plan", str(line), "--years", "0.5", "--futures", "1", "--out", str(tmp_path / "plan")]
+    assert main(argv) == 0
+    notes = [r for r in re.split(r"[\r\n]", capsys.readouterr().err) if "contradicts the history" in r]
+    assert len(notes) == 1 and notes[0].startswith("trackenv plan: warning: ") and "section K11.23" in notes[0]
+    assert main([*argv, "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert len(payload["warnings"]) == 1 and "rate_factor 1.7 contradicts the history" in payload["warnings"][0]

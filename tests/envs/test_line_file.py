@@ -133,7 +133,24 @@ FAULTS = {
                                                .replace("no,30,", "no,40,")),
                                           ["row 5 (section C)", "freight_share", "per cent: give a fraction"]),
     "section shorter than the segment": (dict(sections=SECTIONS.replace("D,200", "D,20")),
-                                         ["row 6 (section D)", "length_m: segment_length_m must lie in [12, 20]"]),
+                                         ["row 6 (section D)", "length_m: 20 m is outside [30, 1000] m, the "
+                                          "lengths a line file allows (at least the 30 m segment"]),
+    "section longer than a line file allows": (dict(sections=SECTIONS.replace("B,200", "B,2000")),
+                                               ["row 4 (section B)", "length_m: 2000 m is outside [30, 1000] m"]),
+    "rate factor zero": (dict(sections=SECTIONS.replace("renewal\n", "renewal,rate_factor\n").replace(",1\n", ",1,\n")
+                              .replace(",0\n", ",0,\n").replace(",2\n", ",2,0\n").replace(",3\n", ",3,\n")),
+                         ["row 4 (section B)", "rate_factor: 0 is outside [0.01, 100] (1: typical plain track)"]),
+    "semicolon-separated CSV": (dict(sections=SECTIONS.replace(",", ";")),
+                                ["sections.csv, header", "separates its cells with ';'",
+                                 "needs ',' between cells"]),
+    "unquoted decimal comma": (dict(history=HISTORY.replace("B,2023-06-01,1.2,4", "B,2023-06-01,1,2,4")),
+                               ["history.csv, row 5", "5 cells where the header has 4 columns",
+                                "a decimal comma? the cells '1', '2' look like 1,2 split in two: use a decimal point"]),
+    "trailing comma": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,,2,1,")),
+                       ["row 3", "8 cells where the header has 7 columns", "(a trailing ',')"]),
+    "axle load in kg": (dict(line=LINE.replace("freight_share: 0.4", "freight_share: 0.4\n  freight_axle_load_t: "
+                                                                      "22500")),
+                        ["traffic.freight_axle_load_t", "got 22500; it looks like kg: give it in t"]),
     "invalid YAML": (dict(line=LINE.replace("traffic:", "traffic: [")), ["line.yaml, line", "not valid YAML"]),
     "bad date": (dict(history=HISTORY.replace("2024-03-01", "01/03/2024")),
                  ["row 2 (section A)", "'01/03/2024' is not a date; write YYYY-MM-DD"]),
@@ -144,7 +161,8 @@ FAULTS = {
     "tampings not whole": (dict(sections=SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.5,2.5")),
                            ["row 6 (section D)", "tampings_since_renewal: must be a whole number"]),
     "wet not yes/no": (dict(sections=SECTIONS.replace("D,200,plain,yes", "D,200,plain,maybe")),
-                       ["row 6 (section D)", "wet: 'maybe' is not yes or no"]),
+                       ["row 6 (section D)", "wet: 'maybe' is not yes or no (accepted, in any case: yes, y, true, 1 "
+                        "for yes; no, n, false, 0 or blank for no)"]),
     "cells missing in a row": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,2,1")),
                                ["row 3", "6 cells where the header has 7 columns"]),
     "too many sections": (dict(sections=SECTIONS.splitlines()[1] + "\n"
@@ -169,6 +187,42 @@ def test_every_fault_is_one_line_naming_file_row_and_field(tmp_path, kind):
     assert "\n" not in text and text.startswith(str(tmp_path))
     for part in expected:
         assert part in text, f"{part!r} not in {text!r}"
+
+
+@pytest.mark.parametrize("length", ["10", "20", "2000"])
+def test_a_bad_section_length_is_said_in_the_files_terms(tmp_path, length):
+    """A section's length out of what a line file allows names the file's column and range, never the config's
+    fields (section_length_m, segment_length_m, sections_per_segment: a line file cannot set them)."""
+    with pytest.raises(LineFileError) as err:
+        load_line(write(tmp_path, sections=SECTIONS.replace("C,200", f"C,{length}")))
+    text = str(err.value)
+    assert f"sections.csv, row 5 (section C), length_m: {length} m is outside [30, 1000] m" in text
+    for internal in ("section_length_m", "segment_length_m", "sections_per_segment"):
+        assert internal not in text
+
+
+def test_the_documented_section_length_range_is_the_loaders():
+    """The page states the range a line file's section length may take, the loader's."""
+    from trackenv.envs.line_file import SECTION_LENGTH_RANGE_M
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "line-files.md").read_text()
+    row = next(line for line in page.splitlines() if line.startswith("| `length_m` |"))
+    lo, hi = SECTION_LENGTH_RANGE_M
+    assert f"{lo:g}-{hi:g} m" in row and "30-1000 m" in page.split("### The sections (CSV)")[0]
+
+
+@pytest.mark.parametrize("yes, no", [("Y", "N"), ("y", "n"), ("YES", "No"), ("true", "FALSE"), ("1", "0")])
+def test_wet_takes_the_documented_yes_and_no(tmp_path, yes, no):
+    sections = SECTIONS.replace("A,200,plain,no", f"A,200,plain,{no}").replace("D,200,plain,yes",
+                                                                               f"D,200,plain,{yes}")
+    assert [s.wet for s in load_line(write(tmp_path, sections=sections)).sections] == [False, False, False, True]
+
+
+def test_a_dimensionless_value_out_of_range_gets_no_unit_and_no_per_cent_hint(tmp_path):
+    """tampings_since_renewal 150: no '-' for a unit and no 'it looks like per cent' (that is for fractions)."""
+    with pytest.raises(LineFileError) as err:
+        load_line(write(tmp_path, sections=SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.5,150")))
+    assert str(err.value).endswith("row 6 (section D), tampings_since_renewal: 150 is outside [0, 100]")
 
 
 def test_a_missing_line_file_is_one_line(tmp_path):

@@ -141,9 +141,9 @@ class TampingLine(TrackEnv):
 
     **Reward.** −Σ of the step's cost parts (k€) in ``info["costs"]``: ``possession`` (per campaign),
     ``tamping`` (per metre × 200 m per section), ``renewal``, ``spot_tamping``, ``drainage``, ``inspection``,
-    ``survey`` (the choices'; 0 without them), ``geometry`` (per section-year ∝
-    (SD/SD_alert)²), ``alert`` (per section-step in the alert class), ``speed_restriction`` (per section-step at or above the intervention limit),
-    ``immediate_action`` (per section-step at the immediate-action limit). Defaults and sources:
+    ``survey`` (the choices'; 0 without them), ``geometry`` (per section-year ∝ (SD/SD_alert)²), ``alert``
+    (per section-step in the alert class), ``speed_restriction`` (per section-step at or above the intervention
+    limit), ``immediate_action`` (per section-step at the immediate-action limit). Defaults and sources:
     :class:`~trackenv.envs.line_config.LineConfig`.
 
     **Episode end.** No terminal state; truncation at the horizon (default 10 years = 40 steps), enforced:

@@ -15,11 +15,13 @@ file raises :class:`LineFileError`, a ``ValueError`` whose text is one line nami
 field, and what is allowed: a command line prints it and exits with status 2. A misspelled key or column is an
 error (with the closest known name), never a silent default; YAML is read with ``yaml.safe_load`` only.
 
-Bounds: the line's own fields (section length, number of sections, speed, traffic) and a section's own length,
-speed and traffic are checked by :class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges
-live, and its refusal is reported against the file; the other per-section and history fields have theirs in the
-column tables below. Values that fit
-another unit (an SD given in m where mm is expected, a length in km, a share in per cent) are named as such.
+Bounds: the line's own fields (number of sections, speed, traffic) and a section's own speed and traffic are
+checked by :class:`~trackenv.envs.line_config.LineConfig`, the one place their ranges live, and its refusal is
+reported against the file; a section's length has the range a line file allows (:data:`SECTION_LENGTH_RANGE_M`,
+from ``LineConfig``'s bounds), and the other per-section and history fields have theirs in the column tables
+below. Values that fit another unit (an SD given in m where mm is expected, a length in km, a share in per cent,
+an axle load in kg) are named as such, and the usual slips of a spreadsheet's export (cells separated by ';', an
+unquoted decimal comma, a trailing ',') are named in the error.
 """
 
 from __future__ import annotations
@@ -37,11 +39,15 @@ from typing import Any
 
 import yaml
 
-from .line_config import REGISTER_CLASSES
+from .line_config import PER_SECTION_BOUNDS, REGISTER_CLASSES, LineConfig
 
 #: The schema version this trackenv reads (the optional ``schema`` key of a line file).
 SCHEMA_VERSION = 1
 DAYS_PER_YEAR = 365.25
+#: The lengths a line file's section may have [m]: at least the segment of track that represents it in the
+#: physics (``LineConfig``'s default ``segment_length_m``, 30 m; a line file's config has one segment per
+#: section) and at most ``LineConfig``'s longest section (1000 m).
+SECTION_LENGTH_RANGE_M = (float(LineConfig.segment_length_m), PER_SECTION_BOUNDS["section_length_m"][1])
 
 
 class LineFileError(ValueError):
@@ -86,10 +92,11 @@ DEFAULT_FREIGHT_AXLE_LOAD_T = 22.5
 SECTION_COLUMNS: dict[str, Field] = {
     "section": Field("-", True, "the section's id: unique, any text (a kilometre post, an asset number)"),
     "length_m": Field("m", True, "section length: what its tamping, renewal and geometry cost and its possession "
-                      "work scale with (its physics is the line's segment either way)"),
+                      "work scale with (its physics is the line's segment either way)", *SECTION_LENGTH_RANGE_M),
     "register": Field("-", True, "asset-register class: " + ", ".join(REGISTER_CLASSES) + " (transition: a "
                       "bridge or culvert approach; switch_or_crossing: switches and crossings, level crossings)"),
-    "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage); blank: no"),
+    "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage): yes, y, true or 1; "
+                 "no, n, false or 0 (any case); blank: no"),
     "annual_mgt": Field("MGT/year", False, "the section's tonnage (its axle passes); blank: the line's"),
     "speed_kmh": Field("km/h", False, "the section's speed (its passes, time steps and quality limits: a station's "
                        "switches, a restriction); blank: the line's"),
@@ -115,7 +122,7 @@ HISTORY_COLUMNS: dict[str, Field] = {
                      0.1, 60.0),
 }
 
-_YES, _NO = ("yes", "true", "1"), ("no", "false", "0", "")
+_YES, _NO = ("yes", "y", "true", "1"), ("no", "n", "false", "0", "")
 
 
 @dataclass(frozen=True)
@@ -335,11 +342,13 @@ def _csv_rows(line_path: Path, doc: dict, key: str, columns: dict[str, Field]) -
         cells = [c.strip() for c in cells]
         if header is None:
             header = cells
+            _check_separator(path, header)
             _check_header(path, header, columns)
             continue
         where = f"{path}, row {reader.line_num}"
         if len(cells) != len(header):
-            raise LineFileError(f"{where}: {len(cells)} cells where the header has {len(header)} columns")
+            raise LineFileError(f"{where}: {len(cells)} cells where the header has {len(header)} columns"
+                                + _extra_cells_hint(cells, len(header)))
         rows.append((where, dict(zip(header, cells))))
     if header is None:
         raise LineFileError(f"{path}: empty file; expected a header row with the columns {_names(columns)}")
@@ -347,6 +356,31 @@ def _csv_rows(line_path: Path, doc: dict, key: str, columns: dict[str, Field]) -
         raise LineFileError(f"{path}: a header and no rows; the {key} file needs one row per "
                             + ("section" if key == "sections" else "measurement"))
     return rows
+
+
+def _check_separator(path: Path, header: list[str]) -> None:
+    """A header whose cells hold ';' or a tab: a spreadsheet's export with another separator (the whole header
+    read as one column), named as such."""
+    for sep, name in ((";", "';'"), ("\t", "tabs")):
+        if any(sep in cell for cell in header):
+            raise LineFileError(f"{path}, header: the file separates its cells with {name} (the header reads as "
+                                f"{header[0]!r}); a line file's CSV needs ',' between cells: export it as "
+                                f"comma-separated CSV")
+
+
+def _extra_cells_hint(cells: list[str], n_columns: int) -> str:
+    """For a row with more cells than the header: the likely cause, or "". Extra empty cells at its end: a
+    trailing ','; else two neighbouring cells of digits: a decimal comma (1,3 for 1.3) splitting a number."""
+    extra = len(cells) - n_columns
+    if extra <= 0:
+        return ""
+    if not any(cells[n_columns:]):
+        return f"; it ends in {extra} empty cell{'s' * (extra > 1)} more (a trailing ',')"
+    for a, b in zip(cells, cells[1:]):
+        if re.fullmatch(r"[-+]?\d+", a) and re.fullmatch(r"\d+", b):
+            return (f"; a decimal comma? the cells {a!r}, {b!r} look like {a},{b} split in two: use a decimal "
+                    f"point ({a}.{b})")
+    return ""
 
 
 def _check_header(path: Path, header: list[str], columns: dict[str, Field]) -> None:
@@ -411,18 +445,21 @@ def _is_float(text: str) -> bool:
     return True
 
 
-def _in_range(where: str, name: str, v: float, f: Field) -> float:
+def _in_range(where: str, name: str, v: float, f: Field, why: str = "") -> float:
+    """``v`` if it lies in the field's range, else a :class:`LineFileError` naming the range (with its unit
+    where it has one), ``why`` it is that range and another unit the value would fit."""
     lo, hi = f.low, f.high
     if (lo is None or v >= lo) and (hi is None or v <= hi):
         return v
-    raise LineFileError(f"{where}, {name}: {v:g} {f.unit} is outside [{lo:g}, {hi:g}] {f.unit}"
+    unit = "" if f.unit == "-" else f" {f.unit}"
+    raise LineFileError(f"{where}, {name}: {v:g}{unit} is outside [{lo:g}, {hi:g}]{unit}{why}"
                         + _unit_hint(v, lo, hi, f.unit))
 
 
 def _unit_hint(v: float, lo: float | None, hi: float | None, unit: str) -> str:
     """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %)."""
     others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),), "MGT/year": ((1e-6, "t/year"),),
-              "-": ((1e-2, "per cent"),)}.get(unit, ())
+              "t": ((1e-3, "kg"),), "-": ((1e-2, "per cent"),) if hi is not None and hi <= 1 else ()}.get(unit, ())
     for scale, name in others:
         w = v * scale
         if (lo is None or w >= lo) and (hi is None or w <= hi):
@@ -469,7 +506,8 @@ def _yes_no(where: str, name: str, value: Any) -> bool:
         return True
     if text in _NO:
         return False
-    raise LineFileError(f"{where}, {name}: {value!r} is not yes or no (blank: no)")
+    raise LineFileError(f"{where}, {name}: {value!r} is not yes or no (accepted, in any case: "
+                        f"{', '.join(_YES)} for yes; {', '.join(_NO[:-1])} or blank for no)")
 
 
 def _blank(value: Any) -> bool:
@@ -510,8 +548,7 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
     seen: dict[str, str] = {}
     cols = SECTION_COLUMNS
     # the values already checked (the line's were, with its traffic)
-    checked: dict[str, set[float]] = {"section_length_m": set(), **{k: {line[k]} for k in
-                                                                      ("annual_mgt", "speed_kmh", "freight_share")}}
+    checked: dict[str, set[float]] = {k: {line[k]} for k in ("annual_mgt", "speed_kmh", "freight_share")}
     for where, row in rows:
         sid = _text(where, "section", row["section"])
         if not sid:
@@ -523,9 +560,9 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         length = _number(at, "length_m", row["length_m"], "m")
         if length <= 0:
             raise LineFileError(f"{at}, length_m: must be a positive length [m], got {length:g}")
-        if length not in checked["section_length_m"]:
-            _config_check(at, "length_m", "section_length_m", length, "m")
-            checked["section_length_m"].add(length)
+        _in_range(at, "length_m", length, cols["length_m"],
+                  f", the lengths a line file allows (at least the {SECTION_LENGTH_RANGE_M[0]:g} m segment of track "
+                  f"that represents a section)")
         traffic = {}
         for key in ("annual_mgt", "speed_kmh", "freight_share"):
             value = row.get(key)
@@ -540,7 +577,7 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         _in_range(at, "tampings_since_renewal", count, cols["tampings_since_renewal"])
         rate = row.get("rate_factor")
         rate_factor = None if _blank(rate) else _in_range(at, "rate_factor", _number(at, "rate_factor", rate, "-"),
-                                                          cols["rate_factor"])
+                                                          cols["rate_factor"], " (1: typical plain track)")
         out.append(Section(id=sid, length_m=length, register=_choice(at, "register", row["register"],
                                                                      REGISTER_CLASSES),
                            wet=_yes_no(at, "wet", row.get("wet")), years_since_tamping=years,

@@ -21,9 +21,12 @@ of b for k = 1 and k the section's *effective* rate factor: its factor times how
 makes it settle (:func:`roughness`, over the typical one of its class). φ(t) and the spread of ρ are the
 engine's own: short simulations of a section of the same class (register, known wet zone, traffic), one
 tamping since renewal, :data:`FIT_DRAWS` draws of it settled for :data:`FIT_PREVIOUS_CYCLE_YEARS`, tamped by the
-engine's tamping and run without tamping for the span needed. Checked on those simulations: φ scales with k
-within 10 % for k from 0.5 to 4, ρ of a section stays within a few hundredths over three years, and the log of
-the settlement's D1 SD correlates at 0.97 with that of the rate field's roughness.
+engine's tamping and run without tamping for the span needed; each class is simulated alone (a line of that one
+section, the same seeds on every line) and ρ's spread is taken over the section's own span since its tamping,
+so that a section's fit depends on its own data and class only, never on another section's history or years
+since tamping (a simulation's first steps do not depend on how many follow). Checked on those simulations: φ
+scales with k within 10 % for k from 0.5 to 4, ρ of a section stays within a few hundredths over three years,
+and the log of the settlement's D1 SD correlates at 0.97 with that of the rate field's roughness.
 
 The measurements after the last tamping (t_i, SD_i) then condition k by Bayes' rule on a grid of (k, ρ, SD₀):
 the prior of k is the engine's own (lognormal with log-SD ``rate_sigma``, widened by the spread of the
@@ -48,11 +51,18 @@ the documentation's page "Lines from files" (``python experiments/line_example.p
 A fitted section's simulated growth in an episode scatters around its measured one by what remains: the
 posterior's spread, the rest of the hidden field (its stiffness, the pattern beyond its roughness) and the
 dynamics.
+
+Where a section's file contradicts its history, :func:`history_fit` warns (:class:`FitWarning`) and notes it in
+the table: a given ``rate_factor`` whose curve's residual exceeds the fitted factor's by more than
+:data:`FIT_CONFLICT_ERRORS` times the fit's error, or an SD that does not drop across the stated last tamping
+(:data:`FIT_NO_DROP_SHARE`). The file's values are used either way.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import math
+import warnings
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
@@ -80,10 +90,22 @@ FIT_MAX_YEARS = 10.0
 #: The model error of the fit's SD curve [mm], added in quadrature to the recording car's error **[assumption:
 #: the curve fits the engine's own noise-free series within ~0.01-0.03 mm; 0.05 mm leaves room]**.
 FIT_MODEL_ERROR_MM = 0.05
+#: A file's ``rate_factor`` contradicts a section's history where the RMS residual of its curve exceeds that of
+#: the fitted factor's by more than this many times the fit's error (the car's ``sd_noise_mm`` and
+#: :data:`FIT_MODEL_ERROR_MM` in quadrature: 0.11 mm by default, so 0.22 mm): a warning, and a note in the table.
+FIT_CONFLICT_ERRORS = 2.0
+#: A history shows no drop across a section's stated last tamping where its SD rose over its last two runs
+#: before it and rose on across it at least this share of that rate (per year): a warning naming the section.
+FIT_NO_DROP_SHARE = 0.5
 #: The grid of the rate factor's posterior (log-spaced), of ρ and the number of SD₀ values.
 RATE_GRID = np.exp(np.linspace(math.log(0.02), math.log(50.0), 81))
 RHO_GRID = np.linspace(-1.0, 1.0, 25)
 SD0_POINTS = 40
+
+
+class FitWarning(UserWarning):
+    """A section's file contradicts its measured history (:func:`history_fit`): a given ``rate_factor`` the
+    history does not bear out, or an SD that does not drop across the stated last tamping."""
 
 
 @dataclass(frozen=True)
@@ -91,10 +113,12 @@ class SectionFit:
     """One section's fit (:func:`history_fit`): ``status`` says what was done ("fitted"; "given": the file's
     rate factor, ρ and SD₀ fitted; "start SD only": one measurement since the last tamping; "not fitted": none
     since, or last tamped more than :data:`FIT_MAX_YEARS` ago; "no history"); ``points`` the measurements
-    used; ``rate_factor`` the posterior median of k and ``rate_p10`` / ``rate_p90`` its 10-90 % interval;
-    ``rho`` and ``sd_after_tamping_mm`` (SD₀) of the most probable curve, ``residual_mm`` the RMS of that
-    curve against the measured SD, ``start_sd_mm`` its SD at ``as_of``, where the section starts (NaN where
-    drawn)."""
+    used; ``rate_factor`` the posterior median of k (the file's where given) and ``rate_p10`` / ``rate_p90``
+    its 10-90 % interval; ``rho`` and ``sd_after_tamping_mm`` (SD₀) of the most probable curve,
+    ``residual_mm`` the RMS of that curve against the measured SD, ``start_sd_mm`` its SD at ``as_of``, where
+    the section starts (NaN where drawn). Where the factor is given, ``fitted_rate_factor`` and
+    ``fitted_residual_mm`` are those the history alone gives (NaN otherwise), to compare. ``note``: where the
+    file contradicts the history, what (the text of the :class:`FitWarning`; "" otherwise)."""
 
     section: str
     status: str
@@ -106,6 +130,9 @@ class SectionFit:
     sd_after_tamping_mm: float = math.nan
     residual_mm: float = math.nan
     start_sd_mm: float = math.nan
+    fitted_rate_factor: float = math.nan
+    fitted_residual_mm: float = math.nan
+    note: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,14 +156,17 @@ class HistoryFit:
                 "median_residual_mm": float(np.median([s.residual_mm for s in fitted])) if fitted else None}
 
     def table(self) -> str:
-        """A text table of the sections with a history."""
-        lines = [f"{'section':<10} {'status':<14} {'points':>6} {'rate':>5} {'10-90 %':>11} {'SD0 mm':>6} "
-                 f"{'resid mm':>8} {'start SD mm':>11}"]
+        """A text table of the sections with a history: per section its fit, and a note where the file
+        contradicts the history (a given rate factor's "fitted" column is the history's own factor)."""
+        lines = [f"{'section':<10} {'status':<14} {'points':>6} {'rate':>5} {'10-90 %':>11} {'fitted':>6} "
+                 f"{'SD0 mm':>6} {'resid mm':>8} {'start SD mm':>11}  note"]
         for s in self.sections:
             if s.status != "no history":
+                fitted = "" if math.isnan(s.fitted_rate_factor) else f"{s.fitted_rate_factor:.2f}"
                 lines.append(f"{s.section:<10} {s.status:<14} {s.points:>6d} {s.rate_factor:>5.2f} "
-                             f"{s.rate_p10:>5.2f}-{s.rate_p90:<5.2f} {s.sd_after_tamping_mm:>6.2f} "
-                             f"{s.residual_mm:>8.3f} {s.start_sd_mm:>11.2f}")
+                             f"{s.rate_p10:>5.2f}-{s.rate_p90:<5.2f} {fitted:>6} "
+                             f"{s.sd_after_tamping_mm:>6.2f} {s.residual_mm:>8.3f} {s.start_sd_mm:>11.2f}  "
+                             f"{s.note}".rstrip())
         return "\n".join(lines)
 
 
@@ -218,44 +248,100 @@ def _line(config: LineConfig) -> LineDescription:
 # ---------------------------------------------------------------------- the fit
 @dataclass(frozen=True, eq=False)
 class _Growth:
-    """A class's growth from the simulations: φ(t) [m] on the step grid for the class's typical rate-field
-    ``roughness`` (k = 1), the log-SD of that roughness between draws, and the mean and SD of ρ."""
+    """A class's growth from its simulations: φ(t) [m] on the step grid for the class's typical rate-field
+    ``roughness`` (k = 1), the log-SD of that roughness between draws, and ρ per step and draw (steps, draws)."""
 
     phi: np.ndarray
     roughness: float
     roughness_sd: float
-    rho_mean: float
-    rho_sd: float
+    rho: np.ndarray
+
+    def rho_prior(self, years: float, steps_per_year: int) -> tuple[float, float]:
+        """The mean and SD of ρ over the draws and the steps up to ``years`` after the tamping (a section's own
+        span, so that its prior does not depend on how long another section of its class was simulated)."""
+        n = min(max(int(math.ceil(years * steps_per_year - 1e-9)), 1), self.rho.shape[0])
+        return float(self.rho[:n].mean()), float(self.rho[:n].std())
 
 
 @lru_cache(maxsize=16)
 def history_fit(config: LineConfig) -> HistoryFit:
     """Each section's rate factor conditioned on its measured history (see the module docstring); cached per
-    config. A line without history gives every section the status "no history" and simulates nothing."""
+    config. A line without history gives every section the status "no history" and simulates nothing.
+
+    A section's fit uses its own history and its own class's simulations only (each class simulated alone, ρ's
+    prior over the section's own span), so editing one section's history or ``years_since_tamping`` moves no
+    other section's fit or start. Warns (:class:`FitWarning`) where a section's file contradicts its history: a
+    given ``rate_factor`` whose curve fits it far worse than the fitted one (:data:`FIT_CONFLICT_ERRORS`), or an
+    SD that does not drop across the stated last tamping; the table's ``note`` says the same."""
     line = _line(config)
     points = {s.id: _points(line, s) for s in line.sections}
     need = {s.id for s in line.sections if s.years_since_tamping <= FIT_MAX_YEARS
             and (len(points[s.id][1]) >= 2 or (len(points[s.id][1]) == 1 and s.rate_factor is not None))}
-    classes = sorted({_class_of(line, s) for s in line.sections if s.id in need})
-    years = max((s.years_since_tamping for s in line.sections if s.id in need), default=0.0)
-    growth = _growth(config, tuple(classes), years) if classes else []
+    spans: dict[tuple[str, bool, float, float, float], float] = {}
+    for s in line.sections:
+        if s.id in need:
+            cls = _class_of(line, s)
+            spans[cls] = max(spans.get(cls, 0.0), s.years_since_tamping)
+    growth = {cls: _growth(config, cls, years) for cls, years in spans.items()}
     out, cdf = [], np.full((line.n_sections, RATE_GRID.size), np.nan)
     rough = np.full(line.n_sections, np.nan)
     for j, s in enumerate(line.sections):
         t, sd = points[s.id]
+        note = _tamping_note(line, s)
         if not line.measurements(s.id):
-            out.append(SectionFit(s.id, "no history"))
+            fit = SectionFit(s.id, "no history")
         elif s.id in need:
-            g = growth[classes.index(_class_of(line, s))]
+            g = growth[_class_of(line, s)]
             fit, cdf_j = _fit_section(s, t, sd, g, config)
-            out.append(fit)
             if cdf_j is not None:
                 cdf[j], rough[j] = cdf_j, g.roughness
+            note = "; ".join(n for n in (note, _given_note(s, fit, config)) if n)
         elif len(sd) >= 1:
-            out.append(SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3))
+            fit = SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3)
         else:
-            out.append(SectionFit(s.id, "not fitted"))
+            fit = SectionFit(s.id, "not fitted")
+        if note:
+            warnings.warn(f"{line.source}, section {s.id}: {note}", FitWarning, stacklevel=2)
+            fit = replace(fit, note=note)
+        out.append(fit)
     return HistoryFit(tuple(out), cdf, rough)
+
+
+def _given_note(s: Section, fit: SectionFit, config: LineConfig) -> str:
+    """Where the file's ``rate_factor`` contradicts the history: its curve's residual exceeds the fitted
+    factor's by more than :data:`FIT_CONFLICT_ERRORS` times the fit's error (the car's and the model's), a
+    sentence naming both factors and residuals; else ""."""
+    if fit.status != "given" or math.isnan(fit.fitted_residual_mm):
+        return ""
+    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    if fit.residual_mm - fit.fitted_residual_mm <= FIT_CONFLICT_ERRORS * error_mm:
+        return ""
+    return (f"rate_factor {fit.rate_factor:g} contradicts the history: its curve misses the measured SD by "
+            f"{fit.residual_mm:.3f} mm RMS, the fitted factor {fit.fitted_rate_factor:.2f} by "
+            f"{fit.fitted_residual_mm:.3f} mm (more than {FIT_CONFLICT_ERRORS:g} x the fit's error of "
+            f"{error_mm:.3f} mm apart); the given factor is used: check it or leave it blank to fit it")
+
+
+def _tamping_note(line: LineDescription, s: Section) -> str:
+    """Where the history shows no drop across the section's last tamping (``years_since_tamping`` before
+    ``as_of``): its SD rose over its last two runs before that date and rose on across it, by at least
+    :data:`FIT_NO_DROP_SHARE` of that rate; a sentence naming the runs; else "". (A tamping lowers the SD or at
+    least slows its growth; a run on the tamping's date counts as before it, as in the fit.)"""
+    ms = line.measurements(s.id)
+    after = [m for m in ms if s.years_since_tamping - line.years_before(m.date) > FIT_SAME_DAYS / DAYS_PER_YEAR]
+    before = ms[:len(ms) - len(after)]
+    if len(before) < 2 or not after:
+        return ""
+    (b1, b2), a1 = before[-2:], after[0]
+    rate_before = (b2.sd_mm - b1.sd_mm) / (line.years_before(b1.date) - line.years_before(b2.date))
+    rate_across = (a1.sd_mm - b2.sd_mm) / (line.years_before(b2.date) - line.years_before(a1.date))
+    if rate_before <= 0 or rate_across < FIT_NO_DROP_SHARE * rate_before:
+        return ""
+    tamped = dt.date.fromisoformat(line.as_of) - dt.timedelta(days=round(s.years_since_tamping * DAYS_PER_YEAR))
+    return (f"the history shows no drop across the last tamping that years_since_tamping "
+            f"{s.years_since_tamping:g} puts on {tamped.isoformat()}: {b1.sd_mm:g}, {b2.sd_mm:g} mm before it "
+            f"({b1.date}, {b2.date}), {a1.sd_mm:g} mm after ({a1.date}); check years_since_tamping (the fit "
+            f"uses the runs after that date only)")
 
 
 def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
@@ -277,68 +363,74 @@ def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float, floa
 
 def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
                  config: LineConfig) -> tuple[SectionFit, np.ndarray | None]:
-    """The posterior of (k, ρ, SD₀) on the grid (k fixed where the file gives it): the section's fit and the
-    CDF of k (None where k is given)."""
+    """The posterior of (k, ρ, SD₀) on the grid (k fixed where the file gives it, and fitted as well to compare):
+    the section's fit and the CDF of k (None where k is given)."""
     grid_t = np.arange(growth.phi.size) / config.steps_per_year
     phi = np.interp(t, grid_t, growth.phi)
     phi_now = float(np.interp(s.years_since_tamping, grid_t, growth.phi))
     damage = (1.0 + config.tamping_model.damage_per_tamping) ** (s.tampings_since_renewal - 1)
-    given = s.rate_factor is not None
-    rates = np.array([s.rate_factor]) if given else RATE_GRID
-    kappa = rates * damage
+    rho_mean, rho_sd = growth.rho_prior(s.years_since_tamping, config.steps_per_year)
     # the prior of k: the section factor's (lognormal) times the spread of the hidden field's roughness
     sigma_k = math.hypot(max(config.rate_sigma, 0.05), growth.roughness_sd)
     mean_k = -config.rate_sigma**2 / 2
     sigma_e = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM) * 1e-3
-    log_prior = (-(np.log(rates) - mean_k) ** 2 / (2 * sigma_k**2))[:, None] \
-        - ((RHO_GRID - growth.rho_mean) ** 2 / (2 * max(growth.rho_sd, 0.05) ** 2))[None, :]
-    kp = kappa[:, None, None] * phi[None, None, :]  # (k, 1, points)
-    rho = RHO_GRID[None, :, None]
     sd0_grid = np.linspace(0.0, 1.5 * float(sd.max()), SD0_POINTS)
-    log_post = np.empty((rates.size, RHO_GRID.size, sd0_grid.size))
-    for i, s0 in enumerate(sd0_grid):
-        model = np.sqrt(np.maximum(s0 * s0 + 2 * rho * s0 * kp + kp * kp, 0.0))
-        log_post[:, :, i] = log_prior - ((model - sd) ** 2).sum(axis=-1) / (2 * sigma_e**2)
-    ik, ir, i0 = np.unravel_index(int(np.argmax(log_post)), log_post.shape)
-    k_map, rho_map, s0 = kappa[ik], RHO_GRID[ir], sd0_grid[i0]
-    curve = np.sqrt(np.maximum(s0 * s0 + 2 * rho_map * s0 * k_map * phi + (k_map * phi) ** 2, 0.0))
-    start = math.sqrt(max(s0 * s0 + 2 * rho_map * s0 * k_map * phi_now + (k_map * phi_now) ** 2, 0.0))
-    common: dict[str, Any] = {"points": len(sd), "rho": float(rho_map), "sd_after_tamping_mm": float(s0) * 1e3,
-              "residual_mm": float(np.sqrt(np.mean((curve - sd) ** 2))) * 1e3, "start_sd_mm": start * 1e3}
-    if given:
-        return SectionFit(s.id, "given", rate_factor=float(rates[0]), rate_p10=float(rates[0]),
-                          rate_p90=float(rates[0]), **common), None
+
+    def posterior(rates: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+        """The log posterior on (rates, ρ, SD₀) and its most probable curve's fields of a SectionFit."""
+        kappa = rates * damage
+        log_prior = (-(np.log(rates) - mean_k) ** 2 / (2 * sigma_k**2))[:, None] \
+            - ((RHO_GRID - rho_mean) ** 2 / (2 * max(rho_sd, 0.05) ** 2))[None, :]
+        kp = kappa[:, None, None] * phi[None, None, :]  # (k, 1, points)
+        rho = RHO_GRID[None, :, None]
+        log_post = np.empty((rates.size, RHO_GRID.size, sd0_grid.size))
+        for i, s0 in enumerate(sd0_grid):
+            model = np.sqrt(np.maximum(s0 * s0 + 2 * rho * s0 * kp + kp * kp, 0.0))
+            log_post[:, :, i] = log_prior - ((model - sd) ** 2).sum(axis=-1) / (2 * sigma_e**2)
+        ik, ir, i0 = np.unravel_index(int(np.argmax(log_post)), log_post.shape)
+        k_map, rho_map, s0 = kappa[ik], RHO_GRID[ir], sd0_grid[i0]
+        curve = np.sqrt(np.maximum(s0 * s0 + 2 * rho_map * s0 * k_map * phi + (k_map * phi) ** 2, 0.0))
+        start = math.sqrt(max(s0 * s0 + 2 * rho_map * s0 * k_map * phi_now + (k_map * phi_now) ** 2, 0.0))
+        return log_post, {"points": len(sd), "rho": float(rho_map), "sd_after_tamping_mm": float(s0) * 1e3,
+                          "residual_mm": float(np.sqrt(np.mean((curve - sd) ** 2))) * 1e3,
+                          "start_sd_mm": start * 1e3}
+
+    log_post, common = posterior(RATE_GRID)
     weight = np.exp(log_post - log_post.max()).sum(axis=(1, 2))
     cdf = np.cumsum(weight + 1e-12 * weight.sum())
     cdf /= cdf[-1]
     log_k = np.log(RATE_GRID)
     p10, p50, p90 = (math.exp(float(np.interp(q, cdf, log_k))) for q in (0.1, 0.5, 0.9))
-    return SectionFit(s.id, "fitted", rate_factor=p50, rate_p10=p10, rate_p90=p90, **common), cdf
+    if s.rate_factor is None:
+        return SectionFit(s.id, "fitted", rate_factor=p50, rate_p10=p10, rate_p90=p90, **common), cdf
+    k = float(s.rate_factor)
+    _, given = posterior(np.array([k]))
+    return SectionFit(s.id, "given", rate_factor=k, rate_p10=k, rate_p90=k, fitted_rate_factor=p50,
+                      fitted_residual_mm=common["residual_mm"], **given), None
 
 
-def _growth(config: LineConfig, classes: tuple[tuple[str, bool, float, float, float], ...],
-            years: float) -> list[_Growth]:
-    """Each class's :class:`_Growth` from the engine (k = 1, one tamping since renewal), every step from the
-    tamping up to ``years``."""
+def _growth(config: LineConfig, cls: tuple[str, bool, float, float, float], years: float) -> _Growth:
+    """A class's :class:`_Growth` from the engine (k = 1, one tamping since renewal), every step from the
+    tamping up to ``years``: a line of one section of the class, simulated alone, so that its draws are the same
+    whichever other classes the line has (a simulation's first steps do not depend on how many follow)."""
     line = _line(config)
     steps = max(int(math.ceil(years * config.steps_per_year - 1e-9)), 1)
-    protos = tuple(Section(id=f"class{i}", length_m=line.section_length_m, register=reg, wet=wet,
-                           annual_mgt=line.annual_mgt * factor, speed_kmh=speed, freight_share=share,
-                           years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS, tampings_since_renewal=0, rate_factor=1.0)
-                   for i, (reg, wet, factor, speed, share) in enumerate(classes))
-    proto_line = replace(line, sections=protos, history=(), source=f"{line.source} (fit)")
+    reg, wet, factor, speed, share = cls
+    proto_section = Section(id="class", length_m=line.section_length_m, register=reg, wet=wet,
+                            annual_mgt=line.annual_mgt * factor, speed_kmh=speed, freight_share=share,
+                            years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS, tampings_since_renewal=0, rate_factor=1.0)
+    proto_line = replace(line, sections=(proto_section,), history=(), source=f"{line.source} (fit)")
     proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year)
-    phi, rough, rough_sd, rho_mean, rho_sd = _simulated_growth(proto, steps)
-    return [_Growth(phi[i], float(rough[i]), float(rough_sd[i]), float(rho_mean[i]), float(rho_sd[i]))
-            for i in range(len(classes))]
+    phi, rough, rough_sd, rho = _simulated_growth(proto, steps)
+    return _Growth(phi[0], float(rough[0]), float(rough_sd[0]), rho[0])
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=64)
 def _simulated_growth(proto: LineConfig, steps: int) -> tuple[np.ndarray, ...]:
     """Run :data:`FIT_DRAWS` lines of ``proto`` (one section per class): tamp every section, then ``steps`` steps
     of traffic. Per class: φ (classes, steps + 1) [m], the settlement's D1 SD per unit of the rate field's
     roughness averaged over the draws, times the draws' typical (geometric mean) roughness; the log-SD of the
-    roughness; the mean and SD of ρ (over draws and steps)."""
+    roughness; ρ (classes, steps, draws)."""
     from .line_episode import LineBatch  # the engine builds on this module's overrides
 
     S = proto.n_sections
@@ -361,8 +453,8 @@ def _simulated_growth(proto: LineConfig, steps: int) -> tuple[np.ndarray, ...]:
     log_rough = np.log(rough).reshape(FIT_DRAWS, S)
     typical = np.exp(log_rough.mean(axis=0))
     phi = np.array(per_rough).reshape(steps + 1, FIT_DRAWS, S).mean(axis=1).T * typical[:, None]
-    rho_all = np.array(rho).reshape(steps, FIT_DRAWS, S)
-    return phi, typical, log_rough.std(axis=0), rho_all.mean(axis=(0, 1)), rho_all.std(axis=(0, 1))
+    rho_all = np.array(rho).reshape(steps, FIT_DRAWS, S).transpose(2, 0, 1)
+    return phi, typical, log_rough.std(axis=0), rho_all
 
 
 def _centred_d1(level: np.ndarray) -> np.ndarray:

@@ -1,0 +1,160 @@
+"""The history fit of a line file (:func:`~trackenv.envs.line_fit.history_fit`): one section's data moves only
+that section's fit and start, and a file that contradicts its history is named in a warning and in the table."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import trackenv  # noqa: F401  (registers the ids)
+from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_fit import FitWarning, _class_of, _growth, history_fit
+from trackenv.lines import EXAMPLE
+
+LINE = """\
+name: Fit test line
+as_of: 2025-06-30
+traffic:
+  annual_mgt: 12
+  speed_kmh: 100
+  freight_share: 0.2
+sections: sections.csv
+history: history.csv
+"""
+SECTIONS = """\
+section,length_m,register,wet,annual_mgt,speed_kmh,freight_share,years_since_tamping,tampings_since_renewal,rate_factor
+K10.0,200,plain,no,,,,3.5,2,
+K10.2,200,plain,yes,,,,2,4,
+K10.4,180,transition,,,,,1.0,5,
+K11.23,200,switch_or_crossing,,15,80,0.5,1.5,7,
+"""
+HISTORY = """\
+section,date,sd_mm,peak_mm
+K10.0,2023-01-15,0.9,2.5
+K10.0,2023-07-15,1.1,3.0
+K10.0,2024-01-15,1.3,3.4
+K10.0,2024-07-15,1.45,3.9
+K10.0,2025-01-15,1.6,4.2
+K10.2,2024-01-10,0.8,2.0
+K10.2,2024-07-10,1.2,3.0
+K10.2,2025-01-10,1.7,4.5
+K10.4,2024-12-01,0.7,
+K10.4,2025-05-01,1.1,
+K11.23,2024-06-01,1.0,2.6
+K11.23,2025-01-01,1.6,4.0
+"""
+OTHERS = [1, 2, 3]  # K10.2, K10.4, K11.23: the sections whose data the edits below leave alone
+
+
+def write(folder: Path, sections: str = SECTIONS, history: str = HISTORY) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "sections.csv").write_text(sections)
+    (folder / "history.csv").write_text(history)
+    (folder / "line.yaml").write_text(LINE)
+    return folder / "line.yaml"
+
+
+def fit_and_start(path: Path) -> tuple[list, np.ndarray]:
+    """The fit of each section, and its SD [m] after reset(seed=0)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        fit = history_fit(LineConfig(line=path))
+        env = gym.make("trackenv/TampingLine-v0", line=path, horizon_years=0.5)
+        obs, _ = env.reset(seed=0)
+    return list(fit.sections), np.asarray(obs["section_sd"])
+
+
+# ---------------------------------------------------------------------- one section's data, one section's fit
+@pytest.mark.slow
+def test_editing_one_sections_history_moves_no_other_section(tmp_path):
+    """Deleting K10.0's 2023-2024 runs (its class then has no section to fit) or moving its last tamping earlier
+    (a longer span to simulate) changes K10.0's fit and start, and nothing of any other section: neither its fit
+    nor the SD it starts from after reset(seed=0). (Each class is simulated alone, and a section's ρ prior is
+    taken over its own span; before, the classes shared one simulated line and one span.)"""
+    base_fit, base_sd = fit_and_start(write(tmp_path / "base"))
+    edits = {
+        "history": write(tmp_path / "history", history="\n".join(
+            r for r in HISTORY.splitlines() if not r.startswith(("K10.0,2023", "K10.0,2024"))) + "\n"),
+        "years": write(tmp_path / "years", sections=SECTIONS.replace("K10.0,200,plain,no,,,,3.5,",
+                                                                     "K10.0,200,plain,no,,,,4.5,")),
+    }
+    for name, path in edits.items():
+        fit, sd = fit_and_start(path)
+        assert fit[0] != base_fit[0] and sd[0] != base_sd[0], name  # the edited section does move
+        for j in OTHERS:
+            assert fit[j] == base_fit[j], (name, fit[j], base_fit[j])
+        np.testing.assert_array_equal(sd[OTHERS], base_sd[OTHERS], err_msg=name)
+
+
+def test_a_class_growth_does_not_depend_on_the_span_simulated(tmp_path):
+    """What the fix relies on: a class's simulated growth over its first year is the same whether it is
+    simulated for one year or for two (a longer-tamped section of its class changes nothing of the others')."""
+    config = LineConfig(line=write(tmp_path))
+    cls = _class_of(config.line, config.line.sections[3])
+    short, long = _growth(config, cls, 1.0), _growth(config, cls, 2.0)
+    n = short.phi.size
+    assert long.phi.size > n
+    np.testing.assert_array_equal(short.phi, long.phi[:n])
+    np.testing.assert_array_equal(short.rho, long.rho[: n - 1])
+    assert short.rho_prior(1.0, config.steps_per_year) == long.rho_prior(1.0, config.steps_per_year)
+
+
+# ---------------------------------------------------------------------- a file that contradicts its history
+def test_a_given_rate_factor_the_history_contradicts_warns(tmp_path):
+    """K11.23 given rate_factor 1.8 while its history (1.0 mm in 2024-06, 1.6 mm in 2025-01) fits about 0.5:
+    a FitWarning naming the section, both factors and both residuals; the table says the same."""
+    path = write(tmp_path, sections=SECTIONS.replace("0.5,1.5,7,", "0.5,1.5,7,1.8"))
+    with pytest.warns(FitWarning, match=r"section K11\.23: rate_factor 1\.8 contradicts the history") as caught:
+        fit = history_fit(LineConfig(line=path))
+    s = fit.sections[3]
+    assert s.status == "given" and s.rate_factor == 1.8
+    assert 0.3 < s.fitted_rate_factor < 0.8  # the history's own factor
+    assert s.residual_mm - s.fitted_residual_mm > 2 * math.hypot(0.1, 0.05)  # the documented threshold
+    message = str(caught[0].message)
+    assert f"{s.residual_mm:.3f} mm" in message and f"{s.fitted_rate_factor:.2f}" in message
+    assert f"{s.fitted_residual_mm:.3f} mm" in message
+    assert len([w for w in caught if issubclass(w.category, FitWarning)]) == 1  # the other sections agree
+    row = next(r for r in fit.table().splitlines() if r.startswith("K11.23"))
+    assert "contradicts the history" in row and f"{s.fitted_rate_factor:.2f}" in row
+    assert [f.note for f in fit.sections[:3]] == ["", "", ""]
+
+
+def test_a_given_rate_factor_the_history_bears_out_is_quiet(tmp_path):
+    """The same section given the factor its history fits: no warning, no note."""
+    with warnings.catch_warnings():  # (the fit is cached per config: it warns on its first run only)
+        warnings.simplefilter("ignore", FitWarning)
+        fitted = history_fit(LineConfig(line=write(tmp_path / "a", sections=SECTIONS.replace(
+            "0.5,1.5,7,", "0.5,1.5,7,1.8")))).sections[3].fitted_rate_factor
+    path = write(tmp_path / "b", sections=SECTIONS.replace("0.5,1.5,7,", f"0.5,1.5,7,{fitted:.3f}"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FitWarning)
+        s = history_fit(LineConfig(line=path)).sections[3]
+    assert s.status == "given" and s.note == "" and s.residual_mm < 0.2
+
+
+def test_a_history_without_a_drop_across_the_stated_tamping_warns(tmp_path):
+    """K10.0 said tamped a year before as_of (2024-06-30) while its SD rises steadily through that date (1.1,
+    1.3 mm before, 1.45 mm after): a FitWarning naming the section, the date and the runs."""
+    path = write(tmp_path, sections=SECTIONS.replace("K10.0,200,plain,no,,,,3.5,", "K10.0,200,plain,no,,,,1,"))
+    with pytest.warns(FitWarning, match=r"section K10\.0: the history shows no drop across the last tamping "
+                                        r"that years_since_tamping 1 puts on 2024-06-30: 1\.1, 1\.3 mm before") as w:
+        fit = history_fit(LineConfig(line=path))
+    assert len([x for x in w if issubclass(x.category, FitWarning)]) == 1
+    assert "no drop" in fit.sections[0].note and "no drop" in fit.table()
+
+
+@pytest.mark.slow
+def test_the_example_line_fits_without_a_warning():
+    """The shipped example (made by the engine, so consistent) contradicts neither check: their thresholds
+    leave its tamped sections, its given-nothing rates and its noisy runs alone."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FitWarning)
+        fit = history_fit(LineConfig(line=EXAMPLE))
+    assert not any(s.note for s in fit.sections) and len(fit.fitted) > 50
+    assert {f.name for f in dataclasses.fields(fit.sections[0])} >= {"fitted_rate_factor", "note"}
