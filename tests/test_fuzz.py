@@ -15,6 +15,7 @@ import time
 import warnings
 from collections.abc import Callable
 from functools import partial
+from typing import Any
 
 import numpy as np
 import pytest
@@ -75,22 +76,24 @@ def _fast(t0: float, what: str) -> None:
     assert time.perf_counter() - t0 < 1.0, f"{what} took more than a second to refuse"
 
 
-def _refuses_or_stores_canonical_values(make: Callable[..., LineConfig], kw: dict) -> None:
+def _refuses_or_stores_canonical_values(make: Callable[..., Any], kw: dict, kind: type = LineConfig) -> Any:
     """``make(**kw)`` refuses quickly, naming a field it was given (a bound may follow another given field), or
-    stores every given numeric field in the type of its default, finite."""
-    typed = {f.name: type(f.default) for f in dataclasses.fields(LineConfig)}
+    stores every given numeric field of the config class ``kind`` in the type of its default, finite; the config
+    made, or None where refused."""
+    typed = {f.name: type(f.default) for f in dataclasses.fields(kind)}
     t0 = time.perf_counter()
     try:
         cfg = make(**kw)
     except (ValueError, TypeError) as e:
-        _fast(t0, "LineConfig")
+        _fast(t0, kind.__name__)
         _assert_names(e, kw)
-        return
+        return None
     for name in kw:
         value = getattr(cfg, name)
         if typed[name] in (float, int):
             assert type(value) is typed[name], (name, value)
             assert math.isfinite(value)
+    return cfg
 
 
 @FUZZ
@@ -121,15 +124,20 @@ actions = st.one_of(
 )
 
 
-def _reset_and_step(env, seed, action, name: str):
-    """Reset ``env`` with a fuzzed seed (a refused one must name "seed"; then seed 0) and step it with a fuzzed
-    action: (observation, reward) when it is accepted, None when it is refused quickly with an error naming
-    "action"."""
+def _reset(env, seed) -> None:
+    """Reset ``env`` with a fuzzed seed; a refused one must name "seed", and then seed 0 resets it."""
     try:
         env.reset(seed=seed)
     except (ValueError, TypeError) as e:
         _assert_names(e, ["seed"])
         env.reset(seed=0)
+
+
+def _reset_and_step(env, seed, action, name: str):
+    """Reset ``env`` with a fuzzed seed (a refused one must name "seed"; then seed 0) and step it with a fuzzed
+    action: (observation, reward) when it is accepted, None when it is refused quickly with an error naming
+    "action"."""
+    _reset(env, seed)
     t0 = time.perf_counter()
     try:
         obs, reward, _, _, _ = env.step(action)
@@ -138,6 +146,14 @@ def _reset_and_step(env, seed, action, name: str):
         _assert_names(e, ["action"])
         return None
     return obs, reward
+
+
+def _steps_within_its_space(env, seed, action, name: str) -> None:
+    """:func:`_reset_and_step`, and an accepted step's observation finite and in the env's observation space."""
+    out = _reset_and_step(env, seed, action, name)
+    if out is not None:
+        _assert_finite(*out)
+        assert env.observation_space.contains(out[0])
 
 
 def _assert_finite(obs: dict, reward) -> None:
@@ -252,10 +268,7 @@ def choice_env() -> TampingLine:
 @FUZZ
 @given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=choice_actions)
 def test_choice_env_seed_and_action(choice_env: TampingLine, seed, action) -> None:
-    out = _reset_and_step(choice_env, seed, action, "TampingLine.step (choices)")
-    if out is not None:
-        _assert_finite(*out)
-        assert choice_env.observation_space.contains(out[0])
+    _steps_within_its_space(choice_env, seed, action, "TampingLine.step (choices)")
 
 
 @pytest.fixture(scope="module")
@@ -302,16 +315,9 @@ def test_network_config_refuses_or_stores_canonical_values(kw: dict) -> None:
     """A network config refuses naming a field it was given (a line config's own refusal is prefixed with
     line_config; capacity's bound follows the line's sections), or stores its counts as int and its move cost as
     a finite float."""
-    t0 = time.perf_counter()
-    try:
-        cfg = NetworkConfig(**kw)
-    except (ValueError, TypeError) as e:
-        _fast(t0, "NetworkConfig")
-        _assert_names(e, kw)
-        return
-    assert all(type(getattr(cfg, k)) is int for k in ("n_lines", "capacity", "start_line"))
-    assert type(cfg.move_cost) is float and math.isfinite(cfg.move_cost)
-    assert 1 <= cfg.capacity <= cfg.line_config.n_sections == cfg.sections_per_line
+    cfg = _refuses_or_stores_canonical_values(NetworkConfig, kw, NetworkConfig)
+    if cfg is not None:
+        assert type(cfg.capacity) is int and 1 <= cfg.capacity <= cfg.line_config.n_sections
 
 
 valid_network_action = st.lists(st.integers(0, 1), min_size=6, max_size=6)
@@ -330,10 +336,7 @@ def network_env() -> TampingNetwork:
 @settings(FUZZ, max_examples=EXAMPLES or 25)
 @given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=network_actions)
 def test_network_env_seed_and_action(network_env: TampingNetwork, seed, action) -> None:
-    out = _reset_and_step(network_env, seed, action, "TampingNetwork.step")
-    if out is not None:
-        _assert_finite(*out)
-        assert network_env.observation_space.contains(out[0])
+    _steps_within_its_space(network_env, seed, action, "TampingNetwork.step")
 
 
 @pytest.fixture(scope="module")
@@ -360,11 +363,7 @@ def test_parallel_env_seed_and_joint_action(parallel_env, seed, actions) -> None
     """The PettingZoo interface: a joint action is taken (finite rewards, observations in their spaces) or
     refused quickly naming the action or an agent."""
     assert parallel_env.possible_agents == AGENTS
-    try:
-        parallel_env.reset(seed=seed)
-    except (ValueError, TypeError) as e:
-        _assert_names(e, ["seed"])
-        parallel_env.reset(seed=0)
+    _reset(parallel_env, seed)
     t0 = time.perf_counter()
     try:
         obs, rewards, _, _, _ = parallel_env.step(actions)
