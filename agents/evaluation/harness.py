@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -163,9 +164,30 @@ def _vector_env(n: int, cfg: Any, action_type: str) -> TrackVectorEnv:
 
 def bind_policy(policy: Any, config: ProblemConfig) -> Any:
     """``policy`` as it plays ``config``: a rule that reads the problem's calendar or capacity (it has ``bind``)
-    bound to it, any other policy (a trained agent, a callable) as it is."""
+    bound to it, any other policy (a trained agent, any object with SB3's ``predict``) as it is."""
     bind = getattr(policy, "bind", None)
     return bind(config) if callable(bind) else policy
+
+
+def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """The actions a policy returned for a batch of envs, as the vector env takes them (one row per env), before
+    the cast to integers could turn 0.7 or NaN into "wait": ValueError naming the policy for another size or for
+    values that are not whole numbers (the env refuses whole numbers out of range itself)."""
+    a = np.asarray(action)
+    if a.size != math.prod(shape):
+        raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions of shape {a.shape} for a batch "
+                         f"of {shape[0]} envs; it is given a batch of observations (one row per env) and must "
+                         f"return one action per row, shape {shape}")
+    try:
+        values = a.astype(float)
+    except (TypeError, ValueError):
+        raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions that are not numbers: "
+                         f"{a.ravel()[:8].tolist()}") from None
+    bad = ~np.isfinite(values) | (values != np.round(values))
+    if bad.any():
+        raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions that are not whole numbers "
+                         f"(0 wait, 1 tamp, or a choice code): {a.ravel()[bad.ravel()][:8].tolist()}")
+    return values.reshape(shape)
 
 
 def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
@@ -208,7 +230,7 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
         for p, idx in groups.items():
             a, states[p] = policies[p].predict(_take(obs, idx), state=states[p],
                                                episode_start=np.full(idx.size, t == 0), deterministic=True)
-            actions[idx] = np.asarray(a).reshape(actions[idx].shape)
+            actions[idx] = _checked_actions(policies[p], a, actions[idx].shape)
         obs, r, _, trunc, info = env.step(actions)
         rewards += r
         for k in keys:

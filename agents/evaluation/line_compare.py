@@ -85,7 +85,8 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
                     progress: bool = True, out_dir: str = "results/line_compare", extra: dict[str, Any] | None = None,
                     executor: Any = None, **overrides: Any) -> dict[str, Any]:
     """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
-    ``extra`` policies (by name, e.g. the trained line policy) scored on ``seeds`` with 95 % CIs, and the paired
+    ``extra`` policies (e.g. the trained line policy; each row is named by the policy's ``name``) scored on
+    ``seeds`` (any sequence of whole numbers; default 0-7) with 95 % CIs, and the paired
     difference of each against the best. ``rules``: the rule families to score (names of
     :data:`LINE_HEURISTICS`, and on the ids with every choice those of
     :data:`~trackenv_agents.rules.choices.CHOICE_RULES`; default all, no-maintenance included). ``executor``: runs
@@ -118,7 +119,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     if network:  # each line policy on every line, the one machine sent where the requests are
         pols = [network_play(p) for p in pols]
         extra = {k: network_play(v) for k, v in (extra or {}).items()}
-    seeds = seeds or list(range(8))
+    seeds = [int(s) for s in seeds] if seeds is not None and len(seeds) else list(range(8))  # any sequence
     res = evaluate_many(pols, cfg, seeds, action_type=action_type, batch_size=batch_size, progress=progress,
                         desc="test", executor=executor)
     res.sort(key=lambda r: float(r.cost.mean()))

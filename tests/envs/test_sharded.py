@@ -57,6 +57,31 @@ def test_sharded_line_env_is_the_native_vector_env_bit_for_bit() -> None:
         assert_same(a, b, f"step {i}")
 
 
+def test_sharded_env_moves_states_between_its_workers_and_the_native_env() -> None:
+    """get_state / set_state by env index reach the worker that holds the env: a snapshot of env 4 (the second
+    worker) restored into env 0 (the first) and into a native vector env continues as env 4 does; a bad index is
+    refused by name."""
+    make = partial(TampingVectorEnv, **SHORT)
+    actions = np.ones((5, 3), dtype=np.int8)
+    with ShardedVectorEnv(make, 5, workers=2) as env:
+        env.reset(seed=3)
+        env.step(actions)
+        state = env.get_state(4)
+        want = env.step(actions)
+        env.set_state(0, state)
+        got = env.step(actions)
+        with pytest.raises(ValueError, match=r"index must be an integer in \[0, 4\]"):
+            env.get_state(5)
+    native = make(5)
+    native.reset(seed=9)
+    native.set_state(2, state)
+    again = native.step(actions)
+    for name, i in (("worker", 0), ("native", 2)):
+        back = got if name == "worker" else again
+        assert_same({k: v[4] for k, v in want[0].items()}, {k: v[i] for k, v in back[0].items()}, name)
+        assert want[1][4] == back[1][i], name
+
+
 def test_sharded_env_renders_the_first_env_and_raises_worker_errors_as_theirs() -> None:
     make = partial(TampingVectorEnv, render_mode="rgb_array", **SMALL)
     one = make(2)

@@ -86,6 +86,10 @@ def _command(env: BatchedVectorEnv, command: str, arg: Any) -> Any:
         return env.action_masks()  # type: ignore[attr-defined]
     if command == "render":
         return env.render()
+    if command == "get_state":
+        return env.get_state(arg)  # type: ignore[attr-defined]
+    if command == "set_state":
+        return env.set_state(*arg)  # type: ignore[attr-defined]
     raise ValueError(f"unknown command {command!r}")  # pragma: no cover (the parent sends only the above)
 
 
@@ -280,6 +284,25 @@ class ShardedVectorEnv(VectorEnv):
     def action_masks(self) -> np.ndarray:
         """(num_envs, ...) action masks of the shards, in env order."""
         return np.concatenate(self._send_all("action_masks", [None] * self.workers))
+
+    def get_state(self, index: int) -> Any:
+        """A snapshot of env ``index`` from the worker that holds it: the native vector env's
+        (:mod:`trackenv.envs.state`), restorable in any row, here or in a native or single env of this config."""
+        k, i = self._shard_of(index)
+        self._send(k, "get_state", i)
+        return self._gather([k])[0]
+
+    def set_state(self, index: int, state: Any) -> None:
+        """Continue env ``index`` from ``state`` (a snapshot of this config), in the worker that holds it."""
+        k, i = self._shard_of(index)
+        self._send(k, "set_state", (i, state))
+        self._gather([k])
+
+    def _shard_of(self, index: int) -> tuple[int, int]:
+        """The worker holding env ``index`` (checked) and the env's row in its shard."""
+        index = check_int("index", index, low=0, high=self.num_envs - 1)
+        k = int(np.searchsorted(self._bounds, index, side="right")) - 1
+        return k, index - int(self._bounds[k])
 
     def render(self):  # one frame, as the native vector env draws it
         """The first env's state as an RGB array (``render_mode="rgb_array"``), else None."""

@@ -208,3 +208,33 @@ def test_the_machine_steps_of_a_network_are_those_its_env_reports():
     assert counted == {k: int(v[1]) for k, v in steps.items()}
     assert counted["move"] > 0 and counted["work"] > 0  # the case tests both
     assert "machine_steps" not in evaluate_one(LineNoMaintenance(), "small", [0]).summary()
+
+
+class _Constant:
+    """A policy of the harness's interface that returns ``value`` for every section (or one row: ``batched=False``)."""
+
+    name = "constant"
+
+    def __init__(self, value, batched: bool = True) -> None:
+        self.value, self.batched = value, batched
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        n, s = obs["section_sd"].shape
+        return (np.full((n, s), self.value) if self.batched else np.zeros(s)), state
+
+
+@pytest.mark.parametrize("policy, message", [
+    (_Constant(0.7), r"policy 'constant': predict returned actions that are not whole numbers .*\[0\.7"),
+    (_Constant(np.nan), r"policy 'constant': predict returned actions that are not whole numbers .*\[nan"),
+    (_Constant(0, batched=False), r"policy 'constant': predict returned actions of shape \(6,\) for a batch of 2 "
+                                  r"envs; .* shape \(2, 6\)"),
+])
+def test_a_policys_bad_actions_are_refused_naming_it_not_cast_to_wait(policy, message):
+    """The harness casts actions to integers for the vector env: 0.7 or NaN became "wait" (scored as a policy that
+    never tamps); now they are refused naming the policy, as the env refuses them; so is one action for a batch."""
+    from trackenv.envs.problems import problem_config
+
+    with pytest.raises(ValueError, match=message):
+        evaluate_many([policy], problem_config("small").replace(horizon_years=0.5), seeds=[0, 1])
+    result = evaluate_many([_Constant(1.0)], problem_config("small").replace(horizon_years=0.5), seeds=[0, 1])
+    assert result[0].n_episodes == 2  # whole numbers given as floats are actions

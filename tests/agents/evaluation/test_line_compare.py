@@ -1,4 +1,8 @@
-"""The line comparison's report: the agents' headlines against the best tuned rule."""
+"""The line comparison's report: the agents' headlines against the best tuned rule; a user's own policy."""
+
+import numpy as np
+
+from trackenv_agents.evaluation.line_compare import line_comparison
 
 
 def test_agent_headline_pairs_the_agent_with_the_best_rule_whichever_policy_is_best():
@@ -14,3 +18,21 @@ def test_agent_headline_pairs_the_agent_with_the_best_rule_whichever_policy_is_b
     assert line is not None and line.startswith("agent vs the best tuned rule (rule), paired over 2 episodes: +10.0")
     assert line.endswith("+10.0 %")
     assert "-10.0 k€" in agent_headline(payload, "planner") and agent_headline(payload, "rule") is None
+
+
+def test_a_users_own_policy_is_scored_as_the_agents_page_shows(tmp_path):
+    """The page's example: a class with SB3's predict on a batch, scored against a tuned rule with the seeds as a
+    range (they failed when the JSON was written), its row named by its name and labelled by its params."""
+    class TampAbove:
+        name = "tamp-above-2.5mm"
+        params = {"threshold_mm": 2.5}
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            return (obs["section_sd"] >= 2.5).astype(np.int8), state
+
+    result = line_comparison("trackenv/TampingLineSmall-v0", seeds=range(2), rules=["grouped-threshold"],
+                             extra={"mine": TampAbove()}, progress=False, out_dir=str(tmp_path), horizon_years=1.0)
+    assert result["seeds"] == [0, 1] and result["extra"] == ["tamp-above-2.5mm"]
+    mine = next(r for r in result["results"] if r["policy"] == "tamp-above-2.5mm")
+    assert mine["params"] == {"threshold_mm": 2.5} and mine["n_episodes"] == 2
+    assert (tmp_path / "line_compare.json").exists()
