@@ -229,3 +229,20 @@ def test_vector_reset_refuses_bad_seeds(seed) -> None:
 def test_vector_reset_refuses_unknown_options() -> None:
     with pytest.raises(ValueError, match="unknown reset option"):
         TampingVectorEnv(num_envs=2, config=CFG).reset(seed=0, options={"x": 1})
+
+
+@pytest.mark.parametrize("spelling, mode", [("NextStep", "NextStep"), ("next_step", "NextStep"),
+                                            ("NEXT_STEP", "NextStep"), ("same_step", "SameStep")])
+def test_autoreset_mode_takes_its_value_or_its_name_in_any_case(spelling, mode) -> None:
+    from trackenv.envs.batched import check_autoreset_mode
+
+    assert check_autoreset_mode(spelling).value == mode
+    with pytest.raises(ValueError, match=r"autoreset_mode must be one of \['SameStep', 'NextStep'\], got 'Disabled'"):
+        check_autoreset_mode("Disabled")
+
+
+def test_a_harness_given_an_env_id_for_a_preset_is_told_the_preset() -> None:
+    from trackenv.envs.problems import problem_config
+
+    with pytest.raises(ValueError, match=r"unknown scenario 'trackenv/TampingLineSmall-v0'.*an env id: give"):
+        problem_config("trackenv/TampingLineSmall-v0")

@@ -41,8 +41,11 @@ AUTORESET_MODES = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
 
 
 def check_autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
-    """``value`` as an AutoresetMode (the enum or its value, "SameStep" or "NextStep"); any other raises
-    ValueError naming the modes a native vector env supports."""
+    """``value`` as an AutoresetMode (the enum, its value "SameStep" or "NextStep", or its name in any case:
+    "same_step", "NEXT_STEP"); any other raises ValueError naming the modes a native vector env supports."""
+    if isinstance(value, str):
+        spelled = {m.value.lower(): m for m in AUTORESET_MODES} | {m.name.lower(): m for m in AUTORESET_MODES}
+        value = spelled.get(value.lower(), value)
     try:
         mode = AutoresetMode(value)
     except ValueError:

@@ -64,7 +64,9 @@ def problem_config(value: Any = None) -> ProblemConfig:
         return value
     if isinstance(value, str):
         if value not in SCENARIOS:
-            raise ValueError(f"unknown scenario {value!r}; known: {sorted(SCENARIOS)}")
+            hint = (" (an env id: give its preset, e.g. 'small' for trackenv/TampingLineSmall-v0, or its config, "
+                    "gym.make(id).unwrapped.config)") if "/" in value else ""
+            raise ValueError(f"unknown scenario {value!r}; known: {sorted(SCENARIOS)}{hint}")
         return LineConfig.coerce(value)
     if value is None:
         return LineConfig.coerce("track60")
