@@ -62,7 +62,8 @@ def line_frame(batch, line: int, info: dict) -> np.ndarray:
     the true SD and D1 mean-to-peak (bars, from the physics) and the last measured ones (dots, what the planner
     sees), against the SD alert limit and the mean-to-peak alert, intervention and immediate-action limits (of
     each section's speed band);
-    sections tamped this step (``info["tamped_sections"]``) shaded, known zones of the register labelled."""
+    sections tamped this step (``info["tamped_sections"]``) shaded, known zones of the register labelled; the title
+    starts with ``info["frame_label"]`` where there is one (the network: which line)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -98,7 +99,8 @@ def line_frame(batch, line: int, info: dict) -> np.ndarray:
     ax2.set_xticks(x, [f"{s}\n{zone.get(int(batch.register[r][s]), '')}" for s in x], fontsize=7)
     ax2.set_xlabel("section (shaded: tamped this step)")
     step = int(batch.step[line])
-    ax1.set_title(f"year {step / c.steps_per_year:.2f}   step cost {info.get('cost', 0.0):.1f} k€")
+    ax1.set_title(f"{info.get('frame_label', '')}year {step / c.steps_per_year:.2f}   step cost "
+                  f"{info.get('cost', 0.0):.1f} k€")
     fig.tight_layout()
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()

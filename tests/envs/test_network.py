@@ -234,3 +234,19 @@ def test_render_draws_the_machines_line():
     env.step(_ask({1: _pick(env, 1, 1)}))  # the machine moves to line 1: the picture is line 1's
     assert first.ndim == 3 and first.dtype == np.uint8 and env.render().shape == first.shape
     assert not np.array_equal(env.render(), first)
+
+
+def test_the_picture_names_its_line_and_shows_that_lines_cost(monkeypatch):
+    """The picture is of the machine's line only: its title says which line, and the step cost is that line's own
+    (it showed the whole network's)."""
+    env = _network(render_mode="rgb_array")
+    env.reset(seed=1)
+    *_, info = env.step(_ask({1: _pick(env, 1, 1)}))  # the machine moves to line 1
+    *_, info = env.step(_ask({1: _pick(env, 1, 1)}))
+    seen: dict = {}
+    lines = env.unwrapped.engine.lines
+    monkeypatch.setattr(lines, "frame", lambda row, part: seen.update(part) or np.zeros((2, 2, 3), np.uint8))
+    env.render()
+    n_lines = env.unwrapped.config.n_lines
+    assert seen["frame_label"].startswith(f"line 1 (the machine's; lines 0-{n_lines - 1})")
+    assert seen["cost"] == info["line_costs"][1] != info["cost"]

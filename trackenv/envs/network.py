@@ -345,9 +345,12 @@ class NetworkBatch:
 
     def frame(self, b: int, last_info: dict) -> np.ndarray:
         """An RGB picture of the line network ``b``'s machine is on (:meth:`LineBatch.frame`), from its part of
-        the network's ``last_info``."""
+        the network's ``last_info``: titled with that line's number and its own step cost."""
         line = int(self.machine[b])
         S = self.S
         mine = {k: v[line * S:(line + 1) * S] if isinstance(v, np.ndarray) and v.shape[:1] == (self.L * S,) else v
                 for k, v in last_info.items()}
+        if "line_costs" in last_info:  # the title's cost: that line's, not the network's
+            mine["cost"] = float(last_info["line_costs"][line])
+        mine["frame_label"] = f"line {line} (the machine's; lines 0-{self.L - 1})   "
         return self.lines.frame(b * self.L + line, mine)
