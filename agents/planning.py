@@ -40,6 +40,7 @@ import numpy as np
 
 from trackenv.envs.choices import CHOICES, action_type_for
 from trackenv.envs.line_config import LINE_FILE_FIELDS, SCENARIOS, LineConfig, check_horizon
+from trackenv.envs.line_config import scenario as preset
 
 from .shipped import SHIPPED_AGENTS
 
@@ -82,8 +83,6 @@ def line_policy(name: str, config: Any, scenario: str | None = None, years: floa
                              f"{trained:g} years with it, got {years:g}")
         bind = getattr(agent, "bind", None)
         return bind(config) if callable(bind) else agent
-    from trackenv.envs.line_config import scenario as preset
-
     from .rules.problems import every_rule
 
     if name in every_rule():
@@ -99,8 +98,6 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
     :class:`~trackenv.envs.line_file.LineDescription`) modelled as on the preset ``scenario``
     (:data:`PLAN_SCENARIOS`), with further ``config`` fields; ``years``: the plan's, its horizon (checked under
     that name, in the config's range: whole steps, at least one, at most ``MAX_HORIZON_YEARS``)."""
-    from trackenv.envs.line_config import scenario as preset
-
     if scenario not in PLAN_SCENARIOS:
         raise ValueError(f"scenario must be one of {', '.join(PLAN_SCENARIOS)} (those that take the line's sections "
                          f"and traffic from its file), got {scenario!r}")

@@ -328,7 +328,7 @@ def _tamping_note(line: LineDescription, s: Section) -> str:
     :data:`FIT_NO_DROP_SHARE` of that rate; a sentence naming the runs; else "". (A tamping lowers the SD or at
     least slows its growth; a run on the tamping's date counts as before it, as in the fit.)"""
     ms = line.measurements(s.id)
-    after = [m for m in ms if s.years_since_tamping - line.years_before(m.date) > FIT_SAME_DAYS / DAYS_PER_YEAR]
+    after = [m for m in ms if _after_tamping(line, s, m)]
     before = ms[:len(ms) - len(after)]
     if len(before) < 2 or not after:
         return ""
@@ -344,15 +344,20 @@ def _tamping_note(line: LineDescription, s: Section) -> str:
             f"uses the runs after that date only)")
 
 
-def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
-    """A section's measurements after its last tamping: (years since that tamping, SD [m]). A run less than
+def _after_tamping(line: LineDescription, s: Section, m: Any) -> bool:
+    """Whether the run ``m`` of section ``s`` comes after its last tamping. A run less than
     :data:`FIT_SAME_DAYS` days after it counts as before it (the tamping may be that run's reason, and years
     since tamping are often rounded)."""
-    ms = line.measurements(s.id)
+    return s.years_since_tamping - line.years_before(m.date) > FIT_SAME_DAYS / DAYS_PER_YEAR
+
+
+def _points(line: LineDescription, s: Section) -> tuple[np.ndarray, np.ndarray]:
+    """A section's measurements after its last tamping (:func:`_after_tamping`): (years since that tamping,
+    SD [m])."""
+    ms = [m for m in line.measurements(s.id) if _after_tamping(line, s, m)]
     t = np.array([s.years_since_tamping - line.years_before(m.date) for m in ms])
     sd = np.array([m.sd_m for m in ms])
-    keep = t > FIT_SAME_DAYS / DAYS_PER_YEAR
-    return t[keep], sd[keep]
+    return t, sd
 
 
 def _class_of(line: LineDescription, s: Section) -> tuple[str, bool, float, float, float]:
