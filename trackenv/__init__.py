@@ -11,6 +11,8 @@ from ._openmp import prefer_passive_wait as _prefer_passive_wait
 from .degradation import DegradationHistory, IterationRecord, RunawayError, RunawayWarning, TrackDegradation
 from .physics.contact import HertzContact, LinearContact, zhai_contact_constant
 from .physics.dynamics import (
+    OverloadError,
+    OverloadWarning,
     PassResult,
     receptance,
     simulate_pass,
@@ -50,6 +52,8 @@ __all__ = [
     "IndraratnaLaw",
     "IterationRecord",
     "LinearContact",
+    "OverloadError",
+    "OverloadWarning",
     "PassResult",
     "SatoLaw",
     "SeligWatersLaw",

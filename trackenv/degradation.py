@@ -27,6 +27,7 @@ import scipy.linalg
 
 from .physics._checks import check_array, check_bool, check_choice, check_int, check_scalar, check_speed
 from .physics.dynamics import (
+    OVERLOAD_FACTOR,
     SLEEPER_FORCE_MEASURES,
     PassResult,
     _vehicle_system,
@@ -114,8 +115,8 @@ RUNAWAY_GROWTH, RUNAWAY_ITERATIONS, RUNAWAY_FLOOR = 1.5, 2, 0.1e-3
 #: A single iteration whose differential increment jumps by more than this factor (above the floor) is enough.
 RUNAWAY_JUMP = 4.0
 #: Contact force, as a multiple of the static wheel load, beyond which a pass is out of any plain track's range
-#: (dynamic factors from track geometry stay below about 2) **[assumption]**: the loop has run away.
-RUNAWAY_FORCE_FACTOR = 3.0
+#: (the physics' :data:`~trackenv.physics.dynamics.OVERLOAD_FACTOR`, **[assumption]**): the loop has run away.
+RUNAWAY_FORCE_FACTOR = OVERLOAD_FACTOR
 
 
 class RunawayWarning(RuntimeWarning):
@@ -526,7 +527,7 @@ def _simulate_group(sims: list[TrackDegradation], engine_options: dict) -> list[
     if s0.feedback == "irregularity":
         rails = [s.rail_level() for s in sims]
         return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, rails, x_end=s0.pass_end,
-                               **options)
+                               on_overload="ignore", **options)  # (the loop checks its own: check_runaway)
     profiles = np.stack([s.model_irregularity() for s in sims])
     return simulate_passes([s.model_track for s in sims], s0.vehicle, s0.speed, None, support_settlement=profiles,
-                           x_end=s0.pass_end, **options)
+                           x_end=s0.pass_end, on_overload="ignore", **options)  # (the loop checks its own)

@@ -15,6 +15,8 @@ from reference import load_vector, reference_pass
 from trackenv.physics import dynamics
 from trackenv.physics.contact import LinearContact
 from trackenv.physics.dynamics import (
+    OverloadError,
+    OverloadWarning,
     batched_bands,
     newmark_constants,
     simulate_pass,
@@ -183,7 +185,7 @@ def test_contact_force_profile_is_the_peak_of_every_axle_over_each_bay():
     t = Track.realistic(30.0)
     rng = np.random.default_rng(3)
     irr = 1e-3 * rng.standard_normal((5, t.n_sleepers))
-    for res in simulate_passes(t, Car.manchester_coach(), 30.0, irr, dt="auto"):
+    for res in simulate_passes(t, Car.manchester_coach(), 30.0, irr, dt="auto", on_overload="ignore"):
         idx = np.clip(np.rint(res.wheel_position / t.sleeper_spacing).astype(int), 0, t.n_sleepers - 1)
         want = np.zeros(t.n_sleepers)
         for step, axle in np.ndindex(idx.shape):
@@ -397,9 +399,30 @@ def test_loss_of_contact_force_is_zero_never_negative():
 
 
 def test_bare_wheelset_leaves_the_rail():
-    res = simulate_pass(Track.seed(), Wheelset.seed(), V120, cosine_dip(5e-3), x_start=10.0, x_end=20.0)
+    """A 5 mm dip at 120 km/h throws a bare wheelset off the rail; its landing, 30 times its static load, is far
+    beyond what track in service gives, so the pass warns (an impact study passes on_overload="ignore")."""
+    with pytest.warns(OverloadWarning, match=r"row 0 of 1: peak contact force .* times the static wheel load"):
+        res = simulate_pass(Track.seed(), Wheelset.seed(), V120, cosine_dip(5e-3), x_start=10.0, x_end=20.0)
     f = res.contact_force[:, 0]
     assert np.any(f == 0.0) and np.all(f >= 0.0)
+    with pytest.raises(OverloadError, match="on_overload='ignore'"):
+        simulate_pass(Track.seed(), Wheelset.seed(), V120, cosine_dip(5e-3), x_start=10.0, x_end=20.0,
+                      on_overload="raise")
+    again = simulate_pass(Track.seed(), Wheelset.seed(), V120, cosine_dip(5e-3), x_start=10.0, x_end=20.0,
+                          on_overload="ignore")
+    np.testing.assert_array_equal(again.contact_force, res.contact_force)
+
+
+def test_wrong_unit_stiffness_warns():
+    """Pads and ballast given in kN/m where N/m is meant (1000 times too soft): the pass's contact force reaches
+    3 times the static wheel load and the pass says to check the units; the same track in N/m stays near 1."""
+    wheel = Wheelset(mass=1800.0, static_load=100e3)
+    assert simulate_pass(Track.seed(), wheel, V80).max_contact_force < 1.5 * wheel.wheel_load
+    soft = Track.seed().scaled(pad_stiffness=1e-3, ballast_stiffness=1e-3)
+    with pytest.warns(OverloadWarning, match="Check the units"):
+        simulate_pass(soft, wheel, V80)
+    with pytest.raises(ValueError, match="on_overload"):
+        simulate_pass(Track.seed(), wheel, V80, on_overload="quiet")
 
 
 @pytest.mark.slow
@@ -407,7 +430,7 @@ def test_loss_of_contact_matches_reference():
     t = Track.seed()
     kw = dict(x_start=12.0, x_end=19.0)
     ref = reference_pass(t, LOADED, V120, cosine_dip(5e-3), **kw)
-    res = simulate_pass(t, LOADED, V120, cosine_dip(5e-3), window_bays=None, **kw)
+    res = simulate_pass(t, LOADED, V120, cosine_dip(5e-3), window_bays=None, on_overload="ignore", **kw)
     np.testing.assert_array_equal(res.contact_force == 0.0, ref.contact_force == 0.0)
     np.testing.assert_allclose(res.contact_force, ref.contact_force, rtol=0, atol=1e-8 * LOADED.wheel_load)
 
@@ -417,6 +440,17 @@ def test_loss_of_contact_matches_reference():
 def test_bad_speed(speed):
     with pytest.raises(ValueError, match="speed"):
         simulate_pass(Track.seed(), LOADED, speed)
+
+
+def test_a_speed_beyond_ballasted_lines_warns_with_its_km_h():
+    """120 given for 120 km/h is taken as 120 m/s = 432 km/h: a warning names both units; 300 km/h does not warn."""
+    import warnings
+
+    with pytest.warns(UserWarning, match=r"speed 120 m/s is 432 km/h, above the 350 km/h"):
+        simulate_pass(Track.seed(), LOADED, 120.0, x_start=5.0, x_end=6.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate_pass(Track.seed(), LOADED, 300 / 3.6, x_start=5.0, x_end=6.0)
 
 
 def test_dt_too_large_to_resolve_contact():

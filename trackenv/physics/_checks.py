@@ -30,6 +30,9 @@ MAX_PASS_SAMPLES = 50_000_000
 #: Upper bound of a pass's speed [m/s] (720 km/h: beyond any railway; the model has no aerodynamics or
 #: critical-velocity checks), read by the dynamics, the settlement loop and the paper's reproduction.
 MAX_SPEED_M_PER_S = 200.0
+#: Above this speed [m/s] (350 km/h: the fastest ballasted lines run at 300-320 km/h) a pass warns: the model has
+#: no ballast flight or ground-wave (critical velocity) effects, and a speed in km/h given as m/s lands here.
+SERVICE_SPEED_M_PER_S = 350.0 / 3.6
 
 
 def _describe(value) -> str:
@@ -161,8 +164,16 @@ def check_array(
 
 
 def check_speed(speed, name: str = "speed") -> float:
-    """A vehicle's speed [m/s] in (0, :data:`MAX_SPEED_M_PER_S`]."""
-    return check_scalar(name, speed, low=0.0, high=MAX_SPEED_M_PER_S, low_inclusive=False)
+    """A vehicle's speed [m/s] in (0, :data:`MAX_SPEED_M_PER_S`]; a warning above :data:`SERVICE_SPEED_M_PER_S`
+    (outside the model's validity, or km/h given as m/s)."""
+    v = check_scalar(name, speed, low=0.0, high=MAX_SPEED_M_PER_S, low_inclusive=False)
+    if v > SERVICE_SPEED_M_PER_S:
+        import warnings
+
+        warnings.warn(f"{name} {v:g} m/s is {v * 3.6:.0f} km/h, above the 350 km/h of any ballasted line: the "
+                      f"model has no ballast flight or critical-velocity effects there. The speed is in m/s (a "
+                      f"speed in km/h divided by 3.6)", UserWarning, stacklevel=3)
+    return v
 
 
 def check_time_steps(length_m: float, speed_m_per_s: float, dt_s: float, rows: int = 1, axles: int = 1) -> int:

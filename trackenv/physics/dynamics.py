@@ -29,6 +29,20 @@ from .window_ends import check_window_ends, static_ends
 
 Irregularity = np.ndarray | Callable[[np.ndarray], np.ndarray] | None
 SLEEPER_FORCE_MEASURES = ("ballast", "pad_plus_ballast")
+ON_OVERLOAD = ("warn", "raise", "ignore")
+#: Peak contact force, as a multiple of the static wheel load, beyond which a pass is out of any plain track's
+#: range (dynamic factors from track geometry stay below about 2; a load dropped onto the track at rest gives 2)
+#: **[assumption]**: a wrong unit (stiffness in kN/m, a level in mm) or an irregularity far beyond service limits.
+OVERLOAD_FACTOR = 3.0
+
+
+class OverloadWarning(RuntimeWarning):
+    """A pass's contact force exceeded :data:`OVERLOAD_FACTOR` times the static wheel load."""
+
+
+class OverloadError(RuntimeError):
+    """A pass's contact force exceeded :data:`OVERLOAD_FACTOR` times the static wheel load and
+    ``on_overload="raise"`` was asked for."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -639,6 +653,7 @@ def simulate_passes(
     support_settlement=None,
     backend: str = "numba",
     device=None,
+    on_overload: str = "warn",
 ) -> list[PassResult]:
     """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
 
@@ -672,13 +687,43 @@ def simulate_passes(
     ``backend``: "numba", the compiled kernel on the CPU, or "torch": the same integration batched over the rows in
     torch (:mod:`trackenv.physics.torch_pass`) on ``device`` ("cpu", "cuda", ...; None: the CPU), within ~1e-9
     relative of the kernel (its window solves round differently).
+    ``on_overload``: "warn" (default, :class:`OverloadWarning`), "raise" (:class:`OverloadError`) or "ignore" when
+    a row's peak contact force exceeds :data:`OVERLOAD_FACTOR` times the static wheel load (one message per call,
+    naming the worst row): no track geometry in service gives that, so an input is most likely in the wrong unit.
     """
+    check_choice("on_overload", on_overload, ON_OVERLOAD)
     with _side_by_side.python_side():  # (see simulate_pass_batches)
-        return _simulate_passes(tracks, vehicle, speed, irregularities, dt=dt, contact=contact, start=start,
-                                x_start=x_start, x_end=x_end, window_bays=window_bays, window_ends=window_ends,
-                                window_decay_lengths=window_decay_lengths,
-                                sleeper_force_measure=sleeper_force_measure, support_settlement=support_settlement,
-                                backend=backend, device=device)
+        results = _simulate_passes(tracks, vehicle, speed, irregularities, dt=dt, contact=contact, start=start,
+                                   x_start=x_start, x_end=x_end, window_bays=window_bays, window_ends=window_ends,
+                                   window_decay_lengths=window_decay_lengths,
+                                   sleeper_force_measure=sleeper_force_measure,
+                                   support_settlement=support_settlement, backend=backend, device=device)
+    if on_overload != "ignore":
+        check_overload(results, on_overload)
+    return results
+
+
+def check_overload(results: Sequence[PassResult], on_overload: str = "warn") -> str | None:
+    """Warn or raise (``on_overload``) when a row's peak contact force exceeds :data:`OVERLOAD_FACTOR` times its
+    static wheel load; one message for the batch, naming the worst row. Returns the message, or None."""
+    factors = np.array([float(np.max(r.contact_force.max(axis=0) / r.static_wheel_load)) if len(r.time) else 0.0
+                        for r in results])
+    over = np.flatnonzero(factors > OVERLOAD_FACTOR)
+    if over.size == 0:
+        return None
+    worst = int(over[np.argmax(factors[over])])
+    r = results[worst]
+    where = f"row {worst} of {len(results)}" + (f" (and {over.size - 1} more)" if over.size > 1 else "")
+    msg = (f"{where}: peak contact force {r.max_contact_force / 1e3:.4g} kN, {factors[worst]:.3g} times the static "
+           f"wheel load {float(np.max(r.static_wheel_load)) / 1e3:.4g} kN: track geometry in service stays below "
+           f"about 2 times. Check the units (stiffness N/m, damping N·s/m, mass kg, speed m/s, levels m) and the "
+           f"irregularity's size; pass on_overload='ignore' where such a force is meant (an impact study)")
+    if on_overload == "raise":
+        raise OverloadError(msg)
+    import warnings
+
+    warnings.warn(msg, OverloadWarning, stacklevel=3)
+    return msg
 
 
 def _simulate_passes(tracks, vehicle, speed, irregularities, *, dt, contact, start, x_start, x_end, window_bays,
@@ -816,7 +861,8 @@ def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: l
     """Simulate ``rows`` of a batch again as a batch of their own (other window or time step in ``options``)
     and put their results in place in ``results``; ``settlement``: the batch's settled supports or None."""
     again = simulate_passes([tracks[b] for b in rows], vehicle, speed, [irr_rows[b] for b in rows],
-                            support_settlement=None if settlement is None else settlement[rows], **options)
+                            support_settlement=None if settlement is None else settlement[rows],
+                            on_overload="ignore", **options)  # (the outer call checks the whole batch)
     for b, res in zip(rows, again):
         results[b] = res
 
