@@ -174,7 +174,7 @@ EXAMPLE_STATION_SPEED_KMH = 80.0  # through the station's switches, against 120 
 EXAMPLE_SWITCHES = (47, 48, 51, 35, 88)  # and two level crossings
 EXAMPLE_BRIDGES = (22, 78)  # each with a transition zone on both approaches
 EXAMPLE_WET = (12, 13, 14, 15, 63, 64, 65, 66)  # two cuttings known to be wet
-EXAMPLE_BRANCH_FROM = 49  # a freight branch joins at the station: more traffic from here on, most of it freight
+EXAMPLE_BRANCH_FROM = 49  # a freight branch joins at the station: more traffic from here on, half of it freight
 #: Traffic before / from the branch: MGT a year and freight share (the branch adds 6 MGT, nearly all freight:
 #: (18 × 0.35 + 6) / 24 ≈ 0.5) **[assumption]**.
 EXAMPLE_TRAFFIC = ((18.0, 0.35), (24.0, 0.5))
@@ -223,9 +223,9 @@ def example_line(seed: int = 2026, history_years: float = 5.0) -> tuple[LineDesc
                             description="A synthetic 20 km main line made by trackenv's engine: a "
                                         "station with switches passed at 80 km/h, two bridges with transition "
                                         "zones, two level crossings, two cuttings known to be wet, a freight "
-                                        "branch joining at the station (more tonnage, most of it freight, from "
-                                        "there on), sections of 150-250 m, five years of recording-car runs "
-                                        "twice a year.")
+                                        "branch joining at the station (6 MGT a year more from there on, nearly "
+                                        "all of it freight: half the tonnage), sections of 150-250 m, five years "
+                                        "of recording-car runs twice a year.")
     steps = int(round(history_years * 4))
     tamp_at = {}
     for s in sections:

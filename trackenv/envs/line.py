@@ -69,7 +69,7 @@ class TampingLine(TrackEnv):
     Sections differ: plain-track rates lognormal and correlated along the line, transition zones and
     switches/level crossings (in the register), hidden wet spots that start mid-episode (in no register).
     Tamping restores less on worse track (SD after rises with SD before), restarts consolidation and damages
-    the ballast (faster settlement after each tamping) until a renewal at the 8th.
+    the ballast (faster settlement after each tamping) until the 9th tamping, which is a ballast renewal.
 
     **Scenarios** (registered ids; ``LineConfig`` fields in :data:`~trackenv.envs.line_config.SCENARIOS`):
 

@@ -115,18 +115,29 @@ class LineConfig(ConfigBase):
     **Heterogeneity.** Plain-track settlement-rate factor per section lognormal with log-SD ``rate_sigma``, AR(1)
     correlated along the line with correlation length ``rate_correlation_m`` (Andrade & Teixeira 2011: lognormal;
     the figures are **[assumption]**); inside a segment per-sleeper factors with CV ``sleeper_rate_cv`` correlated
-    over ``sleeper_rate_correlation_m`` and ballast stiffness CV ``ballast_stiffness_cv`` around
-    ``ballast_stiffness_factor`` times the realistic track's 160 MN/m (1 by default; other values are for robustness
-    studies: the calibration was run at 1). Known zones, in the register: a **transition** (probability
-    ``transition_probability`` per section; ballast ``transition_stiffness_ratio`` times stiffer from the middle of
-    the segment on, as at a bridge, plus ``transition_rate_factor`` on the soft side: the physics alone gives too
-    little, see the calibration) and a **switch or level crossing** (``switch_probability``; ``switch_rate_factor``
-    on the segment and a stiff 3 m patch). **Hidden wet spots**: with probability ``wet_spot_probability`` per
-    section and episode a ``wet_spot_length_m`` patch starts to settle ``wet_spot_rate_factor`` times faster at a
-    step drawn uniformly in the horizon; it is in no register. ``rate_scale`` multiplies all settlement (calibrated
-    to the published SD growth, see ``trackenv calibrate``). ``initial_age_years``: each section was last tamped up
-    to this long before the start (uniform), with up to ``initial_max_tampings`` tampings since renewal; its initial
-    level is the German low-disturbance PSD scaled by a factor uniform in ``initial_scale``.
+    over ``sleeper_rate_correlation_m`` and ballast stiffness CV ``ballast_stiffness_cv`` (correlated over 2
+    sleepers, 1.2 m **[assumption]**) around ``ballast_stiffness_factor`` times the realistic track's 160 MN/m (1
+    by default; other values are for robustness studies: the calibration was run at 1). Known zones, in the
+    register: a **transition** (probability ``transition_probability`` per section; ballast
+    ``transition_stiffness_ratio`` times stiffer from the middle of the segment on, as at a bridge, plus
+    ``transition_rate_factor`` on the soft side: the physics alone gives too little, see the calibration) and a
+    **switch or level crossing** (``switch_probability``; ``switch_rate_factor`` on the segment and a stiff 3 m
+    patch: ballast twice as stiff **[assumption]**: a crossing nose or a level-crossing slab). **Hanging
+    sleepers**: a Poisson number per segment, mean ``voided_sleepers_mean`` (0 on the line, 0.3 on the 60 m
+    track), each resting on ``voided_residual_support`` (0.05) of its ballast stiffness **[assumption]**: a gap
+    under the sleeper that the first millimetres of deflection close. **Hidden wet spots**: with probability
+    ``wet_spot_probability`` per section and episode a ``wet_spot_length_m`` patch starts to settle
+    ``wet_spot_rate_factor`` times faster at a step drawn uniformly in the horizon; it is in no register.
+    ``rate_scale`` multiplies all settlement (calibrated to the published SD growth, see ``trackenv calibrate``).
+    ``initial_age_years``: each section was last tamped up to this long before the start (uniform), with up to
+    ``initial_max_tampings`` tampings since renewal; its initial level is the German low-disturbance PSD scaled
+    by a factor uniform in ``initial_scale``.
+
+    **Settlement law** (``law``, ``law_params``: a name of :data:`~trackenv.physics.settlement.LAWS` and fields
+    of that law). Shenton's power-plus-linear law with K1 = 0.05 mm (a third of
+    :class:`~trackenv.physics.settlement.ShentonLaw`'s own default: less early consolidation), K2 = 1 mm per
+    million cycles at 50 kN, and Hettler's force exponent 1.6 **[assumption]**: the form keeps growing after
+    consolidation as track does, and ``rate_scale`` calibrates the whole to the published SD growth.
 
     **Tamping** (``tamping``: :class:`TampingModel` fields). A tamped section is lifted to the least-squares
     line of its segment keeping ``residual_fraction`` of its old shape plus a random residual (so the SD after
@@ -143,9 +154,13 @@ class LineConfig(ConfigBase):
     intervention limit of the D1 mean-to-peak (a temporary speed restriction: Railtrack's ~650 TSRs cost
     ~2 000 delay-minutes a day, ~3 min a day each; at ~75 € per delay-minute **[assumption]** that is
     ~80 k€ a year, 20 k€ a quarter),
-    ``immediate_action_cost`` per section-step at the immediate-action limit (closure) **[assumption]**.
+    ``immediate_action_cost`` per section-step at the immediate-action limit (closure) **[assumption]**,
+    ``alert_cost`` per section-step in the alert class (0: the geometry cost already prices the SD; 0.5 k€ on the
+    60 m track **[assumption]**). ``limits``: the quality limits as ``QualityLimits`` fields (empty, the
+    default: ``QualityLimits.en13848()``, the EN 13848-5 limits of each speed band).
     **Constraints**: ``capacity`` sections per campaign (a possession covers ``capacity`` × 200 m: one night
-    at a tamper's 0.5-2.2 km/h); ``annual_budget`` (0: none) for tamping costs per calendar year;
+    at a tamper's 0.5-2.2 km/h); ``annual_budget`` (0: none) for the cost of each calendar year's work
+    (possession, tamping, renewal and the other choices);
     ``over_capacity``: "clip" (keep the allowed sections with the worst measured SD, documented in the env)
     or "raise" (ValueError). ``min_steps_between_tampings``: a section tamped in the last k steps is masked.
     ``profiles``: also observe the measured per-sleeper level and wheel/rail force of every segment.
@@ -669,7 +684,9 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     "long": {"n_sections": 250, "capacity": 25},
     # the 60 m track (trackenv/Tamping-v1): one 60 m segment of six 10 m sections, one wheelset type (20 t
     # axles, 2 million axle passes a year), measured without error after every step, with the level and the
-    # wheel/rail force per sleeper in the observation; its costs per 10 m section
+    # wheel/rail force per sleeper in the observation; its costs per 10 m section [assumption]: a 10 m site's
+    # tamping (2 k€) is mostly the machine's set-up, not the line's per-metre price, and each class cost is
+    # scaled so that the six short sections' costs stay comparable to the possession
     "track60": {"n_sections": 6, "section_length_m": 10.0, "segment_length_m": 60.0, "sections_per_segment": 6,
                 "annual_mgt": 40.0, "freight_share": 1.0, "freight_axle_load_t": 20.0,
                 "measurement_interval": 1, "sd_noise_mm": 0.0, "peak_noise_mm": 0.0, "rate_sigma": 0.0,

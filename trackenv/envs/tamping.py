@@ -28,7 +28,8 @@ class TampingEnv(TampingLine):
     One wheelset type (20 t axles, 2 million axle passes a year = 40 MGT), a stiffness transition (ratio 2, in
     the middle) on 30 % of the tracks, on average 0.3 hanging sleepers, no switches or wet spots; the track is
     measured without error after every step, and the observation adds the level and the wheel/rail force over
-    every sleeper bay (``profiles``: ``level`` and ``contact_force``, shape (1, 101)). Costs per 10 m section:
+    every sleeper bay (``profiles``: ``level`` and ``contact_force``, shape (1, 101)). Costs per 10 m section
+    **[assumption]** (a short site's tamping is mostly the machine's set-up, not the line's per-metre price):
     10 k€ per campaign, 2 k€ per section tamped, 0.5 / 3 / 50 k€ per section-step in the alert class, at the
     intervention limit and at the immediate-action limit, 4 k€ per section-year at the alert SD, 1.5 k€ per
     ballast renewal (at the 9th tamping). Rendering (``render_mode="rgb_array"``) draws the level, the D1 level

@@ -269,7 +269,7 @@ class HettlerLaw(_SeparableLaw):
     * ``a = 1.6``: the paper gives no exponent on F; 1.6 is Hettler's exponent (Hettler 1984,
       Eisenbahntechnische Rundschau 33:847, as reviewed by Dahlberg 2001, Proc IMechE F 215:289). It is also
       the exponent for which the paper's s gives a realistic magnitude: a 50 kN sleeper force gives
-      u = 0.00095·50^1.6·(1 + 0.43·ln 1e6) ≈ 3.5 mm after one million axle passes, a few mm per million
+      u = 0.00095·50^1.6·(1 + 0.43·ln 1e6) ≈ 3.45 mm after one million axle passes, a few mm per million
       passes as observed on track (with a = 1, s·F would give only 0.33 mm).
 
     Valid ranges: s > 0, a in (0, 4], C in [0, 5]. With C = 0 the law stops growing after the first cycle.

@@ -47,8 +47,8 @@ Model (all coefficients are parameters of :class:`TampingModel`; defaults are as
   the count and the rate factor reset (0 and 1) and, since fresh ballast has no memory, the old shape is not
   kept (``beta = 0`` for those sleepers).
 
-Tamping machines work at about 0.3-2.5 km/h; :meth:`TampingModel.duration_s` converts a tamped length to
-machine time with ``machine_speed_m_per_s``.
+Tamping machines work at about 0.5-2.2 km/h (Railway Gazette and manufacturers' figures);
+:meth:`TampingModel.duration_s` converts a tamped length to machine time with ``machine_speed_m_per_s``.
 """
 
 from __future__ import annotations
@@ -98,7 +98,8 @@ class TampingModel:
         >= 0: length of the lift ramp at the ends of a tamped run next to untamped track. Default 3
         **[assumption]** (real run-out ramps are set by a maximum lift gradient; 0 disables the ramp).
     machine_speed_m_per_s : float
-        > 0: working speed of the tamping machine. Default 1 km/h = 0.2778 m/s, within 0.3-2.5 km/h.
+        > 0: working speed of the tamping machine. Default 1 km/h = 0.2778 m/s, within the 0.5-2.2 km/h of
+        practice (Railway Gazette and manufacturers' figures).
     reference : {"smoothing", "design"}
         Line the machine restores (module docstring). Default "smoothing": the chord through the untamped
         neighbours (no lift step against settled neighbours); "design": lift to the design line (level 0),
