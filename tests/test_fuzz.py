@@ -30,6 +30,8 @@ from trackenv.envs.network import NetworkConfig
 from trackenv.envs.network_env import TampingNetwork
 from trackenv.envs.tamping import TampingEnv
 from trackenv.envs.vector import TampingVectorEnv
+from trackenv.physics._checks import SERVICE_SPEED_M_PER_S
+from trackenv.physics.dynamics import OVERLOAD_FACTOR
 from trackenv.physics.settlement import LAWS, make_law
 from trackenv.physics.tamping import TampingModel
 
@@ -421,13 +423,21 @@ def test_simulate_pass_refuses_or_is_finite(speed, dt, mass, load) -> None:
         _assert_names(e, ["mass", "static_load"])
         return
     try:
-        res = te.simulate_pass(track, wheel, speed=speed, dt=dt)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = te.simulate_pass(track, wheel, speed=speed, dt=dt)
     except (ValueError, TypeError) as e:
         _fast(t0, "simulate_pass")
         _assert_names(e, ["speed", "dt"])
         return
     assert np.all(np.isfinite(res.contact_force))
     assert np.all(np.isfinite(res.sleeper_force))
+    # a speed beyond ballasted lines says so with its km/h; a contact force beyond 3 times the static load as well
+    fast = [w for w in caught if "km/h, above the 350 km/h" in str(w.message)]
+    assert bool(fast) == (speed > SERVICE_SPEED_M_PER_S)
+    overload = res.max_contact_force > OVERLOAD_FACTOR * float(np.max(res.static_wheel_load))
+    assert overload == any(issubclass(w.category, te.OverloadWarning) for w in caught)
+    assert len(caught) == len(fast) + overload
 
 
 @FUZZ
