@@ -151,6 +151,9 @@ FAULTS = {
     "axle load in kg": (dict(line=LINE.replace("freight_share: 0.4", "freight_share: 0.4\n  freight_axle_load_t: "
                                                                       "22500")),
                         ["traffic.freight_axle_load_t", "got 22500; it looks like kg: give it in t"]),
+    "axle load in kN": (dict(line=LINE.replace("freight_share: 0.4", "freight_share: 0.4\n  freight_axle_load_t: "
+                                                                      "225")),
+                        ["traffic.freight_axle_load_t", "got 225; it looks like kN: give it in t"]),
     "invalid YAML": (dict(line=LINE.replace("traffic:", "traffic: [")), ["line.yaml, line", "not valid YAML"]),
     "bad date": (dict(history=HISTORY.replace("2024-03-01", "01/03/2024")),
                  ["row 2 (section A)", "'01/03/2024' is not a date; write YYYY-MM-DD"]),

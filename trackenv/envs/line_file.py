@@ -457,9 +457,11 @@ def _in_range(where: str, name: str, v: float, f: Field, why: str = "") -> float
 
 
 def _unit_hint(v: float, lo: float | None, hi: float | None, unit: str) -> str:
-    """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %)."""
+    """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %, an axle
+    load in kg or kN)."""
     others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),), "MGT/year": ((1e-6, "t/year"),),
-              "t": ((1e-3, "kg"),), "-": ((1e-2, "per cent"),) if hi is not None and hi <= 1 else ()}.get(unit, ())
+              "t": ((1e-3, "kg"), (1 / 9.81, "kN")),
+              "-": ((1e-2, "per cent"),) if hi is not None and hi <= 1 else ()}.get(unit, ())
     for scale, name in others:
         w = v * scale
         if (lo is None or w >= lo) and (hi is None or w <= hi):

@@ -54,8 +54,11 @@ dynamics.
 
 Where a section's file contradicts its history, :func:`history_fit` warns (:class:`FitWarning`) and notes it in
 the table: a given ``rate_factor`` whose curve's residual exceeds the fitted factor's by more than
-:data:`FIT_CONFLICT_ERRORS` times the fit's error, or an SD that does not drop across the stated last tamping
-(:data:`FIT_NO_DROP_SHARE`). The file's values are used either way.
+:data:`FIT_CONFLICT_ERRORS` times the fit's error, an SD that does not drop across the stated last tamping
+(:data:`FIT_NO_DROP_SHARE`), an SD that drops after it (a tamping the file does not state,
+:data:`FIT_DROP_ERRORS`), a fitted curve that misses its runs by far (:data:`FIT_POOR_ERRORS`), or a history
+whose every SD is below what tamped track measures (:data:`FIT_LOW_SD_MM`: an SD in cm). The file's values are
+used either way.
 """
 
 from __future__ import annotations
@@ -97,6 +100,19 @@ FIT_CONFLICT_ERRORS = 2.0
 #: A history shows no drop across a section's stated last tamping where its SD rose over its last two runs
 #: before it and rose on across it at least this share of that rate (per year): a warning naming the section.
 FIT_NO_DROP_SHARE = 0.5
+#: A drop of a section's SD between two runs after its stated last tamping, larger than this many times the fit's
+#: error and than :data:`FIT_DROP_SHARE` of the SD before it, is a tamping the file does not state (the SD of
+#: settling track does not fall; the car's error moves it by ~0.15 mm between two runs, the example line's largest
+#: such drop is 0.32 mm, a tamping takes ~1-3 mm off): a warning naming the runs.
+FIT_DROP_ERRORS = 5.0
+FIT_DROP_SHARE = 0.3
+#: A fitted curve that misses its runs by more than this many times the fit's error (RMS) follows no one
+#: settlement curve (the example line's worst is 1.5 times): a warning.
+FIT_POOR_ERRORS = 3.0
+#: A section whose every run measures an SD below this [mm] measures less than tamped track does (about 0.5 mm
+#: and more; the engine's tamping leaves ~0.14 mm plus a quarter of the SD before plus its residual shape):
+#: most likely an SD in cm, a warning **[assumption]**.
+FIT_LOW_SD_MM = 0.3
 #: The grid of the rate factor's posterior (log-spaced), of ρ and the number of SD₀ values.
 RATE_GRID = np.exp(np.linspace(math.log(0.02), math.log(50.0), 81))
 RHO_GRID = np.linspace(-1.0, 1.0, 25)
@@ -270,9 +286,8 @@ def history_fit(config: LineConfig) -> HistoryFit:
 
     A section's fit uses its own history and its own class's simulations only (each class simulated alone, ρ's
     prior over the section's own span), so editing one section's history or ``years_since_tamping`` moves no
-    other section's fit or start. Warns (:class:`FitWarning`) where a section's file contradicts its history: a
-    given ``rate_factor`` whose curve fits it far worse than the fitted one (:data:`FIT_CONFLICT_ERRORS`), or an
-    SD that does not drop across the stated last tamping; the table's ``note`` says the same."""
+    other section's fit or start. Warns (:class:`FitWarning`) where a section's file contradicts its history (the
+    module docstring lists the checks); the table's ``note`` says the same."""
     line = _line(config)
     points = {s.id: _points(line, s) for s in line.sections}
     need = {s.id for s in line.sections if s.years_since_tamping <= FIT_MAX_YEARS
@@ -287,7 +302,8 @@ def history_fit(config: LineConfig) -> HistoryFit:
     rough = np.full(line.n_sections, np.nan)
     for j, s in enumerate(line.sections):
         t, sd = points[s.id]
-        note = _tamping_note(line, s)
+        note = "; ".join(n for n in (_tamping_note(line, s), _drop_note(line, s, config), _low_sd_note(line, s))
+                         if n)
         if not line.measurements(s.id):
             fit = SectionFit(s.id, "no history")
         elif s.id in need:
@@ -295,7 +311,8 @@ def history_fit(config: LineConfig) -> HistoryFit:
             fit, cdf_j = _fit_section(s, t, sd, g, config)
             if cdf_j is not None:
                 cdf[j], rough[j] = cdf_j, g.roughness
-            note = "; ".join(n for n in (note, _given_note(s, fit, config)) if n)
+            poor = "" if "drops from" in note else _poor_fit_note(fit, config)
+            note = "; ".join(n for n in (note, _given_note(s, fit, config), poor) if n)
         elif len(sd) >= 1:
             fit = SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3)
         else:
@@ -342,6 +359,45 @@ def _tamping_note(line: LineDescription, s: Section) -> str:
             f"{s.years_since_tamping:g} puts on {tamped.isoformat()}: {b1.sd_mm:g}, {b2.sd_mm:g} mm before it "
             f"({b1.date}, {b2.date}), {a1.sd_mm:g} mm after ({a1.date}); check years_since_tamping (the fit "
             f"uses the runs after that date only)")
+
+
+def _drop_note(line: LineDescription, s: Section, config: LineConfig) -> str:
+    """Where the SD drops between two runs after the stated last tamping by more than :data:`FIT_DROP_ERRORS`
+    times the fit's error and :data:`FIT_DROP_SHARE` of the SD before: a tamping the file does not state, a
+    sentence naming the runs (the largest such drop); else ""."""
+    ms = [m for m in line.measurements(s.id) if _after_tamping(line, s, m)]
+    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    drops = [(a.sd_mm - b.sd_mm, a, b) for a, b in zip(ms[:-1], ms[1:], strict=True)
+             if a.sd_mm - b.sd_mm > max(FIT_DROP_ERRORS * error_mm, FIT_DROP_SHARE * a.sd_mm)]
+    if not drops:
+        return ""
+    _, a, b = max(drops, key=lambda d: d[0])
+    tamped = dt.date.fromisoformat(line.as_of) - dt.timedelta(days=round(s.years_since_tamping * DAYS_PER_YEAR))
+    return (f"the SD drops from {a.sd_mm:g} to {b.sd_mm:g} mm between the runs of {a.date} and {b.date}, after "
+            f"the last tamping that years_since_tamping {s.years_since_tamping:g} puts on {tamped.isoformat()}: a "
+            f"tamping the file does not state? The fit runs one settlement curve through the drop; check "
+            f"years_since_tamping")
+
+
+def _poor_fit_note(fit: SectionFit, config: LineConfig) -> str:
+    """Where the fitted curve misses the section's runs by more than :data:`FIT_POOR_ERRORS` times the fit's
+    error (RMS): a sentence saying so; else ""."""
+    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    if fit.status != "fitted" or not fit.residual_mm > FIT_POOR_ERRORS * error_mm:
+        return ""
+    return (f"the fitted curve misses the measured SD by {fit.residual_mm:.3f} mm RMS, more than "
+            f"{FIT_POOR_ERRORS:g} x the fit's error of {error_mm:.3f} mm: the runs since the last tamping follow no "
+            f"one settlement curve; check their dates and SDs and years_since_tamping")
+
+
+def _low_sd_note(line: LineDescription, s: Section) -> str:
+    """Where every run of the section measures an SD below :data:`FIT_LOW_SD_MM`: a sentence asking for the
+    unit; else ""."""
+    ms = line.measurements(s.id)
+    if not ms or max(m.sd_mm for m in ms) >= FIT_LOW_SD_MM:
+        return ""
+    return (f"every run measures an SD below {FIT_LOW_SD_MM:g} mm (at most {max(m.sd_mm for m in ms):g} mm), less "
+            f"than tamped track measures (about 0.5 mm and more): is sd_mm given in cm?")
 
 
 def _after_tamping(line: LineDescription, s: Section, m: Any) -> bool:
