@@ -16,7 +16,21 @@ from trackenv_agents.cli import main
 from trackenv_agents.planning import plan_line
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "envs"))
-from test_line_file import FAULTS, write  # noqa: E402  (the malformed files of the loader's tests)
+from test_line_file import FAULTS, HISTORY, LINE, write  # noqa: E402  (the malformed files of the loader's tests)
+
+#: The loader's test line with section B (a transition) measured rough (SD 2.6 -> 3.8 mm over two years): the
+#: default grouped threshold (trigger 3.5 mm) calls a campaign on it in the first quarter.
+ROUGH_B = HISTORY.replace("B,2023-06-01,1.2,4\nB,2024-06-01,1.5,5\nB,2025-06-01,1.9,6",
+                          "B,2023-06-01,2.6,8\nB,2024-06-01,3.2,10\nB,2025-06-01,3.8,12")
+FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
+
+
+@pytest.fixture(scope="module")
+def rough_plan(tmp_path_factory):
+    """Half a year of the grouped threshold in two futures on the line with a rough section B, and its files."""
+    folder = tmp_path_factory.mktemp("rough")
+    plan = plan_line(write(folder, history=ROUGH_B), years=0.5, futures=2, **FAST)
+    return plan, plan.write(folder / "plan")
 
 
 def test_plan_writes_its_table_csv_and_plot(tmp_path, capsys):
@@ -28,6 +42,7 @@ def test_plan_writes_its_table_csv_and_plot(tmp_path, capsys):
     assert payload["quarters"][0]["from"] == "2026-01-01" and payload["quarters"][1]["from"] == "2026-04-02"
     assert payload["cost_keur"]["p10"] <= payload["cost_keur"]["mean"] <= payload["cost_keur"]["p90"]
     assert payload["fit"]["fitted"] == 2
+    assert list(payload)[:3] == ["line", "as_of", "line_summary"]  # what the plan was run on comes first
     with open(payload["files"]["costs_csv"]) as f:
         rows = list(csv.DictReader(f))
     assert [r["quarter"] for r in rows] == ["1", "2"]
@@ -191,3 +206,123 @@ def test_the_fits_warnings_come_after_the_progress_bar_and_in_the_json(tmp_path,
     assert main([*argv, "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
     assert len(payload["warnings"]) == 1 and "rate_factor 1.7 contradicts the history" in payload["warnings"][0]
+
+
+def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
+    """The table's two lines after the first and the JSON's ``line_summary`` say what the plan ran on, in the
+    file's units, so a unit mistake in the file shows: sections, length, speed, tonnage and freight ranges, axle
+    load, known zones, and the last recording-car run with its age; a file without a history says so."""
+    from trackenv.envs.line_file import load_line
+    from trackenv_agents.planning import line_summary
+
+    plan = plan_line(write(tmp_path), years=0.5, futures=1, **FAST)
+    summary = plan.to_dict()["line_summary"]
+    assert summary == {"sections": 4, "length_km": 0.8, "speed_kmh": [100.0, 100.0], "annual_mgt": [15.0, 30.0],
+                       "freight_share": [0.4, 0.4], "freight_axle_load_t": 22.5, "transitions": 1,
+                       "switches_crossings": 1, "known_wet": 1,
+                       "last_recording": {"date": "2025-12-01", "years_before": pytest.approx(31 / 365.25)}}
+    read = plan.table().splitlines()[1:3]
+    assert read[0] == ("read from the file: 4 sections, 0.80 km; speed 100 km/h; tonnage 15-30 MGT/year; freight "
+                       "share 0.40, freight axle load 22.5 t")
+    assert read[1] == ("  1 transition, 1 switch or crossing, 1 known wet zone; last recording-car run 2025-12-01 "
+                       "(0.08 years before as_of)")
+    (tmp_path / "bare").mkdir()
+    bare = write(tmp_path / "bare", line=LINE.replace("history: history.csv\n", ""), history=None)
+    assert line_summary(load_line(bare))["last_recording"] is None
+
+
+def test_the_plan_records_the_state_each_quarter_decided_on(rough_plan, tmp_path):
+    """Per quarter and section the plan keeps the means over the futures of what the policy observed (the measured
+    SD and peak, their age) and of the true SD and peak before the quarter's work: the first quarter's are the
+    reset's observation and info; B, tamped in the first quarter, is smoother in the second, while its measurement
+    (no recording run until the fourth quarter) is the same, a quarter older."""
+    from gymnasium.vector import AutoresetMode
+
+    from trackenv.envs.line import TampingLineVectorEnv
+    from trackenv.physics.geometry import QualityLimits
+    from trackenv_agents.planning import STATE_COLUMNS, plan_config
+
+    plan, files = rough_plan
+    assert set(plan.state) == set(STATE_COLUMNS) and all(v.shape == (2, 4) for v in plan.state.values())
+    env = TampingLineVectorEnv(2, plan_config(write(tmp_path, history=ROUGH_B), years=0.5, **FAST),
+                               autoreset_mode=AutoresetMode.NEXT_STEP)
+    obs, info = env.reset(seed=[0, 1])
+    env.close()
+    assert np.allclose(plan.state["measured_sd_mm"][0], obs["section_sd"].mean(axis=0))
+    assert np.allclose(plan.state["peak_mm"][0], info["section_peak_mm"].mean(axis=0))
+    assert plan.recommended[0, 1] == 1 and plan.share[0, 1] == 1.0  # B tamped in every future
+    assert plan.state["sd_mm"][1, 1] < plan.state["sd_mm"][0, 1] - 1.0
+    assert np.allclose(plan.state["measured_sd_mm"][1], plan.state["measured_sd_mm"][0])
+    assert np.allclose(plan.state["measurement_age_years"], [[0.0] * 4, [0.25] * 4])
+    limits = QualityLimits.en13848().for_speed(100 / 3.6)  # the test line's speed band
+    assert plan.limits_mm["sd_alert"] == pytest.approx([limits.sd_alert_m * 1e3] * 4)
+    assert plan.limits_mm["immediate_action"] == pytest.approx([limits.immediate_action_m * 1e3] * 4)
+    quarter = plan.to_dict()["quarters"][0]
+    assert quarter["state"]["sd_mm"] == pytest.approx(plan.state["sd_mm"][0], abs=1e-3)
+    with open(files["plan_csv"]) as f:
+        row = next(r for r in csv.DictReader(f) if r["quarter"] == "1" and r["section"] == "B")
+    assert float(row["measured_sd_mm"]) == pytest.approx(plan.state["measured_sd_mm"][0, 1], abs=1e-3)
+    assert {"measured_peak_mm", "measurement_age_years", "sd_mm", "peak_mm"} <= set(row)
+
+
+def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan, monkeypatch):
+    """For each section recommended in the first quarter a line of its measured SD and peak against the limits of
+    its speed band, under the rule's thresholds (at most ``SECTION_LINES`` per choice, the rest counted); then when
+    the model's next recording run falls (after a plan of half a year; read in the fifth quarter of a longer one);
+    and what the geometry cost is."""
+    import dataclasses
+
+    from trackenv_agents import planning
+
+    plan, _ = rough_plan
+    text = plan.table()
+    b = plan.state["measured_sd_mm"][0, 1]
+    assert ("Q1's recommended sections as the policy saw them (grouped-threshold: trigger_mm 3.5, include_mm 1.75), "
+            "means over the futures [mm]:") in text
+    assert (f"  B (transition) tamp: measured SD {b:.2f} (SD alert 2.25), peak "
+            f"{plan.state['measured_peak_mm'][0, 1]:.2f} (alert 12, intervention 15.5, immediate action 26), "
+            "0.00 years old; true SD") in text
+    assert "recording-car runs in the model: at as_of (read in Q1), then every 4 quarters: the next 2027-01-01, " \
+           "after the plan" in text
+    longer = dataclasses.replace(plan, dates=plan.dates * 3)  # six quarters
+    assert longer.recording_runs() == [(4, "2027-01-01"), (8, "2028-01-01")]
+    assert longer.recording_note().endswith("every 4 quarters: 2027-01-01 (read in Q5)")
+    assert "geometry is a notional cost of poor track geometry" in text
+    assert list(np.flatnonzero(plan.recommended[0])) == [1, 3]  # B and D: D above include_mm
+    monkeypatch.setattr(planning, "SECTION_LINES", 1)
+    capped = plan.table()
+    assert "  B (transition) tamp:" in capped and "  D (known wet) tamp:" not in capped
+    assert "  ... and 1 more tamp (plan.csv, --json)" in capped
+
+
+def test_the_table_names_the_sections_asked_for_but_not_done(tmp_path):
+    """A section the rule asks for that the env masks (D, rough but tamped a quarter ago: at most one tamping per
+    step, ``min_steps_between_tampings``) is not recommended; the table gives its numbers under their own line, and
+    the JSON lists it per quarter."""
+    from test_line_file import SECTIONS
+
+    sections = SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.25,3")
+    plan = plan_line(write(tmp_path, sections=sections, history=ROUGH_B + "D,2025-12-01,4.0,10\n"), years=0.5,
+                     futures=2, **FAST)
+    assert plan.recommended[0, 3] == 0 and plan.recommended[1, 3] == 1  # done a quarter later
+    assert plan.unmet_share is not None and list(plan.unmet_share[0]) == [0.0, 0.0, 0.0, 1.0]
+    text = plan.table()
+    assert "Q1's sections asked for by the policy in at least half the futures but not done" in text
+    assert f"  D (known wet) asked, not done: measured SD {plan.state['measured_sd_mm'][0, 3]:.2f} (SD alert" in text
+    assert plan.to_dict()["quarters"][0]["asked_not_done"] == ["D"]
+
+
+def test_the_costs_come_in_their_parts_and_the_plot_names_sections_and_dates(rough_plan):
+    """costs.csv carries each cost part's mean per quarter (they add up to the quarter's mean cost); the plot labels
+    the line with the file's section ids and the cost panel with dates."""
+    plan, files = rough_plan
+    with open(files["costs_csv"]) as f:
+        rows = list(csv.DictReader(f))
+    parts = [k for k in rows[0] if k.endswith("_mean_keur") and k != "cost_mean_keur"]
+    assert {"possession_mean_keur", "tamping_mean_keur", "geometry_mean_keur"} <= set(parts)
+    for row in rows:
+        assert sum(float(row[k]) for k in parts) == pytest.approx(float(row["cost_mean_keur"]), abs=1e-2)
+    assert float(rows[0]["tamping_mean_keur"]) > 0 and float(rows[1]["tamping_mean_keur"]) == 0
+    axes = plan.figure().axes
+    labels = {t.get_text() for ax in [*axes, *(c for a in axes for c in a.child_axes)] for t in ax.get_xticklabels()}
+    assert {"A", "B", "C", "D"} <= labels and {"2026-01-01", "2026-07-03"} <= labels
