@@ -33,15 +33,15 @@ from __future__ import annotations
 
 import copy
 import functools
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from trackenv.envs.choices import INTERVENTIONS, IS_TRACK_WORK, action_type_for, code
+from trackenv.envs.choices import CHOICES, INTERVENTIONS, IS_TRACK_WORK, action_type_for, code
 from trackenv.envs.env import TrackVectorEnv
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
@@ -169,12 +169,14 @@ def bind_policy(policy: Any, config: ProblemConfig) -> Any:
     return bind(config) if callable(bind) else policy
 
 
-def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...]) -> np.ndarray:
+def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...], top: int) -> np.ndarray:
     """The actions a policy returned for a batch of envs, as the vector env takes them (one row per env), before
-    the cast to integers could turn 0.7 or NaN into "wait": ValueError naming the policy for another size or for
-    values that are not whole numbers (the env refuses whole numbers out of range itself)."""
+    the cast to integers could turn 0.7 or NaN into "wait": ValueError naming the policy for another shape (a
+    transposed or flattened batch would be read row by row as other envs' actions), for values that are not
+    whole numbers, or for whole numbers outside [0, ``top``] (1: tamp or wait; the number of sections: one
+    section's number; the last choice code)."""
     a = np.asarray(action)
-    if a.size != math.prod(shape):
+    if a.shape != shape:
         raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions of shape {a.shape} for a batch "
                          f"of {shape[0]} envs; it is given a batch of observations (one row per env) and must "
                          f"return one action per row, shape {shape}")
@@ -187,7 +189,33 @@ def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...]) -> np.nda
     if bad.any():
         raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions that are not whole numbers "
                          f"(0 wait, 1 tamp, or a choice code): {a.ravel()[bad.ravel()][:8].tolist()}")
-    return values.reshape(shape)
+    out = (values < 0) | (values > top)
+    if out.any():
+        raise ValueError(f"policy {policy_name(policy)!r}: predict returned actions outside [0, {top}]: "
+                         f"{a.ravel()[out.ravel()][:8].tolist()}")
+    return values
+
+
+def _predict(policy: Any, obs: dict[str, np.ndarray], state: Any, episode_start: np.ndarray) -> tuple[Any, Any]:
+    """``policy.predict`` on a batch, checked to return SB3's pair (actions, state): a bare array would unpack
+    into its first two rows."""
+    out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True)
+    if not (isinstance(out, tuple) and len(out) == 2):
+        raise ValueError(f"policy {policy_name(policy)!r}: predict must return a pair (actions, state) as "
+                         f"stable-baselines3's does (state None for a policy without memory), got "
+                         f"{type(out).__name__}")
+    return out
+
+
+def _checked_policies(policies: Sequence[Any]) -> None:
+    """ValueError naming the first entry of ``policies`` without SB3's ``predict`` (a class instead of an
+    instance, a path instead of a loaded model)."""
+    for p in policies:
+        if isinstance(p, type) or not callable(getattr(p, "predict", None)):
+            hint = (" (load a saved model first)" if isinstance(p, (str, Path))
+                    else " (a class: give an instance of it)" if isinstance(p, type) else "")
+            raise ValueError(f"policy {p!r} has no predict(observation, state, episode_start, deterministic): a "
+                             f"policy is an object with stable-baselines3's predict{hint}")
 
 
 def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
@@ -226,11 +254,11 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
         actions = np.zeros(n, dtype=np.int64)
     else:
         actions = np.zeros((n, cfg.n_sections), dtype=np.int8)
+    top = {"discrete": cfg.n_sections, "choices": len(CHOICES) - 1}.get(action_type, 1)
     for t in range(cfg.horizon_steps):
         for p, idx in groups.items():
-            a, states[p] = policies[p].predict(_take(obs, idx), state=states[p],
-                                               episode_start=np.full(idx.size, t == 0), deterministic=True)
-            actions[idx] = _checked_actions(policies[p], a, actions[idx].shape)
+            a, states[p] = _predict(policies[p], _take(obs, idx), states[p], np.full(idx.size, t == 0))
+            actions[idx] = _checked_actions(policies[p], a, actions[idx].shape, top)
         obs, r, _, trunc, info = env.step(actions)
         rewards += r
         for k in keys:
@@ -291,6 +319,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
         raise ValueError("seeds must not be empty")
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size!r}")
+    _checked_policies(policies)
     bound = [bind_policy(p, cfg) for p in policies]
     slots = [(p, s) for p in range(len(bound)) for s in seeds]
     chunks = [slots[i:i + batch_size] for i in range(0, len(slots), batch_size)]

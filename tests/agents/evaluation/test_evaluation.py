@@ -211,16 +211,19 @@ def test_the_machine_steps_of_a_network_are_those_its_env_reports():
 
 
 class _Constant:
-    """A policy of the harness's interface that returns ``value`` for every section (or one row: ``batched=False``)."""
+    """A policy of the harness's interface that returns ``value`` for every section (or one row: ``batched=False``;
+    the batch transposed or flat: ``layout``; the actions alone, without the state: ``pair=False``)."""
 
     name = "constant"
 
-    def __init__(self, value, batched: bool = True) -> None:
-        self.value, self.batched = value, batched
+    def __init__(self, value, batched: bool = True, layout: str = "rows", pair: bool = True) -> None:
+        self.value, self.batched, self.layout, self.pair = value, batched, layout, pair
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         n, s = obs["section_sd"].shape
-        return (np.full((n, s), self.value) if self.batched else np.zeros(s)), state
+        a = np.full((n, s), self.value) if self.batched else np.zeros(s)
+        a = {"rows": a, "transposed": a.T, "flat": a.ravel()}[self.layout]
+        return (a, state) if self.pair else a
 
 
 @pytest.mark.parametrize("policy, message", [
@@ -228,6 +231,15 @@ class _Constant:
     (_Constant(np.nan), r"policy 'constant': predict returned actions that are not whole numbers .*\[nan"),
     (_Constant(0, batched=False), r"policy 'constant': predict returned actions of shape \(6,\) for a batch of 2 "
                                   r"envs; .* shape \(2, 6\)"),
+    # a transposed or flat batch has the right size, and was read row by row as other envs' actions
+    (_Constant(0, layout="transposed"), r"policy 'constant': predict returned actions of shape \(6, 2\)"),
+    (_Constant(0, layout="flat"), r"policy 'constant': predict returned actions of shape \(12,\)"),
+    (_Constant(2), r"policy 'constant': predict returned actions outside \[0, 1\]: \[2"),
+    (_Constant(-1), r"policy 'constant': predict returned actions outside \[0, 1\]: \[-1"),
+    # the actions alone: two envs' rows unpacked into "actions" and "state"
+    (_Constant(0, pair=False), r"policy 'constant': predict must return a pair \(actions, state\)"),
+    (_Constant, r"policy <class .*_Constant'> has no predict.*\(a class: give an instance of it\)"),
+    ("runs/ppo/model.zip", r"has no predict.*\(load a saved model first\)"),
 ])
 def test_a_policys_bad_actions_are_refused_naming_it_not_cast_to_wait(policy, message):
     """The harness casts actions to integers for the vector env: 0.7 or NaN became "wait" (scored as a policy that
