@@ -221,10 +221,10 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
     elif args.policy == "agent":
         raise UsageError(f"no trained line policy at {path}; train one (experiments/train_line.py) and pass --model")
     if args.policy == "all":
-        from .evaluation.line_compare import scenario_config, scenario_of
+        from .evaluation.line_compare import env_config
         from .rules.model_predictive import ModelPredictive
 
-        if ModelPredictive.unfit_for(scenario_config(scenario_of(args.env))) is None:
+        if ModelPredictive.unfit_for(env_config(args.env)) is None:
             out[ModelPredictive.name] = ModelPredictive()
     return out
 
@@ -235,14 +235,14 @@ def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
     its observation statistics) or an RLlib run, named by its folder and file, only on the line it was trained on,
     or a network of that line (else one line saying which fields differ)."""
     from .evaluation.leaderboard import fitting_agents
-    from .evaluation.line_compare import scenario_config, scenario_of
+    from .evaluation.line_compare import env_config
     from .learning.baselines import baseline_kind, load_baseline
 
     kind = baseline_kind(path)
     if kind == "line":
         return {LINE_AGENT_NAME: load_baseline(path, name=LINE_AGENT_NAME)}
     policy = load_baseline(path, name=f"{path.parent.name}/{path.stem}" if path.suffix else path.name)
-    fit, unfit = fitting_agents({policy.name: policy}, scenario_config(scenario_of(args.env), **engine_overrides(args)))
+    fit, unfit = fitting_agents({policy.name: policy}, env_config(args.env, **engine_overrides(args)))
     if unfit:
         raise UsageError(f"--model {path} cannot be scored on {args.env}: {unfit[policy.name]}")
     return fit
@@ -259,9 +259,10 @@ def _executor(args: argparse.Namespace) -> Any:
 
 
 def engine_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """The config fields ``--engine`` and ``--pass-reuse-mm`` set (none where they are not given: the preset's,
-    the classic engine without reuse, with which every saved result was computed)."""
-    out: dict[str, Any] = {}
+    """The config fields ``--set`` (a field of the scenario's config each), ``--engine`` and ``--pass-reuse-mm``
+    set (none where they are not given: the preset's, the classic engine without reuse, with which every saved
+    result was computed)."""
+    out: dict[str, Any] = dict(getattr(args, "set", None) or [])
     if args.engine is not None:
         out["engine"] = args.engine
     if args.pass_reuse_mm is not None:
@@ -309,6 +310,8 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
     agents: dict[str, str] = {}
     every_rule = False
     for item in (x.strip() for x in text.split(",")):
+        if not item:  # ("rules," or "a,,b": nothing between the commas)
+            continue
         if item == "rules":
             every_rule = True
         elif item in rule_names:
@@ -326,6 +329,10 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
                 raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
             cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
             agents.update({p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found})
+        elif item.endswith(".py"):
+            raise UsageError(f"--policies {item}: the command takes trained policies by path (.zip, or a folder of "
+                             "experiments/train_rllib.py), not Python code; score a policy object from Python with "
+                             "trackenv_agents.evaluation.leaderboard.run_leaderboard(agents={'name': policy})")
         elif item.endswith(".zip") or Path(item).exists():
             from .learning.baselines import baseline_kind
 
@@ -338,7 +345,7 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
             agents[item if taken else name] = item
         else:
             raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{', '.join(SHIPPED_AGENTS)}, {ModelPredictive.name} or the path of a "
+                             f"{', '.join(SHIPPED_AGENTS)}, {ModelPredictive.name}, 'baselines' or the path of a "
                              "trained policy (.zip, or a folder of experiments/train_rllib.py)")
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
@@ -365,7 +372,7 @@ def _stdout_to_stderr() -> Iterator[None]:
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     """`trackenv leaderboard`: every policy on every scenario of the suite, scored against the best tuned rule and
     the hindsight bound (agents/evaluation/leaderboard.py); writes DIR/leaderboard.json and DIR/leaderboard.md."""
-    from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard
+    from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard, write_leaderboard
     from .evaluation.line_compare import parse_seeds, scenario_of
     from .rules.problems import every_rule
 
@@ -388,7 +395,8 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     try:
         with _stdout_to_stderr():
             payload = run_leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
-                                      out_dir=out, executor=executor, progress=not args.json, **overrides)
+                                      out_dir=out, executor=executor, progress=not args.json, write=False,
+                                      **overrides)
     finally:
         if executor is not None:
             executor.close()
@@ -396,12 +404,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     payload["wall_time_s"] = time.perf_counter() - t0
     payload["ray"] = args.ray_address or ("local" if args.ray else None)
     table = format_leaderboard(payload)
-    out.mkdir(parents=True, exist_ok=True)
-    from trackenv._json import json_default
-
-    (out / "leaderboard.json").write_text(json.dumps(payload, indent=1, default=json_default) + "\n")
-    (out / "leaderboard.md").write_text(table)
-    payload["files"] = [str(out / "leaderboard.json"), str(out / "leaderboard.md")]
+    payload["files"] = write_leaderboard(payload, out)
     _emit(args, payload, f"{table}\nwrote {', '.join(payload['files'])} in {payload['wall_time_s']:.0f} s")
     return 0
 
@@ -551,7 +554,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     overrides = engine_overrides(args)
     if args.resume is not None:
         if overrides:
-            raise UsageError("--engine and --pass-reuse-mm: a resumed run keeps the config it was started with")
+            raise UsageError("--engine, --pass-reuse-mm and --set: a resumed run keeps the config it was started "
+                             "with")
         return cmd_train_resume(args)
     if args.env is not None and args.env != DEFAULT_ENV_ID:
         return cmd_train_line(args, overrides)
@@ -628,6 +632,21 @@ def _hyperparam_defaults() -> dict[str, Any]:
         return {}
 
 
+def _field_value(text: str) -> tuple[str, Any]:
+    """``--set FIELD=VALUE``: the field's name and its value read as YAML (a number, true/false, a list as a
+    tuple, else the text); the config checks the name and the value when it is built."""
+    import yaml
+
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip() or not value.strip():
+        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (e.g. annual_mgt=30), got {text!r}")
+    try:
+        parsed = yaml.safe_load(value)
+    except yaml.YAMLError:
+        parsed = value
+    return name.strip(), tuple(parsed) if isinstance(parsed, list) else parsed
+
+
 def _widths(text: str) -> list[int]:
     """``--widths``: comma-separated kernel widths, each one of the kernel's (checked when the command runs)."""
     try:
@@ -655,6 +674,10 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--out", default=None, metavar="DIR", help=f"output folder (default: {default})")
 
     def engine(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--set", type=_field_value, action="append", default=None, metavar="FIELD=VALUE",
+                        help="change a field of the scenario's config (trackenv.envs.LineConfig; on the network "
+                             "its own fields or its line's), e.g. --set annual_mgt=30 --set capacity=4; the tuned "
+                             "rules keep the preset's parameters, and the JSON records the config")
         sp.add_argument("--engine", choices=ENGINES, default=None,
                         help="how the passes run: classic (every preset's default, with which every saved result "
                              "was computed) or fast (a converged start and shorter windows: a line step's costs "

@@ -232,6 +232,7 @@ class LinePlan:
     unmet_share: np.ndarray | None = None
     steps_per_year: int = 4
     measurement_interval: int = 4
+    config_changes: dict[str, Any] = field(default_factory=dict)
 
     @property
     def share(self) -> np.ndarray:
@@ -293,6 +294,7 @@ class LinePlan:
             "line": self.line.name, "as_of": self.line.as_of, "line_summary": line_summary(self.line),
             "policy": self.policy, "policy_params": dict(self.policy_params), "scenario": self.scenario,
             "years": self.years, "futures": self.futures, "seed": self.seed, "engine": self.engine,
+            "config_changes": dict(self.config_changes),
             "pass_reuse_mm": self.pass_reuse_tolerance_m * 1e3, "section_ids": ids,
             "limits_mm": {k: _rounded(v) for k, v in self.limits_mm.items()},
             "recording_runs": [date for _, date in self.recording_runs()], "quarters": quarters,
@@ -306,12 +308,13 @@ class LinePlan:
         """The plan as text: what it was run on, per quarter its mean cost and the sections recommended for each
         choice, the first quarter's recommended sections against their limits, when the model's recording car
         runs, then the cost forecast."""
-        from .evaluation.line_compare import engine_note
+        from .evaluation.line_compare import changes_note, engine_note
 
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
         lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {_years(self.years)}, "
-                 f"{self.futures} futures{engine}", *summary_lines(d["line_summary"]),
+                 f"{self.futures} futures{engine}{changes_note(self.config_changes)}",
+                 *summary_lines(d["line_summary"]),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
@@ -584,4 +587,5 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
                     cfg.engine, cfg.pass_reuse_tolerance_m, part_costs=run.part_costs, state=run.state,
                     limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
                     unmet_share=run.unmet_share,
-                    steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval)
+                    steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
+                    config_changes={k: v for k, v in config.items() if k not in ("engine", "pass_reuse_tolerance_m")})

@@ -156,6 +156,47 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
     assert seen["executor"] is None and json.loads(capsys.readouterr().out)["ray"] is None
 
 
+def test_set_changes_a_field_of_the_scenario_and_the_table_says_so(tmp_path, capsys):
+    """``--set FIELD=VALUE`` scores a variant of the preset from the command line (it had no way to): the JSON
+    records the config and what changed, the table's first line names the changes; a misspelt field or a value out
+    of range is one line naming it."""
+    argv = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:1", "--rules", "grouped-threshold",
+            "--set", "horizon_years=1", "--out", str(tmp_path)]
+    assert main([*argv, "--json"]) == 0
+    base = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--set", "annual_mgt=30", "--json"]) == 0
+    heavy = json.loads(capsys.readouterr().out)
+    assert heavy["config"]["annual_mgt"] == 30 and base["config"]["annual_mgt"] != 30
+    assert heavy["config_changes"] == {"annual_mgt": 30.0, "horizon_years": 1.0}
+    cost = {r["policy"]: r["mean_cost"] for r in base["results"]}
+    assert all(r["mean_cost"] != cost[r["policy"]] for r in heavy["results"])
+    assert main([*argv, "--set", "annual_mgt=30"]) == 0
+    assert capsys.readouterr().out.splitlines()[0].endswith("; changed: annual_mgt=30.0, horizon_years=1.0")
+    for bad, message in (("annual_mgtt=30", "unknown LineConfig key(s) ['annual_mgtt']"),
+                         ("annual_mgt=-3", "annual_mgt must lie in [0.1, 200], got -3")):
+        assert main([*argv, "--set", bad]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    with pytest.raises(SystemExit):
+        main([*argv, "--set", "annual_mgt"])
+    assert "--set: expected FIELD=VALUE (e.g. annual_mgt=30), got 'annual_mgt'" in capsys.readouterr().err
+
+
+def test_plan_takes_set_and_says_what_changed(tmp_path, capsys):
+    """``trackenv plan --set capacity=3`` plans with three sections a possession and says so; a field the line file
+    sets is refused naming the file's value."""
+    from trackenv.lines import EXAMPLE
+
+    argv = ["plan", str(EXAMPLE), "--years", "0.25", "--futures", "1", "--engine", "fast", "--pass-reuse-mm", "1",
+            "--out", str(tmp_path)]
+    assert main([*argv, "--set", "capacity=3", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["config_changes"] == {"capacity": 3}
+    assert all(len(q["tamp"]) <= 3 for q in payload["quarters"])
+    assert main([*argv, "--set", "annual_mgt=3"]) == 2
+    assert "annual_mgt=3 conflicts with the line file" in capsys.readouterr().err
+
+
 def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(monkeypatch, capsys, tmp_path):
     """``--engine`` and ``--pass-reuse-mm`` (mm on the command line, metres in the config) reach `evaluate`'s
     comparison as config overrides and the table's first line names them; `train` builds the line's config (and
@@ -174,8 +215,8 @@ def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(mo
     def fake(env_id, **kw):
         seen.clear()
         seen.update(kw)
-        config = lc.scenario_config(lc.scenario_of(env_id), **{k: v for k, v in kw.items() if k in
-                                                               ("engine", "pass_reuse_tolerance_m")}).to_dict()
+        config = lc.env_config(env_id, **{k: v for k, v in kw.items() if k in
+                                          ("engine", "pass_reuse_tolerance_m")}).to_dict()
         return {"env": env_id, "scenario": "small", "seeds": [0], "tuned_from": "shipped", "results": [],
                 "config": config}
 
@@ -198,7 +239,7 @@ def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(mo
     monkeypatch.setattr(cli, "_line_payload", lambda path, wall, out: ({}, ""))
     assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--engine", "fast", "--pass-reuse-mm", "0.5"]) == 0
     assert configs[-1].engine == "fast" and configs[-1].pass_reuse_tolerance_m == pytest.approx(5e-4)
-    assert configs[-1].n_sections == lc.scenario_config("small").n_sections
+    assert configs[-1].n_sections == lc.env_config("trackenv/TampingLineSmall-v0").n_sections
     assert main(["train", "--env", "trackenv/TampingLineSmall-v0"]) == 0
     assert configs[-1] == "small"  # no override: the preset by name, as before
     monkeypatch.setattr(tamping, "train", lambda **kw: configs.append(kw["config"]) or tmp_path / "m.zip")
@@ -471,7 +512,13 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
      "rules must name some of small's rules ['budgeted-worst-first',"),
     (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
     (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
-    (["--policies", f"rules,{HERE / 'conftest.py'}"], "conftest.py: a trained policy is a .zip (stable-baselines3) or"),
+    (["--policies", f"rules,{HERE / 'conftest.py'}"],
+     "conftest.py: the command takes trained policies by path (.zip, or a folder of experiments/train_rllib.py), "
+     "not Python code; score a policy object from Python with "
+     "trackenv_agents.evaluation.leaderboard.run_leaderboard(agents={'name': policy})"),
+    (["--policies", "rules,,no-such-agent,"], "--policies: unknown policy 'no-such-agent'; give 'rules'"),
+    (["--policies", "rules,no-such-agent"], "'baselines' or the path of a trained policy"),
+    (["--env", "TampingLineSmall-v0"], "did you mean 'trackenv/TampingLineSmall-v0'?"),
     (["--pass-reuse-mm", "3"], "--pass-reuse-mm must be in [0, 2] mm, got 3"),
 ])
 def test_leaderboard_bad_input_is_one_line_and_status_2(argv, message, capsys, tmp_path):

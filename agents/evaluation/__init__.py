@@ -30,12 +30,12 @@ from .leaderboard import (
 from .line_compare import (
     SECTION_CLASSES,
     class_breakdown,
+    env_config,
     format_line_table,
     line_comparison,
     parse_seeds,
     plot_line_episode,
     run_calibration,
-    scenario_config,
     scenario_of,
 )
 from .line_hindsight import (
@@ -64,7 +64,7 @@ __all__ = [
     "tune", "tune_many", "plot_comparison", "RayExecutor",
     # the comparison of policies on a preset (.line_compare)
     "SECTION_CLASSES", "class_breakdown", "format_line_table",
-    "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "scenario_config",
+    "line_comparison", "parse_seeds", "plot_line_episode", "run_calibration", "env_config",
     "scenario_of",
     # the line's hindsight bound (.line_hindsight)
     "RECORDING_DESIGNS", "TrueStateRule", "hindsight_bound", "hindsight_bounds", "recorded_rule_schedules",

@@ -44,7 +44,7 @@ import functools
 import hashlib
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +54,16 @@ from trackenv.envs.network import NetworkConfig
 
 from ..rules.network import NETWORK_DISPATCH
 from .harness import EvaluationResult, evaluate_many
-from .line_compare import SECTION_CLASSES, class_breakdown, engine_note, scenario_config, scenario_of
+from .line_compare import (
+    SECTION_CLASSES,
+    changes_note,
+    class_breakdown,
+    config_changes,
+    engine_note,
+    env_config,
+    parse_seeds,
+    scenario_of,
+)
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
 __all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "NETWORK_DISPATCH", "SAVED_SEARCHES",
@@ -364,7 +373,8 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
                     agents: dict[str, Any] | None = None, seeds: Sequence[int] | None = None, bound: bool = True,
                     out_dir: str | Path = "results/leaderboard", executor: Any = None, batch_size: int = 32,
                     progress: bool = False, searches: Path | None = SAVED_SEARCHES,
-                    shipped_bounds: Path | None = SHIPPED_BOUNDS, **overrides: Any) -> dict[str, Any]:
+                    shipped_bounds: Path | None = SHIPPED_BOUNDS, write: bool = True,
+                    **overrides: Any) -> dict[str, Any]:
     """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; on each scenario
     those of its family, :func:`~trackenv_agents.rules.problems.rules_for`; default all tuned rules) and
     ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds`` (default
@@ -373,14 +383,25 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     scenario's config (e.g. a short ``horizon_years`` for tests, or the engine's options). An agent that does not
     fit a scenario (:func:`fitting_agents`) is left out there. The payload of the module docstring: "results" (one
     row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
-    "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and why), "config_overrides"."""
+    "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and why), "config_overrides",
+    "wall_time_s", and with ``write`` (default) "files": ``leaderboard.json`` and the page ``leaderboard.md``
+    (:func:`format_leaderboard`) written into ``out_dir``, which also keeps the bound's cache (``bounds/``), as
+    ``trackenv leaderboard --out`` does. ``envs``: ids (one id alone is taken as a list of one); ``seeds``: whole
+    numbers or an ``"A:B"`` text."""
     from ..rules.problems import every_rule, rules_for, tuned_params_for, tuned_rule
+
+    t0 = time.perf_counter()
+    envs = [envs] if isinstance(envs, str) else list(envs)
+    if isinstance(seeds, str):
+        seeds = parse_seeds(seeds)
+    elif seeds is not None and not isinstance(seeds, Iterable):
+        raise ValueError(f"seeds must be whole numbers (e.g. range(16), [0, 1]) or 'A:B', got {seeds!r}")
 
     unknown = [n for n in rules or () if n not in every_rule()]
     if unknown:
         raise ValueError(f"rules must be among {sorted(every_rule())}, got unknown {unknown}")
     names = {env_id: scenario_of(env_id) for env_id in envs}
-    configs = {env_id: scenario_config(name, **overrides) for env_id, name in names.items()}
+    configs = {env_id: env_config(env_id, **overrides) for env_id in envs}
     lines = {env_id: cfg.line_config if isinstance(cfg, NetworkConfig) else cfg for env_id, cfg in configs.items()}
     wanted_at = {env_id: [n for n in (rules if rules is not None else tuned_params_for(line)) if n in rules_for(line)]
                  for env_id, line in lines.items()}
@@ -425,7 +446,26 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         payload["best_rule"][env_id] = best.policy
         payload.setdefault("not_scored", {})[env_id] = unfit
         payload.setdefault("scenarios", {})[env_id] = name
+        payload.setdefault("config_changes", {})[env_id] = config_changes(env_id, cfg)
+    payload["wall_time_s"] = time.perf_counter() - t0
+    if write:
+        payload["files"] = write_leaderboard(payload, out_dir)
     return payload
+
+
+def write_leaderboard(payload: dict[str, Any], out_dir: str | Path) -> list[str]:
+    """Write ``payload`` (:func:`run_leaderboard`'s) as ``leaderboard.json`` and its page ``leaderboard.md``
+    (:func:`format_leaderboard`) into ``out_dir`` (made if missing); returns the two paths."""
+    from trackenv._json import json_default
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = [out / "leaderboard.json", out / "leaderboard.md"]
+    body = {k: v for k, v in payload.items() if k != "files"}
+    files[0].write_text(json.dumps({**body, "files": [str(f) for f in files]}, indent=1, default=json_default)
+                        + "\n")
+    files[1].write_text(format_leaderboard(payload))
+    return [str(f) for f in files]
 
 
 def _as_result(like: EvaluationResult, cost: np.ndarray, name: str) -> EvaluationResult:
@@ -464,9 +504,10 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
     for env_id, seeds in payload["seeds"].items():
         rows = [r for r in payload["results"] if r["env"] == env_id]
         b = payload["bound"][env_id]
+        changed = changes_note((payload.get("config_changes") or {}).get(env_id) or {})
         out += [f"### {env_id}", "",
                 f"{len(seeds)} held-out episodes (seeds {_seed_text(seeds)}); best tuned rule: "
-                f"{payload['best_rule'][env_id]}.", "",
+                f"{payload['best_rule'][env_id]}{changed}.", "",
                 "| policy | mean cost, k€ [95 % CI] | vs best rule, k€ (paired) [95 % CI] | normalised score [95 % CI] "
                 "| IA | tampings per section: " + " / ".join(short.values()) + " |",
                 "|---|---|---|---|---|---|"]

@@ -30,7 +30,8 @@ def scenario_of(env_id: str) -> str:
     try:
         spec = gym.spec(env_id)
     except gym.error.Error as exc:  # an unknown name or version: the user's input, not a crash
-        raise ValueError(f"{env_id!r} is not a registered env id ({exc})") from None
+        hint = f"; did you mean 'trackenv/{env_id}'?" if f"trackenv/{env_id}" in gym.registry else ""
+        raise ValueError(f"{env_id!r} is not a registered env id ({exc}){hint}") from None
     entry, kwargs = str(spec.entry_point), dict(spec.kwargs)
     if entry.endswith(":TampingNetwork"):
         return "network"
@@ -42,11 +43,19 @@ def scenario_of(env_id: str) -> str:
     return kwargs["scenario"]
 
 
-def scenario_config(name: str, **overrides: Any) -> LineConfig | NetworkConfig:
-    """The config of a preset named by :func:`scenario_of`, with ``overrides`` (fields of the line config, and on
-    the network its own fields): the default network (:class:`~trackenv.envs.network.NetworkConfig`) for
-    ``"network"``, else the line preset."""
-    return NetworkConfig.coerce(None, **overrides) if name == "network" else scenario(name, **overrides)
+def env_config(env_id: str, **overrides: Any) -> LineConfig | NetworkConfig:
+    """The config ``gym.make(env_id, **overrides)`` runs: the id's preset with the id's own registered arguments
+    (an id registered with ``gym.register`` over a preset keeps its changes) and ``overrides`` (fields of the line
+    config, and on the network its own fields; an unknown one is the env's ValueError naming the known ones)."""
+    import gymnasium as gym
+
+    scenario_of(env_id)  # a clear error for an id that is no preset with per-section actions
+    env = gym.make(env_id, disable_env_checker=True, **overrides)
+    try:
+        config: LineConfig | NetworkConfig = env.unwrapped.config  # type: ignore[attr-defined]
+        return config
+    finally:
+        env.close()
 
 
 def action_type_of(env_id: str) -> str:
@@ -95,7 +104,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     name = scenario_of(env_id)
     network = name == "network"
     action_type = "multibinary" if network else action_type_of(env_id)
-    cfg = scenario_config(name, **overrides)
+    cfg = env_config(env_id, **overrides)
     line_cfg = cfg.line_config if isinstance(cfg, NetworkConfig) else cfg
     if network and retune:
         raise ValueError("--retune: the network's rules take the tuned parameters of its line (NetworkRule); "
@@ -137,7 +146,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     rule_names = {policy_name(p) for p in pols[:len(pols) - len(extra or {})]}
     best_rule = next((r.policy for r in res if r.policy in rule_names), None)
     payload = {"env": env_id, "scenario": name, "action_type": action_type, "config": cfg.to_dict(), "seeds": seeds,
-               "tuned_from": tuned_from,
+               "config_changes": config_changes(env_id, cfg), "tuned_from": tuned_from,
                "best_rule": best_rule, "extra": [policy_name(p) for p in (extra or {}).values()], "results": rows}
     (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
     from .reporting import plot_comparison
@@ -214,10 +223,29 @@ def engine_note(config: dict[str, Any]) -> str:
     return "".join(f", {n}" for n in notes)
 
 
+def config_changes(env_id: str, config: Any) -> dict[str, Any]:
+    """The fields in which ``config`` differs from the registered ``env_id``'s own (:func:`env_config`), the
+    engine's options left to :func:`engine_note` (a network's line fields prefixed ``line_config.``), as plain
+    data: what a table must say it was scored on."""
+    base, got = env_config(env_id).to_dict(), config.to_dict()
+    out = {k: v for k, v in got.items() if k != "line_config" and v != base.get(k)}
+    if "line_config" in got:
+        out.update({f"line_config.{k}": v for k, v in got["line_config"].items()
+                    if v != base["line_config"].get(k)})
+    engine = ("engine", "pass_reuse_tolerance_m")
+    return {k: v for k, v in out.items() if k.rpartition(".")[2] not in engine}
+
+
+def changes_note(changes: dict[str, Any]) -> str:
+    """"; changed: annual_mgt=30, horizon_years=2" for :func:`config_changes`, "" for none."""
+    return "; changed: " + ", ".join(f"{k}={v}" for k, v in changes.items()) if changes else ""
+
+
 def format_line_table(payload: dict[str, Any]) -> str:
     w = max([27] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
     lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
-             f"{payload['tuned_from']}{engine_note(payload.get('config', {}))}",
+             f"{payload['tuned_from']}{engine_note(payload.get('config', {}))}"
+             f"{changes_note(payload.get('config_changes') or {})}",
              f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
              f"{'IA':>4s} " + " ".join(f"{CHOICE_COLUMNS[c]:>5s}" for c in CHOICE_NAMES) + "  params"]
     for r in payload["results"]:

@@ -207,6 +207,41 @@ def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
     assert not (tmp_path / "bounds").exists()
 
 
+def test_from_python_it_writes_the_commands_files_and_takes_its_seed_text(tmp_path) -> None:
+    """run_leaderboard writes leaderboard.json and the page into out_dir as the command does (a caller found none),
+    and takes one id alone and the command's "A:B" seeds; seeds that are no sequence are named."""
+    payload = run_leaderboard(ENV, rules=RULES[:1], seeds="0:1", bound=False, out_dir=tmp_path / "lb", **TINY)
+    files = [str(tmp_path / "lb" / "leaderboard.json"), str(tmp_path / "lb" / "leaderboard.md")]
+    assert payload["files"] == files and payload["seeds"] == {ENV: [0]}
+    saved = json.loads((tmp_path / "lb" / "leaderboard.json").read_text())
+    assert saved["results"] == json.loads(json.dumps(payload["results"])) and saved["files"] == files
+    assert (tmp_path / "lb" / "leaderboard.md").read_text() == format_leaderboard(payload)
+    assert not run_leaderboard([ENV], rules=RULES[:1], seeds=[0], bound=False, out_dir=tmp_path / "no",
+                               write=False, **TINY).get("files") and not (tmp_path / "no").exists()
+    with pytest.raises(ValueError, match="seeds must be whole numbers"):
+        run_leaderboard([ENV], rules=RULES[:1], seeds=2, bound=False, out_dir=tmp_path, **TINY)
+
+
+def test_an_id_registered_over_a_preset_is_scored_with_its_own_arguments(tmp_path) -> None:
+    """An id registered with gym.register over a preset's entry point, with a field changed, is scored on that
+    config (it was scored on the preset: the same cost as the id it was made from)."""
+    import gymnasium as gym
+
+    variant = "trackenv_tests/HeavySmallLine-v0"
+    if variant not in gym.registry:
+        spec = gym.spec(ENV)
+        gym.register(variant, entry_point=spec.entry_point, kwargs={**spec.kwargs, "annual_mgt": 30.0})
+    try:
+        cost = {env_id: run_leaderboard([env_id], rules=RULES[:1], seeds=[0], bound=False, write=False,
+                                        out_dir=tmp_path, **TINY)["results"][0]["mean_cost"]
+                for env_id in (ENV, variant)}
+        heavier = run_leaderboard([ENV], rules=RULES[:1], seeds=[0], bound=False, write=False, out_dir=tmp_path,
+                                  annual_mgt=30.0, **TINY)["results"][0]["mean_cost"]
+    finally:
+        del gym.registry[variant]
+    assert cost[variant] == heavier != cost[ENV]
+
+
 def test_unknown_rule_is_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match="rules must be among .*got unknown \\['no-such-rule'\\]"):
         run_leaderboard([ENV], rules=["grouped-threshold", "no-such-rule"], seeds=SEEDS, out_dir=tmp_path, **TINY)
