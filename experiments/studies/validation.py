@@ -10,7 +10,7 @@
   middle half of the pass against the static wheel load, the spectral peaks against the sleeper-passing
   frequency v/s (with 2 and with 4 rail elements per sleeper bay);
 * the paper's bare wheelset (Table 4) set on the unloaded track from rest at 80 km/h, with its contact-force
-  spectrum (the paper saw peaks at 36, 67 and 74 Hz);
+  spectrum on a converged mesh (4 elements per bay; the paper saw peaks at 36, 67 and 74 Hz);
 
 each with pass/fail against a stated tolerance (:func:`validation_checks`, ``summary["checks"]``), and writes
 the plots ``fig4_static_deflection.png``, ``fig4_receptance.png``,
@@ -166,8 +166,15 @@ def _loaded_pass_summary() -> tuple[dict, dict[int, tuple[PassResult, np.ndarray
     return out, curves
 
 
+#: The mesh of the pass from rest: converged for spectra. With the default 2 elements per bay the element-passing
+#: frequency v/(s/2) falls on the paper's 74 Hz and adds a numerical 31 N to the 16 N of the sleeper-passing
+#: frequency's second harmonic there (48 N in all).
+REST_PASS_ELEMENTS_PER_BAY = 4
+
+
 def _rest_pass_summary() -> tuple[dict, tuple[PassResult, np.ndarray, np.ndarray]]:
-    res = simulate_pass(Track.seed(), Wheelset.seed(), SPEED, start="rest")
+    res = simulate_pass(Track.seed(elements_per_bay=REST_PASS_ELEMENTS_PER_BAY), Wheelset.seed(), SPEED,
+                        start="rest")
     force = res.contact_force[:, 0]
     freq, amp = amplitude_spectrum(force, res.dt, detrend="constant")
     peaks = spectral_peaks(freq, amp, 10.0, 200.0, n=8)
@@ -177,6 +184,7 @@ def _rest_pass_summary() -> tuple[dict, tuple[PassResult, np.ndarray, np.ndarray
         nearest[f"{fp:g}"] = {"found_hz": f, "amplitude_N": a}
     summary = {
         "speed_m_per_s": SPEED,
+        "elements_per_bay": REST_PASS_ELEMENTS_PER_BAY,
         "static_wheel_load_N": float(res.static_wheel_load[0]),
         "max_force_N": float(force.max()),
         "min_force_N": float(force.min()),
@@ -312,11 +320,12 @@ def validation_checks(summary: dict) -> list[dict]:
         out.append(_check(f"loaded pass ({epb} elements/bay): sleeper-passing peak over spectrum median",
                           run["sleeper_passing_amplitude_over_median"], ">", 5.0, "x"))
     rest = summary.get("bare_wheelset_from_rest", {})
+    name = f"bare wheelset from rest ({rest.get('elements_per_bay', 2)} elements/bay)"
     if "mean_central_force_N" in rest:
-        out.append(_check("bare wheelset from rest: mean contact force vs static load",
+        out.append(_check(f"{name}: mean contact force vs static load",
                           100 * (rest["mean_central_force_N"] / rest["static_wheel_load_N"] - 1), "<", 1.0, "%"))
     for f_paper, found in rest.get("nearest_to_paper_peaks", {}).items():
-        out.append(_check(f"bare wheelset from rest: spectral peak near the paper's {f_paper} Hz",
+        out.append(_check(f"{name}: spectral peak near the paper's {f_paper} Hz",
                           found["found_hz"] - float(f_paper), "<", 3.0, "Hz"))
     return out
 

@@ -57,6 +57,7 @@ def test_run_validation(tmp_path):
 
     rest = summary["bare_wheelset_from_rest"]
     assert rest["paper_peaks_hz"] == [36.0, 67.0, 74.0]
+    assert rest["elements_per_bay"] == 4  # converged: at 2 the element-passing frequency falls on 74 Hz
     assert rest["min_force_N"] >= 0.0
     assert rest["mean_central_force_N"] == pytest.approx(rest["static_wheel_load_N"], rel=0.01)
     for f_paper, found in rest["nearest_to_paper_peaks"].items():
