@@ -331,7 +331,8 @@ class LinePlan:
             lines.append(f"  ({GEOMETRY_NOTE})")
         fit = d["fit"]
         if fit["fitted"]:
-            lines.append(f"history: {fit['fitted']} sections' rates fitted, median residual "
+            whose = "1 section's rate" if fit["fitted"] == 1 else f"{fit['fitted']} sections' rates"
+            lines.append(f"history: {whose} fitted, median residual "
                          f"{fit['median_residual_mm']:.3f} mm (trackenv.envs.history_fit)")
         return "\n".join(lines)
 

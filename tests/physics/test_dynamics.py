@@ -182,7 +182,7 @@ def test_contact_force_profile_is_the_peak_of_every_axle_over_each_bay():
     maxima over every (time step, axle) whose wheel lies within ±s/2 of the sleeper, as computed here element by
     element, for every row of a batch of several chunks and a four-axle car; the same from the general path
     (positions given)."""
-    t = Track.realistic(30.0)
+    t = Track.realistic(48.0)  # longer than the coach's span and its bogies' gap: every bay under some wheel
     rng = np.random.default_rng(3)
     irr = 1e-3 * rng.standard_normal((5, t.n_sleepers))
     for res in simulate_passes(t, Car.manchester_coach(), 30.0, irr, dt="auto", on_overload="ignore"):
@@ -411,6 +411,18 @@ def test_bare_wheelset_leaves_the_rail():
     again = simulate_pass(Track.seed(), Wheelset.seed(), V120, cosine_dip(5e-3), x_start=10.0, x_end=20.0,
                           on_overload="ignore")
     np.testing.assert_array_equal(again.contact_force, res.contact_force)
+
+
+def test_a_car_on_a_track_barely_longer_than_itself_warns_of_the_unloaded_stretch():
+    """A coach (axles up to 15.6 m apart) over the 30 m seed track by default: its leading axle runs 9.6 m, so no
+    wheel crosses 12-18 m and a dip there changes nothing; the pass says so. On 72 m it does not."""
+    import warnings
+
+    with pytest.warns(UserWarning, match=r"the pass leaves 12-18 m of the track under no wheel"):
+        simulate_pass(Track.seed(), Car.zhai_coach(), 160 / 3.6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate_pass(Track.realistic(72.0), Car.zhai_coach(), 160 / 3.6)
 
 
 def test_wrong_unit_stiffness_warns():

@@ -747,6 +747,7 @@ def _simulate_passes(tracks, vehicle, speed, irregularities, *, dt, contact, sta
     settlement = None if support_settlement is None else _settlement_rows(support_settlement, len(tracks), tracks[0])
     margins = _row_margins(tracks, window_bays, window_decay_lengths)
     x_start, x_end = _pass_range(tracks[0], system, start, margins, x_start, x_end)
+    _warn_unloaded(system, x_start, x_end)
     options = dict(contact=law, start=start, x_start=x_start, x_end=x_end, sleeper_force_measure=sleeper_force_measure,
                    backend=backend, device=device, window_ends=window_ends)
     groups: dict = {}
@@ -854,6 +855,26 @@ def _pass_range(track: Track, system: VehicleSystem, start: str, margins: list, 
     if x_end is None:
         return x_start, track.length
     return x_start, check_scalar("x_end", x_end, low=x_start, high=track.length, low_inclusive=False)
+
+
+def _warn_unloaded(system: VehicleSystem, x_start: float, x_end: float) -> None:
+    """Warn where the pass leaves a stretch of track between two axles that no wheel crosses: axle i runs from
+    ``x_start`` − d_i to ``x_end`` − d_i (d_i its distance behind the leading axle), so two neighbouring axles
+    further apart than the pass is long leave the track between them unloaded (a car on a track little longer
+    than its span). Its sleeper forces are then the static track's, not a pass's."""
+    d = np.sort(system.axle_offsets)
+    run = x_end - x_start
+    gaps = [(x_end - b, x_start - a) for a, b in zip(d[:-1], d[1:], strict=True) if b - a > run + 1e-9]
+    if not gaps:
+        return
+    lo, hi = max(gaps, key=lambda g: g[1] - g[0])
+    import warnings
+
+    warnings.warn(f"the pass leaves {lo:.4g}-{hi:.4g} m of the track under no wheel: the leading axle runs "
+                  f"{run:.4g} m (x_start {x_start:.4g} to x_end {x_end:.4g} m) while neighbouring axles are up to "
+                  f"{float(np.diff(d).max()):.4g} m apart, so the sleeper forces there are the static track's. "
+                  f"Use a track longer than the vehicle's span ({system.span:.4g} m) plus the stretch of interest",
+                  UserWarning, stacklevel=4)
 
 
 def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: list, settlement, vehicle,
