@@ -229,6 +229,12 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+def model_label(path: Path) -> str:
+    """A trained policy's name in the tables: its folder and file (``run1/model``, ``run1/best_model``: the run it
+    came from) for a file, the folder's name for an RLlib run."""
+    return f"{path.parent.name}/{path.stem}" if path.suffix else path.name
+
+
 def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
     """``--model PATH`` by what the path holds (:func:`~.learning.baselines.baseline_kind`): a per-section policy
     (``trackenv train --env ID``), named ``cpi-agent``, runs on any line; a model of ``trackenv train`` (SB3, with
@@ -241,7 +247,7 @@ def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
     kind = baseline_kind(path)
     if kind == "line":
         return {LINE_AGENT_NAME: load_baseline(path, name=LINE_AGENT_NAME)}
-    policy = load_baseline(path, name=f"{path.parent.name}/{path.stem}" if path.suffix else path.name)
+    policy = load_baseline(path, name=model_label(path))
     fit, unfit = fitting_agents({policy.name: policy}, env_config(args.env, **engine_overrides(args)))
     if unfit:
         raise UsageError(f"--model {path} cannot be scored on {args.env}: {unfit[policy.name]}")
@@ -340,7 +346,7 @@ def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None,
                 baseline_kind(item)
             except (FileNotFoundError, ValueError) as err:
                 raise UsageError(f"--policies: {err}") from None
-            name = Path(item).stem  # its file or folder name, or the path where that is taken
+            name = model_label(Path(item))  # as trackenv evaluate names it, or the path where that is taken
             taken = name in agents or name in rule_names or name in SHIPPED_AGENTS
             agents[item if taken else name] = item
         else:

@@ -598,6 +598,20 @@ def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):
     assert sorted(agents) == ["maskable-ppo-ranked", "rllib-ppo-ranked", "rllib-shared-ppo"]
 
 
+def test_leaderboard_names_trained_files_by_their_run_as_evaluate_does(tmp_path):
+    """Two runs' model.zip were named "model" and "/path/run2/model.zip": now "run1/model" and "run2/model", as
+    trackenv evaluate names them; a name already taken falls back to the path."""
+    from trackenv_agents.cli import _leaderboard_policies
+
+    files = [tmp_path / run / "model.zip" for run in ("run1", "run2")]
+    for f in files:
+        f.parent.mkdir()
+        f.write_bytes(b"")
+        (f.parent / "model_obs_stats.json").write_text("{}")
+    rules, agents = _leaderboard_policies(f"rules,{files[0]},{files[1]},{files[1]}", ["grouped-threshold"])
+    assert agents == {"run1/model": str(files[0]), "run2/model": str(files[1]), str(files[1]): str(files[1])}
+
+
 def test_leaderboard_policies_name_both_shipped_line_agents():
     """`--policies cpi-agent,cpi-choice-agent`: the two shipped line policies by name, each a per-section policy
     whose metadata names its advisor (the choice rule for the agent of the lines with every choice)."""

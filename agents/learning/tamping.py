@@ -481,12 +481,16 @@ def _train_run(run: _Run, progress: bool, verbose: int, on_evaluation: Callable[
 
     callbacks: list[Any] = []
     eval_cb = None
+    meta = {"action_type": s.action_type, "config": run.config.to_dict()}  # what a scorer of a saved model checks
     if run.eval_seeds and s.eval_freq > 0:
         def make_policy(model) -> NormalizedPolicy:
             return NormalizedPolicy.from_vecnormalize(model, model.get_vec_normalize_env(), raw.obs_keys,
                                                       algo=s.algo, action_type=s.action_type)
 
-        eval_cb = _make_eval_callback(run.config, run.eval_seeds, s.eval_freq, run_dir, make_policy, _save_policy,
+        def save_best(model, policy: NormalizedPolicy, path: Path) -> Path:
+            return _save_policy(model, policy, path, meta)
+
+        eval_cb = _make_eval_callback(run.config, run.eval_seeds, s.eval_freq, run_dir, make_policy, save_best,
                                       s.action_type, verbose, evaluate_at_start=warm is not None,
                                       on_evaluation=on_evaluation)
         if ckpt is not None and ckpt.state["evaluation"] is not None:
@@ -513,8 +517,7 @@ def _train_run(run: _Run, progress: bool, verbose: int, on_evaluation: Callable[
     wall = time.time() - t0
     env.save(str(run_dir / "vecnormalize.pkl"))
     policy = NormalizedPolicy.from_vecnormalize(model, env, raw.obs_keys, algo=s.algo, action_type=s.action_type)
-    path = _save_policy(model, policy, run_dir / "model.zip",
-                        {"action_type": s.action_type, "config": run.config.to_dict()})
+    path = _save_policy(model, policy, run_dir / "model.zip", meta)
     checkpoints = None
     if ckpt_cb is not None:
         t_final = time.monotonic()

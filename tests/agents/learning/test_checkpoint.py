@@ -259,11 +259,17 @@ def test_sb3_run_killed_with_sigkill_resumes_from_its_checkpoint(tmp_path):
     assert resumed["timesteps_this_run"] == 160 - at["done"] and resumed["timesteps"] == 160
     assert read_checkpoint_info(killed)["finished"]
 
-    from trackenv_agents.learning.tamping import load_trained
+    from trackenv_agents.learning.baselines import load_baseline
+    from trackenv_agents.learning.tamping import load_trained, stats_path
 
     for name in ("model.zip", "best_model.zip"):
         load_trained(killed / name)
         _assert_same_parameters(killed / name, whole / name)
+        # each says what it was trained on, so trackenv evaluate --model / leaderboard --policies can score it (the
+        # best model's sidecar had no config: refused "no 'config' (the line it was trained on)")
+        meta = json.loads(stats_path(killed / name).read_text())
+        assert meta["config"] == json.loads(stats_path(killed / "model.zip").read_text())["config"]
+        load_baseline(killed / name, name=name)
     assert (killed / "vecnormalize.pkl").exists()
     evaluations = json.loads((killed / "evaluations.json").read_text())
     assert [e["timesteps"] for e in evaluations] == [64, 128, 160]
