@@ -61,13 +61,14 @@ def write(folder: Path, sections: str = SECTIONS, history: str = HISTORY) -> Pat
 
 
 def fit_and_start(path: Path) -> tuple[list, np.ndarray]:
-    """The fit of each section, and its SD [m] after reset(seed=0)."""
+    """The fit of each section, and its true SD [m] after reset(seed=0) (the observation shows the file's last
+    runs)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         fit = history_fit(LineConfig(line=path))
         env = gym.make("trackenv/TampingLine-v0", line=path, horizon_years=0.5)
-        obs, _ = env.reset(seed=0)
-    return list(fit.sections), np.asarray(obs["section_sd"])
+        env.reset(seed=0)
+    return list(fit.sections), env.unwrapped.batch.sd.copy()
 
 
 # ---------------------------------------------------------------------- one section's data, one section's fit
@@ -147,6 +148,26 @@ def test_a_history_without_a_drop_across_the_stated_tamping_warns(tmp_path):
         fit = history_fit(LineConfig(line=path))
     assert len([x for x in w if issubclass(x.category, FitWarning)]) == 1
     assert "no drop" in fit.sections[0].note and "no drop" in fit.table()
+
+
+def test_the_first_observation_is_the_files_last_run_dated_back_to_it(tmp_path):
+    """At as_of a planner knows each section's last recording-car run, not a fresh one: the first observation shows
+    it (SD, mean-to-peak) with its age in whole steps (K10.0 0.45 years before as_of: two quarters), where the
+    model ran its own reading at as_of. A run before the section's last tamping (K10.4 said tamped after it) is not
+    the section's state: the model's reading stands there."""
+    sections = SECTIONS.replace("K10.4,180,transition,,,,,1.0,5,", "K10.4,180,transition,,,,,0.1,5,")
+    path = write(tmp_path, sections=sections)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        env = gym.make("trackenv/TampingLine-v1", line=path, horizon_years=0.5)
+        obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(obs["section_sd"][[0, 1, 3]], [1.6, 1.7, 1.6], rtol=1e-6)
+    np.testing.assert_allclose(obs["section_peak"][[0, 1, 3]], [4.2, 4.5, 4.0], rtol=1e-6)
+    np.testing.assert_allclose(obs["section_measurement_age"], [0.5, 0.5, 0.0, 0.5])
+    assert obs["section_sd"][2] != pytest.approx(1.1, abs=1e-3)  # K10.4: the model's own reading
+    assert obs["measurement_age"][0] == 0.0  # the line's latest run: the model's on K10.4
+    truth = env.unwrapped.batch.sd[:4] * 1e3
+    assert not np.allclose(truth[[0, 1, 3]], obs["section_sd"][[0, 1, 3]])  # the fit's state, not the runs
 
 
 def test_a_drop_after_the_stated_tamping_warns_as_a_tamping_the_file_does_not_state(tmp_path):

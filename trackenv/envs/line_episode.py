@@ -398,6 +398,8 @@ class LineBatch:
         mask = np.zeros(self.n_lines, dtype=bool)
         mask[lines] = True
         self._measure(mask)
+        for b in lines:
+            self._file_readings(b)
         _, contact, bays = self._passes(segs)
         self._contact(segs, contact, bays)
 
@@ -625,6 +627,28 @@ class LineBatch:
         rows = rs.start + known
         self.offset[rows], self.u[rows] = start_levels(self.offset[rows], self.u[rows],
                                                        o.sd_after_tamping_m[known], o.start_sd_m[known])
+
+    def _file_readings(self, b: int) -> None:
+        """Line ``b``'s first observation as a planner knows it at ``as_of``: each section's last recording-car run
+        in the line file, dated back to it (:func:`~trackenv.envs.line_fit.last_runs`), in place of the model's own
+        run at the start; the line's last run the latest of them. Sections without a usable run (none, one
+        before their last tamping, one older than the horizon) keep the model's reading. Nothing is drawn, so the
+        episode's draws do not change."""
+        c = self.config
+        if c.line is None:
+            return
+        from .line_fit import line_overrides
+
+        o, r = line_overrides(c), self.rows(b)
+        known = np.flatnonzero(~np.isnan(o.last_sd_m))
+        if not known.size:
+            return
+        at = r.start + known
+        self.measured_sd[at] = o.last_sd_m[known]
+        peak = ~np.isnan(o.last_peak_m[known])
+        self.measured_peak[at[peak]] = o.last_peak_m[known][peak]
+        self.measured_at[at] = self.step[b] - np.round(o.last_run_age_years[known] * c.steps_per_year)
+        self.last_measured[b] = int(self.measured_at[r].max())
 
     def _equivalent(self, forces: np.ndarray, mix: np.ndarray) -> np.ndarray:
         """Equivalent force of each row's traffic mix: (Σ n_v F_v^p / Σ n_v)^(1/p); forces (2, rows, ...), mix

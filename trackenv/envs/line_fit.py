@@ -192,7 +192,9 @@ class LineOverrides:
     ``wet`` (known wet zones), ``years_since_tamping``,
     ``tampings_since_renewal``, ``rate_factor`` (the file's; NaN: none), ``rate_cdf`` (the posterior CDF of a
     fitted rate on :data:`RATE_GRID`; NaN rows: not fitted), ``start_sd_m`` (the SD at the start; NaN: as
-    drawn) and ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn)."""
+    drawn), ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn), and the
+    section's last recording-car run as the episode's first observation reads it (:func:`last_runs`):
+    ``last_sd_m``, ``last_peak_m`` (NaN: the model's own reading at the start) and ``last_run_age_years``."""
 
     register: np.ndarray
     wet: np.ndarray
@@ -203,6 +205,9 @@ class LineOverrides:
     roughness: np.ndarray
     start_sd_m: np.ndarray
     sd_after_tamping_m: np.ndarray
+    last_sd_m: np.ndarray
+    last_peak_m: np.ndarray
+    last_run_age_years: np.ndarray
 
 
 @lru_cache(maxsize=16)
@@ -221,10 +226,32 @@ def line_overrides(config: LineConfig) -> LineOverrides:
         roughness=fit.roughness,
         start_sd_m=np.array([f.start_sd_mm * 1e-3 for f in fit.sections]),
         sd_after_tamping_m=np.array([f.sd_after_tamping_mm * 1e-3 for f in fit.sections]),
+        **last_runs(line, config.horizon_years),
     )
     for a in vars(arrays).values():
         a.flags.writeable = False
     return arrays
+
+
+def last_runs(line: LineDescription, max_age_years: float) -> dict[str, np.ndarray]:
+    """Per section, its last recording-car run, which a planner knows at ``as_of`` and the episode's first
+    observation shows in place of a run of the model's own: ``last_sd_m``, ``last_peak_m`` [m] and
+    ``last_run_age_years`` (years before ``as_of``). NaN where the section has no run, where its last run
+    comes before its last tamping (:func:`_after_tamping`: the tamping's result is not measured yet), or where
+    it is older than ``max_age_years`` (the horizon: beyond the observation's bounds); the peak NaN where the
+    run gives none. There the model's own reading at the start stands."""
+    sd, peak, age = (np.full(line.n_sections, math.nan) for _ in range(3))
+    for j, s in enumerate(line.sections):
+        ms = line.measurements(s.id)
+        if not ms:
+            continue
+        last = ms[-1]
+        years = line.years_before(last.date)
+        if not _after_tamping(line, s, last) or years > max_age_years:
+            continue
+        sd[j], age[j] = last.sd_m, years
+        peak[j] = math.nan if last.peak_mm is None else last.peak_mm * 1e-3
+    return {"last_sd_m": sd, "last_peak_m": peak, "last_run_age_years": age}
 
 
 def rate_multipliers(overrides: LineOverrides, drawn: np.ndarray, rate: np.ndarray,
