@@ -249,7 +249,7 @@ class LinePlan:
         return np.where(np.take_along_axis(work, best[..., None], axis=2)[..., 0] >= RECOMMEND_SHARE, best + 1, 0)
 
     def recording_runs(self) -> list[tuple[int, str]]:
-        """The model's recording-car runs after its run at ``as_of`` (the one the first quarter reads), as (step,
+        """The model's recording-car runs after ``as_of`` (the first quarter reads the file's last runs), as (step,
         date): one every ``measurement_interval`` steps, closing the quarter of that number (read by the next
         quarter's decision); those within the plan and the first after it."""
         runs = []
@@ -265,12 +265,12 @@ class LinePlan:
         runs = self.recording_runs()
         inside = [(step, date) for step, date in runs if step < len(self.dates)]
         every = f"every {_count(self.measurement_interval, 'quarter', 'quarters')}"
+        first = "Q1 reads each section's last run in the file (the model's own at as_of where it has none)"
         if not inside:
-            return (f"recording-car runs in the model: at as_of (read in Q1), then {every}: the next "
-                    f"{runs[-1][1]}, after the plan")
+            return (f"recording-car runs: {first}; the model's then {every}: the next {runs[-1][1]}, after the "
+                    f"plan")
         listed = ", ".join(f"{date} (read in Q{step + 1})" for step, date in inside[:3])
-        return (f"recording-car runs in the model: at as_of (read in Q1), then {every}: "
-                f"{listed}{', ...' if len(inside) > 3 else ''}")
+        return f"recording-car runs: {first}; the model's then {every}: {listed}{', ...' if len(inside) > 3 else ''}"
 
     def to_dict(self) -> dict[str, Any]:
         """The plan as plain data (JSON-ready), opening with what it was run on (:func:`line_summary`); per quarter

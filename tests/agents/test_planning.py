@@ -282,8 +282,8 @@ def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan,
     assert (f"  B (transition) tamp: measured SD {b:.2f} (SD alert 2.25), peak "
             f"{plan.state['measured_peak_mm'][0, 1]:.2f} (alert 12, intervention 15.5, immediate action 26), "
             "0.00 years old; true SD") in text
-    assert "recording-car runs in the model: at as_of (read in Q1), then every 4 quarters: the next 2027-01-01, " \
-           "after the plan" in text
+    assert "recording-car runs: Q1 reads each section's last run in the file (the model's own at as_of where it " \
+           "has none); the model's then every 4 quarters: the next 2027-01-01, after the plan" in text
     longer = dataclasses.replace(plan, dates=plan.dates * 3)  # six quarters
     assert longer.recording_runs() == [(4, "2027-01-01"), (8, "2028-01-01")]
     assert longer.recording_note().endswith("every 4 quarters: 2027-01-01 (read in Q5)")
