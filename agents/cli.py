@@ -268,7 +268,16 @@ def engine_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The config fields ``--set`` (a field of the scenario's config each), ``--engine`` and ``--pass-reuse-mm``
     set (none where they are not given: the preset's, the classic engine without reuse, with which every saved
     result was computed)."""
-    out: dict[str, Any] = dict(getattr(args, "set", None) or [])
+    given = list(getattr(args, "set", None) or [])
+    names = [name.removeprefix("line_config.") for name, _ in given]  # a network's line field, as it is reported
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise UsageError(f"--set {', '.join(twice)}: given more than once")
+    out: dict[str, Any] = dict(zip(names, (value for _, value in given), strict=True))
+    for field, flag in (("engine", args.engine), ("pass_reuse_tolerance_m", args.pass_reuse_mm)):
+        if field in out and flag is not None:
+            option = "--engine" if field == "engine" else "--pass-reuse-mm"
+            raise UsageError(f"--set {field} and {option}: give one of them")
     if args.engine is not None:
         out["engine"] = args.engine
     if args.pass_reuse_mm is not None:
@@ -424,6 +433,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     line = load_line(args.line)
     overrides = engine_overrides(args)
+    for field, own in (("line", "the line file argument"), ("horizon_years", "--years")):
+        if field in overrides:
+            raise UsageError(f"--set {field}: the plan takes it from {own}")
     # an unknown policy or scenario before the fit and the futures
     line_policy(args.policy, plan_config(line, args.scenario, years=args.years, **overrides), args.scenario,
                 years=args.years)
@@ -505,7 +517,8 @@ def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
                       out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
                       iterations=args.iterations, verbose=0 if args.json else 1,
                       checkpoint_every_s=args.checkpoint_every)
-    _emit(args, *_line_payload(path, time.perf_counter() - t0, out))
+    payload, human = _line_payload(path, time.perf_counter() - t0, out)
+    _emit(args, {**payload, "config_changes": _set_fields(overrides)}, human + _set_note(overrides))
     return 0
 
 
@@ -589,9 +602,20 @@ def cmd_train(args: argparse.Namespace) -> int:
         checkpoint_every_s=args.checkpoint_every,
     )
     wall = time.perf_counter() - t0
-    payload = {"model": str(path), "wall_time_s": wall}
-    _emit(args, payload, f"trained -> {path} in {wall:.0f} s")
+    payload = {"model": str(path), "wall_time_s": wall, "config_changes": _set_fields(overrides)}
+    _emit(args, payload, f"trained -> {path} in {wall:.0f} s{_set_note(overrides)}")
     return 0
+
+
+def _set_fields(overrides: dict[str, Any]) -> dict[str, Any]:
+    """The fields of ``overrides`` besides the engine's options (which the tables name on their own)."""
+    return {k: v for k, v in overrides.items() if k not in ("engine", "pass_reuse_tolerance_m")}
+
+
+def _set_note(overrides: dict[str, Any]) -> str:
+    from .evaluation.line_compare import changes_note
+
+    return changes_note(_set_fields(overrides))
 
 
 def _positive(kind: type, zero: bool = False) -> Any:
@@ -647,10 +671,27 @@ def _field_value(text: str) -> tuple[str, Any]:
     if not sep or not name.strip() or not value.strip():
         raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (e.g. annual_mgt=30), got {text!r}")
     try:
-        parsed = yaml.safe_load(value)
+        parsed = _numbers(yaml.safe_load(value))
     except yaml.YAMLError:
         parsed = value
     return name.strip(), tuple(parsed) if isinstance(parsed, list) else parsed
+
+
+def _numbers(value: Any) -> Any:
+    """``value`` with every text that reads as a number a number (YAML 1.1 reads ``1e-3`` as text), inside lists
+    and mappings too."""
+    if isinstance(value, str):
+        for kind in (int, float):
+            try:
+                return kind(value)
+            except ValueError:
+                continue
+        return value
+    if isinstance(value, list):
+        return [_numbers(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _numbers(v) for k, v in value.items()}
+    return value
 
 
 def _widths(text: str) -> list[int]:

@@ -160,7 +160,8 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
     last = summary["last_recording"]
     run = ("no recording-car history" if last is None else
            f"last recording-car run {last['date']} ({last['years_before']:.2f} years before as_of)")
-    return [f"read from the file: {summary['sections']} sections, {summary['length_km']:.2f} km; speed "
+    sections = _count(summary["sections"], "section", "sections")
+    return [f"read from the file: {sections}, {summary['length_km']:.2f} km; speed "
             f"{_span(summary['speed_kmh'], 'g')} km/h; tonnage {_span(summary['annual_mgt'], 'g')} MGT/year; "
             f"freight share {_span(summary['freight_share'], '.2f')}, freight axle load "
             f"{summary['freight_axle_load_t']:g} t",
@@ -265,7 +266,8 @@ class LinePlan:
         runs = self.recording_runs()
         inside = [(step, date) for step, date in runs if step < len(self.dates)]
         every = f"every {_count(self.measurement_interval, 'quarter', 'quarters')}"
-        first = "Q1 reads each section's last run in the file (the model's own at as_of where it has none)"
+        first = ("Q1 reads each section's last run in the file (the model's own at as_of where it has none)"
+                 if self.line.history else "Q1 reads the model's own run at as_of (the file has no history)")
         if not inside:
             return (f"recording-car runs: {first}; the model's then {every}: the next {runs[-1][1]}, after the "
                     f"plan")

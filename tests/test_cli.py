@@ -180,6 +180,24 @@ def test_set_changes_a_field_of_the_scenario_and_the_table_says_so(tmp_path, cap
     with pytest.raises(SystemExit):
         main([*argv, "--set", "annual_mgt"])
     assert "--set: expected FIELD=VALUE (e.g. annual_mgt=30), got 'annual_mgt'" in capsys.readouterr().err
+    for extra, message in ((["--set", "annual_mgt=30", "--set", "annual_mgt=40"],
+                            "--set annual_mgt: given more than once"),
+                           (["--set", "engine=classic", "--engine", "fast"], "--set engine and --engine: give one"),
+                           (["--set", "pass_reuse_tolerance_m=0", "--pass-reuse-mm", "1"],
+                            "--set pass_reuse_tolerance_m and --pass-reuse-mm: give one")):
+        assert main([*argv, *extra]) == 2 and message in capsys.readouterr().err
+    assert main([*argv, "--set", "pass_reuse_tolerance_m=1e-3", "--json"]) == 0  # (YAML 1.1 read 1e-3 as text)
+    assert json.loads(capsys.readouterr().out)["config"]["pass_reuse_tolerance_m"] == 1e-3
+
+
+def test_set_takes_a_networks_line_fields_as_the_output_names_them(tmp_path, capsys):
+    """On the network a line field is reported as line_config.FIELD; --set takes that name back."""
+    argv = ["evaluate", "--env", "trackenv/TampingNetwork-v0", "--seeds", "0:1", "--rules", "grouped-threshold",
+            "--policy", "rules", "--set", "line_config.horizon_years=0.5", "--set", "n_lines=2", "--json",
+            "--out", str(tmp_path)]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["config_changes"] == {"n_lines": 2, "line_config.horizon_years": 0.5}
 
 
 def test_plan_takes_set_and_says_what_changed(tmp_path, capsys):
@@ -195,6 +213,9 @@ def test_plan_takes_set_and_says_what_changed(tmp_path, capsys):
     assert all(len(q["tamp"]) <= 3 for q in payload["quarters"])
     assert main([*argv, "--set", "annual_mgt=3"]) == 2
     assert "annual_mgt=3 conflicts with the line file" in capsys.readouterr().err
+    for field, own in (("line=other.yaml", "the line file argument"), ("horizon_years=3", "--years")):
+        assert main([*argv, "--set", field]) == 2
+        assert f"the plan takes it from {own}" in capsys.readouterr().err  # (line= was a TypeError traceback)
 
 
 def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(monkeypatch, capsys, tmp_path):
@@ -247,6 +268,9 @@ def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(mo
     assert configs[-1].engine == "fast" and configs[-1].sections_per_segment == 6  # the 60 m track
     assert main(["train", "--resume", str(tmp_path), "--engine", "fast"]) == 2
     assert "a resumed run keeps the config it was started with" in capsys.readouterr().err
+    capsys.readouterr()
+    assert main(["train", "--set", "capacity=3", "--json"]) == 0  # the JSON says what --set changed
+    assert configs[-1].capacity == 3 and json.loads(capsys.readouterr().out)["config_changes"] == {"capacity": 3}
 
 
 def test_evaluate_line_rules_option(monkeypatch, capsys):

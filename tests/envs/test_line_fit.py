@@ -154,13 +154,15 @@ def test_the_first_observation_is_the_files_last_run_dated_back_to_it(tmp_path):
     """At as_of a planner knows each section's last recording-car run, not a fresh one: the first observation shows
     it (SD, mean-to-peak) with its age in whole steps (K10.0 0.45 years before as_of: two quarters), where the
     model ran its own reading at as_of. A run before the section's last tamping (K10.4 said tamped after it) is not
-    the section's state: the model's reading stands there."""
+    the section's state: the model's reading stands there. A run older than the horizon (a quarter here) is read
+    too, within the observation's bounds (a plan's first quarter did not depend on its length)."""
     sections = SECTIONS.replace("K10.4,180,transition,,,,,1.0,5,", "K10.4,180,transition,,,,,0.1,5,")
     path = write(tmp_path, sections=sections)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
-        env = gym.make("trackenv/TampingLine-v1", line=path, horizon_years=0.5)
+        env = gym.make("trackenv/TampingLine-v1", line=path, horizon_years=0.25)
         obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
     np.testing.assert_allclose(obs["section_sd"][[0, 1, 3]], [1.6, 1.7, 1.6], rtol=1e-6)
     np.testing.assert_allclose(obs["section_peak"][[0, 1, 3]], [4.2, 4.5, 4.0], rtol=1e-6)
     np.testing.assert_allclose(obs["section_measurement_age"], [0.5, 0.5, 0.0, 0.5])

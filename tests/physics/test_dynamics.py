@@ -418,8 +418,10 @@ def test_a_car_on_a_track_barely_longer_than_itself_warns_of_the_unloaded_stretc
     wheel crosses 12-18 m and a dip there changes nothing; the pass says so. On 72 m it does not."""
     import warnings
 
-    with pytest.warns(UserWarning, match=r"the pass leaves 12-18 m of the track under no wheel"):
+    with pytest.warns(dynamics.UnloadedTrackWarning, match=r"the pass leaves 12-18 m of the track under no wheel") \
+            as caught:
         simulate_pass(Track.seed(), Car.zhai_coach(), 160 / 3.6)
+    assert caught[0].filename == __file__  # the warning names the caller's line, not the library's
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         simulate_pass(Track.realistic(72.0), Car.zhai_coach(), 160 / 3.6)
@@ -431,8 +433,9 @@ def test_wrong_unit_stiffness_warns():
     wheel = Wheelset(mass=1800.0, static_load=100e3)
     assert simulate_pass(Track.seed(), wheel, V80).max_contact_force < 1.5 * wheel.wheel_load
     soft = Track.seed().scaled(pad_stiffness=1e-3, ballast_stiffness=1e-3)
-    with pytest.warns(OverloadWarning, match="Check the units"):
+    with pytest.warns(OverloadWarning, match="Check the units") as caught:
         simulate_pass(soft, wheel, V80)
+    assert caught[0].filename == __file__
     with pytest.raises(ValueError, match="on_overload"):
         simulate_pass(Track.seed(), wheel, V80, on_overload="quiet")
 
@@ -458,8 +461,9 @@ def test_a_speed_beyond_ballasted_lines_warns_with_its_km_h():
     """120 given for 120 km/h is taken as 120 m/s = 432 km/h: a warning names both units; 300 km/h does not warn."""
     import warnings
 
-    with pytest.warns(UserWarning, match=r"speed 120 m/s is 432 km/h, above the 350 km/h"):
+    with pytest.warns(UserWarning, match=r"speed 120 m/s is 432 km/h, above the 350 km/h") as caught:
         simulate_pass(Track.seed(), LOADED, 120.0, x_start=5.0, x_end=6.0)
+    assert caught[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         simulate_pass(Track.seed(), LOADED, 300 / 3.6, x_start=5.0, x_end=6.0)

@@ -116,6 +116,17 @@ class LineState:
     budget_left: float
 
 
+def file_run_age_years(config: LineConfig) -> float:
+    """How long before ``as_of`` the oldest of a line file's sections' last runs was [years] (0 without a file):
+    the first observation shows those runs (:func:`~trackenv.envs.line_fit.last_runs`), so the measurement ages
+    reach that far beyond the horizon's."""
+    line = config.line
+    if line is None:
+        return 0.0
+    return max((line.years_before(line.measurements(s.id)[-1].date) for s in line.sections
+                if line.measurements(s.id)), default=0.0)
+
+
 def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]]:
     """Bounds of each key of TampingLine's observation (its space is built from these and the observation is
     clipped to them, so the two cannot drift apart); ``level`` and ``contact_force`` only with ``profiles``."""
@@ -123,7 +134,7 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
     bounds = {
         "section_sd": shared["section_sd"],
         "section_peak": shared["section_peak"],
-        "measurement_age": (0.0, config.horizon_years + 1.0),
+        "measurement_age": (0.0, config.horizon_years + 1.0 + file_run_age_years(config)),
         "register": (0.0, float(len(REGISTER_CLASSES) - 1)),
         "tampings": shared["tampings"],
         "tampings_since_renewal": shared["tampings"],
@@ -138,7 +149,7 @@ def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]
         bounds["section_contact_peak"] = shared["contact_force"]
         bounds["section_dynamic_share"] = (-1.0, 20.0)
     if "inspect" in config.choices:
-        bounds["section_measurement_age"] = (0.0, config.horizon_years + 1.0)
+        bounds["section_measurement_age"] = (0.0, config.horizon_years + 1.0 + file_run_age_years(config))
     if "survey" in config.choices:
         bounds["section_survey"] = (-1.0, 1.0)
     return bounds
@@ -631,8 +642,8 @@ class LineBatch:
     def _file_readings(self, b: int) -> None:
         """Line ``b``'s first observation as a planner knows it at ``as_of``: each section's last recording-car run
         in the line file, dated back to it (:func:`~trackenv.envs.line_fit.last_runs`), in place of the model's own
-        run at the start; the line's last run the latest of them. Sections without a usable run (none, one
-        before their last tamping, one older than the horizon) keep the model's reading. Nothing is drawn, so the
+        run at the start; the line's last run the latest of them. Sections without a usable run (none, or one
+        before their last tamping) keep the model's reading. Nothing is drawn, so the
         episode's draws do not change."""
         c = self.config
         if c.line is None:

@@ -226,20 +226,20 @@ def line_overrides(config: LineConfig) -> LineOverrides:
         roughness=fit.roughness,
         start_sd_m=np.array([f.start_sd_mm * 1e-3 for f in fit.sections]),
         sd_after_tamping_m=np.array([f.sd_after_tamping_mm * 1e-3 for f in fit.sections]),
-        **last_runs(line, config.horizon_years),
+        **last_runs(line),
     )
     for a in vars(arrays).values():
         a.flags.writeable = False
     return arrays
 
 
-def last_runs(line: LineDescription, max_age_years: float) -> dict[str, np.ndarray]:
+def last_runs(line: LineDescription) -> dict[str, np.ndarray]:
     """Per section, its last recording-car run, which a planner knows at ``as_of`` and the episode's first
     observation shows in place of a run of the model's own: ``last_sd_m``, ``last_peak_m`` [m] and
-    ``last_run_age_years`` (years before ``as_of``). NaN where the section has no run, where its last run
-    comes before its last tamping (:func:`_after_tamping`: the tamping's result is not measured yet), or where
-    it is older than ``max_age_years`` (the horizon: beyond the observation's bounds); the peak NaN where the
-    run gives none. There the model's own reading at the start stands."""
+    ``last_run_age_years`` (years before ``as_of``, whatever the horizon: the observation's bounds take the
+    oldest, ``line_episode.file_run_age_years``). NaN where the section has no run or where its last run comes
+    before its last tamping (:func:`_after_tamping`: the tamping's result is not measured yet); the peak NaN
+    where the run gives none. There the model's own reading at the start stands."""
     sd, peak, age = (np.full(line.n_sections, math.nan) for _ in range(3))
     for j, s in enumerate(line.sections):
         ms = line.measurements(s.id)
@@ -247,7 +247,7 @@ def last_runs(line: LineDescription, max_age_years: float) -> dict[str, np.ndarr
             continue
         last = ms[-1]
         years = line.years_before(last.date)
-        if not _after_tamping(line, s, last) or years > max_age_years:
+        if not _after_tamping(line, s, last):
             continue
         sd[j], age[j] = last.sd_m, years
         peak[j] = math.nan if last.peak_mm is None else last.peak_mm * 1e-3

@@ -17,6 +17,7 @@ import dataclasses
 import math
 import numbers
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -163,6 +164,20 @@ def check_array(
     return arr
 
 
+def caller_stacklevel() -> int:
+    """The ``stacklevel`` that makes a warning issued by the calling function name the first frame outside the
+    trackenv package (the user's call), however deep inside it the warning is raised."""
+    import os
+    import sys
+
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    frame: Any = sys._getframe(1)
+    level = 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package + os.sep):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 def check_speed(speed, name: str = "speed") -> float:
     """A vehicle's speed [m/s] in (0, :data:`MAX_SPEED_M_PER_S`]; a warning above :data:`SERVICE_SPEED_M_PER_S`
     (outside the model's validity, or km/h given as m/s)."""
@@ -170,9 +185,9 @@ def check_speed(speed, name: str = "speed") -> float:
     if v > SERVICE_SPEED_M_PER_S:
         import warnings
 
-        warnings.warn(f"{name} {v:g} m/s is {v * 3.6:.0f} km/h, above the 350 km/h of any ballasted line: the "
+        warnings.warn(f"{name} {v:g} m/s is {v * 3.6:.4g} km/h, above the 350 km/h of any ballasted line: the "
                       f"model has no ballast flight or critical-velocity effects there. The speed is in m/s (a "
-                      f"speed in km/h divided by 3.6)", UserWarning, stacklevel=3)
+                      f"speed in km/h divided by 3.6)", UserWarning, stacklevel=caller_stacklevel())
     return v
 
 

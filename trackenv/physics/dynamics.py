@@ -20,7 +20,15 @@ import numpy as np
 import scipy.linalg
 
 from . import _kernel, _side_by_side, _step
-from ._checks import check_array, check_choice, check_instance, check_scalar, check_speed, check_time_steps
+from ._checks import (
+    caller_stacklevel,
+    check_array,
+    check_choice,
+    check_instance,
+    check_scalar,
+    check_speed,
+    check_time_steps,
+)
 from .contact import HertzContact, LinearContact
 from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
@@ -38,6 +46,10 @@ OVERLOAD_FACTOR = 3.0
 
 class OverloadWarning(RuntimeWarning):
     """A pass's contact force exceeded :data:`OVERLOAD_FACTOR` times the static wheel load."""
+
+
+class UnloadedTrackWarning(UserWarning):
+    """A pass left a stretch of track between two axles under no wheel (:func:`simulate_passes`)."""
 
 
 class OverloadError(RuntimeError):
@@ -722,7 +734,7 @@ def check_overload(results: Sequence[PassResult], on_overload: str = "warn") -> 
         raise OverloadError(msg)
     import warnings
 
-    warnings.warn(msg, OverloadWarning, stacklevel=3)
+    warnings.warn(msg, OverloadWarning, stacklevel=caller_stacklevel())
     return msg
 
 
@@ -874,7 +886,7 @@ def _warn_unloaded(system: VehicleSystem, x_start: float, x_end: float) -> None:
                   f"{run:.4g} m (x_start {x_start:.4g} to x_end {x_end:.4g} m) while neighbouring axles are up to "
                   f"{float(np.diff(d).max()):.4g} m apart, so the sleeper forces there are the static track's. "
                   f"Use a track longer than the vehicle's span ({system.span:.4g} m) plus the stretch of interest",
-                  UserWarning, stacklevel=4)
+                  UnloadedTrackWarning, stacklevel=caller_stacklevel())
 
 
 def _rerun_rows(results: list, rows: list[int], tracks: list[Track], irr_rows: list, settlement, vehicle,
