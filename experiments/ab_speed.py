@@ -254,7 +254,7 @@ def figure_codes(figure: str, env_ids: dict[str, str], kwargs: dict[str, dict], 
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--base", required=True, help="git revision of the base version")
     parser.add_argument("--new", default=None, help="git revision of the new version (default: the working tree)")
     parser.add_argument("--figure", choices=FIGURES, default="vector", help="what to time (default: vector)")

@@ -143,7 +143,7 @@ def cmd_export(runs: dict[str, Path], dest: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> Any:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
     c = sub.add_parser("curves", help="learning curves (JSON and PNG)")
     c.add_argument("runs", nargs="+", metavar="NAME=FOLDER")

@@ -13,7 +13,7 @@ from trackenv_studies.calibration import format_calibration
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--seeds", default="2000:2004")
     ap.add_argument("--threshold", type=float, default=2.0)

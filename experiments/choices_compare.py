@@ -269,7 +269,7 @@ def plot(saved: list[dict[str, Any]], out_png: str) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", choices=sorted(IDS), action="append", help="scenario(s) to run (repeatable)")
     ap.add_argument("--tune", action="store_true", help="tune on the training seeds first (else: the shipped files)")
     ap.add_argument("--train-seeds", default="1000:1004", metavar="A:B", help="training episodes (default 1000:1004)")

@@ -259,7 +259,7 @@ def spot_ablation() -> dict[str, Any]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="1000:1004", metavar="A:B", help="training episodes (default 1000:1004)")
     ap.add_argument("--ablation", action="store_true", help="also the choice rule without spot tamping")
     args = ap.parse_args()

@@ -117,7 +117,7 @@ def _save(key: str, record: dict) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("what", choices=("speed", "time", "costs"))
     parser.add_argument("--engine", choices=ENGINES, default="fast")
     parser.add_argument("--pairs", type=int, default=4)

@@ -349,7 +349,7 @@ def _drive_tuple(call: dict):
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--make-reference", type=Path, help="write the reference .npz here (needs the package)")
     parser.add_argument("--cpu-timing", action="store_true", help="time the numba kernel on the reference's batch")
     parser.add_argument("--reference", type=Path, default=ROOT / "experiments" / "saved" / "gpu" / "reference.npz")

@@ -142,7 +142,7 @@ def own_store(reuse, stores: dict):
 def main(argv: list[str] | None = None) -> None:
     from trackenv.physics._kernel import WIDTHS  # the widths the kernel is compiled for
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kernel", action="append", type=Path, help="kernel file(s) (default: this tree's)")
     parser.add_argument("--rows", type=int, default=1, choices=WIDTHS, help="rows in lockstep (a chunk)")
     parser.add_argument("--repeats", type=int, default=7, help="passes per kernel (alternating)")

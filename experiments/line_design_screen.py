@@ -38,7 +38,7 @@ def _value(text: str):
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="LineConfig overrides")
     ap.add_argument("--seeds", default="1000:1004")
     ap.add_argument("--rounds", type=int, default=1)

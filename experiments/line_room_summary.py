@@ -33,7 +33,7 @@ def summarise(room: dict, searches: list[dict]) -> dict:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("room", help="line_room.py result (the rules' held-out costs)")
     ap.add_argument("searches", nargs="*", help="more search results (line_room.py JSON)")
     ap.add_argument("--out", default=None)

@@ -200,7 +200,7 @@ def report(out: Path, against: str | None = None) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", default="0:200", help="held-out episodes A:B (seeds A..B-1)")
     parser.add_argument("--policies", default="grouped-threshold,section-threshold,cpi-agent",
                         help="comma-separated rule names and shipped agents, each run on every line")

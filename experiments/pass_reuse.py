@@ -138,7 +138,7 @@ def measure(seeds: list[int], tolerances_mm: list[float], policy: str = "rule", 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=8, help="episodes, seeds 0 .. seeds - 1 (default 8)")
     parser.add_argument("--tolerances-mm", default="0.02,0.05,0.1,0.2")
     parser.add_argument("--policy", choices=("rule", "random"), default="rule")

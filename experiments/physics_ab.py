@@ -81,7 +81,7 @@ def measure(tree: Path, workload: str, repeats: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--base", type=Path, required=True, help="a source tree holding trackenv/")
     parser.add_argument("--new", type=Path, default=ROOT, help="default: this tree")
     parser.add_argument("--workload", choices=("single", "line", "seed"), default="line")

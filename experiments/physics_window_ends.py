@@ -237,7 +237,7 @@ def env_ab(pairs: int, budget_s: float) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("what", choices=("accuracy", "ab", "time", "env-ab", "time-env"))
     parser.add_argument("--layout", default="c3", help=f"one of {LAYOUTS} (or c<decay lengths>, w<decay lengths>)")
     parser.add_argument("--pairs", type=int, default=4)

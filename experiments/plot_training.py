@@ -21,7 +21,7 @@ from trackenv_agents.rules import tuned_rule
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", help="training output folders, in training order")
     parser.add_argument("--labels", nargs="*", default=None, help="legend label per run (default: folder names)")
     parser.add_argument("--out", default="results/training_curve.png")

@@ -16,7 +16,7 @@ from trackenv_studies.paper import PAPER_ELEMENTS_PER_BAY, format_summary, repro
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="results/paper", help="output folder (paper.json, PNG figures)")
     parser.add_argument("--iterations", type=int, default=6, help="iterations per scenario (default 6)")
     parser.add_argument("--cycles", type=float, default=50_000,

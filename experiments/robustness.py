@@ -129,7 +129,7 @@ def table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", default="default", choices=sorted(SCENARIOS),
                     help="the default line, or the 60 m track (track60) with the model-predictive planner")
     ap.add_argument("--seeds", default="2000:2032", help="held-out seeds A:B (default 2000:2032)")

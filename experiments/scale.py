@@ -108,7 +108,7 @@ def ray_batch(episodes: int, horizon_years: float, address: str | None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[12, 50, 250], help="sections per line (250: the Long id)")
     p.add_argument("--steps", type=int, default=8, help="env steps timed per size (after the reset)")
     p.add_argument("--no-network", action="store_true", help="skip the network episode")

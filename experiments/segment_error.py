@@ -21,7 +21,7 @@ from trackenv_studies.calibration import _slopes, run_line
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[3000, 3001])
     ap.add_argument("--lengths", type=float, nargs="+", default=[30.0, 60.0])
     ap.add_argument("--years", type=float, default=4.0)

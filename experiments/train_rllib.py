@@ -116,7 +116,7 @@ def iteration_record(i: int, result: dict, seconds: float) -> dict[str, Any]:
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--env-id", default=None,
                    help="default trackenv/Tamping-v1; with --multi-agent trackenv/TampingLine-v0")
     p.add_argument("--env-config", default="{}", help="JSON of env keyword arguments (LineConfig fields)")

@@ -98,7 +98,7 @@ def run(num_samples: int, timesteps: int, eval_freq: int, eval_seeds: list[int],
 
 
 def main(argv=None) -> list[dict[str, Any]]:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--num-samples", type=int, default=8)
     p.add_argument("--timesteps", type=int, default=16384, help="env steps per trial at most")
     p.add_argument("--eval-freq", type=int, default=2048, help="env steps between reports (an ASHA rung)")
