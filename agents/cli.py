@@ -609,7 +609,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _set_fields(overrides: dict[str, Any]) -> dict[str, Any]:
     """The fields of ``overrides`` besides the engine's options (which the tables name on their own)."""
-    return {k: v for k, v in overrides.items() if k not in ("engine", "pass_reuse_tolerance_m")}
+    from .evaluation.line_compare import without_engine
+
+    return without_engine(overrides)
 
 
 def _set_note(overrides: dict[str, Any]) -> str:

@@ -567,6 +567,8 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from trackenv.envs.line import TampingLineVectorEnv
     from trackenv.envs.line_fit import history_fit
 
+    from .evaluation.line_compare import without_engine
+
     cfg = plan_config(line, scenario, years=years, **config)
     rule = line_policy(policy, cfg, scenario, years=years)
     steps = cfg.horizon_steps
@@ -591,4 +593,4 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
                     limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
                     unmet_share=run.unmet_share,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes={k: v for k, v in config.items() if k not in ("engine", "pass_reuse_tolerance_m")})
+                    config_changes=without_engine(config))

@@ -55,6 +55,7 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.network import NETWORK_DISPATCH
 from .harness import EvaluationResult, evaluate_many
 from .line_compare import (
+    ENGINE_FIELDS,
     SECTION_CLASSES,
     changes_note,
     class_breakdown,
@@ -495,7 +496,7 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
     and the command that wrote it."""
     out = []
     overrides = payload.get("config_overrides") or {}
-    note = engine_note({k: overrides[k] for k in ("engine", "pass_reuse_tolerance_m") if k in overrides})
+    note = engine_note({k: overrides[k] for k in ENGINE_FIELDS if k in overrides})
     if note:
         out += [f"Passes computed otherwise than the presets' ({note[2:]}): costs differ from the classic engine's "
                 "by about a tenth of a percent; a bound marked *replayed* is the schedule the classic engine's "

@@ -211,6 +211,15 @@ CHOICE_COLUMNS = {"tamp": "tamp", "spot_tamp": "spot", "drainage": "drain", "ren
                   "survey": "surv"}
 
 
+#: The config fields of how the passes run (named by :func:`engine_note`, not among a table's changed fields).
+ENGINE_FIELDS = ("engine", "pass_reuse_tolerance_m")
+
+
+def without_engine(fields: dict[str, Any]) -> dict[str, Any]:
+    """``fields`` but the engine's options (:data:`ENGINE_FIELDS`)."""
+    return {k: v for k, v in fields.items() if k not in ENGINE_FIELDS}
+
+
 def engine_note(config: dict[str, Any]) -> str:
     """", engine fast, pass reuse 1 mm" for a config (its ``to_dict``; a network's line inside it) whose passes run
     otherwise than every preset's (the classic engine, every pass computed); "" for those."""
@@ -232,8 +241,7 @@ def config_changes(env_id: str, config: Any) -> dict[str, Any]:
     if "line_config" in got:
         out.update({f"line_config.{k}": v for k, v in got["line_config"].items()
                     if v != base["line_config"].get(k)})
-    engine = ("engine", "pass_reuse_tolerance_m")
-    return {k: v for k, v in out.items() if k.rpartition(".")[2] not in engine}
+    return {k: v for k, v in out.items() if k.rpartition(".")[2] not in ENGINE_FIELDS}
 
 
 def changes_note(changes: dict[str, Any]) -> str:
