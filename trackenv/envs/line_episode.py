@@ -117,14 +117,15 @@ class LineState:
 
 
 def file_run_age_years(config: LineConfig) -> float:
-    """How long before ``as_of`` the oldest of a line file's sections' last runs was [years] (0 without a file):
-    the first observation shows those runs (:func:`~trackenv.envs.line_fit.last_runs`), so the measurement ages
-    reach that far beyond the horizon's."""
-    line = config.line
-    if line is None:
+    """How long before ``as_of`` the oldest of the line file's last runs that the first observation shows was
+    [years] (:func:`~trackenv.envs.line_fit.last_runs`; 0 without a file or without such a run): the measurement
+    ages reach that far beyond the horizon's."""
+    if config.line is None:
         return 0.0
-    return max((line.years_before(line.measurements(s.id)[-1].date) for s in line.sections
-                if line.measurements(s.id)), default=0.0)
+    from .line_fit import last_runs
+
+    ages = last_runs(config.line)["last_run_age_years"]
+    return float(np.max(ages[~np.isnan(ages)], initial=0.0))
 
 
 def line_observation_bounds(config: LineConfig) -> dict[str, tuple[float, float]]:

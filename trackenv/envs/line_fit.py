@@ -329,8 +329,8 @@ def history_fit(config: LineConfig) -> HistoryFit:
     rough = np.full(line.n_sections, np.nan)
     for j, s in enumerate(line.sections):
         t, sd = points[s.id]
-        note = "; ".join(n for n in (_tamping_note(line, s), _drop_note(line, s, config), _low_sd_note(line, s))
-                         if n)
+        drop = _drop_note(line, s, config)
+        note = "; ".join(n for n in (_tamping_note(line, s), drop, _low_sd_note(line, s)) if n)
         if not line.measurements(s.id):
             fit = SectionFit(s.id, "no history")
         elif s.id in need:
@@ -338,7 +338,7 @@ def history_fit(config: LineConfig) -> HistoryFit:
             fit, cdf_j = _fit_section(s, t, sd, g, config)
             if cdf_j is not None:
                 cdf[j], rough[j] = cdf_j, g.roughness
-            poor = "" if "drops from" in note else _poor_fit_note(fit, config)
+            poor = "" if drop else _poor_fit_note(fit, config)  # (a drop explains a poor fit: said once)
             note = "; ".join(n for n in (note, _given_note(s, fit, config), poor) if n)
         elif len(sd) >= 1:
             fit = SectionFit(s.id, "start SD only", points=1, start_sd_mm=float(sd[-1]) * 1e3)
@@ -357,7 +357,7 @@ def _given_note(s: Section, fit: SectionFit, config: LineConfig) -> str:
     sentence naming both factors and residuals; else ""."""
     if fit.status != "given" or math.isnan(fit.fitted_residual_mm):
         return ""
-    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    error_mm = _fit_error_mm(config)
     if fit.residual_mm - fit.fitted_residual_mm <= FIT_CONFLICT_ERRORS * error_mm:
         return ""
     return (f"rate_factor {fit.rate_factor:g} contradicts the history: its curve misses the measured SD by "
@@ -381,9 +381,9 @@ def _tamping_note(line: LineDescription, s: Section) -> str:
     rate_across = (a1.sd_mm - b2.sd_mm) / (line.years_before(b2.date) - line.years_before(a1.date))
     if rate_before <= 0 or rate_across < FIT_NO_DROP_SHARE * rate_before:
         return ""
-    tamped = dt.date.fromisoformat(line.as_of) - dt.timedelta(days=round(s.years_since_tamping * DAYS_PER_YEAR))
+    tamped = _tamping_date(line, s)
     return (f"the history shows no drop across the last tamping that years_since_tamping "
-            f"{s.years_since_tamping:g} puts on {tamped.isoformat()}: {b1.sd_mm:g}, {b2.sd_mm:g} mm before it "
+            f"{s.years_since_tamping:g} puts on {tamped}: {b1.sd_mm:g}, {b2.sd_mm:g} mm before it "
             f"({b1.date}, {b2.date}), {a1.sd_mm:g} mm after ({a1.date}); check years_since_tamping (the fit "
             f"uses the runs after that date only)")
 
@@ -393,15 +393,15 @@ def _drop_note(line: LineDescription, s: Section, config: LineConfig) -> str:
     times the fit's error and :data:`FIT_DROP_SHARE` of the SD before: a tamping the file does not state, a
     sentence naming the runs (the largest such drop); else ""."""
     ms = [m for m in line.measurements(s.id) if _after_tamping(line, s, m)]
-    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    error_mm = _fit_error_mm(config)
     drops = [(a.sd_mm - b.sd_mm, a, b) for a, b in zip(ms[:-1], ms[1:], strict=True)
              if a.sd_mm - b.sd_mm > max(FIT_DROP_ERRORS * error_mm, FIT_DROP_SHARE * a.sd_mm)]
     if not drops:
         return ""
     _, a, b = max(drops, key=lambda d: d[0])
-    tamped = dt.date.fromisoformat(line.as_of) - dt.timedelta(days=round(s.years_since_tamping * DAYS_PER_YEAR))
+    tamped = _tamping_date(line, s)
     return (f"the SD drops from {a.sd_mm:g} to {b.sd_mm:g} mm between the runs of {a.date} and {b.date}, after "
-            f"the last tamping that years_since_tamping {s.years_since_tamping:g} puts on {tamped.isoformat()}: a "
+            f"the last tamping that years_since_tamping {s.years_since_tamping:g} puts on {tamped}: a "
             f"tamping the file does not state? The fit runs one settlement curve through the drop; check "
             f"years_since_tamping")
 
@@ -409,7 +409,7 @@ def _drop_note(line: LineDescription, s: Section, config: LineConfig) -> str:
 def _poor_fit_note(fit: SectionFit, config: LineConfig) -> str:
     """Where the fitted curve misses the section's runs by more than :data:`FIT_POOR_ERRORS` times the fit's
     error (RMS): a sentence saying so; else ""."""
-    error_mm = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+    error_mm = _fit_error_mm(config)
     if fit.status != "fitted" or not fit.residual_mm > FIT_POOR_ERRORS * error_mm:
         return ""
     return (f"the fitted curve misses the measured SD by {fit.residual_mm:.3f} mm RMS, more than "
@@ -425,6 +425,18 @@ def _low_sd_note(line: LineDescription, s: Section) -> str:
         return ""
     return (f"every run measures an SD below {FIT_LOW_SD_MM:g} mm (at most {max(m.sd_mm for m in ms):g} mm), less "
             f"than tamped track measures (about 0.5 mm and more): is sd_mm given in cm?")
+
+
+def _fit_error_mm(config: LineConfig) -> float:
+    """The fit's error of one SD reading [mm]: the recording car's ``sd_noise_mm`` and the model error
+    :data:`FIT_MODEL_ERROR_MM` in quadrature (the likelihood's, and the scale of every check's threshold)."""
+    return math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM)
+
+
+def _tamping_date(line: LineDescription, s: Section) -> str:
+    """The date (ISO) of section ``s``'s last tamping as its ``years_since_tamping`` puts it before ``as_of``."""
+    as_of = dt.date.fromisoformat(line.as_of)
+    return (as_of - dt.timedelta(days=round(s.years_since_tamping * DAYS_PER_YEAR))).isoformat()
 
 
 def _after_tamping(line: LineDescription, s: Section, m: Any) -> bool:
@@ -461,7 +473,7 @@ def _fit_section(s: Section, t: np.ndarray, sd: np.ndarray, growth: _Growth,
     # the prior of k: the section factor's (lognormal) times the spread of the hidden field's roughness
     sigma_k = math.hypot(max(config.rate_sigma, 0.05), growth.roughness_sd)
     mean_k = -config.rate_sigma**2 / 2
-    sigma_e = math.hypot(config.sd_noise_mm, FIT_MODEL_ERROR_MM) * 1e-3
+    sigma_e = _fit_error_mm(config) * 1e-3
     sd0_grid = np.linspace(0.0, 1.5 * float(sd.max()), SD0_POINTS)
 
     def posterior(rates: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
