@@ -306,7 +306,11 @@ def test_pass_reuse_env_steps_finitely(reuse_env: TampingLine, seed, actions) ->
 # the network: its config, and the env's seeds and actions on two lines of the short track (6 sections)
 NETWORK_FIELDS = [f.name for f in dataclasses.fields(NetworkConfig)]
 line_configs = st.sampled_from(["default", "small", "nowhere", {"n_sections": 2}, {"n_sections": 2, "capacity": 2},
-                                {"bogus": 1}, ENV_CFG])
+                                {"bogus": 1}, ENV_CFG,
+                                # lines of their own: good, empty, one bad, another calendar, other observation keys
+                                ["small", {"n_sections": 4, "capacity": 2}], [], ["small", "nowhere"],
+                                ["small", {"steps_per_year": 2}], ["small", {"contact_sensor": True}],
+                                ("small", "small", {"n_sections": 8, "capacity": 8})])
 
 
 @FUZZ
@@ -315,11 +319,17 @@ line_configs = st.sampled_from(["default", "small", "nowhere", {"n_sections": 2}
                        min_size=1, max_size=3))
 def test_network_config_refuses_or_stores_canonical_values(kw: dict) -> None:
     """A network config refuses naming a field it was given (a line config's own refusal is prefixed with
-    line_config; capacity's bound follows the line's sections), or stores its counts as int and its move cost as
-    a finite float."""
+    line_config; capacity's bound follows the lines' sections; a list's length is the number of lines), or stores
+    its counts as int, its move cost as a finite float, one line config per line each with a capacity within its
+    sections (the network's cut to them)."""
     cfg = _refuses_or_stores_canonical_values(NetworkConfig, kw, NetworkConfig)
     if cfg is not None:
-        assert type(cfg.capacity) is int and 1 <= cfg.capacity <= cfg.line_config.n_sections
+        assert type(cfg.n_lines) is int and len(cfg.line_configs) == cfg.n_lines == len(cfg.line_sections)
+        assert all(1 <= line.capacity <= line.n_sections for line in cfg.line_configs)
+        if cfg.capacity is not None:
+            assert type(cfg.capacity) is int and 1 <= cfg.capacity <= max(cfg.line_sections)
+            assert all(line.capacity == min(cfg.capacity, line.n_sections) for line in cfg.line_configs)
+        assert cfg.mixed or cfg.capacity is not None
 
 
 valid_network_action = st.lists(st.integers(0, 1), min_size=6, max_size=6)
@@ -339,6 +349,26 @@ def network_env() -> TampingNetwork:
 @given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=network_actions)
 def test_network_env_seed_and_action(network_env: TampingNetwork, seed, action) -> None:
     _steps_within_its_space(network_env, seed, action, "TampingNetwork.step")
+
+
+@pytest.fixture(scope="module")
+def mixed_network_env() -> TampingNetwork:
+    """Lines of their own: the short track's 3 sections and a track of 6 such sections, capacity 2 (9 entries in the
+    action)."""
+    return TampingNetwork(NetworkConfig(line_config=[ENV_CFG, ENV_CFG.replace(n_sections=6, capacity=2)]))
+
+
+mixed_network_actions = st.one_of(
+    mostly(st.lists(st.integers(0, 1), min_size=9, max_size=9), 3),
+    st.lists(st.integers(-1, 2), max_size=10),
+    st.lists(st.sampled_from([0, 1, 0.5, np.nan, None]), min_size=9, max_size=9),
+)
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 25)
+@given(seed=mostly(st.one_of(st.integers(0, 2**32), st.none())), action=mixed_network_actions)
+def test_mixed_network_env_seed_and_action(mixed_network_env: TampingNetwork, seed, action) -> None:
+    _steps_within_its_space(mixed_network_env, seed, action, "TampingNetwork.step")
 
 
 @pytest.fixture(scope="module")

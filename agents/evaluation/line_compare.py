@@ -345,11 +345,11 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
     from matplotlib.figure import Figure
 
     pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
-    n_lines, n_sections = cfg.n_lines, cfg.line_config.n_sections
+    n_lines, offsets = cfg.n_lines, cfg.line_offsets
     fig = Figure(figsize=(8 * len(pols), 1.6 + 2.2 * n_lines))
     axes = fig.subplots(n_lines + 1, len(pols), sharex=True, sharey="row", squeeze=False,
                         gridspec_kw={"height_ratios": [0.6] + [1.0] * n_lines})
-    years = np.arange(cfg.horizon_steps + 1) / cfg.line_config.steps_per_year
+    years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
     for col, pol in enumerate(pols):
         env = gym.make("trackenv/TampingNetwork-v0", config=cfg)
         obs, info = env.reset(seed=seed)
@@ -363,8 +363,7 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
             chosen.append(info["section_choices"])
             cost -= float(r)
         env.close()
-        sd_ = np.array(sd).reshape(-1, n_lines, n_sections)
-        tamped_ = np.array(tamped).reshape(-1, n_lines, n_sections)
+        sd_, tamped_ = np.array(sd), np.array(tamped)
         top = axes[0, col]
         start = years[:-1]  # step t runs from years[t]: the machine's line in it (a move's destination)
         top.step(start, machine, where="post", color="0.6", lw=0.8)
@@ -379,11 +378,11 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
         top.legend(fontsize=6, ncol=3, loc="upper right")
         for line in range(n_lines):
             ax = axes[line + 1, col]
-            for j in range(n_sections):
+            for j, entry in enumerate(range(offsets[line], offsets[line + 1])):
                 colour = f"C{j % 10}"
-                ax.plot(years, sd_[:, line, j], color=colour, lw=0.8)
-                steps = np.flatnonzero(tamped_[:, line, j])
-                ax.plot(years[steps], sd_[steps, line, j], "v", color=colour, ms=4, ls="none")
+                ax.plot(years, sd_[:, entry], color=colour, lw=0.8)
+                steps = np.flatnonzero(tamped_[:, entry])
+                ax.plot(years[steps], sd_[steps, entry], "v", color=colour, ms=4, ls="none")
         axes[-1, col].set_xlabel("year")
     axes[0, 0].set_ylabel("machine's line")
     for line in range(n_lines):

@@ -21,10 +21,13 @@ observation anyway).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from trackenv.envs.line_episode import line_observation_space
+from trackenv.envs.network import line_groups
 from trackenv.physics._checks import check_scalar
 
 from .base import Heuristic, as_batch
@@ -71,19 +74,45 @@ def network_label(line_name: str, dispatch: str | ValueDispatch = "requests",
     return f"network-by-value({inner})" if by_value else f"network({inner})"
 
 
-def line_view(obs: dict[str, np.ndarray], n_lines: int) -> dict[str, np.ndarray]:
-    """A batched network observation (batch, ...) as the batched observation of its lines (batch · n_lines,
-    ...): per-section keys (batch, n_lines · S) -> (batch · n_lines, S), per-line keys -> (batch · n_lines, 1),
-    ``time`` repeated; ``machine_line`` left out."""
+def line_view(obs: dict[str, np.ndarray], n_lines: int, lines: Sequence[int] | None = None,
+              network: Any = None) -> dict[str, np.ndarray]:
+    """A batched network observation (batch, ...) as the batched observation of its lines ``lines`` (default
+    all; batch · len(lines), ...): per-section keys (batch, Σ sections) -> (batch · len(lines), S), per-line keys
+    -> (batch · len(lines), 1), ``time`` repeated; ``machine_line`` left out. The lines' sections (and profile
+    segments) are those of ``network`` (a :class:`~trackenv.envs.network.NetworkConfig`; None: every line has an
+    equal share); ``lines`` must have equally many."""
+    chosen = list(range(n_lines)) if lines is None else list(lines)
     out = {}
     for key, value in obs.items():
         if key == "machine_line":
             continue
         if key == "time":
-            out[key] = np.repeat(value, n_lines, axis=0)
+            out[key] = np.repeat(value, len(chosen), axis=0)
+        elif _per_line(key, value, n_lines, network):
+            out[key] = value[:, chosen].reshape(-1, 1)
         else:
-            out[key] = value.reshape(value.shape[0] * n_lines, value.shape[1] // n_lines, *value.shape[2:])
+            rows = _line_rows(network, n_lines, value.shape[1], profile=value.ndim > 2)
+            parts = [value[:, rows[line]:rows[line + 1]] for line in chosen]
+            out[key] = np.stack(parts, axis=1).reshape(-1, *parts[0].shape[1:])
     return out
+
+
+def _per_line(key: str, value: np.ndarray, n_lines: int, network: Any) -> bool:
+    """Whether ``key`` holds one value per line: per the line's observation space, or without ``network`` by its
+    shape (batch, n_lines)."""
+    if network is None:
+        return value.ndim == 2 and value.shape[1] == n_lines
+    return line_observation_space(network.line_configs[0]).spaces[key].shape == (1,)
+
+
+def _line_rows(network: Any, n_lines: int, total: int, profile: bool) -> np.ndarray:
+    """(n_lines + 1,) where each line's rows of a stacked key start: its sections, or with ``profile`` its
+    segments, per ``network``'s lines; an equal share of ``total`` without one."""
+    if network is None:
+        return np.arange(n_lines + 1) * (total // n_lines)
+    if not profile:
+        return np.asarray(network.line_offsets)
+    return np.concatenate([[0], np.cumsum([line.n_segments for line in network.line_configs])])
 
 
 class NetworkRule(Heuristic):
@@ -131,27 +160,42 @@ class NetworkRule(Heuristic):
 
     def bind(self, config: Any) -> NetworkRule:
         """A copy whose line policy knows the calendar and capacity of the network's line config (a policy
-        without ``bind`` is taken as it is), and whose dispatch knows that line's limits and costs."""
+        without ``bind`` is taken as it is), and whose dispatch knows that line's limits and costs. On a network
+        of lines of their own (``config.mixed``) the line policy is bound to each distinct line config and plays
+        the lines of that config."""
         bind = getattr(self.line_rule, "bind", None)
-        return type(self)(bind(config.line_config) if callable(bind) else self.line_rule, self.dispatch,
-                          config.line_config, self.eager_probability)
+        groups = [(members, bind(line) if callable(bind) else self.line_rule, line)
+                  for line, members in line_groups(config)]
+        bound = type(self)(groups[0][1], self.dispatch, config.line_config, self.eager_probability)
+        bound._network, bound._groups = config, groups
+        return bound
+
+    #: set by :meth:`bind`: the network's config, and per distinct line config (its lines, the line policy bound
+    #: to it, the config)
+    _network: Any = None
+    _groups: list[tuple[list[int], Any, Any]] | None = None
 
     def reset(self) -> None:
-        """The line policy's reset, where it has one."""
-        reset = getattr(self.line_rule, "reset", None)
-        if callable(reset):
-            reset()
+        """The line policy's reset (each bound copy's), where it has one."""
+        for _, line_rule, _ in self._groups or [([], self.line_rule, None)]:
+            reset = getattr(line_rule, "reset", None)
+            if callable(reset):
+                reset()
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         b, batched = as_batch(obs)
         n_envs, n_lines = b["machine_line"].shape
-        lines = line_view(b, n_lines)
-        want, _ = self.line_rule.predict(lines)
-        want = np.asarray(want, dtype=bool).reshape(n_envs, n_lines, -1)
+        groups = self._groups or [(list(range(n_lines)), self.line_rule, self.line_config)]
+        sections = np.diff(_line_rows(self._network, n_lines, b["section_sd"].shape[1], profile=False))
+        want = np.zeros((n_envs, n_lines, sections.max()), dtype=bool)  # padded where a line has fewer sections
+        views = [line_view(b, n_lines, members, self._network) for members, _, _ in groups]
+        for (members, line_rule, _), view in zip(groups, views, strict=True):
+            asked, _ = line_rule.predict(view)
+            want[:, members, :sections[members[0]]] = np.asarray(asked, dtype=bool).reshape(n_envs, len(members), -1)
         here = b["machine_line"].argmax(axis=1)
         rows = np.arange(n_envs)
         if isinstance(self.dispatch, ValueDispatch):
-            target = self._value_target(self.dispatch, lines, want, here)
+            target = self._value_target(self.dispatch, groups, views, want, here)
             keep = np.arange(n_lines)[None, :] == target[:, None]
             stay = target == here
         else:
@@ -159,16 +203,23 @@ class NetworkRule(Heuristic):
             keep = np.where(stay[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
         act = want & keep[:, :, None]
         if self.eager_probability is not None:  # where the machine stays, its line asks for what is due soon too
-            soon = np.asarray(self.line_rule.requests(lines, self.eager_probability), dtype=bool)
-            act[rows, here] |= soon.reshape(n_envs, n_lines, -1)[rows, here] & stay[:, None]
-        act = act.reshape(n_envs, -1).astype(np.int8)
-        return (act if batched else act[0]), state
+            soon = np.zeros_like(want)
+            for (members, line_rule, _), view in zip(groups, views, strict=True):
+                due = np.asarray(line_rule.requests(view, self.eager_probability), dtype=bool)
+                soon[:, members, :sections[members[0]]] = due.reshape(n_envs, len(members), -1)
+            act[rows, here] |= soon[rows, here] & stay[:, None]
+        flat = np.concatenate([act[:, line, :sections[line]] for line in range(n_lines)], axis=1).astype(np.int8)
+        return (flat if batched else flat[0]), state
 
-    def _value_target(self, dispatch: ValueDispatch, lines: dict[str, np.ndarray], want: np.ndarray,
-                      here: np.ndarray) -> np.ndarray:
-        """(n_envs,) the line ``dispatch`` serves this step."""
-        if self.line_config is None:
-            raise ValueError("NetworkRule(dispatch='value') prices the sections with the line's limits and costs: "
-                             "bind it to the network's config first (bind)")
-        values = dispatch.line_values(lines, want, self.line_config)
+    def _value_target(self, dispatch: ValueDispatch, groups: list, views: list[dict[str, np.ndarray]],
+                      want: np.ndarray, here: np.ndarray) -> np.ndarray:
+        """(n_envs,) the line ``dispatch`` serves this step: each line's requests ``want`` (n_envs, n_lines, S)
+        priced with its own config's limits and costs."""
+        values = np.zeros(want.shape[:2])
+        for (members, _, line_config), view in zip(groups, views, strict=True):
+            if line_config is None:
+                raise ValueError("NetworkRule(dispatch='value') prices the sections with the line's limits and "
+                                 "costs: bind it to the network's config first (bind)")
+            mine = want[:, members, :view["section_sd"].shape[1]]
+            values[:, members] = dispatch.line_values(view, mine, line_config)
         return dispatch.target(values, np.asarray(want.any(axis=2)), here)

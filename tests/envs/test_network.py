@@ -250,3 +250,123 @@ def test_the_picture_names_its_line_and_shows_that_lines_cost(monkeypatch):
     n_lines = env.unwrapped.config.n_lines
     assert seen["frame_label"].startswith(f"line 1 (the machine's; lines 0-{n_lines - 1})")
     assert seen["cost"] == info["line_costs"][1] != info["cost"]
+
+
+# ---------------------------------------------------------------- lines of their own (a list of line configs)
+#: three lines of their own: 6 sections, 4 sections of 150 m at 80 km/h, 6 sections with twice the tonnage
+MIXED = {"line_config": ["small", {"n_sections": 4, "section_length_m": 150.0, "speed_kmh": 80.0, "capacity": 2},
+                         {"n_sections": 6, "capacity": 3, "annual_mgt": 30.0}],
+         "horizon_years": 0.75}
+
+
+def _mixed(**kw):
+    return TampingNetwork(**{**MIXED, **kw})
+
+
+def test_lines_of_their_own_each_run_as_their_plain_line():
+    """Without requests, line ``l`` of a network of mixed lines is bit for bit the plain line of its config and
+    seed: its slice of every per-section key, its per-line keys and its cost."""
+    seed = 11
+    env = _mixed()
+    config = env.config
+    assert config.mixed and config.line_sections == (6, 4, 6) and config.line_offsets == (0, 6, 10, 16)
+    assert env.action_space == gym.spaces.MultiBinary(16) and config.capacity is None
+    plain = [TampingLine(line) for line in config.line_configs]
+    nobs, _ = env.reset(seed=seed)
+    lobs = [line.reset(seed=s)[0] for line, s in zip(plain, line_seeds(np.random.default_rng(seed), 3), strict=True)]
+    for _ in range(3):
+        for line, (first, end) in enumerate(zip(config.line_offsets, config.line_offsets[1:])):
+            for key, value in lobs[line].items():
+                mine = nobs[key][line] if value.shape == (1,) and key != "time" else (
+                    nobs[key] if key == "time" else nobs[key][first:end])
+                assert np.array_equal(np.atleast_1d(mine), value), (line, key)
+        nobs, _, _, _, info = env.step(np.zeros(16, dtype=np.int8))
+        steps = [line.step(np.zeros(line.config.n_sections, dtype=np.int8)) for line in plain]
+        lobs = [s[0] for s in steps]
+        assert list(info["line_costs"]) == [s[4]["cost"] for s in steps]
+
+
+def test_requests_on_a_line_of_its_own_tamp_its_sections_within_its_capacity():
+    env = _mixed()
+    env.reset(seed=12)
+    free = np.flatnonzero(env.action_masks().reshape(-1, 2)[:, 1][6:10])
+    ask = np.zeros(16, dtype=np.int8)
+    ask[6 + free] = 1
+    _, _, _, _, info = env.step(ask)  # the machine moves to line 1
+    assert info["moved"] and info["machine_line"] == 1
+    _, _, _, _, info = env.step(ask)
+    tamped = np.flatnonzero(info["tamped_sections"])
+    assert set(tamped) <= set(6 + free) and len(tamped) == min(2, free.size)  # line 1's own capacity, 2
+    assert info["clipped"] == (free.size > 2)
+
+
+def test_a_network_capacity_is_cut_to_each_lines_sections():
+    config = NetworkConfig.coerce(None, **MIXED, capacity=5)
+    assert [line.capacity for line in config.line_configs] == [5, 4, 5]
+    with pytest.raises(ValueError, match=r"capacity must be an integer in \[1, 6\]"):
+        NetworkConfig.coerce(None, **MIXED, capacity=7)
+
+
+def test_a_list_of_equal_configs_is_the_one_config():
+    listed = NetworkConfig(line_config=["small", "small"])
+    assert not listed.mixed and listed == NetworkConfig(n_lines=2, line_config="small")
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"n_lines": 2}, r"n_lines=2 but line_config lists 3 line configs"),
+    ({"line_config": []}, "line_config: an empty list"),
+    ({"line_config": ["small", "nowhere"]}, r"^line_config\[1\]: unknown scenario"),
+    ({"line_config": ["small", {"steps_per_year": 2}]}, r"line_config\[1\]: steps_per_year=2 differs"),
+    ({"line_config": ["small", {"horizon_years": 2.0}]}, r"line_config\[1\]: horizon_steps=8 differs"),
+    ({"line_config": ["small", {"contact_sensor": True}]}, r"line_config\[1\]: its observation has other keys"),
+    ({"line_config": [{"profiles": True}, {"profiles": True, "segment_length_m": 20.0}]},
+     r"line_config\[1\]: segment_length_m=20.0 differs"),
+])
+def test_bad_lists_of_line_configs_raise_naming_the_line(bad, message):
+    with pytest.raises(ValueError, match=message):
+        NetworkConfig(**{"line_config": MIXED["line_config"], **bad})
+
+
+def test_mixed_config_round_trip_and_line_overrides():
+    config = NetworkConfig.coerce(None, **MIXED)
+    assert NetworkConfig.from_dict(config.to_dict()) == config
+    assert isinstance(config.to_dict()["line_config"], list)
+    assert all(line.horizon_steps == 3 for line in config.line_configs)  # the override reached every line
+    with pytest.raises(ValueError, match="line_sections"):
+        _ = config.sections_per_line
+
+
+def test_mixed_vector_env_equals_single_envs_and_the_state_round_trips():
+    vec = TampingNetworkVectorEnv(2, **MIXED)
+    vobs, _ = vec.reset(seed=30)
+    singles = [_mixed() for _ in range(2)]
+    for i, env in enumerate(singles):
+        env.reset(seed=30 + i)
+    rng = np.random.default_rng(1)
+    for step in range(4):  # across the end of the 3-step episodes
+        actions = (rng.random((2, 16)) < 0.3).astype(np.int8)
+        vobs, vr, _, vtr, _ = vec.step(actions)
+        for i, env in enumerate(singles):
+            obs, r, _, tr, _ = env.step(actions[i])
+            assert vr[i] == r and vtr[i] == tr
+            if tr:
+                obs, _ = env.reset()
+            assert all(np.array_equal(vobs[k][i], obs[k]) for k in obs), (step, i)
+    env = singles[0]
+    state = env.get_state()
+    after = [env.step(actions[0])[1] for _ in range(2)]
+    env.set_state(state)
+    assert [env.step(actions[0])[1] for _ in range(2)] == after
+
+
+def test_mixed_checkers_and_picture():
+    from stable_baselines3.common.env_checker import check_env as sb3_check
+
+    check_env(gym.make("trackenv/TampingNetwork-v0", **MIXED).unwrapped, skip_render_check=True)
+    sb3_check(_mixed(), warn=True)
+    env = _mixed(render_mode="rgb_array")
+    env.reset(seed=1)
+    ask = np.zeros(16, dtype=np.int8)
+    ask[6:10] = 1
+    env.step(ask)
+    assert env.render().ndim == 3

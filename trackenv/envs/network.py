@@ -38,7 +38,7 @@ from .common import observation_space
 from .line_config import LineConfig
 from .line_episode import LineBatch, LineState, line_observation_bounds, line_observation_space
 
-__all__ = ["NETWORK_COST_KEYS", "NetworkBatch", "NetworkConfig", "NetworkState", "line_seeds",
+__all__ = ["NETWORK_COST_KEYS", "NetworkBatch", "NetworkConfig", "NetworkState", "line_groups", "line_seeds",
            "network_observation_space"]
 
 #: the network's own cost part, beside the lines' parts in ``info["costs"]``
@@ -48,40 +48,53 @@ NETWORK_COST_KEYS = (*LineConfig.cost_keys(), MOVE_COST_KEY)
 
 @dataclass(frozen=True)
 class NetworkConfig:
-    """A network of ``n_lines`` lines of one line config that share one tamping machine. Costs in k€.
+    """A network of ``n_lines`` lines that share one tamping machine. Costs in k€.
 
-    * ``n_lines``: lines in the network (1-16; default 3 **[assumption]**: a regional maintenance area of a
-      few lines served by one tamper);
     * ``line_config``: the config of every line (a :class:`~trackenv.envs.line_config.LineConfig`, a dict of its
       fields, or a preset name of :data:`~trackenv.envs.line_config.SCENARIOS`; default ``"default"``, the
-      12-section line); each line draws its own episode from it;
-    * ``capacity``: sections the machine tamps per step over the whole network (one line per step; at most a
-      line's sections; None: the line config's ``capacity``, 6 on the default line: one quarter's nights of a
-      tamper at 0.5-2.2 km per working hour). It replaces the line config's ``capacity``;
+      12-section line), or a list of them, one per line (lines of their own: each a line file's config, say,
+      with its own sections, lengths, speeds and traffic); each line draws its own episode from its config.
+      Lines of a list share the calendar (``steps_per_year``, ``horizon_years``) and the observation's keys
+      (``profiles``, ``contact_sensor``, ``choices``); a list whose configs are all equal is stored as the one
+      config;
+    * ``n_lines``: lines in the network (1-16; default 3 **[assumption]**: a regional maintenance area of a
+      few lines served by one tamper; with a list of configs, its length, and another number is an error);
+    * ``capacity``: sections the machine tamps per step on the line it is on (one line per step; at most that
+      line's sections, in that line's ``section_length_m``; None: each line's own ``capacity``, 6 on the
+      default line: one quarter's nights of a tamper at 0.5-2.2 km per working hour). It replaces the line
+      configs' ``capacity`` (cut to a line's sections where it has fewer; above every line's, an error);
     * ``move_cost``: moving the machine to another line (10 k€ **[assumption]**: a transfer run of the tamper
       and its crew over the network, of the order of a possession's call-out); the move takes the step in which
       it is asked (no tamping anywhere in that step);
     * ``start_line``: the line the machine is on at the start of every episode (default 0).
 
-    The horizon, calendar and economics of each line are the line config's. Bad values raise ValueError naming
+    The horizon, calendar and economics of each line are its line config's. Bad values raise ValueError naming
     the field and its range; an unknown key (:meth:`from_dict`, :meth:`replace`) raises naming it."""
 
     #: the action parameterisations a learner may use on the network: its own (one flag per section of every line)
     agent_action_types: ClassVar[tuple[str, ...]] = ("multibinary",)
 
-    n_lines: int = 3
+    n_lines: int = None  # type: ignore[assignment]  # None: 3, or the length of a list of line configs
     line_config: Any = "default"
     capacity: int | None = None
     move_cost: float = 10.0
     start_line: int = 0
 
     def __post_init__(self) -> None:
+        lines = _line_configs(self.line_config)
+        if self.n_lines is None:
+            object.__setattr__(self, "n_lines", len(lines) if isinstance(self.line_config, (list, tuple)) else 3)
         check_int_field(self, "n_lines", low=1, high=16)
-        line = _line_config(self.line_config)
-        if self.capacity is None:
-            object.__setattr__(self, "capacity", line.capacity)
-        check_int_field(self, "capacity", low=1, high=line.n_sections)
-        object.__setattr__(self, "line_config", line.replace(capacity=self.capacity))
+        if isinstance(self.line_config, (list, tuple)) and len(lines) != self.n_lines:
+            raise ValueError(f"n_lines={self.n_lines!r} but line_config lists {len(lines)} line configs: give one "
+                             f"per line, or leave n_lines out")
+        if self.capacity is None and all(line == lines[0] for line in lines):
+            object.__setattr__(self, "capacity", lines[0].capacity)
+        if self.capacity is not None:
+            check_int_field(self, "capacity", low=1, high=max(line.n_sections for line in lines))
+            lines = tuple(line.replace(capacity=min(self.capacity, line.n_sections)) for line in lines)
+        _check_alike(lines)
+        object.__setattr__(self, "line_config", lines[0] if all(line == lines[0] for line in lines) else lines)
         check_field(self, "move_cost", low=0.0, high=1e6)
         check_int_field(self, "start_line", low=0, high=self.n_lines - 1)
 
@@ -97,7 +110,7 @@ class NetworkConfig:
     @classmethod
     def coerce(cls, config: NetworkConfig | dict | None, **overrides: Any) -> NetworkConfig:
         """A config from None (defaults), a dict or a config, with ``overrides``: NetworkConfig fields, and any
-        other key a field of the line config (``horizon_years=1.0``) applied to ``line_config``."""
+        other key a field of the line configs (``horizon_years=1.0``) applied to every line's config."""
         if config is None:
             config = cls()
         elif isinstance(config, dict):
@@ -108,21 +121,27 @@ class NetworkConfig:
         mine = {k: v for k, v in overrides.items() if k in own}
         line_changes = {k: v for k, v in overrides.items() if k not in own}
         if line_changes:
-            line = _line_config(mine.get("line_config", config.line_config))
-            mine["line_config"] = line.replace(**line_changes)
+            given = mine.get("line_config", config.line_config)
+            lines = [line.replace(**line_changes) for line in _line_configs(given)]
+            mine["line_config"] = lines if isinstance(given, (list, tuple)) else lines[0]
         return config.replace(**mine) if mine else config
 
     def replace(self, **changes: Any) -> NetworkConfig:
-        """A copy with some fields changed (validated). A new ``line_config`` brings its own capacity unless
-        ``capacity`` is given too."""
+        """A copy with some fields changed (validated). A new ``line_config`` brings its own capacity (and a list
+        of them its own number of lines) unless ``capacity`` (``n_lines``) is given too."""
         base = {f.name: getattr(self, f.name) for f in fields(self)}
         if "line_config" in changes and "capacity" not in changes:
             base["capacity"] = None
+        if isinstance(changes.get("line_config"), (list, tuple)) and "n_lines" not in changes:
+            base["n_lines"] = None
         return self.from_dict({**base, **changes})
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly: the network's fields, the line config as its own dict (:meth:`from_dict` reads it)."""
-        return {**{f.name: getattr(self, f.name) for f in fields(self)}, "line_config": self.line_config.to_dict()}
+        """JSON-friendly: the network's fields, the line config as its own dict, or a list of them (:meth:`from_dict`
+        reads it)."""
+        lines = [line.to_dict() for line in self.line_configs]
+        return {**{f.name: getattr(self, f.name) for f in fields(self)},
+                "line_config": lines if self.mixed else lines[0]}
 
     @classmethod
     def cost_keys(cls) -> tuple[str, ...]:
@@ -130,36 +149,107 @@ class NetworkConfig:
         return NETWORK_COST_KEYS
 
     @property
+    def mixed(self) -> bool:
+        """Whether the lines have configs of their own (``line_config`` a tuple), not one config for all."""
+        return isinstance(self.line_config, tuple)
+
+    @property
+    def line_configs(self) -> tuple[LineConfig, ...]:
+        """(n_lines,) each line's config, in line order."""
+        return self.line_config if self.mixed else (self.line_config,) * self.n_lines
+
+    @property
+    def line_sections(self) -> tuple[int, ...]:
+        """(n_lines,) each line's number of sections: line ``l``'s sections are the action's entries
+        ``line_offsets[l] .. line_offsets[l + 1] − 1``."""
+        return tuple(line.n_sections for line in self.line_configs)
+
+    @property
+    def line_offsets(self) -> tuple[int, ...]:
+        """(n_lines + 1,) where each line's sections start in the action (and in per-section observation keys)."""
+        return (0, *np.cumsum(self.line_sections).tolist())
+
+    @property
     def sections_per_line(self) -> int:
+        """Sections of every line, where the lines have one config (ValueError on a network of lines of their
+        own: :attr:`line_sections`)."""
+        if self.mixed:
+            raise ValueError("the lines of this network have configs of their own: see line_sections")
         return self.line_config.n_sections
 
     @property
     def n_sections(self) -> int:
         """Sections of the whole network: the length of the action."""
-        return self.n_lines * self.line_config.n_sections
+        return sum(self.line_sections)
 
     @property
     def horizon_steps(self) -> int:
-        return self.line_config.horizon_steps
+        return self.line_configs[0].horizon_steps
 
     @property
     def horizon_years(self) -> float:
-        return self.line_config.horizon_years
+        return self.line_configs[0].horizon_years
 
     @property
     def steps_per_year(self) -> int:
-        return self.line_config.steps_per_year
+        return self.line_configs[0].steps_per_year
 
 
 def _line_config(value: Any) -> LineConfig:
     """``line_config`` as a LineConfig (a config, a dict of its fields or a preset name), else ValueError."""
     if not isinstance(value, (LineConfig, dict, str)):
-        raise ValueError(f"line_config must be a LineConfig, a dict of its fields or a preset name, got "
-                         f"{type(value).__name__}")
+        raise ValueError(f"line_config must be a LineConfig, a dict of its fields or a preset name, or a list of "
+                         f"them (one per line), got {type(value).__name__}")
     try:
         return LineConfig.coerce(value)
     except ValueError as exc:
         raise ValueError(f"line_config: {exc}") from None
+
+
+def _line_configs(value: Any) -> tuple[LineConfig, ...]:
+    """``line_config`` as the tuple of the configs it gives (one, or one per line), else ValueError."""
+    if not isinstance(value, (list, tuple)):
+        return (_line_config(value),)
+    if not value:
+        raise ValueError("line_config: an empty list (give one line config per line)")
+    out = []
+    for i, item in enumerate(value):
+        try:
+            out.append(_line_config(item))
+        except ValueError as exc:
+            raise ValueError(f"line_config[{i}]: {str(exc).removeprefix('line_config: ')}") from None
+    return tuple(out)
+
+
+def _check_alike(lines: tuple[LineConfig, ...]) -> None:
+    """Lines of one network step together and stack their observations: ValueError naming the first line whose
+    calendar or observation keys differ from line 0's."""
+    first = lines[0]
+    for i, line in enumerate(lines[1:], start=1):
+        for name in ("steps_per_year", "horizon_steps"):
+            if getattr(line, name) != getattr(first, name):
+                raise ValueError(f"line_config[{i}]: {name}={getattr(line, name)!r} differs from line 0's "
+                                 f"{getattr(first, name)!r}: the lines of a network step together")
+        if set(line_observation_bounds(line)) != set(line_observation_bounds(first)):
+            raise ValueError(f"line_config[{i}]: its observation has other keys than line 0's (profiles, "
+                             f"contact_sensor and choices must agree)")
+        if line.profiles and line.n_sleepers != first.n_sleepers:
+            raise ValueError(f"line_config[{i}]: segment_length_m={line.segment_length_m!r} differs from line 0's "
+                             f"{first.segment_length_m!r}: with profiles the lines' profiles are stacked")
+
+
+def line_groups(config: NetworkConfig) -> list[tuple[LineConfig, list[int]]]:
+    """The network's distinct line configs, each with its lines (in the order of first appearance): one group of
+    every line for a network of one line config."""
+    groups: list[tuple[LineConfig, list[int]]] = []
+    for line, line_config in enumerate(config.line_configs):
+        for known, members in groups:
+            if known == line_config:
+                members.append(line)
+                break
+        else:
+            groups.append((line_config, [line]))
+    return groups
 
 
 def line_seeds(rng: np.random.Generator, n_lines: int) -> list[int]:
@@ -169,21 +259,26 @@ def line_seeds(rng: np.random.Generator, n_lines: int) -> list[int]:
 
 
 def network_observation_space(config: NetworkConfig) -> spaces.Dict:
-    """The Dict space of the network's observation: each key of the line's observation stacked over the lines
-    (per-section keys (n_lines · S,), per-line keys (n_lines,), ``time`` (1,) shared, profiles (n_lines · R, n)),
-    with the line's bounds; and ``machine_line``, the machine's line one-hot (n_lines,)."""
-    line_space = line_observation_space(config.line_config).spaces
-    bounds = {**line_observation_bounds(config.line_config), "machine_line": (0.0, 1.0)}
-    shapes = {key: _stacked_shape(key, tuple(line_space[key].shape or ()), config.n_lines) for key in line_space}
-    return observation_space(bounds, {**shapes, "machine_line": (config.n_lines,)})
+    """The Dict space of the network's observation: each key of the lines' observation stacked over the lines
+    (per-section keys (Σ sections,) in the action's order, per-line keys (n_lines,), ``time`` (1,) shared,
+    profiles (Σ segments, n)), with the widest of the lines' bounds; and ``machine_line``, the machine's line
+    one-hot (n_lines,)."""
+    lines = config.line_configs
+    spaces_ = [line_observation_space(line).spaces for line in lines]
+    line_bounds = [line_observation_bounds(line) for line in lines]
+    bounds = {key: (min(b[key][0] for b in line_bounds), max(b[key][1] for b in line_bounds))
+              for key in line_bounds[0]}
+    shapes = {key: _stacked_shape(key, [tuple(s[key].shape or ()) for s in spaces_]) for key in spaces_[0]}
+    return observation_space({**bounds, "machine_line": (0.0, 1.0)}, {**shapes, "machine_line": (len(lines),)})
 
 
-def _stacked_shape(key: str, shape: tuple[int, ...], n_lines: int) -> tuple[int, ...]:
+def _stacked_shape(key: str, shapes: list[tuple[int, ...]]) -> tuple[int, ...]:
+    """The shape of a key of the lines' observations (``shapes``, one per line) stacked over the lines."""
     if key == "time":
-        return shape
-    if shape == (1,):
-        return (n_lines,)
-    return (n_lines * shape[0], *shape[1:])
+        return shapes[0]
+    if shapes[0] == (1,):
+        return (len(shapes),)
+    return (sum(shape[0] for shape in shapes), *shapes[0][1:])
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,9 +296,10 @@ _COMBINE: dict[str, Callable[[list], Any]] = {
 
 
 class NetworkBatch:
-    """``n_networks`` network episodes of one :class:`NetworkConfig`, their lines the rows of one
-    :class:`~trackenv.envs.line_episode.LineBatch` (network ``b``'s line ``l``: row ``b·L + l``). It offers the
-    env layer the engine API of the line (:meth:`start`, :meth:`advance`, :meth:`observation`,
+    """``n_networks`` network episodes of one :class:`NetworkConfig`, their lines rows of the line engine: one
+    :class:`~trackenv.envs.line_episode.LineBatch` per distinct line config (:attr:`groups`; one for a network of
+    one line config), whose row ``b·G + k`` is network ``b``'s ``k``-th line of that config (G lines of it). It
+    offers the env layer the engine API of the line (:meth:`start`, :meth:`advance`, :meth:`observation`,
     :meth:`observations`, :meth:`reset_info`, :meth:`allowed`, :meth:`step_count`, :meth:`get_state`,
     :meth:`set_state`, :meth:`frame`), per network; the rules of the shared machine are in the module
     docstring."""
@@ -212,26 +308,49 @@ class NetworkBatch:
         self.config = config
         self.n_networks = int(n_networks)
         self.L = config.n_lines
-        self.S = config.sections_per_line
-        self.lines = LineBatch(config.line_config, self.n_networks * self.L)
+        self.offsets = np.asarray(config.line_offsets)
+        self.sections = np.asarray(config.line_sections)
+        #: (LineBatch, the network's lines it holds) per distinct line config (:func:`line_groups`)
+        self.groups = [(LineBatch(line_config, self.n_networks * len(members)), members)
+                       for line_config, members in line_groups(config)]
+        #: line ``l`` of every network: (its group, its place in the group)
+        self._place = {line: (g, k) for g, (_, members) in enumerate(self.groups) for k, line in enumerate(members)}
         self.machine = np.full(self.n_networks, config.start_line, dtype=np.int64)
-        self._line_keys = list(line_observation_space(config.line_config).spaces)
+        self._line_keys = list(line_observation_space(config.line_configs[0]).spaces)
 
-    def rows(self, b: int) -> range:
-        """The line rows of network ``b``."""
-        return range(b * self.L, (b + 1) * self.L)
+    def row(self, b: int, line: int) -> tuple[LineBatch, int]:
+        """Network ``b``'s ``line``: the line engine that holds it and its row there."""
+        g, k = self._place[line]
+        batch, members = self.groups[g]
+        return batch, b * len(members) + k
+
+    @property
+    def lines(self) -> LineBatch:
+        """The line engine of a network of one line config (ValueError on lines of their own: :meth:`row`)."""
+        if len(self.groups) > 1:
+            raise ValueError("the lines of this network have configs of their own: reach a line with row(b, line)")
+        return self.groups[0][0]
+
+    def _per_line(self, b: int) -> list[tuple[LineBatch, int]]:
+        return [self.row(b, line) for line in range(self.L)]
+
+    def _line_slices(self, values: np.ndarray) -> list[np.ndarray]:
+        """``values`` (n, Σ sections) split into each line's (n, sections of the line)."""
+        return [values[:, self.offsets[line]:self.offsets[line + 1]] for line in range(self.L)]
 
     # ------------------------------------------------------------------ episodes
     def start(self, networks: list[int], rngs: list[np.random.Generator]) -> None:
         """New episodes for ``networks``, each line drawn from a generator seeded by :func:`line_seeds` of its
         network's generator ``rngs[b]``; the machine on ``start_line``."""
-        line_rngs: list[Any] = [None] * (self.n_networks * self.L)
-        rows = []
+        starts: list[tuple[list[int], list[Any]]] = [([], [None] * batch.n_lines) for batch, _ in self.groups]
         for b in networks:
-            for row, seed in zip(self.rows(b), line_seeds(rngs[b], self.L), strict=True):
-                line_rngs[row] = np.random.default_rng(seed)
-                rows.append(row)
-        self.lines.start(rows, line_rngs)
+            for line, seed in enumerate(line_seeds(rngs[b], self.L)):
+                g, _ = self._place[line]
+                _, row = self.row(b, line)
+                starts[g][0].append(row)
+                starts[g][1][row] = np.random.default_rng(seed)
+        for (batch, _), (rows, line_rngs) in zip(self.groups, starts, strict=True):
+            batch.start(sorted(rows), line_rngs)
         self.machine[networks] = self.config.start_line
 
     def destination(self, requested: np.ndarray) -> np.ndarray:
@@ -243,46 +362,60 @@ class NetworkBatch:
 
     def advance(self, want: np.ndarray, networks: list[int], rngs: list[np.random.Generator],
                 resetting: list[int] = ()) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:  # type: ignore[assignment]
-        """One step of ``networks``, which ask to tamp ``want`` (n_networks, n_lines · S) bool: the machine's line
+        """One step of ``networks``, which ask to tamp ``want`` (n_networks, Σ sections) bool: the machine's line
         worked or the machine moved (module docstring), every line's traffic and costs; then new episodes in
         ``resetting``. Returns rewards, truncation flags (n_networks,; 0 and False for networks not stepped) and
         each stepped network's info."""
-        N, L, S = self.n_networks, self.L, self.S
+        N, L = self.n_networks, self.L
         stepped = np.zeros(N, dtype=bool)
         stepped[networks] = True
-        asked = want.reshape(N, L, S) & stepped[:, None, None] & self.lines.allowed().reshape(N, L, S)
-        requested = asked.sum(axis=2)
+        asked = np.asarray(want, dtype=bool).reshape(N, -1) & stepped[:, None] & self.allowed()
+        requested = np.add.reduceat(asked, self.offsets[:-1], axis=1)
         target = self.destination(requested)
         moving = stepped & (target != self.machine)
         working = (np.arange(L)[None, :] == self.machine[:, None]) & ~moving[:, None]
-        worked = asked & working[:, :, None]
-        line_rows = [row for b in networks for row in self.rows(b)]
-        rewards, truncated, line_infos = self.lines.advance(worked.reshape(N * L, S), line_rows, [])
+        worked = self._line_slices(asked & np.repeat(working, self.sections, axis=1))
+        rewards, truncated = np.zeros((N, L)), np.zeros((N, L), dtype=bool)
+        line_infos: dict[tuple[int, int], dict] = {}
+        for batch, members in self.groups:
+            G = len(members)
+            rows = [b * G + k for b in networks for k in range(G)]
+            group_want = np.stack([worked[line] for line in members], axis=1).reshape(N * G, -1)
+            group_rewards, group_truncated, infos = batch.advance(group_want, rows, [])
+            rewards[:, members] = group_rewards.reshape(N, G)
+            truncated[:, members] = np.asarray(group_truncated).reshape(N, G)
+            line_infos.update({(row // G, members[row % G]): info for row, info in infos.items()})
         self.machine = np.where(moving, target, self.machine)
         move = np.where(moving, self.config.move_cost, 0.0)
-        totals = np.where(stepped, rewards.reshape(N, L).sum(axis=1) - move, 0.0)
+        totals = np.where(stepped, rewards.sum(axis=1) - move, 0.0)
         infos = {}
         for b in networks:
-            mine = [line_infos[row] for row in self.rows(b)]
+            mine = [line_infos[b, line] for line in range(L)]
             tamped = np.array([info["tamped_sections"].sum() for info in mine])
             infos[b] = self.info(b, mine, bool(moving[b]), requested[b], requested[b] - tamped)
         if resetting:
             self.start(list(resetting), rngs)
-        return totals, np.asarray(truncated.reshape(N, L).all(axis=1)), infos
+        return totals, np.asarray(truncated.all(axis=1)), infos
 
     def allowed(self) -> np.ndarray:
-        """(n_networks, n_lines · S) the sections that may be tamped now (the line's mask). A True on a line the
+        """(n_networks, Σ sections) the sections that may be tamped now (the line's mask). A True on a line the
         machine is not on means a request there counts towards moving the machine."""
-        return self.lines.allowed().reshape(self.n_networks, self.L * self.S)
+        out = np.zeros((self.n_networks, int(self.offsets[-1])), dtype=bool)
+        for batch, members in self.groups:
+            allowed = batch.allowed().reshape(self.n_networks, len(members), -1)
+            for k, line in enumerate(members):
+                out[:, self.offsets[line]:self.offsets[line + 1]] = allowed[:, k]
+        return out
 
     def step_count(self, b: int) -> int:
         """Steps network ``b`` has taken in its episode (its lines step together)."""
-        return self.lines.step_count(b * self.L)
+        batch, row = self.row(b, 0)
+        return batch.step_count(row)
 
     # ------------------------------------------------------------------ observation and info
     def observation(self, b: int) -> dict[str, np.ndarray]:
         """Network ``b``'s observation (:func:`network_observation_space`)."""
-        per_line = [self.lines.observation(row) for row in self.rows(b)]
+        per_line = [batch.observation(row) for batch, row in self._per_line(b)]
         out = {key: per_line[0][key] if key == "time" else np.concatenate([o[key] for o in per_line])
                for key in self._line_keys}
         out["machine_line"] = (np.arange(self.L) == self.machine[b]).astype(np.float32)
@@ -296,7 +429,7 @@ class NetworkBatch:
     def reset_info(self, b: int) -> dict:
         """Network ``b``'s info at the start of its episode (no costs, nothing asked)."""
         none = np.zeros(self.L, dtype=np.int64)
-        return self.info(b, [self.lines.reset_info(row) for row in self.rows(b)], False, none, none)
+        return self.info(b, [batch.reset_info(row) for batch, row in self._per_line(b)], False, none, none)
 
     def info(self, b: int, line_infos: list[dict], moved: bool, requested: np.ndarray, dropped: np.ndarray) -> dict:
         """Network ``b``'s step info: ``costs`` (each part summed over the lines, and ``move``) and ``cost``
@@ -335,22 +468,24 @@ class NetworkBatch:
     # ------------------------------------------------------------------ planning state, rendering
     def get_state(self, b: int) -> NetworkState:
         """A copy of network ``b``'s episode: :meth:`set_state` restores it exactly."""
-        return NetworkState(tuple(self.lines.get_state(row) for row in self.rows(b)), int(self.machine[b]))
+        return NetworkState(tuple(batch.get_state(row) for batch, row in self._per_line(b)), int(self.machine[b]))
 
     def set_state(self, b: int, state: NetworkState) -> None:
         """Make network ``b`` continue from ``state`` (:meth:`get_state` of a batch of this config)."""
-        for row, line in zip(self.rows(b), state.lines, strict=True):
-            self.lines.set_state(row, line)
+        for (batch, row), line in zip(self._per_line(b), state.lines, strict=True):
+            batch.set_state(row, line)
         self.machine[b] = state.machine_line
 
     def frame(self, b: int, last_info: dict) -> np.ndarray:
         """An RGB picture of the line network ``b``'s machine is on (:meth:`LineBatch.frame`), from its part of
         the network's ``last_info``: titled with that line's number and its own step cost."""
         line = int(self.machine[b])
-        S = self.S
-        mine = {k: v[line * S:(line + 1) * S] if isinstance(v, np.ndarray) and v.shape[:1] == (self.L * S,) else v
+        first, end = self.offsets[line], self.offsets[line + 1]
+        total = int(self.offsets[-1])
+        mine = {k: v[first:end] if isinstance(v, np.ndarray) and v.shape[:1] == (total,) else v
                 for k, v in last_info.items()}
         if "line_costs" in last_info:  # the title's cost: that line's, not the network's
             mine["cost"] = float(last_info["line_costs"][line])
         mine["frame_label"] = f"line {line} (the machine's; lines 0-{self.L - 1})   "
-        return self.lines.frame(b * self.L + line, mine)
+        batch, row = self.row(b, line)
+        return batch.frame(row, mine)

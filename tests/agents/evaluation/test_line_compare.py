@@ -36,3 +36,17 @@ def test_a_users_own_policy_is_scored_as_the_agents_page_shows(tmp_path):
     mine = next(r for r in result["results"] if r["policy"] == "tamp-above-2.5mm")
     assert mine["params"] == {"threshold_mm": 2.5} and mine["n_episodes"] == 2
     assert (tmp_path / "line_compare.json").exists()
+
+
+def test_the_network_episode_figure_draws_lines_of_their_own(tmp_path):
+    """Each line's panel draws that line's own sections (lines of 6, 4 and 8 sections)."""
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.evaluation.line_compare import plot_network_episode
+    from trackenv_agents.rules import NetworkRule, SectionThreshold
+
+    config = NetworkConfig.coerce(None, line_config=["small", {"n_sections": 4, "capacity": 2},
+                                                     {"n_sections": 8, "capacity": 3}], horizon_years=0.5)
+    out = plot_network_episode(NetworkRule(SectionThreshold(threshold_mm=0.5)), config, 0, str(tmp_path / "n.png"))
+    import matplotlib.image
+
+    assert matplotlib.image.imread(out).ndim == 3

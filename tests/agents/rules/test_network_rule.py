@@ -175,3 +175,28 @@ def test_eager_asks_more_only_on_the_line_the_machine_stays_on():
         assert env.action_space.contains(a_eager)
         obs, *_ = env.step(a_eager)
     assert added > 0  # the eager policy asked for more on this episode
+
+
+@pytest.mark.parametrize("dispatch", ["requests", "value"])
+def test_lines_of_their_own_each_get_the_rule_bound_to_their_config(dispatch):
+    """On a network of lines of their own the line rule is bound to each line's config (its capacity) and asked on
+    that line's slice of the observation: each line's requests are the plain line rule's on that line."""
+    lines = ["small", {"n_sections": 4, "section_length_m": 150.0, "capacity": 2}, {"n_sections": 8, "capacity": 3}]
+    env = TampingNetwork(line_config=lines, horizon_years=1.0)
+    config = env.config
+    rule = NetworkRule(SectionThreshold(threshold_mm=0.5), dispatch).bind(config)
+    plain = [SectionThreshold(threshold_mm=0.5).bind(line) for line in config.line_configs]
+    obs, _ = env.reset(seed=5)
+    offsets = config.line_offsets
+    for _ in range(config.horizon_steps):
+        act, _ = rule.predict(obs)
+        assert env.action_space.contains(act) and act.shape == (18,)
+        for line, own_rule in enumerate(plain):
+            mine = {k: (v if k == "time" else v[[line]] if v.shape == (3,) else v[offsets[line]:offsets[line + 1]])
+                    for k, v in obs.items() if k != "machine_line"}
+            own = own_rule.predict({k: v[None] for k, v in mine.items()})[0][0]
+            part = act[offsets[line]:offsets[line + 1]]
+            assert (part <= own).all() and part.sum() <= config.line_configs[line].capacity
+            if dispatch == "requests" and line == int(obs["machine_line"].argmax()) and own.any():
+                assert np.array_equal(part, own)  # the machine's line asks: its requests are passed on whole
+        obs, *_ = env.step(act)
