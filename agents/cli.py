@@ -425,19 +425,24 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    """Load the line first (a fault in it: one line, exit 2, before anything slow), then plan and write."""
+    """Load the line (or network) first (a fault in it: one line, exit 2, before anything slow), then plan and
+    write."""
     from trackenv.envs.line_file import load_line
     from trackenv.envs.line_fit import FitWarning
+    from trackenv.envs.network_file import is_network_file, load_network
 
     from .planning import line_policy, plan_config, plan_line
 
-    line = load_line(args.line)
+    network = load_network(args.line) if is_network_file(args.line) else None
+    lines = network.lines if network is not None else (load_line(args.line),)
     overrides = engine_overrides(args)
     for field, own in (("line", "the line file argument"), ("horizon_years", "--years")):
         if field in overrides:
             raise UsageError(f"--set {field}: the plan takes it from {own}")
+    if network is not None:
+        network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario before the fit and the futures
-    line_policy(args.policy, plan_config(line, args.scenario, years=args.years, **overrides), args.scenario,
+    line_policy(args.policy, plan_config(lines[0], args.scenario, years=args.years, **overrides), args.scenario,
                 years=args.years)
     t0 = time.perf_counter()
     progress = None
@@ -446,13 +451,21 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
         bar = tqdm(total=int(round(args.years * 4)), desc="plan (quarters)", file=sys.stderr, leave=False)
         progress = bar.update
+    kwargs = dict(policy=args.policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
+                  progress=progress, **overrides)
     with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
         warnings.simplefilter("ignore", FitWarning)
-        plan = plan_line(line, policy=args.policy, years=args.years, futures=args.futures, seed=args.seed,
-                         scenario=args.scenario, progress=progress, **overrides)
+        if network is not None:
+            from .network_plan import plan_network
+
+            plan: Any = plan_network(network, **kwargs)
+        else:
+            plan = plan_line(lines[0], **kwargs)
     if progress is not None:
         bar.close()
-    notes = [f"{line.source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
+    line_plans = plan.lines if network is not None else (plan,)
+    notes = [f"{lp.line.source}, section {s.section}: {s.note}" for lp in line_plans for s in lp.fit.sections
+             if s.note]
     for note in notes:
         print(f"trackenv plan: warning: {note}", file=sys.stderr)
     files = plan.write(Path(args.out or "results/plan"))
@@ -824,9 +837,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run them on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
     sp.set_defaults(func=cmd_leaderboard)
 
-    sp = command("plan", "what to do on a line from a line file, quarter by quarter, with the cost forecast")
+    sp = command("plan", "what to do on a line (or a network of lines sharing a tamping machine) from its file, "
+                         "quarter by quarter, with the cost forecast")
     out(sp, "results/plan")
-    sp.add_argument("line", metavar="LINE.yaml", help="a line file (the documentation's page Lines from files)")
+    sp.add_argument("line", metavar="FILE.yaml", help="a line file, or a network file that lists line files (the "
+                    "documentation's page Lines from files); on a network the line policy plays every line and "
+                    "the machine goes where the requested work is worth most (tamping only)")
     sp.add_argument("--policy", default="grouped-threshold", metavar="NAME",
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
                          "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "

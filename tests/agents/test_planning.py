@@ -272,7 +272,7 @@ def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan,
     and what the geometry cost is."""
     import dataclasses
 
-    from trackenv_agents import planning
+    from trackenv_agents import plan_report
 
     plan, _ = rough_plan
     text = plan.table()
@@ -289,7 +289,7 @@ def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan,
     assert longer.recording_note().endswith("every 4 quarters: 2027-01-01 (read in Q5)")
     assert "geometry is a notional cost of poor track geometry" in text
     assert list(np.flatnonzero(plan.recommended[0])) == [1, 3]  # B and D: D above include_mm
-    monkeypatch.setattr(planning, "SECTION_LINES", 1)
+    monkeypatch.setattr(plan_report, "SECTION_LINES", 1)
     capped = plan.table()
     assert "  B (transition) tamp:" in capped and "  D (known wet) tamp:" not in capped
     assert "  ... and 1 more tamp (plan.csv, --json)" in capped
@@ -297,8 +297,8 @@ def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan,
 
 def test_the_table_names_the_sections_asked_for_but_not_done(tmp_path):
     """A section the rule asks for that the env masks (D, rough but tamped a quarter ago: at most one tamping per
-    step, ``min_steps_between_tampings``) is not recommended; the table gives its numbers under their own line, and
-    the JSON lists it per quarter."""
+    step, ``min_steps_between_tampings``) is not recommended; the table gives its numbers under their own line with
+    that reason, and the JSON lists it per quarter with its reasons."""
     from test_line_file import SECTIONS
 
     sections = SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.25,3")
@@ -308,8 +308,80 @@ def test_the_table_names_the_sections_asked_for_but_not_done(tmp_path):
     assert plan.unmet_share is not None and list(plan.unmet_share[0]) == [0.0, 0.0, 0.0, 1.0]
     text = plan.table()
     assert "Q1's sections asked for by the policy in at least half the futures but not done" in text
-    assert f"  D (known wet) asked, not done: measured SD {plan.state['measured_sd_mm'][0, 3]:.2f} (SD alert" in text
+    assert (f"  D (known wet) asked, not done (tamped in the previous quarter in 2 of 2 futures): measured SD "
+            f"{plan.state['measured_sd_mm'][0, 3]:.2f} (SD alert") in text
+    assert "masked, e.g." not in text  # the reason, not a list of what it might be
     assert plan.to_dict()["quarters"][0]["asked_not_done"] == ["D"]
+    assert plan.to_dict()["quarters"][0]["asked_not_done_why"] == {"D": {"recent_work": 2}}
+
+
+class _AskEverySection:
+    """A policy that asks for a tamping of every section in every step (the rules keep within the capacity)."""
+
+    def predict(self, obs, deterministic=True):
+        return np.ones(np.shape(obs["section_sd"]), dtype=np.int8), None
+
+
+def test_the_table_says_a_section_asked_for_was_beyond_the_capacity(tmp_path, monkeypatch):
+    """With a capacity of one section and every section asked for, the env keeps the worst measured (B) and drops
+    the rest: the table names the capacity for them in Q1; B, tamped in Q1 and asked again in Q2, was tamped in the
+    previous quarter. Every section asked for and not done is counted under exactly one reason."""
+    from trackenv_agents import planning
+
+    monkeypatch.setattr(planning, "line_policy", lambda *args, **kwargs: _AskEverySection())
+    plan = plan_line(write(tmp_path, history=ROUGH_B), years=0.5, futures=2, capacity=1, **FAST)
+    assert list(plan.recommended[0]) == [0, 1, 0, 0]
+    assert list(plan.unmet_share[0]) == [1.0, 0.0, 1.0, 1.0]
+    counted = sum(plan.unmet_reasons.values())
+    assert np.array_equal(counted, np.rint(plan.unmet_share * plan.futures)) and not plan.unmet_reasons["unknown"].any()
+    assert list(plan.unmet_reasons["capacity"][0]) == [2, 0, 2, 2]
+    assert plan.unmet_reasons["recent_work"][1, 1] == 2
+    text = plan.table()
+    assert "  A asked, not done (beyond the possession's capacity in 2 of 2 futures): measured SD" in text
+    assert "  B (transition) asked, not done" not in text  # done in Q1
+    assert plan.unmet_note(1, 1) == "tamped in the previous quarter in 2 of 2 futures"
+    assert plan.to_dict()["quarters"][0]["asked_not_done_why"]["C"] == {"capacity": 2}
+
+
+def test_the_table_says_a_section_asked_for_was_beyond_the_budget(tmp_path):
+    """An annual budget below one campaign's cost: the rule asks for B in both futures and the env drops it for
+    the budget, which the table names."""
+    plan = plan_line(write(tmp_path, history=ROUGH_B), years=0.5, futures=2, annual_budget=1.0, **FAST)
+    assert plan.unmet_reasons["budget"][0, 1] == 2 and plan.recommended[0, 1] == 0
+    assert "  B (transition) asked, not done (beyond the annual budget left in 2 of 2 futures): measured SD" in \
+        plan.table()
+
+
+def test_each_section_not_done_gets_the_first_reason_the_env_checks():
+    """:func:`~trackenv_agents.planning.unmet_reasons` on one step of two lines by hand: a choice the config does
+    not enable, track work on a section worked on too recently, work beyond the capacity (the worse measured SD
+    kept), beyond the budget on a clipped line, and a drop no reason explains (a line the env did not clip)."""
+    from types import SimpleNamespace
+
+    from trackenv.envs.choices import code
+    from trackenv_agents.planning import unmet_reasons
+
+    config = SimpleNamespace(choices=("tamp", "inspect"), choice_work={"tamp": 1.0, "spot_tamp": 0.5, "drainage": 0.5,
+                             "renew": 2.0, "inspect": 0.0, "survey": 0.0}, length_factors=np.ones(5), capacity=2,
+                             annual_budget=100.0)
+    tamp, inspect, drainage = code("tamp"), code("inspect"), code("drainage")
+    want = np.array([[drainage, tamp, tamp, tamp, tamp], [inspect, tamp, 0, 0, 0]])
+    applied = np.array([[0, 0, tamp, 0, 0], [0, tamp, 0, 0, 0]])  # line 0: D fits the capacity, not the budget
+    allowed = np.array([[True, False, True, True, True], [True] * 5])
+    sd = np.array([[1.0, 9.0, 5.0, 3.0, 2.0], [1.0] * 5])
+    why = unmet_reasons(config, want, applied, allowed, sd, clipped=np.array([True, False]))
+    assert {k: v.astype(int).tolist() for k, v in why.items()} == {
+        "not_enabled": [[1, 0, 0, 0, 0], [0] * 5],
+        "recent_work": [[0, 1, 0, 0, 0], [0] * 5],
+        "machine": [[0] * 5, [0] * 5],
+        "capacity": [[0, 0, 0, 0, 1], [0] * 5],
+        "budget": [[0, 0, 0, 1, 0], [0] * 5],
+        "unknown": [[0] * 5, [1, 0, 0, 0, 0]],
+    }
+    # the same step on a network whose machine worked on line 0 only: line 1's drop is the machine's
+    why = unmet_reasons(config, want, applied, allowed, sd, clipped=np.array([True, False]),
+                        working=np.array([True, False]))
+    assert why["machine"].astype(int).tolist() == [[0] * 5, [1, 0, 0, 0, 0]] and not why["unknown"].any()
 
 
 def test_the_costs_come_in_their_parts_and_the_plot_names_sections_and_dates(rough_plan):

@@ -39,6 +39,7 @@ from .line_fit import history_fit
 from .multiagent import line_parallel_env
 from .network import NetworkConfig
 from .network_env import TampingNetwork, TampingNetworkVectorEnv
+from .network_file import NetworkDescription, load_network
 from .problems import make_vector_env, problem_config
 from .state import EnvState
 from .tamping import TampingEnv
@@ -83,6 +84,7 @@ CURRENT_LOWER_VERSIONS = ("trackenv/TampingLine-v0",)
 for _id in CURRENT_LOWER_VERSIONS:
     warnings.filterwarnings("ignore", message=rf".*The environment {_id} is out of date\.", category=DeprecationWarning)
 
-__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "NetworkConfig", "TampingEnv",
-           "TampingLine", "TampingLineVectorEnv", "TampingNetwork", "TampingNetworkVectorEnv", "TampingVectorEnv",
-           "history_fit", "line_parallel_env", "load_line", "make_vector_env", "problem_config", "scenario"]
+__all__ = ["SCENARIOS", "EnvState", "LineConfig", "LineDescription", "LineFileError", "NetworkConfig",
+           "NetworkDescription", "TampingEnv", "TampingLine", "TampingLineVectorEnv", "TampingNetwork",
+           "TampingNetworkVectorEnv", "TampingVectorEnv", "history_fit", "line_parallel_env", "load_line",
+           "load_network", "make_vector_env", "problem_config", "scenario"]

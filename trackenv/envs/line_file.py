@@ -282,7 +282,25 @@ def load_line(path: str | os.PathLike[str]) -> LineDescription:
     number, date or class, a value out of its range or in another unit, duplicate section ids, a history out of
     date order or naming an unknown section, traffic the engine cannot take."""
     path = Path(path)
-    text = _read_text(path, "line file")
+    doc = yaml_mapping(path, "line file", LINE_KEYS)
+    sections = _csv_rows(path, doc, "sections", SECTION_COLUMNS)
+    history = _csv_rows(path, doc, "history", HISTORY_COLUMNS) if doc.get("history") is not None else []
+    return _build(str(path), doc, sections, history)
+
+
+def yaml_document(path: str | os.PathLike[str]) -> Any:
+    """The YAML document of the file ``path``, or None where it cannot be read or parsed (a loader,
+    :func:`yaml_mapping`, then names the fault): to tell a line file from a network file."""
+    try:
+        return yaml.safe_load(Path(path).read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError):
+        return None
+
+
+def yaml_mapping(path: Path, what: str, keys: dict[str, Field]) -> dict[str, Any]:
+    """The YAML mapping of the file ``path`` (a ``what``: "line file", "network file") with only ``keys`` and
+    every required one of them, else :class:`LineFileError` naming the fault."""
+    text = _read_text(path, what)
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:
@@ -293,14 +311,11 @@ def load_line(path: str | os.PathLike[str]) -> LineDescription:
     except ValueError as e:  # YAML reads 2026-13-45 as a date and fails to build it, outside its own errors
         raise LineFileError(f"{path}{_impossible_date(text)}: {e}") from None
     if doc is None:
-        raise LineFileError(f"{path}: empty file; a line file is a YAML mapping of {_names(LINE_KEYS)}")
+        raise LineFileError(f"{path}: empty file; a {what} is a YAML mapping of {_names(keys)}")
     if not isinstance(doc, dict):
-        raise LineFileError(f"{path}: a line file is a YAML mapping of {_names(LINE_KEYS)}, "
-                            f"got a {type(doc).__name__}")
-    _check_keys(str(path), "", doc, LINE_KEYS)
-    sections = _csv_rows(path, doc, "sections", SECTION_COLUMNS)
-    history = _csv_rows(path, doc, "history", HISTORY_COLUMNS) if doc.get("history") is not None else []
-    return _build(str(path), doc, sections, history)
+        raise LineFileError(f"{path}: a {what} is a YAML mapping of {_names(keys)}, got a {type(doc).__name__}")
+    _check_keys(str(path), "", doc, keys)
+    return doc
 
 
 def _impossible_date(text: str) -> str:

@@ -9,6 +9,9 @@ branch joining at the station and five years of recording-car runs, made by trac
     from trackenv.lines import EXAMPLE
 
     env = gym.make("trackenv/TampingLine-v0", line=EXAMPLE)
+
+``EXAMPLE_NETWORK`` is the example network file: the example line and a synthetic 6 km freight branch without a
+measured history (``example_branch.yaml``), served by one tamping machine (:mod:`trackenv.envs.network_file`).
 """
 
 from pathlib import Path
@@ -16,4 +19,7 @@ from pathlib import Path
 #: The example line's file (its sections and history CSV files lie beside it).
 EXAMPLE = Path(__file__).resolve().parent / "example.yaml"
 
-__all__ = ["EXAMPLE"]
+#: The example network's file (its line files lie beside it).
+EXAMPLE_NETWORK = Path(__file__).resolve().parent / "example_network.yaml"
+
+__all__ = ["EXAMPLE", "EXAMPLE_NETWORK"]

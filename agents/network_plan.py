@@ -1,0 +1,214 @@
+"""What to do on a network of lines that share one tamping machine: ``trackenv plan NETWORK.yaml`` and
+:func:`plan_network`.
+
+A network file (:mod:`trackenv.envs.network_file`) names line files and the machine's line now; :func:`plan_network`
+runs a tamping policy on the network for the next ``years`` in ``futures`` sampled futures (each line's future
+drawn as :func:`~trackenv_agents.planning.plan_line` draws it, all of them in one vector env of
+``trackenv/TampingNetwork-v0``). The policy is a line policy played on every line by
+:func:`~trackenv_agents.rules.network.network_play` (the comparisons' way of playing a line policy on the network:
+the machine goes where the requested work is worth most), the rule's tuned parameters those of ``scenario``.
+
+The plan is each line's :class:`~trackenv_agents.plan_report.LinePlan` (its sections' shares, state, reasons and
+costs, from its part of the network's futures; a section asked for on a line the machine was not working on is
+"not done" for the reason ``machine``) and the machine's course: per quarter the share of futures in which it
+works on each line or moves, the move costs, and the network's cost forecast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .plan_report import LIMIT_FIELDS, LinePlan, _years, step_date
+from .planning import DEFAULT_POLICY, _run_futures, line_policy, plan_config, trained_horizon_years, unmet_reasons
+
+__all__ = ["NetworkPlan", "plan_network"]
+
+
+@dataclass
+class NetworkPlan:
+    """A network's plan (:func:`plan_network`): the ``network`` (a
+    :class:`~trackenv.envs.network_file.NetworkDescription`), each line's :class:`LinePlan` in ``lines`` (its own
+    costs, without the machine's moves), the machine's line after each quarter ``machine`` and whether it moved in
+    it ``moved`` (futures, quarters), and the network's ``costs`` and ``move_costs`` (futures, quarters) k€."""
+
+    network: Any
+    policy: str
+    years: float
+    futures: int
+    seed: int
+    dates: tuple[str, ...]
+    lines: tuple[LinePlan, ...]
+    machine: np.ndarray
+    moved: np.ndarray
+    costs: np.ndarray
+    move_costs: np.ndarray
+    scenario: str = "default"
+
+    @property
+    def works_on(self) -> np.ndarray:
+        """(quarters, lines): the share of futures in which the machine works on each line in each quarter (it is
+        there and did not move in the quarter)."""
+        here = self.machine[:, :, None] == np.arange(len(self.lines))
+        return (here & ~self.moved[:, :, None]).mean(axis=0)
+
+    def _names(self) -> list[str]:
+        return [line.line.name for line in self.lines]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan as plain data (JSON-ready): the network, per quarter the machine's course and the network's
+        mean cost, the cost forecast, and each line's plan (:meth:`LinePlan.to_dict`)."""
+        names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
+        quarters = [{"from": d, "works_on": {n: float(s) for n, s in zip(names, works, strict=True)},
+                     "moving": float(self.moved[:, q].mean()), "cost_mean_keur": float(self.costs[:, q].mean()),
+                     "move_cost_mean_keur": float(self.move_costs[:, q].mean())}
+                    for q, (d, works) in enumerate(zip(self.dates, self.works_on, strict=True))]
+        return {
+            "network": self.network.name, "as_of": self.network.as_of, "lines": names,
+            "machine_now": names[self.network.start_line], "policy": self.policy, "scenario": self.scenario,
+            "years": self.years, "futures": self.futures, "seed": self.seed, "quarters": quarters,
+            "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
+                          "p90": float(np.quantile(total, 0.9)), "move_mean": float(moves.mean())},
+            "line_plans": [line.to_dict() for line in self.lines],
+        }
+
+    def table(self) -> str:
+        """The plan as text: the network and its lines, per quarter where the machine works and what it tamps
+        there (the sections recommended on each line), the first quarter's decision lines of each line, then the
+        cost forecast of each line and of the network."""
+        d, names = self.to_dict(), self._names()
+        out = [f"Network plan for {d['network']} from {d['as_of']}: {self.policy} ({self.scenario}, tamping), "
+               f"{_years(self.years)}, {self.futures} futures; the machine is on line {self.network.start_line} now"]
+        for i, line in enumerate(self.lines):
+            km = sum(s.length_m for s in line.line.sections) / 1000.0
+            out.append(f"  line {i}: {line.line.name}, {len(line.line.sections)} sections, {km:.1f} km "
+                       f"({line.line.source})")
+        out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
+        for q, row in enumerate(d["quarters"]):
+            where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"].values()) if s > 0]
+            if row["moving"] > 0:
+                where.append(f"moving {row['moving']:.0%}")
+            tamped = [f"line {i}: {' '.join(plan['quarters'][q]['tamp'])}"
+                      for i, plan in enumerate(d["line_plans"]) if plan["quarters"][q]["tamp"]]
+            out.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {', '.join(where) or '-'}; "
+                       f"{'; '.join(tamped) or '-'}")
+        for i, line in enumerate(self.lines):
+            decisions = line.decision_lines()
+            if decisions:
+                out += [f"line {i}, {names[i]}:", *decisions]
+        c = d["cost_keur"]
+        for i, line in enumerate(self.lines):
+            total = line.costs.sum(axis=1)
+            out.append(f"cost of line {i} over {_years(self.years)}: {total.mean():.0f} k€ mean, "
+                       f"{np.quantile(total, 0.1):.0f}-{np.quantile(total, 0.9):.0f} k€ over 10-90 % of the futures")
+        out.append(f"cost of the network over {_years(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
+                   f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f})")
+        return "\n".join(out)
+
+    def write(self, folder: Path) -> dict[str, str]:
+        """Write ``network.csv`` (quarter, date, where the machine works: a column per line and ``moving``, shares
+        of futures; the network's mean, p10 and p90 cost and the mean move cost k€) into ``folder`` and each line's
+        plan (:meth:`LinePlan.write`) into a folder of its own, ``line<i>``; returns the paths."""
+        import csv
+
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / "network.csv"
+        with path.open("w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(["quarter", "from", *(f"works_on_line{i}" for i in range(len(self.lines))), "moving",
+                        "cost_mean_keur", "cost_p10_keur", "cost_p90_keur", "move_cost_mean_keur"])
+            for q, (date, works) in enumerate(zip(self.dates, self.works_on, strict=True)):
+                c = self.costs[:, q]
+                w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), f"{self.moved[:, q].mean():.3f}",
+                            f"{c.mean():.3f}", f"{np.quantile(c, 0.1):.3f}", f"{np.quantile(c, 0.9):.3f}",
+                            f"{self.move_costs[:, q].mean():.3f}"])
+        files = {"network_csv": str(path)}
+        for i, line in enumerate(self.lines):
+            files.update({f"line{i}_{k}": v for k, v in line.write(folder / f"line{i}").items()})
+        return files
+
+
+def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
+                 scenario: str = "default", progress: Callable[[int], Any] | None = None,
+                 **config: Any) -> NetworkPlan:
+    """Plan tamping on ``network`` (a network file's path or a
+    :class:`~trackenv.envs.network_file.NetworkDescription`) for ``years`` from its ``as_of``: the line policy
+    ``policy`` (:func:`~trackenv_agents.planning.line_policy`: a tamping rule with the tuned parameters of
+    ``scenario``, or the shipped ``cpi-agent``) played on every line by
+    :func:`~trackenv_agents.rules.network.network_play`, in ``futures`` futures (seeds ``seed``, ``seed + 1``,
+    ...); each line modelled as :func:`~trackenv_agents.planning.plan_config` models it; ``config``: further
+    :class:`~trackenv.envs.line_config.LineConfig` fields for every line. ``progress(1)`` after each quarter.
+    ValueError for a policy that cannot play a line (its reason, naming the line)."""
+    from gymnasium.vector import AutoresetMode
+
+    from trackenv.envs.line_fit import history_fit
+    from trackenv.envs.network import NetworkConfig
+    from trackenv.envs.network_env import TampingNetworkVectorEnv
+    from trackenv.envs.network_file import load_network
+
+    from .evaluation.line_compare import without_engine
+    from .rules.network import network_play
+
+    desc = network if not isinstance(network, (str, Path)) else load_network(network)
+    lines = []
+    for line in desc.lines:
+        cfg = plan_config(line, scenario, years=years, **config)
+        if cfg.choices != ("tamp",):  # the network's machine tamps: its lines plan tamping only
+            cfg = cfg.replace(choices=("tamp",))
+        lines.append(cfg)
+    rules = []
+    for i, cfg in enumerate(lines):
+        try:
+            rules.append(line_policy(policy, cfg, scenario, years=years))
+        except ValueError as exc:
+            raise ValueError(f"line {i} ({desc.lines[i].name}): {exc}") from None
+    steps = lines[0].horizon_steps
+    trained = trained_horizon_years(rules[0])
+    if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years
+        lines = [cfg.replace(horizon_years=trained) for cfg in lines]
+    base = desc.config()  # the machine's fields (and the dates' check) from the file
+    net = NetworkConfig(line_config=lines, capacity=base.capacity, move_cost=base.move_cost,
+                        start_line=base.start_line)
+    rule = network_play(rules[0]).bind(net)
+    env = TampingNetworkVectorEnv(futures, net, autoreset_mode=AutoresetMode.NEXT_STEP)
+    offsets = net.line_offsets
+
+    def why(want: np.ndarray, codes: np.ndarray, allowed: np.ndarray, measured_sd: np.ndarray,
+            info: dict[str, Any]) -> dict[str, np.ndarray]:
+        """:func:`unmet_reasons` line by line, the lines the machine did not work on (it moved, or was elsewhere)
+        under the reason ``machine``."""
+        parts: list[dict[str, np.ndarray]] = []
+        for i, cfg in enumerate(net.line_configs):
+            at = slice(offsets[i], offsets[i + 1])
+            working = (np.asarray(info["machine_line"]) == i) & ~np.asarray(info["moved"], dtype=bool)
+            parts.append(unmet_reasons(cfg, want[:, at], codes[:, at], allowed[:, at], measured_sd[:, at],
+                                       np.asarray(info["clipped"], dtype=bool) & working, working))
+        return {key: np.concatenate([p[key] for p in parts], axis=1) for key in parts[0]}
+
+    run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress, why, net.line_sections)
+    assert env.batch is not None and run.line_costs is not None  # built at reset; a network's run has them
+    assert run.machine is not None and run.moved is not None
+    dates = tuple(step_date(desc.as_of, q, net.steps_per_year) for q in range(steps))
+    params = getattr(rules[0], "params", None)
+    plans = []
+    for i, cfg in enumerate(net.line_configs):
+        at = slice(offsets[i], offsets[i + 1])
+        batch, row = env.batch.row(0, i)
+        limits = {name: batch.section_limits(attr)[row * cfg.n_sections:(row + 1) * cfg.n_sections] * 1e3
+                  for name, attr in LIMIT_FIELDS.items()}
+        part_costs = {k: v[:, :, i] for k, v in run.line_part_costs.items()}
+        plans.append(LinePlan(
+            cfg.line, policy, float(years), futures, seed, dates, run.share[:, at], run.line_costs[:, :, i],
+            {k: v.sum(axis=1) for k, v in part_costs.items()}, history_fit(cfg), scenario, ("tamp",), cfg.engine,
+            cfg.pass_reuse_tolerance_m, part_costs=part_costs, state={k: v[:, at] for k, v in run.state.items()},
+            limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
+            unmet_share=run.unmet_share[:, at], unmet_reasons={k: v[:, at] for k, v in run.unmet_reasons.items()},
+            min_steps_between_tampings=cfg.min_steps_between_tampings, steps_per_year=cfg.steps_per_year,
+            measurement_interval=cfg.measurement_interval, config_changes=without_engine(config)))
+    env.close()
+    return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine, run.moved,
+                       run.costs, run.part_costs["move"], scenario)

@@ -1,0 +1,461 @@
+"""A finished plan and how it is presented: :class:`LinePlan`, what :func:`~trackenv_agents.planning.plan_line`
+gathered in its futures, as a table, plain data, CSV files and a figure.
+
+The plan's numbers are per quarter and section: the share of futures in which the section gets each choice, the
+state the policy decided on (:data:`STATE_COLUMNS`), the section's limits (:data:`LIMIT_FIELDS`), and how often
+the env did not apply what the policy asked for, by its reason (:data:`UNMET_REASONS`); per future and quarter,
+the costs in their parts. Everything a reader sees is made from these here: what the plan read from the line
+file (:func:`line_summary`, so a unit mistake shows), the quarters' recommendations and costs, the numbers behind
+the decision to take now against the limits and the rule's thresholds (:func:`rule_thresholds`), why sections
+asked for were not done, when the recording car runs, and ``plan.csv``, ``costs.csv`` and ``plan.png``. Running
+the futures (:mod:`trackenv_agents.planning`) and saying what they gave are kept apart so that either can change
+without the other.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackenv.envs.choices import CHOICES
+from trackenv.envs.line_file import DAYS_PER_YEAR
+
+#: The share of futures from which a section's choice in a quarter is recommended.
+RECOMMEND_SHARE = 0.5
+
+
+def _years(years: float) -> str:
+    return f"{years:g} year{'' if years == 1 else 's'}"
+
+
+def step_date(as_of: str, step: int, steps_per_year: int) -> str:
+    """The date (ISO) ``step`` model steps after ``as_of``: a step is 365.25 / ``steps_per_year`` days, the date
+    rounded to the day."""
+    start = dt.date.fromisoformat(as_of)
+    return (start + dt.timedelta(days=round(step * DAYS_PER_YEAR / steps_per_year))).isoformat()
+
+
+def line_summary(line: Any) -> dict[str, Any]:
+    """What a plan reads from a line file (a :class:`~trackenv.envs.line_file.LineDescription`), in the file's
+    units, for a reader to check them: the number of sections and the length [km], the ranges over the sections of
+    the speed [km/h], the tonnage [MGT/year] and the freight share, the freight axle load [t], the counts of
+    transitions, switches or crossings and known wet zones, and the date of the last recording-car run in the
+    history with its age [years before ``as_of``] (None without a history)."""
+    sections = line.sections
+
+    def span(attr: str) -> list[float]:
+        values = [float(getattr(s, attr)) for s in sections]
+        return [min(values), max(values)]
+
+    last = max((m.date for m in line.history), default=None)
+    return {
+        "sections": len(sections), "length_km": line.length_m / 1000.0,
+        "speed_kmh": span("speed_kmh"), "annual_mgt": span("annual_mgt"), "freight_share": span("freight_share"),
+        "freight_axle_load_t": float(line.freight_axle_load_t),
+        "transitions": sum(s.register == "transition" for s in sections),
+        "switches_crossings": sum(s.register == "switch_or_crossing" for s in sections),
+        "known_wet": sum(bool(s.wet) for s in sections),
+        "last_recording": None if last is None else {"date": last, "years_before": line.years_before(last)},
+    }
+
+
+def _span(values: list[float], fmt: str) -> str:
+    low, high = values
+    return format(low, fmt) if low == high else f"{low:{fmt}}-{high:{fmt}}"
+
+
+def _count(n: int, what: str, plural: str) -> str:
+    return f"{n} {what if n == 1 else plural}"
+
+
+def summary_lines(summary: dict[str, Any]) -> list[str]:
+    """The two lines of text that repeat a :func:`line_summary`."""
+    last = summary["last_recording"]
+    run = ("no recording-car history" if last is None else
+           f"last recording-car run {last['date']} ({last['years_before']:.2f} years before as_of)")
+    sections = _count(summary["sections"], "section", "sections")
+    return [f"read from the file: {sections}, {summary['length_km']:.2f} km; speed "
+            f"{_span(summary['speed_kmh'], 'g')} km/h; tonnage {_span(summary['annual_mgt'], 'g')} MGT/year; "
+            f"freight share {_span(summary['freight_share'], '.2f')}, freight axle load "
+            f"{summary['freight_axle_load_t']:g} t",
+            f"  {_count(summary['transitions'], 'transition', 'transitions')}, "
+            f"{_count(summary['switches_crossings'], 'switch or crossing', 'switches or crossings')}, "
+            f"{_count(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}"]
+
+
+#: The per-section state a plan records per quarter (means over the futures, before the quarter's work): what the
+#: policy observed (the last measured SD and D1 mean-to-peak, their age) and the true SD and mean-to-peak.
+STATE_COLUMNS = {"measured_sd_mm": "measured SD [mm]", "measured_peak_mm": "measured D1 mean-to-peak [mm]",
+                 "measurement_age_years": "age of that measurement [year]", "sd_mm": "true SD [mm]",
+                 "peak_mm": "true D1 mean-to-peak [mm]"}
+#: A section's quality limits in its speed band (:class:`~trackenv.physics.geometry.BandLimits`), by the name the
+#: plan gives them [mm]: the D1 mean-to-peak's alert, intervention and immediate-action limits and the SD alert.
+LIMIT_FIELDS = {"alert": "alert_m", "intervention": "intervention_m", "immediate_action": "immediate_action_m",
+                "sd_alert": "sd_alert_m"}
+GEOMETRY_NOTE = ("geometry is a notional cost of poor track geometry (poorer ride, faster wear of track and "
+                 "vehicles), not money spent")
+
+#: Why the env did not apply a choice the policy asked for (it became "nothing"), in the order the env checks
+#: them (:meth:`~trackenv.envs.line_episode.LineBatch.resolve`), each future's section counted under the first
+#: that holds: the scenario does not enable the choice; the section had track work within the last
+#: ``min_steps_between_tampings`` steps; on a network, the machine was on another line or moving there; its work
+#: did not fit the possession's capacity after the sections of worse measured SD asked for in the same step; the
+#: step's work cost more than the annual budget had left; ``unknown`` where none of these explains it.
+UNMET_REASONS = ("not_enabled", "recent_work", "machine", "capacity", "budget", "unknown")
+#: At most this many sections of one choice get a line of their numbers in the table.
+SECTION_LINES = 8
+#: At most this many section ids label the plot's line axis (more sections: every n-th).
+SECTION_LABELS = 20
+
+
+def rule_thresholds(params: dict[str, Any]) -> dict[str, float]:
+    """A rule's level thresholds from its ``params``: those in mm (name ending ``_mm``: ``trigger_mm``,
+    ``include_mm``, ``threshold_mm``, ``spot_peak_mm``, ...) that are on (above 0); margins, which are no
+    levels, left out; none for a trained policy."""
+    return {k: float(v) for k, v in params.items() if k.endswith("_mm") and "margin" not in k
+            and isinstance(v, int | float) and not isinstance(v, bool) and v > 0}
+
+
+def _rounded(values: np.ndarray) -> list[float]:
+    return [round(float(v), 3) for v in values]
+
+
+@dataclass(frozen=True, eq=False)
+class LinePlan:
+    """A plan (:func:`plan_line`): ``choice_share`` (quarters, sections, choices) the share of futures in which
+    each section gets each choice (indexed by code, :data:`~trackenv.envs.choices.CHOICES`) in each quarter,
+    ``costs`` (futures, quarters) k€, ``parts`` the cost parts per future (k€, summed over the plan),
+    ``part_costs`` the same per future and quarter ((futures, quarters) k€), ``state`` what the sections were
+    before each quarter's work (:data:`STATE_COLUMNS`, each (quarters, sections), means over the futures),
+    ``limits_mm`` each section's limits in its speed band (:data:`LIMIT_FIELDS`, each (sections,) mm),
+    ``unmet_share`` (quarters, sections) the share of futures in which the policy asked for a choice the env did
+    not apply, ``unmet_reasons`` the number of those futures per reason (:data:`UNMET_REASONS`, each (quarters,
+    sections) int; ``min_steps_between_tampings`` the config's, which the reason ``recent_work`` names),
+    ``policy_params`` the policy's parameters (a rule's thresholds; empty or the file of a trained policy),
+    ``dates`` the first day of each quarter, the ``fit`` of the line's history, the ``scenario``, ``choices``,
+    ``engine`` and ``pass_reuse_tolerance_m`` (m) the line was planned with, and the model's ``steps_per_year``
+    and ``measurement_interval`` (steps between recording-car runs)."""
+
+    line: Any
+    policy: str
+    years: float
+    futures: int
+    seed: int
+    dates: tuple[str, ...]
+    choice_share: np.ndarray
+    costs: np.ndarray
+    parts: dict[str, np.ndarray]
+    fit: Any
+    scenario: str = "default"
+    choices: tuple[str, ...] = ("tamp",)
+    engine: str = "classic"
+    pass_reuse_tolerance_m: float = 0.0
+    part_costs: dict[str, np.ndarray] = field(default_factory=dict)
+    state: dict[str, np.ndarray] = field(default_factory=dict)
+    limits_mm: dict[str, np.ndarray] = field(default_factory=dict)
+    policy_params: dict[str, Any] = field(default_factory=dict)
+    unmet_share: np.ndarray | None = None
+    steps_per_year: int = 4
+    measurement_interval: int = 4
+    config_changes: dict[str, Any] = field(default_factory=dict)
+    unmet_reasons: dict[str, np.ndarray] = field(default_factory=dict)
+    min_steps_between_tampings: int = 1
+
+    @property
+    def share(self) -> np.ndarray:
+        """(quarters, sections): the share of futures in which the section gets any choice but nothing (with
+        tamping only: is tamped)."""
+        return 1.0 - self.choice_share[:, :, 0]
+
+    @property
+    def recommended(self) -> np.ndarray:
+        """(quarters, sections) int: the code of the choice made in at least :data:`RECOMMEND_SHARE` of the
+        futures (the more frequent, then the lower code, where two reach it), 0 (nothing) where none does."""
+        work = self.choice_share[:, :, 1:]
+        best = work.argmax(axis=2)
+        return np.where(np.take_along_axis(work, best[..., None], axis=2)[..., 0] >= RECOMMEND_SHARE, best + 1, 0)
+
+    def recording_runs(self) -> list[tuple[int, str]]:
+        """The model's recording-car runs after ``as_of`` (the first quarter reads the file's last runs), as (step,
+        date): one every ``measurement_interval`` steps, closing the quarter of that number (read by the next
+        quarter's decision); those within the plan and the first after it."""
+        runs = []
+        step = self.measurement_interval
+        while True:
+            runs.append((step, step_date(self.line.as_of, step, self.steps_per_year)))
+            if step >= len(self.dates):
+                return runs
+            step += self.measurement_interval
+
+    def recording_note(self) -> str:
+        """When the plan's decisions see a new recording-car run (:meth:`recording_runs`), in a line."""
+        runs = self.recording_runs()
+        inside = [(step, date) for step, date in runs if step < len(self.dates)]
+        every = f"every {_count(self.measurement_interval, 'quarter', 'quarters')}"
+        first = ("Q1 reads each section's last run in the file (the model's own at as_of where it has none)"
+                 if self.line.history else "Q1 reads the model's own run at as_of (the file has no history)")
+        if not inside:
+            return (f"recording-car runs: {first}; the model's then {every}: the next {runs[-1][1]}, after the "
+                    f"plan")
+        listed = ", ".join(f"{date} (read in Q{step + 1})" for step, date in inside[:3])
+        return f"recording-car runs: {first}; the model's then {every}: {listed}{', ...' if len(inside) > 3 else ''}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan as plain data (JSON-ready), opening with what it was run on (:func:`line_summary`); per quarter
+        the sections recommended for each choice, the mean cost and its parts, and the sections' ``state``
+        (:data:`STATE_COLUMNS`, lists in the order of ``section_ids``)."""
+        ids = [s.id for s in self.line.sections]
+        total = self.costs.sum(axis=1)
+        quarters = []
+        for q, (d, rec, c) in enumerate(zip(self.dates, self.recommended, self.costs.T, strict=True)):
+            row: dict[str, Any] = {"from": d}
+            for name in self.choices:
+                code = CHOICES.index(name)
+                row[name] = [i for i, r in zip(ids, rec, strict=True) if r == code]
+            if self.unmet_share is not None:
+                row["asked_not_done"] = [i for i, u in zip(ids, self.unmet_share[q], strict=True)
+                                         if u >= RECOMMEND_SHARE]
+                if self.unmet_reasons:
+                    row["asked_not_done_why"] = {i: self.unmet_counts(q, ids.index(i))
+                                                 for i in row["asked_not_done"]}
+            quarters.append({**row, "cost_mean_keur": float(c.mean()),
+                             "cost_parts_mean_keur": {k: float(v[:, q].mean()) for k, v in self.part_costs.items()},
+                             "state": {k: _rounded(v[q]) for k, v in self.state.items()}})
+        return {
+            "line": self.line.name, "as_of": self.line.as_of, "line_summary": line_summary(self.line),
+            "policy": self.policy, "policy_params": dict(self.policy_params), "scenario": self.scenario,
+            "years": self.years, "futures": self.futures, "seed": self.seed, "engine": self.engine,
+            "config_changes": dict(self.config_changes),
+            "pass_reuse_mm": self.pass_reuse_tolerance_m * 1e3, "section_ids": ids,
+            "limits_mm": {k: _rounded(v) for k, v in self.limits_mm.items()},
+            "recording_runs": [date for _, date in self.recording_runs()], "quarters": quarters,
+            "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
+                          "p90": float(np.quantile(total, 0.9))},
+            "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
+            "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
+        }
+
+    def table(self) -> str:
+        """The plan as text: what it was run on, per quarter its mean cost and the sections recommended for each
+        choice, the first quarter's recommended sections against their limits, when the model's recording car
+        runs, then the cost forecast."""
+        from .evaluation.line_compare import changes_note, engine_note
+
+        d = self.to_dict()
+        engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
+        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {_years(self.years)}, "
+                 f"{self.futures} futures{engine}{changes_note(self.config_changes)}",
+                 *summary_lines(d["line_summary"]),
+                 f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
+        for q, row in enumerate(d["quarters"]):
+            if self.choices == ("tamp",):
+                what = " ".join(row["tamp"]) or "-"
+            else:
+                what = "; ".join(f"{name} {' '.join(row[name])}" for name in self.choices if row[name]) or "-"
+            lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
+        lines += [*self.decision_lines(), self.recording_note()]
+        c = d["cost_keur"]
+        parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
+        lines.append(f"cost over {_years(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
+                     f"over 10-90 % of the futures ({parts})")
+        if "geometry" in self.parts:
+            lines.append(f"  ({GEOMETRY_NOTE})")
+        fit = d["fit"]
+        if fit["fitted"]:
+            whose = "1 section's rate" if fit["fitted"] == 1 else f"{fit['fitted']} sections' rates"
+            lines.append(f"history: {whose} fitted, median residual "
+                         f"{fit['median_residual_mm']:.3f} mm (trackenv.envs.history_fit)")
+        return "\n".join(lines)
+
+    def decision_lines(self) -> list[str]:
+        """A line per section recommended in the first quarter (the decision to take now): the measured SD and
+        D1 mean-to-peak the policy saw against the limits of the section's speed band, the measurement's age and
+        the true SD and mean-to-peak (means over the futures), under a line with the rule's level thresholds
+        (:func:`rule_thresholds`); then the same for the sections the policy asked for in at least half the
+        futures that the env did not work on (:attr:`unmet_share`), each with the env's reasons and in how many
+        futures (:meth:`unmet_note`). The numbers are what the model had, not a reason it does not have."""
+        if not len(self.dates) or not self.state or not self.limits_mm:
+            return []
+        first = self.recommended[0]
+        unmet = np.zeros_like(first, dtype=bool) if self.unmet_share is None else self.unmet_share[0] >= RECOMMEND_SHARE
+        thresholds = rule_thresholds(self.policy_params)
+        rule = f" ({self.policy}: {', '.join(f'{k} {v:g}' for k, v in thresholds.items())})" if thresholds else ""
+        lines = []
+        if first.any():
+            lines.append(f"Q1's recommended sections as the policy saw them{rule}, means over the futures [mm]:")
+            for code in np.unique(first[first > 0]):
+                lines += self._section_lines(np.flatnonzero(first == code), CHOICES[code])
+        if unmet.any() and not self.unmet_reasons:
+            lines.append("Q1's sections asked for by the policy in at least half the futures but not done (masked, "
+                         "e.g. tamped in the last min_steps_between_tampings steps, or beyond the capacity):")
+            lines += self._section_lines(np.flatnonzero(unmet), "asked, not done")
+        elif unmet.any():
+            lines.append("Q1's sections asked for by the policy in at least half the futures but not done (why, in "
+                         "how many futures):")
+            lines += self._section_lines(np.flatnonzero(unmet), "asked, not done", lambda j: self.unmet_note(0, j))
+        return lines
+
+    def unmet_counts(self, quarter: int, section: int) -> dict[str, int]:
+        """In how many futures the env did not apply what the policy asked for section index ``section`` in
+        ``quarter`` (0: Q1), per reason (:data:`UNMET_REASONS`; those of no future left out), the most frequent
+        first (ties in the env's order)."""
+        counts = {k: int(self.unmet_reasons[k][quarter, section]) for k in UNMET_REASONS if k in self.unmet_reasons}
+        return dict(sorted(((k, n) for k, n in counts.items() if n), key=lambda kv: -kv[1]))
+
+    def unmet_note(self, quarter: int, section: int) -> str:
+        """:meth:`unmet_counts` in words: "beyond the possession's capacity in 3 of 4 futures, tamped in the
+        previous quarter in 1"."""
+        parts = [f"{self._reason(k)} in {n}" for k, n in self.unmet_counts(quarter, section).items()]
+        if parts:
+            parts[0] += f" of {self.futures} futures"
+        return ", ".join(parts)
+
+    def _reason(self, key: str) -> str:
+        """The words for the reason ``key`` of :data:`UNMET_REASONS`."""
+        if key == "recent_work":
+            step = "quarter" if self.steps_per_year == 4 else "step"
+            k = self.min_steps_between_tampings
+            when = f"the previous {step}" if k == 1 else f"the last {k} {step}s"
+            return f"{'tamped' if self.choices == ('tamp',) else 'worked on'} in {when}"
+        return {"not_enabled": "not a choice of the scenario", "machine": "the machine on another line or moving",
+                "capacity": "beyond the possession's capacity",
+                "budget": "beyond the annual budget left", "unknown": "for a reason the plan does not know"}[key]
+
+    def _section_lines(self, at: np.ndarray, what: str, why: Callable[[int], str] | None = None) -> list[str]:
+        """:meth:`_section_line` of the sections ``at`` in line order, at most :data:`SECTION_LINES` of them (the
+        rest counted: their numbers are in plan.csv and the JSON); ``why(j)``: words after ``what`` in section
+        ``j``'s line, in brackets."""
+        lines = [self._section_line(int(j), what if why is None else f"{what} ({why(int(j))})")
+                 for j in at[:SECTION_LINES]]
+        if len(at) > SECTION_LINES:
+            lines.append(f"  ... and {len(at) - SECTION_LINES} more {what} (plan.csv, --json)")
+        return lines
+
+    def _section_line(self, j: int, what: str) -> str:
+        st = {k: float(v[0, j]) for k, v in self.state.items()}
+        lim = {k: float(v[j]) for k, v in self.limits_mm.items()}
+        section = self.line.sections[j]
+        known = [name for name, on in (("transition", section.register == "transition"),
+                                       ("switch or crossing", section.register == "switch_or_crossing"),
+                                       ("known wet", section.wet)) if on]
+        tag = f" ({', '.join(known)})" if known else ""
+        return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
+                f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
+                f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
+                f"{st['measurement_age_years']:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
+
+    def write(self, folder: Path) -> dict[str, str]:
+        """Write ``plan.csv`` (quarter, date, section, choice, share of futures, recommended, then the section's
+        state before the quarter's work, :data:`STATE_COLUMNS`; a row per choice a section gets in some future),
+        ``costs.csv`` (quarter, date, mean, p10, p90 k€, then the mean of each cost part k€) and ``plan.png`` into
+        ``folder``; returns their paths."""
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = {"plan_csv": folder / "plan.csv", "costs_csv": folder / "costs.csv", "plot": folder / "plan.png"}
+        self._write_choices(paths["plan_csv"])
+        self._write_costs(paths["costs_csv"])
+        self.plot(paths["plot"])
+        return {k: str(v) for k, v in paths.items()}
+
+    def _write_choices(self, path: Path) -> None:
+        with path.open("w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(["quarter", "from", "section", "choice", "share_of_futures", "recommended", *self.state])
+            for q, (date, shares, rec) in enumerate(zip(self.dates, self.choice_share, self.recommended,
+                                                       strict=True)):
+                for j, (s, share, r) in enumerate(zip(self.line.sections, shares, rec, strict=True)):
+                    state = [f"{v[q, j]:.3f}" for v in self.state.values()]
+                    for code in np.flatnonzero(share[1:] > 0) + 1:
+                        w.writerow([q + 1, date, s.id, CHOICES[code], f"{share[code]:.3f}", int(r == code), *state])
+
+    def _write_costs(self, path: Path) -> None:
+        with path.open("w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(["quarter", "from", "cost_mean_keur", "cost_p10_keur", "cost_p90_keur",
+                        *(f"{name}_mean_keur" for name in self.part_costs)])
+            for q, (date, c) in enumerate(zip(self.dates, self.costs.T, strict=True)):
+                w.writerow([q + 1, date, f"{c.mean():.3f}", f"{np.quantile(c, 0.1):.3f}",
+                            f"{np.quantile(c, 0.9):.3f}", *(f"{v[:, q].mean():.3f}" for v in self.part_costs.values())])
+
+    def plot(self, path: Path) -> None:
+        """Save :meth:`figure` to ``path``."""
+        self.figure().savefig(path)
+
+    def figure(self) -> Any:
+        """The plan along the line over time (share of futures in which each section gets a choice in each
+        quarter, the recommended ones outlined, one colour per choice; km below, the file's section ids above)
+        above the cumulative cost forecast by date (mean and 10-90 % band): a pyplot-free
+        :class:`matplotlib.figure.Figure`."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        km = np.cumsum([0.0] + [s.length_m for s in self.line.sections]) / 1000.0
+        quarters = np.arange(len(self.dates) + 1)
+        fig = Figure(figsize=(10, 7.5), dpi=100)
+        FigureCanvasAgg(fig)
+        top, bottom = fig.subplots(2, 1, gridspec_kw={"height_ratios": [3, 1.4]})
+        mesh = top.pcolormesh(km, quarters, self.share, cmap="Blues", vmin=0.0, vmax=1.0, shading="flat")
+        colours = dict(zip(CHOICES[1:], ("crimson", "gold", "navy", "black", "limegreen", "magenta"), strict=True))
+        for name in self.choices:
+            q, j = np.nonzero(self.recommended == CHOICES.index(name))
+            top.scatter((km[j] + km[j + 1]) / 2, q + 0.5, marker="s", s=12, facecolors="none",
+                        edgecolors=colours[name], linewidths=0.8, label=name)
+        zones = {1: ("transition", "darkorange"), 2: ("switch or crossing", "purple")}
+        for code, (label, colour) in zones.items():
+            at = [i for i, s in enumerate(self.line.sections) if s.register_index == code]
+            top.scatter((km[at] + km[np.array(at, dtype=int) + 1]) / 2 if at else [], [-0.4] * len(at), marker="^",
+                        color=colour, s=18, label=label, clip_on=False)
+        wet = [i for i, s in enumerate(self.line.sections) if s.wet]
+        top.scatter((km[wet] + km[np.array(wet, dtype=int) + 1]) / 2 if wet else [], [-0.4] * len(wet), marker="v",
+                    color="teal", s=18, label="known wet", clip_on=False)
+        top.set_ylim(len(self.dates), -0.8)
+        step = max(len(self.dates) // 8, 1)
+        top.set_yticks(np.arange(0, len(self.dates), step) + 0.5, [self.dates[i] for i in range(0, len(self.dates),
+                                                                                                 step)])
+        top.set_xlabel("position along the line [km]")
+        self._section_axis(top, km)
+        top.set_title(f"{self.line.name}: {self.policy} ({self.scenario}), {self.futures} futures from "
+                      f"{self.line.as_of}")
+        top.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), fontsize=7, ncol=5,
+                   title=f"recommended: made in at least {RECOMMEND_SHARE:.0%} of the futures", title_fontsize=7)
+        fig.colorbar(mesh, ax=top, label="share of futures tamping" if self.choices == ("tamp",)
+                     else "share of futures with a choice")
+        self._cost_panel(bottom)
+        fig.tight_layout()
+        return fig
+
+    def _section_axis(self, ax: Any, km: np.ndarray) -> None:
+        """The file's section ids along the top of the plan panel, at their sections' middles: every one up to
+        :data:`SECTION_LABELS`, else every n-th (the first and the last always)."""
+        ids = [s.id for s in self.line.sections]
+        every = -(-len(ids) // SECTION_LABELS)
+        shown = sorted({*range(0, len(ids), every), len(ids) - 1})
+        if every > 1 and len(shown) > 1 and shown[-1] - shown[-2] < every / 2:
+            shown.pop(-2)  # the last label would overlap its neighbour
+        ids_axis = ax.secondary_xaxis("top")
+        ids_axis.set_xticks([(km[i] + km[i + 1]) / 2 for i in shown], [ids[i] for i in shown], rotation=90,
+                            fontsize=7)
+        nth = f"{every}{'nd' if every == 2 else 'rd' if every == 3 else 'th'}"
+        ids_axis.set_xlabel("section" if every == 1 else f"section (every {nth} labelled)", fontsize=8)
+
+    def _cost_panel(self, ax: Any) -> None:
+        """The cumulative cost forecast at the end of each quarter (mean and 10-90 % band), from 0 at ``as_of``,
+        against the dates."""
+        steps = len(self.dates)
+        cum = np.concatenate([np.zeros((self.costs.shape[0], 1)), np.cumsum(self.costs, axis=1)], axis=1)
+        x = np.arange(steps + 1)
+        ax.fill_between(x, np.quantile(cum, 0.1, axis=0), np.quantile(cum, 0.9, axis=0), alpha=0.3,
+                        label="10-90 % of futures")
+        ax.plot(x, cum.mean(axis=0), label="mean")
+        every = max(-(-steps // 8), 1)
+        ticks = list(range(0, steps + 1, every))
+        ax.set_xticks(ticks, [step_date(self.line.as_of, k, self.steps_per_year) for k in ticks], fontsize=8)
+        ax.set_xlim(0, steps)
+        ax.set_xlabel("date (cost summed from as_of to the end of each quarter)")
+        ax.set_ylabel("cumulative cost [k€]")
+        ax.legend(fontsize=7)

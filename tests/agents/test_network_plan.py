@@ -1,0 +1,81 @@
+"""``trackenv plan NETWORK.yaml`` and :func:`~trackenv_agents.network_plan.plan_network`: the network's plan is its
+lines' plans and the machine's course, their costs add up, a section asked for where the machine is not is not
+done for the machine, and the command plans a network file as it plans a line file."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv.envs.network_file import load_network
+from trackenv.lines import EXAMPLE_NETWORK
+from trackenv_agents.cli import main
+from trackenv_agents.network_plan import plan_network
+
+
+@pytest.fixture(scope="module")
+def network_plan():
+    return plan_network(EXAMPLE_NETWORK, years=0.75, futures=3)
+
+
+def test_the_networks_costs_are_its_lines_and_the_moves(network_plan):
+    plan = network_plan
+    assert [len(p.line.sections) for p in plan.lines] == [100, 30] and plan.costs.shape == (3, 3)
+    lines = sum(p.costs for p in plan.lines)
+    assert np.allclose(plan.costs, lines + plan.move_costs, rtol=1e-12, atol=1e-9)
+    for p in plan.lines:  # each line's parts add up to its cost
+        assert np.allclose(sum(p.part_costs.values()), p.costs, rtol=1e-9, atol=1e-9)
+    assert np.allclose(plan.works_on.sum(axis=1) + plan.moved.mean(axis=0), 1.0)
+    assert (plan.move_costs[plan.moved] == 10.0).all() and (plan.move_costs[~plan.moved] == 0.0).all()
+
+
+def test_the_machine_works_where_its_lines_plan_says_the_sections_are_tamped(network_plan):
+    """A line's sections are tamped in a future's quarter only where the machine worked on that line then: the
+    line's tamping share per quarter is at most the share of futures in which the machine worked there."""
+    plan = network_plan
+    for i, p in enumerate(plan.lines):
+        tamped_somewhere = p.share.max(axis=1)  # (quarters,) the largest share of any section
+        assert (tamped_somewhere <= plan.works_on[:, i] + 1e-12).all()
+
+
+def test_a_request_where_the_machine_is_not_is_not_done_for_the_machine(tmp_path):
+    """With the machine on the branch and the work on the main line, the first quarter moves the machine in some
+    future: what the main line's policy asked for there is not done, for the reason ``machine``."""
+    for path in EXAMPLE_NETWORK.parent.glob("example*"):
+        shutil.copy(path, tmp_path / path.name)
+    network = tmp_path / "example_network.yaml"
+    network.write_text(network.read_text().replace("machine_on: example.yaml", "machine_on: example_branch.yaml"))
+    plan = plan_network(network, years=0.5, futures=2)
+    assert plan.network.start_line == 1 and plan.moved[:, 0].any()
+    main_line = plan.lines[0]
+    machine = main_line.unmet_reasons["machine"][0]
+    assert machine.max() == plan.moved[:, 0].sum() and not main_line.unmet_reasons["unknown"].any()
+    j = int(machine.argmax())
+    assert main_line.unmet_counts(0, j)["machine"] == plan.moved[:, 0].sum()
+    assert "the machine on another line or moving in" in main_line.unmet_note(0, j)
+
+
+def test_plan_plans_a_network_file(tmp_path, capsys):
+    out = tmp_path / "plan"
+    assert main(["plan", str(EXAMPLE_NETWORK), "--years", "0.5", "--futures", "2", "--json", "--out", str(out)]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["network"] == load_network(EXAMPLE_NETWORK).name and len(d["line_plans"]) == 2
+    assert d["lines"] == [p["line"] for p in d["line_plans"]] and len(d["quarters"]) == 2
+    assert {Path(p).name for p in d["files"].values()} == {"network.csv", "plan.csv", "costs.csv", "plan.png"}
+    assert (out / "line1" / "plan.csv").is_file() and (out / "network.csv").read_text().startswith("quarter,from")
+    main(["plan", str(EXAMPLE_NETWORK), "--years", "0.25", "--futures", "1", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert text.startswith("Network plan for Example Valley network (synthetic) from 2026-01-01")
+    assert "cost of the network over 3 months" in text or "cost of the network over 0.25" in text
+
+
+def test_a_faulty_network_file_is_one_line_and_exit_2(tmp_path, capsys):
+    path = tmp_path / "network.yaml"
+    path.write_text("name: N\nlines:\n  - nowhere.yaml\n")
+    assert main(["plan", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no such line file" in err and len(err.splitlines()) == 1

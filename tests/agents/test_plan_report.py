@@ -1,0 +1,41 @@
+"""The presentation of a plan (:mod:`trackenv_agents.plan_report`): what it names where the env did not apply what
+the policy asked for, and the names :mod:`trackenv_agents.planning` gives of it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trackenv_agents import plan_report, planning
+from trackenv_agents.plan_report import UNMET_REASONS, LinePlan
+
+
+def _plan(choices: tuple[str, ...], min_steps: int, **reasons: list[int]) -> LinePlan:
+    """A plan of one quarter, one section and four futures with only the counts of ``reasons`` (what
+    :meth:`LinePlan.unmet_note` reads)."""
+    counts = {k: np.array([[reasons.get(k, 0)]]) for k in UNMET_REASONS}
+    return LinePlan(None, "p", 0.25, 4, 0, ("2026-01-01",), np.zeros((1, 1, 7)), np.zeros((4, 1)), {}, None,
+                    choices=choices, unmet_reasons=counts, min_steps_between_tampings=min_steps)
+
+
+def test_the_reasons_come_most_frequent_first_with_the_futures_counted_once():
+    plan = _plan(("tamp",), 1, recent_work=1, capacity=3)
+    assert plan.unmet_counts(0, 0) == {"capacity": 3, "recent_work": 1}
+    assert plan.unmet_note(0, 0) == ("beyond the possession's capacity in 3 of 4 futures, tamped in the previous "
+                                     "quarter in 1")
+    assert _plan(("tamp",), 1).unmet_note(0, 0) == ""
+
+
+def test_the_reasons_name_the_work_and_the_steps_between_tampings():
+    """With choices beyond tamping the recent work is any track work; the steps are the config's."""
+    worked = _plan(("tamp", "drainage"), 2, recent_work=2)
+    assert worked.unmet_note(0, 0) == "worked on in the last 2 quarters in 2 of 4 futures"
+    note = _plan(("tamp",), 1, not_enabled=1, budget=1, unknown=1).unmet_note(0, 0)
+    assert note == ("not a choice of the scenario in 1 of 4 futures, beyond the annual budget left in 1, for a reason "
+                    "the plan does not know in 1")
+
+
+def test_planning_gives_the_reports_names():
+    """Callers import the report's names from :mod:`trackenv_agents.planning` as before the report had a module."""
+    for name in ("LinePlan", "RECOMMEND_SHARE", "STATE_COLUMNS", "LIMIT_FIELDS", "GEOMETRY_NOTE", "SECTION_LINES",
+                 "SECTION_LABELS", "UNMET_REASONS", "line_summary", "summary_lines", "rule_thresholds", "step_date"):
+        assert getattr(planning, name) is getattr(plan_report, name) and name in planning.__all__

@@ -1,0 +1,73 @@
+"""Network files: the example network loads and runs, and every fault of a network file is refused naming the file
+and the key."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv.envs.line_file import LineFileError, load_line
+from trackenv.envs.network_env import TampingNetwork
+from trackenv.envs.network_file import load_network
+from trackenv.lines import EXAMPLE, EXAMPLE_NETWORK
+
+
+def test_the_example_network_is_its_line_files_and_runs():
+    network = load_network(EXAMPLE_NETWORK)
+    assert [line.name for line in network.lines] == [load_line(EXAMPLE).name, "Example Branch Line (synthetic)"]
+    assert network.start_line == 0 and network.capacity is None and network.as_of == "2026-01-01"
+    config = network.config(horizon_years=0.5)
+    assert config.mixed and config.line_sections == (100, 30) and config.horizon_steps == 2
+    assert [line.line for line in config.line_configs] == list(network.lines)
+    env = TampingNetwork(config)
+    obs, _ = env.reset(seed=0)
+    assert obs["section_sd"].shape == (130,)
+    _, reward, *_ = env.step(np.zeros(130, dtype=np.int8))
+    assert np.isfinite(reward) and reward < 0
+
+
+def _folder(tmp_path: Path, text: str) -> Path:
+    for name in ("example.yaml", "example_sections.csv", "example_history.csv", "example_branch.yaml",
+                 "example_branch_sections.csv"):
+        shutil.copy(EXAMPLE.parent / name, tmp_path / name)
+    path = tmp_path / "network.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+GOOD = "name: N\nlines:\n  - example.yaml\n  - example_branch.yaml\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("name: N\n", "missing key 'lines'"),
+    ("name: N\nlines: []\n", "lines: must be a list of line files"),
+    ("name: N\nlines: example.yaml\n", "lines: must be a list of line files"),
+    ("name: N\nlines:\n  - example.yaml\n  - ./example.yaml\n", r"lines\[1\]: './example.yaml' is listed twice"),
+    ("name: N\nlines:\n  - nowhere.yaml\n", "no such line file"),
+    (GOOD + "machine_on: main\n", "machine_on: 'main' is neither a listed line file"),
+    (GOOD + "capacity: 0\n", "capacity: must be at least 1 section"),
+    (GOOD + "capacity: 101\n", r"capacity must be an integer in \[1, 100\]"),
+    (GOOD + "move_cost: -1\n", r"move_cost: -1 k€ is outside"),
+    (GOOD + "mashine_on: example.yaml\n", "did you mean 'machine_on'"),
+])
+def test_faults_of_a_network_file_name_the_key(tmp_path, text, message):
+    path = _folder(tmp_path, text)
+    with pytest.raises(LineFileError, match=message):
+        load_network(path).config()
+
+
+def test_the_machine_is_on_the_line_named_by_file_or_by_name(tmp_path):
+    assert load_network(_folder(tmp_path, GOOD + "machine_on: example_branch.yaml\n")).start_line == 1
+    path = _folder(tmp_path, GOOD + "machine_on: Example Branch Line (synthetic)\n")
+    assert load_network(path).config().start_line == 1
+
+
+def test_lines_dated_more_than_a_step_apart_are_refused(tmp_path):
+    path = _folder(tmp_path, GOOD)
+    branch = tmp_path / "example_branch.yaml"
+    branch.write_text(branch.read_text().replace("as_of: 2026-01-01", "as_of: 2026-05-01"))
+    with pytest.raises(LineFileError, match=r"lines\[0\] .*as_of 2026-01-01 is 120 days before the network's latest"):
+        load_network(path).config()
+    branch.write_text(branch.read_text().replace("as_of: 2026-05-01", "as_of: 2026-02-01"))
+    assert load_network(path).config().n_lines == 2  # within a quarter: they step together from 2026-02-01

@@ -1,0 +1,166 @@
+"""Networks from files: several line files that share one tamping machine.
+
+A network file (YAML) names the line files of a maintenance area and what the shared machine adds::
+
+    name: Northern maintenance area
+    lines:                 # line files, relative to this file (the documentation's page "Lines from files")
+      - valley.yaml
+      - branch.yaml
+    machine_on: valley.yaml   # optional: the line the machine is on now (a listed file or a line's name);
+                              # default the first
+    capacity: 6               # optional: sections a step on the machine's line; default each line's own
+    move_cost: 10             # optional: k€ to move the machine to another line; default NetworkConfig's
+
+:func:`load_network` reads it (and every line file, each checked as :func:`~trackenv.envs.line_file.load_line`
+checks it) into a :class:`NetworkDescription`, whose :meth:`~NetworkDescription.config` is the
+:class:`~trackenv.envs.network.NetworkConfig` of ``trackenv/TampingNetwork-v0`` with each line a line of its own.
+The lines' ``as_of`` dates must lie within one step (a quarter) of each other: the lines step together from the
+latest of them. Every fault raises :class:`~trackenv.envs.line_file.LineFileError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from .line_config import LineConfig
+from .line_file import (
+    DAYS_PER_YEAR,
+    Field,
+    LineDescription,
+    LineFileError,
+    _integer,
+    _number,
+    _text,
+    load_line,
+    yaml_document,
+    yaml_mapping,
+)
+from .network import NetworkConfig
+
+__all__ = ["NETWORK_KEYS", "NetworkDescription", "is_network_file", "load_network"]
+
+#: The keys of a network file (YAML).
+NETWORK_KEYS: dict[str, Field] = {
+    "name": Field("-", True, "the network's name"),
+    "description": Field("-", False, "free text"),
+    "lines": Field("paths", True, "the line files of the network (at least one), relative to this file"),
+    "machine_on": Field("-", False, "the line the machine is on now: one of the listed files, or a line's name "
+                        "(default: the first line)"),
+    "capacity": Field("sections", False, "sections the machine tamps a step on its line (default: each line's "
+                      "own capacity)", 1, None),
+    "move_cost": Field("k€", False, f"moving the machine to another line (default {NetworkConfig.move_cost:g} "
+                       "k€)", 0.0, 1e6),
+}
+
+
+@dataclass(frozen=True)
+class NetworkDescription:
+    """A network as its file describes it (:func:`load_network`): its lines in the file's order, the machine's
+    line now, and the machine's ``capacity`` and ``move_cost`` where the file gives them (None: the defaults).
+    ``source`` names the file (not compared)."""
+
+    name: str
+    lines: tuple[LineDescription, ...]
+    start_line: int = 0
+    capacity: int | None = None
+    move_cost: float | None = None
+    description: str = ""
+    source: str = field(default="<dict>", compare=False)
+
+    @property
+    def as_of(self) -> str:
+        """The date the network's plan starts from: the latest of its lines' ``as_of``."""
+        return max(line.as_of for line in self.lines)
+
+    def config(self, **line_fields: Any) -> NetworkConfig:
+        """The :class:`~trackenv.envs.network.NetworkConfig` of this network: each line a
+        :class:`~trackenv.envs.line_config.LineConfig` of its file with ``line_fields`` (any field but the file's
+        own: a scenario's hidden parts, costs, the horizon, the engine), the machine's fields from the file.
+        :class:`~trackenv.envs.line_file.LineFileError` naming a line whose ``as_of`` is more than a step before
+        the latest, or whose config a field refuses."""
+        lines = []
+        for i, line in enumerate(self.lines):
+            try:
+                lines.append(LineConfig(line=line, **line_fields))
+            except ValueError as exc:
+                raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): {exc}") from None
+        step_days = DAYS_PER_YEAR / lines[0].steps_per_year
+        for i, line in enumerate(self.lines):
+            late = -line.years_before(self.as_of) * DAYS_PER_YEAR  # days from its as_of to the latest
+            if late > step_days:
+                raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): as_of {line.as_of} is {late:.0f} "
+                                    f"days before the network's latest ({self.as_of}); the lines step together, so "
+                                    f"their states must be dated within one step ({step_days:.0f} days): bring "
+                                    f"the file up to its last measurements")
+        move_cost = NetworkConfig.move_cost if self.move_cost is None else self.move_cost
+        try:
+            return NetworkConfig(line_config=lines, capacity=self.capacity, move_cost=move_cost,
+                                 start_line=self.start_line)
+        except ValueError as exc:
+            raise LineFileError(f"{self.source}: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The network as plain data: its own fields, each line as :meth:`LineDescription.to_dict`."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("lines", "source")}
+        return {**out, "lines": [line.to_dict() for line in self.lines]}
+
+
+def is_network_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a network file (a YAML mapping with ``lines``) rather than a line file; False for
+    anything else, whose loader then names the fault."""
+    doc = yaml_document(path)
+    return isinstance(doc, dict) and "lines" in doc
+
+
+def load_network(path: str | os.PathLike[str]) -> NetworkDescription:
+    """Read a network file (YAML) and every line file it names into a :class:`NetworkDescription`.
+
+    Raises :class:`~trackenv.envs.line_file.LineFileError` for a fault in the network file (an unknown or
+    missing key, no lines, a line listed twice, a ``machine_on`` that names no line or two, a bad number) or in
+    a line file (reported as :func:`~trackenv.envs.line_file.load_line` reports it)."""
+    path = Path(path)
+    source = str(path)
+    doc = yaml_mapping(path, "network file", NETWORK_KEYS)
+    listed = doc["lines"]
+    if not isinstance(listed, list) or not listed or not all(isinstance(p, str) and p.strip() for p in listed):
+        raise LineFileError(f"{source}, lines: must be a list of line files (paths relative to this file), got "
+                            f"{listed!r}")
+    files = [(path.parent / p.strip()).resolve() for p in listed]
+    for i, file in enumerate(files):
+        if file in files[:i]:
+            raise LineFileError(f"{source}, lines[{i}]: {listed[i]!r} is listed twice")
+    lines = tuple(load_line(file) for file in files)
+    start = _machine_line(source, doc.get("machine_on"), listed, lines)
+    capacity = None
+    if doc.get("capacity") is not None:
+        capacity = _integer(source, "capacity", doc["capacity"])
+        if capacity < 1:
+            raise LineFileError(f"{source}, capacity: must be at least 1 section, got {capacity}")
+    move_cost = None
+    if doc.get("move_cost") is not None:
+        move_cost = _number(source, "move_cost", doc["move_cost"], "k€")
+        if not 0.0 <= move_cost <= 1e6:
+            raise LineFileError(f"{source}, move_cost: {move_cost:g} k€ is outside [0, 1e+06] k€")
+    return NetworkDescription(_text(source, "name", doc["name"]), lines, start, capacity, move_cost,
+                              _text(source, "description", doc.get("description", "")), source)
+
+
+def _machine_line(source: str, value: Any, listed: list[str], lines: tuple[LineDescription, ...]) -> int:
+    """The index of the line ``machine_on`` names (a listed file as written, or a line's name); 0 if not given."""
+    if value is None:
+        return 0
+    text = _text(source, "machine_on", value)
+    by_file = [i for i, p in enumerate(listed) if p.strip() == text]
+    by_name = [i for i, line in enumerate(lines) if line.name == text]
+    found = sorted(set(by_file or by_name))
+    if len(found) == 1:
+        return found[0]
+    known = ", ".join(repr(p.strip()) for p in listed)
+    if not found:
+        raise LineFileError(f"{source}, machine_on: {text!r} is neither a listed line file ({known}) nor a line's "
+                            f"name")
+    raise LineFileError(f"{source}, machine_on: {text!r} is the name of lines {found}: name the file instead "
+                        f"({known})")
