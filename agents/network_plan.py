@@ -16,6 +16,7 @@ works on each line or moves, the move costs, and the network's cost forecast.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,8 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from .plan_report import LIMIT_FIELDS, LinePlan, _years, step_date
+from .plan_report import LIMIT_FIELDS, LinePlan, line_summary, step_date, summary_lines, years_text
 from .planning import DEFAULT_POLICY, _run_futures, line_policy, plan_config, trained_horizon_years, unmet_reasons
+from .rules.choices import CHOICE_RULES
+from .rules.line import LINE_HEURISTICS
+from .shipped import CHOICE_AGENT_NAME as CHOICE_AGENT
 
 __all__ = ["NetworkPlan", "plan_network"]
 
@@ -60,10 +64,11 @@ class NetworkPlan:
         return [line.line.name for line in self.lines]
 
     def to_dict(self) -> dict[str, Any]:
-        """The plan as plain data (JSON-ready): the network, per quarter the machine's course and the network's
-        mean cost, the cost forecast, and each line's plan (:meth:`LinePlan.to_dict`)."""
+        """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on``: the
+        share of futures per line, in the order of ``lines``; ``moving``) and the network's mean cost, the cost
+        forecast, and each line's plan (:meth:`LinePlan.to_dict`)."""
         names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
-        quarters = [{"from": d, "works_on": {n: float(s) for n, s in zip(names, works, strict=True)},
+        quarters = [{"from": d, "works_on": [float(s) for s in works],
                      "moving": float(self.moved[:, q].mean()), "cost_mean_keur": float(self.costs[:, q].mean()),
                      "move_cost_mean_keur": float(self.move_costs[:, q].mean())}
                     for q, (d, works) in enumerate(zip(self.dates, self.works_on, strict=True))]
@@ -80,16 +85,20 @@ class NetworkPlan:
         """The plan as text: the network and its lines, per quarter where the machine works and what it tamps
         there (the sections recommended on each line), the first quarter's decision lines of each line, then the
         cost forecast of each line and of the network."""
+        from .evaluation.line_compare import changes_note, engine_note
+
         d, names = self.to_dict(), self._names()
+        first = self.lines[0]
+        engine = engine_note({"engine": first.engine, "pass_reuse_tolerance_m": first.pass_reuse_tolerance_m})
         out = [f"Network plan for {d['network']} from {d['as_of']}: {self.policy} ({self.scenario}, tamping), "
-               f"{_years(self.years)}, {self.futures} futures; the machine is on line {self.network.start_line} now"]
+               f"{years_text(self.years)}, {self.futures} futures{engine}{changes_note(first.config_changes)}; the "
+               f"machine is on line {self.network.start_line} now"]
         for i, line in enumerate(self.lines):
-            km = sum(s.length_m for s in line.line.sections) / 1000.0
-            out.append(f"  line {i}: {line.line.name}, {len(line.line.sections)} sections, {km:.1f} km "
-                       f"({line.line.source})")
+            out.append(f"line {i}: {line.line.name} ({line.line.source})")
+            out += [f"  {text}" for text in summary_lines(line_summary(line.line))]
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
         for q, row in enumerate(d["quarters"]):
-            where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"].values()) if s > 0]
+            where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
             if row["moving"] > 0:
                 where.append(f"moving {row['moving']:.0%}")
             tamped = [f"line {i}: {' '.join(plan['quarters'][q]['tamp'])}"
@@ -103,16 +112,53 @@ class NetworkPlan:
         c = d["cost_keur"]
         for i, line in enumerate(self.lines):
             total = line.costs.sum(axis=1)
-            out.append(f"cost of line {i} over {_years(self.years)}: {total.mean():.0f} k€ mean, "
+            out.append(f"cost of line {i} over {years_text(self.years)}: {total.mean():.0f} k€ mean, "
                        f"{np.quantile(total, 0.1):.0f}-{np.quantile(total, 0.9):.0f} k€ over 10-90 % of the futures")
-        out.append(f"cost of the network over {_years(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
+        out.append(f"cost of the network over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
                    f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f})")
         return "\n".join(out)
 
+    def figure(self) -> Any:
+        """The machine's course (per quarter the share of futures in which it works on each line, or moves) above
+        the cumulative cost forecast by date (the network's mean and 10-90 % band, each line's mean, the moves): a
+        pyplot-free :class:`matplotlib.figure.Figure`."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(10, 6.5), dpi=100)
+        FigureCanvasAgg(fig)
+        top, bottom = fig.subplots(2, 1, sharex=True)
+        quarters = np.arange(len(self.dates))
+        below = np.zeros(len(self.dates))
+        for i, share in enumerate(self.works_on.T):
+            top.bar(quarters, share, bottom=below, color=f"C{i}", label=f"line {i}: {self.lines[i].line.name}")
+            below += share
+        top.bar(quarters, self.moved.mean(axis=0), bottom=below, color="0.7", label="moving")
+        top.set_ylim(0, 1)
+        top.set_ylabel("share of futures")
+        top.set_title(f"{self.network.name}: where the machine works, {self.policy} ({self.scenario}), "
+                      f"{self.futures} futures from {self.network.as_of}", fontsize=9)
+        top.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.04), ncol=min(len(self.lines) + 1, 4))
+        total = np.cumsum(self.costs, axis=1)
+        bottom.fill_between(quarters, np.quantile(total, 0.1, axis=0), np.quantile(total, 0.9, axis=0),
+                            color="0.85", label="network, 10-90 % of the futures")
+        bottom.plot(quarters, total.mean(axis=0), color="k", label="network, mean")
+        for i, line in enumerate(self.lines):
+            bottom.plot(quarters, np.cumsum(line.costs, axis=1).mean(axis=0), color=f"C{i}", lw=1, label=f"line {i}")
+        bottom.plot(quarters, np.cumsum(self.move_costs, axis=1).mean(axis=0), color="0.5", ls="--", lw=1,
+                    label="moves")
+        bottom.set_ylabel("cumulative cost [k€]")
+        step = max(len(self.dates) // 8, 1)
+        bottom.set_xticks(quarters[::step], [self.dates[q] for q in quarters[::step]], fontsize=7)
+        bottom.legend(fontsize=7, loc="upper left")
+        fig.tight_layout()
+        return fig
+
     def write(self, folder: Path) -> dict[str, str]:
         """Write ``network.csv`` (quarter, date, where the machine works: a column per line and ``moving``, shares
-        of futures; the network's mean, p10 and p90 cost and the mean move cost k€) into ``folder`` and each line's
-        plan (:meth:`LinePlan.write`) into a folder of its own, ``line<i>``; returns the paths."""
+        of futures; the network's mean, p10 and p90 cost and the mean move cost k€) and ``network.png``
+        (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
+        ``line<i>``; returns the paths."""
         import csv
 
         folder.mkdir(parents=True, exist_ok=True)
@@ -126,7 +172,9 @@ class NetworkPlan:
                 w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), f"{self.moved[:, q].mean():.3f}",
                             f"{c.mean():.3f}", f"{np.quantile(c, 0.1):.3f}", f"{np.quantile(c, 0.9):.3f}",
                             f"{self.move_costs[:, q].mean():.3f}"])
-        files = {"network_csv": str(path)}
+        png = folder / "network.png"
+        self.figure().savefig(png)
+        files = {"network_csv": str(path), "network_plot": str(png)}
         for i, line in enumerate(self.lines):
             files.update({f"line{i}_{k}": v for k, v in line.write(folder / f"line{i}").items()})
         return files
@@ -154,12 +202,11 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     from .rules.network import network_play
 
     desc = network if not isinstance(network, (str, Path)) else load_network(network)
-    lines = []
-    for line in desc.lines:
-        cfg = plan_config(line, scenario, years=years, **config)
-        if cfg.choices != ("tamp",):  # the network's machine tamps: its lines plan tamping only
-            cfg = cfg.replace(choices=("tamp",))
-        lines.append(cfg)
+    if policy in CHOICE_RULES or policy == CHOICE_AGENT:
+        raise ValueError(f"policy {policy!r} uses the choices beyond tamping, and the network's machine tamps only: "
+                         f"plan it with a tamping rule ({', '.join(LINE_HEURISTICS)}) or cpi-agent")
+    # every line modelled as in its own plan (a scenario's hidden parts and observation), the action tamping only
+    lines = [plan_config(line, scenario, years=years, **config) for line in desc.lines]
     rules = []
     for i, cfg in enumerate(lines):
         try:
@@ -189,7 +236,13 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
                                        np.asarray(info["clipped"], dtype=bool) & working, working))
         return {key: np.concatenate([p[key] for p in parts], axis=1) for key in parts[0]}
 
-    run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress, why, net.line_sections)
+    def asked(action: np.ndarray) -> np.ndarray:
+        """What each line's policy asked for in the step just predicted, before the dispatch."""
+        assert rule.last_requests is not None  # set by the predict that made ``action``
+        return rule.last_requests
+
+    run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress, why, net.line_sections,
+                       asked)
     assert env.batch is not None and run.line_costs is not None  # built at reset; a network's run has them
     assert run.machine is not None and run.moved is not None
     dates = tuple(step_date(desc.as_of, q, net.steps_per_year) for q in range(steps))
@@ -201,8 +254,10 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
         limits = {name: batch.section_limits(attr)[row * cfg.n_sections:(row + 1) * cfg.n_sections] * 1e3
                   for name, attr in LIMIT_FIELDS.items()}
         part_costs = {k: v[:, :, i] for k, v in run.line_part_costs.items()}
+        assert cfg.line is not None  # every line of a network file is a line file's
+        line = dataclasses.replace(cfg.line, as_of=desc.as_of)  # the network's calendar
         plans.append(LinePlan(
-            cfg.line, policy, float(years), futures, seed, dates, run.share[:, at], run.line_costs[:, :, i],
+            line, policy, float(years), futures, seed, dates, run.share[:, at], run.line_costs[:, :, i],
             {k: v.sum(axis=1) for k, v in part_costs.items()}, history_fit(cfg), scenario, ("tamp",), cfg.engine,
             cfg.pass_reuse_tolerance_m, part_costs=part_costs, state={k: v[:, at] for k, v in run.state.items()},
             limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},

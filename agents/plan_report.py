@@ -30,7 +30,8 @@ from trackenv.envs.line_file import DAYS_PER_YEAR
 RECOMMEND_SHARE = 0.5
 
 
-def _years(years: float) -> str:
+def years_text(years: float) -> str:
+    """"1 year", "3 years", "0.25 years": a plan's span in words."""
     return f"{years:g} year{'' if years == 1 else 's'}"
 
 
@@ -249,7 +250,7 @@ class LinePlan:
 
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
-        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {_years(self.years)}, "
+        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {years_text(self.years)}, "
                  f"{self.futures} futures{engine}{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
@@ -262,7 +263,7 @@ class LinePlan:
         lines += [*self.decision_lines(), self.recording_note()]
         c = d["cost_keur"]
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
-        lines.append(f"cost over {_years(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
+        lines.append(f"cost over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
                      f"over 10-90 % of the futures ({parts})")
         if "geometry" in self.parts:
             lines.append(f"  ({GEOMETRY_NOTE})")

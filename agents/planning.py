@@ -218,11 +218,14 @@ UnmetReasons = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[st
 
 
 def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Callable[[int], Any] | None,
-                 why: UnmetReasons | None = None, line_sections: tuple[int, ...] | None = None) -> _Futures:
+                 why: UnmetReasons | None = None, line_sections: tuple[int, ...] | None = None,
+                 asked: Callable[[np.ndarray], np.ndarray] | None = None) -> _Futures:
     """Run ``rule`` for ``steps`` steps in the vector env ``env`` from the seeds ``seeds``, recording per step
     the sections' state before its work, the choices made, why those asked for were not made (``why``; default
     the line's :func:`unmet_reasons`) and the costs in their parts (on a network, each line's too: give
-    ``line_sections``, each line's number of sections)."""
+    ``line_sections``, each line's number of sections). What was asked for is the rule's action, or
+    ``asked(action)`` called after the rule's ``predict`` (on a network, what the line policies asked for before
+    the dispatch)."""
     if why is None:
         def why(want, codes, allowed, measured_sd, info):
             return unmet_reasons(env.config, want, codes, allowed, measured_sd, info["clipped"])
@@ -238,7 +241,7 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
         allowed, measured_sd = env.batch.allowed(), obs["section_sd"]  # as the env resolves the step's work
         obs, reward, _, _, info = env.step(action)
         codes = np.asarray(info["section_choices"])  # (futures, sections)
-        want = np.asarray(action).reshape(codes.shape)
+        want = np.asarray(action if asked is None else asked(action)).reshape(codes.shape).astype(np.int64)
         out.share[step] = (codes[..., None] == np.arange(len(CHOICES))).mean(axis=0)
         out.unmet_share[step] = ((want != 0) & (codes == 0)).mean(axis=0)
         for key, value in why(want, codes, allowed, measured_sd, info).items():

@@ -174,6 +174,9 @@ class NetworkRule(Heuristic):
     #: to it, the config)
     _network: Any = None
     _groups: list[tuple[list[int], Any, Any]] | None = None
+    #: (n_envs, Σ sections) bool, set by :meth:`predict`: what each line's policy asked for on its line before the
+    #: dispatch kept one line's (what a plan calls asked, wherever the machine is); None before the first predict
+    last_requests: np.ndarray | None = None
 
     def reset(self) -> None:
         """The line policy's reset (each bound copy's), where it has one."""
@@ -182,16 +185,30 @@ class NetworkRule(Heuristic):
             if callable(reset):
                 reset()
 
-    def predict(self, obs, state=None, episode_start=None, deterministic=True):
-        b, batched = as_batch(obs)
+    def _line_wants(self, b: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, list, list]:
+        """The line policies' own requests on the batched network observation ``b``: (n_envs, n_lines, S) bool,
+        padded with False where a line has fewer sections; each line's number of sections; the groups of lines
+        of one line policy and each group's view of the observation (:func:`line_view`)."""
         n_envs, n_lines = b["machine_line"].shape
         groups = self._groups or [(list(range(n_lines)), self.line_rule, self.line_config)]
         sections = np.diff(_line_rows(self._network, n_lines, b["section_sd"].shape[1], profile=False))
-        want = np.zeros((n_envs, n_lines, sections.max()), dtype=bool)  # padded where a line has fewer sections
+        want = np.zeros((n_envs, n_lines, sections.max()), dtype=bool)
         views = [line_view(b, n_lines, members, self._network) for members, _, _ in groups]
         for (members, line_rule, _), view in zip(groups, views, strict=True):
             asked, _ = line_rule.predict(view)
             want[:, members, :sections[members[0]]] = np.asarray(asked, dtype=bool).reshape(n_envs, len(members), -1)
+        return want, sections, groups, views
+
+    @staticmethod
+    def _flat(per_line: np.ndarray, sections: np.ndarray) -> np.ndarray:
+        """(n_envs, n_lines, S) padded per-line values as the network's (n_envs, Σ sections), in the action's order."""
+        return np.concatenate([per_line[:, line, :sections[line]] for line in range(len(sections))], axis=1)
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        b, batched = as_batch(obs)
+        n_envs, n_lines = b["machine_line"].shape
+        want, sections, groups, views = self._line_wants(b)
+        self.last_requests = self._flat(want, sections)
         here = b["machine_line"].argmax(axis=1)
         rows = np.arange(n_envs)
         if isinstance(self.dispatch, ValueDispatch):
@@ -208,7 +225,7 @@ class NetworkRule(Heuristic):
                 due = np.asarray(line_rule.requests(view, self.eager_probability), dtype=bool)
                 soon[:, members, :sections[members[0]]] = due.reshape(n_envs, len(members), -1)
             act[rows, here] |= soon[rows, here] & stay[:, None]
-        flat = np.concatenate([act[:, line, :sections[line]] for line in range(n_lines)], axis=1).astype(np.int8)
+        flat = self._flat(act, sections).astype(np.int8)
         return (flat if batched else flat[0]), state
 
     def _value_target(self, dispatch: ValueDispatch, groups: list, views: list[dict[str, np.ndarray]],

@@ -44,17 +44,39 @@ GOOD = "name: N\nlines:\n  - example.yaml\n  - example_branch.yaml\n"
     ("name: N\nlines: []\n", "lines: must be a list of line files"),
     ("name: N\nlines: example.yaml\n", "lines: must be a list of line files"),
     ("name: N\nlines:\n  - example.yaml\n  - ./example.yaml\n", r"lines\[1\]: './example.yaml' is listed twice"),
-    ("name: N\nlines:\n  - nowhere.yaml\n", "no such line file"),
+    ("name: N\nlines:\n  - nowhere.yaml\n",
+     r"lines\[0\] \('nowhere.yaml', relative to the network file\): no such line file"),
     (GOOD + "machine_on: main\n", "machine_on: 'main' is neither a listed line file"),
-    (GOOD + "capacity: 0\n", "capacity: must be at least 1 section"),
-    (GOOD + "capacity: 101\n", r"capacity must be an integer in \[1, 100\]"),
+    (GOOD + "capacity: 0\n", r"capacity: 0 is outside \[1, 100\] sections"),
+    (GOOD + "capacity: 600\n", r"capacity: 600 is outside \[1, 100\] sections .*it counts sections a step, not metres"),
     (GOOD + "move_cost: -1\n", r"move_cost: -1 k€ is outside"),
+    (GOOD + "move_cost: 10000\n", r"move_cost: 10000 k€ is outside \[0, 1000\] k€; give it in k€"),
+    ("name: N\nas_of: 2026-01-01\ntraffic: {}\nsections: s.csv\n", "a line file .*not a network file"),
     (GOOD + "mashine_on: example.yaml\n", "did you mean 'machine_on'"),
 ])
 def test_faults_of_a_network_file_name_the_key(tmp_path, text, message):
     path = _folder(tmp_path, text)
     with pytest.raises(LineFileError, match=message):
         load_network(path).config()
+
+
+def test_a_network_file_given_as_a_line_file_is_named(tmp_path):
+    import gymnasium as gym
+
+    path = _folder(tmp_path, GOOD)
+    with pytest.raises(LineFileError, match="a network file .*not a line file: plan it with trackenv plan"):
+        load_line(path)
+    with pytest.raises(ValueError, match="a network file"):
+        gym.make("trackenv/TampingLine-v0", line=str(path))
+
+
+def test_the_lines_keep_their_files_name_through_a_config():
+    """A line's description keeps its source through the network's config (a capacity given rebuilds each line's
+    config), so what the plan says names the file, not a dict."""
+    import dataclasses
+
+    config = dataclasses.replace(load_network(EXAMPLE_NETWORK), capacity=3).config()
+    assert [Path(line.line.source).name for line in config.line_configs] == ["example.yaml", "example_branch.yaml"]
 
 
 def test_the_machine_is_on_the_line_named_by_file_or_by_name(tmp_path):

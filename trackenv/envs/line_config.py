@@ -531,7 +531,7 @@ class LineConfig(ConfigBase):
         if line is not None and given:
             raise ValueError(f"{', '.join(given)} come(s) from the line file: change the file, or leave "
                              f"{'them' if len(given) > 1 else 'it'} out")
-        base = self.to_dict()
+        base = {**self.to_dict(), "line": self.line}  # the description itself: its source, no second check
         if "line" in changes:  # the old line's values (or the scenario's) give way to the new file's
             for name in LINE_FILE_FIELDS:
                 del base[name]

@@ -314,6 +314,12 @@ def yaml_mapping(path: Path, what: str, keys: dict[str, Field]) -> dict[str, Any
         raise LineFileError(f"{path}: empty file; a {what} is a YAML mapping of {_names(keys)}")
     if not isinstance(doc, dict):
         raise LineFileError(f"{path}: a {what} is a YAML mapping of {_names(keys)}, got a {type(doc).__name__}")
+    if what == "line file" and "lines" in doc and "sections" not in doc:
+        raise LineFileError(f"{path}: a network file (it lists line files under 'lines'), not a line file: plan it "
+                            f"with trackenv plan, read it with trackenv.envs.load_network")
+    if what == "network file" and "sections" in doc and "lines" not in doc:
+        raise LineFileError(f"{path}: a line file (it has 'sections'), not a network file: read it with "
+                            f"trackenv.envs.load_line, or list it under 'lines' in a network file")
     _check_keys(str(path), "", doc, keys)
     return doc
 

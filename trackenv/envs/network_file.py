@@ -31,6 +31,7 @@ from .line_file import (
     Field,
     LineDescription,
     LineFileError,
+    _in_range,
     _integer,
     _number,
     _text,
@@ -52,7 +53,7 @@ NETWORK_KEYS: dict[str, Field] = {
     "capacity": Field("sections", False, "sections the machine tamps a step on its line (default: each line's "
                       "own capacity)", 1, None),
     "move_cost": Field("k€", False, f"moving the machine to another line (default {NetworkConfig.move_cost:g} "
-                       "k€)", 0.0, 1e6),
+                       "k€; at most 1000 k€: a larger value is taken for euros)", 0.0, 1000.0),
 }
 
 
@@ -128,23 +129,30 @@ def load_network(path: str | os.PathLike[str]) -> NetworkDescription:
     if not isinstance(listed, list) or not listed or not all(isinstance(p, str) and p.strip() for p in listed):
         raise LineFileError(f"{source}, lines: must be a list of line files (paths relative to this file), got "
                             f"{listed!r}")
-    files = [(path.parent / p.strip()).resolve() for p in listed]
+    files = [(path.parent / p.strip()).resolve() for p in listed]  # relative to the network file
     for i, file in enumerate(files):
         if file in files[:i]:
             raise LineFileError(f"{source}, lines[{i}]: {listed[i]!r} is listed twice")
-    lines = tuple(load_line(file) for file in files)
-    start = _machine_line(source, doc.get("machine_on"), listed, lines)
+    lines = []
+    for i, file in enumerate(files):
+        try:
+            lines.append(load_line(file))
+        except LineFileError as exc:
+            raise LineFileError(f"{source}, lines[{i}] ({listed[i].strip()!r}, relative to the network file): "
+                                f"{exc}") from None
+    start = _machine_line(source, doc.get("machine_on"), listed, tuple(lines))
     capacity = None
     if doc.get("capacity") is not None:
         capacity = _integer(source, "capacity", doc["capacity"])
-        if capacity < 1:
-            raise LineFileError(f"{source}, capacity: must be at least 1 section, got {capacity}")
+        most = max(line.n_sections for line in lines)
+        if not 1 <= capacity <= most:
+            raise LineFileError(f"{source}, capacity: {capacity} is outside [1, {most}] sections (the most any of "
+                                f"its lines has); it counts sections a step, not metres")
     move_cost = None
     if doc.get("move_cost") is not None:
-        move_cost = _number(source, "move_cost", doc["move_cost"], "k€")
-        if not 0.0 <= move_cost <= 1e6:
-            raise LineFileError(f"{source}, move_cost: {move_cost:g} k€ is outside [0, 1e+06] k€")
-    return NetworkDescription(_text(source, "name", doc["name"]), lines, start, capacity, move_cost,
+        move_cost = _in_range(source, "move_cost", _number(source, "move_cost", doc["move_cost"], "k€"),
+                              NETWORK_KEYS["move_cost"], "; give it in k€ (10 is ten thousand euros)")
+    return NetworkDescription(_text(source, "name", doc["name"]), tuple(lines), start, capacity, move_cost,
                               _text(source, "description", doc.get("description", "")), source)
 
 
