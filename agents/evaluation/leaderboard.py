@@ -62,6 +62,7 @@ from .line_compare import (
     config_changes,
     engine_note,
     env_config,
+    line_of,
     parse_seeds,
     scenario_of,
 )
@@ -316,7 +317,7 @@ def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any],
     ``unfit_for(config)`` (a baseline that sees the observation of the line it was trained on,
     :class:`~trackenv_agents.learning.baselines.TrainedPolicy`) is scored where that returns None only. On a
     network the question is asked of its line (each agent runs on every line, :func:`on_network`)."""
-    line = config.line_config if isinstance(config, NetworkConfig) else config
+    line = line_of(config)
     here: dict[str, Any] = {}
     unfit: dict[str, str] = {}
     for label, agent in agents.items():
@@ -403,7 +404,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         raise ValueError(f"rules must be among {sorted(every_rule())}, got unknown {unknown}")
     names = {env_id: scenario_of(env_id) for env_id in envs}
     configs = {env_id: env_config(env_id, **overrides) for env_id in envs}
-    lines = {env_id: cfg.line_config if isinstance(cfg, NetworkConfig) else cfg for env_id, cfg in configs.items()}
+    lines = {env_id: line_of(cfg) for env_id, cfg in configs.items()}
     wanted_at = {env_id: [n for n in (rules if rules is not None else tuned_params_for(line)) if n in rules_for(line)]
                  for env_id, line in lines.items()}
     for env_id, wanted in wanted_at.items():  # (the rules of the choices apply only where a config enables them)

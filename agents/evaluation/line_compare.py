@@ -105,7 +105,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     network = name == "network"
     action_type = "multibinary" if network else action_type_of(env_id)
     cfg = env_config(env_id, **overrides)
-    line_cfg = cfg.line_config if isinstance(cfg, NetworkConfig) else cfg
+    line_cfg = line_of(cfg)
     if network and retune:
         raise ValueError("--retune: the network's rules take the tuned parameters of its line (NetworkRule); "
                          "they are not tuned on the network")
@@ -218,6 +218,18 @@ ENGINE_FIELDS = ("engine", "pass_reuse_tolerance_m")
 def without_engine(fields: dict[str, Any]) -> dict[str, Any]:
     """``fields`` but the engine's options (:data:`ENGINE_FIELDS`)."""
     return {k: v for k, v in fields.items() if k not in ENGINE_FIELDS}
+
+
+def line_of(config: Any) -> LineConfig:
+    """The line config a comparison plays: ``config`` itself, or a network's one line config; ValueError for a
+    network of lines of their own, which the comparisons (tuned per preset) do not score."""
+    if not isinstance(config, NetworkConfig):
+        return config
+    if config.mixed:
+        raise ValueError("line_config: a network of lines of their own is not scored by evaluate or the leaderboard "
+                         "(their rules are tuned per preset); plan it with trackenv plan NETWORK.yaml, or play "
+                         "NetworkRule(...).bind(config) on it in Python")
+    return config.line_config
 
 
 def engine_note(config: dict[str, Any]) -> str:

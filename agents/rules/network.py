@@ -119,7 +119,8 @@ class NetworkRule(Heuristic):
     """A line policy on every line, the machine kept on its line while the policy asks for work there (see the
     module docstring). ``line_rule``: a line heuristic (default: :class:`~.line.SectionThreshold` at its default
     threshold) or any line policy with SB3's ``predict``, a ``name`` and a ``params`` dict (a trained line
-    agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity. ``dispatch``:
+    agent); bind it to the network's config (:meth:`bind`) for the line's calendar and capacity (on a network of
+    lines of their own, always: unbound, it takes every line to have an equal share of the sections). ``dispatch``:
     ``"requests"`` (default: the machine stays while its line asks, else goes where most sections are asked
     for), ``"value"`` (:class:`~.dispatch.ValueDispatch` at its defaults) or a ValueDispatch; the value dispatch
     prices the sections with the line's limits and costs, so it plays once bound. ``eager_probability`` (in
@@ -191,6 +192,9 @@ class NetworkRule(Heuristic):
         of one line policy and each group's view of the observation (:func:`line_view`)."""
         n_envs, n_lines = b["machine_line"].shape
         groups = self._groups or [(list(range(n_lines)), self.line_rule, self.line_config)]
+        if self._network is None and b["section_sd"].shape[1] % n_lines:
+            raise ValueError(f"NetworkRule: {b['section_sd'].shape[1]} sections over {n_lines} lines are lines of "
+                             f"their own: bind the rule to the network's config first (bind)")
         sections = np.diff(_line_rows(self._network, n_lines, b["section_sd"].shape[1], profile=False))
         want = np.zeros((n_envs, n_lines, sections.max()), dtype=bool)
         views = [line_view(b, n_lines, members, self._network) for members, _, _ in groups]

@@ -62,7 +62,9 @@ class NetworkConfig:
     * ``capacity``: sections the machine tamps per step on the line it is on (one line per step; at most that
       line's sections, in that line's ``section_length_m``; None: each line's own ``capacity``, 6 on the
       default line: one quarter's nights of a tamper at 0.5-2.2 km per working hour). It replaces the line
-      configs' ``capacity`` (cut to a line's sections where it has fewer; above every line's, an error);
+      configs' ``capacity`` (cut to a line's sections where it has fewer; above every line's, an error) in the
+      stored line configs, so ``replace(capacity=None)`` afterwards keeps the replaced values (give the line
+      configs again for their own);
     * ``move_cost``: moving the machine to another line (10 k€ **[assumption]**: a transfer run of the tamper
       and its crew over the network, of the order of a possession's call-out); the move takes the step in which
       it is asked (no tamping anywhere in that step);

@@ -200,3 +200,21 @@ def test_lines_of_their_own_each_get_the_rule_bound_to_their_config(dispatch):
             if dispatch == "requests" and line == int(obs["machine_line"].argmax()) and own.any():
                 assert np.array_equal(part, own)  # the machine's line asks: its requests are passed on whole
         obs, *_ = env.step(act)
+
+
+def test_an_unbound_rule_on_lines_of_their_own_asks_to_be_bound():
+    env = TampingNetwork(line_config=["small", {"n_sections": 4, "capacity": 2}, {"n_sections": 4, "capacity": 2}],
+                         horizon_years=0.5)
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match="bind the rule to the network's config first"):
+        NetworkRule(SectionThreshold()).predict(obs)
+    act, _ = NetworkRule(SectionThreshold()).bind(env.config).predict(obs)
+    assert act.shape == (14,)
+
+
+def test_evaluate_refuses_a_network_of_lines_of_their_own_naming_why(capsys):
+    from trackenv_agents.cli import main
+
+    lines = 'line_config=["small", {"n_sections": 4, "capacity": 2}]'
+    assert main(["evaluate", "--env", "trackenv/TampingNetwork-v0", "--set", lines, "--seeds", "0:1"]) == 2
+    assert "a network of lines of their own is not scored by evaluate" in capsys.readouterr().err
