@@ -82,15 +82,17 @@ class ValueDispatch:
         rates = section_cost_rates(line_obs, line_config, self.lead_years).reshape(want.shape)
         return np.where(want, rates, 0.0).sum(axis=2)
 
-    def target(self, values: np.ndarray, asked: np.ndarray, here: np.ndarray) -> np.ndarray:
+    def target(self, values: np.ndarray, asked: np.ndarray, here: np.ndarray, move_cost: float = 0.0) -> np.ndarray:
         """(n,) the line whose requests the machine serves: ``values`` (n, L) of the lines' requests, ``asked``
         (n, L) whether a line asks for any work, ``here`` (n,) the machine's line. It stays on a line that asks
-        unless another's requests are worth more by ``switch_margin``; from a line that asks for nothing it goes
-        to the asking line worth most (the lowest index of equals; its own line where none asks)."""
+        unless another's requests are worth more by ``switch_margin`` or by the network's ``move_cost`` (k€),
+        whichever is larger (a move dearer than the margin is weighed; on the shipped networks, 10 k€, it is
+        not); from a line that asks for nothing it goes to the asking line worth most (the lowest index of
+        equals; its own line where none asks)."""
         rows = np.arange(values.shape[0])
         worth = np.where(asked, values, -np.inf)
         best = worth.argmax(axis=1)
         busy = asked[rows, here]
-        leave = worth[rows, best] > values[rows, here] + self.switch_margin
+        leave = worth[rows, best] > values[rows, here] + max(self.switch_margin, move_cost)
         go = np.where(busy, leave, asked.any(axis=1))
         return np.where(go, best, here)

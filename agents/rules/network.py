@@ -243,4 +243,5 @@ class NetworkRule(Heuristic):
                                  "costs: bind it to the network's config first (bind)")
             mine = want[:, members, :view["section_sd"].shape[1]]
             values[:, members] = dispatch.line_values(view, mine, line_config)
-        return dispatch.target(values, np.asarray(want.any(axis=2)), here)
+        move_cost = 0.0 if self._network is None else float(self._network.move_cost)
+        return dispatch.target(values, np.asarray(want.any(axis=2)), here, move_cost)

@@ -93,6 +93,30 @@ def test_the_margin_keeps_the_machine_on_its_line_while_it_asks():
     asked = np.array([[True, True, False], [True, True, False], [False, True, True], [False, False, False]])
     here = np.array([0, 0, 0, 1])
     assert dispatch.target(values, asked, here).tolist() == [0, 1, 2, 1]
+    # a move dearer than the margin is weighed instead (a line that asks for nothing is still left)
+    assert dispatch.target(values, asked, here, move_cost=10.0).tolist() == [0, 1, 2, 1]
+    assert dispatch.target(values, asked, here, move_cost=25.0).tolist() == [0, 0, 2, 1]
+
+
+def test_a_bound_value_rule_weighs_the_networks_move_cost():
+    """On a network whose move costs 1000 k€, the value rule without a margin never takes the machine from a line
+    that asks (with the move free it does)."""
+    from trackenv.envs.network_env import TampingNetwork
+    from trackenv_agents.rules import NetworkRule, SectionThreshold
+
+    def moves_from_asking_lines(move_cost: float) -> int:
+        env = TampingNetwork(line_config="small", n_lines=3, horizon_years=2.0, move_cost=move_cost)
+        rule = NetworkRule(SectionThreshold(threshold_mm=0.5), ValueDispatch(switch_margin=0.0)).bind(env.config)
+        obs, _ = env.reset(seed=1)
+        moves = 0
+        for _ in range(env.config.horizon_steps):
+            action, _ = rule.predict(obs)
+            asks_here = rule.last_requests.reshape(3, 6)[int(obs["machine_line"].argmax())].any()
+            obs, _, _, _, info = env.step(action)
+            moves += bool(info["moved"] and asks_here)
+        return moves
+
+    assert moves_from_asking_lines(1000.0) == 0 and moves_from_asking_lines(0.0) > 0
 
 
 def test_the_value_dispatch_plays_the_env_and_the_harness_and_the_default_is_unchanged():
