@@ -735,11 +735,14 @@ def build_parser() -> argparse.ArgumentParser:
     def out(sp: argparse.ArgumentParser, default: str) -> None:
         sp.add_argument("--out", default=None, metavar="DIR", help=f"output folder (default: {default})")
 
-    def engine(sp: argparse.ArgumentParser) -> None:
+    def engine(sp: argparse.ArgumentParser, plan: bool = False) -> None:
+        what = ("a field of every line's config (trackenv.envs.LineConfig) but those its file sets (sections, "
+                "lengths, speeds, traffic), e.g. --set capacity=4 --set geometry_cost_per_section_year=3"
+                if plan else "a field of the scenario's config (trackenv.envs.LineConfig; on the network its own "
+                "fields or its line's), e.g. --set annual_mgt=30 --set capacity=4")
         sp.add_argument("--set", type=_field_value, action="append", default=None, metavar="FIELD=VALUE",
-                        help="change a field of the scenario's config (trackenv.envs.LineConfig; on the network "
-                             "its own fields or its line's), e.g. --set annual_mgt=30 --set capacity=4; the tuned "
-                             "rules keep the preset's parameters, and the JSON records the config")
+                        help=f"change {what}; the tuned rules keep the preset's parameters, and the JSON records "
+                             "the config")
         sp.add_argument("--engine", choices=ENGINES, default=None,
                         help="how the passes run: classic (every preset's default, with which every saved result "
                              "was computed) or fast (a converged start and shorter windows: a line step's costs "
@@ -860,7 +863,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sampled futures (what the file does not know drawn again in each)")
     sp.add_argument("--seed", type=_positive(int, zero=True), default=0, metavar="N",
                     help="future i is the episode of seed N + i")
-    engine(sp)
+    engine(sp, plan=True)
     sp.set_defaults(func=cmd_plan)
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")
