@@ -21,6 +21,7 @@ observation anyway).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -102,7 +103,13 @@ def _per_line(key: str, value: np.ndarray, n_lines: int, network: Any) -> bool:
     shape (batch, n_lines)."""
     if network is None:
         return value.ndim == 2 and value.shape[1] == n_lines
-    return line_observation_space(network.line_configs[0]).spaces[key].shape == (1,)
+    return key in _per_line_keys(network.line_configs[0])
+
+
+@functools.lru_cache(maxsize=64)
+def _per_line_keys(line_config: Any) -> frozenset[str]:
+    """The keys of the line's observation that hold one value per line (shape (1,))."""
+    return frozenset(k for k, space in line_observation_space(line_config).spaces.items() if space.shape == (1,))
 
 
 def _line_rows(network: Any, n_lines: int, total: int, profile: bool) -> np.ndarray:
