@@ -263,7 +263,8 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
             limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
             unmet_share=run.unmet_share[:, at], unmet_reasons={k: v[:, at] for k, v in run.unmet_reasons.items()},
             min_steps_between_tampings=cfg.min_steps_between_tampings, steps_per_year=cfg.steps_per_year,
-            measurement_interval=cfg.measurement_interval, config_changes=without_engine(config)))
+            measurement_interval=cfg.measurement_interval, config_changes=without_engine(config),
+            capacity=cfg.capacity))
     env.close()
     return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine, run.moved,
                        run.costs, run.part_costs["move"], scenario)

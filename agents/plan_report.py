@@ -94,7 +94,11 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
 #: policy observed (the last measured SD and D1 mean-to-peak, their age) and the true SD and mean-to-peak.
 STATE_COLUMNS = {"measured_sd_mm": "measured SD [mm]", "measured_peak_mm": "measured D1 mean-to-peak [mm]",
                  "measurement_age_years": "age of that measurement [year]", "sd_mm": "true SD [mm]",
-                 "peak_mm": "true D1 mean-to-peak [mm]"}
+                 "peak_mm": "true D1 mean-to-peak [mm]",
+                 "renewal_due": "share of futures in which its next tamping is a ballast renewal (its tampings "
+                                "since the last renewal reached the model's limit)"}
+#: From this share of futures a recommended tamping is called a ballast renewal in the table.
+RENEWAL_SHARE = 0.5
 #: A section's quality limits in its speed band (:class:`~trackenv.physics.geometry.BandLimits`), by the name the
 #: plan gives them [mm]: the D1 mean-to-peak's alert, intervention and immediate-action limits and the SD alert.
 LIMIT_FIELDS = {"alert": "alert_m", "intervention": "intervention_m", "immediate_action": "immediate_action_m",
@@ -141,7 +145,8 @@ class LinePlan:
     ``policy_params`` the policy's parameters (a rule's thresholds; empty or the file of a trained policy),
     ``dates`` the first day of each quarter, the ``fit`` of the line's history, the ``scenario``, ``choices``,
     ``engine`` and ``pass_reuse_tolerance_m`` (m) the line was planned with, and the model's ``steps_per_year``
-    and ``measurement_interval`` (steps between recording-car runs)."""
+    and ``measurement_interval`` (steps between recording-car runs), and the possession ``capacity`` (sections a
+    quarter; None: not known), which the table names where a quarter recommends more."""
 
     line: Any
     policy: str
@@ -167,6 +172,7 @@ class LinePlan:
     config_changes: dict[str, Any] = field(default_factory=dict)
     unmet_reasons: dict[str, np.ndarray] = field(default_factory=dict)
     min_steps_between_tampings: int = 1
+    capacity: int | None = None
 
     @property
     def share(self) -> np.ndarray:
@@ -257,6 +263,9 @@ class LinePlan:
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
                 what = " ".join(row["tamp"]) or "-"
+                if self.capacity is not None and len(row["tamp"]) > self.capacity:
+                    what += (f" (more than the capacity of {self.capacity}: each future tamps at most "
+                             f"{self.capacity}; listed, those of at least half the futures)")
             else:
                 what = "; ".join(f"{name} {' '.join(row[name])}" for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
@@ -346,6 +355,8 @@ class LinePlan:
                                        ("switch or crossing", section.register == "switch_or_crossing"),
                                        ("known wet", section.wet)) if on]
         tag = f" ({', '.join(known)})" if known else ""
+        if what == "tamp" and st.get("renewal_due", 0.0) >= RENEWAL_SHARE:
+            what = f"tamp, a ballast renewal in {st['renewal_due']:.0%} of the futures"
         return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
                 f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
                 f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "

@@ -239,6 +239,7 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
         _record_state(out.state, step, obs, info, line_sections)
         action, _ = rule.predict(obs, deterministic=True)
         allowed, measured_sd = env.batch.allowed(), obs["section_sd"]  # as the env resolves the step's work
+        out.state["renewal_due"][step] = np.asarray(env.batch.renewing()).reshape(futures, -1).mean(axis=0)
         obs, reward, _, _, info = env.step(action)
         codes = np.asarray(info["section_choices"])  # (futures, sections)
         want = np.asarray(action if asked is None else asked(action)).reshape(codes.shape).astype(np.int64)
@@ -304,4 +305,4 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
                     unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes=without_engine(config))
+                    config_changes=without_engine(config), capacity=cfg.capacity)

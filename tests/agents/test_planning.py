@@ -398,3 +398,34 @@ def test_the_costs_come_in_their_parts_and_the_plot_names_sections_and_dates(rou
     axes = plan.figure().axes
     labels = {t.get_text() for ax in [*axes, *(c for a in axes for c in a.child_axes)] for t in ax.get_xticklabels()}
     assert {"A", "B", "C", "D"} <= labels and {"2026-01-01", "2026-07-03"} <= labels
+
+
+def test_a_recommended_tamping_that_is_a_ballast_renewal_says_so(tmp_path):
+    """Section B, rough and tamped in the first quarter, has had 8 tampings since its last renewal: the model renews
+    it instead (its cost is a renewal's), and the table and plan.csv say so; B with 2 tampings is a tamping."""
+    from test_line_file import SECTIONS
+
+    due = SECTIONS.replace("B,200,transition,no,,3,2", "B,200,transition,no,,3,8")
+    assert due != SECTIONS
+    plan = plan_line(write(tmp_path, sections=due, history=ROUGH_B), years=0.25, futures=2, **FAST)
+    b = [s.id for s in plan.line.sections].index("B")
+    assert plan.recommended[0, b] == 1 and plan.state["renewal_due"][0, b] == 1.0
+    assert "B (transition) tamp, a ballast renewal in 100% of the futures:" in plan.table()
+    rows = [r for r in csv.DictReader((Path(plan.write(tmp_path / "plan")["plan_csv"])).open())
+            if r["section"] == "B"]
+    assert rows and float(rows[0]["renewal_due"]) == 1.0
+    plain = plan_line(write(tmp_path, history=ROUGH_B), years=0.25, futures=2, **FAST)
+    assert plain.state["renewal_due"][0, b] == 0.0 and "a ballast renewal" not in plain.table()
+
+
+def test_a_quarter_recommending_more_than_the_capacity_says_so(rough_plan):
+    """Recommended sections are those of at least half the futures: where they are more than the capacity, the
+    quarter's row says that no future tamps them all."""
+    import dataclasses
+
+    plan, _ = rough_plan
+    q = int(np.flatnonzero((plan.recommended == 1).sum(axis=1) >= 2)[0])
+    n = int((plan.recommended[q] == 1).sum())
+    assert "more than the capacity" not in plan.table()
+    tight = dataclasses.replace(plan, capacity=n - 1)
+    assert f"(more than the capacity of {n - 1}: each future tamps at most {n - 1};" in tight.table()

@@ -370,3 +370,16 @@ def test_mixed_checkers_and_picture():
     ask[6:10] = 1
     env.step(ask)
     assert env.render().ndim == 3
+
+
+def test_per_section_engine_values_are_placed_at_each_lines_offsets():
+    """``allowed`` and ``renewing`` of a network of lines of their own: each line's slice is its line engine's row."""
+    env = _mixed()
+    env.reset(seed=13)
+    engine, config = env.unwrapped.engine, env.unwrapped.config
+    for values, of_line in ((engine.allowed(), "allowed"), (engine.renewing(), "renewing")):
+        assert values.shape == (1, 16)
+        for line, (first, end) in enumerate(zip(config.line_offsets, config.line_offsets[1:])):
+            batch, row = engine.row(0, line)
+            own = np.asarray(getattr(batch, of_line)()).reshape(batch.n_lines, -1)[row]
+            assert np.array_equal(values[0, first:end], own), (of_line, line)

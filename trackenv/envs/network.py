@@ -402,11 +402,24 @@ class NetworkBatch:
     def allowed(self) -> np.ndarray:
         """(n_networks, Σ sections) the sections that may be tamped now (the line's mask). A True on a line the
         machine is not on means a request there counts towards moving the machine."""
-        out = np.zeros((self.n_networks, int(self.offsets[-1])), dtype=bool)
+        return self._per_section(LineBatch.allowed)
+
+    def renewing(self) -> np.ndarray:
+        """(n_networks, Σ sections) whether a section's next tamping is a ballast renewal
+        (:meth:`LineBatch.renewing`)."""
+        return self._per_section(LineBatch.renewing)
+
+    def _per_section(self, of_lines: Callable[[LineBatch], np.ndarray]) -> np.ndarray:
+        """(n_networks, Σ sections) in the action's order: ``of_lines(batch)`` (per section of its rows) of each
+        line engine, placed at its lines."""
+        out: np.ndarray | None = None
         for batch, members in self.groups:
-            allowed = batch.allowed().reshape(self.n_networks, len(members), -1)
+            values = np.asarray(of_lines(batch)).reshape(self.n_networks, len(members), -1)
+            if out is None:
+                out = np.zeros((self.n_networks, int(self.offsets[-1])), dtype=values.dtype)
             for k, line in enumerate(members):
-                out[:, self.offsets[line]:self.offsets[line + 1]] = allowed[:, k]
+                out[:, self.offsets[line]:self.offsets[line + 1]] = values[:, k]
+        assert out is not None  # a network has a line
         return out
 
     def step_count(self, b: int) -> int:
