@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trackenv.envs import LineConfig, scenario
+from trackenv.envs import LineConfig, NetworkConfig, scenario
 from trackenv.envs.common import SHARED_BOUNDS
 from trackenv.envs.env import TrackEnv, TrackVectorEnv
 from trackenv.envs.info import step_info
@@ -63,6 +63,8 @@ def test_dispatch_by_config_type():
     assert problem_config("track60") == scenario("track60")
     assert problem_config(None) == scenario("track60")  # the default of the harnesses that take no env
     assert problem_config({"n_sections": 3, "capacity": 3}) == LineConfig(n_sections=3, capacity=3)
+    network = {"line_config": ["small", {"n_sections": 4, "capacity": 2}]}  # a network's dict is a network's
+    assert problem_config(network) == NetworkConfig(**network) and problem_config({"n_lines": 2}).n_lines == 2
     with pytest.raises(ValueError, match="scenario"):
         problem_config("tiny")
     with pytest.raises(ValueError, match="config must be one of"):

@@ -58,7 +58,8 @@ def problem_of(config: Any) -> Problem:
 
 def problem_config(value: Any = None) -> ProblemConfig:
     """A problem's config from a config (returned as is), a preset name (``"small"``, ``"default"``, ``"hard"``,
-    ``"track60"``), a dict of :class:`~trackenv.envs.line_config.LineConfig` fields, or None (the 60 m track,
+    ``"track60"``), a dict of :class:`~trackenv.envs.line_config.LineConfig` fields (or, with ``line_config`` or
+    ``n_lines`` among its keys, of :class:`~trackenv.envs.network.NetworkConfig` fields), or None (the 60 m track,
     ``"track60"``: the default of the trainers and harnesses that take no env)."""
     if type(value) in _PROBLEMS:
         return value
@@ -70,6 +71,8 @@ def problem_config(value: Any = None) -> ProblemConfig:
         return LineConfig.coerce(value)
     if value is None:
         return LineConfig.coerce("track60")
+    if isinstance(value, dict) and {"line_config", "n_lines"} & set(value):
+        return NetworkConfig.from_dict(value)
     return LineConfig.coerce(value)
 
 
