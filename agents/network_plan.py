@@ -16,6 +16,7 @@ works on each line or moves, the move costs, and the network's cost forecast.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -159,8 +160,6 @@ class NetworkPlan:
         of futures; the network's mean, p10 and p90 cost and the mean move cost k€) and ``network.png``
         (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
         ``line<i>``; returns the paths."""
-        import csv
-
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / "network.csv"
         with path.open("w", newline="") as f:
