@@ -440,6 +440,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if field in overrides:
             raise UsageError(f"--set {field}: the plan takes it from {own}")
     if network is not None:
+        from .network_plan import check_network_policy
+
+        check_network_policy(args.policy)
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario before the fit and the futures
     line_policy(args.policy, plan_config(lines[0], args.scenario, years=args.years, **overrides), args.scenario,

@@ -31,7 +31,7 @@ from .rules.choices import CHOICE_RULES
 from .rules.line import LINE_HEURISTICS
 from .shipped import CHOICE_AGENT_NAME as CHOICE_AGENT
 
-__all__ = ["NetworkPlan", "plan_network"]
+__all__ = ["NetworkPlan", "check_network_policy", "plan_network"]
 
 
 @dataclass
@@ -57,7 +57,7 @@ class NetworkPlan:
     @property
     def works_on(self) -> np.ndarray:
         """(quarters, lines): the share of futures in which the machine works on each line in each quarter (it is
-        there and did not move in the quarter)."""
+        there and did not move in the quarter: it tamps there what the line asks for, or stands idle)."""
         here = self.machine[:, :, None] == np.arange(len(self.lines))
         return (here & ~self.moved[:, :, None]).mean(axis=0)
 
@@ -102,8 +102,10 @@ class NetworkPlan:
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
             if row["moving"] > 0:
                 where.append(f"moving {row['moving']:.0%}")
-            tamped = [f"line {i}: {' '.join(plan['quarters'][q]['tamp'])}"
-                      for i, plan in enumerate(d["line_plans"]) if plan["quarters"][q]["tamp"]]
+            tamped = [f"line {i}: " + " ".join(f"{s} (renewal)" if s in line.renewals(q) else s
+                                                for s in plan["quarters"][q]["tamp"])
+                      for i, (plan, line) in enumerate(zip(d["line_plans"], self.lines, strict=True))
+                      if plan["quarters"][q]["tamp"]]
             out.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {', '.join(where) or '-'}; "
                        f"{'; '.join(tamped) or '-'}")
         for i, line in enumerate(self.lines):
@@ -179,6 +181,14 @@ class NetworkPlan:
         return files
 
 
+def check_network_policy(policy: str) -> None:
+    """ValueError for a policy that uses the choices beyond tamping (a choice rule, ``cpi-choice-agent``): the
+    network's machine tamps only."""
+    if policy in CHOICE_RULES or policy == CHOICE_AGENT:
+        raise ValueError(f"policy {policy!r} uses the choices beyond tamping, and the network's machine tamps only: "
+                         f"plan it with a tamping rule ({', '.join(LINE_HEURISTICS)}) or cpi-agent")
+
+
 def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
                  scenario: str = "default", progress: Callable[[int], Any] | None = None,
                  **config: Any) -> NetworkPlan:
@@ -188,8 +198,9 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     ``scenario``, or the shipped ``cpi-agent``) played on every line by
     :func:`~trackenv_agents.rules.network.network_play`, in ``futures`` futures (seeds ``seed``, ``seed + 1``,
     ...); each line modelled as :func:`~trackenv_agents.planning.plan_config` models it; ``config``: further
-    :class:`~trackenv.envs.line_config.LineConfig` fields for every line. ``progress(1)`` after each quarter.
-    ValueError for a policy that cannot play a line (its reason, naming the line)."""
+    :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` the network file gives
+    overrides theirs). ``progress(1)`` after each quarter. ValueError for a policy that uses the choices beyond
+    tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the line)."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line_fit import history_fit
@@ -201,9 +212,7 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     from .rules.network import network_play
 
     desc = network if not isinstance(network, (str, Path)) else load_network(network)
-    if policy in CHOICE_RULES or policy == CHOICE_AGENT:
-        raise ValueError(f"policy {policy!r} uses the choices beyond tamping, and the network's machine tamps only: "
-                         f"plan it with a tamping rule ({', '.join(LINE_HEURISTICS)}) or cpi-agent")
+    check_network_policy(policy)
     # every line modelled as in its own plan (a scenario's hidden parts and observation), the action tamping only
     lines = [plan_config(line, scenario, years=years, **config) for line in desc.lines]
     rules = []

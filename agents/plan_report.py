@@ -262,7 +262,8 @@ class LinePlan:
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
-                what = " ".join(row["tamp"]) or "-"
+                renewals = self.renewals(q)
+                what = " ".join(f"{i} (renewal)" if i in renewals else i for i in row["tamp"]) or "-"
                 if self.capacity is not None and len(row["tamp"]) > self.capacity:
                     what += (f" (more than the capacity of {self.capacity}: each future tamps at most "
                              f"{self.capacity}; listed, those of at least half the futures)")
@@ -282,6 +283,14 @@ class LinePlan:
             lines.append(f"history: {whose} fitted, median residual "
                          f"{fit['median_residual_mm']:.3f} mm (trackenv.envs.history_fit)")
         return "\n".join(lines)
+
+    def renewals(self, quarter: int) -> set[str]:
+        """The ids of the sections whose tamping in ``quarter`` is a ballast renewal in at least
+        :data:`RENEWAL_SHARE` of the futures."""
+        due = self.state.get("renewal_due")
+        if due is None:
+            return set()
+        return {s.id for s, share in zip(self.line.sections, due[quarter], strict=True) if share >= RENEWAL_SHARE}
 
     def decision_lines(self) -> list[str]:
         """A line per section recommended in the first quarter (the decision to take now): the measured SD and

@@ -90,3 +90,9 @@ def test_a_faulty_network_file_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["plan", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "no such line file" in err and len(err.splitlines()) == 1
+
+
+def test_a_choice_policy_on_a_network_is_refused_before_anything_runs(capsys):
+    assert main(["plan", str(EXAMPLE_NETWORK), "--policy", "choice-threshold", "--scenario", "wet"]) == 2
+    captured = capsys.readouterr()
+    assert "the network's machine tamps only" in captured.err and "plan (quarters)" not in captured.err

@@ -411,6 +411,8 @@ def test_a_recommended_tamping_that_is_a_ballast_renewal_says_so(tmp_path):
     b = [s.id for s in plan.line.sections].index("B")
     assert plan.recommended[0, b] == 1 and plan.state["renewal_due"][0, b] == 1.0
     assert "B (transition) tamp, a ballast renewal in 100% of the futures:" in plan.table()
+    (q1,) = [row for row in plan.table().splitlines() if row.startswith("Q1 ")]
+    assert "B (renewal)" in q1
     rows = [r for r in csv.DictReader((Path(plan.write(tmp_path / "plan")["plan_csv"])).open())
             if r["section"] == "B"]
     assert rows and float(rows[0]["renewal_due"]) == 1.0

@@ -1,14 +1,16 @@
 """A network of lines that share one tamping machine: its configuration (:class:`NetworkConfig`) and its episode
 engine (:class:`NetworkBatch`), a thin layer over the one line engine.
 
-The network's lines are rows of one :class:`~trackenv.envs.line_episode.LineBatch` (network ``b``'s line ``l``
-is row ``b·L + l``, L = ``n_lines``), every line a draw of the same :class:`~trackenv.envs.line_config.LineConfig`
-with its own traffic, register, rates and wet spots. The layer adds only what the shared machine changes: which
+The network's lines are rows of the line engine, :class:`~trackenv.envs.line_episode.LineBatch`: one engine per
+distinct line config (:func:`line_groups`; one for a network of one config, whose network ``b``'s line ``l`` is
+row ``b·L + l``, L = ``n_lines``), every line a draw of its :class:`~trackenv.envs.line_config.LineConfig` with
+its own traffic, register, rates and wet spots. The layer adds only what the shared machine changes: which
 line's requests are worked, the move between lines and its cost, and the stacked observation and info. The
 physics, the tamping, the masks, the capacity and budget rules and the costs are the line engine's.
 
 **The machine.** It is on one line at a time (line ``start_line`` at the start of every episode). A step's
-requests (``MultiBinary(n_lines · S)``, line ``l``'s sections at ``l·S .. l·S + S − 1``) are counted per line,
+requests (``MultiBinary(Σ sections)``, line ``l``'s sections at ``line_offsets[l] .. line_offsets[l + 1] − 1``
+of :class:`NetworkConfig`: ``l·S .. l·S + S − 1`` on lines of one config of S sections) are counted per line,
 masked sections left out. The machine's *destination* is the line with the most requested sections; a tie
 with the machine's own line keeps it there, a tie between other lines goes to the lowest index. If the
 destination is the machine's line, its requests are worked as on a plain line (at most ``capacity``

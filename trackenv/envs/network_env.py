@@ -33,13 +33,15 @@ class TampingNetwork(TrackEnv):
     which of its sections it tamps, step by step.
 
     **Description.** ``n_lines`` lines (default 3), each a TampingLine of the same line config (default: the
-    12-section default line; :class:`~trackenv.envs.line.TampingLine` has the physics), each with its own
-    draws (traffic field, register, rates, hidden wet spots). One machine serves them all: it is on one line at
+    12-section default line; :class:`~trackenv.envs.line.TampingLine` has the physics) or of its own (a list of
+    line configs: presets, dicts, line files), each with its own draws (traffic field, register, rates, hidden
+    wet spots). One machine serves them all: it is on one line at
     a time, tamps at most ``capacity`` sections per step there (the line's capacity by default), and moving to
     another line takes a step and costs ``move_cost``. Every line carries its traffic and degrades every step.
 
     **Action space.** ``MultiBinary(n_lines · n_sections)``: line ``l``'s section ``j`` is entry
-    ``l · n_sections + j``. The requests are counted per line (masked sections left out); the machine's
+    ``l · n_sections + j`` (on lines of their own ``MultiBinary(Σ sections)``, line ``l``'s section ``j`` at
+    ``config.line_offsets[l] + j``). The requests are counted per line (masked sections left out); the machine's
     destination is the line with the most requests (a tie with the machine's line keeps it there; between other
     lines, the lowest index). On its own line the machine works the requests as a TampingLine does (over
     ``capacity``, the worst measured SD kept and ``info["clipped"]`` True); requests on other lines are dropped.
@@ -51,14 +53,14 @@ class TampingNetwork(TrackEnv):
     on another line, asking for it votes to move there (and it may be tamped once the machine is there).
 
     **Observation** (``Dict``, float32): every key of TampingLine's observation stacked over the lines, with the
-    line's bounds: per-section keys (``section_sd``, ``register``, ...) (n_lines · n_sections,) in the action's
-    order; per-line keys (``measurement_age``, ``budget_left``) (n_lines,); ``time`` (1,), shared; and
+    line's bounds (the widest of the lines'): per-section keys (``section_sd``, ``register``, ...) (Σ sections,) in
+    the action's order; per-line keys (``measurement_age``, ``budget_left``) (n_lines,); ``time`` (1,), shared; and
     ``machine_line`` (n_lines,), the machine's line one-hot.
 
     **Reward.** −(Σ over the lines of their step costs + the move cost), k€. ``info["costs"]``: each of the
     line's cost parts summed over the lines, and ``move``; ``info["line_costs"]`` (n_lines,) each line's cost
     and ``info["line_cost_parts"]`` per part and line; ``info["machine_line"]`` (after the step) and
-    ``info["moved"]``; the lines' per-section info keys concatenated (n_lines · n_sections,).
+    ``info["moved"]``; the lines' per-section info keys concatenated (Σ sections,).
 
     **Episode end.** Truncation at the lines' horizon (default 10 years = 40 steps); ``step`` after it raises
     until ``reset``; the machine starts every episode on ``start_line``.
@@ -69,7 +71,8 @@ class TampingNetwork(TrackEnv):
     (:mod:`trackenv.envs.batched`); network ``i`` gives bit for bit what this env gives for the same seed.
 
     **Arguments.** ``config`` (:class:`~trackenv.envs.network.NetworkConfig` or a dict), or its fields as keywords
-    (``n_lines``, ``line_config``: a LineConfig, dict or preset name, ``capacity``, ``move_cost``,
+    (``n_lines``, ``line_config``: a LineConfig, dict or preset name, or a list of them one per line,
+    ``capacity``, ``move_cost``,
     ``start_line``); any other keyword is a field of the line config (``horizon_years=1.0``).
     ``render_mode="rgb_array"`` draws the machine's line. **Randomness**: each line is drawn at reset from a
     generator seeded from the env's (:func:`~trackenv.envs.network.line_seeds`); ``get_state``/``set_state``
