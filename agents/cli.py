@@ -458,6 +458,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
                   progress=progress, **overrides)
     with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
         warnings.simplefilter("ignore", FitWarning)
+        # a section beyond the model's validity: the plan names it by its id (the engine's warning, by its row)
+        warnings.filterwarnings("ignore", message=".*has left the model's validity", category=RuntimeWarning)
         if network is not None:
             from .network_plan import plan_network
 
@@ -469,6 +471,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     line_plans = plan.lines if network is not None else (plan,)
     notes = [f"{lp.line.source}, section {s.section}: {s.note}" for lp in line_plans for s in lp.fit.sections
              if s.note]
+    notes += [f"{lp.line.source}: {text.removeprefix('warning: ')}" for lp in line_plans
+              for text in lp.validity_lines()]
     for note in notes:
         print(f"trackenv plan: warning: {note}", file=sys.stderr)
     files = plan.write(Path(args.out or "results/plan"))

@@ -102,8 +102,7 @@ class NetworkPlan:
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
             if row["moving"] > 0:
                 where.append(f"moving {row['moving']:.0%}")
-            tamped = [f"line {i}: " + " ".join(f"{s} (renewal)" if s in line.renewals(q) else s
-                                                for s in plan["quarters"][q]["tamp"])
+            tamped = [f"line {i}: {line.tamp_text(q, plan['quarters'][q]['tamp'])}"
                       for i, (plan, line) in enumerate(zip(d["line_plans"], self.lines, strict=True))
                       if plan["quarters"][q]["tamp"]]
             out.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {', '.join(where) or '-'}; "
@@ -112,13 +111,15 @@ class NetworkPlan:
             decisions = line.decision_lines()
             if decisions:
                 out += [f"line {i}, {names[i]}:", *decisions]
+        for i, line in enumerate(self.lines):
+            out += [f"line {i}: {text}" for text in line.validity_lines()]
         c = d["cost_keur"]
         for i, line in enumerate(self.lines):
             total = line.costs.sum(axis=1)
             out.append(f"cost of line {i} over {years_text(self.years)}: {total.mean():.0f} k€ mean, "
                        f"{np.quantile(total, 0.1):.0f}-{np.quantile(total, 0.9):.0f} k€ over 10-90 % of the futures")
         out.append(f"cost of the network over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
-                   f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f})")
+                   f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f} k€)")
         return "\n".join(out)
 
     def figure(self) -> Any:
@@ -142,17 +143,21 @@ class NetworkPlan:
         top.set_title(f"{self.network.name}: where the machine works, {self.policy} ({self.scenario}), "
                       f"{self.futures} futures from {self.network.as_of}", fontsize=9)
         top.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.04), ncol=min(len(self.lines) + 1, 4))
-        total = np.cumsum(self.costs, axis=1)
-        bottom.fill_between(quarters, np.quantile(total, 0.1, axis=0), np.quantile(total, 0.9, axis=0),
+        def summed(costs: np.ndarray) -> np.ndarray:  # (futures, quarters+1): from 0 to the end of each quarter
+            return np.concatenate([np.zeros((costs.shape[0], 1)), np.cumsum(costs, axis=1)], axis=1)
+
+        edges = np.arange(len(self.dates) + 1) - 0.5  # the quarters' bars sit on their indices
+        total = summed(self.costs)
+        bottom.fill_between(edges, np.quantile(total, 0.1, axis=0), np.quantile(total, 0.9, axis=0),
                             color="0.85", label="network, 10-90 % of the futures")
-        bottom.plot(quarters, total.mean(axis=0), color="k", label="network, mean")
+        bottom.plot(edges, total.mean(axis=0), color="k", label="network, mean")
         for i, line in enumerate(self.lines):
-            bottom.plot(quarters, np.cumsum(line.costs, axis=1).mean(axis=0), color=f"C{i}", lw=1, label=f"line {i}")
-        bottom.plot(quarters, np.cumsum(self.move_costs, axis=1).mean(axis=0), color="0.5", ls="--", lw=1,
-                    label="moves")
-        bottom.set_ylabel("cumulative cost [k€]")
+            bottom.plot(edges, summed(line.costs).mean(axis=0), color=f"C{i}", lw=1, label=f"line {i}")
+        bottom.plot(edges, summed(self.move_costs).mean(axis=0), color="0.5", ls="--", lw=1, label="moves")
+        bottom.set_ylabel("cost summed to the end of the quarter [k€]")
         step = max(len(self.dates) // 8, 1)
         bottom.set_xticks(quarters[::step], [self.dates[q] for q in quarters[::step]], fontsize=7)
+        bottom.set_xlabel("quarter from")
         bottom.legend(fontsize=7, loc="upper left")
         fig.tight_layout()
         return fig
@@ -198,9 +203,10 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     ``scenario``, or the shipped ``cpi-agent``) played on every line by
     :func:`~trackenv_agents.rules.network.network_play`, in ``futures`` futures (seeds ``seed``, ``seed + 1``,
     ...); each line modelled as :func:`~trackenv_agents.planning.plan_config` models it; ``config``: further
-    :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` the network file gives
-    overrides theirs). ``progress(1)`` after each quarter. ValueError for a policy that uses the choices beyond
-    tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the line)."""
+    :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` given here is the
+    machine's, over the network file's). ``progress(1)`` after each quarter. ValueError for a policy that uses
+    the choices beyond tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the
+    line)."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line_fit import history_fit
@@ -226,8 +232,8 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years
         lines = [cfg.replace(horizon_years=trained) for cfg in lines]
     base = desc.config()  # the machine's fields (and the dates' check) from the file
-    net = NetworkConfig(line_config=lines, capacity=base.capacity, move_cost=base.move_cost,
-                        start_line=base.start_line)
+    capacity = config.get("capacity", base.capacity)  # one given to the plan over the file's
+    net = NetworkConfig(line_config=lines, capacity=capacity, move_cost=base.move_cost, start_line=base.start_line)
     rule = network_play(rules[0]).bind(net)
     env = TampingNetworkVectorEnv(futures, net, autoreset_mode=AutoresetMode.NEXT_STEP)
     offsets = net.line_offsets
@@ -262,8 +268,8 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
         limits = {name: batch.section_limits(attr)[row * cfg.n_sections:(row + 1) * cfg.n_sections] * 1e3
                   for name, attr in LIMIT_FIELDS.items()}
         part_costs = {k: v[:, :, i] for k, v in run.line_part_costs.items()}
-        assert cfg.line is not None  # every line of a network file is a line file's
-        line = dataclasses.replace(cfg.line, as_of=desc.as_of)  # the network's calendar
+        # the file's own description (two files of equal content share one config) on the network's calendar
+        line = dataclasses.replace(desc.lines[i], as_of=desc.as_of)
         plans.append(LinePlan(
             line, policy, float(years), futures, seed, dates, run.share[:, at], run.line_costs[:, :, i],
             {k: v.sum(axis=1) for k, v in part_costs.items()}, history_fit(cfg), scenario, ("tamp",), cfg.engine,
@@ -272,7 +278,7 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
             unmet_share=run.unmet_share[:, at], unmet_reasons={k: v[:, at] for k, v in run.unmet_reasons.items()},
             min_steps_between_tampings=cfg.min_steps_between_tampings, steps_per_year=cfg.steps_per_year,
             measurement_interval=cfg.measurement_interval, config_changes=without_engine(config),
-            capacity=cfg.capacity))
+            capacity=cfg.capacity, peak_max_mm=None if run.peak_max_mm is None else run.peak_max_mm[at]))
     env.close()
     return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine, run.moved,
                        run.costs, run.part_costs["move"], scenario)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.choices import CHOICES
+from trackenv.envs.line_episode import VALID_PEAK_M
 from trackenv.envs.line_file import DAYS_PER_YEAR
 
 #: The share of futures from which a section's choice in a quarter is recommended.
@@ -145,8 +146,9 @@ class LinePlan:
     ``policy_params`` the policy's parameters (a rule's thresholds; empty or the file of a trained policy),
     ``dates`` the first day of each quarter, the ``fit`` of the line's history, the ``scenario``, ``choices``,
     ``engine`` and ``pass_reuse_tolerance_m`` (m) the line was planned with, and the model's ``steps_per_year``
-    and ``measurement_interval`` (steps between recording-car runs), and the possession ``capacity`` (sections a
-    quarter; None: not known), which the table names where a quarter recommends more."""
+    and ``measurement_interval`` (steps between recording-car runs), the possession ``capacity`` (sections a
+    quarter; None: not known), which the table names where a quarter recommends more, and ``peak_max_mm`` each
+    section's largest true D1 mean-to-peak in any future (sections,; :meth:`beyond_validity`)."""
 
     line: Any
     policy: str
@@ -173,6 +175,7 @@ class LinePlan:
     unmet_reasons: dict[str, np.ndarray] = field(default_factory=dict)
     min_steps_between_tampings: int = 1
     capacity: int | None = None
+    peak_max_mm: np.ndarray | None = None
 
     @property
     def share(self) -> np.ndarray:
@@ -246,6 +249,7 @@ class LinePlan:
                           "p90": float(np.quantile(total, 0.9))},
             "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
+            "beyond_validity_peak_mm": self.beyond_validity(),
         }
 
     def table(self) -> str:
@@ -262,15 +266,11 @@ class LinePlan:
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
-                renewals = self.renewals(q)
-                what = " ".join(f"{i} (renewal)" if i in renewals else i for i in row["tamp"]) or "-"
-                if self.capacity is not None and len(row["tamp"]) > self.capacity:
-                    what += (f" (more than the capacity of {self.capacity}: each future tamps at most "
-                             f"{self.capacity}; listed, those of at least half the futures)")
+                what = self.tamp_text(q, row["tamp"]) or "-"
             else:
                 what = "; ".join(f"{name} {' '.join(row[name])}" for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
-        lines += [*self.decision_lines(), self.recording_note()]
+        lines += [*self.decision_lines(), self.recording_note(), *self.validity_lines()]
         c = d["cost_keur"]
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
         lines.append(f"cost over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
@@ -283,6 +283,36 @@ class LinePlan:
             lines.append(f"history: {whose} fitted, median residual "
                          f"{fit['median_residual_mm']:.3f} mm (trackenv.envs.history_fit)")
         return "\n".join(lines)
+
+    def beyond_validity(self) -> dict[str, float]:
+        """The sections whose true D1 mean-to-peak went beyond what the model represents
+        (:data:`~trackenv.envs.line_episode.VALID_PEAK_M`) in some future, with that peak [mm]: their settlement
+        ran away there, and the costs that follow are not physical."""
+        if self.peak_max_mm is None:
+            return {}
+        limit = VALID_PEAK_M * 1e3
+        return {s.id: float(p) for s, p in zip(self.line.sections, self.peak_max_mm, strict=True) if p > limit}
+
+    def validity_lines(self) -> list[str]:
+        """A warning for the table where :meth:`beyond_validity` names sections (none otherwise)."""
+        beyond = self.beyond_validity()
+        if not beyond:
+            return []
+        worst = ", ".join(f"{i} {p:.0f} mm" for i, p in sorted(beyond.items(), key=lambda kv: -kv[1])[:5])
+        return [f"warning: the true D1 mean-to-peak of {len(beyond)} section(s) went beyond the model's validity "
+                f"({VALID_PEAK_M * 1e3:.0f} mm) in some future ({worst}): their settlement ran away there and the "
+                f"costs that follow are not physical (the scenario's defect and wet-spot rates: "
+                f"local_defect_rate_factor, wet_spot_rate_factor)"]
+
+    def tamp_text(self, quarter: int, tamped: list[str]) -> str:
+        """The ids of the sections recommended for tamping in ``quarter`` as the table gives them: a ballast
+        renewal marked "(renewal)", and a note where they are more than the capacity."""
+        renewals = self.renewals(quarter)
+        text = " ".join(f"{i} (renewal)" if i in renewals else i for i in tamped)
+        if self.capacity is not None and len(tamped) > self.capacity:
+            text += (f" (more than the capacity of {self.capacity}: each future tamps at most {self.capacity}; "
+                     f"listed, those of at least half the futures)")
+        return text
 
     def renewals(self, quarter: int) -> set[str]:
         """The ids of the sections whose tamping in ``quarter`` is a ballast renewal in at least
@@ -353,7 +383,8 @@ class LinePlan:
         lines = [self._section_line(int(j), what if why is None else f"{what} ({why(int(j))})")
                  for j in at[:SECTION_LINES]]
         if len(at) > SECTION_LINES:
-            lines.append(f"  ... and {len(at) - SECTION_LINES} more {what} (plan.csv, --json)")
+            where = "--json" if what.startswith("asked") else "plan.csv, --json"  # plan.csv has what was done
+            lines.append(f"  ... and {len(at) - SECTION_LINES} more {what} ({where})")
         return lines
 
     def _section_line(self, j: int, what: str) -> str:

@@ -196,7 +196,8 @@ class _Futures:
     """What :func:`_run_futures` gathers: choice shares (steps, sections, choices), costs (futures, steps) k€, the
     cost parts (each (futures, steps) k€), the state (:data:`STATE_COLUMNS`, each (steps, sections)), the share
     of futures in which the policy asked for a choice that was not applied (steps, sections), and the number of
-    futures in which that was for each of :data:`UNMET_REASONS` (each (steps, sections)). On a network also each
+    futures in which that was for each of :data:`UNMET_REASONS` (each (steps, sections)), each section's largest
+    true D1 mean-to-peak in any future and step (sections,) mm. On a network also each
     line's costs (futures, steps, lines) and cost parts, the machine's line after each step and whether it moved
     (futures, steps)."""
 
@@ -206,6 +207,7 @@ class _Futures:
     state: dict[str, np.ndarray]
     unmet_share: np.ndarray
     unmet_reasons: dict[str, np.ndarray]
+    peak_max_mm: np.ndarray | None = None
     line_costs: np.ndarray | None = None
     line_part_costs: dict[str, np.ndarray] = field(default_factory=dict)
     machine: np.ndarray | None = None
@@ -248,6 +250,8 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
         for key, value in why(want, codes, allowed, measured_sd, info).items():
             out.unmet_reasons[key][step] = value.sum(axis=0)
         out.costs[:, step] = -np.asarray(reward)
+        peak = np.asarray(info["section_peak_mm"], dtype=float).max(axis=0)  # the worst future's true peak
+        out.peak_max_mm = peak if out.peak_max_mm is None else np.maximum(out.peak_max_mm, peak)
         for key, value in info["costs"].items():
             if not key.startswith("_"):
                 out.part_costs.setdefault(key, np.zeros((futures, steps)))[:, step] = np.asarray(value)
@@ -305,4 +309,4 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
                     unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes=without_engine(config), capacity=cfg.capacity)
+                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm)

@@ -86,13 +86,15 @@ class ValueDispatch:
         """(n,) the line whose requests the machine serves: ``values`` (n, L) of the lines' requests, ``asked``
         (n, L) whether a line asks for any work, ``here`` (n,) the machine's line. It stays on a line that asks
         unless another's requests are worth more by ``switch_margin`` or by the network's ``move_cost`` (k€),
-        whichever is larger (a move dearer than the margin is weighed; on the shipped networks, 10 k€, it is
-        not); from a line that asks for nothing it goes to the asking line worth most (the lowest index of
-        equals; its own line where none asks)."""
+        whichever is larger; from a line that asks for nothing it goes to the asking line worth most (the lowest
+        index of equals; its own line where none asks), and where the move costs more than the margin, only if
+        that line's requests are worth more than the move. So a move dearer than the margin is weighed; on the
+        shipped networks (10 k€ against 60) it is not."""
         rows = np.arange(values.shape[0])
         worth = np.where(asked, values, -np.inf)
         best = worth.argmax(axis=1)
         busy = asked[rows, here]
         leave = worth[rows, best] > values[rows, here] + max(self.switch_margin, move_cost)
-        go = np.where(busy, leave, asked.any(axis=1))
+        worth_moving = asked.any(axis=1) & ((move_cost <= self.switch_margin) | (worth[rows, best] > move_cost))
+        go = np.where(busy, leave, worth_moving)
         return np.where(go, best, here)

@@ -7,11 +7,13 @@ import csv
 import json
 import re
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from trackenv.envs.line_fit import FitWarning
 from trackenv_agents.cli import main
 from trackenv_agents.planning import plan_line
 
@@ -431,3 +433,20 @@ def test_a_quarter_recommending_more_than_the_capacity_says_so(rough_plan):
     assert "more than the capacity" not in plan.table()
     tight = dataclasses.replace(plan, capacity=n - 1)
     assert f"(more than the capacity of {n - 1}: each future tamps at most {n - 1};" in tight.table()
+
+
+def test_a_section_beyond_the_models_validity_is_named_by_its_id(tmp_path, capsys):
+    """Short defects settling 100 times faster run away within a year: the plan names the section by its id in its
+    table, its JSON and its warnings (not the engine's warning, which names a row of its batch)."""
+    out = tmp_path / "plan"
+    args = ["plan", str(write(tmp_path)), "--scenario", "defects", "--policy", "no-maintenance", "--years", "1",
+            "--futures", "2", "--set", "local_defect_rate_factor=100", "--engine", "fast", "--pass-reuse-mm", "1",
+            "--json", "--out", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        assert main(args) == 0
+    captured = capsys.readouterr()
+    d = json.loads(captured.out)
+    assert set(d["beyond_validity_peak_mm"]) == {"B"} and d["beyond_validity_peak_mm"]["B"] > 250
+    assert any("went beyond the model's validity (250 mm) in some future (B " in w for w in d["warnings"])
+    assert "has left the model's validity" not in captured.err

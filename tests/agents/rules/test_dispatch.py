@@ -93,9 +93,9 @@ def test_the_margin_keeps_the_machine_on_its_line_while_it_asks():
     asked = np.array([[True, True, False], [True, True, False], [False, True, True], [False, False, False]])
     here = np.array([0, 0, 0, 1])
     assert dispatch.target(values, asked, here).tolist() == [0, 1, 2, 1]
-    # a move dearer than the margin is weighed instead (a line that asks for nothing is still left)
+    # a move dearer than the margin is weighed instead: from a line that asks, and from one that does not
     assert dispatch.target(values, asked, here, move_cost=10.0).tolist() == [0, 1, 2, 1]
-    assert dispatch.target(values, asked, here, move_cost=25.0).tolist() == [0, 0, 2, 1]
+    assert dispatch.target(values, asked, here, move_cost=25.0).tolist() == [0, 0, 0, 1]
 
 
 def test_a_bound_value_rule_weighs_the_networks_move_cost():
