@@ -96,3 +96,17 @@ def test_a_choice_policy_on_a_network_is_refused_before_anything_runs(capsys):
     assert main(["plan", str(EXAMPLE_NETWORK), "--policy", "choice-threshold", "--scenario", "wet"]) == 2
     captured = capsys.readouterr()
     assert "the network's machine tamps only" in captured.err and "plan (quarters)" not in captured.err
+
+
+def test_two_copies_of_a_line_keep_their_files_and_the_plans_capacity_is_the_machines(tmp_path):
+    """Two files of equal content share one line config, but each line's plan names its own file; a capacity given
+    to the plan is the machine's, over the network file's."""
+    for path in EXAMPLE_NETWORK.parent.glob("example_branch*"):
+        shutil.copy(path, tmp_path / path.name)
+    shutil.copy(tmp_path / "example_branch.yaml", tmp_path / "branch_copy.yaml")
+    network = tmp_path / "network.yaml"
+    network.write_text("name: two branches\nlines:\n  - example_branch.yaml\n  - branch_copy.yaml\ncapacity: 2\n")
+    plan = plan_network(network, years=0.25, futures=1, capacity=3)
+    assert [Path(p.line.source).name for p in plan.lines] == ["example_branch.yaml", "branch_copy.yaml"]
+    assert [p.capacity for p in plan.lines] == [3, 3]
+    assert "line 1: Example Branch Line (synthetic) (" in plan.table() and "branch_copy.yaml)" in plan.table()
