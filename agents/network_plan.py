@@ -61,16 +61,25 @@ class NetworkPlan:
         here = self.machine[:, :, None] == np.arange(len(self.lines))
         return (here & ~self.moved[:, :, None]).mean(axis=0)
 
+    @property
+    def moving_to(self) -> np.ndarray:
+        """(quarters, lines): the share of futures in which the machine moves to each line in each quarter (it
+        works there from the next)."""
+        there = self.machine[:, :, None] == np.arange(len(self.lines))
+        return (there & self.moved[:, :, None]).mean(axis=0)
+
     def _names(self) -> list[str]:
         return [line.line.name for line in self.lines]
 
     def to_dict(self) -> dict[str, Any]:
         """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on``: the
-        share of futures per line, in the order of ``lines``; ``moving``) and the network's mean cost, the cost
+        share of futures per line, in the order of ``lines``; ``moving``, and ``moving_to`` per line) and the
+        network's mean cost, the cost
         forecast, and each line's plan (:meth:`LinePlan.to_dict`)."""
         names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
         quarters = [{"from": d, "works_on": [float(s) for s in works],
-                     "moving": float(self.moved[:, q].mean()), "cost_mean_keur": float(self.costs[:, q].mean()),
+                     "moving": float(self.moved[:, q].mean()), "moving_to": [float(m) for m in self.moving_to[q]],
+                     "cost_mean_keur": float(self.costs[:, q].mean()),
                      "move_cost_mean_keur": float(self.move_costs[:, q].mean())}
                     for q, (d, works) in enumerate(zip(self.dates, self.works_on, strict=True))]
         return {
@@ -100,8 +109,7 @@ class NetworkPlan:
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
         for q, row in enumerate(d["quarters"]):
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
-            if row["moving"] > 0:
-                where.append(f"moving {row['moving']:.0%}")
+            where += [f"moving to line {i} {m:.0%}" for i, m in enumerate(row["moving_to"]) if m > 0]
             tamped = [f"line {i}: {line.tamp_text(q, plan['quarters'][q]['tamp'])}"
                       for i, (plan, line) in enumerate(zip(d["line_plans"], self.lines, strict=True))
                       if plan["quarters"][q]["tamp"]]
@@ -163,19 +171,20 @@ class NetworkPlan:
         return fig
 
     def write(self, folder: Path) -> dict[str, str]:
-        """Write ``network.csv`` (quarter, date, where the machine works: a column per line and ``moving``, shares
-        of futures; the network's mean, p10 and p90 cost and the mean move cost k€) and ``network.png``
+        """Write ``network.csv`` (quarter, date, where the machine works and where it moves to, a column per line
+        each, shares of futures; the network's mean, p10 and p90 cost and the mean move cost k€) and ``network.png``
         (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
         ``line<i>``; returns the paths."""
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / "network.csv"
         with path.open("w", newline="") as f:
             w = csv.writer(f, lineterminator="\n")
-            w.writerow(["quarter", "from", *(f"works_on_line{i}" for i in range(len(self.lines))), "moving",
+            w.writerow(["quarter", "from", *(f"works_on_line{i}" for i in range(len(self.lines))),
+                        *(f"moving_to_line{i}" for i in range(len(self.lines))),
                         "cost_mean_keur", "cost_p10_keur", "cost_p90_keur", "move_cost_mean_keur"])
-            for q, (date, works) in enumerate(zip(self.dates, self.works_on, strict=True)):
+            for q, (date, works, moving) in enumerate(zip(self.dates, self.works_on, self.moving_to, strict=True)):
                 c = self.costs[:, q]
-                w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), f"{self.moved[:, q].mean():.3f}",
+                w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), *(f"{m:.3f}" for m in moving),
                             f"{c.mean():.3f}", f"{np.quantile(c, 0.1):.3f}", f"{np.quantile(c, 0.9):.3f}",
                             f"{self.move_costs[:, q].mean():.3f}"])
         png = folder / "network.png"

@@ -30,6 +30,7 @@ def test_the_networks_costs_are_its_lines_and_the_moves(network_plan):
     for p in plan.lines:  # each line's parts add up to its cost
         assert np.allclose(sum(p.part_costs.values()), p.costs, rtol=1e-9, atol=1e-9)
     assert np.allclose(plan.works_on.sum(axis=1) + plan.moved.mean(axis=0), 1.0)
+    assert np.allclose(plan.moving_to.sum(axis=1), plan.moved.mean(axis=0))
     assert (plan.move_costs[plan.moved] == 10.0).all() and (plan.move_costs[~plan.moved] == 0.0).all()
 
 
@@ -75,6 +76,7 @@ def test_plan_plans_a_network_file(tmp_path, capsys):
     assert d["network"] == load_network(EXAMPLE_NETWORK).name and len(d["line_plans"]) == 2
     assert d["lines"] == [p["line"] for p in d["line_plans"]] and len(d["quarters"]) == 2
     assert all(len(q["works_on"]) == 2 and abs(sum(q["works_on"]) + q["moving"] - 1) < 1e-9 for q in d["quarters"])
+    assert all(abs(sum(q["moving_to"]) - q["moving"]) < 1e-9 for q in d["quarters"])
     assert {Path(p).name for p in d["files"].values()} == {"network.csv", "network.png", "plan.csv", "costs.csv",
                                                         "plan.png"}
     assert (out / "line1" / "plan.csv").is_file() and (out / "network.csv").read_text().startswith("quarter,from")
