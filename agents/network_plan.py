@@ -25,8 +25,17 @@ from typing import Any
 
 import numpy as np
 
-from .plan_report import LIMIT_FIELDS, LinePlan, line_summary, step_date, summary_lines, years_text
-from .planning import DEFAULT_POLICY, _run_futures, line_policy, plan_config, trained_horizon_years, unmet_reasons
+from .plan_report import LinePlan, line_summary, step_date, summary_lines, years_text
+from .planning import (
+    DEFAULT_POLICY,
+    _run_futures,
+    line_limits,
+    line_plan,
+    line_policy,
+    plan_config,
+    trained_horizon_years,
+    unmet_reasons,
+)
 from .rules.choices import CHOICE_RULES
 from .rules.line import LINE_HEURISTICS
 from .shipped import CHOICE_AGENT_NAME as CHOICE_AGENT
@@ -218,12 +227,9 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     line)."""
     from gymnasium.vector import AutoresetMode
 
-    from trackenv.envs.line_fit import history_fit
-    from trackenv.envs.network import NetworkConfig
     from trackenv.envs.network_env import TampingNetworkVectorEnv
     from trackenv.envs.network_file import load_network
 
-    from .evaluation.line_compare import without_engine
     from .rules.network import network_play
 
     desc = network if not isinstance(network, (str, Path)) else load_network(network)
@@ -240,9 +246,7 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     trained = trained_horizon_years(rules[0])
     if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years
         lines = [cfg.replace(horizon_years=trained) for cfg in lines]
-    base = desc.config()  # the machine's fields (and the dates' check) from the file
-    capacity = config.get("capacity", base.capacity)  # one given to the plan over the file's
-    net = NetworkConfig(line_config=lines, capacity=capacity, move_cost=base.move_cost, start_line=base.start_line)
+    net = desc.config(lines, capacity=config.get("capacity"))  # the machine's fields and the dates from the file
     rule = network_play(rules[0]).bind(net)
     env = TampingNetworkVectorEnv(futures, net, autoreset_mode=AutoresetMode.NEXT_STEP)
     offsets = net.line_offsets
@@ -266,28 +270,16 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
 
     run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress, why, net.line_sections,
                        asked)
-    assert env.batch is not None and run.line_costs is not None  # built at reset; a network's run has them
-    assert run.machine is not None and run.moved is not None
+    assert env.batch is not None and run.machine is not None  # built at reset; a network's run has its record
     dates = tuple(step_date(desc.as_of, q, net.steps_per_year) for q in range(steps))
-    params = getattr(rules[0], "params", None)
     plans = []
     for i, cfg in enumerate(net.line_configs):
-        at = slice(offsets[i], offsets[i + 1])
         batch, row = env.batch.row(0, i)
-        limits = {name: batch.section_limits(attr)[row * cfg.n_sections:(row + 1) * cfg.n_sections] * 1e3
-                  for name, attr in LIMIT_FIELDS.items()}
-        part_costs = {k: v[:, :, i] for k, v in run.line_part_costs.items()}
         # the file's own description (two files of equal content share one config) on the network's calendar
         line = dataclasses.replace(desc.lines[i], as_of=desc.as_of)
-        plans.append(LinePlan(
-            line, policy, float(years), futures, seed, dates, run.share[:, at], run.line_costs[:, :, i],
-            {k: v.sum(axis=1) for k, v in part_costs.items()}, history_fit(cfg), scenario, ("tamp",), cfg.engine,
-            cfg.pass_reuse_tolerance_m, part_costs=part_costs, state={k: v[:, at] for k, v in run.state.items()},
-            limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
-            unmet_share=run.unmet_share[:, at], unmet_reasons={k: v[:, at] for k, v in run.unmet_reasons.items()},
-            min_steps_between_tampings=cfg.min_steps_between_tampings, steps_per_year=cfg.steps_per_year,
-            measurement_interval=cfg.measurement_interval, config_changes=without_engine(config),
-            capacity=cfg.capacity, peak_max_mm=None if run.peak_max_mm is None else run.peak_max_mm[at]))
+        plans.append(line_plan(line, cfg, run.line(i, slice(offsets[i], offsets[i + 1])),
+                               line_limits(batch, row, cfg.n_sections), policy=policy, rule=rules[0], years=years,
+                               seed=seed, dates=dates, scenario=scenario, choices=("tamp",), config=config))
     env.close()
-    return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine, run.moved,
-                       run.costs, run.part_costs["move"], scenario)
+    return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine.machine,
+                       run.machine.moved, run.costs, run.part_costs["move"], scenario)

@@ -38,7 +38,7 @@ figure, are :mod:`trackenv_agents.plan_report`'s (:class:`LinePlan`); its names 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -79,8 +79,9 @@ PLAN_SCENARIOS = tuple(name for name, fields_ in SCENARIOS.items() if not set(fi
 DEFAULT_POLICY = "grouped-threshold"
 
 __all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "RECOMMEND_SHARE", "SECTION_LABELS",
-           "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_policy", "line_summary", "plan_config",
-           "plan_line", "rule_thresholds", "step_date", "summary_lines", "trained_horizon_years", "unmet_reasons"]
+           "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_limits", "line_plan", "line_policy",
+           "line_summary", "plan_config", "plan_line", "rule_thresholds", "step_date", "summary_lines",
+           "trained_horizon_years", "unmet_reasons"]
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
@@ -144,19 +145,21 @@ def trained_horizon_years(policy: Any) -> float | None:
 
 
 def _record_state(state: dict[str, np.ndarray], step: int, obs: dict[str, Any], info: dict[str, Any],
-                  line_sections: tuple[int, ...] | None = None) -> None:
+                  renewing: np.ndarray, line_sections: tuple[int, ...] | None = None) -> None:
     """Store in ``state`` (:data:`STATE_COLUMNS`) the sections' state before step ``step``'s work, means over the
     futures: from the observation the policy acts on (the measured SD and peak, and the age of the measurement:
-    each section's own where the problem has inspections, else the recording car's) and from the info of the step
-    before (the true SD and peak after it). On a network, ``line_sections``: each line's sections, over which its
-    recording car's age is spread."""
+    each section's own where the problem has inspections, else the recording car's), from the info of the step
+    before (the true SD and peak after it) and from the engine (``renewing``: whether a section's next tamping is
+    a ballast renewal, per future and section). On a network, ``line_sections``: each line's sections, over which
+    its recording car's age is spread."""
     sd = np.asarray(obs["section_sd"], dtype=float)
     line_age = np.asarray(obs["measurement_age"])
     if line_sections is not None:
         line_age = np.repeat(line_age, line_sections, axis=1)
     age = obs.get("section_measurement_age", np.broadcast_to(line_age, sd.shape))
     values = {"measured_sd_mm": sd, "measured_peak_mm": obs["section_peak"], "measurement_age_years": age,
-              "sd_mm": info["section_sd_mm"], "peak_mm": info["section_peak_mm"]}
+              "sd_mm": info["section_sd_mm"], "peak_mm": info["section_peak_mm"],
+              "renewal_due": np.asarray(renewing).reshape(sd.shape)}
     for key, value in values.items():
         state[key][step] = np.asarray(value, dtype=float).mean(axis=0)
 
@@ -192,14 +195,23 @@ def unmet_reasons(config: Any, want: np.ndarray, applied: np.ndarray, allowed: n
 
 
 @dataclass
+class _MachineRecord:
+    """What a network's futures add (:func:`_run_futures`): each line's costs (futures, steps, lines) and cost
+    parts (each the same shape) k€, the machine's line after each step and whether it moved (futures, steps)."""
+
+    line_costs: np.ndarray
+    line_part_costs: dict[str, np.ndarray]
+    machine: np.ndarray
+    moved: np.ndarray
+
+
+@dataclass
 class _Futures:
     """What :func:`_run_futures` gathers: choice shares (steps, sections, choices), costs (futures, steps) k€, the
     cost parts (each (futures, steps) k€), the state (:data:`STATE_COLUMNS`, each (steps, sections)), the share
-    of futures in which the policy asked for a choice that was not applied (steps, sections), and the number of
+    of futures in which the policy asked for a choice that was not applied (steps, sections), the number of
     futures in which that was for each of :data:`UNMET_REASONS` (each (steps, sections)), each section's largest
-    true D1 mean-to-peak in any future and step (sections,) mm. On a network also each
-    line's costs (futures, steps, lines) and cost parts, the machine's line after each step and whether it moved
-    (futures, steps)."""
+    true D1 mean-to-peak in any future and step (sections,) mm; on a network the ``machine``'s record."""
 
     share: np.ndarray
     costs: np.ndarray
@@ -207,11 +219,18 @@ class _Futures:
     state: dict[str, np.ndarray]
     unmet_share: np.ndarray
     unmet_reasons: dict[str, np.ndarray]
-    peak_max_mm: np.ndarray | None = None
-    line_costs: np.ndarray | None = None
-    line_part_costs: dict[str, np.ndarray] = field(default_factory=dict)
-    machine: np.ndarray | None = None
-    moved: np.ndarray | None = None
+    peak_max_mm: np.ndarray
+    machine: _MachineRecord | None = None
+
+    def line(self, index: int, at: slice) -> _Futures:
+        """A network's line ``index`` (its sections ``at``) as the futures of a line: its sections' shares,
+        state, reasons and peaks, and its own costs (the moves left out)."""
+        assert self.machine is not None  # a network's futures
+        m = self.machine
+        return _Futures(self.share[:, at], m.line_costs[:, :, index],
+                        {k: v[:, :, index] for k, v in m.line_part_costs.items()},
+                        {k: v[:, at] for k, v in self.state.items()}, self.unmet_share[:, at],
+                        {k: v[:, at] for k, v in self.unmet_reasons.items()}, self.peak_max_mm[at])
 
 
 #: why the env did not apply what was asked in one step: (want, applied codes, allowed, measured SD, info) ->
@@ -236,12 +255,15 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
     sections = np.shape(obs["section_sd"])[1]
     out = _Futures(np.zeros((steps, sections, len(CHOICES))), np.zeros((futures, steps)), {},
                    {key: np.zeros((steps, sections)) for key in STATE_COLUMNS}, np.zeros((steps, sections)),
-                   {key: np.zeros((steps, sections), dtype=np.int64) for key in UNMET_REASONS})
+                   {key: np.zeros((steps, sections), dtype=np.int64) for key in UNMET_REASONS}, np.zeros(sections))
+    if "line_costs" in info:  # a network: each line's costs, and the machine
+        lines = np.shape(info["line_costs"])[1]
+        out.machine = _MachineRecord(np.zeros((futures, steps, lines)), {}, np.zeros((futures, steps), np.int64),
+                                     np.zeros((futures, steps), bool))
     for step in range(steps):
-        _record_state(out.state, step, obs, info, line_sections)
+        _record_state(out.state, step, obs, info, env.batch.renewing(), line_sections)
         action, _ = rule.predict(obs, deterministic=True)
         allowed, measured_sd = env.batch.allowed(), obs["section_sd"]  # as the env resolves the step's work
-        out.state["renewal_due"][step] = np.asarray(env.batch.renewing()).reshape(futures, -1).mean(axis=0)
         obs, reward, _, _, info = env.step(action)
         codes = np.asarray(info["section_choices"])  # (futures, sections)
         want = np.asarray(action if asked is None else asked(action)).reshape(codes.shape).astype(np.int64)
@@ -250,24 +272,52 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
         for key, value in why(want, codes, allowed, measured_sd, info).items():
             out.unmet_reasons[key][step] = value.sum(axis=0)
         out.costs[:, step] = -np.asarray(reward)
-        peak = np.asarray(info["section_peak_mm"], dtype=float).max(axis=0)  # the worst future's true peak
-        out.peak_max_mm = peak if out.peak_max_mm is None else np.maximum(out.peak_max_mm, peak)
-        for key, value in info["costs"].items():
-            if not key.startswith("_"):
-                out.part_costs.setdefault(key, np.zeros((futures, steps)))[:, step] = np.asarray(value)
-        if "line_costs" in info:  # a network: each line's costs, and the machine
-            line_costs = np.asarray(info["line_costs"])  # (futures, lines)
-            if out.line_costs is None or out.machine is None or out.moved is None:
-                out.line_costs = np.zeros((futures, steps, line_costs.shape[1]))
-                out.machine, out.moved = np.zeros((futures, steps), dtype=np.int64), np.zeros((futures, steps), bool)
-            out.line_costs[:, step] = line_costs
-            for key, value in info["line_cost_parts"].items():
-                if not key.startswith("_"):
-                        out.line_part_costs.setdefault(key, np.zeros(out.line_costs.shape))[:, step] = np.asarray(value)
-            out.machine[:, step], out.moved[:, step] = info["machine_line"], info["moved"]
+        # the worst future's true peak (a peak is never negative: zeros start the maximum)
+        out.peak_max_mm = np.maximum(out.peak_max_mm, np.asarray(info["section_peak_mm"], dtype=float).max(axis=0))
+        _record_parts(out.part_costs, info["costs"], step, (futures, steps))
+        if out.machine is not None:
+            m = out.machine
+            m.line_costs[:, step] = info["line_costs"]
+            _record_parts(m.line_part_costs, info["line_cost_parts"], step, m.line_costs.shape)
+            m.machine[:, step], m.moved[:, step] = info["machine_line"], info["moved"]
         if progress is not None:
             progress(1)
     return out
+
+
+def _record_parts(parts: dict[str, np.ndarray], step_parts: dict[str, Any], step: int, shape: tuple[int, ...]) -> None:
+    """Store step ``step``'s cost parts (a vector env's info: each part per future, its ``_`` mask keys left out)
+    in ``parts`` (each of ``shape``, the step on the second axis)."""
+    for key, value in step_parts.items():
+        if not key.startswith("_"):
+            parts.setdefault(key, np.zeros(shape))[:, step] = np.asarray(value)
+
+
+def line_limits(batch: Any, row: int, n_sections: int) -> dict[str, np.ndarray]:
+    """The limits of each section's speed band [mm] (:data:`LIMIT_FIELDS`) of the line in ``row`` of the line
+    engine ``batch``: the same in every future of a plan."""
+    return {name: batch.section_limits(attr)[row * n_sections:(row + 1) * n_sections] * 1e3
+            for name, attr in LIMIT_FIELDS.items()}
+
+
+def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray], *, policy: str, rule: Any,
+              years: float, seed: int, dates: tuple[str, ...], scenario: str, choices: tuple[str, ...],
+              config: dict[str, Any]) -> LinePlan:
+    """The :class:`LinePlan` of ``line`` (its description) modelled by ``cfg`` from its futures ``run`` (a line's:
+    :meth:`_Futures.line` on a network), with its ``limits``; ``config``: the fields the plan was given."""
+    from trackenv.envs.line_fit import history_fit
+
+    from .evaluation.line_compare import without_engine
+
+    params = getattr(rule, "params", None)
+    return LinePlan(line, policy, float(years), run.costs.shape[0], seed, dates, run.share, run.costs,
+                    {k: v.sum(axis=1) for k, v in run.part_costs.items()}, history_fit(cfg), scenario, choices,
+                    cfg.engine, cfg.pass_reuse_tolerance_m, part_costs=run.part_costs, state=run.state,
+                    limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
+                    unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
+                    min_steps_between_tampings=cfg.min_steps_between_tampings,
+                    steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
+                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm)
 
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
@@ -280,9 +330,6 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv
-    from trackenv.envs.line_fit import history_fit
-
-    from .evaluation.line_compare import without_engine
 
     cfg = plan_config(line, scenario, years=years, **config)
     rule = line_policy(policy, cfg, scenario, years=years)
@@ -293,20 +340,11 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
         # length, of which the plan takes its first ``years`` (the line goes on after the plan, as in training)
         cfg = cfg.replace(horizon_years=trained)
         rule = rule.bind(cfg)
-    fit = history_fit(cfg)
     env = TampingLineVectorEnv(futures, cfg, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(cfg))
     run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress)
-    batch = env.batch  # the limits of each section's speed band: the same on every future's line
-    assert batch is not None  # built at reset
-    limits = {name: batch.section_limits(attr)[:cfg.n_sections] * 1e3 for name, attr in LIMIT_FIELDS.items()}
+    assert env.batch is not None  # built at reset
+    limits = line_limits(env.batch, 0, cfg.n_sections)
     env.close()
     dates = tuple(step_date(cfg.line.as_of, q, cfg.steps_per_year) for q in range(steps))
-    params = getattr(rule, "params", None)
-    return LinePlan(cfg.line, policy, float(years), futures, seed, dates, run.share, run.costs,
-                    {k: v.sum(axis=1) for k, v in run.part_costs.items()}, fit, scenario, tuple(cfg.choices),
-                    cfg.engine, cfg.pass_reuse_tolerance_m, part_costs=run.part_costs, state=run.state,
-                    limits_mm=limits, policy_params=dict(params) if isinstance(params, dict) else {},
-                    unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
-                    min_steps_between_tampings=cfg.min_steps_between_tampings,
-                    steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm)
+    return line_plan(cfg.line, cfg, run, limits, policy=policy, rule=rule, years=years, seed=seed, dates=dates,
+                     scenario=scenario, choices=tuple(cfg.choices), config=config)

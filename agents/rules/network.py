@@ -22,7 +22,7 @@ observation anyway).
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -203,12 +203,21 @@ class NetworkRule(Heuristic):
             raise ValueError(f"NetworkRule: {b['section_sd'].shape[1]} sections over {n_lines} lines are lines of "
                              f"their own: bind the rule to the network's config first (bind)")
         sections = np.diff(_line_rows(self._network, n_lines, b["section_sd"].shape[1], profile=False))
-        want = np.zeros((n_envs, n_lines, sections.max()), dtype=bool)
         views = [line_view(b, n_lines, members, self._network) for members, _, _ in groups]
-        for (members, line_rule, _), view in zip(groups, views, strict=True):
-            asked, _ = line_rule.predict(view)
-            want[:, members, :sections[members[0]]] = np.asarray(asked, dtype=bool).reshape(n_envs, len(members), -1)
+        want = self._per_line(n_envs, groups, views, sections, lambda line_rule, view: line_rule.predict(view)[0])
         return want, sections, groups, views
+
+    @staticmethod
+    def _per_line(n_envs: int, groups: list, views: list[dict[str, np.ndarray]], sections: np.ndarray,
+                  ask: Callable[[Any, dict[str, np.ndarray]], np.ndarray]) -> np.ndarray:
+        """(n_envs, n_lines, S) bool: ``ask(line_rule, view)`` (batch · lines of the group, sections) of each
+        group's line policy on its view, placed at its lines and padded with False where a line has fewer
+        sections."""
+        out = np.zeros((n_envs, len(sections), sections.max()), dtype=bool)
+        for (members, line_rule, _), view in zip(groups, views, strict=True):
+            asked = np.asarray(ask(line_rule, view), dtype=bool)
+            out[:, members, :sections[members[0]]] = asked.reshape(n_envs, len(members), -1)
+        return out
 
     @staticmethod
     def _flat(per_line: np.ndarray, sections: np.ndarray) -> np.ndarray:
@@ -231,10 +240,8 @@ class NetworkRule(Heuristic):
             keep = np.where(stay[:, None], np.arange(n_lines)[None, :] == here[:, None], True)
         act = want & keep[:, :, None]
         if self.eager_probability is not None:  # where the machine stays, its line asks for what is due soon too
-            soon = np.zeros_like(want)
-            for (members, line_rule, _), view in zip(groups, views, strict=True):
-                due = np.asarray(line_rule.requests(view, self.eager_probability), dtype=bool)
-                soon[:, members, :sections[members[0]]] = due.reshape(n_envs, len(members), -1)
+            p = self.eager_probability
+            soon = self._per_line(n_envs, groups, views, sections, lambda rule, view: rule.requests(view, p))
             act[rows, here] |= soon[rows, here] & stay[:, None]
         flat = self._flat(act, sections).astype(np.int8)
         return (flat if batched else flat[0]), state

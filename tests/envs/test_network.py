@@ -244,7 +244,7 @@ def test_the_picture_names_its_line_and_shows_that_lines_cost(monkeypatch):
     *_, info = env.step(_ask({1: _pick(env, 1, 1)}))  # the machine moves to line 1
     *_, info = env.step(_ask({1: _pick(env, 1, 1)}))
     seen: dict = {}
-    lines = env.unwrapped.engine.lines
+    lines, _ = env.unwrapped.engine.row(0, 1)  # the line engine that draws the machine's line
     monkeypatch.setattr(lines, "frame", lambda row, part: seen.update(part) or np.zeros((2, 2, 3), np.uint8))
     env.render()
     n_lines = env.unwrapped.config.n_lines

@@ -328,13 +328,6 @@ class NetworkBatch:
         batch, members = self.groups[g]
         return batch, b * len(members) + k
 
-    @property
-    def lines(self) -> LineBatch:
-        """The line engine of a network of one line config (ValueError on lines of their own: :meth:`row`)."""
-        if len(self.groups) > 1:
-            raise ValueError("the lines of this network have configs of their own: reach a line with row(b, line)")
-        return self.groups[0][0]
-
     def _per_line(self, b: int) -> list[tuple[LineBatch, int]]:
         return [self.row(b, line) for line in range(self.L)]
 

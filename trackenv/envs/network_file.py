@@ -21,6 +21,7 @@ latest of them. Every fault raises :class:`~trackenv.envs.line_file.LineFileErro
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -76,14 +77,16 @@ class NetworkDescription:
         """The date the network's plan starts from: the latest of its lines' ``as_of``."""
         return max(line.as_of for line in self.lines)
 
-    def config(self, **line_fields: Any) -> NetworkConfig:
+    def config(self, line_configs: Sequence[LineConfig] | None = None, *, capacity: int | None = None,
+               **line_fields: Any) -> NetworkConfig:
         """The :class:`~trackenv.envs.network.NetworkConfig` of this network: each line a
         :class:`~trackenv.envs.line_config.LineConfig` of its file with ``line_fields`` (any field but the file's
-        own: a scenario's hidden parts, costs, the horizon, the engine), the machine's fields from the file.
-        :class:`~trackenv.envs.line_file.LineFileError` naming a line whose ``as_of`` is more than a step before
-        the latest, or whose config a field refuses."""
-        lines = []
-        for i, line in enumerate(self.lines):
+        own: a scenario's hidden parts, costs, the horizon, the engine), or ``line_configs`` where the caller made
+        them (one per line, in the file's order: a plan models each line as its scenario); the machine's fields
+        from the file, ``capacity`` over the file's. :class:`~trackenv.envs.line_file.LineFileError` naming a line
+        whose ``as_of`` is more than a step before the latest, or whose config a field refuses."""
+        lines = list(line_configs) if line_configs is not None else []
+        for i, line in enumerate(self.lines if line_configs is None else ()):
             try:
                 lines.append(LineConfig(line=line, **line_fields))
             except ValueError as exc:
@@ -98,8 +101,8 @@ class NetworkDescription:
                                     f"the file up to its last measurements")
         move_cost = NetworkConfig.move_cost if self.move_cost is None else self.move_cost
         try:
-            return NetworkConfig(line_config=lines, capacity=self.capacity, move_cost=move_cost,
-                                 start_line=self.start_line)
+            return NetworkConfig(line_config=lines, capacity=self.capacity if capacity is None else capacity,
+                                 move_cost=move_cost, start_line=self.start_line)
         except ValueError as exc:
             raise LineFileError(f"{self.source}: {exc}") from None
 
