@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ from .planning import (
     line_plan,
     line_policy,
     plan_config,
+    plan_warnings,
     trained_horizon_years,
     unmet_reasons,
 )
@@ -80,11 +81,13 @@ class NetworkPlan:
     def _names(self) -> list[str]:
         return [line.line.name for line in self.lines]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, files: Mapping[str, str] | None = None) -> dict[str, Any]:
         """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on``: the
         share of futures per line, in the order of ``lines``; ``moving``, and ``moving_to`` per line) and the
-        network's mean cost, the cost
-        forecast, and each line's plan (:meth:`LinePlan.to_dict`)."""
+        network's mean cost, the cost forecast, and each line's plan (:meth:`LinePlan.to_dict`) with the keys a
+        line's plan has in ``trackenv plan LINE.yaml --json``: its ``warnings`` (:func:`plan_warnings`) and its
+        ``files``, those of ``files`` (what :meth:`write` returned) under ``line<i>/``, keyed as a line's (none
+        without ``files``)."""
         names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
         quarters = [{"from": d, "works_on": [float(s) for s in works],
                      "moving": float(self.moved[:, q].mean()), "moving_to": [float(m) for m in self.moving_to[q]],
@@ -97,7 +100,8 @@ class NetworkPlan:
             "years": self.years, "futures": self.futures, "seed": self.seed, "quarters": quarters,
             "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
                           "p90": float(np.quantile(total, 0.9)), "move_mean": float(moves.mean())},
-            "line_plans": [line.to_dict() for line in self.lines],
+            "line_plans": [{**line.to_dict(), "files": _line_files(files or {}, i), "warnings": plan_warnings(line)}
+                           for i, line in enumerate(self.lines)],
         }
 
     def table(self) -> str:
@@ -200,8 +204,21 @@ class NetworkPlan:
         self.figure().savefig(png)
         files = {"network_csv": str(path), "network_plot": str(png)}
         for i, line in enumerate(self.lines):
-            files.update({f"line{i}_{k}": v for k, v in line.write(folder / f"line{i}").items()})
+            files.update({_line_key(i, k): v for k, v in line.write(folder / f"line{i}").items()})
         return files
+
+
+def _line_key(line: int, key: str) -> str:
+    """The key in :meth:`NetworkPlan.write`'s paths of the file ``key`` (a key of :meth:`LinePlan.write`'s) of
+    line ``line``."""
+    return f"line{line}_{key}"
+
+
+def _line_files(files: Mapping[str, str], line: int) -> dict[str, str]:
+    """Line ``line``'s part of :meth:`NetworkPlan.write`'s paths ``files``, keyed as :meth:`LinePlan.write` keys
+    them (``plan_csv``, ``costs_csv``, ``plot``)."""
+    prefix = _line_key(line, "")
+    return {key.removeprefix(prefix): path for key, path in files.items() if key.startswith(prefix)}
 
 
 def check_network_policy(policy: str) -> None:

@@ -80,7 +80,7 @@ DEFAULT_POLICY = "grouped-threshold"
 
 __all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "RECOMMEND_SHARE", "SECTION_LABELS",
            "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_limits", "line_plan", "line_policy",
-           "line_summary", "plan_config", "plan_line", "rule_thresholds", "step_date", "summary_lines",
+           "line_summary", "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
            "trained_horizon_years", "unmet_reasons"]
 
 
@@ -291,6 +291,15 @@ def _record_parts(parts: dict[str, np.ndarray], step_parts: dict[str, Any], step
     for key, value in step_parts.items():
         if not key.startswith("_"):
             parts.setdefault(key, np.zeros(shape))[:, step] = np.asarray(value)
+
+
+def plan_warnings(plan: LinePlan) -> list[str]:
+    """The warnings of a line's plan, each naming its line file: the history fit's notes on its sections, then the
+    sections that went beyond the model's validity (:meth:`LinePlan.validity_lines`). ``trackenv plan`` prints them
+    and puts them in the JSON, a network's per line and all together."""
+    source = plan.line.source
+    notes = [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
+    return notes + [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()]
 
 
 def line_limits(batch: Any, row: int, n_sections: int) -> dict[str, np.ndarray]:

@@ -34,6 +34,24 @@ def test_the_networks_costs_are_its_lines_and_the_moves(network_plan):
     assert (plan.move_costs[plan.moved] == 10.0).all() and (plan.move_costs[~plan.moved] == 0.0).all()
 
 
+def test_each_lines_entry_has_its_own_files_and_warnings(network_plan, monkeypatch):
+    """Each of ``line_plans`` has the keys of a line's plan JSON: its files (written under ``line<i>/``, keyed as a
+    line's) and the warnings about it, naming its file; the top level keeps them all."""
+    from trackenv_agents.plan_report import LinePlan
+
+    branch = network_plan.lines[1]
+    monkeypatch.setattr(LinePlan, "validity_lines",  # a warning on the branch only
+                        lambda self: ["warning: a section went beyond the model's validity"] if self is branch else [])
+    files = {"network_csv": "n.csv", "line0_plan_csv": "line0/plan.csv", "line1_plan_csv": "line1/plan.csv",
+             "line1_plot": "line1/plan.png"}
+    d = network_plan.to_dict(files)
+    assert [p["files"] for p in d["line_plans"]] == [{"plan_csv": "line0/plan.csv"},
+                                                     {"plan_csv": "line1/plan.csv", "plot": "line1/plan.png"}]
+    assert d["line_plans"][1]["warnings"] == [f"{branch.line.source}: a section went beyond the model's validity"]
+    assert d["line_plans"][0]["warnings"] == []
+    assert all(p["files"] == {} for p in network_plan.to_dict()["line_plans"])  # nothing written: no files
+
+
 def test_the_machine_works_where_its_lines_plan_says_the_sections_are_tamped(network_plan):
     """A line's sections are tamped in a future's quarter only where the machine worked on that line then: the
     line's tamping share per quarter is at most the share of futures in which the machine worked there."""
@@ -80,8 +98,18 @@ def test_plan_plans_a_network_file(tmp_path, capsys):
     assert {Path(p).name for p in d["files"].values()} == {"network.csv", "network.png", "plan.csv", "costs.csv",
                                                         "plan.png"}
     assert (out / "line1" / "plan.csv").is_file() and (out / "network.csv").read_text().startswith("quarter,from")
+    sources = [line.source for line in load_network(EXAMPLE_NETWORK).lines]
+    for i, line_plan in enumerate(d["line_plans"]):  # each line's entry has a line plan's files and warnings
+        assert line_plan["files"] == {"plan_csv": str(out / f"line{i}" / "plan.csv"),
+                                      "costs_csv": str(out / f"line{i}" / "costs.csv"),
+                                      "plot": str(out / f"line{i}" / "plan.png")}
+        assert all(w.startswith(f"{sources[i]}") for w in line_plan["warnings"])
+    assert [w for line_plan in d["line_plans"] for w in line_plan["warnings"]] == d["warnings"]
     main(["plan", str(EXAMPLE_NETWORK), "--years", "0.25", "--futures", "1", "--out", str(out)])
-    text = capsys.readouterr().out
+    text, err = capsys.readouterr()
+    # the bar says what the start waits for (seconds per line with a history; it stood at 0 with no word)
+    assert "plan: starting 2 lines (130 sections, fitting 100 sections' histories; once per plan)" in err
+    assert "plan (quarters)" in err
     assert text.startswith("Network plan for Example Valley network (synthetic) from 2026-01-01")
     assert "cost of the network over 3 months" in text or "cost of the network over 0.25" in text
 
@@ -92,6 +120,23 @@ def test_a_faulty_network_file_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["plan", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "no such line file" in err and len(err.splitlines()) == 1
+
+
+def test_plan_reads_the_network_file_once(monkeypatch, capsys):
+    """``trackenv plan NETWORK.yaml`` reads the network file once, to tell it from a line file and to load it (it
+    read it twice); each line file once too."""
+    reads: list[str] = []
+    read_text = Path.read_text
+
+    def counted(self, *args, **kwargs):
+        reads.append(self.name)
+        return read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", counted)
+    # refused once the network is loaded, before the futures: the reads are the loading's
+    assert main(["plan", str(EXAMPLE_NETWORK), "--policy", "choice-threshold", "--scenario", "wet"]) == 2
+    assert "the network's machine tamps only" in capsys.readouterr().err
+    assert reads.count("example_network.yaml") == 1 and reads.count("example_branch.yaml") == 1
 
 
 def test_a_choice_policy_on_a_network_is_refused_before_anything_runs(capsys):

@@ -245,6 +245,18 @@ def test_config_validation_and_scenarios():
         env.step(np.ones(5, int))
 
 
+def test_a_short_line_is_told_that_the_capacity_it_exceeds_is_the_default():
+    """A line of fewer sections than the default capacity, given none, is told that 6 is the default and what to
+    set (it said "capacity must be in [1, 4], got 6", a 6 the user never wrote); a capacity given is refused as
+    before, and one that fits is taken."""
+    with pytest.raises(ValueError, match=r"^capacity must be in \[1, 4\] on a line of 4 sections, got 6 \(the "
+                                         r"default where capacity is not given\): set capacity$"):
+        LineConfig(n_sections=4)
+    with pytest.raises(ValueError, match=r"^capacity must be an integer in \[1, 4\], got 5"):
+        LineConfig(n_sections=4, capacity=5)
+    assert LineConfig(n_sections=4, capacity=4).capacity == 4
+
+
 @pytest.mark.parametrize(("field", "value", "message"), [
     ("n_sections", 2.0, r"n_sections must be an integer in \[1, 256\]"),
     ("annual_mgt", "15", r"annual_mgt must be a real number"),

@@ -208,7 +208,8 @@ def test_state_round_trip_and_into_a_vector_row():
     ({"move_cost": -1.0}, "move_cost"),
     ({"start_line": 2}, "start_line"),
     ({"line_config": "nowhere"}, "^line_config: unknown scenario"),
-    ({"line_config": {"n_sections": 2}}, r"^line_config: capacity must be an integer in \[1, 2\], got 6"),
+    ({"line_config": {"n_sections": 2}}, r"^line_config: capacity must be in \[1, 2\] on a line of 2 sections, "
+                                         r"got 6 \(the default where capacity is not given\)"),
     ({"line_config": {"bogus": 1}}, r"^line_config: unknown LineConfig key\(s\) \['bogus'\]"),
     ({"line_config": 3}, "line_config"),
     ({"no_such_field": 1}, "no_such_field"),
@@ -334,6 +335,19 @@ def test_mixed_config_round_trip_and_line_overrides():
     assert all(line.horizon_steps == 3 for line in config.line_configs)  # the override reached every line
     with pytest.raises(ValueError, match="line_sections"):
         _ = config.sections_per_line
+
+
+def test_a_field_a_line_file_sets_given_to_every_line_names_the_line():
+    """``n_sections`` given to a network whose second line is a line file is refused naming that line by its index,
+    its name and its file (it named neither: which of several files sets it?)."""
+    from trackenv.lines import EXAMPLE_NETWORK
+
+    branch = EXAMPLE_NETWORK.parent / "example_branch.yaml"
+    config = NetworkConfig(line_config=[{"n_sections": 30, "capacity": 3}, {"line": str(branch)}])
+    with pytest.raises(ValueError, match=r"^line_config\[1\] \(Example Branch Line \(synthetic\)\): n_sections "
+                                         r"come\(s\) from the line file .*example_branch\.yaml: change the file"):
+        NetworkConfig.coerce(config, n_sections=5)
+    assert NetworkConfig.coerce(config, horizon_years=0.5).horizon_steps == 2  # a field no file sets reaches both
 
 
 def test_mixed_vector_env_equals_single_envs_and_the_state_round_trips():

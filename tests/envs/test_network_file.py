@@ -9,7 +9,7 @@ import pytest
 
 from trackenv.envs.line_file import LineFileError, load_line
 from trackenv.envs.network_env import TampingNetwork
-from trackenv.envs.network_file import load_network
+from trackenv.envs.network_file import load_network, load_network_or_none
 from trackenv.lines import EXAMPLE, EXAMPLE_NETWORK
 
 
@@ -83,6 +83,29 @@ def test_the_machine_is_on_the_line_named_by_file_or_by_name(tmp_path):
     assert load_network(_folder(tmp_path, GOOD + "machine_on: example_branch.yaml\n")).start_line == 1
     path = _folder(tmp_path, GOOD + "machine_on: Example Branch Line (synthetic)\n")
     assert load_network(path).config().start_line == 1
+
+
+@pytest.mark.parametrize("written", ["./example_branch.yaml", "../{folder}/example_branch.yaml",
+                                     "{folder_path}/example_branch.yaml"])
+def test_machine_on_matches_a_listed_file_as_a_path_from_the_network_files_folder(tmp_path, written):
+    """``machine_on: ./example_branch.yaml`` (or any path to the file, from the network file's folder) is the listed
+    ``example_branch.yaml``: it was refused as naming no line, since it matched only as written."""
+    text = written.format(folder=tmp_path.name, folder_path=tmp_path)
+    assert load_network(_folder(tmp_path, GOOD + f"machine_on: {text}\n")).start_line == 1
+    with pytest.raises(LineFileError, match=r"machine_on: './example_branch.csv' is neither a listed line file"):
+        load_network(_folder(tmp_path, GOOD + "machine_on: ./example_branch.csv\n"))
+
+
+def test_load_network_or_none_loads_a_network_file_and_leaves_anything_else(tmp_path):
+    """A network file is loaded as :func:`load_network` loads it, its faults named as it names them; a line file,
+    or a file that is not YAML, is None (the line's loader names its faults)."""
+    assert load_network_or_none(EXAMPLE_NETWORK) == load_network(EXAMPLE_NETWORK)
+    assert load_network_or_none(EXAMPLE) is None
+    path = _folder(tmp_path, GOOD + "mashine_on: example.yaml\n")
+    with pytest.raises(LineFileError, match="unknown key 'mashine_on'; did you mean 'machine_on'"):
+        load_network_or_none(path)
+    path.write_text("name: [unclosed\n")
+    assert load_network_or_none(path) is None and load_network_or_none(tmp_path / "nowhere.yaml") is None
 
 
 def test_lines_dated_more_than_a_step_apart_are_refused(tmp_path):

@@ -397,7 +397,7 @@ class LineConfig(ConfigBase):
         for name in ("possession_cost", "tamping_cost_per_m", "renewal_cost_per_m", "geometry_cost_per_section_year",
                      "alert_cost", "speed_restriction_cost", "immediate_action_cost", "annual_budget"):
             c(name, low=0.0, high=1e9)
-        bounded_by(self, "n_sections", ci, "capacity", low=1, high=self.n_sections)
+        self._check_capacity(ci)
         check_choice("over_capacity", self.over_capacity, OVER_CAPACITY)
         ci("min_steps_between_tampings", low=0, high=100)
         object.__setattr__(self, "profiles", check_bool("profiles", self.profiles))
@@ -529,13 +529,24 @@ class LineConfig(ConfigBase):
         line = changes.get("line", self.line)
         given = [name for name in LINE_FILE_FIELDS if name in changes]
         if line is not None and given:
-            raise ValueError(f"{', '.join(given)} come(s) from the line file: change the file, or leave "
+            source = line if isinstance(line, (str, os.PathLike)) else getattr(line, "source", "given")
+            raise ValueError(f"{', '.join(given)} come(s) from the line file {source}: change the file, or leave "
                              f"{'them' if len(given) > 1 else 'it'} out")
         base = {**self.to_dict(), "line": self.line}  # the description itself: its source, no second check
         if "line" in changes:  # the old line's values (or the scenario's) give way to the new file's
             for name in LINE_FILE_FIELDS:
                 del base[name]
         return self.from_dict({**base, **changes})
+
+    def _check_capacity(self, ci: Any) -> None:
+        """``capacity`` within [1, n_sections]; the default's refusal on a shorter line says that it is the
+        default, which the user never set, and what to set."""
+        default = next(f.default for f in fields(self) if f.name == "capacity")
+        n = self.n_sections
+        if type(self.capacity) is int and self.capacity == default and isinstance(n, int) and 1 <= n < default:
+            raise ValueError(f"capacity must be in [1, {n}] on a line of {n} sections, got {default} (the default "
+                             f"where capacity is not given): set capacity")
+        bounded_by(self, "n_sections", ci, "capacity", low=1, high=self.n_sections)
 
     def _take_line(self) -> None:
         """Read ``line`` (a path, a dict of a line's keys, or a description) and set the fields it owns."""

@@ -126,7 +126,7 @@ class NetworkConfig:
         line_changes = {k: v for k, v in overrides.items() if k not in own}
         if line_changes:
             given = mine.get("line_config", config.line_config)
-            lines = [line.replace(**line_changes) for line in _line_configs(given)]
+            lines = _replaced(_line_configs(given), line_changes)
             mine["line_config"] = lines if isinstance(given, (list, tuple)) else lines[0]
         return config.replace(**mine) if mine else config
 
@@ -223,6 +223,19 @@ def _line_configs(value: Any) -> tuple[LineConfig, ...]:
         except ValueError as exc:
             raise ValueError(f"line_config[{i}]: {str(exc).removeprefix('line_config: ')}") from None
     return tuple(out)
+
+
+def _replaced(lines: tuple[LineConfig, ...], changes: dict[str, Any]) -> list[LineConfig]:
+    """Each of ``lines`` with ``changes``; a line that refuses them (a field its line file sets, say) is named in
+    the ValueError by its index and its name, since the lines of a network may come from several files."""
+    out = []
+    for i, line in enumerate(lines):
+        try:
+            out.append(line.replace(**changes))
+        except ValueError as exc:
+            where = f" ({line.line.name})" if line.line is not None else ""  # the message names its file
+            raise ValueError(f"line_config[{i}]{where}: {exc}") from None
+    return out
 
 
 def _check_alike(lines: tuple[LineConfig, ...]) -> None:

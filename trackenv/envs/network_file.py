@@ -32,6 +32,7 @@ from .line_file import (
     Field,
     LineDescription,
     LineFileError,
+    _check_keys,
     _in_range,
     _integer,
     _number,
@@ -42,7 +43,7 @@ from .line_file import (
 )
 from .network import NetworkConfig
 
-__all__ = ["NETWORK_KEYS", "NetworkDescription", "is_network_file", "load_network"]
+__all__ = ["NETWORK_KEYS", "NetworkDescription", "is_network_file", "load_network", "load_network_or_none"]
 
 #: The keys of a network file (YAML).
 NETWORK_KEYS: dict[str, Field] = {
@@ -115,7 +116,11 @@ class NetworkDescription:
 def is_network_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` is a network file (a YAML mapping with ``lines``) rather than a line file; False for
     anything else, whose loader then names the fault."""
-    doc = yaml_document(path)
+    return _is_network(yaml_document(path))
+
+
+def _is_network(doc: Any) -> bool:
+    """Whether a file's YAML document ``doc`` is a network file's (a mapping with ``lines``)."""
     return isinstance(doc, dict) and "lines" in doc
 
 
@@ -125,9 +130,23 @@ def load_network(path: str | os.PathLike[str]) -> NetworkDescription:
     Raises :class:`~trackenv.envs.line_file.LineFileError` for a fault in the network file (an unknown or
     missing key, no lines, a line listed twice, a ``machine_on`` that names no line or two, a bad number) or in
     a line file (reported as :func:`~trackenv.envs.line_file.load_line` reports it)."""
-    path = Path(path)
+    return _network(Path(path), yaml_mapping(Path(path), "network file", NETWORK_KEYS))
+
+
+def load_network_or_none(path: str | os.PathLike[str]) -> NetworkDescription | None:
+    """:func:`load_network` where ``path`` is a network file (:func:`is_network_file`), else None (a line file,
+    or a file whose loader then names the fault), reading the file once for both: what ``trackenv plan`` takes."""
+    doc = yaml_document(path)
+    if not _is_network(doc):
+        return None
+    _check_keys(str(path), "", doc, NETWORK_KEYS)  # as yaml_mapping checks a file it reads
+    return _network(Path(path), doc)
+
+
+def _network(path: Path, doc: dict[str, Any]) -> NetworkDescription:
+    """The :class:`NetworkDescription` of the network file ``path`` from its YAML mapping ``doc`` (its keys
+    checked): every line file read, every value checked (:func:`load_network`)."""
     source = str(path)
-    doc = yaml_mapping(path, "network file", NETWORK_KEYS)
     listed = doc["lines"]
     if not isinstance(listed, list) or not listed or not all(isinstance(p, str) and p.strip() for p in listed):
         raise LineFileError(f"{source}, lines: must be a list of line files (paths relative to this file), got "
@@ -143,7 +162,7 @@ def load_network(path: str | os.PathLike[str]) -> NetworkDescription:
         except LineFileError as exc:
             raise LineFileError(f"{source}, lines[{i}] ({listed[i].strip()!r}, relative to the network file): "
                                 f"{exc}") from None
-    start = _machine_line(source, doc.get("machine_on"), listed, tuple(lines))
+    start = _machine_line(source, doc.get("machine_on"), listed, files, tuple(lines))
     capacity = None
     if doc.get("capacity") is not None:
         capacity = _integer(source, "capacity", doc["capacity"])
@@ -159,12 +178,16 @@ def load_network(path: str | os.PathLike[str]) -> NetworkDescription:
                               _text(source, "description", doc.get("description", "")), source)
 
 
-def _machine_line(source: str, value: Any, listed: list[str], lines: tuple[LineDescription, ...]) -> int:
-    """The index of the line ``machine_on`` names (a listed file as written, or a line's name); 0 if not given."""
+def _machine_line(source: str, value: Any, listed: list[str], files: list[Path],
+                  lines: tuple[LineDescription, ...]) -> int:
+    """The index of the line ``machine_on`` names (a listed file, compared as a path relative to the network
+    file's folder: ``./branch.yaml`` is ``branch.yaml``; or a line's name); 0 if not given. ``files``: the
+    listed files resolved, in the order of ``listed``."""
     if value is None:
         return 0
     text = _text(source, "machine_on", value)
-    by_file = [i for i, p in enumerate(listed) if p.strip() == text]
+    named = (Path(source).parent / text).resolve()
+    by_file = [i for i, file in enumerate(files) if file == named]
     by_name = [i for i, line in enumerate(lines) if line.name == text]
     found = sorted(set(by_file or by_name))
     if len(found) == 1:
