@@ -103,4 +103,5 @@ def test_a_settlement_that_runs_away_is_a_warning_not_silent_figures():
 
     runaway = run(local_defect_length_m=3.0, local_defect_rate_factor=5.0, local_defect_in_zone="multiply")
     assert len(runaway) == 1 and "local_defect_rate_factor=5" in str(runaway[0].message)
+    assert "of the line in row 0 of the batch (the env of that index in a vector env)" in str(runaway[0].message)
     assert run() == []

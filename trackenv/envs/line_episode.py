@@ -1093,7 +1093,8 @@ class LineBatch:
             c = self.config
             ratio = self.contact_force[at] / self.static_wheel_load[at]
             warnings.warn(
-                f"section {at % c.n_sections} of line {at // c.n_sections} has left the model's validity: "
+                f"section {at % c.n_sections} of the line in row {at // c.n_sections} of the batch (the env of "
+                f"that index in a vector env) has left the model's validity: "
                 f"wheel/rail force {self.contact_force[at] / 1e3:.0f} kN ({ratio:.1f} x the static wheel load; "
                 f"valid up to {VALID_CONTACT_FACTOR:g} x), D1 mean-to-peak "
                 f"{self.peak[at] * 1e3:.0f} mm (valid up to {VALID_PEAK_M * 1e3:.0f} mm); its settlement has run "
