@@ -808,9 +808,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seeds", default=None, metavar="A:B",
                     help="held-out episodes: A:B (seeds A..B-1) or a,b,c (default 0:8)")
     sp.add_argument("--policy", choices=("all", "agent", "rules"), default="all",
-                    help="which policies to score: the rules and the trained agent, with the model-predictive "
-                         "planner where the preset measures every step without error (the 60 m track) (default), "
-                         "or the rules or the agent alone")
+                    help="which policies to score: all, the tuned rules and the trained agent, with the "
+                         "model-predictive planner where the preset measures every step without error (the 60 m "
+                         "track); agent, the trained agent (refused where there is none) and the tuned rules it is "
+                         "compared with (its paired difference to the best of them; --rules NAMES scores fewer, "
+                         "e.g. --rules grouped-threshold); rules, the tuned rules alone")
     sp.add_argument("--model", default=None, metavar="ZIP",
                     help=f"a trained policy: a per-section policy of trackenv train --env ID (any line), a model of "
                          f"trackenv train (the line it was trained on) or a folder of experiments/train_rllib.py "

@@ -126,6 +126,33 @@ def test_train_line_options_are_refused_where_they_do_not_apply(capsys):
     assert "train it on the network's line (--env trackenv/TampingLine-v0)" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", [["evaluate", "--seeds", "0:1"], ["leaderboard"], ["train"]])
+def test_a_line_or_network_file_as_env_says_what_to_give_instead(command, capsys, tmp_path):
+    """``--env FILE.yaml`` is no env id: a line file is refused in one line giving the id and ``--set line=PATH``
+    (was: "not a registered env id"), a network file naming the plan and NetworkRule instead."""
+    from trackenv.lines import EXAMPLE, EXAMPLE_NETWORK
+
+    name, *rest = command
+    assert main([name, "--env", str(EXAMPLE), *rest, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a line file, not an env id" in err
+    assert f"--env trackenv/TampingLine-v0 --set line={EXAMPLE}" in err and f"trackenv plan {EXAMPLE}" in err
+    assert main([name, "--env", str(EXAMPLE_NETWORK), *rest, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a network file, not an env id" in err
+    assert f"trackenv plan {EXAMPLE_NETWORK}" in err and "NetworkRule(...).bind(config)" in err
+
+
+@pytest.mark.parametrize("env", [[], ["--env", "trackenv/TampingLine-v0"]])
+@pytest.mark.parametrize("field", ["bogus", "n_lines"])
+def test_train_refuses_an_unknown_set_field_as_evaluate_does(env, field, capsys):
+    """``trackenv train --set FIELD=...`` with no such field of the line's config: evaluate's one line naming it
+    and the known fields, exit status 2 (was Python's TypeError traceback)."""
+    assert main(["train", *env, "--set", f"{field}=2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"trackenv train: unknown LineConfig key(s) ['{field}']; known: ") and err.count("\n") == 1
+
+
 def test_evaluate_ray_options_parse():
     from trackenv_agents.cli import build_parser
 
@@ -383,6 +410,8 @@ def test_every_option_has_help_text(command):
         assert "(default: 20000)" in text and "hyper-parameter file's, 8" in text
     if command == "paper":
         assert "(default: 6)" in text and "(default: 50000)" in text
+    if command == "evaluate":  # --policy agent scores the rules as well: its comparison is with the best of them
+        assert "agent, the trained agent (refused where there is none) and the tuned rules it is compared with" in text
 
 
 @pytest.mark.parametrize("argv", [["train", "--timesteps", "-5"], ["train", "--n-envs", "0"],

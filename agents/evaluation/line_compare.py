@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.line_config import LineConfig, scenario
+from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig, scenario
 from trackenv.envs.network import NetworkConfig
 
 from ..rules.line import LINE_HEURISTICS
@@ -27,6 +27,9 @@ def scenario_of(env_id: str) -> str:
 
     import trackenv  # noqa: F401
 
+    refusal = file_as_env_refusal(env_id)
+    if refusal is not None:
+        raise ValueError(refusal)
     try:
         spec = gym.spec(env_id)
     except gym.error.Error as exc:  # an unknown name or version: the user's input, not a crash
@@ -41,6 +44,28 @@ def scenario_of(env_id: str) -> str:
         raise ValueError(f"{env_id} is not an id of a preset with per-section actions (the TampingLine ids, "
                          "trackenv/Tamping-v1)")
     return kwargs["scenario"]
+
+
+#: what to do with a network of lines of their own, which the comparisons do not score (:func:`line_of`)
+NETWORK_ROUTES = "plan it with trackenv plan {path}, or play NetworkRule(...).bind(config) on it in Python"
+
+
+def file_as_env_refusal(env_id: str) -> str | None:
+    """What to give instead where ``env_id`` is the path of a line or network file (a YAML file that exists):
+    an env id is a registered name, and a line file is a field of a line's config (``--set line=PATH``); None
+    for anything else (an id, or a name that is no file, which Gymnasium then refuses)."""
+    from trackenv.envs.network_file import is_network_file
+
+    path = Path(env_id)
+    if path.suffix.lower() not in (".yaml", ".yml") or not path.is_file():
+        return None
+    if is_network_file(path):
+        return (f"{env_id!r} is a network file, not an env id: a network of lines of their own is not scored by "
+                f"evaluate or the leaderboard (their rules are tuned per preset); "
+                f"{NETWORK_ROUTES.format(path=env_id)}; train a line's policy on one of its lines with --env "
+                f"trackenv/TampingLine-v0 --set line=LINE.yaml")
+    return (f"{env_id!r} is a line file, not an env id: give --env trackenv/TampingLine-v0 --set line={env_id} "
+            f"(or plan the line with trackenv plan {env_id})")
 
 
 def env_config(env_id: str, **overrides: Any) -> LineConfig | NetworkConfig:
@@ -227,8 +252,7 @@ def line_of(config: Any) -> LineConfig:
         return config
     if config.mixed:
         raise ValueError("line_config: a network of lines of their own is not scored by evaluate or the leaderboard "
-                         "(their rules are tuned per preset); plan it with trackenv plan NETWORK.yaml, or play "
-                         "NetworkRule(...).bind(config) on it in Python")
+                         f"(their rules are tuned per preset); {NETWORK_ROUTES.format(path='NETWORK.yaml')}")
     return config.line_config
 
 
@@ -247,13 +271,25 @@ def engine_note(config: dict[str, Any]) -> str:
 def config_changes(env_id: str, config: Any) -> dict[str, Any]:
     """The fields in which ``config`` differs from the registered ``env_id``'s own (:func:`env_config`), the
     engine's options left to :func:`engine_note` (a network's line fields prefixed ``line_config.``), as plain
-    data: what a table must say it was scored on."""
+    data: what a table must say it was scored on. A line file is named by its path, not by the fields it sets (the
+    JSON's ``config`` holds the whole line)."""
     base, got = env_config(env_id).to_dict(), config.to_dict()
     out = {k: v for k, v in got.items() if k != "line_config" and v != base.get(k)}
     if "line_config" in got:
         out.update({f"line_config.{k}": v for k, v in got["line_config"].items()
                     if v != base["line_config"].get(k)})
-    return {k: v for k, v in out.items() if k.rpartition(".")[2] not in ENGINE_FIELDS}
+    return line_named(config, {k: v for k, v in out.items() if k.rpartition(".")[2] not in ENGINE_FIELDS})
+
+
+def line_named(config: Any, changes: dict[str, Any]) -> dict[str, Any]:
+    """``changes`` (of :func:`config_changes`) with the line of ``config`` (or of its network) named by its
+    :attr:`~trackenv.envs.line_file.LineDescription.label` and without the fields its file sets: the whole line
+    and its sections' values would fill a table's header."""
+    line = getattr(getattr(config, "line_config", config), "line", None)  # (a network of lines of their own: none)
+    if line is None:
+        return changes
+    return {k: line.label if k.rpartition(".")[2] == "line" else v for k, v in changes.items()
+            if k.rpartition(".")[2] not in LINE_FILE_FIELDS}
 
 
 def changes_note(changes: dict[str, Any]) -> str:

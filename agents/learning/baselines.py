@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig
 from trackenv.envs.wrappers import ranked_to_sections
 
 from ..rules.base import as_batch
@@ -131,14 +131,36 @@ class TrainedPolicy:
             reset()
 
     def unfit_for(self, config: LineConfig) -> str | None:
-        """None where ``config`` is the line this policy was trained on; else which of its fields differ."""
-        mine, theirs = self.config.to_dict(), LineConfig.coerce(config).to_dict()
+        """None where ``config`` is the line this policy was trained on; else which of its fields differ (another
+        line file first, named by its path, without the fields the files set) and, where it was trained on a line
+        file, how to score it there."""
+        here = LineConfig.coerce(config)
+        mine, theirs = self.config.to_dict(), here.to_dict()
         differ = [k for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
         if not differ:
             return None
-        shown = ", ".join(f"{k} {mine.get(k)!r} (here {theirs.get(k)!r})" for k in differ[:3])
+        if "line" in differ:
+            differ = ["line", *(k for k in differ if k != "line" and k not in LINE_FILE_FIELDS)]
+        shown = ", ".join(f"{k} {_shown(self.config, k)} (here {_shown(here, k)})" for k in differ[:3])
         more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
-        return f"trained on another line: {shown}{more}"
+        hint = _line_hint(self.config.line) if "line" in differ else ""
+        return f"trained on another line: {shown}{more}{hint}"
+
+
+def _shown(config: LineConfig, field: str) -> str:
+    """A field of ``config`` in :meth:`TrainedPolicy.unfit_for`'s message: its line by the file it was read from
+    (the whole line would be kilobytes), any other field as Python writes it."""
+    if field != "line":
+        return repr(config.to_dict().get(field))
+    return "none" if config.line is None else config.line.label
+
+
+def _line_hint(line: Any) -> str:
+    """How to score a policy trained on ``line`` (a line description, or None) on that line: ``--set line=PATH``
+    with the path of its file where it was read from one; "" without a line."""
+    if line is None:
+        return ""
+    return f"; score it on its line with --set line={line.path or 'PATH (the file of ' + line.label + ')'}"
 
 
 def rllib_module_dir(run_dir: str | Path, multi_agent: bool) -> Path:

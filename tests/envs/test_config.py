@@ -71,6 +71,8 @@ def test_unknown_key_raises_naming_it(key: str) -> None:
         TampingEnv(**SMALL, **{key: 1})
     with pytest.raises(ValueError, match=named):
         gym.make("trackenv/Tamping-v1", **SMALL, **{key: 1})
+    with pytest.raises(ValueError, match=named):  # the preset by name too (was Python's TypeError)
+        scenario("track60", **{key: 1})
 
 
 def test_a_horizon_between_whole_steps_is_refused_not_rounded() -> None:

@@ -82,6 +82,15 @@ def test_the_description_round_trips_and_is_hashable(line_file):
     assert pickle.loads(pickle.dumps(line)) == line
 
 
+def test_a_line_is_named_by_its_file_or_else_by_its_name(line_file):
+    """``label``, what messages and tables show of a line: the file it was read from, or for a line given as data
+    its quoted name (the whole description is kilobytes)."""
+    line = load_line(line_file)
+    assert line.path == line.label == str(line_file)
+    again = LineDescription.from_dict(line.to_dict())
+    assert again.path is None and again.label == "'Test line'"
+
+
 # One case per kind of fault: (what the files say, what the one line must name). Each gives a LineFileError
 # (a ValueError) of one line naming the file, and for a CSV the row, and the field with what is allowed.
 FAULTS = {

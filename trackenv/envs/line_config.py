@@ -723,7 +723,8 @@ SCENARIOS: dict[str, dict[str, Any]] = {
 
 
 def scenario(name: str, **overrides: Any) -> LineConfig:
-    """The named scenario's config, with ``overrides``."""
+    """The named scenario's config, with ``overrides`` (fields of :class:`LineConfig`: an unknown one is a
+    ValueError naming the known ones, as the env's is, not Python's TypeError)."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r}; known: {sorted(SCENARIOS)}")
-    return LineConfig(**{**SCENARIOS[name], **overrides})
+    return LineConfig.from_dict({**SCENARIOS[name], **overrides})

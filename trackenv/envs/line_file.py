@@ -215,6 +215,18 @@ class LineDescription:
     def length_m(self) -> float:
         return sum(s.length_m for s in self.sections)
 
+    @property
+    def path(self) -> str | None:
+        """The file the line was read from; None for a line given as data (a dict, a saved config), whose
+        ``source`` is a placeholder in angle brackets."""
+        return None if self.source.startswith("<") else self.source
+
+    @property
+    def label(self) -> str:
+        """The line for people: its :attr:`path`, else its quoted name, in place of the whole description that
+        ``to_dict`` writes (kilobytes: every section and measurement)."""
+        return self.path or repr(self.name)
+
     def traffic_factors(self) -> tuple[float, ...]:
         """Per section, its tonnage over the line's (its axle passes are those of the line's tonnage times this)."""
         return tuple(s.annual_mgt / self.annual_mgt for s in self.sections)

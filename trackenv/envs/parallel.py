@@ -104,12 +104,13 @@ class LineParallelEnv(ParallelEnv):
 
     **Observation** (per agent): ``Dict`` with
 
-    * ``"observation"``: float32 ``Box``, first the agent's section's entries of the line env's observation
-      (``section_sd`` and ``section_peak`` [mm], ``register``, ``tampings``, ``tampings_since_renewal``,
-      ``years_since_tamping`` [year]; with ``profiles`` its measured ``level`` row [mm]), then the line context
-      that every agent shares (``time``, ``measurement_age`` [year], ``budget_left``). ``feature_names`` names
-      the entries in their order (that of the line env's observation space); units and bounds are the line
-      env's (its table: :class:`~trackenv.envs.line.TampingLine`).
+    * ``"observation"``: float32 ``Box``, first the agent's section's entries of the line env's observation,
+      then the line context that every agent shares, each part in the order of the line env's observation space
+      (its keys' alphabetical order): on the default line ``register``, ``section_peak`` and ``section_sd``
+      [mm], ``tampings``, ``tampings_since_renewal``, ``years_since_tamping`` [year], then ``budget_left``,
+      ``measurement_age`` [year], ``time`` (the keys of ``profiles`` or the choices take their places in that
+      order). ``feature_names`` names the entries in order; units and bounds are the line env's (its table:
+      :class:`~trackenv.envs.line.TampingLine`).
     * ``"action_mask"``: int8 ``(2,)`` [may wait, may tamp]: 0 for tamp while the section is within
       ``min_steps_between_tampings`` of its last tamping; with the choices ``(7,)``, one entry per code (the
       line env's ``action_masks()``, section by section: a choice not enabled, track work too soon after the

@@ -50,3 +50,15 @@ def test_the_network_episode_figure_draws_lines_of_their_own(tmp_path):
     import matplotlib.image
 
     assert matplotlib.image.imread(out).ndim == 3
+
+
+def test_a_line_file_is_named_by_its_path_in_what_changed():
+    """A table's "changed:" names a line file by its path, not by the whole line (100 kB for the example) nor the
+    fields and per-section values the file sets; the JSON's "config" keeps the line itself."""
+    from trackenv.lines import EXAMPLE
+    from trackenv_agents.evaluation.line_compare import changes_note, config_changes, env_config
+
+    config = env_config("trackenv/TampingLine-v0", line=str(EXAMPLE), horizon_years=1.0)
+    changes = config_changes("trackenv/TampingLine-v0", config)
+    assert changes == {"horizon_years": 1.0, "line": str(EXAMPLE)}
+    assert changes_note(changes) == f"; changed: horizon_years=1.0, line={EXAMPLE}"

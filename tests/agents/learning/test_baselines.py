@@ -79,6 +79,24 @@ def test_leaderboard_scores_a_baseline_on_its_line_and_says_where_it_does_not(sb
         format_leaderboard(payload))
 
 
+def test_a_baseline_of_a_line_file_is_refused_naming_the_file_and_how_to_score_it_there():
+    """Trained on a line file, refused elsewhere by the file's path and ``--set line=PATH``, not by the whole line
+    (kilobytes) and the fields its file sets; a line given as data is named by its name."""
+    from trackenv.envs.line_file import LineDescription
+    from trackenv.lines import EXAMPLE
+    from trackenv_agents.learning.baselines import TrainedPolicy
+
+    trained = scenario("default", line=str(EXAMPLE), horizon_years=2.0)
+    message = TrainedPolicy(None, trained, "run", "sb3", "run.zip").unfit_for(scenario("default"))
+    assert message == (f"trained on another line: line {EXAMPLE} (here none), horizon_years 2.0 (here 10.0); score "
+                       f"it on its line with --set line={EXAMPLE}")
+    as_data = trained.replace(line=LineDescription.from_dict(trained.line.to_dict()))
+    message = TrainedPolicy(None, as_data, "run", "sb3", "run.zip").unfit_for(scenario("default"))
+    assert "line 'Example Valley Line (synthetic)' (here none)" in message
+    assert message.endswith("--set line=PATH (the file of 'Example Valley Line (synthetic)')")
+    assert len(message) < 300
+
+
 def _rllib_run(folder: Path, multi_agent: bool) -> Path:
     """A folder as experiments/train_rllib.py writes it, with an untrained RLModule of RLlib's default PPO."""
     pytest.importorskip("ray.rllib")
