@@ -148,7 +148,9 @@ class LinePlan:
     ``engine`` and ``pass_reuse_tolerance_m`` (m) the line was planned with, and the model's ``steps_per_year``
     and ``measurement_interval`` (steps between recording-car runs), the possession ``capacity`` (sections a
     quarter; None: not known), which the table names where a quarter recommends more, and ``peak_max_mm`` each
-    section's largest true D1 mean-to-peak in any future (sections,; :meth:`beyond_validity`)."""
+    section's largest true D1 mean-to-peak in any future (sections,; :meth:`beyond_validity`), and the rule's
+    ``tuning`` on the line where the plan asked for one (:class:`~trackenv_agents.plan_tuning.RuleTuning`; None:
+    the shipped parameters)."""
 
     line: Any
     policy: str
@@ -176,6 +178,7 @@ class LinePlan:
     min_steps_between_tampings: int = 1
     capacity: int | None = None
     peak_max_mm: np.ndarray | None = None
+    tuning: Any = None
 
     @property
     def share(self) -> np.ndarray:
@@ -250,6 +253,7 @@ class LinePlan:
             "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
             "beyond_validity_peak_mm": self.beyond_validity(),
+            "tuning": None if self.tuning is None else self.tuning.to_dict(),
         }
 
     def table(self) -> str:
@@ -263,6 +267,7 @@ class LinePlan:
         lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {years_text(self.years)}, "
                  f"{self.futures} futures{engine}{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
+                 *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
@@ -283,6 +288,16 @@ class LinePlan:
             lines.append(f"history: {whose} fitted, median residual "
                          f"{fit['median_residual_mm']:.3f} mm (trackenv.envs.history_fit)")
         return "\n".join(lines)
+
+    def tuning_lines(self) -> list[str]:
+        """What the rule's parameters were tuned on: this line (``--tune``: what the tuning chose), or the
+        preset, with how to tune them here (a rule with thresholds only; none for a trained policy)."""
+        if self.tuning is not None:
+            return [self.tuning.text(self.policy)]
+        if not rule_thresholds(self.policy_params):
+            return []
+        return [f"parameters: the shipped ones, tuned on the {self.scenario} preset's line; --tune 8 tunes them on "
+                f"this line first (minutes)"]
 
     def beyond_validity(self) -> dict[str, float]:
         """The sections whose true D1 mean-to-peak went beyond what the model represents

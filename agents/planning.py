@@ -311,9 +311,10 @@ def line_limits(batch: Any, row: int, n_sections: int) -> dict[str, np.ndarray]:
 
 def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray], *, policy: str, rule: Any,
               years: float, seed: int, dates: tuple[str, ...], scenario: str, choices: tuple[str, ...],
-              config: dict[str, Any]) -> LinePlan:
+              config: dict[str, Any], tuning: Any = None) -> LinePlan:
     """The :class:`LinePlan` of ``line`` (its description) modelled by ``cfg`` from its futures ``run`` (a line's:
-    :meth:`_Futures.line` on a network), with its ``limits``; ``config``: the fields the plan was given."""
+    :meth:`_Futures.line` on a network), with its ``limits``; ``config``: the fields the plan was given;
+    ``tuning``: the rule's tuning on the line, where asked (:class:`~trackenv_agents.plan_tuning.RuleTuning`)."""
     from trackenv.envs.line_fit import history_fit
 
     from .evaluation.line_compare import without_engine
@@ -326,22 +327,32 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm)
+                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm,
+                    tuning=tuning)
 
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
-              scenario: str = "default", progress: Callable[[int], Any] | None = None, **config: Any) -> LinePlan:
+              scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
+              **config: Any) -> LinePlan:
     """Plan maintenance on ``line`` (a line file's path or a :class:`~trackenv.envs.line_file.LineDescription`)
     for ``years`` from its ``as_of``: the policy ``policy`` (:func:`line_policy`) run in ``futures`` futures
     (episodes from seeds ``seed``, ``seed + 1``, ...) in one vector env, the line modelled as on the preset
     ``scenario`` (:data:`PLAN_SCENARIOS`); ``config``: further :class:`LineConfig` fields (costs, capacity, ...).
-    ``progress(1)`` is called after each quarter."""
+    ``tune``: where > 0, the rule's parameters are first tuned on that many futures of this line
+    (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`) instead of the shipped ones. ``progress(1)`` is called
+    after each quarter (and the tuning, where asked, shows its own progress bar)."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv
 
     cfg = plan_config(line, scenario, years=years, **config)
     rule = line_policy(policy, cfg, scenario, years=years)
+    tuning = None
+    if tune:
+        from .plan_tuning import tune_plan_rule
+
+        tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None)
+        rule = type(rule)(**tuning.params).bind(cfg)
     steps = cfg.horizon_steps
     trained = trained_horizon_years(rule)
     if trained is not None:
@@ -356,4 +367,4 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     env.close()
     dates = tuple(step_date(cfg.line.as_of, q, cfg.steps_per_year) for q in range(steps))
     return line_plan(cfg.line, cfg, run, limits, policy=policy, rule=rule, years=years, seed=seed, dates=dates,
-                     scenario=scenario, choices=tuple(cfg.choices), config=config)
+                     scenario=scenario, choices=tuple(cfg.choices), config=config, tuning=tuning)

@@ -1,0 +1,83 @@
+"""What ``trackenv plan --tune N`` is worth: the rule tuned on a line against the shipped parameters, on futures the
+tuning did not see.
+
+For each line (the default line's sections and traffic at ``--speeds`` km/h: a faster line has tighter limits and a
+dearer geometry per millimetre than the 100 km/h line the shipped parameters were tuned on), the grouped threshold
+is tuned as ``--tune`` tunes it (:func:`trackenv_agents.plan_tuning.tune_plan_rule`: its grid and the shipped
+parameters on ``--tune`` training futures of 10 years, seeds 1000..), then the tuned and the shipped rule run the
+held-out episodes ``--seeds`` (10 years each), paired per episode (95 % bootstrap CI of the mean difference).
+``--line-file PATH`` does the same on a line file (from its state as of the file, as ``trackenv plan`` models it),
+``--fast`` on the faster passes (``--engine fast --pass-reuse-mm 1``) for both.
+
+    python experiments/plan_tuning.py                       # 100, 140 and 180 km/h, --tune 8, seeds 0:100
+    python experiments/plan_tuning.py --speeds '' --line-file trackenv/lines/example.yaml --seeds 0:32 --fast \
+        --out experiments/saved/plan_tuning_example.json
+
+Writes ``experiments/saved/plan_tuning.json`` (``--out``); about 8 minutes per line of 12 sections on two cores,
+15 for the example line's 100 sections with ``--fast``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from trackenv.envs.line_config import scenario
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.evaluation.line_compare import parse_seeds
+from trackenv_agents.evaluation.statistics import paired_difference
+from trackenv_agents.plan_tuning import TUNE_YEARS, tune_plan_rule
+from trackenv_agents.planning import plan_config
+from trackenv_agents.rules.problems import tuned_rule
+
+OUT = Path(__file__).resolve().parent / "saved" / "plan_tuning.json"
+
+
+def one_line(label: str, config, futures: int, seeds: list[int]) -> dict:
+    """The tuning and the held-out comparison on the line of ``config`` (10-year episodes)."""
+    config = config.replace(horizon_years=TUNE_YEARS)
+    shipped = tuned_rule(config, "grouped-threshold")
+    t0 = time.perf_counter()
+    tuning = tune_plan_rule(shipped.bind(config), config, futures, progress=True)
+    tuned = type(shipped)(**tuning.params)
+    tuned_s = time.perf_counter() - t0
+    results = evaluate_many([shipped, tuned], config, seeds, progress=True, desc=f"held out, {label}")
+    diff = paired_difference(results[1], results[0])
+    base = float(results[0].cost.mean())
+    return {"line": label, "engine": config.engine, "tuning": tuning.to_dict(), "tuning_s": round(tuned_s, 1),
+            "held_out": {"episodes": len(seeds), "seeds": [seeds[0], seeds[-1]], "shipped_keur": base,
+                         "tuned_keur": float(results[1].cost.mean()), "tuned_minus_shipped": diff,
+                         "relative": diff["mean_difference"] / base,
+                         "relative_ci": [diff["ci_low"] / base, diff["ci_high"] / base]}}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--speeds", default="100,140,180", help="the default line at these speeds, km/h, comma-separated")
+    ap.add_argument("--line-file", default=None, help="a line file, after the speeds")
+    ap.add_argument("--fast", action="store_true", help="the faster passes (engine fast, pass reuse 1 mm)")
+    ap.add_argument("--tune", type=int, default=8, help="training futures (as trackenv plan --tune N)")
+    ap.add_argument("--seeds", default="0:100", help="held-out episodes A:B")
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args()
+    seeds = parse_seeds(args.seeds)
+    fast = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3} if args.fast else {}
+    lines = [(f"{float(v):g} km/h", scenario("default", speed_kmh=float(v), **fast))
+             for v in args.speeds.split(",") if v]
+    if args.line_file:
+        lines.append((args.line_file, plan_config(args.line_file, **fast)))
+    rows = []
+    for label, config in lines:
+        rows.append(one_line(label, config, args.tune, seeds))
+        h = rows[-1]["held_out"]
+        print(f"{label}: tuned {rows[-1]['tuning']['params']} — shipped {h['shipped_keur']:.1f}, tuned "
+              f"{h['tuned_keur']:.1f} k€, {100 * h['relative']:+.1f} % [{100 * h['relative_ci'][0]:+.1f}, "
+              f"{100 * h['relative_ci'][1]:+.1f}]", flush=True)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"rule": "grouped-threshold", "lines": rows}, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

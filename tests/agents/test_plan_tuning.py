@@ -1,0 +1,83 @@
+"""``trackenv plan --tune N``: the plan's rule tuned on the line itself (:mod:`trackenv_agents.plan_tuning`)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackenv_agents.cli import main
+from trackenv_agents.evaluation.harness import evaluate_many
+from trackenv_agents.plan_tuning import TUNE_YEARS, tune_plan_rule
+from trackenv_agents.planning import line_policy, plan_config, plan_line
+from trackenv_agents.rules.line import GroupedThreshold
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "envs"))
+from test_line_file import write  # noqa: E402  (the loader's test line: four sections with a history)
+
+FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
+#: one candidate besides the shipped parameters (3.5 / 1.75 mm): a low trigger that tamps far more often
+LOW = {"trigger_mm": 1.0, "include_mm": 0.5}
+
+
+@pytest.fixture
+def small_grid(monkeypatch):
+    """The grouped threshold's grid cut to one candidate, so that a tuning runs a few episodes."""
+    monkeypatch.setattr(GroupedThreshold, "param_grid", classmethod(lambda cls: [dict(LOW)]))
+
+
+def test_the_tuning_scores_the_grid_and_the_shipped_parameters_on_ten_year_training_futures(tmp_path, small_grid):
+    """Each candidate's cost is its mean over the training futures (seeds 1000, 1001) of ten years from the
+    line's state, as the harness scores it; the cheaper is chosen."""
+    cfg = plan_config(write(tmp_path), years=0.5, **FAST)
+    rule = line_policy("grouped-threshold", cfg)
+    tuning = tune_plan_rule(rule, cfg, 2)
+    assert tuning.candidates == 2 and tuning.shipped_params == {"trigger_mm": 3.5, "include_mm": 1.75}
+    runs = evaluate_many([GroupedThreshold(**tuning.shipped_params), GroupedThreshold(**LOW)],
+                         cfg.replace(horizon_years=TUNE_YEARS), [1000, 1001])
+    shipped, low = (float(r.cost.mean()) for r in runs)
+    assert tuning.shipped_cost_keur == pytest.approx(shipped, rel=1e-12)
+    assert tuning.cost_keur == pytest.approx(min(shipped, low), rel=1e-12)
+    assert tuning.params == (LOW if low < shipped else tuning.shipped_params)
+    assert tuning.to_dict()["seeds"] == [1000, 1001] and tuning.to_dict()["years"] == TUNE_YEARS
+
+
+def test_the_plan_runs_the_tuned_rule_and_says_so(tmp_path, small_grid):
+    """The plan's rule is the tuned one (its parameters in the plan), and the table and JSON say what the tuning
+    found; without ``tune`` nothing is tuned."""
+    line = write(tmp_path)
+    plan = plan_line(line, years=0.5, futures=2, tune=2, **FAST)
+    assert plan.tuning is not None and plan.policy_params == plan.tuning.params
+    assert plan.to_dict()["tuning"]["candidates"] == 2
+    assert "tuned on this line: grouped-threshold" in plan.table()
+    assert "in-sample" in plan.table()
+    plain = plan_line(line, years=0.5, futures=2, **FAST)
+    assert plain.tuning is None and plain.to_dict()["tuning"] is None and "tuned on this line" not in plain.table()
+    assert "parameters: the shipped ones, tuned on the default preset's line; --tune 8" in plain.table()
+    if plan.policy_params == plain.policy_params:  # the same rule: the same plan
+        np.testing.assert_array_equal(plan.costs, plain.costs)
+
+
+def test_plan_tune_from_the_command_line(tmp_path, capsys, small_grid):
+    line = write(tmp_path)
+    assert main(["plan", str(line), "--years", "0.5", "--futures", "1", "--tune", "1", "--engine", "fast",
+                 "--json", "--out", str(tmp_path / "plan")]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["tuning"]["futures"] == 1 and payload["policy_params"] == payload["tuning"]["params"]
+
+
+def test_what_cannot_be_tuned_is_refused_naming_why(tmp_path, capsys):
+    cfg = plan_config(write(tmp_path), years=0.5)
+    with pytest.raises(ValueError, match=r"^tune: 'no-maintenance' has no parameters to tune"):
+        tune_plan_rule(line_policy("no-maintenance", cfg), cfg, 2)
+    rule = line_policy("grouped-threshold", cfg)
+    for bad in (0, 101, 2.5, True):
+        with pytest.raises(ValueError, match=r"^tune must be an integer in \[1, 100\]"):
+            tune_plan_rule(rule, cfg, bad)
+    from trackenv.lines import EXAMPLE_NETWORK
+
+    assert main(["plan", str(EXAMPLE_NETWORK), "--tune", "2"]) == 2
+    assert "--tune tunes a line's rule on that line" in capsys.readouterr().err
