@@ -461,9 +461,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     kwargs = dict(policy=args.policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
                   progress=progress, **overrides)
     if args.tune:
-        if network is not None:
-            raise ValueError("--tune tunes a line's rule on that line: plan the network's lines one by one with "
-                             "--tune, or the network with the shipped parameters")
         kwargs["tune"] = args.tune
     with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
         warnings.simplefilter("ignore", FitWarning)
@@ -895,7 +892,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="tune the rule's parameters on this line first: its grid and the shipped parameters on N "
                          "training futures of 10 years (seeds 1000..), the cheapest planned with (0, the default: "
                          "the shipped parameters, tuned on the preset; 8 is a good start; minutes: each candidate "
-                         "runs N ten-year futures)")
+                         "runs N ten-year futures; on a network each line's rule, tuned on the line alone)")
     engine(sp, plan=True)
     sp.set_defaults(func=cmd_plan)
 

@@ -118,7 +118,7 @@ class NetworkPlan:
                f"machine is on line {self.network.start_line} now"]
         for i, line in enumerate(self.lines):
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
-            out += [f"  {text}" for text in summary_lines(line_summary(line.line))]
+            out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
         for q, row in enumerate(d["quarters"]):
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
@@ -221,6 +221,25 @@ def _line_files(files: Mapping[str, str], line: int) -> dict[str, str]:
     return {key.removeprefix(prefix): path for key, path in files.items() if key.startswith(prefix)}
 
 
+def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool) -> list[Any]:
+    """Each line's :class:`~trackenv_agents.plan_tuning.RuleTuning`: its rule tuned on ``tune`` futures of the
+    line alone, once per distinct line config (lines of equal files share it)."""
+    from .plan_tuning import tune_plan_rule
+
+    found: list[tuple[Any, Any]] = []
+    out = []
+    for i, (rule, cfg) in enumerate(zip(rules, lines, strict=True)):
+        known = next((t for c, t in found if c == cfg), None)
+        if known is None:
+            try:
+                known = tune_plan_rule(rule, cfg, tune, progress=progress)
+            except ValueError as exc:
+                raise ValueError(f"line {i}: {exc}") from None
+            found.append((cfg, known))
+        out.append(known)
+    return out
+
+
 def check_network_policy(policy: str) -> None:
     """ValueError for a policy that uses the choices beyond tamping (a choice rule, ``cpi-choice-agent``): the
     network's machine tamps only."""
@@ -230,7 +249,7 @@ def check_network_policy(policy: str) -> None:
 
 
 def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
-                 scenario: str = "default", progress: Callable[[int], Any] | None = None,
+                 scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
                  **config: Any) -> NetworkPlan:
     """Plan tamping on ``network`` (a network file's path or a
     :class:`~trackenv.envs.network_file.NetworkDescription`) for ``years`` from its ``as_of``: the line policy
@@ -239,9 +258,10 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     :func:`~trackenv_agents.rules.network.network_play`, in ``futures`` futures (seeds ``seed``, ``seed + 1``,
     ...); each line modelled as :func:`~trackenv_agents.planning.plan_config` models it; ``config``: further
     :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` given here is the
-    machine's, over the network file's). ``progress(1)`` after each quarter. ValueError for a policy that uses
-    the choices beyond tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the
-    line)."""
+    machine's, over the network file's). ``tune``: where > 0, each line's rule is first tuned on that many
+    futures of the line alone (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`: as if it had a machine of its
+    own; lines of one config once). ``progress(1)`` after each quarter. ValueError for a policy that uses the
+    choices beyond tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the line)."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.network_env import TampingNetworkVectorEnv
@@ -259,12 +279,15 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
             rules.append(line_policy(policy, cfg, scenario, years=years))
         except ValueError as exc:
             raise ValueError(f"line {i} ({desc.lines[i].name}): {exc}") from None
+    tunings = _tuned(rules, lines, tune, progress is not None) if tune else [None] * len(lines)
+    rules = [rule if t is None else type(rule)(**t.params).bind(cfg) for rule, t, cfg in zip(rules, tunings, lines,
+                                                                                             strict=True)]
     steps = lines[0].horizon_steps
     trained = trained_horizon_years(rules[0])
     if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years
         lines = [cfg.replace(horizon_years=trained) for cfg in lines]
     net = desc.config(lines, capacity=config.get("capacity"))  # the machine's fields and the dates from the file
-    rule = network_play(rules[0]).bind(net)
+    rule = network_play(rules[0]).bind(net, line_rules=rules)
     env = TampingNetworkVectorEnv(futures, net, autoreset_mode=AutoresetMode.NEXT_STEP)
     offsets = net.line_offsets
 
@@ -295,8 +318,9 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
         # the file's own description (two files of equal content share one config) on the network's calendar
         line = dataclasses.replace(desc.lines[i], as_of=desc.as_of)
         plans.append(line_plan(line, cfg, run.line(i, slice(offsets[i], offsets[i + 1])),
-                               line_limits(batch, row, cfg.n_sections), policy=policy, rule=rules[0], years=years,
-                               seed=seed, dates=dates, scenario=scenario, choices=("tamp",), config=config))
+                               line_limits(batch, row, cfg.n_sections), policy=policy, rule=rules[i], years=years,
+                               seed=seed, dates=dates, scenario=scenario, choices=("tamp",), config=config,
+                               tuning=tunings[i]))
     env.close()
     return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine.machine,
                        run.machine.moved, run.costs, run.part_costs["move"], scenario)

@@ -65,6 +65,10 @@ def network_play(line_policy: Any, dispatch: str | ValueDispatch = NETWORK_DISPA
     return NetworkRule(line_policy, dispatch, eager_probability=eager_for(line_policy))
 
 
+def _params(policy: Any) -> dict[str, Any]:
+    return dict(getattr(policy, "params", None) or {})
+
+
 def network_label(line_name: str, dispatch: str | ValueDispatch = "requests",
                   eager_probability: float | None = None) -> str:
     """The name of a :class:`NetworkRule` over the line policy ``line_name``: ``network(<line_name>)`` by
@@ -166,14 +170,24 @@ class NetworkRule(Heuristic):
         # the base class's name is a class attribute; this one is the instance's
         self.__dict__["name"] = network_label(line_name, dispatch, eager_probability)
 
-    def bind(self, config: Any) -> NetworkRule:
+    def bind(self, config: Any, line_rules: Sequence[Any] | None = None) -> NetworkRule:
         """A copy whose line policy knows the calendar and capacity of the network's line config (a policy
         without ``bind`` is taken as it is), and whose dispatch knows that line's limits and costs. On a network
         of lines of their own (``config.mixed``) the line policy is bound to each distinct line config and plays
-        the lines of that config."""
-        bind = getattr(self.line_rule, "bind", None)
-        groups = [(members, bind(line) if callable(bind) else self.line_rule, line)
-                  for line, members in line_groups(config)]
+        the lines of that config. ``line_rules``: one line policy per line instead (a plan's rules tuned per
+        line), of which the lines of one config play their first line's (ValueError where they differ in
+        parameters)."""
+        if line_rules is not None and len(line_rules) != config.n_lines:
+            raise ValueError(f"line_rules must have one line policy per line ({config.n_lines}), got "
+                             f"{len(line_rules)}")
+        groups = []
+        for line, members in line_groups(config):
+            rule = self.line_rule if line_rules is None else line_rules[members[0]]
+            if line_rules is not None and any(_params(line_rules[m]) != _params(rule) for m in members):
+                raise ValueError(f"line_rules: lines {members} share one config but not their line policy's "
+                                 f"parameters")
+            bind = getattr(rule, "bind", None)
+            groups.append((members, bind(line) if callable(bind) else rule, line))
         bound = type(self)(groups[0][1], self.dispatch, config.line_config, self.eager_probability)
         bound._network, bound._groups = config, groups
         return bound

@@ -16,7 +16,7 @@ from trackenv_agents.planning import line_policy, plan_config, plan_line
 from trackenv_agents.rules.line import GroupedThreshold
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "envs"))
-from test_line_file import write  # noqa: E402  (the loader's test line: four sections with a history)
+from test_line_file import LINE, write  # noqa: E402  (the loader's test line: four sections with a history)
 
 FAST = {"engine": "fast", "pass_reuse_tolerance_m": 1e-3}
 #: one candidate besides the shipped parameters (3.5 / 1.75 mm): a low trigger that tamps far more often
@@ -77,7 +77,49 @@ def test_what_cannot_be_tuned_is_refused_naming_why(tmp_path, capsys):
     for bad in (0, 101, 2.5, True):
         with pytest.raises(ValueError, match=r"^tune must be an integer in \[1, 100\]"):
             tune_plan_rule(rule, cfg, bad)
-    from trackenv.lines import EXAMPLE_NETWORK
 
-    assert main(["plan", str(EXAMPLE_NETWORK), "--tune", "2"]) == 2
-    assert "--tune tunes a line's rule on that line" in capsys.readouterr().err
+
+def test_a_networks_lines_are_tuned_each_on_its_own_and_play_their_tuned_rules(tmp_path, small_grid, monkeypatch):
+    """On a network of a 100 km/h line twice (two files of equal content) and a 160 km/h line, each line's rule is
+    tuned on that line alone, lines of one config once, and each line plans with its own tuned parameters (its
+    plan and table say so)."""
+    from trackenv_agents import network_plan, plan_tuning
+    from trackenv_agents.rules.network import NetworkRule
+
+    for name, speed in (("slow", 100), ("slow_copy", 100), ("fast", 160)):
+        folder = tmp_path / name
+        folder.mkdir()
+        write(folder, line=LINE.replace("speed_kmh: 100", f"speed_kmh: {speed}"))
+    (tmp_path / "net.yaml").write_text("name: probe network\n"
+                                       "lines: [slow/line.yaml, slow_copy/line.yaml, fast/line.yaml]\nmove_cost: 10\n")
+    tuned, real = [], plan_tuning.tune_plan_rule
+
+    def tune_plan_rule(rule, cfg, futures, progress=False):
+        tuning = real(rule, cfg, futures, progress)
+        tuned.append(cfg.speed_kmh)
+        # the fast line keeps the shipped parameters, the slow one takes the low trigger: two rules on one network
+        params = dict(LOW) if cfg.speed_kmh == 100 else dict(tuning.shipped_params)
+        return plan_tuning.RuleTuning(params, tuning.shipped_params, tuning.cost_keur, tuning.shipped_cost_keur,
+                                      futures, tuning.seed, tuning.candidates)
+
+    monkeypatch.setattr(plan_tuning, "tune_plan_rule", tune_plan_rule)
+    bound = []
+    real_bind = NetworkRule.bind
+    monkeypatch.setattr(NetworkRule, "bind", lambda self, config, line_rules=None: bound.append(line_rules)
+                        or real_bind(self, config, line_rules))
+    plan = network_plan.plan_network(tmp_path / "net.yaml", years=0.5, futures=1, tune=1, **FAST)
+    assert sorted(tuned) == [100.0, 160.0]  # the two slow lines share one tuning
+    assert [p.policy_params for p in plan.lines] == [LOW, LOW, plan.lines[2].tuning.shipped_params]
+    assert [dict(r.params) for r in bound[-1]] == [LOW, LOW, plan.lines[2].tuning.shipped_params]
+    assert plan.table().count("tuned on this line: grouped-threshold") == 3
+
+
+def test_line_rules_of_one_config_must_agree(tmp_path):
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.rules.network import NetworkRule
+
+    net = NetworkConfig(n_lines=2)
+    with pytest.raises(ValueError, match=r"^line_rules must have one line policy per line \(2\), got 1"):
+        NetworkRule(GroupedThreshold()).bind(net, line_rules=[GroupedThreshold()])
+    with pytest.raises(ValueError, match=r"^line_rules: lines \[0, 1\] share one config but not"):
+        NetworkRule(GroupedThreshold()).bind(net, line_rules=[GroupedThreshold(), GroupedThreshold(**LOW)])
