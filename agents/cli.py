@@ -18,11 +18,15 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS, TRACK60_AGENT_NAME
+
+#: ``trackenv plan --tune``'s largest number of training futures: the training seeds'
+#: (``trackenv_agents.evaluation.harness.TRAIN_SEEDS``, not imported here to keep the command's start light)
+MAX_TUNE_FUTURES = 100
 
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
@@ -444,36 +448,53 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
         check_network_policy(args.policy)
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
-    # an unknown policy or scenario before the fit and the futures
-    line_policy(args.policy, plan_config(lines[0], args.scenario, years=args.years, **overrides), args.scenario,
-                years=args.years)
+    # an unknown policy or scenario (and what --tune cannot tune) before the fit and the futures
+    rule = line_policy(args.policy, plan_config(lines[0], args.scenario, years=args.years, **overrides),
+                       args.scenario, years=args.years)
+    if args.tune:
+        from .plan_tuning import check_apart, check_tunable
+
+        check_tunable(rule, args.tune)
+        check_apart(args.seed, args.futures, args.tune)
     t0 = time.perf_counter()
-    progress = None
+    progress, bar = None, None
     if not args.json:
         from tqdm import tqdm
 
-        bar = tqdm(total=int(round(args.years * 4)), desc=_start_text(lines), file=sys.stderr, leave=False)
+        def new_bar(desc: str) -> Any:
+            return tqdm(total=int(round(args.years * 4)), desc=desc, file=sys.stderr, leave=False)
+
+        # with --tune the tuning's bars show the start, and the quarters' bar starts after them
+        bar = None if args.tune else new_bar(_start_text(lines))
 
         def progress(n: int) -> None:
-            if bar.n == 0:  # started: the bar counts the quarters from now on
+            nonlocal bar
+            if bar is None:
+                bar = new_bar("plan (quarters)")
+            elif bar.n == 0:  # started: the bar counts the quarters from now on
                 bar.set_description("plan (quarters)", refresh=False)
             bar.update(n)
+    elif args.tune:
+        print(f"trackenv plan: tuning {args.policy} on {args.tune} ten-year futures of each line first (minutes; "
+              f"no progress bars with --json)", file=sys.stderr)
     kwargs = dict(policy=args.policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
                   progress=progress, **overrides)
     if args.tune:
         kwargs["tune"] = args.tune
-    with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
-        warnings.simplefilter("ignore", FitWarning)
-        # a section beyond the model's validity: the plan names it by its id (the engine's warning, by its row)
-        warnings.filterwarnings("ignore", message=".*has left the model's validity", category=RuntimeWarning)
-        if network is not None:
-            from .network_plan import plan_network
+    try:
+        with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
+            warnings.simplefilter("ignore", FitWarning)
+            # a section beyond the model's validity: the plan names it by its id (the engine's warning, by its row)
+            warnings.filterwarnings("ignore", message=".*has left the model's validity", category=RuntimeWarning)
+            if network is not None:
+                from .network_plan import plan_network
 
-            plan: Any = plan_network(network, **kwargs)
-        else:
-            plan = plan_line(lines[0], **kwargs)
-    if progress is not None:
-        bar.close()
+                plan: Any = plan_network(network, **kwargs)
+            else:
+                plan = plan_line(lines[0], **kwargs)
+    finally:  # an error is said on a line of its own, not after the bar
+        if bar is not None:
+            bar.close()
     line_plans = plan.lines if network is not None else (plan,)
     notes = [note for lp in line_plans for note in plan_warnings(lp)]
     for note in notes:
@@ -492,7 +513,7 @@ def _start_text(lines: Any) -> str:
     for. ``lines``: the plan's line descriptions."""
     sections = sum(len(line.sections) for line in lines)
     fitted = sum(len({m.section for m in line.history}) for line in lines)
-    fits = f", fitting {fitted} sections' histories" if fitted else ""
+    fits = f", fitting the histories of {fitted} sections that have one" if fitted else ""
     what = f"{len(lines)} lines" if len(lines) > 1 else "the line"
     return f"plan: starting {what} ({sections} sections{fits}; once per plan)"
 
@@ -656,6 +677,18 @@ def _set_note(overrides: dict[str, Any]) -> str:
     return changes_note(_set_fields(overrides))
 
 
+def _at_most(parse: Callable[[str], Any], high: float) -> Any:
+    """An argparse type: what ``parse`` reads, at most ``high``."""
+
+    def bounded(text: str) -> Any:
+        value = parse(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be at most {high:g}, got {text}")
+        return value
+
+    return bounded
+
+
 def _positive(kind: type, zero: bool = False) -> Any:
     """An argparse type: a number of ``kind`` (int or float) that is finite and > 0 (>= 0 if ``zero``); ``1e5``
     is a whole number."""
@@ -764,8 +797,8 @@ def build_parser() -> argparse.ArgumentParser:
                 if plan else "a field of the scenario's config (trackenv.envs.LineConfig; on the network its own "
                 "fields or its line's), e.g. --set annual_mgt=30 --set capacity=4")
         sp.add_argument("--set", type=_field_value, action="append", default=None, metavar="FIELD=VALUE",
-                        help=f"change {what}; the tuned rules keep the preset's parameters, and the JSON records "
-                             "the config")
+                        help=f"change {what}; the tuned rules keep the preset's parameters"
+                             f"{' (--tune tunes them on the line)' if plan else ''}, and the JSON records the config")
         sp.add_argument("--engine", choices=ENGINES, default=None,
                         help="how the passes run: classic (every preset's default, with which every saved result "
                              "was computed) or fast (a converged start and shorter windows: a line step's costs "
@@ -888,11 +921,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sampled futures (what the file does not know drawn again in each)")
     sp.add_argument("--seed", type=_positive(int, zero=True), default=0, metavar="N",
                     help="future i is the episode of seed N + i")
-    sp.add_argument("--tune", type=_positive(int, zero=True), default=0, metavar="N",
-                    help="tune the rule's parameters on this line first: its grid and the shipped parameters on N "
-                         "training futures of 10 years (seeds 1000..), the cheapest planned with (0, the default: "
-                         "the shipped parameters, tuned on the preset; 8 is a good start; minutes: each candidate "
-                         "runs N ten-year futures; on a network each line's rule, tuned on the line alone)")
+    sp.add_argument("--tune", type=_at_most(_positive(int, zero=True), MAX_TUNE_FUTURES), default=0, metavar="N",
+                    help=f"tune the rule's parameters on this line first: its grid and the shipped parameters on N "
+                         f"training futures of 10 years (seeds 1000.., apart from the plan's), the cheapest planned "
+                         f"with (0, the default: the shipped parameters, tuned on the preset; at most "
+                         f"{MAX_TUNE_FUTURES}; 8 is a good start; minutes: each candidate runs N ten-year futures; on "
+                         f"a network each line's rule, tuned on the line alone)")
     engine(sp, plan=True)
     sp.set_defaults(func=cmd_plan)
 

@@ -232,9 +232,10 @@ def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool) -> lis
         known = next((t for c, t in found if c == cfg), None)
         if known is None:
             try:
-                known = tune_plan_rule(rule, cfg, tune, progress=progress)
+                known = tune_plan_rule(rule, cfg, tune, progress=progress, desc=f"tune line {i} ({cfg.line.name})")
             except ValueError as exc:
                 raise ValueError(f"line {i}: {exc}") from None
+            known = dataclasses.replace(known, alone=True)
             found.append((cfg, known))
         out.append(known)
     return out
@@ -279,6 +280,10 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
             rules.append(line_policy(policy, cfg, scenario, years=years))
         except ValueError as exc:
             raise ValueError(f"line {i} ({desc.lines[i].name}): {exc}") from None
+    if tune:
+        from .plan_tuning import check_apart
+
+        check_apart(seed, futures, tune)
     tunings = _tuned(rules, lines, tune, progress is not None) if tune else [None] * len(lines)
     rules = [rule if t is None else type(rule)(**t.params).bind(cfg) for rule, t, cfg in zip(rules, tunings, lines,
                                                                                              strict=True)]

@@ -293,7 +293,7 @@ class LinePlan:
         """What the rule's parameters were tuned on: this line (``--tune``: what the tuning chose), or the
         preset, with how to tune them here (a rule with thresholds only; none for a trained policy)."""
         if self.tuning is not None:
-            return [self.tuning.text(self.policy)]
+            return self.tuning.lines(self.policy)
         if not rule_thresholds(self.policy_params):
             return []
         return [f"parameters: the shipped ones, tuned on the {self.scenario} preset's line; --tune 8 tunes them on "

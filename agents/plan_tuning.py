@@ -12,7 +12,7 @@ did not see.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from trackenv.envs.choices import action_type_for
@@ -20,7 +20,7 @@ from trackenv.envs.choices import action_type_for
 from .evaluation.harness import TRAIN_SEEDS
 from .evaluation.tuning import tune
 
-__all__ = ["TUNE_YEARS", "RuleTuning", "tune_plan_rule"]
+__all__ = ["TUNE_YEARS", "RuleTuning", "check_apart", "check_tunable", "tune_plan_rule"]
 
 #: years of each training future: the presets' episodes, on which the shipped parameters were tuned
 TUNE_YEARS = 10.0
@@ -30,7 +30,9 @@ TUNE_YEARS = 10.0
 class RuleTuning:
     """What :func:`tune_plan_rule` found: the ``params`` it chose and the ``shipped_params``, their mean costs
     over the ``futures`` training futures (k€ over :data:`TUNE_YEARS`, in-sample), the first training seed
-    ``seed`` and the number of ``candidates`` searched."""
+    ``seed``, the number of ``candidates`` searched and the values each parameter took among them (``searched``:
+    only the parameters that varied; a parameter not in it was not tuned). ``alone``: the line was tuned alone,
+    as if it had a machine of its own (a line of a network)."""
 
     params: dict[str, Any]
     shipped_params: dict[str, Any]
@@ -39,44 +41,103 @@ class RuleTuning:
     futures: int
     seed: int
     candidates: int
+    searched: dict[str, list[Any]] = field(default_factory=dict)
+    alone: bool = False
+
+    @property
+    def seeds(self) -> list[int]:
+        return list(range(self.seed, self.seed + self.futures))
+
+    def at_edge(self) -> list[str]:
+        """The parameters whose chosen value is the smallest or the largest searched (of at least three): the
+        line's best may lie beyond the grid."""
+        return [k for k, values in self.searched.items() if len(values) >= 3 and isinstance(values[0], int | float)
+                and not isinstance(values[0], bool) and self.params.get(k) in (values[0], values[-1])]
 
     def to_dict(self) -> dict[str, Any]:
         return {"params": dict(self.params), "shipped_params": dict(self.shipped_params),
                 "cost_keur": self.cost_keur, "shipped_cost_keur": self.shipped_cost_keur, "futures": self.futures,
-                "seeds": [self.seed, self.seed + self.futures - 1], "years": TUNE_YEARS,
-                "candidates": self.candidates}
+                "seeds": self.seeds, "years": TUNE_YEARS, "candidates": self.candidates,
+                "searched": {k: list(v) for k, v in self.searched.items()}, "at_edge": self.at_edge(),
+                "alone": self.alone}
 
-    def text(self, policy: str) -> str:
-        """One line for the plan's table: the parameters that changed (a choice rule has a dozen), both costs."""
+    def lines(self, policy: str) -> list[str]:
+        """The plan's table's lines: what changed (a choice rule has a dozen parameters), both costs, what was
+        searched, and where the choice lies at the grid's edge."""
         changed = ", ".join(f"{k} {_shown(v)} (shipped {_shown(self.shipped_params.get(k))})"
                             for k, v in self.params.items() if v != self.shipped_params.get(k))
         chose = f"chose {changed}" if changed else "kept the shipped parameters"
-        return (f"tuned on this line: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "
-                f"with the shipped ones over {TUNE_YEARS:g} years, means over {self.futures} training futures "
-                f"(seeds {self.seed}-{self.seed + self.futures - 1}, in-sample; {self.candidates} candidates)")
+        where = "this line alone (as if it had a machine of its own)" if self.alone else "this line"
+        futures = f"{self.futures} training future{'s' if self.futures > 1 else ''}"
+        seeds = f"seed {self.seed}" if self.futures == 1 else f"seeds {self.seed}-{self.seed + self.futures - 1}"
+        lines = [f"tuned on {where}: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "
+                 f"with the shipped ones over {TUNE_YEARS:g} years, means over {futures} ({seeds}, in-sample)",
+                 f"  searched ({self.candidates} candidates): " + ", ".join(
+                     f"{k} {_shown(v[0])}-{_shown(v[-1])}" if len(v) > 2 else f"{k} {' or '.join(map(_shown, v))}"
+                     for k, v in self.searched.items())]
+        edge = self.at_edge()
+        if edge:
+            lines.append(f"  at the grid's edge: {', '.join(f'{k} {_shown(self.params[k])}' for k in edge)}: the "
+                         f"line's best may lie beyond it")
+        return lines
 
 
 def _shown(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False) -> RuleTuning:
-    """Tune ``rule`` (a bound line rule with its shipped parameters: :func:`~trackenv_agents.planning.line_policy`)
-    on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: its class's grid and
-    its own parameters, each scored on the same futures (one batched run); ``progress``: a progress bar on
-    stderr. ValueError for a policy that has nothing to tune (an agent, a rule without parameters)."""
+def check_tunable(rule: Any, futures: int) -> None:
+    """ValueError unless ``rule`` has parameters and a grid to tune and ``futures`` is a number of training
+    futures in [1, len(TRAIN_SEEDS)]: what :func:`tune_plan_rule` needs, checked before a plan starts."""
     grid = list(type(rule).param_grid()) if hasattr(type(rule), "param_grid") else []
-    shipped = dict(getattr(rule, "params", None) or {})
-    if not shipped or not any(grid):
+    if not getattr(rule, "params", None) or not any(grid):
         raise ValueError(f"tune: {getattr(rule, 'name', type(rule).__name__)!r} has no parameters to tune: tune "
                          f"a rule with thresholds or intervals (grouped-threshold, section-threshold, ...)")
     if not isinstance(futures, int) or isinstance(futures, bool) or not 1 <= futures <= len(TRAIN_SEEDS):
         raise ValueError(f"tune must be an integer in [1, {len(TRAIN_SEEDS)}] (training futures), got {futures!r}")
-    candidates = [shipped, *(g for g in grid if g != shipped)]
+
+
+def check_apart(seed: int, futures: int, tune: int) -> None:
+    """ValueError where a plan's futures (seeds ``seed`` .. ``seed + futures - 1``) are among the tuning's
+    training futures (seeds from 1000): the forecast would be in-sample."""
+    first, last = TRAIN_SEEDS[0], TRAIN_SEEDS[0] + tune - 1
+    if tune and seed <= last and seed + futures - 1 >= first:
+        raise ValueError(f"seed: the plan's futures (seeds {seed}-{seed + futures - 1}) overlap the tuning's "
+                         f"training futures (seeds {first}-{last}): its forecast would be in-sample; choose a seed "
+                         f"below {first - futures + 1} or above {last}")
+
+
+def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
+                   desc: str | None = None) -> RuleTuning:
+    """Tune ``rule`` (a bound line rule with its shipped parameters: :func:`~trackenv_agents.planning.line_policy`)
+    on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: its class's grid and
+    its own parameters, each scored on the same futures (one batched run); ``progress``: a progress bar on
+    stderr (``desc`` its text). ValueError for a policy that has nothing to tune (:func:`check_tunable`)."""
+    check_tunable(rule, futures)
+    shipped = dict(rule.params)
+    candidates = [shipped, *(g for g in type(rule).param_grid() if g != shipped)]
     train = config.replace(horizon_years=TUNE_YEARS)
     found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
-                 action_type=action_type_for(config))
+                 action_type=action_type_for(config), desc=desc)
     costs = {tuple(sorted(row["params"].items())): row["mean_cost"] for row in found["table"]}
     return RuleTuning(dict(found["best_params"]), shipped, float(found["best_mean_cost"]),
-                      float(costs[tuple(sorted(shipped.items()))]), futures, TRAIN_SEEDS[0], len(candidates))
+                      float(costs[tuple(sorted(shipped.items()))]), futures, TRAIN_SEEDS[0], len(candidates),
+                      _searched(candidates))
 
+
+def _searched(candidates: list[dict[str, Any]]) -> dict[str, list[Any]]:
+    """Each parameter that varies among ``candidates`` with its values, sorted (a candidate without it: the
+    rule's default, left out)."""
+    values: dict[str, list[Any]] = {}
+    for candidate in candidates:
+        for key, value in candidate.items():
+            if value not in values.setdefault(key, []):
+                values[key].append(value)
+    out = {}
+    for key, seen in values.items():
+        if len(seen) > 1:
+            try:
+                out[key] = sorted(seen)
+            except TypeError:  # values of several types (None and a number): as first met
+                out[key] = seen
+    return out

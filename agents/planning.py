@@ -349,9 +349,10 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     rule = line_policy(policy, cfg, scenario, years=years)
     tuning = None
     if tune:
-        from .plan_tuning import tune_plan_rule
+        from .plan_tuning import check_apart, tune_plan_rule
 
-        tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None)
+        check_apart(seed, futures, tune)
+        tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None, desc=f"tune {policy}")
         rule = type(rule)(**tuning.params).bind(cfg)
     steps = cfg.horizon_steps
     trained = trained_horizon_years(rule)

@@ -22,9 +22,10 @@ __all__ = ["tune", "tune_many"]
 
 def tune(policy_cls: type[Heuristic], config: LineConfig | dict | str | None = None,
          train_seeds: Iterable[int] = TRAIN_SEEDS, grid: Sequence[dict] | None = None, batch_size: int = 32,
-         progress: bool = False, executor: Any = None, action_type: str = "multibinary") -> dict[str, Any]:
+         progress: bool = False, executor: Any = None, action_type: str = "multibinary",
+         desc: str | None = None) -> dict[str, Any]:
     """Grid search of ``policy_cls`` over ``grid`` (default ``policy_cls.param_grid()``) on ``train_seeds``
-    (``action_type``: the env's, "choices" for the rules that use the choices).
+    (``action_type``: the env's, "choices" for the rules that use the choices; ``desc``: the progress bar's).
 
     Returns ``{"policy", "best_params", "best_mean_cost", "table"}``; ``table`` lists every candidate's
     params, mean cost and per-episode costs on the training seeds, sorted by cost (ties: grid order).
@@ -33,18 +34,19 @@ def tune(policy_cls: type[Heuristic], config: LineConfig | dict | str | None = N
     if not grid:
         raise ValueError("empty parameter grid")
     return tune_many([policy_cls], problem_config(config), list(train_seeds), batch_size, progress,
-                     grids=[grid], executor=executor, action_type=action_type)[0]
+                     grids=[grid], executor=executor, action_type=action_type, desc=desc)[0]
 
 
 def tune_many(classes: Sequence[type[Heuristic]], cfg: ProblemConfig, train_seeds: Sequence[int], batch_size: int,
               progress: bool, grids: Sequence[Sequence[dict]] | None = None, executor: Any = None,
-              action_type: str = "multibinary") -> dict[int, dict]:
+              action_type: str = "multibinary", desc: str | None = None) -> dict[int, dict]:
     """:func:`tune` for several classes in one batched run, each over its grid (default its
     ``param_grid()``); table rows also hold the per-episode costs, in ``train_seeds`` order."""
     if grids is None:
         grids = [cls.param_grid() for cls in classes]
     cands = [(i, g) for i, grid in enumerate(grids) for g in grid]
-    desc = f"tune {getattr(classes[0], 'name', classes[0].__name__)}" if len(classes) == 1 else "tune"
+    if desc is None:
+        desc = f"tune {getattr(classes[0], 'name', classes[0].__name__)}" if len(classes) == 1 else "tune"
     results = evaluate_many([classes[i](**g) for i, g in cands], cfg, train_seeds, action_type=action_type,
                             batch_size=batch_size, progress=progress, desc=desc, executor=executor)
     out: dict[int, dict] = {}

@@ -108,7 +108,8 @@ def test_plan_plans_a_network_file(tmp_path, capsys):
     main(["plan", str(EXAMPLE_NETWORK), "--years", "0.25", "--futures", "1", "--out", str(out)])
     text, err = capsys.readouterr()
     # the bar says what the start waits for (seconds per line with a history; it stood at 0 with no word)
-    assert "plan: starting 2 lines (130 sections, fitting 100 sections' histories; once per plan)" in err
+    assert ("plan: starting 2 lines (130 sections, fitting the histories of 100 sections that have one; once per "
+            "plan)") in err
     assert "plan (quarters)" in err
     assert text.startswith("Network plan for Example Valley network (synthetic) from 2026-01-01")
     assert "cost of the network over 3 months" in text or "cost of the network over 0.25" in text

@@ -43,6 +43,26 @@ def test_the_tuning_scores_the_grid_and_the_shipped_parameters_on_ten_year_train
     assert tuning.cost_keur == pytest.approx(min(shipped, low), rel=1e-12)
     assert tuning.params == (LOW if low < shipped else tuning.shipped_params)
     assert tuning.to_dict()["seeds"] == [1000, 1001] and tuning.to_dict()["years"] == TUNE_YEARS
+    assert tuning.searched == {"trigger_mm": [1.0, 3.5], "include_mm": [0.5, 1.75]} and tuning.at_edge() == []
+
+
+def test_the_table_says_what_was_searched_and_a_choice_at_the_grids_edge():
+    """A parameter the grid did not vary is not in ``searched`` (a choice rule's grid may leave the triggers
+    alone), and a choice at the smallest or largest value searched is flagged."""
+    from trackenv_agents.plan_tuning import RuleTuning, _searched
+
+    grid = [{"trigger_mm": t, "include_mm": 1.0, "spot_peak_mm": 9.0} for t in (2.0, 3.0, 3.5)]
+    searched = _searched(grid)
+    assert searched == {"trigger_mm": [2.0, 3.0, 3.5]}
+    edge = RuleTuning(dict(grid[0]), dict(grid[2]), 90.0, 100.0, 1, 1000, 3, searched)
+    text = "\n".join(edge.lines("grouped-threshold"))
+    assert "chose trigger_mm 2 (shipped 3.5);" in text and "over 1 training future (seed 1000, in-sample)" in text
+    assert "searched (3 candidates): trigger_mm 2-3.5" in text
+    assert "at the grid's edge: trigger_mm 2: the line's best may lie beyond it" in text
+    assert edge.to_dict()["at_edge"] == ["trigger_mm"]
+    inside = RuleTuning(dict(grid[1]), dict(grid[2]), 90.0, 100.0, 2, 1000, 3, searched, alone=True)
+    assert inside.at_edge() == [] and "grid's edge" not in "\n".join(inside.lines("x"))
+    assert inside.lines("x")[0].startswith("tuned on this line alone (as if it had a machine of its own)")
 
 
 def test_the_plan_runs_the_tuned_rule_and_says_so(tmp_path, small_grid):
@@ -65,8 +85,30 @@ def test_plan_tune_from_the_command_line(tmp_path, capsys, small_grid):
     line = write(tmp_path)
     assert main(["plan", str(line), "--years", "0.5", "--futures", "1", "--tune", "1", "--engine", "fast",
                  "--json", "--out", str(tmp_path / "plan")]) == 0
-    payload = json.loads(capsys.readouterr().out)
+    out = capsys.readouterr()
+    payload = json.loads(out.out)
     assert payload["tuning"]["futures"] == 1 and payload["policy_params"] == payload["tuning"]["params"]
+    assert "tuning grouped-threshold on 1 ten-year futures of each line first" in out.err  # --json: no bars
+
+
+def test_the_tunings_limits_are_checked_before_the_plan_starts(tmp_path, capsys):
+    """What cannot be tuned, a number of futures out of range and a plan's futures among the training futures
+    are one line each, exit status 2, before the fit and the futures run."""
+    from trackenv_agents.cli import MAX_TUNE_FUTURES
+    from trackenv_agents.evaluation.harness import TRAIN_SEEDS
+
+    assert MAX_TUNE_FUTURES == len(TRAIN_SEEDS)
+    line = str(write(tmp_path))
+    with pytest.raises(SystemExit) as exit_:
+        main(["plan", line, "--tune", "101"])
+    assert exit_.value.code == 2 and "argument --tune: must be at most 100, got 101" in capsys.readouterr().err
+    for args, says in ((["--tune", "2", "--policy", "no-maintenance"], "tune: 'no-maintenance' has no parameters"),
+                       (["--tune", "2", "--seed", "995", "--futures", "8"],
+                        "seed: the plan's futures (seeds 995-1002) overlap the tuning's training futures (seeds "
+                        "1000-1001): its forecast would be in-sample; choose a seed below 993 or above 1001")):
+        assert main(["plan", line, *args]) == 2
+        err = capsys.readouterr().err
+        assert says in err and "plan: starting" not in err, err
 
 
 def test_what_cannot_be_tuned_is_refused_naming_why(tmp_path, capsys):
@@ -94,13 +136,13 @@ def test_a_networks_lines_are_tuned_each_on_its_own_and_play_their_tuned_rules(t
                                        "lines: [slow/line.yaml, slow_copy/line.yaml, fast/line.yaml]\nmove_cost: 10\n")
     tuned, real = [], plan_tuning.tune_plan_rule
 
-    def tune_plan_rule(rule, cfg, futures, progress=False):
-        tuning = real(rule, cfg, futures, progress)
+    def tune_plan_rule(rule, cfg, futures, progress=False, desc=None):
+        tuning = real(rule, cfg, futures, progress, desc)
         tuned.append(cfg.speed_kmh)
         # the fast line keeps the shipped parameters, the slow one takes the low trigger: two rules on one network
         params = dict(LOW) if cfg.speed_kmh == 100 else dict(tuning.shipped_params)
         return plan_tuning.RuleTuning(params, tuning.shipped_params, tuning.cost_keur, tuning.shipped_cost_keur,
-                                      futures, tuning.seed, tuning.candidates)
+                                      futures, tuning.seed, tuning.candidates, tuning.searched)
 
     monkeypatch.setattr(plan_tuning, "tune_plan_rule", tune_plan_rule)
     bound = []
@@ -111,7 +153,8 @@ def test_a_networks_lines_are_tuned_each_on_its_own_and_play_their_tuned_rules(t
     assert sorted(tuned) == [100.0, 160.0]  # the two slow lines share one tuning
     assert [p.policy_params for p in plan.lines] == [LOW, LOW, plan.lines[2].tuning.shipped_params]
     assert [dict(r.params) for r in bound[-1]] == [LOW, LOW, plan.lines[2].tuning.shipped_params]
-    assert plan.table().count("tuned on this line: grouped-threshold") == 3
+    assert plan.table().count("tuned on this line alone (as if it had a machine of its own): grouped-threshold") == 3
+    assert all(p.tuning.alone for p in plan.lines)
 
 
 def test_line_rules_of_one_config_must_agree(tmp_path):
