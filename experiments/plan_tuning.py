@@ -7,7 +7,9 @@ is tuned as ``--tune`` tunes it (:func:`trackenv_agents.plan_tuning.tune_plan_ru
 parameters on ``--tune`` training futures of 10 years, seeds 1000..), then the tuned and the shipped rule run the
 held-out episodes ``--seeds`` (10 years each), paired per episode (95 % bootstrap CI of the mean difference).
 ``--line-file PATH`` does the same on a line file (from its state as of the file, as ``trackenv plan`` models it),
-``--fast`` on the faster passes (``--engine fast --pass-reuse-mm 1``) for both.
+``--fast`` on the faster passes (``--engine fast --pass-reuse-mm 1``) for both. ``--network PATH``: a network
+file planned over 10 years as ``trackenv plan NETWORK.yaml`` plans it, with ``--tune`` and without (each line's rule
+tuned on the line alone, then the lines sharing the machine), on the futures ``--seeds``, paired per future.
 
     python experiments/plan_tuning.py                       # 100, 140 and 180 km/h, --tune 8, seeds 0:100
     python experiments/plan_tuning.py --speeds '' --line-file trackenv/lines/example.yaml --seeds 0:32 --fast \
@@ -27,7 +29,8 @@ from pathlib import Path
 from trackenv.envs.line_config import scenario
 from trackenv_agents.evaluation.harness import evaluate_many
 from trackenv_agents.evaluation.line_compare import parse_seeds
-from trackenv_agents.evaluation.statistics import paired_difference
+from trackenv_agents.evaluation.statistics import bootstrap_ci, paired_difference
+from trackenv_agents.network_plan import plan_network
 from trackenv_agents.plan_tuning import TUNE_YEARS, tune_plan_rule
 from trackenv_agents.planning import plan_config
 from trackenv_agents.rules.problems import tuned_rule
@@ -53,10 +56,31 @@ def one_line(label: str, config, futures: int, seeds: list[int]) -> dict:
                          "relative_ci": [diff["ci_low"] / base, diff["ci_high"] / base]}}
 
 
+def one_network(path: str, futures: int, seeds: list[int], fast: dict) -> dict:
+    """The network's 10-year plan with each line's rule tuned (``futures`` training futures) and with the shipped
+    parameters, on the plan's futures ``seeds`` (consecutive), paired per future."""
+    kw = dict(years=TUNE_YEARS, futures=len(seeds), seed=seeds[0], **fast)
+    t0 = time.perf_counter()
+    tuned = plan_network(path, tune=futures, progress=lambda n: None, **kw)
+    tuned_s = time.perf_counter() - t0
+    shipped = plan_network(path, **kw)
+    a, b = tuned.costs.sum(axis=1), shipped.costs.sum(axis=1)
+    low, high = bootstrap_ci(a - b)
+    lines = [{"line": p.line.name, "tuning": p.tuning.to_dict(), "shipped_keur": float(s.costs.sum(axis=1).mean()),
+              "tuned_keur": float(p.costs.sum(axis=1).mean())} for p, s in zip(tuned.lines, shipped.lines, strict=True)]
+    return {"network": path, "engine": fast.get("engine", "classic"), "tuning_and_plan_s": round(tuned_s, 1),
+            "futures": len(seeds), "seeds": [seeds[0], seeds[-1]], "shipped_keur": float(b.mean()),
+            "tuned_keur": float(a.mean()), "tuned_minus_shipped": float((a - b).mean()), "ci": [low, high],
+            "relative": float((a - b).mean() / b.mean()), "cheaper_in": int((a < b).sum()),
+            "moves_shipped_keur": float(shipped.move_costs.sum(axis=1).mean()),
+            "moves_tuned_keur": float(tuned.move_costs.sum(axis=1).mean()), "lines": lines}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--speeds", default="100,140,180", help="the default line at these speeds, km/h, comma-separated")
     ap.add_argument("--line-file", default=None, help="a line file, after the speeds")
+    ap.add_argument("--network", default=None, help="a network file, after the lines")
     ap.add_argument("--fast", action="store_true", help="the faster passes (engine fast, pass reuse 1 mm)")
     ap.add_argument("--tune", type=int, default=8, help="training futures (as trackenv plan --tune N)")
     ap.add_argument("--seeds", default="0:100", help="held-out episodes A:B")
@@ -77,6 +101,13 @@ def main() -> None:
               f"{100 * h['relative_ci'][1]:+.1f}]", flush=True)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"rule": "grouped-threshold", "lines": rows}, indent=1) + "\n")
+    if args.network:
+        row = one_network(args.network, args.tune, seeds, fast)
+        print(f"{args.network}: shipped {row['shipped_keur']:.1f}, tuned {row['tuned_keur']:.1f} k€ over 10 years, "
+              f"{100 * row['relative']:+.1f} %, CI {row['ci']}, cheaper in {row['cheaper_in']} of {len(seeds)}",
+              flush=True)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"rule": "grouped-threshold", "lines": rows, "network": row}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
