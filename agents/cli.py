@@ -475,8 +475,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 bar.set_description("plan (quarters)", refresh=False)
             bar.update(n)
     elif args.tune:
-        print(f"trackenv plan: tuning {args.policy} on {args.tune} ten-year futures of each line first (minutes; "
-              f"no progress bars with --json)", file=sys.stderr)
+        futures = f"{args.tune} ten-year future{'s' if args.tune > 1 else ''}"
+        where = "each line" if network is not None else "the line"
+        print(f"trackenv plan: tuning {args.policy} on {futures} of {where} first (minutes; no progress bars with "
+              f"--json)", file=sys.stderr)
     kwargs = dict(policy=args.policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
                   progress=progress, **overrides)
     if args.tune:

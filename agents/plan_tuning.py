@@ -72,9 +72,9 @@ class RuleTuning:
         seeds = f"seed {self.seed}" if self.futures == 1 else f"seeds {self.seed}-{self.seed + self.futures - 1}"
         lines = [f"tuned on {where}: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "
                  f"with the shipped ones over {TUNE_YEARS:g} years, means over {futures} ({seeds}, in-sample)",
-                 f"  searched ({self.candidates} candidates): " + ", ".join(
-                     f"{k} {_shown(v[0])}-{_shown(v[-1])}" if len(v) > 2 else f"{k} {' or '.join(map(_shown, v))}"
-                     for k, v in self.searched.items())]
+                 f"  searched {self.candidates} candidates (combinations of a grid, not every one) with " + ", ".join(
+                     f"{k} from {_shown(v[0])} to {_shown(v[-1])}" if len(v) > 2
+                     else f"{k} {' or '.join(map(_shown, v))}" for k, v in self.searched.items())]
         edge = self.at_edge()
         if edge:
             lines.append(f"  at the grid's edge: {', '.join(f'{k} {_shown(self.params[k])}' for k in edge)}: the "
@@ -102,9 +102,10 @@ def check_apart(seed: int, futures: int, tune: int) -> None:
     training futures (seeds from 1000): the forecast would be in-sample."""
     first, last = TRAIN_SEEDS[0], TRAIN_SEEDS[0] + tune - 1
     if tune and seed <= last and seed + futures - 1 >= first:
-        raise ValueError(f"seed: the plan's futures (seeds {seed}-{seed + futures - 1}) overlap the tuning's "
-                         f"training futures (seeds {first}-{last}): its forecast would be in-sample; choose a seed "
-                         f"below {first - futures + 1} or above {last}")
+        plan = f"seed {seed}" if futures == 1 else f"seeds {seed}-{seed + futures - 1}"
+        train = f"seed {first}" if tune == 1 else f"seeds {first}-{last}"
+        raise ValueError(f"seed: the plan's futures ({plan}) overlap the tuning's training futures ({train}): its "
+                         f"forecast would be in-sample; choose a seed below {first - futures + 1} or above {last}")
 
 
 def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,

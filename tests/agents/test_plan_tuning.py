@@ -57,7 +57,7 @@ def test_the_table_says_what_was_searched_and_a_choice_at_the_grids_edge():
     edge = RuleTuning(dict(grid[0]), dict(grid[2]), 90.0, 100.0, 1, 1000, 3, searched)
     text = "\n".join(edge.lines("grouped-threshold"))
     assert "chose trigger_mm 2 (shipped 3.5);" in text and "over 1 training future (seed 1000, in-sample)" in text
-    assert "searched (3 candidates): trigger_mm 2-3.5" in text
+    assert "searched 3 candidates (combinations of a grid, not every one) with trigger_mm from 2 to 3.5" in text
     assert "at the grid's edge: trigger_mm 2: the line's best may lie beyond it" in text
     assert edge.to_dict()["at_edge"] == ["trigger_mm"]
     inside = RuleTuning(dict(grid[1]), dict(grid[2]), 90.0, 100.0, 2, 1000, 3, searched, alone=True)
@@ -88,7 +88,7 @@ def test_plan_tune_from_the_command_line(tmp_path, capsys, small_grid):
     out = capsys.readouterr()
     payload = json.loads(out.out)
     assert payload["tuning"]["futures"] == 1 and payload["policy_params"] == payload["tuning"]["params"]
-    assert "tuning grouped-threshold on 1 ten-year futures of each line first" in out.err  # --json: no bars
+    assert "tuning grouped-threshold on 1 ten-year future of the line first" in out.err  # --json: no bars
 
 
 def test_the_tunings_limits_are_checked_before_the_plan_starts(tmp_path, capsys):
