@@ -69,9 +69,9 @@ class RuleTuning:
         chose = f"chose {changed}" if changed else "kept the shipped parameters"
         where = "this line alone (as if it had a machine of its own)" if self.alone else "this line"
         futures = f"{self.futures} training future{'s' if self.futures > 1 else ''}"
-        seeds = f"seed {self.seed}" if self.futures == 1 else f"seeds {self.seed}-{self.seed + self.futures - 1}"
         lines = [f"tuned on {where}: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "
-                 f"with the shipped ones over {TUNE_YEARS:g} years, means over {futures} ({seeds}, in-sample)",
+                 f"with the shipped ones over {TUNE_YEARS:g} years, means over {futures} "
+                 f"({_seeds_text(self.seed, self.futures)}, in-sample)",
                  f"  searched {self.candidates} candidates (combinations of a grid, not every one) with " + ", ".join(
                      f"{k} from {_shown(v[0])} to {_shown(v[-1])}" if len(v) > 2
                      else f"{k} {' or '.join(map(_shown, v))}" for k, v in self.searched.items())]
@@ -84,6 +84,11 @@ class RuleTuning:
 
 def _shown(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _seeds_text(first: int, count: int) -> str:
+    """``count`` consecutive seeds from ``first`` for people: "seed 1000" or "seeds 1000-1007"."""
+    return f"seed {first}" if count == 1 else f"seeds {first}-{first + count - 1}"
 
 
 def check_tunable(rule: Any, futures: int) -> None:
@@ -102,10 +107,9 @@ def check_apart(seed: int, futures: int, tune: int) -> None:
     training futures (seeds from 1000): the forecast would be in-sample."""
     first, last = TRAIN_SEEDS[0], TRAIN_SEEDS[0] + tune - 1
     if tune and seed <= last and seed + futures - 1 >= first:
-        plan = f"seed {seed}" if futures == 1 else f"seeds {seed}-{seed + futures - 1}"
-        train = f"seed {first}" if tune == 1 else f"seeds {first}-{last}"
-        raise ValueError(f"seed: the plan's futures ({plan}) overlap the tuning's training futures ({train}): its "
-                         f"forecast would be in-sample; choose a seed below {first - futures + 1} or above {last}")
+        raise ValueError(f"seed: the plan's futures ({_seeds_text(seed, futures)}) overlap the tuning's training "
+                         f"futures ({_seeds_text(first, tune)}): its forecast would be in-sample; choose a seed below "
+                         f"{first - futures + 1} or above {last}")
 
 
 def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
@@ -120,10 +124,9 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
     train = config.replace(horizon_years=TUNE_YEARS)
     found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
                  action_type=action_type_for(config), desc=desc)
-    costs = {tuple(sorted(row["params"].items())): row["mean_cost"] for row in found["table"]}
-    return RuleTuning(dict(found["best_params"]), shipped, float(found["best_mean_cost"]),
-                      float(costs[tuple(sorted(shipped.items()))]), futures, TRAIN_SEEDS[0], len(candidates),
-                      _searched(candidates))
+    shipped_cost = next(row["mean_cost"] for row in found["table"] if row["params"] == shipped)
+    return RuleTuning(dict(found["best_params"]), shipped, float(found["best_mean_cost"]), float(shipped_cost),
+                      futures, TRAIN_SEEDS[0], len(candidates), _searched(candidates))
 
 
 def _searched(candidates: list[dict[str, Any]]) -> dict[str, list[Any]]:

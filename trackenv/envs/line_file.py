@@ -322,6 +322,13 @@ def yaml_mapping(path: Path, what: str, keys: dict[str, Field]) -> dict[str, Any
         raise LineFileError(f"{path}{where}: not valid YAML ({problem})") from None
     except ValueError as e:  # YAML reads 2026-13-45 as a date and fails to build it, outside its own errors
         raise LineFileError(f"{path}{_impossible_date(text)}: {e}") from None
+    return checked_mapping(path, what, keys, doc)
+
+
+def checked_mapping(path: Path, what: str, keys: dict[str, Field], doc: Any) -> dict[str, Any]:
+    """``doc``, the YAML document of the file ``path`` (a ``what``), if it is a mapping with only ``keys`` and every
+    required one of them, else :class:`LineFileError` naming the fault: :func:`yaml_mapping`'s checks, for a
+    document already read."""
     if doc is None:
         raise LineFileError(f"{path}: empty file; a {what} is a YAML mapping of {_names(keys)}")
     if not isinstance(doc, dict):

@@ -32,11 +32,11 @@ from .line_file import (
     Field,
     LineDescription,
     LineFileError,
-    _check_keys,
     _in_range,
     _integer,
     _number,
     _text,
+    checked_mapping,
     load_line,
     yaml_document,
     yaml_mapping,
@@ -139,8 +139,7 @@ def load_network_or_none(path: str | os.PathLike[str]) -> NetworkDescription | N
     doc = yaml_document(path)
     if not _is_network(doc):
         return None
-    _check_keys(str(path), "", doc, NETWORK_KEYS)  # as yaml_mapping checks a file it reads
-    return _network(Path(path), doc)
+    return _network(Path(path), checked_mapping(Path(path), "network file", NETWORK_KEYS, doc))
 
 
 def _network(path: Path, doc: dict[str, Any]) -> NetworkDescription:
