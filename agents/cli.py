@@ -20,7 +20,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from .shipped import CHOICE_AGENT_NAME, LINE_AGENT_NAME, SHIPPED_AGENTS, TRACK60_AGENT_NAME
 
@@ -240,18 +240,19 @@ def model_label(path: Path) -> str:
 
 
 def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
-    """``--model PATH`` by what the path holds (:func:`~.learning.baselines.baseline_kind`): a per-section policy
-    (``trackenv train --env ID``), named ``cpi-agent``, runs on any line; a model of ``trackenv train`` (SB3, with
-    its observation statistics) or an RLlib run, named by its folder and file, only on the line it was trained on,
-    or a network of that line (else one line saying which fields differ)."""
+    """``--model PATH`` by what the path holds (:func:`~.learning.baselines.baseline_kind`), named by its folder and
+    file (:func:`model_label`; a shipped agent's file by the agent's name): a per-section policy (``trackenv train
+    --env ID``) runs on any line; a model of ``trackenv train`` (SB3, with its observation statistics) or an RLlib
+    run only on the line it was trained on, or a network of that line (else one line saying which fields differ)."""
     from .evaluation.leaderboard import fitting_agents
     from .evaluation.line_compare import env_config
     from .learning.baselines import baseline_kind, load_baseline
 
     kind = baseline_kind(path)
+    shipped = next((n for n, p in SHIPPED_AGENTS.items() if Path(p).resolve() == path.resolve()), None)
+    policy = load_baseline(path, name=shipped or model_label(path))
     if kind == "line":
-        return {LINE_AGENT_NAME: load_baseline(path, name=LINE_AGENT_NAME)}
-    policy = load_baseline(path, name=model_label(path))
+        return {policy.name: policy}
     fit, unfit = fitting_agents({policy.name: policy}, env_config(args.env, **engine_overrides(args)))
     if unfit:
         raise UsageError(f"--model {path} cannot be scored on {args.env}: {unfit[policy.name]}")
@@ -639,6 +640,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         return cmd_train_line(args, overrides)
     if args.iterations is not None:
         raise UsageError("--iterations is for a TampingLine --env (its counterfactual policy iteration)")
+    if "line" in overrides:
+        raise UsageError(f"--set line: a line file trains as a line: --env trackenv/TampingLine-v0 --set "
+                         f"line={overrides['line']} (the default --env, {DEFAULT_ENV_ID}, is the 60 m track: one "
+                         f"segment of six sections)")
     from .learning.tamping import train
 
     t0 = time.perf_counter()
@@ -775,8 +780,25 @@ def _widths(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose errors (an unknown option, a value out of range) are one line on stderr with exit
+    status 2, as every other refusal of the CLI, instead of the usage block and then the error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+    def parse_args(self, args: Any = None, namespace: Any = None) -> argparse.Namespace:
+        """As argparse's, but an unknown option is reported by the command it was given to (its ``--help``
+        lists the options), not by ``trackenv``."""
+        parsed, extra = self.parse_known_args(args, namespace)
+        if extra:
+            command = getattr(self, "commands", {}).get(getattr(parsed, "command", None), self)
+            command.error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="trackenv", formatter_class=_HelpFormatter,
         description="Railway track tamping on vehicle-track dynamics and ballast settlement: check the model, "
                     "reproduce the paper, time it, score and train maintenance policies.",
@@ -784,6 +806,7 @@ def build_parser() -> argparse.ArgumentParser:
                "training); --json prints one JSON object instead of the summary.")
     p.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p.commands = sub.choices  # each command's parser, by name: its errors name it
 
     def command(name: str, help: str) -> argparse.ArgumentParser:
         sp = sub.add_parser(name, help=help, description=help, formatter_class=_HelpFormatter)

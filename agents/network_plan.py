@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .plan_report import LinePlan, line_summary, step_date, summary_lines, years_text
+from .plan_report import LinePlan, counted, line_summary, step_date, summary_lines, years_text
 from .planning import (
     DEFAULT_POLICY,
     _run_futures,
@@ -113,9 +113,10 @@ class NetworkPlan:
         d, names = self.to_dict(), self._names()
         first = self.lines[0]
         engine = engine_note({"engine": first.engine, "pass_reuse_tolerance_m": first.pass_reuse_tolerance_m})
+        futures = counted(self.futures, "future", "futures")
         out = [f"Network plan for {d['network']} from {d['as_of']}: {self.policy} ({self.scenario}, tamping), "
-               f"{years_text(self.years)}, {self.futures} futures{engine}{changes_note(first.config_changes)}; the "
-               f"machine is on line {self.network.start_line} now"]
+               f"{years_text(self.years)}, {futures}{engine}{changes_note(first.config_changes)}; the machine is on "
+               f"line {self.network.start_line} now"]
         for i, line in enumerate(self.lines):
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
             out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]

@@ -72,7 +72,8 @@ def _span(values: list[float], fmt: str) -> str:
     return format(low, fmt) if low == high else f"{low:{fmt}}-{high:{fmt}}"
 
 
-def _count(n: int, what: str, plural: str) -> str:
+def counted(n: int, what: str, plural: str) -> str:
+    """``n`` things for people: "1 future", "8 futures"."""
     return f"{n} {what if n == 1 else plural}"
 
 
@@ -81,14 +82,14 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
     last = summary["last_recording"]
     run = ("no recording-car history" if last is None else
            f"last recording-car run {last['date']} ({last['years_before']:.2f} years before as_of)")
-    sections = _count(summary["sections"], "section", "sections")
+    sections = counted(summary["sections"], "section", "sections")
     return [f"read from the file: {sections}, {summary['length_km']:.2f} km; speed "
             f"{_span(summary['speed_kmh'], 'g')} km/h; tonnage {_span(summary['annual_mgt'], 'g')} MGT/year; "
             f"freight share {_span(summary['freight_share'], '.2f')}, freight axle load "
             f"{summary['freight_axle_load_t']:g} t",
-            f"  {_count(summary['transitions'], 'transition', 'transitions')}, "
-            f"{_count(summary['switches_crossings'], 'switch or crossing', 'switches or crossings')}, "
-            f"{_count(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}"]
+            f"  {counted(summary['transitions'], 'transition', 'transitions')}, "
+            f"{counted(summary['switches_crossings'], 'switch or crossing', 'switches or crossings')}, "
+            f"{counted(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}"]
 
 
 #: The per-section state a plan records per quarter (means over the futures, before the quarter's work): what the
@@ -210,7 +211,7 @@ class LinePlan:
         """When the plan's decisions see a new recording-car run (:meth:`recording_runs`), in a line."""
         runs = self.recording_runs()
         inside = [(step, date) for step, date in runs if step < len(self.dates)]
-        every = f"every {_count(self.measurement_interval, 'quarter', 'quarters')}"
+        every = f"every {counted(self.measurement_interval, 'quarter', 'quarters')}"
         first = ("Q1 reads each section's last run in the file (the model's own at as_of where it has none)"
                  if self.line.history else "Q1 reads the model's own run at as_of (the file has no history)")
         if not inside:
@@ -265,7 +266,7 @@ class LinePlan:
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
         lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {years_text(self.years)}, "
-                 f"{self.futures} futures{engine}{changes_note(self.config_changes)}",
+                 f"{counted(self.futures, 'future', 'futures')}{engine}{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
@@ -377,7 +378,7 @@ class LinePlan:
         previous quarter in 1"."""
         parts = [f"{self._reason(k)} in {n}" for k, n in self.unmet_counts(quarter, section).items()]
         if parts:
-            parts[0] += f" of {self.futures} futures"
+            parts[0] += f" of {counted(self.futures, 'future', 'futures')}"
         return ", ".join(parts)
 
     def _reason(self, key: str) -> str:
@@ -486,8 +487,8 @@ class LinePlan:
                                                                                                  step)])
         top.set_xlabel("position along the line [km]")
         self._section_axis(top, km)
-        top.set_title(f"{self.line.name}: {self.policy} ({self.scenario}), {self.futures} futures from "
-                      f"{self.line.as_of}")
+        futures = counted(self.futures, "future", "futures")
+        top.set_title(f"{self.line.name}: {self.policy} ({self.scenario}), {futures} from {self.line.as_of}")
         top.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), fontsize=7, ncol=5,
                    title=f"recommended: made in at least {RECOMMEND_SHARE:.0%} of the futures", title_fontsize=7)
         fig.colorbar(mesh, ax=top, label="share of futures tamping" if self.choices == ("tamp",)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -329,10 +330,10 @@ def test_evaluate_line_rules_option(monkeypatch, capsys):
     assert err.count("\n") == 1 and "per-section actions" in err
 
 
-def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
+def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys, tmp_path):
     """`trackenv evaluate` scores the agent of the lines with every choice on an id with every choice, the 60 m
     track's agent there, the tamp-or-wait agent elsewhere (the network's lines are tamp-or-wait), and a
-    ``--model`` under the tamp-or-wait agent's name."""
+    ``--model`` by its folder and file, the shipped agent's file by its name."""
     pytest.importorskip("stable_baselines3")
     import trackenv_agents.evaluation.line_compare as lc
     from trackenv_agents.cli import shipped_agent_for
@@ -359,7 +360,14 @@ def test_evaluate_scores_the_shipped_agent_of_the_id(monkeypatch, capsys):
     assert name == "cpi-agent" and not agent.choices
     assert main(["evaluate", "--env", "trackenv/TampingLineWet-v0", "--seeds", "0:1", "--json",
                  "--model", str(DEFAULT_LINE_PRETRAINED)]) == 0
-    assert list(seen["extra"]) == ["cpi-agent"]
+    assert list(seen["extra"]) == ["cpi-agent"]  # a shipped agent's file: the agent's name
+    own = tmp_path / "run" / "best_model.zip"  # any other: its folder and file
+    own.parent.mkdir()
+    shutil.copy(DEFAULT_LINE_PRETRAINED, own)
+    shutil.copy(DEFAULT_LINE_PRETRAINED.with_name(DEFAULT_LINE_PRETRAINED.stem + "_meta.json"),
+                own.with_name("best_model_meta.json"))
+    assert main(["evaluate", "--env", "trackenv/TampingLine-v0", "--seeds", "0:1", "--json", "--model", str(own)]) == 0
+    assert list(seen["extra"]) == ["run/best_model"]
     assert main(["evaluate", "--env", "trackenv/Tamping-v1", "--seeds", "0:1", "--json"]) == 0
     (name, agent), *planner = seen["extra"].items()
     assert name == "cpi-track60-agent" and agent.advisor.name == "model-predictive" and agent.observation_state
@@ -425,6 +433,22 @@ def test_non_positive_counts_are_refused(argv, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "error: argument" in err and "Traceback" not in err
+    assert err.count("\n") == 1 and "usage:" not in err  # one line, as every other refusal
+
+
+def test_a_line_file_on_the_60_m_track_says_how_to_train_on_it(capsys):
+    assert main(["train", "--set", "line=my.yaml", "--timesteps", "64"]) == 2
+    assert capsys.readouterr().err == (
+        "trackenv train: --set line: a line file trains as a line: --env trackenv/TampingLine-v0 --set line=my.yaml "
+        "(the default --env, trackenv/Tamping-v1, is the 60 m track: one segment of six sections)\n")
+
+
+def test_an_unknown_option_is_named_by_its_command(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["plan", "line.yaml", "--bogus", "2"])
+    assert exc.value.code == 2
+    assert capsys.readouterr().err == ("trackenv plan: error: unrecognized arguments: --bogus 2 (see `trackenv plan "
+                                       "--help`)\n")
 
 
 def test_large_counts_may_be_written_in_exponent_form():

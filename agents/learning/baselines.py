@@ -136,6 +136,7 @@ class TrainedPolicy:
         file, how to score it there."""
         here = LineConfig.coerce(config)
         mine, theirs = self.config.to_dict(), here.to_dict()
+        mine["line"], theirs["line"] = self.config.line, here.line  # compared as lines, not by the file's path
         differ = [k for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
         if not differ:
             return None

@@ -83,12 +83,16 @@ def test_the_description_round_trips_and_is_hashable(line_file):
 
 
 def test_a_line_is_named_by_its_file_or_else_by_its_name(line_file):
-    """``label``, what messages and tables show of a line: the file it was read from, or for a line given as data
-    its quoted name (the whole description is kilobytes)."""
+    """``label``, what messages and tables show of a line: the file it was read from (kept through ``to_dict``, as
+    a saved config keeps it), or for a line given as data its quoted name (the whole description is kilobytes)."""
     line = load_line(line_file)
     assert line.path == line.label == str(line_file)
-    again = LineDescription.from_dict(line.to_dict())
+    assert LineDescription.from_dict(line.to_dict()).path == str(Path(line_file).resolve())  # from any folder
+    again = LineDescription.from_dict({k: v for k, v in line.to_dict().items() if k != "source"})
     assert again.path is None and again.label == "'Test line'"
+    with pytest.raises(LineFileError, match=r"<line dict>, source: must be the path of the file the line was read "
+                                            r"from, got '<dict>'"):
+        LineDescription.from_dict({**line.to_dict(), "source": "<dict>"})
 
 
 # One case per kind of fault: (what the files say, what the one line must name). Each gives a LineFileError

@@ -27,6 +27,7 @@ unquoted decimal comma, a trailing ',') are named in the error.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import datetime as dt
 import difflib
 import math
@@ -264,15 +265,19 @@ class LineDescription:
                                "history": history}
         if self.description:
             out["description"] = self.description
+        if self.path is not None:  # a saved config names the file its line came from, from any folder
+            out["source"] = str(Path(self.path).resolve())
         return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str = "<line dict>") -> LineDescription:
         """A line from plain data with a line file's keys, whose ``sections`` and ``history`` are lists of rows
-        (mappings of the CSV columns): checked as a file is, faults reported against ``source``."""
+        (mappings of the CSV columns): checked as a file is, faults reported against ``source``. A ``source`` key
+        (:meth:`to_dict` writes the file a line was read from) becomes the line's :attr:`path`."""
         if not isinstance(d, Mapping):
             raise LineFileError(f"{source}: a line must be a mapping of {_names(LINE_KEYS)}, got {type(d).__name__}")
-        keys = {**LINE_KEYS, "sections": Field("-", True, "rows"), "history": Field("-", False, "rows")}
+        keys = {**LINE_KEYS, "sections": Field("-", True, "rows"), "history": Field("-", False, "rows"),
+                "source": Field("path", False, "the file the line was read from")}
         _check_keys(source, "", d, keys)
         rows = {}
         for key, columns in (("sections", SECTION_COLUMNS), ("history", HISTORY_COLUMNS)):
@@ -282,7 +287,14 @@ class LineDescription:
             rows[key] = [(f"{source}, {key}[{i}]", r) for i, r in enumerate(value)]
             for where, r in rows[key]:
                 _check_keys(where, "", r, columns, what="column")
-        return _build(source, d, rows["sections"], rows["history"])
+        line = _build(source, d, rows["sections"], rows["history"])
+        read_from = d.get("source")
+        if read_from is None:
+            return line
+        if not isinstance(read_from, str) or not read_from or read_from.startswith("<"):
+            raise LineFileError(f"{source}, source: must be the path of the file the line was read from, got "
+                                f"{read_from!r}")
+        return dataclasses.replace(line, source=read_from)
 
 
 # ---------------------------------------------------------------------- loading

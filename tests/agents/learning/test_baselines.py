@@ -9,12 +9,13 @@ of real training runs."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from trackenv.envs.line_config import scenario
+from trackenv.envs.line_config import LineConfig, scenario
 from trackenv_agents.evaluation.harness import evaluate_one
 from trackenv_agents.evaluation.leaderboard import format_leaderboard, run_leaderboard
 from trackenv_agents.learning.baselines import (
@@ -79,9 +80,10 @@ def test_leaderboard_scores_a_baseline_on_its_line_and_says_where_it_does_not(sb
         format_leaderboard(payload))
 
 
-def test_a_baseline_of_a_line_file_is_refused_naming_the_file_and_how_to_score_it_there():
+def test_a_baseline_of_a_line_file_is_refused_naming_the_file_and_how_to_score_it_there(tmp_path):
     """Trained on a line file, refused elsewhere by the file's path and ``--set line=PATH``, not by the whole line
-    (kilobytes) and the fields its file sets; a line given as data is named by its name."""
+    (kilobytes) and the fields its file sets, also from the config its files saved; fit for the same line read
+    from another path; a line given as data is named by its name."""
     from trackenv.envs.line_file import LineDescription
     from trackenv.lines import EXAMPLE
     from trackenv_agents.learning.baselines import TrainedPolicy
@@ -90,7 +92,13 @@ def test_a_baseline_of_a_line_file_is_refused_naming_the_file_and_how_to_score_i
     message = TrainedPolicy(None, trained, "run", "sb3", "run.zip").unfit_for(scenario("default"))
     assert message == (f"trained on another line: line {EXAMPLE} (here none), horizon_years 2.0 (here 10.0); score "
                        f"it on its line with --set line={EXAMPLE}")
-    as_data = trained.replace(line=LineDescription.from_dict(trained.line.to_dict()))
+    saved = LineConfig.coerce(json.loads(json.dumps(trained.to_dict())))  # the config a model's files keep
+    assert TrainedPolicy(None, saved, "run", "sb3", "run.zip").unfit_for(scenario("default")) == message
+    copy = shutil.copytree(EXAMPLE.parent, tmp_path / "lines") / EXAMPLE.name  # the same line, another path
+    assert TrainedPolicy(None, saved, "run", "sb3", "run.zip").unfit_for(
+        scenario("default", line=str(copy), horizon_years=2.0)) is None
+    unnamed = {k: v for k, v in trained.line.to_dict().items() if k != "source"}
+    as_data = trained.replace(line=LineDescription.from_dict(unnamed))
     message = TrainedPolicy(None, as_data, "run", "sb3", "run.zip").unfit_for(scenario("default"))
     assert "line 'Example Valley Line (synthetic)' (here none)" in message
     assert message.endswith("--set line=PATH (the file of 'Example Valley Line (synthetic)')")
