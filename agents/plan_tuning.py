@@ -3,15 +3,16 @@
 The shipped rules' thresholds were tuned on the presets (the default line runs at 100 km/h, 25 MGT a year). A
 line of one's own differs: a faster line has tighter limits and a dearer geometry per millimetre, other traffic
 settles it at another rate. :func:`tune_plan_rule` searches the rule's grid (:meth:`param_grid`, plus the shipped
-parameters) on ``N`` futures of the line from its state as of its file, each over :data:`TUNE_YEARS` (the
-presets' episode length, so that what a rule leaves undone after the plan's horizon still costs), on the
-training seeds (from 1000: apart from the plan's futures, seeds 0, 1, ...), and the plan then runs the cheapest.
-Its cost on those futures is in-sample: the documentation's line-files page gives what it is worth on futures it
-did not see.
+parameters; a choice rule's campaign first, then its choices around the best campaign: :func:`tuning_stages`) on ``N``
+futures of the line from its state as of its file, each over :data:`TUNE_YEARS` (the presets' episode length, so
+that what a rule leaves undone after the plan's horizon still costs), on the training seeds (from 1000: apart from
+the plan's futures, seeds 0, 1, ...), and the plan then runs the cheapest. Its cost on those futures is in-sample:
+the documentation's line-files page gives what it is worth on futures it did not see.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,11 +20,15 @@ from trackenv.envs.choices import action_type_for
 
 from .evaluation.harness import TRAIN_SEEDS
 from .evaluation.tuning import tune
+from .rules.choices import CHOICE_OFF, ChoiceThreshold, choice_grid
+from .rules.line import GroupedThreshold
 
-__all__ = ["TUNE_YEARS", "RuleTuning", "check_apart", "check_tunable", "tune_plan_rule"]
+__all__ = ["TUNE_YEARS", "RuleTuning", "check_apart", "check_tunable", "tune_plan_rule", "tuning_stages"]
 
 #: years of each training future: the presets' episodes, on which the shipped parameters were tuned
 TUNE_YEARS = 10.0
+#: a choice rule's parameters whose value 0 switches their choice off: not the end of a range of thresholds
+_OFF_AT_ZERO = frozenset(k for k, (_, off) in CHOICE_OFF.items() if off == 0 and not isinstance(off, bool))
 
 
 @dataclass(frozen=True)
@@ -31,8 +36,10 @@ class RuleTuning:
     """What :func:`tune_plan_rule` found: the ``params`` it chose and the ``shipped_params``, their mean costs
     over the ``futures`` training futures (k€ over :data:`TUNE_YEARS`, in-sample), the first training seed
     ``seed``, the number of ``candidates`` searched and the values each parameter took among them (``searched``:
-    only the parameters that varied; a parameter not in it was not tuned). ``alone``: the line was tuned alone,
-    as if it had a machine of its own (a line of a network)."""
+    only the parameters that varied; a parameter not in it was not tuned), the ``stages`` searched in turn where
+    more than one, each its name and its number of candidates (:func:`tuning_stages`: a choice rule's campaign,
+    then its choices). ``alone``: the line was tuned
+    alone, as if it had a machine of its own (a line of a network)."""
 
     params: dict[str, Any]
     shipped_params: dict[str, Any]
@@ -43,6 +50,7 @@ class RuleTuning:
     candidates: int
     searched: dict[str, list[Any]] = field(default_factory=dict)
     alone: bool = False
+    stages: tuple[tuple[str, int], ...] = ()
 
     @property
     def seeds(self) -> list[int]:
@@ -50,16 +58,22 @@ class RuleTuning:
 
     def at_edge(self) -> list[str]:
         """The parameters whose chosen value is the smallest or the largest searched (of at least three): the
-        line's best may lie beyond the grid."""
-        return [k for k, values in self.searched.items() if len(values) >= 3 and isinstance(values[0], int | float)
-                and not isinstance(values[0], bool) and self.params.get(k) in (values[0], values[-1])]
+        line's best may lie beyond the grid. A choice switched off (its parameter at 0) is no end of a range."""
+        out = []
+        for k, values in self.searched.items():
+            if k in _OFF_AT_ZERO:
+                values = [v for v in values if v != 0]
+            numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+            if len(values) >= 3 and numbers and self.params.get(k) in (values[0], values[-1]):
+                out.append(k)
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {"params": dict(self.params), "shipped_params": dict(self.shipped_params),
                 "cost_keur": self.cost_keur, "shipped_cost_keur": self.shipped_cost_keur, "futures": self.futures,
                 "seeds": self.seeds, "years": TUNE_YEARS, "candidates": self.candidates,
                 "searched": {k: list(v) for k, v in self.searched.items()}, "at_edge": self.at_edge(),
-                "alone": self.alone}
+                "stages": [{"name": name, "candidates": n} for name, n in self.stages], "alone": self.alone}
 
     def lines(self, policy: str) -> list[str]:
         """The plan's table's lines: what changed (a choice rule has a dozen parameters), both costs, what was
@@ -69,10 +83,13 @@ class RuleTuning:
         chose = f"chose {changed}" if changed else "kept the shipped parameters"
         where = "this line alone (as if it had a machine of its own)" if self.alone else "this line"
         futures = f"{self.futures} training future{'s' if self.futures > 1 else ''}"
+        stages = (f" in {len(self.stages)} stages (" + ", then ".join(f"{n} for the {name}" for name, n in self.stages)
+                  + "; " if len(self.stages) > 1 else " (")
         lines = [f"tuned on {where}: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "
                  f"with the shipped ones over {TUNE_YEARS:g} years, means over {futures} "
                  f"({_seeds_text(self.seed, self.futures)}, in-sample)",
-                 f"  searched {self.candidates} candidates (combinations of a grid, not every one) with " + ", ".join(
+                 f"  searched {self.candidates} candidates{stages}combinations of a grid, not every one) with "
+                 + ", ".join(
                      f"{k} from {_shown(v[0])} to {_shown(v[-1])}" if len(v) > 2
                      else f"{k} {' or '.join(map(_shown, v))}" for k, v in self.searched.items())]
         edge = self.at_edge()
@@ -83,6 +100,8 @@ class RuleTuning:
 
 
 def _shown(value: Any) -> str:
+    if isinstance(value, bool):
+        return "on" if value else "off"
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
@@ -112,21 +131,59 @@ def check_apart(seed: int, futures: int, tune: int) -> None:
                          f"{first - futures + 1} or above {last}")
 
 
+#: a search stage: the candidates to try from the best parameters found so far
+Stage = Callable[[dict[str, Any]], list[dict[str, Any]]]
+
+
+def tuning_stages(cls: type) -> list[tuple[str, Stage]]:
+    """The grids :func:`tune_plan_rule` searches in turn for a rule of class ``cls``, each named and each from the
+    best parameters so far: a choice rule's campaign triggers first (the grouped threshold's grid, with the
+    choices as they are), then its choices around the best campaign (:func:`~trackenv_agents.rules.choices.
+    choice_grid`), since the campaign carries most of a line's cost and the choice grid keeps it fixed; any other
+    rule its own grid (:meth:`param_grid`) in one stage."""
+    if issubclass(cls, ChoiceThreshold):
+        def campaign(best: dict[str, Any]) -> list[dict[str, Any]]:
+            return [{**best, **c} for c in GroupedThreshold.param_grid()]
+
+        def choices(best: dict[str, Any]) -> list[dict[str, Any]]:
+            return choice_grid(cls, {k: best[k] for k in ("trigger_mm", "include_mm")})
+
+        return [("campaign's triggers", campaign), ("choices around the best campaign", choices)]
+    return [("", lambda best: list(cls.param_grid()))]
+
+
 def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
                    desc: str | None = None) -> RuleTuning:
     """Tune ``rule`` (a bound line rule with its shipped parameters: :func:`~trackenv_agents.planning.line_policy`)
-    on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: its class's grid and
-    its own parameters, each scored on the same futures (one batched run); ``progress``: a progress bar on
-    stderr (``desc`` its text). ValueError for a policy that has nothing to tune (:func:`check_tunable`)."""
+    on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: the shipped parameters
+    and each stage's grid (:func:`tuning_stages`), every candidate scored on the same futures (one batched run a stage);
+    ``progress``: a progress bar a stage on stderr (``desc`` its text). ValueError for a policy that has nothing
+    to tune (:func:`check_tunable`)."""
     check_tunable(rule, futures)
     shipped = dict(rule.params)
-    candidates = [shipped, *(g for g in type(rule).param_grid() if g != shipped)]
     train = config.replace(horizon_years=TUNE_YEARS)
-    found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
-                 action_type=action_type_for(config), desc=desc)
-    shipped_cost = next(row["mean_cost"] for row in found["table"] if row["params"] == shipped)
-    return RuleTuning(dict(found["best_params"]), shipped, float(found["best_mean_cost"]), float(shipped_cost),
-                      futures, TRAIN_SEEDS[0], len(candidates), _searched(candidates))
+    best, best_cost, shipped_cost, tried, counts = shipped, None, None, [shipped], []
+    named = tuning_stages(type(rule))
+    for k, (name, stage) in enumerate(named):
+        candidates = [c for c in stage(best) if c not in tried]
+        if best_cost is None:  # the shipped parameters run in the first stage's batch
+            candidates = [shipped, *candidates]
+        counts.append((name, len(candidates)))
+        if not candidates:
+            continue
+        text = desc
+        if len(named) > 1:
+            text = (f"{desc or 'tune ' + type(rule).name}, stage {k + 1} of {len(named)}: {name} "
+                    f"({len(candidates)} candidates)")
+        found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
+                     action_type=action_type_for(config), desc=text)
+        if shipped_cost is None:
+            shipped_cost = best_cost = next(row["mean_cost"] for row in found["table"] if row["params"] == shipped)
+        if found["best_mean_cost"] < best_cost:
+            best, best_cost = dict(found["best_params"]), float(found["best_mean_cost"])
+        tried += [c for c in candidates if c not in tried]
+    return RuleTuning(best, shipped, float(best_cost), float(shipped_cost), futures, TRAIN_SEEDS[0], len(tried),
+                      _searched(tried), stages=tuple(counts) if len(counts) > 1 else ())
 
 
 def _searched(candidates: list[dict[str, Any]]) -> dict[str, list[Any]]:

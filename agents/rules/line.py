@@ -192,7 +192,8 @@ class GroupedThreshold(LineHeuristic):
         first = [(t, i) for t in (2.5, 3.0, 3.5) for i in (1.25, 1.5, 2.0)]
         refined = [(t, i) for t in (3.5, 4.0, 5.0) for i in (2.0, 2.5, 3.0) if (t, i) not in first]
         lower = [(2.0, 1.0), (2.0, 1.25), (2.0, 1.5), (2.5, 1.0), (3.0, 1.0)]  # rules that read stale data as fresh
-        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined + lower]
+        lowest = [(1.5, 0.75), (1.5, 1.0), (1.25, 0.75)]  # lines that settle fast for their limits (a line file's)
+        return [{"trigger_mm": t, "include_mm": i} for t, i in first + refined + lower + lowest]
 
 
 class RegisterPeriodic(LineHeuristic):

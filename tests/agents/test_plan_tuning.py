@@ -46,6 +46,46 @@ def test_the_tuning_scores_the_grid_and_the_shipped_parameters_on_ten_year_train
     assert tuning.searched == {"trigger_mm": [1.0, 3.5], "include_mm": [0.5, 1.75]} and tuning.at_edge() == []
 
 
+def test_a_choice_rule_tunes_its_campaign_first_then_its_choices_around_the_best(tmp_path, small_grid,
+                                                                                   monkeypatch):
+    """A choice rule's campaign triggers are searched first (the grouped threshold's grid, the choices as
+    shipped), then its choice grid around the best campaign; every candidate once, the cheapest of all chosen."""
+    from trackenv_agents import plan_tuning
+    from trackenv_agents.rules.choices import ChoiceThresholdSpotOnly
+
+    bases = []
+
+    def choice_grid(cls, base):
+        bases.append(dict(base))
+        return [{**base, "spot_peak_mm": 9.0}]
+
+    monkeypatch.setattr(plan_tuning, "choice_grid", choice_grid)
+    cfg = plan_config(write(tmp_path), "defects", years=0.5, **FAST)
+    rule = line_policy("choice-threshold-spot-only", cfg, "defects")
+    shipped = dict(rule.params)
+    tuning = tune_plan_rule(rule, cfg, 2)
+    campaign = {**shipped, **LOW}
+    assert [name for name, _ in plan_tuning.tuning_stages(ChoiceThresholdSpotOnly)] == [
+        "campaign's triggers", "choices around the best campaign"]
+    runs = evaluate_many([ChoiceThresholdSpotOnly(**shipped), ChoiceThresholdSpotOnly(**campaign)],
+                         cfg.replace(horizon_years=TUNE_YEARS), [1000, 1001], action_type="choices")
+    costs = {"shipped": float(runs[0].cost.mean()), "low": float(runs[1].cost.mean())}
+    best_campaign = campaign if costs["low"] < costs["shipped"] else shipped
+    assert bases == [{k: best_campaign[k] for k in ("trigger_mm", "include_mm")}]
+    spot = {**best_campaign, "spot_peak_mm": 9.0}
+    costs["spot"] = float(evaluate_many([ChoiceThresholdSpotOnly(**spot)], cfg.replace(horizon_years=TUNE_YEARS),
+                                        [1000, 1001], action_type="choices")[0].cost.mean())
+    assert tuning.shipped_cost_keur == pytest.approx(costs["shipped"], rel=1e-12)
+    assert tuning.cost_keur == pytest.approx(min(costs.values()), rel=1e-12)
+    assert tuning.params == {"shipped": shipped, "low": campaign, "spot": spot}[min(costs, key=costs.get)]
+    assert tuning.candidates == 3 and set(tuning.searched) == {"trigger_mm", "include_mm", "spot_peak_mm"}
+    assert tuning.to_dict()["stages"] == [{"name": "campaign's triggers", "candidates": 2},
+                                          {"name": "choices around the best campaign", "candidates": 1}]
+    assert tuning.lines("choice-threshold-spot-only")[1].startswith(
+        "  searched 3 candidates in 2 stages (2 for the campaign's triggers, then 1 for the choices around the best "
+        "campaign; combinations of a grid, not every one) with ")
+
+
 def test_the_table_says_what_was_searched_and_a_choice_at_the_grids_edge():
     """A parameter the grid did not vary is not in ``searched`` (a choice rule's grid may leave the triggers
     alone), and a choice at the smallest or largest value searched is flagged."""
@@ -60,6 +100,12 @@ def test_the_table_says_what_was_searched_and_a_choice_at_the_grids_edge():
     assert "searched 3 candidates (combinations of a grid, not every one) with trigger_mm from 2 to 3.5" in text
     assert "at the grid's edge: trigger_mm 2: the line's best may lie beyond it" in text
     assert edge.to_dict()["at_edge"] == ["trigger_mm"]
+    spots = _searched([{"spot_peak_mm": p, "drain_surveyed": d} for p in (0.0, 7.0, 9.0, 12.0) for d in (False, True)])
+    off = RuleTuning({"spot_peak_mm": 0.0, "drain_surveyed": True}, {"spot_peak_mm": 9.0, "drain_surveyed": False},
+                     90.0, 100.0, 1, 1000, 8, spots)
+    assert off.at_edge() == []  # 0 switches spot tamping off: no end of a range of peaks
+    assert "chose spot_peak_mm 0 (shipped 9), drain_surveyed on (shipped off)" in off.lines("choice-threshold")[0]
+    assert RuleTuning({"spot_peak_mm": 12.0}, {}, 90.0, 100.0, 1, 1000, 8, spots).at_edge() == ["spot_peak_mm"]
     inside = RuleTuning(dict(grid[1]), dict(grid[2]), 90.0, 100.0, 2, 1000, 3, searched, alone=True)
     assert inside.at_edge() == [] and "grid's edge" not in "\n".join(inside.lines("x"))
     assert inside.lines("x")[0].startswith("tuned on this line alone (as if it had a machine of its own)")
