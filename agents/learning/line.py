@@ -194,6 +194,10 @@ def train_line(config: LineConfig | dict | str | None = None, total_timesteps: i
                            None if eval_seeds is None else [int(x) for x in eval_seeds], progress, verbose)
     if init_policy is not None:
         trainer.start_from(Path(init_policy))
+    if verbose:
+        print(f"[start] {s.iterations} policy iterations of {s.episodes_per_iteration} training episodes each "
+              f"(minutes each on two cores), then {s.total_timesteps} line-steps of {s.algo}: iterations and "
+              f"total_timesteps (--iterations, --timesteps) set them", flush=True)
     return trainer.run(None)
 
 

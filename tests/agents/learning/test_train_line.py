@@ -56,6 +56,16 @@ def test_line_hyperparams_entry_and_its_schema(tmp_path):
                    progress=False, verbose=0)
 
 
+def test_a_run_says_first_how_much_it_will_train(tmp_path, capsys):
+    """A new run's first line says its policy iterations and PPO line-steps, and what sets them (a small
+    ``--timesteps`` does not make a short run)."""
+    train_line("small", iterations=0, total_timesteps=0, n_envs=1, out_dir=tmp_path, eval_seeds=None,
+               progress=False, verbose=1)
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == ("[start] 0 policy iterations of 16 training episodes each (minutes each on two cores), then 0 "
+                     "line-steps of maskable_ppo: iterations and total_timesteps (--iterations, --timesteps) set them")
+
+
 def test_saved_policy_loads_with_its_advisor_and_acts_the_same(tmp_path, fast_line):
     from sb3_contrib import MaskablePPO
 
