@@ -37,6 +37,7 @@ figure, are :mod:`trackenv_agents.plan_report`'s (:class:`LinePlan`); its names 
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -121,8 +122,11 @@ def line_policy(name: str, config: Any, scenario: str | None = None, years: floa
         with_choices = [s for s in PLAN_SCENARIOS if tuple(preset(s).choices) != ("tamp",)]
         raise ValueError(f"policy {name!r} uses the choices beyond tamping: plan with --scenario "
                          f"{', '.join(with_choices[:-1])} or {with_choices[-1]}")
-    raise ValueError(f"unknown policy {name!r}; known: {', '.join([*rules, *SHIPPED_AGENTS])} or the path of a "
-                     "trained policy (.zip)")
+    known = [*rules, *SHIPPED_AGENTS]
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise ValueError(f"unknown policy {name!r}{hint}; known: {', '.join(known)} or the path of a trained policy "
+                     "(.zip)")
 
 
 def plan_config(line: Any, scenario: str = "default", years: float | None = None, **config: Any) -> Any:

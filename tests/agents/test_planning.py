@@ -106,9 +106,14 @@ def test_a_malformed_file_is_one_line_and_exit_2(tmp_path, capsys, kind):
 
 def test_plan_refuses_an_unknown_policy_and_a_missing_file(tmp_path, capsys):
     assert main(["plan", str(write(tmp_path)), "--policy", "greedy"]) == 2
-    assert "unknown policy 'greedy'" in capsys.readouterr().err
+    assert "unknown policy 'greedy'; known: " in capsys.readouterr().err
+    assert main(["plan", str(write(tmp_path)), "--policy", "grouped-treshold"]) == 2
+    assert "unknown policy 'grouped-treshold' (did you mean 'grouped-threshold'?)" in capsys.readouterr().err
     assert main(["plan", str(tmp_path / "none.yaml")]) == 2
     assert "no such line file" in capsys.readouterr().err
+    assert main(["plan", str(tmp_path / "sections.csv")]) == 2  # the sections given for the line file
+    assert capsys.readouterr().err.rstrip().endswith(
+        "got a str (a CSV file: give the YAML file that names it under 'sections' or 'history')")
     # the 60 m track's agent plans with a planner that needs the SD of every step, which a line file's line lacks
     assert main(["plan", str(write(tmp_path)), "--policy", "cpi-track60-agent"]) == 2
     assert "policy 'cpi-track60-agent' cannot run on this line: needs an SD measured every step" in \

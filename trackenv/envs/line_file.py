@@ -344,7 +344,10 @@ def checked_mapping(path: Path, what: str, keys: dict[str, Field], doc: Any) -> 
     if doc is None:
         raise LineFileError(f"{path}: empty file; a {what} is a YAML mapping of {_names(keys)}")
     if not isinstance(doc, dict):
-        raise LineFileError(f"{path}: a {what} is a YAML mapping of {_names(keys)}, got a {type(doc).__name__}")
+        csv = (" (a CSV file: give the YAML file that names it under 'sections' or 'history')"
+               if Path(path).suffix.lower() == ".csv" else "")
+        raise LineFileError(f"{path}: a {what} is a YAML mapping of {_names(keys)}, got a "
+                            f"{type(doc).__name__}{csv}")
     if what == "line file" and "lines" in doc and "sections" not in doc:
         raise LineFileError(f"{path}: a network file (it lists line files under 'lines'), not a line file: plan it "
                             f"with trackenv plan, read it with trackenv.envs.load_network")
