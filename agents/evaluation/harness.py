@@ -103,6 +103,9 @@ class EvaluationResult:
     section_choices: np.ndarray | None = None
     # on a network: whether the machine moved to another line in each step of each episode (episodes, steps)
     machine_moved: np.ndarray | None = None
+    # whether a section left the model's validity in some step of each episode (info["beyond_validity"]): its
+    # costs from there on are not physical (episodes,)
+    beyond_validity: np.ndarray | None = None
 
     @property
     def choices(self) -> dict[str, np.ndarray]:
@@ -152,6 +155,7 @@ class EvaluationResult:
             "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
             "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
             "choices": {name: float(np.mean(counts[name])) if name in counts else 0.0 for name in CHOICE_NAMES},
+            "episodes_beyond_validity": 0 if self.beyond_validity is None else int(self.beyond_validity.sum()),
             **machine,
         }
 
@@ -240,6 +244,7 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
     rewards = np.zeros(n)
     tampings = np.zeros(n)
     exceed = np.zeros(n)
+    beyond = np.zeros(n, dtype=bool)
     final_sd = np.zeros(n)
     tamped = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=bool)
     chosen = np.zeros((n, cfg.horizon_steps, cfg.n_sections), dtype=np.int8)
@@ -271,6 +276,7 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
             has_machine = True
         section_cost += info["section_costs"]
         exceed += info["immediate_action_exceedances"]
+        beyond |= info["beyond_validity"]
         if record:
             traces["section_sd_mm"].append(info["section_sd_mm"])
             traces["tamped"].append(info["tamped_sections"].copy())
@@ -283,7 +289,7 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
                 raise RuntimeError("episodes did not end at the configured horizon")
             final_sd = info["section_sd_mm"].mean(axis=1)
             wet = np.asarray(info.get("wet_spot_active", np.zeros((n, cfg.n_sections))), dtype=bool)
-    return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed,
+    return {"parts": parts, "rewards": rewards, "tampings": tampings, "exceed": exceed, "beyond_validity": beyond,
             "final_sd": final_sd, "tamped": tamped, "section_choices": chosen,
             "machine_moved": moved if has_machine else None, "section_cost": section_cost,
             "register": register, "wet_spot": wet, "traces": traces}
@@ -351,6 +357,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     seed_arr = np.array([s for _, s in slots])
     parts_all = {k: np.concatenate([o["parts"][k] for o in outs]) for k in type(cfg).cost_keys()}
     rewards, tampings, exceed, final_sd = cat("rewards"), cat("tampings"), cat("exceed"), cat("final_sd")
+    beyond = cat("beyond_validity")
     tamped, chosen = cat("tamped"), cat("section_choices")
     moved = cat("machine_moved") if outs[0]["machine_moved"] is not None else None
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
@@ -363,7 +370,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
             tamped=tamped[m], section_choices=chosen[m], machine_moved=None if moved is None else moved[m],
-            extra={k: v[m] for k, v in sections.items()}))
+            beyond_validity=beyond[m], extra={k: v[m] for k, v in sections.items()}))
     return results
 
 

@@ -325,6 +325,11 @@ def format_line_table(payload: dict[str, Any]) -> str:
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
     lines.append("IA: section-steps at the immediate-action limit, all episodes together; tamp ... survey: applied "
                  "choices per episode (tamp, spot tamp, drainage, renewal, inspection, survey)")
+    beyond = [f"{r['policy']} ({r['episodes_beyond_validity']} of {r['n_episodes']})" for r in payload["results"]
+              if r.get("episodes_beyond_validity")]
+    if beyond:  # the engine's warning scrolls past with the progress bars; the table keeps it
+        lines.append("warning: a section left the model's validity (its settlement ran away) in some episodes of "
+                     + ", ".join(beyond) + ": their costs from there on are not physical")
     machine = [r for r in payload["results"] if r.get("machine_steps")]
     if machine:  # a network: what its one tamping machine did
         lines.append("the machine's steps per episode: working on its line / moving to another / idle")

@@ -1077,16 +1077,21 @@ class LineBatch:
         self._quality(segs)
         self._check_validity(self._sections_of(segs))
 
+    def _beyond_validity(self, secs: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(sections ``secs``,) bool each: a wheel/rail force above :data:`VALID_CONTACT_FACTOR` times the static
+        wheel load, and a D1 mean-to-peak above :data:`VALID_PEAK_M`: where a section has left what the model
+        represents."""
+        force = self.contact_force[secs] > VALID_CONTACT_FACTOR * self.static_wheel_load[secs]
+        return force, self.peak[secs] > VALID_PEAK_M
+
     def _check_validity(self, secs: np.ndarray) -> None:
-        """Warn (once per batch) where a section has left what the model represents: a wheel/rail force above
-        :data:`VALID_CONTACT_FACTOR` times the static wheel load, or a D1 mean-to-peak above
-        :data:`VALID_PEAK_M`. A settlement rate that feeds on its own sleeper forces (a very fast, short defect)
-        can run away to metres of settlement and meganewtons; such figures are not physical, and the costs that
-        follow from them are not either."""
+        """Warn (once per batch) where a section has left what the model represents (:meth:`_beyond_validity`).
+        A settlement rate that feeds on its own sleeper forces (a very fast, short defect) can run away to metres
+        of settlement and meganewtons; such figures are not physical, and the costs that follow from them are not
+        either. Each step's info says it per line too (``beyond_validity``)."""
         if self._validity_warned:
             return
-        force = self.contact_force[secs] > VALID_CONTACT_FACTOR * self.static_wheel_load[secs]
-        level = self.peak[secs] > VALID_PEAK_M
+        force, level = self._beyond_validity(secs)
         if force.any() or level.any():
             self._validity_warned = True
             at = int(np.asarray(secs)[np.flatnonzero(force | level)[0]])
@@ -1282,9 +1287,11 @@ class LineBatch:
         """Line ``b``'s step info: the cost parts (k€), the choices applied (``codes`` (S,): per section in
         ``section_choices``, counted by name in ``choices``; ``tamped_sections``: tamp or renew), and per section
         its own costs ``section_costs`` (k€: its choice, geometry, speed restriction, immediate action; the
-        possession is the line's)."""
+        possession is the line's), and ``beyond_validity``: whether a section of the line is beyond the model's
+        validity after the step (:meth:`_beyond_validity`: the step's costs are then not physical)."""
         r = self.rows(b)
         codes = np.asarray(codes, dtype=np.int64)
+        force, level = self._beyond_validity(r)
         return step_info(
             parts, (codes == TAMP) | (codes == RENEW), self.sd[r], self.peak[r], self.classify_rows(self.peak[r], r),
             self.step[b] / self.config.steps_per_year, self.contact_force[r].max(),
@@ -1292,7 +1299,8 @@ class LineBatch:
             section_sd_after_tamping_m=self.sd_after_tamping[r].copy(),
             wet_spot_active=self._wet_sections(b), rate_factor=self._per_section(self.rate()[self.segments(b)], "mean"),
             observation_clipped=clipped_values(self._observed(b), self.bounds),
-            choices=choice_counts(codes), section_choices=codes.copy())
+            choices=choice_counts(codes), section_choices=codes.copy(),
+            beyond_validity=bool(force.any() or level.any()))
 
     def _wet_sections(self, b: int) -> np.ndarray:
         """(S,) bool: line ``b``'s sections with an active wet spot (on a segment of several sections, those

@@ -309,6 +309,7 @@ class NetworkState:
 #: how the lines' scalar info values combine into the network's (any other scalar: an (n_lines,) array)
 _COMBINE: dict[str, Callable[[list], Any]] = {
     "immediate_action_exceedances": sum, "observation_clipped": sum, "clipped": any, "max_contact_force_N": max,
+    "beyond_validity": any,
     "year": lambda values: values[0]}
 
 

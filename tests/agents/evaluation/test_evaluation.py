@@ -151,6 +151,23 @@ def test_comparison_on_the_60m_track_is_sorted_and_tunes(monkeypatch, tmp_path, 
     assert out["best_rule"] == rows[0]["policy"]
 
 
+def test_episodes_beyond_the_models_validity_are_counted_and_the_table_warns(tmp_path):
+    """A policy whose episodes ran a section beyond the model's validity (``info["beyond_validity"]``) has them
+    counted in its summary, and the comparison's table ends with a warning naming it; a maintained line none."""
+    runaway = {"local_defect_length_m": 3.0, "local_defect_rate_factor": 5.0, "local_defect_in_zone": "multiply",
+               "horizon_years": 1.0}
+    with pytest.warns(RuntimeWarning, match="has left the model's validity"):
+        out = line_comparison("trackenv/TampingLineDefects-v0", seeds=[1000], rules=["no-maintenance"],
+                              batch_size=4, progress=False, out_dir=str(tmp_path), **runaway)
+    (row,) = out["results"]
+    assert row["episodes_beyond_validity"] == 1
+    assert format_line_table(out).splitlines()[-2] == (
+        "warning: a section left the model's validity (its settlement ran away) in some episodes of no-maintenance "
+        "(1 of 1): their costs from there on are not physical")
+    plain = evaluate_one(SectionThreshold(threshold_mm=2.5), "small", [0])
+    assert plain.beyond_validity.tolist() == [False] and plain.summary()["episodes_beyond_validity"] == 0
+
+
 def test_evaluate_policy_is_a_deprecated_name_of_evaluate_one(small_config):
     from trackenv_agents import evaluation
 
