@@ -18,7 +18,7 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -784,20 +784,23 @@ class _Parser(argparse.ArgumentParser):
     """argparse's parser whose errors (an unknown option, a value out of range) are one line on stderr with exit
     status 2, as every other refusal of the CLI, instead of the usage block and then the error."""
 
+    #: each command's parser by name (the top-level parser's): an unknown option is reported by its command
+    commands: Mapping[str, argparse.ArgumentParser]
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
 
-    def parse_args(self, args: Any = None, namespace: Any = None) -> argparse.Namespace:
-        """As argparse's, but an unknown option is reported by the command it was given to (its ``--help``
+    def parse_command(self, argv: list[str] | None) -> argparse.Namespace:
+        """:meth:`parse_args`, but an unknown option is reported by the command it was given to (whose ``--help``
         lists the options), not by ``trackenv``."""
-        parsed, extra = self.parse_known_args(args, namespace)
+        parsed, extra = self.parse_known_args(argv)
         if extra:
-            command = getattr(self, "commands", {}).get(getattr(parsed, "command", None), self)
+            command = self.commands.get(getattr(parsed, "command", None) or "", self)
             command.error(f"unrecognized arguments: {' '.join(extra)}")
         return parsed
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> _Parser:
     p = _Parser(
         prog="trackenv", formatter_class=_HelpFormatter,
         description="Railway track tamping on vehicle-track dynamics and ballast settlement: check the model, "
@@ -1001,7 +1004,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_command(argv)
     args.argv = list(sys.argv[2:] if argv is None else argv[1:])  # the command as given, for the files it writes
     import trackenv  # noqa: F401  (first, so that its OpenMP wait policy reaches torch too: trackenv._openmp)
 

@@ -12,6 +12,7 @@ the documentation's line-files page gives what it is worth on futures it did not
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -135,7 +136,7 @@ def check_apart(seed: int, futures: int, tune: int) -> None:
 Stage = Callable[[dict[str, Any]], list[dict[str, Any]]]
 
 
-def tuning_stages(cls: type) -> list[tuple[str, Stage]]:
+def tuning_stages(cls: type[Any]) -> list[tuple[str, Stage]]:
     """The grids :func:`tune_plan_rule` searches in turn for a rule of class ``cls``, each named and each from the
     best parameters so far: a choice rule's campaign triggers first (the grouped threshold's grid, with the
     choices as they are), then its choices around the best campaign (:func:`~trackenv_agents.rules.choices.
@@ -162,12 +163,13 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
     check_tunable(rule, futures)
     shipped = dict(rule.params)
     train = config.replace(horizon_years=TUNE_YEARS)
-    best, best_cost, shipped_cost, tried, counts = shipped, None, None, [shipped], []
+    best, best_cost, shipped_cost = shipped, math.inf, math.inf
+    tried: list[dict[str, Any]] = [shipped]
+    counts: list[tuple[str, int]] = []
     named = tuning_stages(type(rule))
     for k, (name, stage) in enumerate(named):
-        candidates = [c for c in stage(best) if c not in tried]
-        if best_cost is None:  # the shipped parameters run in the first stage's batch
-            candidates = [shipped, *candidates]
+        # the shipped parameters run in the first stage's batch
+        candidates = [*([shipped] if k == 0 else []), *(c for c in stage(best) if c not in tried)]
         counts.append((name, len(candidates)))
         if not candidates:
             continue
@@ -177,12 +179,13 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
                     f"({len(candidates)} candidates)")
         found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
                      action_type=action_type_for(config), desc=text)
-        if shipped_cost is None:
-            shipped_cost = best_cost = next(row["mean_cost"] for row in found["table"] if row["params"] == shipped)
+        if k == 0:
+            shipped_cost = best_cost = float(next(row["mean_cost"] for row in found["table"]
+                                                  if row["params"] == shipped))
         if found["best_mean_cost"] < best_cost:
             best, best_cost = dict(found["best_params"]), float(found["best_mean_cost"])
         tried += [c for c in candidates if c not in tried]
-    return RuleTuning(best, shipped, float(best_cost), float(shipped_cost), futures, TRAIN_SEEDS[0], len(tried),
+    return RuleTuning(best, shipped, best_cost, shipped_cost, futures, TRAIN_SEEDS[0], len(tried),
                       _searched(tried), stages=tuple(counts) if len(counts) > 1 else ())
 
 
