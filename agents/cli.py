@@ -476,7 +476,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 bar.set_description("plan (quarters)", refresh=False)
             bar.update(n)
     elif args.tune:
-        futures = f"{args.tune} ten-year future{'s' if args.tune > 1 else ''}"
+        from .plan_report import counted
+
+        futures = counted(args.tune, "ten-year future", "ten-year futures")
         where = "each line" if network is not None else "the line"
         print(f"trackenv plan: tuning {args.policy} on {futures} of {where} first (minutes; no progress bars with "
               f"--json)", file=sys.stderr)

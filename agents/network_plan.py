@@ -286,8 +286,7 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
 
         check_apart(seed, futures, tune)
     tunings = _tuned(rules, lines, tune, progress is not None) if tune else [None] * len(lines)
-    rules = [rule if t is None else type(rule)(**t.params).bind(cfg) for rule, t, cfg in zip(rules, tunings, lines,
-                                                                                             strict=True)]
+    rules = [rule if t is None else t.rule(rule, cfg) for rule, t, cfg in zip(rules, tunings, lines, strict=True)]
     steps = lines[0].horizon_steps
     trained = trained_horizon_years(rules[0])
     if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years

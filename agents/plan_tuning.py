@@ -21,6 +21,7 @@ from trackenv.envs.choices import action_type_for
 
 from .evaluation.harness import TRAIN_SEEDS
 from .evaluation.tuning import tune
+from .plan_report import counted
 from .rules.choices import CHOICE_OFF, ChoiceThreshold, choice_grid
 from .rules.line import GroupedThreshold
 
@@ -57,6 +58,10 @@ class RuleTuning:
     def seeds(self) -> list[int]:
         return list(range(self.seed, self.seed + self.futures))
 
+    def rule(self, shipped: Any, config: Any) -> Any:
+        """The rule of ``shipped``'s class with the chosen :attr:`params`, bound to ``config`` (what a plan runs)."""
+        return type(shipped)(**self.params).bind(config)
+
     def at_edge(self) -> list[str]:
         """The parameters whose chosen value is the smallest or the largest searched (of at least three): the
         line's best may lie beyond the grid. A choice switched off (its parameter at 0) is no end of a range."""
@@ -83,7 +88,7 @@ class RuleTuning:
                             for k, v in self.params.items() if v != self.shipped_params.get(k))
         chose = f"chose {changed}" if changed else "kept the shipped parameters"
         where = "this line alone (as if it had a machine of its own)" if self.alone else "this line"
-        futures = f"{self.futures} training future{'s' if self.futures > 1 else ''}"
+        futures = counted(self.futures, "training future", "training futures")
         stages = (f" in {len(self.stages)} stages (" + ", then ".join(f"{n} for the {name}" for name, n in self.stages)
                   + "; " if len(self.stages) > 1 else " (")
         lines = [f"tuned on {where}: {policy} {chose}; {self.cost_keur:.0f} against {self.shipped_cost_keur:.0f} k€ "

@@ -357,7 +357,7 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
 
         check_apart(seed, futures, tune)
         tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None, desc=f"tune {policy}")
-        rule = type(rule)(**tuning.params).bind(cfg)
+        rule = tuning.rule(rule, cfg)
     steps = cfg.horizon_steps
     trained = trained_horizon_years(rule)
     if trained is not None:

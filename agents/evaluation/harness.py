@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import copy
 import functools
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ from trackenv.envs.choices import CHOICES, INTERVENTIONS, IS_TRACK_WORK, action_
 from trackenv.envs.env import TrackVectorEnv
 from trackenv.envs.problems import ProblemConfig, make_vector_env, problem_config
 
+from ..rules.base import policy_params
 from .statistics import bootstrap_ci
 
 __all__ = [
@@ -73,11 +74,6 @@ def machine_activity(moved: np.ndarray, section_choices: np.ndarray) -> dict[str
 def policy_name(policy: Any) -> str:
     """The policy's ``name`` attribute, else its class name."""
     return str(getattr(policy, "name", None) or type(policy).__name__)
-
-
-def policy_params(policy: Any) -> dict[str, Any]:
-    params = getattr(policy, "params", None)
-    return dict(params) if isinstance(params, Mapping) else {}
 
 
 @dataclass

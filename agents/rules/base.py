@@ -13,11 +13,18 @@ searches. The rules themselves are in :mod:`.line` (they serve every preset: the
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
-__all__ = ["Heuristic", "RandomPolicy", "as_batch"]
+__all__ = ["Heuristic", "RandomPolicy", "as_batch", "policy_params"]
+
+
+def policy_params(policy: Any) -> dict[str, Any]:
+    """A copy of ``policy``'s ``params`` (a rule's, an agent's), {} where it has none."""
+    params = getattr(policy, "params", None)
+    return dict(params) if isinstance(params, Mapping) else {}
 
 
 def as_batch(obs: dict[str, Any]) -> tuple[dict[str, np.ndarray], bool]:

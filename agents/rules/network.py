@@ -31,7 +31,7 @@ from trackenv.envs.line_episode import line_observation_space
 from trackenv.envs.network import line_groups
 from trackenv.physics._checks import check_scalar
 
-from .base import Heuristic, as_batch
+from .base import Heuristic, as_batch, policy_params
 from .dispatch import ValueDispatch
 from .line import SectionThreshold
 
@@ -63,10 +63,6 @@ def network_play(line_policy: Any, dispatch: str | ValueDispatch = NETWORK_DISPA
     """``line_policy`` as the comparisons play it on the network: on every line, the machine sent by ``dispatch``,
     a trained line agent eager where the machine stays (:func:`eager_for`)."""
     return NetworkRule(line_policy, dispatch, eager_probability=eager_for(line_policy))
-
-
-def _params(policy: Any) -> dict[str, Any]:
-    return dict(getattr(policy, "params", None) or {})
 
 
 def network_label(line_name: str, dispatch: str | ValueDispatch = "requests",
@@ -183,7 +179,7 @@ class NetworkRule(Heuristic):
         groups = []
         for line, members in line_groups(config):
             rule = self.line_rule if line_rules is None else line_rules[members[0]]
-            if line_rules is not None and any(_params(line_rules[m]) != _params(rule) for m in members):
+            if line_rules is not None and any(policy_params(line_rules[m]) != policy_params(rule) for m in members):
                 raise ValueError(f"line_rules: lines {members} share one config but not their line policy's "
                                  f"parameters")
             bind = getattr(rule, "bind", None)
