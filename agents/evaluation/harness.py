@@ -126,6 +126,11 @@ class EvaluationResult:
         return int(self.cost.size)
 
     @property
+    def episodes_beyond_validity(self) -> int:
+        """How many episodes had a section beyond the model's validity in some step (0 where not recorded)."""
+        return 0 if self.beyond_validity is None else int(self.beyond_validity.sum())
+
+    @property
     def tampings_per_km_year(self) -> np.ndarray:
         """Tamped length per length of track per year, per episode (see the module docstring)."""
         c = self.config
@@ -151,7 +156,7 @@ class EvaluationResult:
             "immediate_action_exceedances_mean": float(self.immediate_action_exceedances.mean()),
             "mean_final_sd_mm": float(self.final_mean_sd_mm.mean()),
             "choices": {name: float(np.mean(counts[name])) if name in counts else 0.0 for name in CHOICE_NAMES},
-            "episodes_beyond_validity": 0 if self.beyond_validity is None else int(self.beyond_validity.sum()),
+            "episodes_beyond_validity": self.episodes_beyond_validity,
             **machine,
         }
 

@@ -368,6 +368,7 @@ def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: n
             "sections_per_class": {c: classes[c]["sections_per_episode"] for c in SECTION_CLASSES},
             "campaigns_per_episode": classes["line"]["campaigns_per_episode"],
             "tampings_per_km_year": float(result.tampings_per_km_year.mean()),
+            "episodes_beyond_validity": result.episodes_beyond_validity,
             "episode_costs": result.cost.tolist()}
 
 
@@ -533,6 +534,11 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
                         f"(episodes: {src})."]
         else:
             out += ["", f"No normalised score: {b['reason']}."]
+        beyond = [f"{r['policy']} ({r['episodes_beyond_validity']} of {r['n_episodes']})" for r in rows
+                  if r.get("episodes_beyond_validity")]
+        if beyond:
+            out += ["", "**Beyond the model's validity** (a section's settlement ran away) in some episodes of "
+                    + ", ".join(beyond) + ": their costs from there on are not physical."]
         unfit = payload.get("not_scored", {}).get(env_id) or {}
         by_reason: dict[str, list[str]] = {}
         for name, why in sorted(unfit.items()):  # grouped by the reason's head, the text before its colon

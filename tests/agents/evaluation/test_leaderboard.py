@@ -197,6 +197,18 @@ def test_payload_schema_and_table(first) -> None:
     table = format_leaderboard({**payload, "command": "trackenv leaderboard --env " + ENV})
     assert f"### {ENV}" in table and "Hindsight bound:" in table
     assert table.count(f"| {RULES[0]} |") == 1 and "Written by `trackenv leaderboard --env" in table
+    assert [r["episodes_beyond_validity"] for r in payload["results"]] == [0] * len(payload["results"])
+    assert "Beyond the model's validity" not in table
+
+
+def test_the_page_warns_where_episodes_left_the_models_validity(first) -> None:
+    """A row with episodes beyond the model's validity (its costs not physical from there on) is named under its
+    scenario's table, with the count."""
+    payload, _ = first
+    row = {**payload["results"][-1], "episodes_beyond_validity": 2}
+    table = format_leaderboard({**payload, "results": [*payload["results"][:-1], row]})
+    assert (f"**Beyond the model's validity** (a section's settlement ran away) in some episodes of {row['policy']} "
+            f"(2 of {row['n_episodes']}): their costs from there on are not physical.") in table
 
 
 def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
