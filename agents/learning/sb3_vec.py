@@ -36,7 +36,6 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import VectorWrapper
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from trackenv.envs.line_config import LineConfig
@@ -195,49 +194,27 @@ class TampingSB3VecEnv(_OneObjectVecEnv):
         return getattr(self.venv, name)  # raises AttributeError if neither has it
 
     # --- checkpoints ---
-    def _ranked_wrapper(self) -> RankedVectorActions | None:
-        env = self.venv
-        while isinstance(env, VectorWrapper):
-            if isinstance(env, RankedVectorActions):
-                return env
-            env = env.env
-        return None
-
     def get_state(self) -> dict[str, Any] | None:
         """What a checkpoint needs to continue these envs exactly: each env's snapshot (its episode, generator
-        and last info; :mod:`trackenv.envs.state`) and what the ranked actions' wrapper kept of the last
-        observation (it decodes the next counts on it). None where the envs live in worker processes
-        (``workers`` > 1), out of reach of the planning state API. Call after :meth:`reset`."""
+        and last info; :mod:`trackenv.envs.state`; the ranked actions decode on the restored observation). None
+        where the envs live in worker processes (``workers`` > 1), out of reach of the planning state API. Call
+        after :meth:`reset`."""
         base = self.venv.unwrapped
         if not hasattr(base, "get_state"):
             return None
-        ranked = self._ranked_wrapper()
-        return {"envs": [base.get_state(i) for i in range(self.num_envs)],
-                # the wrapper keeps the last observation's keys privately; there is no public way to set them
-                "ranked_obs": None if ranked is None else {k: np.array(v, copy=True)
-                                                           for k, v in ranked._obs.items()}}
+        return {"envs": [base.get_state(i) for i in range(self.num_envs)]}
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Continue the envs from :meth:`get_state`'s ``state`` (taken from envs of the same config and
         count): every env resumes its episode where it was, and draws its later episodes from its restored
-        generator."""
+        generator. (A checkpoint written before the ranked wrapper read the env's observation also holds its
+        copy of the last observation, ``ranked_obs``: the restored envs give the same.)"""
         if len(state["envs"]) != self.num_envs:
             raise ValueError(f"the state holds {len(state['envs'])} envs, this adapter {self.num_envs}")
         self.venv.reset()  # the rows and their generators exist; their episodes are replaced below
         base = self.venv.unwrapped
         for i, env_state in enumerate(state["envs"]):
             base.set_state(i, env_state)
-        ranked = self._ranked_wrapper()
-        kept = state.get("ranked_obs")
-        if kept is None and state.get("ranked_sd") is not None:  # a state taken before the choices: SDs only
-            kept = {"section_sd": state["ranked_sd"]}
-        other = ValueError("the state comes from an adapter of another action type")
-        if (ranked is None) != (kept is None):
-            raise other
-        if ranked is not None and kept is not None:
-            if set(kept) != set(ranked._obs):
-                raise other
-            ranked._obs = {k: np.array(v, copy=True) for k, v in kept.items()}
         self._reset_seeds()  # a seed set before would reseed the restored generators at the next reset
 
 

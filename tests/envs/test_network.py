@@ -213,6 +213,8 @@ def test_state_round_trip_and_into_a_vector_row():
     ({"line_config": {"bogus": 1}}, r"^line_config: unknown LineConfig key\(s\) \['bogus'\]"),
     ({"line_config": 3}, "line_config"),
     ({"no_such_field": 1}, "no_such_field"),
+    ({"action_type": "discrete"}, r"^action_type: the network takes no action_type \(its action is MultiBinary"),
+    ({"scenario": "wet"}, r"^scenario: the network takes no scenario \(its lines are given by line_config"),
 ])
 def test_bad_config_raises_naming_the_field(bad, message):
     with pytest.raises(ValueError, match=message):

@@ -144,3 +144,35 @@ def test_set_state_drops_a_pending_next_step_reset():
     assert rew[0] == expected and not trunc[0]  # row 0 stepped the restored episode with its action
     assert rew[1] == 0.0  # row 1 was reset, as NEXT_STEP does
     vec.close()
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_ranked_actions_decode_on_a_restored_state(vector):
+    """The ranked ids rank the sections on the env's observation as it stands, so a state restored through
+    ``.unwrapped`` replays the same tamping (they once ranked on a copy of the last observation returned, so the
+    restored episode tamped the sections that ranked worst in the abandoned one)."""
+    cfg = {"horizon_years": 3.0}
+    if vector:
+        env = gym.make_vec("trackenv/TampingRanked-v1", num_envs=2, vectorization_mode="vector_entry_point", **cfg)
+        get, put, wait, tamp_one = (lambda: env.unwrapped.get_state(1), lambda s: env.unwrapped.set_state(1, s),
+                                    np.zeros(2, int), np.ones(2, int))
+        detour = [np.zeros(2, int), np.zeros(2, int), np.array([0, 3])]
+    else:
+        env = gym.make("trackenv/TampingRanked-v1", **cfg)
+        get, put, wait, tamp_one, detour = env.unwrapped.get_state, env.unwrapped.set_state, 0, 1, [0, 0, 3]
+    replayed = 0
+    for seed in range(6):  # row 1 of the vector env: seeds 1 to 6; the old copy tamped other sections at 1 and 4
+        env.reset(seed=seed)
+        for _ in range(4):
+            env.step(wait)
+        state = get()
+        first = env.step(tamp_one)
+        for a in detour:  # another moment of the episode: its worst sections differ
+            env.step(a)
+        put(state)
+        again = env.step(tamp_one)
+        row = (lambda x: x[1]) if vector else (lambda x: x)
+        assert row(first[1]) == row(again[1])
+        np.testing.assert_array_equal(row(first[4]["tamped_sections"]), row(again[4]["tamped_sections"]))
+        replayed += 1
+    assert replayed == 6

@@ -216,8 +216,16 @@ def test_render_mode_renders_the_first_env() -> None:
 def test_malformed_vector_actions_name_the_expected_shape(actions) -> None:
     venv = TampingVectorEnv(num_envs=2, config=CFG)
     venv.reset(seed=0)
-    with pytest.raises(ValueError, match=r"^actions must have shape \(2, 3\)"):
+    with pytest.raises(ValueError, match=r"^actions must have shape \(2, 3\) \(one action per env\), got "
+                                         r"(a ragged list|\w+ of shape)"):
         venv.step(actions)
+
+
+def test_a_bad_value_in_a_vector_action_names_its_env() -> None:
+    venv = TampingVectorEnv(num_envs=2, config=CFG)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"^actions\[1\]: action values must be 0 or 1"):
+        venv.step(np.array([[0, 0, 0], [0, 2, 0]]))
 
 
 @pytest.mark.parametrize("seed", [1.5, -1, True, [0, -1], [0, 1.5], np.array(2.5)])
@@ -246,3 +254,27 @@ def test_a_harness_given_an_env_id_for_a_preset_is_told_the_preset() -> None:
 
     with pytest.raises(ValueError, match=r"unknown scenario 'trackenv/TampingLineSmall-v0'.*an env id: give"):
         problem_config("trackenv/TampingLineSmall-v0")
+
+
+@pytest.mark.parametrize("seeds", [None, [None, None, None]])
+def test_reset_without_a_seed_continues_each_envs_generator(seeds) -> None:
+    """As Gymnasium's SyncVectorEnv (each single env's ``reset()`` continues its generator): after
+    ``reset(seed=s)``, ``reset()`` draws the same next episodes every time, those the sync env draws."""
+    firsts = []
+    for _ in range(2):
+        venv = make_vec(config=CFG)
+        venv.reset(seed=7)
+        firsts.append(venv.reset(seed=seeds)[0])
+    sync = gym.make_vec("trackenv/Tamping-v1", num_envs=3, vectorization_mode="sync", config=CFG)
+    sync.reset(seed=7)
+    expected = sync.reset()[0]
+    for k in expected:
+        np.testing.assert_array_equal(firsts[0][k], firsts[1][k])
+        np.testing.assert_array_equal(firsts[0][k], expected[k])
+    venv = make_vec(config=CFG)
+    venv.reset(seed=7)
+    mixed = venv.reset(seed=[None, 100, None])[0]  # a None keeps that env's generator, a seed reseeds
+    fresh = make_vec(config=CFG).reset(seed=[100, 101, 102])[0]
+    for k in expected:
+        np.testing.assert_array_equal(mixed[k][[0, 2]], expected[k][[0, 2]])
+        np.testing.assert_array_equal(mixed[k][1], fresh[k][0])

@@ -47,6 +47,28 @@ def test_ranked_rejects_counts_out_of_range(k) -> None:
         ranked_to_sections(np.array([k]), np.ones((1, 4)))
 
 
+@pytest.mark.parametrize("env_id, action", [
+    ("trackenv/TampingDiscrete-v1", "3"), ("trackenv/TampingDiscrete-v1", {"a": 1}),
+    ("trackenv/TampingDiscrete-v1", None), ("trackenv/Tamping-v1", ["1"] * 6),
+    ("trackenv/Tamping-v1", np.ones(6, complex)), ("trackenv/Tamping-v1", [[0, 1], [0]]),
+    ("trackenv/TampingRanked-v1", None), ("trackenv/TampingRanked-v1", "000000"),
+    ("trackenv/TampingRanked-v1", {"a": 1}),
+])
+def test_actions_that_are_no_numbers_are_refused_naming_the_action(env_id, action) -> None:
+    """Text, a dict, None, complex numbers or a ragged list: one ValueError saying what an action is (numpy
+    would take "3" as 3, or fail deep inside on a dict)."""
+    env = gym.make(env_id, disable_env_checker=True)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"^action must be "):
+        env.step(action)
+
+
+def test_the_flat_ranked_vector_env_refuses_same_step() -> None:
+    with pytest.raises(ValueError, match=r"^autoreset_mode must be NEXT_STEP with flat=True"):
+        gym.make_vec("trackenv/TampingRankedFlat-v1", num_envs=2, vectorization_mode="vector_entry_point",
+                     autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+
+
 def test_section_keys_and_n_sections_are_generic() -> None:
     env = TampingEnv(CFG)
     assert n_sections_of(gym.wrappers.RecordEpisodeStatistics(env)) == 3

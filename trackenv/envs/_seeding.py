@@ -20,6 +20,11 @@ def vector_seeds(seed: int | list[int] | np.ndarray | None, num_envs: int) -> li
     return [check_int("seed", seed, low=0) + i for i in range(num_envs)]
 
 
-def vector_rngs(seed: int | list[int] | np.ndarray | None, num_envs: int) -> list[np.random.Generator]:
-    """One generator per env for ``reset(seed=...)``, from :func:`vector_seeds`."""
-    return [np.random.default_rng(s) for s in vector_seeds(seed, num_envs)]
+def vector_rngs(seed: int | list[int] | np.ndarray | None, num_envs: int,
+                current: list[np.random.Generator] | None = None) -> list[np.random.Generator]:
+    """One generator per env for ``reset(seed=...)``, from :func:`vector_seeds`; an env whose seed is None keeps
+    its generator in ``current`` where it has one (as a single env's ``reset()`` continues its generator), else
+    draws fresh entropy."""
+    current = current or []
+    return [current[i] if s is None and i < len(current) else np.random.default_rng(s)
+            for i, s in enumerate(vector_seeds(seed, num_envs))]

@@ -4,7 +4,8 @@ A native vector env (:class:`~trackenv.envs.env.TrackVectorEnv`, whatever the pr
 batched call of the physics. What it owes Gymnasium does not depend on the problem and lives here:
 
 * seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i``, or give a list of one seed per env
-  (:func:`~trackenv.envs._seeding.vector_rngs`); later episodes of env ``i`` draw from the same generator;
+  (:func:`~trackenv.envs._seeding.vector_rngs`); later episodes of env ``i`` draw from the same generator, and
+  ``reset()`` without a seed continues every env's generator (a None in the list, that env's);
 * both of Gymnasium's autoreset modes, with the results of ``gymnasium.vector.SyncVectorEnv`` over the problem's
   single env in the same mode (observations, rewards, flags and infos, each info key with its ``_key`` mask):
 
@@ -58,14 +59,15 @@ def check_autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
 def check_vector_actions(actions: Any, num_envs: int, single_action_space: spaces.Space) -> np.ndarray:
     """``actions`` as an array of one action per env, (num_envs, *action shape); else ValueError naming the
     shape expected."""
+    want = (num_envs,) + tuple(single_action_space.shape or ())
     try:
         arr = np.asarray(actions)
     except ValueError:  # ragged nested sequences
-        arr = np.empty(0)
-    want = (num_envs,) + tuple(single_action_space.shape or ())
+        raise ValueError(f"actions must have shape {want} (one action per env), got a ragged "
+                         f"{type(actions).__name__} (rows of different lengths)") from None
     if arr.shape != want:
-        raise ValueError(
-            f"actions must have shape {want} (one action per env), got shape {arr.shape} ({actions!r:.60})")
+        raise ValueError(f"actions must have shape {want} (one action per env), got {type(actions).__name__} "
+                         f"of shape {arr.shape}")
     return arr
 
 
@@ -115,6 +117,11 @@ class BatchedVectorEnv(VectorEnv):
         """An RGB array (H, W, 3) of the first env's state, ``info`` its last info."""
         raise NotImplementedError
 
+    def current_observations(self) -> dict:
+        """The observations of the envs as they stand, batched: what the last reset or step returned, or a row's
+        restored moment after :meth:`set_state` (a NEXT_STEP env that is to reset at the next step: its last)."""
+        return self._observations()
+
     # ------------------------------------------------------------------ the Gymnasium API
     def _observations(self) -> dict:
         out = create_empty_array(self.single_observation_space, self.num_envs)
@@ -127,7 +134,7 @@ class BatchedVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict | None = None) -> tuple[dict, dict[str, Any]]:
-        self._rngs = vector_rngs(seed, self.num_envs)
+        self._rngs = vector_rngs(seed, self.num_envs, self._rngs)
         everyone = list(range(self.num_envs))
         self._start(everyone)
         self._autoreset[:] = False

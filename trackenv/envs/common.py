@@ -3,6 +3,8 @@ actions, checking ``reset``'s arguments and the render mode."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from gymnasium import spaces
 
@@ -68,6 +70,18 @@ def check_reset_arguments(seed, options) -> int | None:
     return seed
 
 
+def numeric_action(action: Any, expected: str) -> np.ndarray:
+    """``action`` as an array of floats; ValueError saying ``expected`` where it is not numbers (text, a dict,
+    None, complex numbers, a ragged sequence), which numpy would otherwise take or fail on deep inside."""
+    try:
+        a = np.asarray(action)
+    except ValueError:  # a ragged sequence
+        a = np.empty(0, dtype=object)
+    if a.dtype.kind not in "biuf":
+        raise ValueError(f"action must be {expected}, got {action!r:.80} ({type(action).__name__})")
+    return a.astype(float)
+
+
 def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
     """The sections to tamp (bool, n_sections) from an action, or with ``action_type="choices"`` the action code
     of each section (int64, n_sections: :data:`~trackenv.envs.choices.CHOICES`); a malformed action raises
@@ -75,12 +89,8 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
     if action_type == "choices":
         return _decode_choices(action, n_sections)
     if action_type == "discrete":
-        a = np.asarray(action)
-        if (
-            a.size != 1
-            or not np.all(np.isfinite(a.astype(float)))
-            or float(a.ravel()[0]) != int(a.ravel()[0])
-        ):
+        a = numeric_action(action, f"one integer in [0, {n_sections}]")
+        if a.size != 1 or not np.all(np.isfinite(a)) or float(a.ravel()[0]) != int(a.ravel()[0]):
             raise ValueError(f"action must be one integer in [0, {n_sections}], got {action!r}")
         k = int(a.ravel()[0])
         if not 0 <= k <= n_sections:
@@ -89,12 +99,7 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
         if k:
             out[k - 1] = True
         return out
-    try:
-        a = np.asarray(action, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"action must be an array of {n_sections} values in {{0, 1}}, got {action!r}"
-        ) from None
+    a = numeric_action(action, f"an array of {n_sections} values in {{0, 1}}")
     if a.shape != (n_sections,):
         raise ValueError(f"action must have shape ({n_sections},) (one 0/1 per section), got {a.shape}")
     if not np.all(np.isfinite(a)) or not np.all((a == 0) | (a == 1)):
@@ -104,11 +109,7 @@ def decode_action(action, action_type: str, n_sections: int) -> np.ndarray:
 
 def _decode_choices(action, n_sections: int) -> np.ndarray:
     top = len(CHOICES) - 1
-    try:
-        a = np.asarray(action, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"action must be an array of {n_sections} choice codes in [0, {top}], "
-                         f"got {action!r}") from None
+    a = numeric_action(action, f"an array of {n_sections} choice codes in [0, {top}]")
     if a.shape != (n_sections,):
         raise ValueError(f"action must have shape ({n_sections},) (one choice code per section), got {a.shape}")
     if not np.all(np.isfinite(a)) or not np.all((a == np.round(a)) & (a >= 0) & (a <= top)):

@@ -106,6 +106,13 @@ class TrackEnv(gym.Env):
         tamped (or worked on) within the last ``min_steps_between_tampings`` steps may not be tamped."""
         return _masks(self.engine, self.config, 1, self.action_type)[0]
 
+    def current_observation(self) -> dict[str, np.ndarray]:
+        """The observation of the episode as it stands: what the last reset or step returned, or the restored
+        moment's after :meth:`set_state` (the ranked wrappers decode their counts on it)."""
+        if self.engine is None:
+            raise RuntimeError("call reset() before current_observation()")
+        return self.engine.observation(0)
+
     def get_state(self) -> EnvState:
         """A snapshot of the episode (:mod:`trackenv.envs.state`): ``set_state`` on this env, on any env of the
         same config or on a row of its vector env continues it bit for bit."""
@@ -165,7 +172,10 @@ class TrackVectorEnv(BatchedVectorEnv):
         n_sections = self.config.n_sections
         want = np.zeros((self.num_envs, n_sections), dtype=np.int64)
         for i in stepping:
-            want[i] = decode_action(actions[i], self.action_type, n_sections)
+            try:
+                want[i] = decode_action(actions[i], self.action_type, n_sections)
+            except ValueError as exc:  # say which env's action
+                raise ValueError(f"actions[{i}]: {exc}") from None
         rewards, truncated, infos = self._rows().advance(want, stepping, self._rngs, resetting)
         return rewards, np.zeros(self.num_envs, dtype=bool), truncated, infos
 

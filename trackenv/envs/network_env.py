@@ -25,7 +25,19 @@ def network_config(config: NetworkConfig | dict | None, overrides: dict[str, Any
     """The config of a TampingNetwork env from its arguments (:meth:`NetworkConfig.coerce`; ``max_episode_steps``,
     which ``gym.make`` may pass, is dropped: the env truncates itself at its horizon)."""
     overrides.pop("max_episode_steps", None)
+    for name, why in _LINE_ENV_ONLY.items():
+        if name in overrides:
+            raise ValueError(f"{name}: the network takes no {name} ({why}); its own arguments are config, n_lines, "
+                             "line_config, capacity, move_cost and start_line, any other a field of the line config")
     return NetworkConfig.coerce(config, **overrides)
+
+
+#: TampingLine's arguments that the network does not take, each with why (a line config would refuse them less
+#: clearly: as unknown keys of its lines)
+_LINE_ENV_ONLY = {
+    "action_type": "its action is MultiBinary, one request per section of every line",
+    "scenario": "its lines are given by line_config: a preset name, a dict, a line file, or a list of them",
+}
 
 
 class TampingNetwork(TrackEnv):

@@ -25,6 +25,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .choices import CHOICES
+from .common import numeric_action
 
 __all__ = ["MIN_GROWTH_YEARS", "PRECEDENCE", "RANKED_SCORES", "choice_scores", "rank_mask", "ranked_choice_masks",
            "ranked_to_choices", "ranked_to_sections", "score_keys"]
@@ -75,7 +76,7 @@ def rank_mask(score, eligible: np.ndarray, k: np.ndarray) -> np.ndarray:
 
 def _counts(k, rows: int, heads: int, n_sections: int) -> np.ndarray:
     """(rows, heads) integer counts from ``k``; ValueError if their number or range is wrong."""
-    counts = np.asarray(k)
+    counts = numeric_action(k, f"ranked counts, integers in [0, {n_sections}]")
     if counts.size != rows * heads:
         raise ValueError(f"need {heads} ranked count(s) per row for {rows} row(s), got {counts.size} value(s)")
     if not np.all((counts >= 0) & (counts <= n_sections) & (counts == np.round(counts))):

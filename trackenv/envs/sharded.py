@@ -86,6 +86,8 @@ def _command(env: BatchedVectorEnv, command: str, arg: Any) -> Any:
         return env.action_masks()  # type: ignore[attr-defined]
     if command == "render":
         return env.render()
+    if command == "current_observations":
+        return env.current_observations()
     if command == "get_state":
         return env.get_state(arg)  # type: ignore[attr-defined]
     if command == "set_state":
@@ -284,6 +286,10 @@ class ShardedVectorEnv(VectorEnv):
     def action_masks(self) -> np.ndarray:
         """(num_envs, ...) action masks of the shards, in env order."""
         return np.concatenate(self._send_all("action_masks", [None] * self.workers))
+
+    def current_observations(self) -> dict:
+        """The shards' observations as they stand (:meth:`BatchedVectorEnv.current_observations`), in env order."""
+        return self._observations(self._send_all("current_observations", [None] * self.workers))
 
     def get_state(self, index: int) -> Any:
         """A snapshot of env ``index`` from the worker that holds it: the native vector env's

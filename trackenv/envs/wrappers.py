@@ -45,7 +45,9 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorActionWrapper, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
+from .batched import check_autoreset_mode
 from .choices import CHOICES
+from .common import numeric_action
 from .ranking import rank_mask, ranked_choice_masks, ranked_to_choices, ranked_to_sections, score_keys
 
 __all__ = [
@@ -181,24 +183,15 @@ class RankedActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         self.heads = self._form.heads
         """The interventions counted by the action, in order (None over a tamp-or-wait env)."""
         self.action_space = self._form.space
-        self._obs = {k: np.zeros(n) for k in self._form.keys}
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._obs = self._form.kept(obs)
-        return obs, info
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = super().step(action)
-        self._obs = self._form.kept(obs)
-        return obs, reward, terminated, truncated, info
 
     def action(self, action) -> np.ndarray:
-        a = np.asarray(action)
+        a = numeric_action(action, f"{self._form.width} integer(s) in [0, {self.n_sections}] (a ranked action)")
         if a.size != self._form.width:
             raise ValueError(f"a ranked action is {self._form.width} integer(s) in [0, {self.n_sections}], got "
                              f"{action!r}")
-        rows = {k: v[None] for k, v in self._obs.items()}
+        # the env's observation as it stands (a state restored through env.unwrapped.set_state included)
+        now = self.env.unwrapped.current_observation()  # type: ignore[attr-defined]
+        rows = {k: v[None] for k, v in self._form.kept(now).items()}
         return self._form.decode(a.reshape(1, -1), rows, lambda: _masks(self.env))[0]
 
     def action_masks(self) -> np.ndarray:
@@ -301,24 +294,25 @@ class RankedVectorActions(VectorActionWrapper):
         self.heads = self._form.heads
         self.single_action_space = self._form.space
         self.action_space = batch_space(self.single_action_space, env.num_envs)
-        self._obs = {k: np.zeros((env.num_envs, n)) for k in self._form.keys}
-
-    def reset(self, *, seed=None, options=None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._obs = self._form.kept(obs)
-        return obs, info
-
-    def step(self, actions):
-        obs, rewards, terminated, truncated, info = self.env.step(self.actions(actions))
-        self._obs = self._form.kept(obs)
-        return obs, rewards, terminated, truncated, info
 
     def actions(self, actions) -> np.ndarray:  # type: ignore[override]
         counts = np.asarray(actions).reshape(self.num_envs, self._form.width)
-        return self._form.decode(counts, self._obs, lambda: _vector_masks(self.env))
+        observed = self._form.kept(_current_observations(self.env.unwrapped))
+        return self._form.decode(counts, observed, lambda: _vector_masks(self.env))
 
     def action_masks(self) -> np.ndarray:
         return self._form.masks(self.num_envs, lambda: _vector_masks(self.env))
+
+
+def _current_observations(env: VectorEnv) -> dict:
+    """The batched observations of ``env``'s envs as they stand: a native vector env's own
+    (``current_observations``), or each single env's (``current_observation``) under Gymnasium's SyncVectorEnv."""
+    if hasattr(env, "current_observations"):
+        return env.current_observations()
+    if isinstance(env, gym.vector.SyncVectorEnv):
+        rows = env.call("current_observation")
+        return {k: np.stack([row[k] for row in rows]) for k in rows[0]}
+    raise TypeError(f"{type(env).__name__} does not say its envs' current observations")
 
 
 class SectionVectorObservation(VectorWrapper):
@@ -360,6 +354,11 @@ def make_ranked_vector(num_envs: int = 8, *, env_id: str = "trackenv/Tamping-v1"
     the default ``autoreset_mode``)."""
     if flat:
         kwargs.setdefault("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if check_autoreset_mode(kwargs["autoreset_mode"]) != AutoresetMode.NEXT_STEP:
+            raise ValueError(f"autoreset_mode must be NEXT_STEP with flat=True (trackenv/TampingRankedFlat-v1): "
+                             f"Gymnasium's vector FlattenObservation works in that mode only, got "
+                             f"{kwargs['autoreset_mode']!r}; take flat=False (trackenv/TampingRanked-v1) for "
+                             f"SAME_STEP")
     venv = None
     if gym.spec(env_id).vector_entry_point is not None:
         try:
