@@ -48,8 +48,9 @@ __all__ = ["NetworkPlan", "check_network_policy", "plan_network"]
 class NetworkPlan:
     """A network's plan (:func:`plan_network`): the ``network`` (a
     :class:`~trackenv.envs.network_file.NetworkDescription`), each line's :class:`LinePlan` in ``lines`` (its own
-    costs, without the machine's moves), the machine's line after each quarter ``machine`` and whether it moved in
-    it ``moved`` (futures, quarters), and the network's ``costs`` and ``move_costs`` (futures, quarters) k€."""
+    costs, without the machine's moves), the machine's line after each quarter ``machine``, whether it moved in
+    it ``moved`` and whether it did track work ``worked`` (futures, quarters; None: counted as working), and the
+    network's ``costs`` and ``move_costs`` (futures, quarters) k€."""
 
     network: Any
     policy: str
@@ -63,13 +64,27 @@ class NetworkPlan:
     costs: np.ndarray
     move_costs: np.ndarray
     scenario: str = "default"
+    worked: np.ndarray | None = None
+
+    def _stays(self, working: bool) -> np.ndarray:
+        """(quarters, lines): the share of futures in which the machine is on each line in each quarter without
+        moving, and did track work there (``working``) or none."""
+        here = (self.machine[:, :, None] == np.arange(len(self.lines))) & ~self.moved[:, :, None]
+        worked = np.ones(self.moved.shape, bool) if self.worked is None else self.worked
+        return (here & (worked if working else ~worked)[:, :, None]).mean(axis=0)
 
     @property
     def works_on(self) -> np.ndarray:
         """(quarters, lines): the share of futures in which the machine works on each line in each quarter (it is
-        there and did not move in the quarter: it tamps there what the line asks for, or stands idle)."""
-        here = self.machine[:, :, None] == np.arange(len(self.lines))
-        return (here & ~self.moved[:, :, None]).mean(axis=0)
+        there, did not move in the quarter and tamps there what the line asks for)."""
+        return self._stays(True)
+
+    @property
+    def idle_on(self) -> np.ndarray:
+        """(quarters, lines): the share of futures in which the machine stands idle on each line in each quarter
+        (there, not moving, and tamping nothing: no work asked for that it may do there, and none elsewhere
+        worth a move)."""
+        return self._stays(False)
 
     @property
     def moving_to(self) -> np.ndarray:
@@ -82,14 +97,16 @@ class NetworkPlan:
         return [line.line.name for line in self.lines]
 
     def to_dict(self, files: Mapping[str, str] | None = None) -> dict[str, Any]:
-        """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on``: the
-        share of futures per line, in the order of ``lines``; ``moving``, and ``moving_to`` per line) and the
+        """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on`` and
+        ``idle_on``: the share of futures per line, in the order of ``lines``; ``moving``, and ``moving_to`` per
+        line) and the
         network's mean cost, the cost forecast, and each line's plan (:meth:`LinePlan.to_dict`) with the keys a
         line's plan has in ``trackenv plan LINE.yaml --json``: its ``warnings`` (:func:`plan_warnings`) and its
         ``files``, those of ``files`` (what :meth:`write` returned) under ``line<i>/``, keyed as a line's (none
         without ``files``)."""
         names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
         quarters = [{"from": d, "works_on": [float(s) for s in works],
+                     "idle_on": [float(s) for s in self.idle_on[q]],
                      "moving": float(self.moved[:, q].mean()), "moving_to": [float(m) for m in self.moving_to[q]],
                      "cost_mean_keur": float(self.costs[:, q].mean()),
                      "move_cost_mean_keur": float(self.move_costs[:, q].mean())}
@@ -123,6 +140,7 @@ class NetworkPlan:
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
         for q, row in enumerate(d["quarters"]):
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
+            where += [f"idle on line {i} {s:.0%}" for i, s in enumerate(row["idle_on"]) if s > 0]
             where += [f"moving to line {i} {m:.0%}" for i, m in enumerate(row["moving_to"]) if m > 0]
             tamped = [f"line {i}: {line.tamp_text(q, plan['quarters'][q]['tamp'])}"
                       for i, (plan, line) in enumerate(zip(d["line_plans"], self.lines, strict=True))
@@ -140,12 +158,16 @@ class NetworkPlan:
             total = line.costs.sum(axis=1)
             out.append(f"cost of line {i} over {years_text(self.years)}: {total.mean():.0f} k€ mean, "
                        f"{np.quantile(total, 0.1):.0f}-{np.quantile(total, 0.9):.0f} k€ over 10-90 % of the futures")
+            end = line.end_state_line()
+            if end is not None:
+                out.append(f"  {end}")
         out.append(f"cost of the network over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
                    f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f} k€)")
         return "\n".join(out)
 
     def figure(self) -> Any:
-        """The machine's course (per quarter the share of futures in which it works on each line, or moves) above
+        """The machine's course (per quarter the share of futures in which it works on each line, stands idle there
+        (hatched), or moves) above
         the cumulative cost forecast by date (the network's mean and 10-90 % band, each line's mean, the moves): a
         pyplot-free :class:`matplotlib.figure.Figure`."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -156,9 +178,13 @@ class NetworkPlan:
         top, bottom = fig.subplots(2, 1, sharex=True)
         quarters = np.arange(len(self.dates))
         below = np.zeros(len(self.dates))
-        for i, share in enumerate(self.works_on.T):
+        for i, (share, idle) in enumerate(zip(self.works_on.T, self.idle_on.T, strict=True)):
             top.bar(quarters, share, bottom=below, color=f"C{i}", label=f"line {i}: {self.lines[i].line.name}")
             below += share
+            if idle.any():
+                top.bar(quarters, idle, bottom=below, color=f"C{i}", alpha=0.3, hatch="//",
+                        label=f"idle on line {i}")
+                below += idle
         top.bar(quarters, self.moved.mean(axis=0), bottom=below, color="0.7", label="moving")
         top.set_ylim(0, 1)
         top.set_ylabel("share of futures")
@@ -185,20 +211,23 @@ class NetworkPlan:
         return fig
 
     def write(self, folder: Path) -> dict[str, str]:
-        """Write ``network.csv`` (quarter, date, where the machine works and where it moves to, a column per line
-        each, shares of futures; the network's mean, p10 and p90 cost and the mean move cost k€) and ``network.png``
-        (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
+        """Write ``network.csv`` (quarter, date, where the machine works, stands idle and where it moves to, a
+        column per line each, shares of futures; the network's mean, p10 and p90 cost and the mean move cost k€)
+        and ``network.png`` (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
         ``line<i>``; returns the paths."""
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / "network.csv"
         with path.open("w", newline="") as f:
             w = csv.writer(f, lineterminator="\n")
             w.writerow(["quarter", "from", *(f"works_on_line{i}" for i in range(len(self.lines))),
+                        *(f"idle_on_line{i}" for i in range(len(self.lines))),
                         *(f"moving_to_line{i}" for i in range(len(self.lines))),
                         "cost_mean_keur", "cost_p10_keur", "cost_p90_keur", "move_cost_mean_keur"])
-            for q, (date, works, moving) in enumerate(zip(self.dates, self.works_on, self.moving_to, strict=True)):
+            for q, (date, works, idle, moving) in enumerate(zip(self.dates, self.works_on, self.idle_on,
+                                                               self.moving_to, strict=True)):
                 c = self.costs[:, q]
-                w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), *(f"{m:.3f}" for m in moving),
+                w.writerow([q + 1, date, *(f"{s:.3f}" for s in works), *(f"{s:.3f}" for s in idle),
+                            *(f"{m:.3f}" for m in moving),
                             f"{c.mean():.3f}", f"{np.quantile(c, 0.1):.3f}", f"{np.quantile(c, 0.9):.3f}",
                             f"{self.move_costs[:, q].mean():.3f}"])
         png = folder / "network.png"
@@ -328,4 +357,4 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
                                tuning=tunings[i]))
     env.close()
     return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine.machine,
-                       run.machine.moved, run.costs, run.part_costs["move"], scenario)
+                       run.machine.moved, run.costs, run.part_costs["move"], scenario, run.machine.worked)

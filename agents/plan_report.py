@@ -151,7 +151,8 @@ class LinePlan:
     quarter; None: not known), which the table names where a quarter recommends more, and ``peak_max_mm`` each
     section's largest true D1 mean-to-peak in any future (sections,; :meth:`beyond_validity`), and the rule's
     ``tuning`` on the line where the plan asked for one (:class:`~trackenv_agents.plan_tuning.RuleTuning`; None:
-    the shipped parameters)."""
+    the shipped parameters), and each section's true SD at the start and the end of each future (``sd_start_mm``,
+    ``sd_end_mm``, (futures, sections) mm; None: not known): what the plan leaves (:meth:`end_state`)."""
 
     line: Any
     policy: str
@@ -180,6 +181,8 @@ class LinePlan:
     capacity: int | None = None
     peak_max_mm: np.ndarray | None = None
     tuning: Any = None
+    sd_start_mm: np.ndarray | None = None
+    sd_end_mm: np.ndarray | None = None
 
     @property
     def share(self) -> np.ndarray:
@@ -255,7 +258,34 @@ class LinePlan:
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
             "beyond_validity_peak_mm": self.beyond_validity(),
             "tuning": None if self.tuning is None else self.tuning.to_dict(),
+            "end_state": self.end_state(),
         }
+
+    def end_state(self) -> dict[str, float] | None:
+        """What the plan leaves, against what it started from (means over the futures): the line's mean true SD
+        [mm] and its number of sections at or above their SD alert limit, at the start and at the end (None where
+        not known). A plan that spends little by leaving the track worse shows it here: its savings come back
+        after the horizon."""
+        if self.sd_start_mm is None or self.sd_end_mm is None:
+            return None
+        alert = self.limits_mm.get("sd_alert")
+        out = {"sd_mean_mm_start": float(self.sd_start_mm.mean()), "sd_mean_mm_end": float(self.sd_end_mm.mean())}
+        if alert is not None:
+            out["sections_at_sd_alert_start"] = float((self.sd_start_mm >= alert).sum(axis=1).mean())
+            out["sections_at_sd_alert_end"] = float((self.sd_end_mm >= alert).sum(axis=1).mean())
+        return out
+
+    def end_state_line(self) -> str | None:
+        """:meth:`end_state` as one line of the table (None where not known)."""
+        e = self.end_state()
+        if e is None:
+            return None
+        text = (f"left at the end (true state, mean of the futures): SD {e['sd_mean_mm_end']:.2f} mm on average "
+                f"({e['sd_mean_mm_start']:.2f} at the start)")
+        if "sections_at_sd_alert_end" in e:
+            text += (f", {e['sections_at_sd_alert_end']:.1f} of {len(self.line.sections)} sections at or above their "
+                     f"SD alert ({e['sections_at_sd_alert_start']:.1f} at the start)")
+        return text
 
     def table(self) -> str:
         """The plan as text: what it was run on, per quarter its mean cost and the sections recommended for each
@@ -283,6 +313,9 @@ class LinePlan:
                      f"over 10-90 % of the futures ({parts})")
         if "geometry" in self.parts:
             lines.append(f"  ({GEOMETRY_NOTE})")
+        end = self.end_state_line()
+        if end is not None:
+            lines.append(end)
         fit = d["fit"]
         if fit["fitted"]:
             whose = "1 section's rate" if fit["fitted"] == 1 else f"{fit['fitted']} sections' rates"

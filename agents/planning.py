@@ -201,12 +201,14 @@ def unmet_reasons(config: Any, want: np.ndarray, applied: np.ndarray, allowed: n
 @dataclass
 class _MachineRecord:
     """What a network's futures add (:func:`_run_futures`): each line's costs (futures, steps, lines) and cost
-    parts (each the same shape) k€, the machine's line after each step and whether it moved (futures, steps)."""
+    parts (each the same shape) k€, the machine's line after each step, whether it moved and whether it did
+    track work (a choice applied anywhere: only its line can have any) (futures, steps)."""
 
     line_costs: np.ndarray
     line_part_costs: dict[str, np.ndarray]
     machine: np.ndarray
     moved: np.ndarray
+    worked: np.ndarray
 
 
 @dataclass
@@ -215,7 +217,8 @@ class _Futures:
     cost parts (each (futures, steps) k€), the state (:data:`STATE_COLUMNS`, each (steps, sections)), the share
     of futures in which the policy asked for a choice that was not applied (steps, sections), the number of
     futures in which that was for each of :data:`UNMET_REASONS` (each (steps, sections)), each section's largest
-    true D1 mean-to-peak in any future and step (sections,) mm; on a network the ``machine``'s record."""
+    true D1 mean-to-peak in any future and step (sections,) mm, its true SD at the start and at the end of each
+    future (``sd_start_mm``, ``sd_end_mm``: (futures, sections) mm); on a network the ``machine``'s record."""
 
     share: np.ndarray
     costs: np.ndarray
@@ -224,6 +227,8 @@ class _Futures:
     unmet_share: np.ndarray
     unmet_reasons: dict[str, np.ndarray]
     peak_max_mm: np.ndarray
+    sd_start_mm: np.ndarray
+    sd_end_mm: np.ndarray
     machine: _MachineRecord | None = None
 
     def line(self, index: int, at: slice) -> _Futures:
@@ -234,7 +239,8 @@ class _Futures:
         return _Futures(self.share[:, at], m.line_costs[:, :, index],
                         {k: v[:, :, index] for k, v in m.line_part_costs.items()},
                         {k: v[:, at] for k, v in self.state.items()}, self.unmet_share[:, at],
-                        {k: v[:, at] for k, v in self.unmet_reasons.items()}, self.peak_max_mm[at])
+                        {k: v[:, at] for k, v in self.unmet_reasons.items()}, self.peak_max_mm[at],
+                        self.sd_start_mm[:, at], self.sd_end_mm[:, at])
 
 
 #: why the env did not apply what was asked in one step: (want, applied codes, allowed, measured SD, info) ->
@@ -259,11 +265,12 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
     sections = np.shape(obs["section_sd"])[1]
     out = _Futures(np.zeros((steps, sections, len(CHOICES))), np.zeros((futures, steps)), {},
                    {key: np.zeros((steps, sections)) for key in STATE_COLUMNS}, np.zeros((steps, sections)),
-                   {key: np.zeros((steps, sections), dtype=np.int64) for key in UNMET_REASONS}, np.zeros(sections))
+                   {key: np.zeros((steps, sections), dtype=np.int64) for key in UNMET_REASONS}, np.zeros(sections),
+                   np.array(info["section_sd_mm"], dtype=float), np.zeros((futures, sections)))
     if "line_costs" in info:  # a network: each line's costs, and the machine
         lines = np.shape(info["line_costs"])[1]
         out.machine = _MachineRecord(np.zeros((futures, steps, lines)), {}, np.zeros((futures, steps), np.int64),
-                                     np.zeros((futures, steps), bool))
+                                     np.zeros((futures, steps), bool), np.zeros((futures, steps), bool))
     for step in range(steps):
         _record_state(out.state, step, obs, info, env.batch.renewing(), line_sections)
         action, _ = rule.predict(obs, deterministic=True)
@@ -284,8 +291,10 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
             m.line_costs[:, step] = info["line_costs"]
             _record_parts(m.line_part_costs, info["line_cost_parts"], step, m.line_costs.shape)
             m.machine[:, step], m.moved[:, step] = info["machine_line"], info["moved"]
+            m.worked[:, step] = (codes != 0).any(axis=1)
         if progress is not None:
             progress(1)
+    out.sd_end_mm = np.array(info["section_sd_mm"], dtype=float)  # after the last step (NEXT_STEP: not reset yet)
     return out
 
 
@@ -332,7 +341,7 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
                     config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm,
-                    tuning=tuning)
+                    tuning=tuning, sd_start_mm=run.sd_start_mm, sd_end_mm=run.sd_end_mm)
 
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,

@@ -29,7 +29,7 @@ def test_the_networks_costs_are_its_lines_and_the_moves(network_plan):
     assert np.allclose(plan.costs, lines + plan.move_costs, rtol=1e-12, atol=1e-9)
     for p in plan.lines:  # each line's parts add up to its cost
         assert np.allclose(sum(p.part_costs.values()), p.costs, rtol=1e-9, atol=1e-9)
-    assert np.allclose(plan.works_on.sum(axis=1) + plan.moved.mean(axis=0), 1.0)
+    assert np.allclose(plan.works_on.sum(axis=1) + plan.idle_on.sum(axis=1) + plan.moved.mean(axis=0), 1.0)
     assert np.allclose(plan.moving_to.sum(axis=1), plan.moved.mean(axis=0))
     assert (plan.move_costs[plan.moved] == 10.0).all() and (plan.move_costs[~plan.moved] == 0.0).all()
 
@@ -59,6 +59,20 @@ def test_the_machine_works_where_its_lines_plan_says_the_sections_are_tamped(net
     for i, p in enumerate(plan.lines):
         tamped_somewhere = p.share.max(axis=1)  # (quarters,) the largest share of any section
         assert (tamped_somewhere <= plan.works_on[:, i] + 1e-12).all()
+
+
+def test_a_machine_with_no_work_asked_for_stands_idle(tmp_path):
+    """Under no maintenance the machine never moves and tamps nothing: every quarter it stands idle on its line
+    (it was counted as working there), in the table, the JSON and network.csv."""
+    plan = plan_network(EXAMPLE_NETWORK, years=0.5, futures=2, policy="no-maintenance")
+    assert not plan.works_on.any() and not plan.moved.any()
+    assert np.array_equal(plan.idle_on, [[1.0, 0.0], [1.0, 0.0]])
+    assert "idle on line 0 100%; -" in plan.table()
+    assert [q["idle_on"] for q in plan.to_dict()["quarters"]] == [[1.0, 0.0], [1.0, 0.0]]
+    rows = (plan.write(tmp_path) and (tmp_path / "network.csv").read_text()).splitlines()
+    assert rows[0].split(",")[2:8] == ["works_on_line0", "works_on_line1", "idle_on_line0", "idle_on_line1",
+                                       "moving_to_line0", "moving_to_line1"]
+    assert rows[1].split(",")[2:6] == ["0.000", "0.000", "1.000", "0.000"]
 
 
 def test_a_request_where_the_machine_is_not_is_not_done_for_the_machine(tmp_path):
@@ -93,7 +107,8 @@ def test_plan_plans_a_network_file(tmp_path, capsys):
     d = json.loads(capsys.readouterr().out)
     assert d["network"] == load_network(EXAMPLE_NETWORK).name and len(d["line_plans"]) == 2
     assert d["lines"] == [p["line"] for p in d["line_plans"]] and len(d["quarters"]) == 2
-    assert all(len(q["works_on"]) == 2 and abs(sum(q["works_on"]) + q["moving"] - 1) < 1e-9 for q in d["quarters"])
+    assert all(len(q["works_on"]) == len(q["idle_on"]) == 2
+               and abs(sum(q["works_on"]) + sum(q["idle_on"]) + q["moving"] - 1) < 1e-9 for q in d["quarters"])
     assert all(abs(sum(q["moving_to"]) - q["moving"]) < 1e-9 for q in d["quarters"])
     assert {Path(p).name for p in d["files"].values()} == {"network.csv", "network.png", "plan.csv", "costs.csv",
                                                         "plan.png"}
@@ -158,3 +173,16 @@ def test_two_copies_of_a_line_keep_their_files_and_the_plans_capacity_is_the_mac
     assert [Path(p.line.source).name for p in plan.lines] == ["example_branch.yaml", "branch_copy.yaml"]
     assert [p.capacity for p in plan.lines] == [3, 3]
     assert "line 1: Example Branch Line (synthetic) (" in plan.table() and "branch_copy.yaml)" in plan.table()
+
+
+def test_a_networks_first_line_draws_the_futures_of_a_network_of_it_alone(network_plan, tmp_path):
+    """The docs compare a line with and without sharing the machine this way: a network file listing the first
+    line alone, planned with the same seed, gives that line the same futures (the same quarters while the machine
+    is on it in both: the first quarter here)."""
+    for path in EXAMPLE_NETWORK.parent.glob("example*"):
+        shutil.copy(path, tmp_path / path.name)
+    alone = tmp_path / "alone.yaml"
+    alone.write_text("name: the main line alone\nlines:\n  - example.yaml\n")
+    plan = plan_network(alone, years=0.75, futures=3)  # the same horizon: an episode draws its whole course
+    assert network_plan.works_on[0, 0] == 1.0  # the shared machine stays on the main line in the first quarter
+    np.testing.assert_array_equal(plan.lines[0].costs[:, 0], network_plan.lines[0].costs[:, 0])

@@ -455,3 +455,20 @@ def test_a_section_beyond_the_models_validity_is_named_by_its_id(tmp_path, capsy
     assert set(d["beyond_validity_peak_mm"]) == {"B"} and d["beyond_validity_peak_mm"]["B"] > 250
     assert any("went beyond the model's validity (250 mm) in some future (B " in w for w in d["warnings"])
     assert "has left the model's validity" not in captured.err
+
+
+def test_the_plan_says_what_it_leaves_against_what_it_started_from(rough_plan, tmp_path):
+    """The true SD at the start of each future is the reset's, at the end the last step's; ``end_state`` and the
+    table's line give their means and the sections at their SD alert. Without maintenance the rough section B is
+    left rougher than under the rule, which tamps it: the same start, a worse end."""
+    plan, _ = rough_plan
+    e = plan.to_dict()["end_state"]
+    assert plan.sd_start_mm.shape == plan.sd_end_mm.shape == (2, 4)
+    assert e["sd_mean_mm_start"] == pytest.approx(plan.state["sd_mm"][0].mean())
+    alert = plan.limits_mm["sd_alert"]
+    assert e["sections_at_sd_alert_start"] == pytest.approx((plan.sd_start_mm >= alert).sum(axis=1).mean())
+    assert "left at the end (true state, mean of the futures): SD " in plan.table()
+    idle = plan_line(write(tmp_path, history=ROUGH_B), years=0.5, futures=2, policy="no-maintenance", **FAST)
+    np.testing.assert_array_equal(idle.sd_start_mm, plan.sd_start_mm)
+    assert (idle.sd_end_mm[:, 1] > plan.sd_end_mm[:, 1] + 1.0).all()  # B: tamped by the rule, not without it
+    assert idle.end_state()["sd_mean_mm_end"] > e["sd_mean_mm_end"]

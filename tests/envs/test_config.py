@@ -62,6 +62,12 @@ def test_config_reaches_the_env_by_object_dict_or_keywords() -> None:
         TampingEnv(config=42)  # type: ignore[arg-type]
 
 
+def test_a_misspelt_key_gets_the_closest_field() -> None:
+    with pytest.raises(ValueError, match=r"unknown LineConfig key\(s\) \['capacty'\]; did you mean 'capacity' for "
+                                         r"'capacty'\? known: \["):
+        scenario("default", capacty=4)
+
+
 @pytest.mark.parametrize("key", ["no_such_field", "horizon", "sections"])
 def test_unknown_key_raises_naming_it(key: str) -> None:
     named = rf"unknown LineConfig key\(s\) \['{key}'\]"

@@ -113,6 +113,8 @@ FAULTS = {
                                 "switch_or_crossing"]),
     "misspelled register class": (dict(sections=SECTIONS.replace("transition", "transtion")),
                                   ["row 4 (section B)", "did you mean 'transition'?"]),
+    "register class abbreviated": (dict(sections=SECTIONS.replace("switch_or_crossing", "S&C")),
+                                   ["row 5 (section C)", "'S&C' is not one of", "did you mean 'switch_or_crossing'?"]),
     "history out of order": (dict(history=HISTORY.replace("B,2024-06-01", "B,2023-01-01")),
                              ["history.csv, row 6 (section B)", "date: 2023-01-01 is not after", "date order"]),
     "SD in m, not mm": (dict(history=HISTORY.replace("A,2025-01-05,0.8", "A,2025-01-05,0.0008")),

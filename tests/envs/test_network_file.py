@@ -112,7 +112,33 @@ def test_lines_dated_more_than_a_step_apart_are_refused(tmp_path):
     path = _folder(tmp_path, GOOD)
     branch = tmp_path / "example_branch.yaml"
     branch.write_text(branch.read_text().replace("as_of: 2026-01-01", "as_of: 2026-05-01"))
-    with pytest.raises(LineFileError, match=r"lines\[0\] .*as_of 2026-01-01 is 120 days before the network's latest"):
+    with pytest.raises(LineFileError, match=r"lines\[0\] .*as_of 2026-01-01 is 120 days before the network's latest "
+                                            r"\(2026-05-01, lines\[1\]: .*example_branch.yaml\)"):
         load_network(path).config()
     branch.write_text(branch.read_text().replace("as_of: 2026-05-01", "as_of: 2026-02-01"))
     assert load_network(path).config().n_lines == 2  # within a quarter: they step together from 2026-02-01
+
+
+@pytest.mark.parametrize("field, where", [("move_cost", "move_cost: 20, in k€"),
+                                          ("start_line", "machine_on"), ("n_lines", "lines: the line files")])
+def test_the_networks_own_fields_are_not_taken_as_line_fields(tmp_path, field, where):
+    """``trackenv plan NETWORK.yaml --set move_cost=20`` passes the field to the lines' configs: one error saying
+    where the network file sets it (it was LineConfig's TypeError, a traceback)."""
+    network = load_network(_folder(tmp_path, GOOD))
+    with pytest.raises(ValueError, match=rf"^{field} is the network's, not a line's: set it in the network file "
+                                         rf".*\({where}"):
+        network.config(**{field: 2})
+
+
+def test_a_line_field_given_as_its_default_still_conflicts_with_the_file(tmp_path):
+    """The file sets speed_kmh; a --set of another value is refused even where it is the field's default (100 km/h
+    was ignored silently while the plan said it had changed)."""
+    network = load_network(_folder(tmp_path, GOOD))
+    speed = network.lines[0].speed_kmh
+    assert speed != 100.0
+    with pytest.raises(LineFileError, match=rf"speed_kmh=100.0 conflicts with the line file .*, which sets it to "
+                                            rf"{speed!r}: leave it out"):
+        network.config(speed_kmh=100.0)
+    from trackenv.envs import scenario
+
+    assert scenario("default", line=network.lines[0], speed_kmh=speed).speed_kmh == speed  # the file's: taken

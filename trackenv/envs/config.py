@@ -4,6 +4,7 @@ is :class:`~trackenv.envs.line_config.LineConfig`, one frozen, validated datacla
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import asdict, fields
 from functools import cached_property
 from typing import Any, ClassVar, TypeVar
@@ -45,7 +46,10 @@ class ConfigBase:
         known = {f.name for f in fields(cls)}  # type: ignore[arg-type]
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown {cls.__name__} key(s) {sorted(unknown)}; known: {sorted(known)}")
+            close = {k: difflib.get_close_matches(str(k), sorted(known), n=1) for k in sorted(unknown, key=str)}
+            hint = "; ".join(f"did you mean {m[0]!r} for {k!r}?" for k, m in close.items() if m)
+            raise ValueError(f"unknown {cls.__name__} key(s) {sorted(unknown)}; {hint + ' ' if hint else ''}"
+                             f"known: {sorted(known)}")
         return cls(**d)
 
     def replace(self: _C, **changes: Any) -> _C:

@@ -503,6 +503,18 @@ class LineConfig(ConfigBase):
 
     # ------------------------------------------------------------------ construction
     @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LineConfig:
+        """Build from a dict (an unknown key raises ValueError naming it); with a ``line``, a field the file sets
+        (:data:`LINE_FILE_FIELDS`) that ``d`` gives must be the file's, even where it is the field's default
+        (the file's 50 km/h is not overridden by a given 100, the default speed, silently)."""
+        config = super().from_dict(d)
+        if config.line is not None:
+            for name in LINE_FILE_FIELDS:
+                if name in d:
+                    _check_file_field(name, d[name], config.line)
+        return config
+
+    @classmethod
     def coerce(cls, config: LineConfig | dict | str | None) -> LineConfig:
         """A config from None (defaults), a scenario name, a dict (validated) or a config."""
         if config is None:
@@ -568,13 +580,10 @@ class LineConfig(ConfigBase):
                              f"its own), got {self.sections_per_segment!r}")
         defaults = {f.name: f.default for f in fields(self)}
         for name in LINE_FILE_FIELDS:
-            value, theirs = getattr(self, name), getattr(line, name)
-            if name == "per_section":  # compared in its stored form
-                value = _items(value)
-            if value != defaults[name] and value != theirs:
-                raise ValueError(f"{name}={value!r} conflicts with the line file {line.source}, which sets it to "
-                                 f"{theirs!r}: leave it out")
-            object.__setattr__(self, name, theirs)
+            value = getattr(self, name)
+            if value != defaults[name]:  # a default: not given (from_dict also checks one given as the default)
+                _check_file_field(name, value, line)
+            object.__setattr__(self, name, getattr(line, name))
         if isinstance(self.capacity, int) and not isinstance(self.capacity, bool):
             object.__setattr__(self, "capacity", min(self.capacity, line.n_sections))
 
@@ -672,6 +681,15 @@ class LineConfig(ConfigBase):
         own tonnage)."""
         shares = self.section_values("freight_share")
         return np.stack([self.axle_passes_per_step(share) for share in shares]) * self.traffic_factors[:, None]
+
+
+def _check_file_field(name: str, value: Any, line: Any) -> None:
+    """ValueError where ``value`` given for the field ``name`` differs from the line file's (``line``, a
+    description), which sets it."""
+    theirs = getattr(line, name)
+    if (_items(value) if name == "per_section" else value) != theirs:  # per_section: in its stored form
+        raise ValueError(f"{name}={value!r} conflicts with the line file {line.source}, which sets it to "
+                         f"{theirs!r}: leave it out")
 
 
 def _items(value: Any) -> Any:

@@ -550,9 +550,17 @@ def _choice(where: str, name: str, value: Any, choices: tuple[str, ...]) -> str:
     text = _text(where, name, value)
     if text in choices:
         return text
-    hint = difflib.get_close_matches(text, choices, n=1)
+    said = _SAID_OTHERWISE.get(text.lower())
+    hint = [said] if said in choices else difflib.get_close_matches(text, choices, n=1)
     did = f"; did you mean {hint[0]!r}?" if hint else ""
     raise LineFileError(f"{where}, {name}: {text!r} is not one of {', '.join(choices)}{did}")
+
+
+#: the usual abbreviations and other words for a register class, for the hint (the file must say it our way)
+_SAID_OTHERWISE = {"s&c": "switch_or_crossing", "s+c": "switch_or_crossing", "switch": "switch_or_crossing",
+                   "crossing": "switch_or_crossing", "turnout": "switch_or_crossing", "points": "switch_or_crossing",
+                   "bridge": "transition", "bridge transition": "transition", "open": "plain",
+                   "plain line": "plain", "plain track": "plain"}
 
 
 def _yes_no(where: str, name: str, value: Any) -> bool:

@@ -45,6 +45,11 @@ from .network import NetworkConfig
 
 __all__ = ["NETWORK_KEYS", "NetworkDescription", "is_network_file", "load_network", "load_network_or_none"]
 
+#: The network config's own fields that a network file sets, each with where (not fields of its lines)
+_MACHINE_FIELDS = {"move_cost": "move_cost: 20, in k€", "start_line": "machine_on: the line the machine is on",
+                   "n_lines": "lines: the line files", "line_config": "lines: the line files",
+                   "machine_on": "machine_on: the line the machine is on"}
+
 #: The keys of a network file (YAML).
 NETWORK_KEYS: dict[str, Field] = {
     "name": Field("-", True, "the network's name"),
@@ -86,18 +91,24 @@ class NetworkDescription:
         them (one per line, in the file's order: a plan models each line as its scenario); the machine's fields
         from the file, ``capacity`` over the file's. :class:`~trackenv.envs.line_file.LineFileError` naming a line
         whose ``as_of`` is more than a step before the latest, or whose config a field refuses."""
+        for name, key in _MACHINE_FIELDS.items():
+            if name in line_fields:
+                raise ValueError(f"{name} is the network's, not a line's: set it in the network file {self.source} "
+                                 f"({key})")
         lines = list(line_configs) if line_configs is not None else []
         for i, line in enumerate(self.lines if line_configs is None else ()):
             try:
-                lines.append(LineConfig(line=line, **line_fields))
+                lines.append(LineConfig.from_dict({**line_fields, "line": line}))
             except ValueError as exc:
                 raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): {exc}") from None
         step_days = DAYS_PER_YEAR / lines[0].steps_per_year
         for i, line in enumerate(self.lines):
             late = -line.years_before(self.as_of) * DAYS_PER_YEAR  # days from its as_of to the latest
             if late > step_days:
+                k, latest = next((k, other) for k, other in enumerate(self.lines) if other.as_of == self.as_of)
                 raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): as_of {line.as_of} is {late:.0f} "
-                                    f"days before the network's latest ({self.as_of}); the lines step together, so "
+                                    f"days before the network's latest ({self.as_of}, lines[{k}]: "
+                                    f"{latest.source}); the lines step together, so "
                                     f"their states must be dated within one step ({step_days:.0f} days): bring "
                                     f"the file up to its last measurements")
         move_cost = NetworkConfig.move_cost if self.move_cost is None else self.move_cost
