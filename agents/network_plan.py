@@ -213,8 +213,8 @@ class NetworkPlan:
     def write(self, folder: Path) -> dict[str, str]:
         """Write ``network.csv`` (quarter, date, where the machine works, stands idle and where it moves to, a
         column per line each, shares of futures; the network's mean, p10 and p90 cost and the mean move cost k€)
-        and ``network.png`` (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a folder of its own,
-        ``line<i>``; returns the paths."""
+        and ``network.png`` (:meth:`figure`) into ``folder`` and each line's plan (:meth:`LinePlan.write`) into a
+        folder of its own, ``line<i>``; returns the paths."""
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / "network.csv"
         with path.open("w", newline="") as f:
