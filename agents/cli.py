@@ -31,6 +31,7 @@ MAX_TUNE_FUTURES = 100
 # = trackenv_agents.learning.tamping.DEFAULT_TRAIN_SEED and DEFAULT_HYPERPARAMS, written out: importing them here would
 # load torch for every command (a test keeps them equal)
 DEFAULT_TRAIN_SEED = 20_000
+DEFAULT_PLAN_POLICY = "grouped-threshold"  # = trackenv_agents.planning.DEFAULT_POLICY
 DEFAULT_ENV_ID = "trackenv/Tamping-v1"  # the SB3 trainer's env (= trackenv_agents.learning.tamping.DEFAULT_ENV_ID)
 HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" / "ppo.yml"
 # = trackenv.envs.line_config.LINE_ENGINES and MAX_PASS_REUSE_TOLERANCE_M (in mm), written out for the same reason
@@ -431,12 +432,11 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Load the line (or network) first (a fault in it: one line, exit 2, before anything slow), then plan and
-    write."""
+    write (with ``--compare``, each policy's plan on the same futures, and the comparison)."""
     from trackenv.envs.line_file import load_line
-    from trackenv.envs.line_fit import FitWarning
     from trackenv.envs.network_file import load_network_or_none
 
-    from .planning import line_policy, plan_config, plan_line, plan_warnings
+    from .planning import line_policy, plan_config, plan_warnings
 
     network = load_network_or_none(args.line)  # the file read once; None: a line file
     lines = network.lines if network is not None else (load_line(args.line),)
@@ -444,23 +444,77 @@ def cmd_plan(args: argparse.Namespace) -> int:
     for field, own in (("line", "the line file argument"), ("horizon_years", "--years")):
         if field in overrides:
             raise UsageError(f"--set {field}: the plan takes it from {own}")
+    policies = [args.policy]
+    if args.compare is not None:
+        from .plan_compare import check_compared
+
+        if args.tune:
+            raise UsageError("--compare runs each policy with its shipped parameters: tune one policy at a time "
+                             "(--policy NAME --tune N)")
+        if args.policy != DEFAULT_PLAN_POLICY:
+            raise UsageError("give the policies to compare in --compare, not --policy")
+        policies = check_compared(args.compare.split(","))
     if network is not None:
         from .network_plan import check_network_policy
 
-        check_network_policy(args.policy)
+        for policy in policies:
+            check_network_policy(policy)
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario (and what --tune cannot tune) before the fit and the futures
-    rule = line_policy(args.policy, plan_config(lines[0], args.scenario, years=args.years, **overrides),
-                       args.scenario, years=args.years)
+    config = plan_config(lines[0], args.scenario, years=args.years, **overrides)
+    rules = [line_policy(policy, config, args.scenario, years=args.years) for policy in policies]
     if args.tune:
         from .plan_tuning import check_apart, check_tunable
 
-        check_tunable(rule, args.tune)
+        check_tunable(rules[0], args.tune)
         check_apart(args.seed, args.futures, args.tune)
     t0 = time.perf_counter()
+    out = Path(args.out or "results/plan")
+    if args.compare is None:
+        plan = _one_plan(args, network, lines, args.policy, overrides)
+        line_plans = plan.lines if network is not None else (plan,)
+        notes = [note for lp in line_plans for note in plan_warnings(lp)]
+        for note in notes:
+            print(f"trackenv plan: warning: {note}", file=sys.stderr)
+        files = plan.write(out)
+        d = plan.to_dict(files) if network is not None else plan.to_dict()  # a network's lines: their files too
+        payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
+        _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
+        return 0
+    from .plan_compare import compare_plans, format_comparison, write_comparison
+
+    plans, written, notes = {}, {}, []
+    for k, policy in enumerate(policies):
+        plans[policy] = plan = _one_plan(args, network, lines, policy, overrides, f"{policy} ({k + 1} of "
+                                                                                  f"{len(policies)})")
+        for lp in plan.lines if network is not None else (plan,):
+            notes += [f"{policy}: {note}" for note in plan_warnings(lp)]
+        written[policy] = plan.write(out / f"{k + 1}-{Path(policy).stem}")
+    for note in notes:
+        print(f"trackenv plan: warning: {note}", file=sys.stderr)
+    comparison = compare_plans(plans)
+    files = {"compare_csv": write_comparison(comparison, out)}
+    payload = {"comparison": comparison, "files": files, "plan_files": written, "warnings": notes,
+               "wall_time_s": time.perf_counter() - t0}
+    folders = ", ".join(sorted({str(Path(next(iter(f.values()))).parent) for f in written.values()}))
+    _emit(args, payload, f"{format_comparison(comparison)}\neach policy's plan (its table with --policy): "
+                         f"{folders}\nwrote {files['compare_csv']}")
+    return 0
+
+
+def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, overrides: dict[str, Any],
+              label: str | None = None) -> Any:
+    """The plan of ``policy`` on the line or ``network`` with the command's options (``label``: what its
+    progress bar says it plans, where several run), with its progress bars on stderr (none with ``--json``)."""
+    from trackenv.envs.line_fit import FitWarning
+
+    from .planning import plan_line
+
     progress, bar = None, None
     if not args.json:
         from tqdm import tqdm
+
+        running = f"plan {label} (quarters)" if label else "plan (quarters)"
 
         def new_bar(desc: str) -> Any:
             return tqdm(total=int(round(args.years * 4)), desc=desc, file=sys.stderr, leave=False)
@@ -471,18 +525,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
         def progress(n: int) -> None:
             nonlocal bar
             if bar is None:
-                bar = new_bar("plan (quarters)")
+                bar = new_bar(running)
             elif bar.n == 0:  # started: the bar counts the quarters from now on
-                bar.set_description("plan (quarters)", refresh=False)
+                bar.set_description(running, refresh=False)
             bar.update(n)
     elif args.tune:
         from .plan_report import counted
 
         futures = counted(args.tune, "ten-year future", "ten-year futures")
         where = "each line" if network is not None else "the line"
-        print(f"trackenv plan: tuning {args.policy} on {futures} of {where} first (minutes; no progress bars with "
+        print(f"trackenv plan: tuning {policy} on {futures} of {where} first (minutes; no progress bars with "
               f"--json)", file=sys.stderr)
-    kwargs = dict(policy=args.policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
+    kwargs = dict(policy=policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
                   progress=progress, **overrides)
     if args.tune:
         kwargs["tune"] = args.tune
@@ -494,21 +548,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
             if network is not None:
                 from .network_plan import plan_network
 
-                plan: Any = plan_network(network, **kwargs)
-            else:
-                plan = plan_line(lines[0], **kwargs)
+                return plan_network(network, **kwargs)
+            return plan_line(lines[0], **kwargs)
     finally:  # an error is said on a line of its own, not after the bar
         if bar is not None:
             bar.close()
-    line_plans = plan.lines if network is not None else (plan,)
-    notes = [note for lp in line_plans for note in plan_warnings(lp)]
-    for note in notes:
-        print(f"trackenv plan: warning: {note}", file=sys.stderr)
-    files = plan.write(Path(args.out or "results/plan"))
-    d = plan.to_dict(files) if network is not None else plan.to_dict()  # a network's lines: their files too
-    payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
-    _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
-    return 0
 
 
 def _start_text(lines: Any) -> str:
@@ -934,7 +978,7 @@ def build_parser() -> _Parser:
     sp.add_argument("line", metavar="FILE.yaml", help="a line file, or a network file that lists line files (the "
                     "documentation's page Lines from files); on a network the line policy plays every line and "
                     "the machine goes where the requested work is worth most (tamping only)")
-    sp.add_argument("--policy", default="grouped-threshold", metavar="NAME",
+    sp.add_argument("--policy", default=DEFAULT_PLAN_POLICY, metavar="NAME",
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
                          "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "
                          "agent, at most the 10 years it was trained on) or the path of a trained per-section policy; "
@@ -957,6 +1001,10 @@ def build_parser() -> _Parser:
                          f"with (0, the default: the shipped parameters, tuned on the preset; at most "
                          f"{MAX_TUNE_FUTURES}; 8 is a good start; minutes: each candidate runs N ten-year futures; on "
                          f"a network each line's rule, tuned on the line alone)")
+    sp.add_argument("--compare", default=None, metavar="A,B,...",
+                    help="plan each of these policies (names as --policy takes them) on the same futures and compare "
+                         "them: each one's cost, its difference to the first's paired per future with a 95 %% CI, "
+                         "and what it leaves at the end; each plan's files under --out, NUMBER-NAME/")
     engine(sp, plan=True)
     sp.set_defaults(func=cmd_plan)
 

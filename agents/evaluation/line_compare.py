@@ -47,7 +47,8 @@ def scenario_of(env_id: str) -> str:
 
 
 #: what to do with a network of lines of their own, which the comparisons do not score (:func:`line_of`)
-NETWORK_ROUTES = "plan it with trackenv plan {path}, or play NetworkRule(...).bind(config) on it in Python"
+NETWORK_ROUTES = ("plan it with trackenv plan {path}, compare policies on its futures with trackenv plan {path} "
+                  "--compare A,B, or play NetworkRule(...).bind(config) on it in Python")
 
 
 def file_as_env_refusal(env_id: str) -> str | None:

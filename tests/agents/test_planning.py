@@ -472,3 +472,48 @@ def test_the_plan_says_what_it_leaves_against_what_it_started_from(rough_plan, t
     np.testing.assert_array_equal(idle.sd_start_mm, plan.sd_start_mm)
     assert (idle.sd_end_mm[:, 1] > plan.sd_end_mm[:, 1] + 1.0).all()  # B: tamped by the rule, not without it
     assert idle.end_state()["sd_mean_mm_end"] > e["sd_mean_mm_end"]
+
+
+def test_plan_compares_policies_on_the_same_futures(tmp_path, capsys):
+    """``trackenv plan FILE --compare A,B``: each policy's plan on the same futures, their costs paired per
+    future (a policy against itself would differ by 0; here each cost is its own plan's, in ``compare.csv`` per
+    future), what each leaves, and each plan's files in a folder of its own."""
+    from trackenv_agents.cli import DEFAULT_PLAN_POLICY, main
+    from trackenv_agents.planning import DEFAULT_POLICY
+
+    assert DEFAULT_PLAN_POLICY == DEFAULT_POLICY
+    line, out = write(tmp_path, history=ROUGH_B), tmp_path / "cmp"
+    argv = ["plan", str(line), "--years", "0.5", "--futures", "2", "--engine", "fast", "--pass-reuse-mm", "1",
+            "--out", str(out)]
+    assert main([*argv, "--compare", "grouped-threshold,no-maintenance", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    rows = {r["policy"]: r for r in d["comparison"]["results"]}
+    assert list(rows) == ["grouped-threshold", "no-maintenance"] and d["comparison"]["reference"] == "grouped-threshold"
+    alone = plan_line(line, years=0.5, futures=2, policy="no-maintenance", **FAST)
+    np.testing.assert_allclose(rows["no-maintenance"]["cost_keur"], alone.costs.sum(axis=1), rtol=1e-12)
+    diff = np.subtract(rows["no-maintenance"]["cost_keur"], rows["grouped-threshold"]["cost_keur"])
+    assert rows["no-maintenance"]["vs_first"]["mean_keur"] == pytest.approx(diff.mean())
+    assert rows["grouped-threshold"]["vs_first"]["mean_keur"] == 0.0
+    left = {name: row["end_state"]["sd_mean_mm_end"] for name, row in rows.items()}
+    assert left["no-maintenance"] > left["grouped-threshold"]
+    assert (out / "1-grouped-threshold" / "plan.csv").is_file() and (out / "2-no-maintenance" / "plan.csv").is_file()
+    lines = (out / "compare.csv").read_text().splitlines()
+    assert lines[0] == "future,seed,grouped-threshold_keur,no-maintenance_keur" and len(lines) == 3
+    assert main([*argv, "--compare", "grouped-threshold,no-maintenance"]) == 0
+    table = capsys.readouterr().out
+    assert "Policies compared on the same 2 futures of" in table and "no-maintenance" in table
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--compare", "grouped-threshold"], "--compare needs at least two policies"),
+    (["--compare", "grouped-threshold,grouped-threshold"], "--compare names grouped-threshold more than once"),
+    (["--compare", "grouped-threshold,no-such-rule"], "no-such-rule"),
+    (["--compare", "a,b", "--tune", "2"], "tune one policy at a time"),
+    (["--compare", "a,b", "--policy", "no-maintenance"], "give the policies to compare in --compare"),
+])
+def test_plan_compare_refuses_what_it_cannot_compare_in_one_line(tmp_path, capsys, extra, message):
+    from trackenv_agents.cli import main
+
+    assert main(["plan", str(write(tmp_path)), "--out", str(tmp_path / "o"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
