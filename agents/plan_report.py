@@ -47,8 +47,9 @@ def line_summary(line: Any) -> dict[str, Any]:
     """What a plan reads from a line file (a :class:`~trackenv.envs.line_file.LineDescription`), in the file's
     units, for a reader to check them: the number of sections and the length [km], the ranges over the sections of
     the speed [km/h], the tonnage [MGT/year] and the freight share, the freight axle load [t], the counts of
-    transitions, switches or crossings and known wet zones, and the date of the last recording-car run in the
-    history with its age [years before ``as_of``] (None without a history)."""
+    transitions, switches or crossings and known wet zones, the date of the last recording-car run in the
+    history with its age [years before ``as_of``] (None without a history), and the line's own costs [k€] where
+    the file gives any."""
     sections = line.sections
 
     def span(attr: str) -> list[float]:
@@ -64,6 +65,7 @@ def line_summary(line: Any) -> dict[str, Any]:
         "switches_crossings": sum(s.register == "switch_or_crossing" for s in sections),
         "known_wet": sum(bool(s.wet) for s in sections),
         "last_recording": None if last is None else {"date": last, "years_before": line.years_before(last)},
+        "costs": dict(getattr(line, "costs", ())),
     }
 
 
@@ -78,7 +80,7 @@ def counted(n: int, what: str, plural: str) -> str:
 
 
 def summary_lines(summary: dict[str, Any]) -> list[str]:
-    """The two lines of text that repeat a :func:`line_summary`."""
+    """The lines of text that repeat a :func:`line_summary` (two, and a third with the file's own costs)."""
     last = summary["last_recording"]
     run = ("no recording-car history" if last is None else
            f"last recording-car run {last['date']} ({last['years_before']:.2f} years before as_of)")
@@ -89,7 +91,9 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
             f"{summary['freight_axle_load_t']:g} t",
             f"  {counted(summary['transitions'], 'transition', 'transitions')}, "
             f"{counted(summary['switches_crossings'], 'switch or crossing', 'switches or crossings')}, "
-            f"{counted(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}"]
+            f"{counted(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}",
+            *([f"  own costs: {', '.join(f'{k} {v:g}' for k, v in summary['costs'].items())} (k€; the rest the "
+               f"defaults)"] if summary.get("costs") else [])]
 
 
 #: The per-section state a plan records per quarter (means over the futures, before the quarter's work): what the

@@ -227,15 +227,23 @@ def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
     assert summary == {"sections": 4, "length_km": 0.8, "speed_kmh": [100.0, 100.0], "annual_mgt": [15.0, 30.0],
                        "freight_share": [0.4, 0.4], "freight_axle_load_t": 22.5, "transitions": 1,
                        "switches_crossings": 1, "known_wet": 1,
-                       "last_recording": {"date": "2025-12-01", "years_before": pytest.approx(31 / 365.25)}}
+                       "last_recording": {"date": "2025-12-01", "years_before": pytest.approx(31 / 365.25)},
+                       "costs": {}}
     read = plan.table().splitlines()[1:3]
     assert read[0] == ("read from the file: 4 sections, 0.80 km; speed 100 km/h; tonnage 15-30 MGT/year; freight "
                        "share 0.40, freight axle load 22.5 t")
     assert read[1] == ("  1 transition, 1 switch or crossing, 1 known wet zone; last recording-car run 2025-12-01 "
                        "(0.08 years before as_of)")
+    assert not plan.table().splitlines()[3].startswith("  own costs")
     (tmp_path / "bare").mkdir()
     bare = write(tmp_path / "bare", line=LINE.replace("history: history.csv\n", ""), history=None)
     assert line_summary(load_line(bare))["last_recording"] is None
+    (tmp_path / "own").mkdir()
+    own = load_line(write(tmp_path / "own", line=LINE + "costs:\n  speed_restriction_cost: 4\n"))
+    assert line_summary(own)["costs"] == {"speed_restriction_cost": 4.0}
+    from trackenv_agents.plan_report import summary_lines
+
+    assert summary_lines(line_summary(own))[2] == "  own costs: speed_restriction_cost 4 (k€; the rest the defaults)"
 
 
 def test_the_plan_records_the_state_each_quarter_decided_on(rough_plan, tmp_path):

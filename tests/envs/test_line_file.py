@@ -113,6 +113,12 @@ FAULTS = {
                                 "switch_or_crossing"]),
     "misspelled register class": (dict(sections=SECTIONS.replace("transition", "transtion")),
                                   ["row 4 (section B)", "did you mean 'transition'?"]),
+    "a cost in euros": (dict(line=LINE + "costs:\n  speed_restriction_cost: 20000\n"),
+                        ["line.yaml", "costs.speed_restriction_cost: 20000 k€ is outside [0, 1000] k€",
+                         "give it in k€ (a larger value is taken for euros)"]),
+    "a misspelt cost": (dict(line=LINE + "costs:\n  possesion_cost: 5\n"),
+                        ["unknown key 'costs.possesion_cost'; did you mean 'possession_cost'?"]),
+    "costs not a mapping": (dict(line=LINE + "costs: 5\n"), ["costs: must be a mapping of possession_cost"]),
     "register class abbreviated": (dict(sections=SECTIONS.replace("switch_or_crossing", "S&C")),
                                    ["row 5 (section C)", "'S&C' is not one of", "did you mean 'switch_or_crossing'?"]),
     "history out of order": (dict(history=HISTORY.replace("B,2024-06-01", "B,2023-01-01")),
@@ -455,7 +461,7 @@ def test_the_example_line_runs_an_episode():
 def test_the_documented_schema_is_the_loaders():
     """The schema tables of the documentation's page list every key and column the loader knows, with its
     unit and whether it is required."""
-    from trackenv.envs.line_file import HISTORY_COLUMNS, LINE_KEYS, SECTION_COLUMNS, TRAFFIC_KEYS
+    from trackenv.envs.line_file import COST_KEYS, HISTORY_COLUMNS, LINE_KEYS, SECTION_COLUMNS, TRAFFIC_KEYS
 
     page = (Path(__file__).resolve().parents[2] / "docs" / "environments" / "line-files.md").read_text()
     rows = {}
@@ -463,7 +469,34 @@ def test_the_documented_schema_is_the_loaders():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if line.startswith("| `") and len(cells) >= 3:
             rows.setdefault(cells[0].strip("`"), []).append((cells[1], cells[2]))
-    tables = [(LINE_KEYS, ""), (TRAFFIC_KEYS, "traffic."), (SECTION_COLUMNS, ""), (HISTORY_COLUMNS, "")]
+    tables = [(LINE_KEYS, ""), (TRAFFIC_KEYS, "traffic."), (COST_KEYS, "costs."), (SECTION_COLUMNS, ""),
+              (HISTORY_COLUMNS, "")]
     for known, prefix in tables:
         for name, field in known.items():
             assert (field.unit, "yes" if field.required else "no") in rows[prefix + name], name
+
+
+def test_a_line_files_costs_are_its_configs_and_its_own(tmp_path):
+    """``costs`` in the file set those fields of the line's config (a quiet branch's speed restriction is
+    cheaper); they travel with the line (its dict round trip, a replace), a --set of another value is refused
+    as for its traffic, and the same value is taken."""
+    from trackenv.envs import scenario
+
+    path = write(tmp_path, line=LINE + "costs:\n  speed_restriction_cost: 4\n  possession_cost: 8.5\n")
+    line = load_line(path)
+    assert line.costs == (("possession_cost", 8.5), ("speed_restriction_cost", 4.0))
+    config = scenario("default", line=path)
+    assert (config.speed_restriction_cost, config.possession_cost) == (4.0, 8.5)
+    assert config.immediate_action_cost == scenario("default").immediate_action_cost  # not given: the default
+    assert LineDescription.from_dict(line.to_dict()) == line
+    assert type(config).from_dict(config.to_dict()) == config
+    assert config.replace(horizon_years=2.0).speed_restriction_cost == 4.0
+    with pytest.raises(ValueError, match=r"speed_restriction_cost=20.0 conflicts with the line file .*, which sets "
+                                         r"it to 4.0: leave it out"):
+        scenario("default", line=path, speed_restriction_cost=20.0)  # 20 is the default: still refused
+    with pytest.raises(ValueError, match="speed_restriction_cost come\\(s\\) from the line file"):
+        config.replace(speed_restriction_cost=3.0)
+    assert scenario("default", line=path, speed_restriction_cost=4.0).speed_restriction_cost == 4.0
+    (tmp_path / "plain").mkdir()
+    plain = scenario("default", line=write(tmp_path / "plain"))
+    assert plain.speed_restriction_cost == 20.0 and config.replace(line=plain.line).speed_restriction_cost == 20.0

@@ -509,7 +509,7 @@ class LineConfig(ConfigBase):
         (the file's 50 km/h is not overridden by a given 100, the default speed, silently)."""
         config = super().from_dict(d)
         if config.line is not None:
-            for name in LINE_FILE_FIELDS:
+            for name in file_fields(config.line):
                 if name in d:
                     _check_file_field(name, d[name], config.line)
         return config
@@ -539,14 +539,15 @@ class LineConfig(ConfigBase):
         fields it sets (:data:`LINE_FILE_FIELDS`) are the file's: changing one is an error, and a new ``line``
         replaces them all."""
         line = changes.get("line", self.line)
-        given = [name for name in LINE_FILE_FIELDS if name in changes]
+        owned = file_fields(line) if hasattr(line, "costs") else dict.fromkeys(LINE_FILE_FIELDS)
+        given = [name for name in owned if name in changes]
         if line is not None and given:
             source = line if isinstance(line, (str, os.PathLike)) else getattr(line, "source", "given")
             raise ValueError(f"{', '.join(given)} come(s) from the line file {source}: change the file, or leave "
                              f"{'them' if len(given) > 1 else 'it'} out")
         base = {**self.to_dict(), "line": self.line}  # the description itself: its source, no second check
         if "line" in changes:  # the old line's values (or the scenario's) give way to the new file's
-            for name in LINE_FILE_FIELDS:
+            for name in LINE_FILE_FIELDS if self.line is None else file_fields(self.line):
                 del base[name]
         return self.from_dict({**base, **changes})
 
@@ -579,11 +580,11 @@ class LineConfig(ConfigBase):
             raise ValueError(f"sections_per_segment must be 1 with a line file (each of its sections is a segment of "
                              f"its own), got {self.sections_per_segment!r}")
         defaults = {f.name: f.default for f in fields(self)}
-        for name in LINE_FILE_FIELDS:
+        for name, theirs in file_fields(line).items():
             value = getattr(self, name)
             if value != defaults[name]:  # a default: not given (from_dict also checks one given as the default)
                 _check_file_field(name, value, line)
-            object.__setattr__(self, name, getattr(line, name))
+            object.__setattr__(self, name, theirs)
         if isinstance(self.capacity, int) and not isinstance(self.capacity, bool):
             object.__setattr__(self, "capacity", min(self.capacity, line.n_sections))
 
@@ -683,10 +684,16 @@ class LineConfig(ConfigBase):
         return np.stack([self.axle_passes_per_step(share) for share in shares]) * self.traffic_factors[:, None]
 
 
+def file_fields(line: Any) -> dict[str, Any]:
+    """The fields of a config that the line file ``line`` (a description) sets, with its values: those of
+    :data:`LINE_FILE_FIELDS`, and the costs it gives (its ``costs`` mapping)."""
+    return {**{name: getattr(line, name) for name in LINE_FILE_FIELDS}, **dict(line.costs)}
+
+
 def _check_file_field(name: str, value: Any, line: Any) -> None:
     """ValueError where ``value`` given for the field ``name`` differs from the line file's (``line``, a
     description), which sets it."""
-    theirs = getattr(line, name)
+    theirs = file_fields(line)[name]
     if (_items(value) if name == "per_section" else value) != theirs:  # per_section: in its stored form
         raise ValueError(f"{name}={value!r} conflicts with the line file {line.source}, which sets it to "
                          f"{theirs!r}: leave it out")

@@ -78,6 +78,24 @@ LINE_KEYS: dict[str, Field] = {
     "traffic": Field("-", True, "the line's traffic (keys below); a section's own columns override it"),
     "sections": Field("path", True, "the sections CSV file, relative to this file"),
     "history": Field("path", False, "the measured-history CSV file, relative to this file"),
+    "costs": Field("-", False, "the line's own costs where they differ from the defaults (keys below): a branch's "
+                   "speed restriction delays fewer trains than a main line's"),
+}
+
+#: The keys of a line file's ``costs`` mapping: fields of :class:`~trackenv.envs.line_config.LineConfig` (whose
+#: docstring gives the defaults and their sources), each in k€ and within a plausibility window: a value above it
+#: is taken for euros.
+COST_KEYS: dict[str, Field] = {
+    "possession_cost": Field("k€", False, "a step with track work on the line (call-out, night possession)",
+                             0.0, 1000.0),
+    "tamping_cost_per_m": Field("k€/m", False, "tamping a metre of track (0.01: 10 €/m)", 0.0, 1.0),
+    "renewal_cost_per_m": Field("k€/m", False, "renewing a metre of ballast (0.15: 150 €/m)", 0.0, 10.0),
+    "speed_restriction_cost": Field("k€", False, "a section-quarter at or above the intervention limit (a temporary "
+                                    "speed restriction's delays)", 0.0, 1000.0),
+    "immediate_action_cost": Field("k€", False, "a section-quarter at the immediate-action limit (a closure)",
+                                   0.0, 10000.0),
+    "geometry_cost_per_section_year": Field("k€", False, "a section-year at the SD alert limit (scaled by (SD / SD "
+                                            "alert)²: poorer ride, faster wear)", 0.0, 1000.0),
 }
 
 #: The keys of a line file's ``traffic`` mapping; their ranges are :class:`LineConfig`'s.
@@ -173,7 +191,8 @@ class LineDescription:
 
     ``as_of`` (ISO date) is the date the sections' state describes; ``speed_kmh``, ``annual_mgt``,
     ``freight_share`` and ``freight_axle_load_t`` are the line's traffic; ``sections`` in line order;
-    ``history`` in date order per section. ``source`` names the file it was read from (not compared)."""
+    ``history`` in date order per section; ``costs`` the line's own costs (name, k€) of :data:`COST_KEYS`, where
+    the file gives them. ``source`` names the file it was read from (not compared)."""
 
     name: str
     as_of: str
@@ -185,6 +204,7 @@ class LineDescription:
     history: tuple[Measurement, ...] = ()
     description: str = ""
     source: str = field(default="<dict>", compare=False)
+    costs: tuple[tuple[str, float], ...] = ()
 
     @property
     def n_sections(self) -> int:
@@ -265,6 +285,8 @@ class LineDescription:
                                "history": history}
         if self.description:
             out["description"] = self.description
+        if self.costs:
+            out["costs"] = dict(self.costs)
         if self.path is not None:  # a saved config names the file its line came from, from any folder
             out["source"] = str(Path(self.path).resolve())
         return out
@@ -605,7 +627,24 @@ def _build(source: str, doc: Mapping[str, Any], section_rows: Sequence[tuple[str
     _config_check(source, f"sections ({len(sections)} rows)", "n_sections", len(sections), "sections")
     history = _history(history_rows, {s.id for s in sections}, as_of)
     return LineDescription(name=name, as_of=as_of, sections=tuple(sections), history=tuple(history),
-                           description=description, source=source, **line_traffic)
+                           description=description, source=source, costs=_costs(source, doc.get("costs")),
+                           **line_traffic)
+
+
+def _costs(source: str, costs: Any) -> tuple[tuple[str, float], ...]:
+    """The file's ``costs`` mapping (:data:`COST_KEYS`), checked, in the keys' order; () where it has none."""
+    if costs is None:
+        return ()
+    if not isinstance(costs, Mapping):
+        raise LineFileError(f"{source}, costs: must be a mapping of {_names(COST_KEYS)}, got {costs!r}")
+    _check_keys(source, "costs.", costs, COST_KEYS)
+    out = []
+    for key, f in COST_KEYS.items():
+        if key in costs:
+            v = _number(source, f"costs.{key}", costs[key], f.unit)
+            out.append((key, _in_range(source, f"costs.{key}", v, f, "; give it in k€ (a larger value is taken "
+                                                                     "for euros)")))
+    return tuple(out)
 
 
 def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, float]) -> list[Section]:
