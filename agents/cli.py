@@ -481,18 +481,32 @@ def cmd_plan(args: argparse.Namespace) -> int:
         payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
         _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
         return 0
-    from .plan_compare import compare_plans, format_comparison, write_comparison
+    return _compare_and_write(args, network, lines, dict(zip(policies, rules, strict=True)), overrides, out, t0)
 
+
+def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, rules: dict[str, Any],
+                       overrides: dict[str, Any], out: Path, t0: float) -> int:
+    """``trackenv plan --compare``: each of ``rules`` (name -> its bound policy) planned on the same futures (in
+    episodes of one length: a trained policy's, where one is compared), their comparison and files."""
+    from .plan_compare import compare_plans, format_comparison, write_comparison
+    from .planning import plan_warnings, trained_horizon_years
+
+    trained = {name: h for name, rule in rules.items() if (h := trained_horizon_years(rule)) is not None}
+    if len(set(trained.values())) > 1:
+        raise UsageError(f"--compare: the trained policies read the time left in training episodes of different "
+                         f"lengths ({', '.join(f'{n} {h:g} years' for n, h in trained.items())}): compare them "
+                         f"apart")
+    episode = next(iter(trained.values()), None)
     plans, written, notes = {}, {}, []
-    for k, policy in enumerate(policies):
+    for k, policy in enumerate(rules):
         plans[policy] = plan = _one_plan(args, network, lines, policy, overrides, f"{policy} ({k + 1} of "
-                                                                                  f"{len(policies)})")
+                                                                                  f"{len(rules)})", episode)
         for lp in plan.lines if network is not None else (plan,):
             notes += [f"{policy}: {note}" for note in plan_warnings(lp)]
         written[policy] = plan.write(out / f"{k + 1}-{Path(policy).stem}")
     for note in notes:
         print(f"trackenv plan: warning: {note}", file=sys.stderr)
-    comparison = compare_plans(plans)
+    comparison = compare_plans(plans, episode)
     files = {"compare_csv": write_comparison(comparison, out)}
     payload = {"comparison": comparison, "files": files, "plan_files": written, "warnings": notes,
                "wall_time_s": time.perf_counter() - t0}
@@ -503,9 +517,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, overrides: dict[str, Any],
-              label: str | None = None) -> Any:
+              label: str | None = None, episode_years: float | None = None) -> Any:
     """The plan of ``policy`` on the line or ``network`` with the command's options (``label``: what its
-    progress bar says it plans, where several run), with its progress bars on stderr (none with ``--json``)."""
+    progress bar says it plans, where several run; ``episode_years``: the futures' episode length, as
+    :func:`~trackenv_agents.planning.plan_line` takes it), with its progress bars on stderr (none with
+    ``--json``)."""
     from trackenv.envs.line_fit import FitWarning
 
     from .planning import plan_line
@@ -537,7 +553,7 @@ def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, o
         print(f"trackenv plan: tuning {policy} on {futures} of {where} first (minutes; no progress bars with "
               f"--json)", file=sys.stderr)
     kwargs = dict(policy=policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
-                  progress=progress, **overrides)
+                  progress=progress, episode_years=episode_years, **overrides)
     if args.tune:
         kwargs["tune"] = args.tune
     try:

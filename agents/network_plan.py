@@ -29,12 +29,12 @@ from .plan_report import LinePlan, counted, line_summary, step_date, summary_lin
 from .planning import (
     DEFAULT_POLICY,
     _run_futures,
+    episode_horizon,
     line_limits,
     line_plan,
     line_policy,
     plan_config,
     plan_warnings,
-    trained_horizon_years,
     unmet_reasons,
 )
 from .rules.choices import CHOICE_RULES
@@ -281,7 +281,7 @@ def check_network_policy(policy: str) -> None:
 
 def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
                  scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
-                 **config: Any) -> NetworkPlan:
+                 episode_years: float | None = None, **config: Any) -> NetworkPlan:
     """Plan tamping on ``network`` (a network file's path or a
     :class:`~trackenv.envs.network_file.NetworkDescription`) for ``years`` from its ``as_of``: the line policy
     ``policy`` (:func:`~trackenv_agents.planning.line_policy`: a tamping rule with the tuned parameters of
@@ -291,7 +291,9 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` given here is the
     machine's, over the network file's). ``tune``: where > 0, each line's rule is first tuned on that many
     futures of the line alone (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`: as if it had a machine of its
-    own; lines of one config once). ``progress(1)`` after each quarter. ValueError for a policy that uses the
+    own; lines of one config once). ``episode_years``: the futures' episode length, as
+    :func:`~trackenv_agents.planning.plan_line` takes it. ``progress(1)`` after each quarter. ValueError for a
+    policy that uses the
     choices beyond tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the line)."""
     from gymnasium.vector import AutoresetMode
 
@@ -317,9 +319,9 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     tunings = _tuned(rules, lines, tune, progress is not None) if tune else [None] * len(lines)
     rules = [rule if t is None else t.rule(rule, cfg) for rule, t, cfg in zip(rules, tunings, lines, strict=True)]
     steps = lines[0].horizon_steps
-    trained = trained_horizon_years(rules[0])
-    if trained is not None:  # as plan_line: futures of the training episodes' length, the plan their first years
-        lines = [cfg.replace(horizon_years=trained) for cfg in lines]
+    horizon = episode_horizon(rules[0], episode_years)
+    if horizon is not None and horizon != lines[0].horizon_years:  # as plan_line: the plan the episodes' first years
+        lines = [cfg.replace(horizon_years=horizon) for cfg in lines]
     net = desc.config(lines, capacity=config.get("capacity"))  # the machine's fields and the dates from the file
     rule = network_play(rules[0]).bind(net, line_rules=rules)
     env = TampingNetworkVectorEnv(futures, net, autoreset_mode=AutoresetMode.NEXT_STEP)

@@ -48,11 +48,12 @@ def _end_state(plan: Any) -> dict[str, float] | None:
             "sections_at_sd_alert_end": float((end >= alert).sum(axis=1).mean()), "sections": int(alert.size)}
 
 
-def compare_plans(plans: dict[str, Any]) -> dict[str, Any]:
+def compare_plans(plans: dict[str, Any], episode_years: float | None = None) -> dict[str, Any]:
     """The comparison of ``plans`` (policy name -> its plan, a line's or a network's, all of the same file,
-    years, futures and seed; the first the reference): per policy its cost per future (k€ over the plan, with
-    the machine's moves on a network), their mean and 10-90 % spread, the paired difference to the reference's
-    with a 95 % bootstrap CI and the futures in which it is cheaper, and what it leaves (:func:`_end_state`)."""
+    years, futures and seed, their futures run in episodes of one length, ``episode_years`` where not the plan's;
+    the first the reference): per policy its cost per future (k€ over the plan, with the machine's moves on a
+    network), their mean and 10-90 % spread, the paired difference to the reference's with a 95 % bootstrap CI
+    and the futures in which it is cheaper, and what it leaves (:func:`_end_state`)."""
     names = list(plans)
     first = plans[names[0]]
     for name, plan in plans.items():
@@ -72,15 +73,18 @@ def compare_plans(plans: dict[str, Any]) -> dict[str, Any]:
                      "end_state": _end_state(plans[name])})
     source = getattr(first, "network", None) or first.line
     return {"file": str(source.source), "name": source.name, "as_of": source.as_of, "years": first.years,
-            "futures": first.futures, "seed": first.seed, "scenario": first.scenario, "reference": names[0],
-            "results": rows}
+            "futures": first.futures, "seed": first.seed, "scenario": first.scenario, "episode_years": episode_years,
+            "reference": names[0], "results": rows}
 
 
 def format_comparison(d: dict[str, Any]) -> str:
     """:func:`compare_plans`' result as a table."""
     futures = counted(d["futures"], "future", "futures")
+    episodes = "" if d.get("episode_years") is None else (
+        f", each the first {years_text(d['years'])} of a {d['episode_years']:g}-year episode (a trained policy's)")
     out = [f"Policies compared on the same {futures} of {d['name']} ({d['file']}) from {d['as_of']}, "
-           f"{years_text(d['years'])} ({d['scenario']}); differences paired per future, against {d['reference']}:",
+           f"{years_text(d['years'])} ({d['scenario']}){episodes}; differences paired per future, against "
+           f"{d['reference']}:",
            f"{'policy':<28} {'cost k€':>8} {'10-90 %':>13}  {'vs ' + d['reference'] + ', k€ [95 % CI]':<34} "
            f"{'cheaper':>8}  left at the end: SD mm, sections at SD alert"]
     for r in d["results"]:

@@ -142,6 +142,18 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
         config["horizon_years"] = check_horizon("years", years, steps_per_year)
     return preset(scenario, line=line, **config)
 
+def episode_horizon(policy: Any, episode_years: float | None = None) -> float | None:
+    """The length [years] of the episodes a plan of ``policy`` runs its futures in where it is not the plan's own:
+    ``episode_years`` where given, else a trained policy's training episodes (:func:`trained_horizon_years`);
+    None for a rule with none given. ValueError where a trained policy would run episodes other than its
+    training's."""
+    trained = trained_horizon_years(policy)
+    if trained is not None and episode_years is not None and episode_years != trained:
+        raise ValueError(f"the policy was trained on episodes of {trained:g} years and reads the time left in them: "
+                         f"it cannot run futures of {episode_years:g}-year episodes")
+    return trained if episode_years is None else episode_years
+
+
 def trained_horizon_years(policy: Any) -> float | None:
     """The episode length a trained policy learnt on (its ``time`` feature is the share of that horizon gone);
     None for a rule, which reads no horizon."""
@@ -346,14 +358,17 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
               scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
-              **config: Any) -> LinePlan:
+              episode_years: float | None = None, **config: Any) -> LinePlan:
     """Plan maintenance on ``line`` (a line file's path or a :class:`~trackenv.envs.line_file.LineDescription`)
     for ``years`` from its ``as_of``: the policy ``policy`` (:func:`line_policy`) run in ``futures`` futures
     (episodes from seeds ``seed``, ``seed + 1``, ...) in one vector env, the line modelled as on the preset
     ``scenario`` (:data:`PLAN_SCENARIOS`); ``config``: further :class:`LineConfig` fields (costs, capacity, ...).
     ``tune``: where > 0, the rule's parameters are first tuned on that many futures of this line
     (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`) instead of the shipped ones. ``progress(1)`` is called
-    after each quarter (and the tuning, where asked, shows its own progress bar)."""
+    after each quarter (and the tuning, where asked, shows its own progress bar). ``episode_years``: the length of
+    the futures' episodes, of which the plan takes its first ``years`` (default: ``years``, or a trained policy's
+    training episodes, :func:`episode_horizon`); a future's draws depend on it, so policies compared on the same
+    futures run the same."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.line import TampingLineVectorEnv
@@ -368,11 +383,11 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
         tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None, desc=f"tune {policy}")
         rule = tuning.rule(rule, cfg)
     steps = cfg.horizon_steps
-    trained = trained_horizon_years(rule)
-    if trained is not None:
-        # a trained policy reads the time left in its training episode: the futures run in episodes of that
-        # length, of which the plan takes its first ``years`` (the line goes on after the plan, as in training)
-        cfg = cfg.replace(horizon_years=trained)
+    horizon = episode_horizon(rule, episode_years)
+    if horizon is not None and horizon != cfg.horizon_years:
+        # the futures run in episodes of that length, of which the plan takes its first ``years`` (the line goes on
+        # after the plan; a trained policy reads the time left in its training episode)
+        cfg = cfg.replace(horizon_years=horizon)
         rule = rule.bind(cfg)
     env = TampingLineVectorEnv(futures, cfg, autoreset_mode=AutoresetMode.NEXT_STEP, action_type=action_type_for(cfg))
     run = _run_futures(env, rule, steps, [seed + i for i in range(futures)], progress)

@@ -525,3 +525,22 @@ def test_plan_compare_refuses_what_it_cannot_compare_in_one_line(tmp_path, capsy
     assert main(["plan", str(write(tmp_path)), "--out", str(tmp_path / "o"), *extra]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_compared_with_a_trained_policy_every_policy_runs_its_training_episodes(tmp_path, capsys):
+    """A future's draws depend on its episode's length, and cpi-agent runs ten-year episodes (it reads the time
+    left in them): compared with it, a rule runs the same ten-year futures, so the two are paired."""
+    from trackenv_agents.cli import main
+
+    line = write(tmp_path, history=ROUGH_B)
+    assert main(["plan", str(line), "--years", "0.5", "--futures", "2", "--engine", "fast", "--pass-reuse-mm", "1",
+                 "--out", str(tmp_path / "cmp"), "--compare", "grouped-threshold,cpi-agent", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)["comparison"]
+    assert d["episode_years"] == 10.0
+    rule = plan_line(line, years=0.5, futures=2, episode_years=10.0, **FAST)
+    short = plan_line(line, years=0.5, futures=2, **FAST)
+    costs = d["results"][0]["cost_keur"]
+    np.testing.assert_allclose(costs, rule.costs.sum(axis=1), rtol=1e-12)
+    assert not np.allclose(costs, short.costs.sum(axis=1))  # the half-year episodes draw other futures
+    with pytest.raises(ValueError, match="trained on episodes of 10 years"):
+        plan_line(line, policy="cpi-agent", years=0.5, futures=1, episode_years=5.0, **FAST)
