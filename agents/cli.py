@@ -481,29 +481,34 @@ def cmd_plan(args: argparse.Namespace) -> int:
         payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
         _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
         return 0
-    return _compare_and_write(args, network, lines, dict(zip(policies, rules, strict=True)), overrides, out, t0)
+    return _compare_and_write(args, network, lines, policies, rules, overrides, out, t0)
 
 
-def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, rules: dict[str, Any],
+def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, policies: list[str], rules: list[Any],
                        overrides: dict[str, Any], out: Path, t0: float) -> int:
-    """``trackenv plan --compare``: each of ``rules`` (name -> its bound policy) planned on the same futures (in
-    episodes of one length: a trained policy's, where one is compared), their comparison and files."""
+    """``trackenv plan --compare``: each of ``policies`` (their bound ``rules``) planned on the same futures (in
+    episodes of one length: a trained policy's, where one is compared), their comparison and files; a trained
+    policy given by its path is named by its folder and file (:func:`model_label`)."""
     from .plan_compare import compare_plans, format_comparison, write_comparison
     from .planning import plan_warnings, trained_horizon_years
 
-    trained = {name: h for name, rule in rules.items() if (h := trained_horizon_years(rule)) is not None}
+    labels = [model_label(Path(p)) if p not in SHIPPED_AGENTS and Path(p).exists() else p for p in policies]
+    if len(set(labels)) < len(labels):  # two models of one folder and file name: their paths
+        labels = list(policies)
+    trained = {name: h for name, rule in zip(labels, rules, strict=True)
+               if (h := trained_horizon_years(rule)) is not None}
     if len(set(trained.values())) > 1:
         raise UsageError(f"--compare: the trained policies read the time left in training episodes of different "
                          f"lengths ({', '.join(f'{n} {h:g} years' for n, h in trained.items())}): compare them "
                          f"apart")
     episode = next(iter(trained.values()), None)
     plans, written, notes = {}, {}, []
-    for k, policy in enumerate(rules):
-        plans[policy] = plan = _one_plan(args, network, lines, policy, overrides, f"{policy} ({k + 1} of "
-                                                                                  f"{len(rules)})", episode)
+    for k, (policy, label) in enumerate(zip(policies, labels, strict=True)):
+        plans[label] = plan = _one_plan(args, network, lines, policy, overrides, f"{label} ({k + 1} of "
+                                                                                 f"{len(policies)})", episode)
         for lp in plan.lines if network is not None else (plan,):
-            notes += [f"{policy}: {note}" for note in plan_warnings(lp)]
-        written[policy] = plan.write(out / f"{k + 1}-{Path(policy).stem}")
+            notes += [f"{label}: {note}" for note in plan_warnings(lp)]
+        written[label] = plan.write(out / f"{k + 1}-{Path(policy).stem}")
     for note in notes:
         print(f"trackenv plan: warning: {note}", file=sys.stderr)
     comparison = compare_plans(plans, episode)
@@ -511,8 +516,9 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, rules
     payload = {"comparison": comparison, "files": files, "plan_files": written, "warnings": notes,
                "wall_time_s": time.perf_counter() - t0}
     folders = ", ".join(sorted({str(Path(next(iter(f.values()))).parent) for f in written.values()}))
-    _emit(args, payload, f"{format_comparison(comparison)}\neach policy's plan (its table with --policy): "
-                         f"{folders}\nwrote {files['compare_csv']}")
+    whose = ("each policy's plan in these futures (a rule's own --policy plan runs shorter episodes: other draws)"
+             if episode is not None else "each policy's plan (as --policy plans it)")
+    _emit(args, payload, f"{format_comparison(comparison)}\n{whose}: {folders}\nwrote {files['compare_csv']}")
     return 0
 
 

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .plan_report import LinePlan, counted, line_summary, step_date, summary_lines, years_text
+from .plan_report import LinePlan, counted, end_state, line_summary, step_date, summary_lines, years_text
 from .planning import (
     DEFAULT_POLICY,
     _run_futures,
@@ -93,6 +93,11 @@ class NetworkPlan:
         there = self.machine[:, :, None] == np.arange(len(self.lines))
         return (there & self.moved[:, :, None]).mean(axis=0)
 
+    def end_state(self) -> dict[str, float] | None:
+        """What the plan leaves on the network, every line's sections together (:func:`end_state`; each line's
+        own is its plan's)."""
+        return end_state(self.lines)
+
     def _names(self) -> list[str]:
         return [line.line.name for line in self.lines]
 
@@ -117,6 +122,7 @@ class NetworkPlan:
             "years": self.years, "futures": self.futures, "seed": self.seed, "quarters": quarters,
             "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
                           "p90": float(np.quantile(total, 0.9)), "move_mean": float(moves.mean())},
+            "end_state": self.end_state(),
             "line_plans": [{**line.to_dict(), "files": _line_files(files or {}, i), "warnings": plan_warnings(line)}
                            for i, line in enumerate(self.lines)],
         }
@@ -131,9 +137,9 @@ class NetworkPlan:
         first = self.lines[0]
         engine = engine_note({"engine": first.engine, "pass_reuse_tolerance_m": first.pass_reuse_tolerance_m})
         futures = counted(self.futures, "future", "futures")
-        out = [f"Network plan for {d['network']} from {d['as_of']}: {self.policy} ({self.scenario}, tamping), "
-               f"{years_text(self.years)}, {futures}{engine}{changes_note(first.config_changes)}; the machine is on "
-               f"line {self.network.start_line} now"]
+        out = [f"Network plan for {d['network']} from {d['as_of']}: {self.policy} (scenario {self.scenario}, "
+               f"tamping), {years_text(self.years)}, {futures}{engine}{changes_note(first.config_changes)}; the "
+               f"machine is on line {self.network.start_line} now"]
         for i, line in enumerate(self.lines):
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
             out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]

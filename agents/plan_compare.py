@@ -33,27 +33,13 @@ def check_compared(names: list[str]) -> list[str]:
     return names
 
 
-def _end_state(plan: Any) -> dict[str, float] | None:
-    """What ``plan`` (a line's or a network's) leaves, over all its lines' sections: the mean true SD and the
-    sections at or above their SD alert at the start and the end (means over the futures; None: not known)."""
-    lines = getattr(plan, "lines", None)
-    lines = lines if isinstance(lines, tuple) else (plan,)
-    if any(p.sd_start_mm is None or p.sd_end_mm is None or "sd_alert" not in p.limits_mm for p in lines):
-        return None
-    start = np.concatenate([p.sd_start_mm for p in lines], axis=1)
-    end = np.concatenate([p.sd_end_mm for p in lines], axis=1)
-    alert = np.concatenate([p.limits_mm["sd_alert"] for p in lines])
-    return {"sd_mean_mm_start": float(start.mean()), "sd_mean_mm_end": float(end.mean()),
-            "sections_at_sd_alert_start": float((start >= alert).sum(axis=1).mean()),
-            "sections_at_sd_alert_end": float((end >= alert).sum(axis=1).mean()), "sections": int(alert.size)}
-
-
 def compare_plans(plans: dict[str, Any], episode_years: float | None = None) -> dict[str, Any]:
     """The comparison of ``plans`` (policy name -> its plan, a line's or a network's, all of the same file,
     years, futures and seed, their futures run in episodes of one length, ``episode_years`` where not the plan's;
     the first the reference): per policy its cost per future (k€ over the plan, with the machine's moves on a
     network), their mean and 10-90 % spread, the paired difference to the reference's with a 95 % bootstrap CI
-    and the futures in which it is cheaper, and what it leaves (:func:`_end_state`)."""
+    and the futures in which it is cheaper, and what it leaves (``end_state()``:
+    :func:`~trackenv_agents.plan_report.end_state`), and the first plan's engine and config changes."""
     names = list(plans)
     first = plans[names[0]]
     for name, plan in plans.items():
@@ -70,22 +56,29 @@ def compare_plans(plans: dict[str, Any], episode_years: float | None = None) -> 
                      "p10_keur": float(np.quantile(total, 0.1)), "p90_keur": float(np.quantile(total, 0.9)),
                      "vs_first": {"mean_keur": float(d.mean()), "ci_low": lo, "ci_high": hi,
                                   "cheaper_futures": int((d < 0).sum())},
-                     "end_state": _end_state(plans[name])})
+                     "end_state": plans[name].end_state()})
     source = getattr(first, "network", None) or first.line
+    line = first.lines[0] if hasattr(first, "network") else first  # the engine and changes: the same on every line
     return {"file": str(source.source), "name": source.name, "as_of": source.as_of, "years": first.years,
+            "engine": line.engine, "pass_reuse_mm": line.pass_reuse_tolerance_m * 1e3,
+            "config_changes": dict(line.config_changes),
             "futures": first.futures, "seed": first.seed, "scenario": first.scenario, "episode_years": episode_years,
             "reference": names[0], "results": rows}
 
 
 def format_comparison(d: dict[str, Any]) -> str:
     """:func:`compare_plans`' result as a table."""
+    from .evaluation.line_compare import changes_note, engine_note
+
     futures = counted(d["futures"], "future", "futures")
+    w = max(28, *(len(r["policy"]) for r in d["results"]))
     episodes = "" if d.get("episode_years") is None else (
         f", each the first {years_text(d['years'])} of a {d['episode_years']:g}-year episode (a trained policy's)")
+    engine = engine_note({"engine": d["engine"], "pass_reuse_tolerance_m": d["pass_reuse_mm"] / 1e3})
     out = [f"Policies compared on the same {futures} of {d['name']} ({d['file']}) from {d['as_of']}, "
-           f"{years_text(d['years'])} ({d['scenario']}){episodes}; differences paired per future, against "
-           f"{d['reference']}:",
-           f"{'policy':<28} {'cost k€':>8} {'10-90 %':>13}  {'vs ' + d['reference'] + ', k€ [95 % CI]':<34} "
+           f"{years_text(d['years'])}, scenario {d['scenario']}{engine}{changes_note(d['config_changes'])}"
+           f"{episodes}; differences paired per future, against {d['reference']}:",
+           f"{'policy':<{w}} {'cost k€':>8} {'10-90 %':>13}  {'vs ' + d['reference'] + ', k€ [95 % CI]':<34} "
            f"{'cheaper':>8}  left at the end: SD mm, sections at SD alert"]
     for r in d["results"]:
         v = r["vs_first"]
@@ -97,7 +90,7 @@ def format_comparison(d: dict[str, Any]) -> str:
                                       f"{e['sections_at_sd_alert_end']:.1f} of {e['sections']} "
                                       f"(from {e['sections_at_sd_alert_start']:.1f})")
         spread = f"{r['p10_keur']:.0f}-{r['p90_keur']:.0f}"
-        out.append(f"{r['policy']:<28} {r['mean_keur']:>8.1f} {spread:>13}  {vs:<34} {cheaper:>8}  {left}")
+        out.append(f"{r['policy']:<{w}} {r['mean_keur']:>8.1f} {spread:>13}  {vs:<34} {cheaper:>8}  {left}")
     out.append("cost: k€ over the plan (the network's with the machine's moves), mean and 10-90 % of the futures; a "
                "policy cheaper within the plan may leave more to pay after it (the last column)")
     return "\n".join(out)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -94,6 +94,24 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
             f"{counted(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}",
             *([f"  own costs: {', '.join(f'{k} {v:g}' for k, v in summary['costs'].items())} (k€; the rest the "
                f"defaults)"] if summary.get("costs") else [])]
+
+
+def end_state(plans: Sequence[Any]) -> dict[str, float] | None:
+    """What line plans (:class:`LinePlan`, a line's or a network's lines) leave, against what they started from,
+    over all their sections (means over the futures): the mean true SD [mm] and the number of sections at or above
+    their SD alert limit at the start and at the end, and the number of ``sections`` (None where a plan does not
+    know its start and end). A plan that spends little by leaving the track worse shows it here: its savings
+    come back after the horizon."""
+    if not plans or any(p.sd_start_mm is None or p.sd_end_mm is None for p in plans):
+        return None
+    start = np.concatenate([p.sd_start_mm for p in plans], axis=1)
+    end = np.concatenate([p.sd_end_mm for p in plans], axis=1)
+    out = {"sd_mean_mm_start": float(start.mean()), "sd_mean_mm_end": float(end.mean()), "sections": start.shape[1]}
+    if all("sd_alert" in p.limits_mm for p in plans):
+        alert = np.concatenate([p.limits_mm["sd_alert"] for p in plans])
+        out["sections_at_sd_alert_start"] = float((start >= alert).sum(axis=1).mean())
+        out["sections_at_sd_alert_end"] = float((end >= alert).sum(axis=1).mean())
+    return out
 
 
 #: The per-section state a plan records per quarter (means over the futures, before the quarter's work): what the
@@ -266,18 +284,8 @@ class LinePlan:
         }
 
     def end_state(self) -> dict[str, float] | None:
-        """What the plan leaves, against what it started from (means over the futures): the line's mean true SD
-        [mm] and its number of sections at or above their SD alert limit, at the start and at the end (None where
-        not known). A plan that spends little by leaving the track worse shows it here: its savings come back
-        after the horizon."""
-        if self.sd_start_mm is None or self.sd_end_mm is None:
-            return None
-        alert = self.limits_mm.get("sd_alert")
-        out = {"sd_mean_mm_start": float(self.sd_start_mm.mean()), "sd_mean_mm_end": float(self.sd_end_mm.mean())}
-        if alert is not None:
-            out["sections_at_sd_alert_start"] = float((self.sd_start_mm >= alert).sum(axis=1).mean())
-            out["sections_at_sd_alert_end"] = float((self.sd_end_mm >= alert).sum(axis=1).mean())
-        return out
+        """What the plan leaves against what it started from (:func:`end_state`)."""
+        return end_state([self])
 
     def end_state_line(self) -> str | None:
         """:meth:`end_state` as one line of the table (None where not known)."""
@@ -287,7 +295,7 @@ class LinePlan:
         text = (f"left at the end (true state, mean of the futures): SD {e['sd_mean_mm_end']:.2f} mm on average "
                 f"({e['sd_mean_mm_start']:.2f} at the start)")
         if "sections_at_sd_alert_end" in e:
-            text += (f", {e['sections_at_sd_alert_end']:.1f} of {len(self.line.sections)} sections at or above their "
+            text += (f", {e['sections_at_sd_alert_end']:.1f} of {e['sections']} sections at or above their "
                      f"SD alert ({e['sections_at_sd_alert_start']:.1f} at the start)")
         return text
 
@@ -299,8 +307,9 @@ class LinePlan:
 
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
-        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} ({self.scenario}), {years_text(self.years)}, "
-                 f"{counted(self.futures, 'future', 'futures')}{engine}{changes_note(self.config_changes)}",
+        lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} (scenario {self.scenario}), "
+                 f"{years_text(self.years)}, {counted(self.futures, 'future', 'futures')}{engine}"
+                 f"{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]

@@ -32,6 +32,12 @@ def test_the_networks_costs_are_its_lines_and_the_moves(network_plan):
     assert np.allclose(plan.works_on.sum(axis=1) + plan.idle_on.sum(axis=1) + plan.moved.mean(axis=0), 1.0)
     assert np.allclose(plan.moving_to.sum(axis=1), plan.moved.mean(axis=0))
     assert (plan.move_costs[plan.moved] == 10.0).all() and (plan.move_costs[~plan.moved] == 0.0).all()
+    # what it leaves: every line's sections together (the JSON's top level), each line's in its plan
+    lines_end = [p.end_state() for p in plan.lines]
+    whole = plan.to_dict()["end_state"]
+    assert whole["sections"] == 130 and whole["sections_at_sd_alert_end"] == pytest.approx(
+        sum(e["sections_at_sd_alert_end"] for e in lines_end))
+    assert whole["sd_mean_mm_end"] == pytest.approx(sum(e["sd_mean_mm_end"] * e["sections"] for e in lines_end) / 130)
 
 
 def test_each_lines_entry_has_its_own_files_and_warnings(network_plan, monkeypatch):

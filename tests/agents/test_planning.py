@@ -150,7 +150,7 @@ def test_a_plan_with_every_choice_recommends_each_by_name(tmp_path, capsys):
     out = tmp_path / "plan"
     assert main(["plan", str(write(tmp_path)), "--scenario", "wet", "--policy", "choice-threshold", "--years", "0.5",
                  "--futures", "2", "--out", str(out)]) == 0
-    assert "(wet)" in capsys.readouterr().out
+    assert "(scenario wet)" in capsys.readouterr().out
     with open(out / "plan.csv") as f:
         rows = list(csv.DictReader(f))
     assert rows and {r["choice"] for r in rows} <= set(plan.choices)
@@ -497,6 +497,7 @@ def test_plan_compares_policies_on_the_same_futures(tmp_path, capsys):
     d = json.loads(capsys.readouterr().out)
     rows = {r["policy"]: r for r in d["comparison"]["results"]}
     assert list(rows) == ["grouped-threshold", "no-maintenance"] and d["comparison"]["reference"] == "grouped-threshold"
+    assert (d["comparison"]["engine"], d["comparison"]["pass_reuse_mm"]) == ("fast", 1.0)
     alone = plan_line(line, years=0.5, futures=2, policy="no-maintenance", **FAST)
     np.testing.assert_allclose(rows["no-maintenance"]["cost_keur"], alone.costs.sum(axis=1), rtol=1e-12)
     diff = np.subtract(rows["no-maintenance"]["cost_keur"], rows["grouped-threshold"]["cost_keur"])

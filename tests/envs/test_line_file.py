@@ -116,6 +116,8 @@ FAULTS = {
     "a cost in euros": (dict(line=LINE + "costs:\n  speed_restriction_cost: 20000\n"),
                         ["line.yaml", "costs.speed_restriction_cost: 20000 k€ is outside [0, 1000] k€",
                          "give it in k€ (a larger value is taken for euros)"]),
+    "a negative cost": (dict(line=LINE + "costs:\n  tamping_cost_per_m: -0.01\n"),
+                        ["costs.tamping_cost_per_m: -0.01 k€/m is outside [0, 1] k€/m"]),
     "a misspelt cost": (dict(line=LINE + "costs:\n  possesion_cost: 5\n"),
                         ["unknown key 'costs.possesion_cost'; did you mean 'possession_cost'?"]),
     "costs not a mapping": (dict(line=LINE + "costs: 5\n"), ["costs: must be a mapping of possession_cost"]),
@@ -500,3 +502,9 @@ def test_a_line_files_costs_are_its_configs_and_its_own(tmp_path):
     (tmp_path / "plain").mkdir()
     plain = scenario("default", line=write(tmp_path / "plain"))
     assert plain.speed_restriction_cost == 20.0 and config.replace(line=plain.line).speed_restriction_cost == 20.0
+
+
+def test_only_a_cost_above_its_range_is_taken_for_euros(tmp_path):
+    with pytest.raises(LineFileError) as err:
+        load_line(write(tmp_path, line=LINE + "costs:\n  tamping_cost_per_m: -0.01\n"))
+    assert "euros" not in str(err.value)

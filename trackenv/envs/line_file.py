@@ -642,8 +642,8 @@ def _costs(source: str, costs: Any) -> tuple[tuple[str, float], ...]:
     for key, f in COST_KEYS.items():
         if key in costs:
             v = _number(source, f"costs.{key}", costs[key], f.unit)
-            out.append((key, _in_range(source, f"costs.{key}", v, f, "; give it in k€ (a larger value is taken "
-                                                                     "for euros)")))
+            euros = "; give it in k€ (a larger value is taken for euros)" if f.high is not None and v > f.high else ""
+            out.append((key, _in_range(source, f"costs.{key}", v, f, euros)))
     return tuple(out)
 
 
