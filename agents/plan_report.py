@@ -47,7 +47,7 @@ def line_summary(line: Any) -> dict[str, Any]:
     """What a plan reads from a line file (a :class:`~trackenv.envs.line_file.LineDescription`), in the file's
     units, for a reader to check them: the number of sections and the length [km], the ranges over the sections of
     the speed [km/h], the tonnage [MGT/year] and the freight share, the freight axle load [t], the counts of
-    transitions, switches or crossings and known wet zones, the date of the last recording-car run in the
+    transitions, switches or crossings and sections in known wet zones, the date of the last recording-car run in the
     history with its age [years before ``as_of``] (None without a history), and the line's own costs [k€] where
     the file gives any."""
     sections = line.sections
@@ -91,7 +91,7 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
             f"{summary['freight_axle_load_t']:g} t",
             f"  {counted(summary['transitions'], 'transition', 'transitions')}, "
             f"{counted(summary['switches_crossings'], 'switch or crossing', 'switches or crossings')}, "
-            f"{counted(summary['known_wet'], 'known wet zone', 'known wet zones')}; {run}",
+            f"{counted(summary['known_wet'], 'section in a known wet zone', 'sections in known wet zones')}; {run}",
             *([f"  own costs: {', '.join(f'{k} {v:g}' for k, v in summary['costs'].items())} (k€; the rest the "
                f"defaults)"] if summary.get("costs") else [])]
 

@@ -232,8 +232,8 @@ def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
     read = plan.table().splitlines()[1:3]
     assert read[0] == ("read from the file: 4 sections, 0.80 km; speed 100 km/h; tonnage 15-30 MGT/year; freight "
                        "share 0.40, freight axle load 22.5 t")
-    assert read[1] == ("  1 transition, 1 switch or crossing, 1 known wet zone; last recording-car run 2025-12-01 "
-                       "(0.08 years before as_of)")
+    assert read[1] == ("  1 transition, 1 switch or crossing, 1 section in a known wet zone; last recording-car run "
+                       "2025-12-01 (0.08 years before as_of)")
     assert not plan.table().splitlines()[3].startswith("  own costs")
     (tmp_path / "bare").mkdir()
     bare = write(tmp_path / "bare", line=LINE.replace("history: history.csv\n", ""), history=None)

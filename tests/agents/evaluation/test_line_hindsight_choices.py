@@ -29,8 +29,18 @@ REFERENCE = Path(__file__).parent / "data" / "hindsight_tamping_reference.json"
 SEARCH = {"rounds": 1, "sd_thresholds_mm": (2.0,), "peak_fractions": (0.8,), "stop_steps": (0,)}
 
 
-def test_tamping_only_configs_give_the_tamping_only_search_bit_for_bit():
-    """The reference was written by the search before it knew the choices (same config, plans and settings)."""
+#: how far a cost of the reference may lie from this machine's: the reference was written on an AVX-512 Xeon;
+#: numpy's elementwise functions are dispatched per instruction set and the pass kernel is compiled for the host
+#: processor, so another processor may round the last bits otherwise (an AVX2 AMD EPYC: up to 3e-14 relative,
+#: measured 2026-12-07); the search's decisions are compared exactly
+CROSS_CPU_REL = 1e-12
+
+
+def test_tamping_only_configs_give_the_tamping_only_search():
+    """The reference was written by the search before it knew the choices (same config, plans and settings): the
+    same schedules and options, bit for bit, and the same costs (the episode's, and after each round of the search)
+    to the last digits a processor may round otherwise (:data:`CROSS_CPU_REL`; on the processor that wrote it,
+    exactly)."""
     ref = json.loads(REFERENCE.read_text())
     cfg = scenario(ref["config"]["scenario"], horizon_years=ref["config"]["horizon_years"],
                    initial_scale=tuple(ref["config"]["initial_scale"]))
@@ -39,10 +49,11 @@ def test_tamping_only_configs_give_the_tamping_only_search_bit_for_bit():
     found = hindsight_bounds(cfg, [(4, plan.astype(bool), (extra.astype(bool),)), (9, plan.astype(bool), ())],
                              **search)
     for h, r in zip(found, ref["episodes"], strict=True):
-        assert (h["seed"], h["cost"], h["replayed_cost"], h["start_cost"]) == \
-            (r["seed"], r["cost"], r["replayed_cost"], r["start_cost"])
-        assert h["search"] == r["search"] and h["options"] == r["options"]
-        assert schedule_rows(h["schedule"]) == r["schedule"]
+        assert h["seed"] == r["seed"]
+        for key in ("cost", "replayed_cost", "start_cost"):
+            assert h[key] == pytest.approx(r[key], rel=CROSS_CPU_REL, abs=0.0), key
+        assert h["search"] == pytest.approx(r["search"], rel=CROSS_CPU_REL, abs=0.0)  # the cost after each round
+        assert h["options"] == r["options"] and schedule_rows(h["schedule"]) == r["schedule"]
 
 
 def test_a_tamping_only_config_gets_no_choice_rules():
