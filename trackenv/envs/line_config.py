@@ -239,10 +239,13 @@ class LineConfig(ConfigBase):
     **A line from a file** (``line``: the path of a line file, or a
     :class:`~trackenv.envs.line_file.LineDescription`; the documentation's page "Lines from files"): the file
     sets :data:`LINE_FILE_FIELDS` (the number of sections, the line's section length, speed and traffic, and
-    ``per_section``: the lengths, speeds, tonnages and freight shares that differ between its sections; giving
-    one of them as well is an error unless it equals the file's or the field's default, which cannot be told
-    from leaving it out and gives way to the file's) and, per section, the register, known wet
-    zones, years since tamping and tampings since renewal; where it gives a measured history the section's
+    ``per_section``: the lengths, speeds, tonnages and freight shares that differ between its sections), the
+    costs its ``costs`` mapping gives (:func:`file_fields`), and, per section, the register, known wet zones,
+    years since tamping and tampings since renewal. Giving one of those fields as well is an error unless it
+    equals the file's (:meth:`from_dict`, ``scenario``; :meth:`replace`, which the envs' keywords go through,
+    refuses any; a config built directly cannot tell a value equal to the field's default from leaving it out,
+    and the file's is taken).
+    Where the file gives a measured history the section's
     rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
     the file does not know is drawn per episode as without one. ``capacity`` is at most the file's number of
     sections (a larger one, the default 6 on a file of 4 sections or any other, is cut to it).
@@ -505,7 +508,8 @@ class LineConfig(ConfigBase):
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> LineConfig:
         """Build from a dict (an unknown key raises ValueError naming it); with a ``line``, a field the file sets
-        (:data:`LINE_FILE_FIELDS`) that ``d`` gives must be the file's, even where it is the field's default
+        (:func:`file_fields`: its traffic and sections, its own costs) that ``d`` gives must be the file's, even
+        where it is the field's default
         (the file's 50 km/h is not overridden by a given 100, the default speed, silently)."""
         config = super().from_dict(d)
         if config.line is not None:
@@ -536,7 +540,7 @@ class LineConfig(ConfigBase):
 
     def replace(self, **changes: Any) -> LineConfig:
         """A copy with some fields changed (validated; unknown keys raise ValueError). With a line file, the
-        fields it sets (:data:`LINE_FILE_FIELDS`) are the file's: changing one is an error, and a new ``line``
+        fields it sets (:func:`file_fields`) are the file's: changing one is an error, and a new ``line``
         replaces them all."""
         line = changes.get("line", self.line)
         owned = file_fields(line) if hasattr(line, "costs") else dict.fromkeys(LINE_FILE_FIELDS)
