@@ -436,7 +436,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from trackenv.envs.line_file import load_line
     from trackenv.envs.network_file import load_network_or_none
 
-    from .planning import line_policy, plan_config, plan_warnings
+    from .planning import line_policy, plan_config
 
     network = load_network_or_none(args.line)  # the file read once; None: a line file
     lines = network.lines if network is not None else (load_line(args.line),)
@@ -472,8 +472,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     out = Path(args.out or "results/plan")
     if args.compare is None:
         plan = _one_plan(args, network, lines, args.policy, overrides)
-        line_plans = plan.lines if network is not None else (plan,)
-        notes = [note for lp in line_plans for note in plan_warnings(lp)]
+        notes = _plan_warnings(plan, network)
         for note in notes:
             print(f"trackenv plan: warning: {note}", file=sys.stderr)
         files = plan.write(out)
@@ -490,7 +489,7 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, polic
     episodes of one length: a trained policy's, where one is compared), their comparison and files; a trained
     policy given by its path is named by its folder and file (:func:`model_label`)."""
     from .plan_compare import compare_plans, format_comparison, write_comparison
-    from .planning import plan_warnings, trained_horizon_years
+    from .planning import trained_horizon_years
 
     labels = [model_label(Path(p)) if p not in SHIPPED_AGENTS and Path(p).exists() else p for p in policies]
     if len(set(labels)) < len(labels):  # two models of one folder and file name: their paths
@@ -502,24 +501,31 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, polic
                          f"lengths ({', '.join(f'{n} {h:g} years' for n, h in trained.items())}): compare them "
                          f"apart")
     episode = next(iter(trained.values()), None)
-    plans, written, notes = {}, {}, []
+    plans, written, notes, folders = {}, {}, [], []
     for k, (policy, label) in enumerate(zip(policies, labels, strict=True)):
         plans[label] = plan = _one_plan(args, network, lines, policy, overrides, f"{label} ({k + 1} of "
                                                                                  f"{len(policies)})", episode)
-        for lp in plan.lines if network is not None else (plan,):
-            notes += [f"{label}: {note}" for note in plan_warnings(lp)]
-        written[label] = plan.write(out / f"{k + 1}-{Path(policy).stem}")
+        notes += [f"{label}: {note}" for note in _plan_warnings(plan, network)]
+        folders.append(out / f"{k + 1}-{Path(policy).stem}")
+        written[label] = plan.write(folders[-1])
     for note in notes:
         print(f"trackenv plan: warning: {note}", file=sys.stderr)
     comparison = compare_plans(plans, episode)
     files = {"compare_csv": write_comparison(comparison, out)}
     payload = {"comparison": comparison, "files": files, "plan_files": written, "warnings": notes,
                "wall_time_s": time.perf_counter() - t0}
-    folders = ", ".join(sorted({str(Path(next(iter(f.values()))).parent) for f in written.values()}))
     whose = ("each policy's plan in these futures (a rule's own --policy plan runs shorter episodes: other draws)"
              if episode is not None else "each policy's plan (as --policy plans it)")
-    _emit(args, payload, f"{format_comparison(comparison)}\n{whose}: {folders}\nwrote {files['compare_csv']}")
+    _emit(args, payload, f"{format_comparison(comparison)}\n{whose}: {', '.join(map(str, folders))}\n"
+                         f"wrote {files['compare_csv']}")
     return 0
+
+
+def _plan_warnings(plan: Any, network: Any) -> list[str]:
+    """The warnings of a line's plan, or of every line of a network's (:func:`~.planning.plan_warnings`)."""
+    from .planning import plan_warnings
+
+    return [note for line in (plan.lines if network is not None else (plan,)) for note in plan_warnings(line)]
 
 
 def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, overrides: dict[str, Any],

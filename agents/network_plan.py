@@ -49,8 +49,8 @@ class NetworkPlan:
     """A network's plan (:func:`plan_network`): the ``network`` (a
     :class:`~trackenv.envs.network_file.NetworkDescription`), each line's :class:`LinePlan` in ``lines`` (its own
     costs, without the machine's moves), the machine's line after each quarter ``machine``, whether it moved in
-    it ``moved`` and whether it did track work ``worked`` (futures, quarters; None: counted as working), and the
-    network's ``costs`` and ``move_costs`` (futures, quarters) k€."""
+    it ``moved`` and whether it did track work ``worked`` (futures, quarters), and the network's ``costs`` and
+    ``move_costs`` (futures, quarters) k€."""
 
     network: Any
     policy: str
@@ -63,15 +63,14 @@ class NetworkPlan:
     moved: np.ndarray
     costs: np.ndarray
     move_costs: np.ndarray
+    worked: np.ndarray
     scenario: str = "default"
-    worked: np.ndarray | None = None
 
     def _stays(self, working: bool) -> np.ndarray:
         """(quarters, lines): the share of futures in which the machine is on each line in each quarter without
         moving, and did track work there (``working``) or none."""
         here = (self.machine[:, :, None] == np.arange(len(self.lines))) & ~self.moved[:, :, None]
-        worked = np.ones(self.moved.shape, bool) if self.worked is None else self.worked
-        return (here & (worked if working else ~worked)[:, :, None]).mean(axis=0)
+        return (here & (self.worked if working else ~self.worked)[:, :, None]).mean(axis=0)
 
     @property
     def works_on(self) -> np.ndarray:
@@ -104,11 +103,10 @@ class NetworkPlan:
     def to_dict(self, files: Mapping[str, str] | None = None) -> dict[str, Any]:
         """The plan as plain data (JSON-ready): the network, per quarter the machine's course (``works_on`` and
         ``idle_on``: the share of futures per line, in the order of ``lines``; ``moving``, and ``moving_to`` per
-        line) and the
-        network's mean cost, the cost forecast, and each line's plan (:meth:`LinePlan.to_dict`) with the keys a
-        line's plan has in ``trackenv plan LINE.yaml --json``: its ``warnings`` (:func:`plan_warnings`) and its
-        ``files``, those of ``files`` (what :meth:`write` returned) under ``line<i>/``, keyed as a line's (none
-        without ``files``)."""
+        line) and the network's mean cost, the cost forecast, what the plan leaves (``end_state``), and each line's
+        plan (:meth:`LinePlan.to_dict`) with the keys a line's plan has in ``trackenv plan LINE.yaml --json``: its
+        ``warnings`` (:func:`plan_warnings`) and its ``files``, those of ``files`` (what :meth:`write` returned)
+        under ``line<i>/``, keyed as a line's (none without ``files``)."""
         names, total, moves = self._names(), self.costs.sum(axis=1), self.move_costs.sum(axis=1)
         quarters = [{"from": d, "works_on": [float(s) for s in works],
                      "idle_on": [float(s) for s in self.idle_on[q]],
@@ -365,4 +363,4 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
                                tuning=tunings[i]))
     env.close()
     return NetworkPlan(desc, policy, float(years), futures, seed, dates, tuple(plans), run.machine.machine,
-                       run.machine.moved, run.costs, run.part_costs["move"], scenario, run.machine.worked)
+                       run.machine.moved, run.costs, run.part_costs["move"], run.machine.worked, scenario)

@@ -57,8 +57,9 @@ def compare_plans(plans: dict[str, Any], episode_years: float | None = None) -> 
                      "vs_first": {"mean_keur": float(d.mean()), "ci_low": lo, "ci_high": hi,
                                   "cheaper_futures": int((d < 0).sum())},
                      "end_state": plans[name].end_state()})
-    source = getattr(first, "network", None) or first.line
-    line = first.lines[0] if hasattr(first, "network") else first  # the engine and changes: the same on every line
+    network = getattr(first, "network", None)
+    source = first.line if network is None else network
+    line = first if network is None else first.lines[0]  # the engine and changes: the same on every line
     return {"file": str(source.source), "name": source.name, "as_of": source.as_of, "years": first.years,
             "engine": line.engine, "pass_reuse_mm": line.pass_reuse_tolerance_m * 1e3,
             "config_changes": dict(line.config_changes),

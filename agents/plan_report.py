@@ -65,7 +65,7 @@ def line_summary(line: Any) -> dict[str, Any]:
         "switches_crossings": sum(s.register == "switch_or_crossing" for s in sections),
         "known_wet": sum(bool(s.wet) for s in sections),
         "last_recording": None if last is None else {"date": last, "years_before": line.years_before(last)},
-        "costs": dict(getattr(line, "costs", ())),
+        "costs": dict(line.costs),
     }
 
 

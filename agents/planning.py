@@ -142,6 +142,7 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
         config["horizon_years"] = check_horizon("years", years, steps_per_year)
     return preset(scenario, line=line, **config)
 
+
 def episode_horizon(policy: Any, episode_years: float | None = None) -> float | None:
     """The length [years] of the episodes a plan of ``policy`` runs its futures in where it is not the plan's own:
     ``episode_years`` where given, else a trained policy's training episodes (:func:`trained_horizon_years`);
