@@ -37,6 +37,8 @@ HYPERPARAMS_FILE = Path(__file__).resolve().parent / "learning" / "hyperparams" 
 # = trackenv.envs.line_config.LINE_ENGINES and MAX_PASS_REUSE_TOLERANCE_M (in mm), written out for the same reason
 ENGINES = ("classic", "fast")
 MAX_PASS_REUSE_MM = 2.0
+# = trackenv_agents.evaluation.line_compare.MAX_EPISODES (the most episodes --seeds may give), for the help text
+MAX_EPISODES = 100_000
 
 
 class UsageError(Exception):
@@ -236,7 +238,9 @@ def _line_policies(args: argparse.Namespace) -> dict[str, Any]:
 
 def model_label(path: Path) -> str:
     """A trained policy's name in the tables: its folder and file (``run1/model``, ``run1/best_model``: the run it
-    came from) for a file, the folder's name for an RLlib run."""
+    came from) for a file, the folder's name for an RLlib run; the same however the path is written (relative,
+    absolute, ``./model.zip`` in its run's folder)."""
+    path = Path(os.path.abspath(path))
     return f"{path.parent.name}/{path.stem}" if path.suffix else path.name
 
 
@@ -249,7 +253,8 @@ def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
     from .evaluation.line_compare import env_config
     from .learning.baselines import baseline_kind, load_baseline
 
-    kind = baseline_kind(path)
+    with _refusals_of("--model"):
+        kind = baseline_kind(path)
     shipped = next((n for n, p in SHIPPED_AGENTS.items() if Path(p).resolve() == path.resolve()), None)
     policy = load_baseline(path, name=shipped or model_label(path))
     if kind == "line":
@@ -276,7 +281,7 @@ def engine_overrides(args: argparse.Namespace) -> dict[str, Any]:
     result was computed)."""
     given = list(getattr(args, "set", None) or [])
     names = [name.removeprefix("line_config.") for name, _ in given]  # a network's line field, as it is reported
-    twice = sorted({n for n in names if names.count(n) > 1})
+    twice = _repeated(names)
     if twice:
         raise UsageError(f"--set {', '.join(twice)}: given more than once")
     out: dict[str, Any] = dict(zip(names, (value for _, value in given), strict=True))
@@ -297,16 +302,18 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     from .evaluation.line_compare import format_line_table, line_comparison, parse_seeds
 
     t0 = time.perf_counter()
+    _scenario(args.env)
     seeds = parse_seeds(args.seeds) if args.seeds else None
+    rules = _comma_items(args.rules, "--rules") if args.rules else None
     overrides = engine_overrides(args)
     extra = _line_policies(args)
     executor = _executor(args)
     try:
-        rules = [r.strip() for r in args.rules.split(",")] if args.rules else None
-        result = line_comparison(args.env, seeds=seeds, rules=rules, n_train=args.n_train or 2, retune=args.retune,
-                                 batch_size=args.batch_size, progress=not args.json,
-                                 out_dir=args.out or "results/line_compare", extra=extra, executor=executor,
-                                 **overrides)
+        with _refusals_of("--rules", "rules"):
+            result = line_comparison(args.env, seeds=seeds, rules=rules, n_train=args.n_train or 2,
+                                     retune=args.retune, batch_size=args.batch_size, progress=not args.json,
+                                     out_dir=args.out or "results/line_compare", extra=extra, executor=executor,
+                                     **overrides)
     finally:
         if executor is not None:
             executor.close()
@@ -317,61 +324,123 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
 
 
 def _leaderboard_policies(text: str, rule_names: Any) -> tuple[list[str] | None, dict[str, str]]:
-    """``--policies``: comma-separated ``rules`` (every tuned rule), rule names, ``cpi-agent`` (the shipped agent),
-    ``cpi-choice-agent`` (the shipped agent of the lines with every choice), ``cpi-track60-agent`` (the shipped
-    agent of the 60 m track, scored where its planner advisor can plan), ``model-predictive`` (the planner,
-    scored where a scenario measures every step without error), ``baselines`` (the committed baselines of
-    experiments/saved/baselines/) or paths of trained policies (a .zip
-    of stable-baselines3, a folder of experiments/train_rllib.py; the kind is told by the files there,
-    :func:`~trackenv_agents.learning.baselines.baseline_kind`). Returns the rules (None: all tuned) and the agents
-    by name -> path; an unknown name, a missing path or one that holds no trained policy is a UsageError."""
-    from .rules.model_predictive import ModelPredictive
-
+    """``--policies``: comma-separated ``rules`` (every tuned rule), rule names and the agents of
+    :func:`_policy_files`. Returns the rules (None: all tuned; with named ones, ``rules`` and those:
+    :func:`~.evaluation.leaderboard.scored_rules`) and the agents by name -> path; an unknown name, a
+    missing path, one that holds no trained policy, an item given twice or one policy given twice (the same file
+    by two paths, or a baseline both by path and by ``baselines``: it would be scored twice) is a UsageError."""
     rules: list[str] = []
     agents: dict[str, str] = {}
+    files: dict[Path, str] = {}  # each policy's file (resolved) -> the item that gave it
     every_rule = False
-    for item in (x.strip() for x in text.split(",")):
-        if not item:  # ("rules," or "a,,b": nothing between the commas)
-            continue
+    for item in _comma_items(text, "--policies"):
         if item == "rules":
             every_rule = True
         elif item in rule_names:
             rules.append(item)
-        elif item in SHIPPED_AGENTS:
-            _existing(str(SHIPPED_AGENTS[item]), f"--policies {item}")
-            agents[item] = str(SHIPPED_AGENTS[item])
-        elif item == ModelPredictive.name:  # no file: built where it is loaded
-            agents[item] = item
-        elif item == "baselines":
-            from .learning.baselines import SAVED_BASELINES, saved_baselines
-
-            found = saved_baselines()
-            if not found:
-                raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
-            cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
-            agents.update({p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found})
-        elif item.endswith(".py"):
-            raise UsageError(f"--policies {item}: the command takes trained policies by path (.zip, or a folder of "
-                             "experiments/train_rllib.py), not Python code; score a policy object from Python with "
-                             "trackenv_agents.evaluation.leaderboard.run_leaderboard(agents={'name': policy})")
-        elif item.endswith(".zip") or Path(item).exists():
-            from .learning.baselines import baseline_kind
-
-            try:
-                baseline_kind(item)
-            except (FileNotFoundError, ValueError) as err:
-                raise UsageError(f"--policies: {err}") from None
-            name = model_label(Path(item))  # as trackenv evaluate names it, or the path where that is taken
-            taken = name in agents or name in rule_names or name in SHIPPED_AGENTS
-            agents[item if taken else name] = item
         else:
-            raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
-                             f"{', '.join(SHIPPED_AGENTS)}, {ModelPredictive.name}, 'baselines' or the path of a "
-                             "trained policy (.zip, or a folder of experiments/train_rllib.py)")
+            for name, path in _policy_files(item, list(rule_names), agents).items():
+                _once(files, path, item)
+                agents[name] = path
     if not (every_rule or rules):
         raise UsageError("--policies names no rule: the normalised score's zero is the best tuned rule; add 'rules' "
                          "or a rule name")
-    return (None if every_rule else rules), agents
+    if every_rule:  # ("rules" and named rules: a named rule a scenario lacks is listed there as not scored)
+        return (["rules", *rules] if rules else None), agents
+    return rules, agents
+
+
+def _policy_files(item: str, rule_names: list[str], agents: dict[str, str]) -> dict[str, str]:
+    """The agents of one ``--policies`` item by name -> path: ``cpi-agent`` (the shipped agent),
+    ``cpi-choice-agent`` (the shipped agent of the lines with every choice), ``cpi-track60-agent`` (the shipped
+    agent of the 60 m track, scored where its planner advisor can plan), ``model-predictive`` (the planner, scored
+    where a scenario measures every step without error; its name for a path), ``baselines`` (the committed
+    baselines of experiments/saved/baselines/) or the path of a trained policy (a .zip of stable-baselines3, a
+    folder of experiments/train_rllib.py; the kind is told by the files there,
+    :func:`~trackenv_agents.learning.baselines.baseline_kind`), named by :func:`model_label` (by its absolute path
+    where a rule, a shipped agent or one of ``agents`` has that name)."""
+    from .rules.model_predictive import ModelPredictive
+
+    if item in SHIPPED_AGENTS:
+        _existing(str(SHIPPED_AGENTS[item]), f"--policies {item}")
+        return {item: str(SHIPPED_AGENTS[item])}
+    if item == ModelPredictive.name:  # no file: built where it is loaded
+        return {item: item}
+    if item == "baselines":
+        from .learning.baselines import SAVED_BASELINES, saved_baselines
+
+        found = saved_baselines()
+        if not found:
+            raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
+        cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
+        return {p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found}
+    if item.endswith(".py"):
+        raise UsageError(f"--policies {item}: the command takes trained policies by path (.zip, or a folder of "
+                         "experiments/train_rllib.py), not Python code; score a policy object from Python with "
+                         "trackenv_agents.evaluation.leaderboard.run_leaderboard(agents={'name': policy})")
+    if item.endswith(".zip") or Path(item).exists():
+        from .learning.baselines import baseline_kind
+
+        try:
+            baseline_kind(item)
+        except (FileNotFoundError, ValueError) as err:
+            raise UsageError(f"--policies: {err}") from None
+        name = model_label(Path(item))  # as trackenv evaluate names it
+        taken = name in agents or name in rule_names or name in SHIPPED_AGENTS
+        return {os.path.abspath(item) if taken else name: item}
+    raise UsageError(f"--policies: unknown policy {item!r}; give 'rules', a rule ({', '.join(rule_names)}), "
+                     f"{', '.join(SHIPPED_AGENTS)}, {ModelPredictive.name}, 'baselines' or the path of a trained "
+                     "policy (.zip, or a folder of experiments/train_rllib.py)")
+
+
+def _once(files: dict[Path, str], path: str, item: str) -> None:
+    """Record the file of a ``--policies`` item in ``files`` (resolved -> the item), refusing one given before by
+    another item (another spelling of its path, or a baseline given by path and by ``baselines``)."""
+    if not Path(path).exists():  # the planner: no file
+        return
+    key = Path(path).resolve()
+    if key in files:
+        raise UsageError(f"--policies {item}: the same policy as {files[key]} ({key}): give each policy once")
+    files[key] = item
+
+
+def _comma_items(text: str, option: str) -> list[str]:
+    """The items of a comma-separated option, stripped; an empty item (a comma too many) or one given twice (it
+    would be scored twice) is a UsageError naming ``option``."""
+    items = [x.strip() for x in text.split(",")]
+    if "" in items:
+        raise UsageError(f"{option} {text!r}: an empty item (a comma too many?)")
+    twice = _repeated(items)
+    if twice:
+        raise UsageError(f"{option} {', '.join(twice)}: given more than once")
+    return items
+
+
+def _repeated(items: list[str]) -> list[str]:
+    """The items that ``items`` holds more than once, sorted."""
+    return sorted({x for x in items if items.count(x) > 1})
+
+
+@contextlib.contextmanager
+def _refusals_of(option: str, parameter: str | None = None) -> Iterator[None]:
+    """Within: a library's ValueError about what ``option`` gives (each one; with ``parameter``, those whose
+    message starts with that parameter's name, as "rules must ...") is the command's one-line refusal naming
+    ``option`` first ("--rules: rules must ..."); any other passes as it is."""
+    try:
+        yield
+    except ValueError as err:
+        if parameter is not None and not str(err).startswith(f"{parameter} "):
+            raise
+        raise UsageError(f"{option}: {err}") from None
+
+
+def _scenario(env_id: str) -> str:
+    """The preset of ``--env`` (:func:`~.evaluation.line_compare.scenario_of`): an unknown id, a file or an id
+    without per-section actions is one line naming ``--env``, before anything slow."""
+    from .evaluation.line_compare import scenario_of
+
+    with _refusals_of("--env"):
+        return scenario_of(env_id)
 
 
 @contextlib.contextmanager
@@ -394,12 +463,12 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     """`trackenv leaderboard`: every policy on every scenario of the suite, scored against the best tuned rule and
     the hindsight bound (agents/evaluation/leaderboard.py); writes DIR/leaderboard.json and DIR/leaderboard.md."""
     from .evaluation.leaderboard import DEFAULT_SUITE, format_leaderboard, run_leaderboard, write_leaderboard
-    from .evaluation.line_compare import parse_seeds, scenario_of
+    from .evaluation.line_compare import parse_seeds
     from .rules.problems import every_rule
 
-    envs = [e.strip() for e in args.env.split(",")] if args.env else list(DEFAULT_SUITE)
+    envs = _comma_items(args.env, "--env") if args.env else list(DEFAULT_SUITE)
     for env_id in envs:
-        scenario_of(env_id)  # an unknown id: one line, before anything slow
+        _scenario(env_id)  # an unknown id: one line, before anything slow
     seeds = parse_seeds(args.seeds) if args.seeds else None
     overrides = engine_overrides(args)
     rules, agent_files = _leaderboard_policies(args.policies, list(every_rule()))
@@ -414,7 +483,7 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()
     try:
-        with _stdout_to_stderr():
+        with _stdout_to_stderr(), _refusals_of("--policies", "rules"):
             payload = run_leaderboard(envs, rules=rules, agents=agents, seeds=seeds, bound=not args.no_bound,
                                       out_dir=out, executor=executor, progress=not args.json, write=False,
                                       **overrides)
@@ -613,19 +682,26 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return cmd_evaluate_line(args)
 
 
-def _line_payload(path: Path, wall: float, out: Path) -> tuple[dict[str, Any], str]:
-    """The JSON payload and the human summary of a line training run (from its summary.json)."""
+def _line_payload(path: Path, wall: float, out: Path, note: str = "") -> tuple[dict[str, Any], str]:
+    """The JSON payload and the human summary of a line training run (from its summary.json; ``note`` ends its
+    last line, :func:`_set_note`), and last a warning where its best held-out iteration is dearer than the advisor rule
+    (:func:`~.learning.line.dearer_than_advisor`; the payload's ``warning``, else None)."""
+    from .evaluation.reporting import ci_text, count_text
+    from .learning.line import dearer_than_advisor
+
     summary = json.loads((out / "summary.json").read_text())
-    payload = {"model": str(path), "wall_time_s": wall, **summary}
     evals = [it["evaluation"] for it in summary["iterations"] if "evaluation" in it]
     best = min(evals, key=lambda e: e["mean_cost"]) if evals else None
+    warning = None if best is None else dearer_than_advisor(best)
+    payload = {"model": str(path), "wall_time_s": wall, **summary, "warning": warning}
     human = f"trained -> {path} in {wall:.0f} s"
     if best is not None:
         d = best["vs_baseline"]
         human += (f"\nbest held-out iteration: {best['mean_cost']:.1f} k€, vs {d['b']} {d['mean_difference']:+.1f} k€ "
-                  f"[{d['ci_low']:+.1f}, {d['ci_high']:+.1f}] on {d['n_episodes']} paired episodes "
+                  f"{ci_text(d['ci_low'], d['ci_high'], d['n_episodes'], signed=True)} on "
+                  f"{count_text(d['n_episodes'], 'paired episode')} "
                   f"(best_model.zip; export it with experiments/train_line.py --export)")
-    return payload, human
+    return payload, human + note + ("" if warning is None else f"\n{warning}")
 
 
 def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
@@ -636,10 +712,9 @@ def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
                          "hyper-parameter file")
     from trackenv.envs.line_config import scenario
 
-    from .evaluation.line_compare import scenario_of
     from .learning.line import train_line
 
-    name = scenario_of(args.env)
+    name = _scenario(args.env)
     if name == "network":
         raise UsageError(f"--env {args.env}: the learner trains a line's policy; train it on the network's line "
                          "(--env trackenv/TampingLine-v0), and every line of the network plays it (trackenv "
@@ -651,8 +726,8 @@ def cmd_train_line(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
                       out_dir=out, hyperparams=args.hyperparams, progress=not args.json,
                       iterations=args.iterations, verbose=0 if args.json else 1,
                       checkpoint_every_s=args.checkpoint_every)
-    payload, human = _line_payload(path, time.perf_counter() - t0, out)
-    _emit(args, {**payload, "config_changes": _set_fields(overrides)}, human + _set_note(overrides))
+    payload, human = _line_payload(path, time.perf_counter() - t0, out, _set_note(overrides))
+    _emit(args, {**payload, "config_changes": _set_fields(overrides)}, human)
     return 0
 
 
@@ -866,12 +941,26 @@ class _Parser(argparse.ArgumentParser):
 
     def parse_command(self, argv: list[str] | None) -> argparse.Namespace:
         """:meth:`parse_args`, but an unknown option is reported by the command it was given to (whose ``--help``
-        lists the options), not by ``trackenv``."""
-        parsed, extra = self.parse_known_args(argv)
+        lists the options), not by ``trackenv``; ``--seeds -1:3`` is read as ``--seeds=-1:3``
+        (:func:`_seeds_joined`)."""
+        parsed, extra = self.parse_known_args(_seeds_joined(sys.argv[1:] if argv is None else argv))
         if extra:
             command = self.commands.get(getattr(parsed, "command", None) or "", self)
             command.error(f"unrecognized arguments: {' '.join(extra)}")
         return parsed
+
+
+def _seeds_joined(argv: list[str]) -> list[str]:
+    """``argv`` with ``--seeds -1:3`` written ``--seeds=-1:3``: argparse takes a value that starts with '-' and is
+    no plain number for an option ("expected one argument"); joined, the seeds reach
+    :func:`~.evaluation.line_compare.parse_seeds`, which says that seeds are >= 0."""
+    out: list[str] = []
+    for token in argv:
+        if out and out[-1] == "--seeds" and token[:1] == "-" and token[1:2].isdigit():
+            out[-1] = f"--seeds={token}"
+        else:
+            out.append(token)
+    return out
 
 
 def build_parser() -> _Parser:
@@ -943,7 +1032,8 @@ def build_parser() -> _Parser:
                          "trackenv/Tamping-v1, the ids with every choice (trackenv/TampingLine-v1, ...Wet-v0, "
                          "...Defects-v0) or the network trackenv/TampingNetwork-v0")
     sp.add_argument("--seeds", default=None, metavar="A:B",
-                    help="held-out episodes: A:B (seeds A..B-1) or a,b,c (default 0:8)")
+                    help=f"held-out episodes: A:B (seeds A..B-1) or a,b,c; whole numbers >= 0 (no negative seed), "
+                         f"at most {MAX_EPISODES} episodes (default 0:8)")
     sp.add_argument("--policy", choices=("all", "agent", "rules"), default="all",
                     help="which policies to score: all, the tuned rules and the trained agent, with the "
                          "model-predictive planner where the preset measures every step without error (the 60 m "
@@ -976,14 +1066,16 @@ def build_parser() -> _Parser:
                                 "against the best tuned rule and the hindsight bound")
     out(sp, "results/leaderboard")
     sp.add_argument("--env", default=None, metavar="ID[,ID...]",
-                    help="the scenarios (default: the suite of agents/evaluation/leaderboard.py DEFAULT_SUITE: the "
-                         "three lines, the 60 m track, the three lines with every choice and the network "
-                         "trackenv/TampingNetwork-v0)")
+                    help="the scenarios, each once (default: the suite of agents/evaluation/leaderboard.py "
+                         "DEFAULT_SUITE: the three lines, the 60 m track, the three lines with every choice and the "
+                         "network trackenv/TampingNetwork-v0)")
     sp.add_argument("--seeds", default=None, metavar="A:B",
-                    help="held-out episodes of every scenario: A:B (seeds A..B-1) or a,b,c (default: each "
-                         "scenario's, agents/evaluation/leaderboard.py DEFAULT_SEEDS)")
+                    help=f"held-out episodes of every scenario: A:B (seeds A..B-1) or a,b,c; whole numbers >= 0 "
+                         f"(no negative seed), at most {MAX_EPISODES} episodes (default: each scenario's, "
+                         "agents/evaluation/leaderboard.py DEFAULT_SEEDS)")
     sp.add_argument("--policies", default=f"rules,{LINE_AGENT_NAME}", metavar="NAMES",
-                    help="comma-separated: 'rules' (every tuned rule), rule names, "
+                    help="comma-separated, each once: 'rules' (every tuned rule), rule names (each scored where "
+                         "the scenario's rules include it, listed as not scored elsewhere), "
                          f"{LINE_AGENT_NAME} (the shipped agent), {CHOICE_AGENT_NAME} (the shipped agent of the "
                          f"lines with every choice), {TRACK60_AGENT_NAME} (the shipped agent of the 60 m track, "
                          "scored there only), model-predictive (the planner, scored where a scenario measures every "
@@ -1040,7 +1132,8 @@ def build_parser() -> _Parser:
     out(sp, "results/line_calibration")
     sp.add_argument("--scenario", default="default", choices=("small", "default", "hard", "wet", "defects"),
                     help="line scenario")
-    sp.add_argument("--seeds", default="2000:2004", metavar="A:B", help="episodes: A:B or a,b,c")
+    sp.add_argument("--seeds", default="2000:2004", metavar="A:B",
+                    help=f"episodes: A:B or a,b,c; whole numbers >= 0, at most {MAX_EPISODES} episodes")
     sp.add_argument("--threshold", type=_positive(float), default=2.0,
                     help="SD [mm] at which the rule tamps a section")
     sp.add_argument("--horizon-years", type=_positive(float), default=None,

@@ -286,7 +286,7 @@ def test_engine_options_reach_the_comparison_and_the_trainers_and_are_checked(mo
 
     configs = []
     monkeypatch.setattr(line_learning, "train_line", lambda config, **kw: configs.append(config) or tmp_path / "m.zip")
-    monkeypatch.setattr(cli, "_line_payload", lambda path, wall, out: ({}, ""))
+    monkeypatch.setattr(cli, "_line_payload", lambda path, wall, out, note="": ({}, ""))
     assert main(["train", "--env", "trackenv/TampingLineSmall-v0", "--engine", "fast", "--pass-reuse-mm", "0.5"]) == 0
     assert configs[-1].engine == "fast" and configs[-1].pass_reuse_tolerance_m == pytest.approx(5e-4)
     assert configs[-1].n_sections == lc.env_config("trackenv/TampingLineSmall-v0").n_sections
@@ -578,23 +578,33 @@ def test_leaderboard_writes_its_files_and_one_json_object(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--env", "trackenv/Nope-v0"], "'trackenv/Nope-v0' is not a registered env id"),
+    (["--env", "trackenv/Nope-v0"], "leaderboard: --env: 'trackenv/Nope-v0' is not a registered env id"),
+    (["--env", "trackenv/TampingLine-v0,"], "--env 'trackenv/TampingLine-v0,': an empty item (a comma too many?)"),
+    (["--env", "trackenv/TampingLineSmall-v0, trackenv/TampingLineSmall-v0"],
+     "--env trackenv/TampingLineSmall-v0: given more than once"),
+    (["--env", "CartPole-v1"], "(the TampingLine ids, trackenv/Tamping-v1, trackenv/TampingNetwork-v0)"),
+    (["--seeds", "0:10000000000000"], "--seeds gives 10000000000000 episodes: at most 100000 are allowed"),
+    (["--seeds", "0:99999999999999999999"], "--seeds must be at most 9223372036854775807"),
+    (["--seeds", "-1:3"], "--seeds must be whole numbers >= 0 (Gymnasium's seeds), got '-1:3'"),
     (["--seeds", "5:2"], "--seeds A:B needs B > A"),
     (["--seeds", "a:b"], "--seeds must be A:B with B > A, or a,b,c: whole numbers >= 0, each once; got 'a:b'"),
     (["--seeds", "1,2,1"], "--seeds must be A:B with B > A"),
     (["--seeds", ","], "--seeds must be A:B with B > A"),
-    (["--seeds=-3:2"], "--seeds must be A:B with B > A"),
+    (["--seeds=-3:2"], "--seeds must be whole numbers >= 0"),
+    (["--seeds", "-3,2"], "--seeds must be whole numbers >= 0"),
     (["--policies", "rules,no-such-agent"], "--policies: unknown policy 'no-such-agent'"),
     (["--policies", "cpi-agent"], "--policies names no rule"),
     (["--env", "trackenv/TampingLineSmall-v0", "--policies", "choice-threshold"],
-     "rules must name some of small's rules ['budgeted-worst-first',"),
+     "--policies: rules must name some of trackenv/TampingLineSmall-v0's rules ['budgeted-worst-first',"),
+    (["--policies", "rules,grouped-threshold,grouped-threshold"], "--policies grouped-threshold: given more than "
+     "once"),
     (["--policies", "rules,/missing.zip"], "--policies: no trained policy at /missing.zip"),
     (["--policies", f"rules,{HERE}"], f"--policies: {HERE}: a folder of a trained policy must hold rllib_summary.json"),
     (["--policies", f"rules,{HERE / 'conftest.py'}"],
      "conftest.py: the command takes trained policies by path (.zip, or a folder of experiments/train_rllib.py), "
      "not Python code; score a policy object from Python with "
      "trackenv_agents.evaluation.leaderboard.run_leaderboard(agents={'name': policy})"),
-    (["--policies", "rules,,no-such-agent,"], "--policies: unknown policy 'no-such-agent'; give 'rules'"),
+    (["--policies", "rules,,no-such-agent"], "--policies 'rules,,no-such-agent': an empty item"),
     (["--policies", "rules,no-such-agent"], "'baselines' or the path of a trained policy"),
     (["--env", "TampingLineSmall-v0"], "did you mean 'trackenv/TampingLineSmall-v0'?"),
     (["--pass-reuse-mm", "3"], "--pass-reuse-mm must be in [0, 2] mm, got 3"),
@@ -676,18 +686,99 @@ def test_leaderboard_policies_baselines_names_the_committed_ones(monkeypatch):
     assert sorted(agents) == ["maskable-ppo-ranked", "rllib-ppo-ranked", "rllib-shared-ppo"]
 
 
-def test_leaderboard_names_trained_files_by_their_run_as_evaluate_does(tmp_path):
+def test_leaderboard_names_trained_files_by_their_run_as_evaluate_does(tmp_path, monkeypatch):
     """Two runs' model.zip were named "model" and "/path/run2/model.zip": now "run1/model" and "run2/model", as
-    trackenv evaluate names them; a name already taken falls back to the path."""
-    from trackenv_agents.cli import _leaderboard_policies
+    trackenv evaluate names them, however the path is written (relative, absolute, ./model.zip in the run's
+    folder); another run's file of the same name is named by its absolute path."""
+    from trackenv_agents.cli import _leaderboard_policies, model_label
 
-    files = [tmp_path / run / "model.zip" for run in ("run1", "run2")]
+    files = [tmp_path / run / "model.zip" for run in ("run1", "run2", "other/run2")]
     for f in files:
-        f.parent.mkdir()
+        f.parent.mkdir(parents=True)
         f.write_bytes(b"")
         (f.parent / "model_obs_stats.json").write_text("{}")
-    rules, agents = _leaderboard_policies(f"rules,{files[0]},{files[1]},{files[1]}", ["grouped-threshold"])
-    assert agents == {"run1/model": str(files[0]), "run2/model": str(files[1]), str(files[1]): str(files[1])}
+    monkeypatch.chdir(tmp_path)
+    rules, agents = _leaderboard_policies(f"rules,run1/model.zip,{files[1]},{files[2]}", ["grouped-threshold"])
+    assert agents == {"run1/model": "run1/model.zip", "run2/model": str(files[1]), str(files[2]): str(files[2])}
+    monkeypatch.chdir(tmp_path / "run1")
+    assert model_label(Path("model.zip")) == model_label(files[0]) == "run1/model"
+
+
+@pytest.mark.parametrize("given", [["{0}", "{0}"], ["run1/model.zip", "{0}"], ["{0}", "run1/../run1/model.zip"]])
+def test_leaderboard_refuses_one_policy_given_twice(given, tmp_path, monkeypatch, capsys):
+    """The same model twice (as written, or by another relative or absolute path) was scored twice under two
+    names: one line naming --policies and the repeated item, exit status 2, before anything runs."""
+    model = tmp_path / "run1" / "model.zip"
+    model.parent.mkdir()
+    model.write_bytes(b"")
+    (model.parent / "model_obs_stats.json").write_text("{}")
+    monkeypatch.chdir(tmp_path)
+    items = [g.format(model) for g in given]
+    assert main(["leaderboard", "--policies", ",".join(["grouped-threshold", *items]), "--out",
+                 str(tmp_path / "lb")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("trackenv leaderboard: --policies ")
+    assert (f"{items[1]}: given more than once" if items[0] == items[1]
+            else f"--policies {items[1]}: the same policy as {items[0]}") in err
+
+
+def test_a_run_folder_as_model_names_its_zip(tmp_path, capsys):
+    """`--model DIR` on the folder of a trackenv train run (model.zip, best_model.zip, no rllib_summary.json) says
+    that a trained model is the .zip, naming those there, instead of asking for rllib_summary.json."""
+    for name in ("model.zip", "best_model.zip"):
+        (tmp_path / name).write_bytes(b"")
+    assert main(["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--model", str(tmp_path), "--seeds", "0:1",
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"trackenv evaluate: --model: {tmp_path}: a trained model is its "
+                                                  f".zip, not the run's folder: give {tmp_path / 'model.zip'} or "
+                                                  f"{tmp_path / 'best_model.zip'}")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--seeds", "0:1000000000000"], "--seeds gives 1000000000000 episodes: at most 100000 are allowed"),
+    (["--seeds", "-1:3"], "--seeds must be whole numbers >= 0"),
+    (["--rules", "foo"], "--rules: rules must name line rules among ['budgeted-worst-first',"),
+    (["--rules", "grouped-threshold,"], "--rules 'grouped-threshold,': an empty item"),
+    (["--rules", "grouped-threshold, grouped-threshold"], "--rules grouped-threshold: given more than once"),
+    (["--env", "trackenv/Nope-v0"], "evaluate: --env: 'trackenv/Nope-v0' is not a registered env id"),
+])
+def test_evaluate_bad_input_is_one_line_naming_the_option(argv, message, capsys, tmp_path):
+    assert main(["evaluate", "--policy", "rules", *argv, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("trackenv evaluate: ") and message in err and err.count("\n") == 1
+
+
+def test_the_most_episodes_of_the_help_are_those_parse_seeds_takes():
+    """cli.MAX_EPISODES is written out (importing it would load the physics for `trackenv --help`): the same
+    number as parse_seeds's."""
+    from trackenv_agents import cli
+    from trackenv_agents.evaluation.line_compare import MAX_EPISODES
+
+    assert cli.MAX_EPISODES == MAX_EPISODES
+
+
+def test_a_line_run_dearer_than_its_advisor_ends_with_a_warning(tmp_path):
+    """A run whose best held-out iteration costs more than the advisor rule (the CI above zero) ends its summary
+    with one warning line (the JSON's "warning"); a run level with the rule ends without one."""
+    from trackenv_agents.cli import _line_payload
+
+    def summary(low: float, high: float) -> None:
+        d = {"b": "grouped-threshold", "n_episodes": 16, "mean_difference": (low + high) / 2, "ci_low": low,
+             "ci_high": high}
+        (tmp_path / "summary.json").write_text(json.dumps({"iterations": [
+            {"iteration": 0, "evaluation": {"mean_cost": 500.0, "vs_baseline": d}}]}))
+
+    summary(38.6, 642.6)
+    payload, human = _line_payload(tmp_path / "model.zip", 1.0, tmp_path, "; changed: capacity=3")
+    lines = human.splitlines()
+    assert lines[1].endswith("(best_model.zip; export it with experiments/train_line.py --export); changed: capacity=3")
+    assert lines[-1] == payload["warning"] and lines[-1].startswith(
+        "warning: the best held-out iteration costs +340.6 k€ [+38.6, +642.6] per episode more than its advisor "
+        "grouped-threshold: the rule stays the better policy")
+    summary(-5.0, 3.0)
+    payload, human = _line_payload(tmp_path / "model.zip", 1.0, tmp_path)
+    assert payload["warning"] is None and "warning" not in human
 
 
 def test_leaderboard_policies_name_both_shipped_line_agents():
@@ -715,6 +806,9 @@ def test_leaderboard_policies_name_the_planner_and_it_is_scored_only_where_it_fi
 
     rules, agents = cli._leaderboard_policies("rules,model-predictive", ["grouped-threshold"])
     assert rules is None and agents == {"model-predictive": "model-predictive"}
+    # every tuned rule and a named one: both reach the leaderboard, which lists the named one where it is no rule
+    assert cli._leaderboard_policies("rules,choice-threshold", ["choice-threshold"]) == (
+        ["rules", "choice-threshold"], {})
     planner = {"model-predictive": ModelPredictive()}
     assert list(fitting_agents(planner, scenario("track60"))[0]) == ["model-predictive"]
     here, unfit = fitting_agents(planner, scenario("default"))

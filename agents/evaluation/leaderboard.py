@@ -64,13 +64,15 @@ from .line_compare import (
     env_config,
     line_of,
     parse_seeds,
+    policy_label,
     scenario_of,
 )
+from .reporting import ci_text, count_text
 from .statistics import N_BOOTSTRAP, bootstrap_ci, paired_difference
 
-__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "NETWORK_DISPATCH", "SAVED_SEARCHES",
-           "bound_unavailable", "episode_bounds", "fitting_agents", "format_leaderboard", "normalised_score",
-           "on_network", "policy_label", "run_leaderboard"]
+__all__ = ["BOUND_SEARCH", "CHOICE_SEARCH", "DEFAULT_SEEDS", "DEFAULT_SUITE", "EVERY_TUNED_RULE", "NETWORK_DISPATCH",
+           "NO_SUCH_RULE", "SAVED_SEARCHES", "bound_unavailable", "episode_bounds", "fitting_agents",
+           "format_leaderboard", "normalised_score", "on_network", "policy_label", "run_leaderboard", "scored_rules"]
 
 #: The scenarios of the default leaderboard: the three lines, the 60 m track, the three lines with every
 #: choice (the default line, the wet line, the line of short defects) and the network of three default lines.
@@ -312,6 +314,32 @@ def episode_bounds(config: Any, scenario_name: str, rules: Sequence[EvaluationRe
             "search_seconds_per_episode": float(np.mean(seconds)) if seconds else None}
 
 
+#: why a rule named in ``rules`` is not scored on a scenario whose family has no such rule (:func:`scored_rules`)
+NO_SUCH_RULE = "no such rule on this scenario"
+
+#: the name in ``rules`` of every tuned rule of each scenario (``--policies rules``; ``rules=None`` is it alone)
+EVERY_TUNED_RULE = "rules"
+
+
+def scored_rules(env_id: str, line: Any, rules: Sequence[str] | None) -> tuple[list[str], dict[str, str]]:
+    """The rules scored on ``env_id`` (whose line config is ``line``): those of ``rules`` in its family
+    (:func:`~trackenv_agents.rules.problems.rules_for`: the rules of the choices apply only where a config enables
+    them; :data:`EVERY_TUNED_RULE` or None: its tuned rules); and each rule named there of another family with why
+    it is not scored there (:data:`NO_SUCH_RULE`), as an agent that does not fit is listed. A scenario where none of
+    ``rules`` applies is refused, naming it: the normalised score's zero is the best rule scored there."""
+    from ..rules.problems import rules_for, tuned_params_for
+
+    family = sorted(rules_for(line))
+    named = list(rules) if rules is not None else [EVERY_TUNED_RULE]
+    tuned = list(tuned_params_for(line))
+    wanted = list(dict.fromkeys(n for name in named for n in (tuned if name == EVERY_TUNED_RULE else [name])
+                                if n in family))
+    if not wanted:
+        raise ValueError(f"rules must name some of {env_id}'s rules {family}, got {named}")
+    why = f"{NO_SUCH_RULE}: its rules are {', '.join(family)}"
+    return wanted, {n: why for n in named if n != EVERY_TUNED_RULE and n not in family}
+
+
 def fitting_agents(agents: dict[str, Any], config: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """The ``agents`` that can be scored on ``config``, and why each other one cannot: a policy with
     ``unfit_for(config)`` (a baseline that sees the observation of the line it was trained on,
@@ -337,18 +365,6 @@ def on_network(policy: Any, config: Any, dispatch: str = NETWORK_DISPATCH) -> An
     from ..rules.network import network_play
 
     return network_play(policy, dispatch) if isinstance(config, NetworkConfig) else policy
-
-
-def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH, policy: Any = None) -> str:
-    """The name of the policy ``label`` (``policy`` itself where given) on ``config``'s rows: on a network the
-    name of its :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (``network(<label>)`` by
-    requests; a trained line agent's with its eager probability, as :func:`on_network` plays it), else
-    ``label``."""
-    from ..rules.network import eager_for, network_label
-
-    if not isinstance(config, NetworkConfig):
-        return label
-    return network_label(label, dispatch, None if policy is None else eager_for(policy))
 
 
 def _row(env_id: str, result: EvaluationResult, best: EvaluationResult, bound: np.ndarray | None) -> dict[str, Any]:
@@ -379,19 +395,20 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
                     shipped_bounds: Path | None = SHIPPED_BOUNDS, write: bool = True,
                     **overrides: Any) -> dict[str, Any]:
     """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; on each scenario
-    those of its family, :func:`~trackenv_agents.rules.problems.rules_for`; default all tuned rules) and
+    those of its family, :func:`scored_rules`; default, or :data:`EVERY_TUNED_RULE` among them, all tuned rules) and
     ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds`` (default
     :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
     ``searches``, the committed bound cache from ``shipped_bounds``; None: none). ``overrides`` change every
     scenario's config (e.g. a short ``horizon_years`` for tests, or the engine's options). An agent that does not
     fit a scenario (:func:`fitting_agents`) is left out there. The payload of the module docstring: "results" (one
     row per scenario and policy, the best rule first, then by mean cost), "bound" (per scenario), "seeds",
-    "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and why), "config_overrides",
+    "best_rule" (per scenario), "not_scored" (per scenario, the agents left out and the named rules of another
+    family, :func:`scored_rules`, and why), "config_overrides",
     "wall_time_s", and with ``write`` (default) "files": ``leaderboard.json`` and the page ``leaderboard.md``
     (:func:`format_leaderboard`) written into ``out_dir``, which also keeps the bound's cache (``bounds/``), as
     ``trackenv leaderboard --out`` does. ``envs``: ids (one id alone is taken as a list of one); ``seeds``: whole
     numbers or an ``"A:B"`` text."""
-    from ..rules.problems import every_rule, rules_for, tuned_params_for, tuned_rule
+    from ..rules.problems import every_rule, tuned_rule
 
     t0 = time.perf_counter()
     envs = [envs] if isinstance(envs, str) else list(envs)
@@ -400,22 +417,20 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     elif seeds is not None and not isinstance(seeds, Iterable):
         raise ValueError(f"seeds must be whole numbers (e.g. range(16), [0, 1]) or 'A:B', got {seeds!r}")
 
-    unknown = [n for n in rules or () if n not in every_rule()]
+    twice = sorted({e for e in envs if envs.count(e) > 1})
+    if twice:
+        raise ValueError(f"envs name {', '.join(twice)} more than once: each scenario is scored once")
+    unknown = [n for n in rules or () if n not in every_rule() and n != EVERY_TUNED_RULE]
     if unknown:
         raise ValueError(f"rules must be among {sorted(every_rule())}, got unknown {unknown}")
     names = {env_id: scenario_of(env_id) for env_id in envs}
     configs = {env_id: env_config(env_id, **overrides) for env_id in envs}
     lines = {env_id: line_of(cfg) for env_id, cfg in configs.items()}
-    wanted_at = {env_id: [n for n in (rules if rules is not None else tuned_params_for(line)) if n in rules_for(line)]
-                 for env_id, line in lines.items()}
-    for env_id, wanted in wanted_at.items():  # (the rules of the choices apply only where a config enables them)
-        if not wanted:
-            family = sorted(rules_for(lines[env_id]))
-            raise ValueError(f"rules must name some of {names[env_id]}'s rules {family}, got {list(rules or [])}")
+    scored = {env_id: scored_rules(env_id, line, rules) for env_id, line in lines.items()}
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
                                "config_overrides": dict(overrides)}
     for env_id in envs:
-        name, cfg, line, wanted = names[env_id], configs[env_id], lines[env_id], wanted_at[env_id]
+        name, cfg, line, (wanted, no_such) = names[env_id], configs[env_id], lines[env_id], scored[env_id]
         here, unfit = fitting_agents(agents or {}, cfg)
         pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
@@ -447,7 +462,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
         payload["bound"][env_id] = entry
         payload["seeds"][env_id] = env_seeds
         payload["best_rule"][env_id] = best.policy
-        payload.setdefault("not_scored", {})[env_id] = unfit
+        payload.setdefault("not_scored", {})[env_id] = {**no_such, **unfit}
         payload.setdefault("scenarios", {})[env_id] = name
         payload.setdefault("config_changes", {})[env_id] = config_changes(env_id, cfg)
     payload["wall_time_s"] = time.perf_counter() - t0
@@ -484,11 +499,6 @@ def _seed_text(seeds: Sequence[int]) -> str:
     return f"{s[0]}–{s[-1]}" if s == list(range(s[0], s[0] + len(s))) and len(s) > 1 else ", ".join(map(str, s))
 
 
-def _ci(lo: float, hi: float, signed: bool = False) -> str:
-    f = "{:+.1f}" if signed else "{:.1f}"
-    return f"[{f.format(lo)}, {f.format(hi)}]"
-
-
 #: how the tables say why a policy is not scored on a scenario, by the head of its ``unfit_for`` reason
 _UNFIT_HEADS = {"trained on another line": "each sees the observation of the line it was trained on"}
 
@@ -508,8 +518,9 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
         rows = [r for r in payload["results"] if r["env"] == env_id]
         b = payload["bound"][env_id]
         changed = changes_note((payload.get("config_changes") or {}).get(env_id) or {})
+        n = len(seeds)
         out += [f"### {env_id}", "",
-                f"{len(seeds)} held-out episodes (seeds {_seed_text(seeds)}); best tuned rule: "
+                f"{count_text(n, 'held-out episode')} (seeds {_seed_text(seeds)}); best tuned rule: "
                 f"{payload['best_rule'][env_id]}{changed}.", "",
                 "| policy | mean cost, k€ [95 % CI] | vs best rule, k€ (paired) [95 % CI] | normalised score [95 % CI] "
                 "| IA | tampings per section: " + " / ".join(short.values()) + " |",
@@ -517,20 +528,21 @@ def format_leaderboard(payload: dict[str, Any]) -> str:
         for r in rows:
             d = r["vs_best_rule"]
             vs = "—" if r["policy"] == payload["best_rule"][env_id] else (
-                f"{d['mean_difference']:+.1f} {_ci(d['ci_low'], d['ci_high'], True)} "
+                f"{d['mean_difference']:+.1f} {ci_text(d['ci_low'], d['ci_high'], n, signed=True)} "
                 f"({100 * r['relative_to_best_rule']:+.1f} %)")
             sc = "n/a" if r["normalised_score"] is None else f"{r['normalised_score']:.2f}"
-            if r["normalised_score_ci"]:
-                sc += " [{:.2f}, {:.2f}]".format(*r["normalised_score_ci"])
+            if r["normalised_score_ci"] and n >= 2:
+                sc += " " + ci_text(r["normalised_score_ci"][0], r["normalised_score_ci"][1], n, digits=2)
             per = " / ".join("–" if r["interventions_per_class"][c] is None else
                              f"{r['interventions_per_class'][c]:.2f}" for c in short)
-            out.append(f"| {r['policy']} | {r['mean_cost']:.1f} {_ci(*r['ci'])} | {vs} | {sc} | "
+            out.append(f"| {r['policy']} | {r['mean_cost']:.1f} {ci_text(r['ci'][0], r['ci'][1], n)} | {vs} | {sc} | "
                        f"{r['immediate_action']} | {per} |")
         if b["available"]:
             d = b["vs_best_rule"]
             src = ", ".join(f"{n} {k}" for k, n in b["sources"].items() if n)
-            out += ["", f"Hindsight bound: {b['mean_cost']:.1f} k€ {_ci(*b['ci'])}, "
-                        f"{d['mean_difference']:+.1f} k€ {_ci(d['ci_low'], d['ci_high'], True)} against the best rule "
+            out += ["", f"Hindsight bound: {b['mean_cost']:.1f} k€ {ci_text(b['ci'][0], b['ci'][1], n)}, "
+                        f"{d['mean_difference']:+.1f} k€ {ci_text(d['ci_low'], d['ci_high'], n, signed=True)} "
+                        "against the best rule "
                         f"(episodes: {src})."]
         else:
             out += ["", f"No normalised score: {b['reason']}."]

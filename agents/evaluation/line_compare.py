@@ -13,16 +13,18 @@ from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig, scenario
 from trackenv.envs.network import NetworkConfig
 
 from ..rules.line import LINE_HEURISTICS
-from ..rules.network import network_play
+from ..rules.network import NETWORK_DISPATCH, network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
 from .harness import CHOICE_NAMES, MACHINE_STEPS, bind_policy, evaluate_many, machine_activity, policy_name
+from .reporting import ci_text, count_text, plot_comparison
 from .statistics import bootstrap_ci, paired_difference
 from .tuning import tune_many
 
 
 def scenario_of(env_id: str) -> str:
     """The preset registered for an id of the one environment with the MultiBinary action (the TampingLine
-    ids, and ``trackenv/Tamping-v1``: the 60 m track, ``"track60"``)."""
+    ids, ``trackenv/Tamping-v1``: the 60 m track, ``"track60"``, and the network ``trackenv/TampingNetwork-v0``:
+    ``"network"``)."""
     import gymnasium as gym
 
     import trackenv  # noqa: F401
@@ -42,7 +44,7 @@ def scenario_of(env_id: str) -> str:
         return "track60"
     if not entry.endswith(":TampingLine"):
         raise ValueError(f"{env_id} is not an id of a preset with per-section actions (the TampingLine ids, "
-                         "trackenv/Tamping-v1)")
+                         "trackenv/Tamping-v1, trackenv/TampingNetwork-v0)")
     return kwargs["scenario"]
 
 
@@ -94,25 +96,52 @@ def action_type_of(env_id: str) -> str:
     return str(gym.spec(env_id).kwargs.get("action_type", "multibinary"))
 
 
+#: The most episodes ``--seeds`` may give (:func:`parse_seeds`): 100 000 episodes of the small line take days on
+#: 2 cores, and a range of billions would fill the memory before anything runs.
+MAX_EPISODES = 100_000
+
+#: The largest seed :func:`parse_seeds` takes: the harness keeps the seeds in a numpy int64 array.
+MAX_SEED = 2**63 - 1
+
+
 def parse_seeds(text: str) -> list[int]:
-    """'A:B' -> A..B-1; 'a,b,c' -> those. Whole numbers >= 0 (Gymnasium's seeds), at least one, each once (an
-    episode listed twice would count twice in the paired statistics); anything else is a ValueError naming
-    ``--seeds``."""
+    """'A:B' -> A..B-1; 'a,b,c' -> those. Whole numbers in [0, :data:`MAX_SEED`] (Gymnasium's seeds are >= 0), at
+    least one and at most :data:`MAX_EPISODES` (counted before the list is built), each once (an episode listed
+    twice would count twice in the paired statistics); anything else is a ValueError naming ``--seeds``."""
     form = f"--seeds must be A:B with B > A, or a,b,c: whole numbers >= 0, each once; got {text!r}"
     parts = text.split(":") if ":" in text else [v for v in text.split(",") if v.strip()]
     try:
         values = [int(v) for v in parts]
     except ValueError:
         raise ValueError(form) from None
+    if ":" in text and len(values) != 2:
+        raise ValueError(form)
+    if values and min(values) < 0:
+        raise ValueError(f"--seeds must be whole numbers >= 0 (Gymnasium's seeds), got {text!r}")
+    if values and max(values) > MAX_SEED + (":" in text):  # (B is one past the last seed)
+        raise ValueError(f"--seeds must be at most {MAX_SEED} (the harness keeps seeds as int64), got {text!r}")
+    if ":" in text and values[1] <= values[0]:
+        raise ValueError(f"--seeds A:B needs B > A, got {text!r}")
+    count = values[1] - values[0] if ":" in text else len(values)
+    if count > MAX_EPISODES:
+        raise ValueError(f"--seeds gives {count} episodes: at most {MAX_EPISODES} are allowed")
     if ":" in text:
-        if len(values) != 2:
-            raise ValueError(form)
-        if values[1] <= values[0]:
-            raise ValueError(f"--seeds A:B needs B > A, got {text!r}")
         values = list(range(*values))
-    if not values or min(values) < 0 or len(set(values)) != len(values):
+    if not values or len(set(values)) != len(values):
         raise ValueError(form)
     return values
+
+
+def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH, policy: Any = None) -> str:
+    """The name of the policy ``label`` (``policy`` itself where given) on ``config``'s rows: on a network the
+    name of its :class:`~trackenv_agents.rules.network.NetworkRule` of ``dispatch`` (``network(<label>)`` by
+    requests; a trained line agent's with its eager probability, as :func:`~..rules.network.network_play` plays it),
+    else ``label``."""
+    from ..rules.network import eager_for, network_label
+
+    if not isinstance(config, NetworkConfig):
+        return label
+    return network_label(label, dispatch, None if policy is None else eager_for(policy))
 
 
 def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | None = None,
@@ -120,12 +149,14 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
                     progress: bool = True, out_dir: str = "results/line_compare", extra: dict[str, Any] | None = None,
                     executor: Any = None, **overrides: Any) -> dict[str, Any]:
     """Tuned line heuristics (shipped parameters, or tuned now on ``n_train`` training seeds 1000+) and the
-    ``extra`` policies (e.g. the trained line policy; each row is named by the policy's ``name``) scored on
-    ``seeds`` (any sequence of whole numbers; default 0-7) with 95 % CIs, and the paired
-    difference of each against the best. ``rules``: the rule families to score (names of
-    :data:`LINE_HEURISTICS`, and on the ids with every choice those of
-    :data:`~trackenv_agents.rules.choices.CHOICE_RULES`; default all, no-maintenance included). ``executor``: runs
-    the batches of episodes (e.g.
+    ``extra`` policies (name -> policy, e.g. the trained line policy; each row is named by its key, as
+    :func:`~.leaderboard.run_leaderboard` names its ``agents``; on the network the key inside its NetworkRule's
+    name, :func:`policy_label`; a key that names a scored rule is refused) scored on ``seeds`` (any sequence of
+    whole numbers; default 0-7) with 95 % CIs, and the paired difference of each against the cheapest policy of
+    the table (``vs_best``; the payload's ``best_rule`` names the cheapest rule, which :func:`agent_headline` pairs
+    the agents with). ``rules``: the rule families to score (names of :data:`LINE_HEURISTICS`, and on the ids with
+    every choice those of :data:`~trackenv_agents.rules.choices.CHOICE_RULES`; default all, no-maintenance
+    included). ``executor``: runs the batches of episodes (e.g.
     :class:`~trackenv_agents.evaluation.distributed.RayExecutor`), with the same results as here."""
     name = scenario_of(env_id)
     network = name == "network"
@@ -150,13 +181,22 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
         params = {classes[i].name: v["best_params"] for i, v in t.items()}
     pols: list[Any] = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
     pols += [family[n](**p) for n, p in params.items()]
-    pols += list((extra or {}).values())
+    n_rules = len(pols)
+    extra = dict(extra or {})
+    pols += list(extra.values())
     if network:  # each line policy on every line, the one machine sent where the requests are
         pols = [network_play(p) for p in pols]
-        extra = {k: network_play(v) for k, v in (extra or {}).items()}
+    rule_names = [policy_name(p) for p in pols[:n_rules]]
+    labels = [policy_label(key, cfg, policy=p) for key, p in extra.items()]
+    taken = [key for key, label in zip(extra, labels, strict=True) if label in rule_names]
+    if taken:
+        raise ValueError(f"extra names {', '.join(taken)} as a rule scored here: give each policy a name of its own")
     seeds = [int(s) for s in seeds] if seeds is not None and len(seeds) else list(range(8))  # any sequence
     res = evaluate_many(pols, cfg, seeds, action_type=action_type, batch_size=batch_size, progress=progress,
                         desc="test", executor=executor)
+    for r, label in zip(res[n_rules:], labels, strict=True):  # (evaluate_many keeps the order of the policies)
+        r.policy = label
+    by_name = {r.policy: p for r, p in zip(res, pols, strict=True)}
     res.sort(key=lambda r: float(r.cost.mean()))
     best = res[0]
     rows = []
@@ -168,18 +208,14 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
         rows.append(s)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    by_name = {policy_name(p): p for p in pols}
-    rule_names = {policy_name(p) for p in pols[:len(pols) - len(extra or {})]}
     best_rule = next((r.policy for r in res if r.policy in rule_names), None)
     payload = {"env": env_id, "scenario": name, "action_type": action_type, "config": cfg.to_dict(), "seeds": seeds,
                "config_changes": config_changes(env_id, cfg), "tuned_from": tuned_from,
-               "best_rule": best_rule, "extra": [policy_name(p) for p in (extra or {}).values()], "results": rows}
+               "best_rule": best_rule, "extra": labels, "results": rows}
     (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
-    from .reporting import plot_comparison
-
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
     # the best rule and the trained policy, side by side
-    shown = ([by_name[best_rule]] if best_rule else []) + list((extra or {}).values())
+    shown = ([by_name[best_rule]] if best_rule else []) + [by_name[label] for label in labels]
     payload["episode_plot"] = (plot_network_episode(shown, cfg, seeds[0], str(out / "network_episode.png"))
                                if isinstance(cfg, NetworkConfig) else
                                plot_line_episode(shown, line_cfg, seeds[0], str(out / "line_episode.png"), action_type))
@@ -228,8 +264,9 @@ def agent_headline(payload: dict[str, Any], name: str) -> str | None:
     d = np.asarray(by[name]["episode_costs"], dtype=float) - np.asarray(by[rule]["episode_costs"], dtype=float)
     diff, (low, high) = float(d.mean()), bootstrap_ci(d)
     pct = 100.0 * diff / by[rule]["mean_cost"]
-    return (f"{name} vs the best tuned rule ({rule}), paired over {len(payload['seeds'])} episodes: {diff:+.1f} k€ "
-            f"[{low:+.1f}, {high:+.1f}] per episode, {pct:+.1f} %")
+    n = len(payload["seeds"])
+    return (f"{name} vs the best tuned rule ({rule}), paired over {count_text(n, 'episode')}: {diff:+.1f} k€ "
+            f"{ci_text(low, high, n, signed=True)} per episode, {pct:+.1f} %")
 
 
 #: the column heads of the choice counts in :func:`format_line_table`
@@ -300,18 +337,19 @@ def changes_note(changes: dict[str, Any]) -> str:
 
 def format_line_table(payload: dict[str, Any]) -> str:
     w = max([27] + [len(r["policy"]) for r in payload["results"]])  # the network's names are longer
-    lines = [f"{payload['env']} ({payload['scenario']}), {len(payload['seeds'])} held-out episodes, parameters "
+    n = len(payload["seeds"])
+    lines = [f"{payload['env']} ({payload['scenario']}), {count_text(n, 'held-out episode')}, parameters "
              f"{payload['tuned_from']}{engine_note(payload.get('config', {}))}"
              f"{changes_note(payload.get('config_changes') or {})}",
-             f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs best (paired, 95% CI)':>30s} "
+             f"{'policy':{w}s} {'cost k€':>8s} {'95% CI':>16s} {'vs cheapest (paired, 95% CI)':>30s} "
              f"{'IA':>4s} " + " ".join(f"{CHOICE_COLUMNS[c]:>5s}" for c in CHOICE_NAMES) + "  params"]
     for r in payload["results"]:
         d = r["vs_best"]
-        diff = "-" if d is None else f"{d['mean_difference']:+.1f} [{d['ci_low']:+.1f}, {d['ci_high']:+.1f}]"
+        diff = "-" if d is None else f"{d['mean_difference']:+.1f} {ci_text(d['ci_low'], d['ci_high'], n, True)}"
         ps = ", ".join(f"{k}={v}" for k, v in r["params"].items() if k not in
                        ("steps_per_year", "horizon_steps", "capacity"))
         counts = r.get("choices", {})
-        lines.append(f"{r['policy']:{w}s} {r['mean_cost']:8.1f} [{r['ci_low']:6.1f}, {r['ci_high']:6.1f}] "
+        lines.append(f"{r['policy']:{w}s} {r['mean_cost']:8.1f} {ci_text(r['ci_low'], r['ci_high'], n):>16s} "
                      f"{diff:>30s} {r.get('immediate_action_exceedances', 0):4d} "
                      + " ".join(f"{counts.get(c, 0.0):5.1f}" for c in CHOICE_NAMES) + f"  {ps}")
     shown = [r for r in payload["results"] if r["policy"] in (payload.get("best_rule"), *payload.get("extra", []))]
@@ -324,8 +362,10 @@ def format_line_table(payload: dict[str, Any]) -> str:
                      f"{cl[c]['cost_per_section']:.1f} ({cl[c]['tampings_per_section']:.2f})" for c in SECTION_CLASSES]
             lines.append(f"{r['policy']:{w}s} " + " ".join(f"{c:>20s}" for c in cells)
                          + f"  {cl['line']['campaigns_per_episode']:9.1f}")
-    lines.append("IA: section-steps at the immediate-action limit, all episodes together; tamp ... survey: applied "
-                 "choices per episode (tamp, spot tamp, drainage, renewal, inspection, survey)")
+    lines.append("vs cheapest: the paired difference to the table's cheapest policy (a trained policy's line below "
+                 "pairs it with the best tuned rule); IA: section-steps at the immediate-action limit, all episodes "
+                 "together; tamp ... survey: applied choices per episode (tamp, spot tamp, drainage, renewal, "
+                 "inspection, survey)")
     beyond = [f"{r['policy']} ({r['episodes_beyond_validity']} of {r['n_episodes']})" for r in payload["results"]
               if r.get("episodes_beyond_validity")]
     if beyond:  # the engine's warning scrolls past with the progress bars; the table keeps it

@@ -77,6 +77,9 @@ def baseline_kind(path: str | Path) -> str:
     if p.is_dir():
         if (p / RLLIB_SUMMARY).is_file():
             return "rllib"
+        models = [str(p / name) for name in ("model.zip", "best_model.zip") if (p / name).is_file()]
+        if models:  # the folder of a run of trackenv train: its model is a file in it
+            raise ValueError(f"{p}: a trained model is its .zip, not the run's folder: give {' or '.join(models)}")
         raise ValueError(f"{p}: a folder of a trained policy must hold {RLLIB_SUMMARY} (experiments/train_rllib.py "
                          "--out DIR)")
     if p.suffix == ".zip":

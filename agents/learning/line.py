@@ -328,8 +328,10 @@ class _LineTrainer:
         t_base = time.time()
         self.baseline = evaluate_one(self.advisor, self.config, self.eval_seeds, batch_size=len(self.eval_seeds))
         if self.verbose:
+            from ..evaluation.reporting import count_text
+
             b = self.baseline
-            print(f"[baseline] {b.policy}: {b.cost.mean():.1f} k€ on {b.n_episodes} held-out episodes "
+            print(f"[baseline] {b.policy}: {b.cost.mean():.1f} k€ on {count_text(b.n_episodes, 'held-out episode')} "
                   f"({time.time() - t_base:.0f} s)", flush=True)
 
     def _evaluate(self, agent: LineAgent) -> dict[str, Any]:
@@ -417,10 +419,14 @@ class _LineTrainer:
                                              tensorboard_log=str(self.run_dir))
 
     def _print_iteration(self, rec: dict[str, Any], seconds: float) -> None:
+        from ..evaluation.reporting import ci_text
+
         ev, fit = rec.get("evaluation"), rec["fit"]
-        vs = "" if ev is None else (f"; held-out {ev['mean_cost']:.1f} k€, vs {self.baseline.policy} "
-                                    f"{ev['vs_baseline']['mean_difference']:+.1f} "
-                                    f"[{ev['vs_baseline']['ci_low']:+.1f}, {ev['vs_baseline']['ci_high']:+.1f}]")
+        vs = ""
+        if ev is not None:
+            d = ev["vs_baseline"]
+            vs = (f"; held-out {ev['mean_cost']:.1f} k€, vs {self.baseline.policy} {d['mean_difference']:+.1f} "
+                  f"{ci_text(d['ci_low'], d['ci_high'], d['n_episodes'], signed=True)}")
         print(f"[iteration {rec['iteration']}] {rec['samples']} decisions priced ({rec['other_choice_cheaper']:.1%} "
               f"cheaper the other way), fit {fit['weighted_target_share']:.3f}{vs} ({seconds:.0f} s)", flush=True)
 
@@ -480,6 +486,22 @@ class _LineTrainer:
                 "checkpoints": {"count": self.checkpoint_count, "seconds": self.checkpoint_seconds,
                                 "bytes": (self.run_dir / CHECKPOINT_FILE).stat().st_size}
                 if self.checkpoint_count else None}
+
+
+def dearer_than_advisor(evaluation: dict[str, Any]) -> str | None:
+    """One warning line where a held-out evaluation of :func:`train_line` (an iteration's ``evaluation`` in
+    summary.json; the run's best one) is dearer than the advisor rule, paired on at least 2 episodes with the whole
+    95 % CI of the difference above zero: the run then saved a policy the rule beats (``best_model.zip`` is only
+    the best of its iterations), and says so rather than leave it to pass for an improvement; None otherwise."""
+    d = evaluation["vs_baseline"]
+    if d["n_episodes"] < 2 or d["ci_low"] <= 0:
+        return None
+    from ..evaluation.reporting import ci_text
+
+    return (f"warning: the best held-out iteration costs {d['mean_difference']:+.1f} k€ "
+            f"{ci_text(d['ci_low'], d['ci_high'], d['n_episodes'], signed=True)} per episode more than its advisor "
+            f"{d['b']}: the rule stays the better policy; more iterations (--iterations) or training episodes "
+            "(episodes_per_iteration in --hyperparams) are needed")
 
 
 def _line_env_id(config: LineConfig) -> str:

@@ -212,10 +212,16 @@ def test_the_page_warns_where_episodes_left_the_models_validity(first) -> None:
 
 
 def test_no_bound_gives_null_scores_and_says_why(tmp_path) -> None:
+    """Without the bound the scores are null and the table says why; on one episode the table gives no CI (one
+    of zero width claimed a certainty) and counts "1 held-out episode"."""
     payload = run_leaderboard([ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
     assert [r["normalised_score"] for r in payload["results"]] == [None]
     assert payload["bound"][ENV] == {"available": False, "reason": "not computed (--no-bound)"}
-    assert "No normalised score: not computed (--no-bound)." in format_leaderboard(payload)
+    table = format_leaderboard(payload)
+    assert "No normalised score: not computed (--no-bound)." in table
+    assert "1 held-out episode (seeds 0); best tuned rule" in table
+    (row,) = [line for line in table.splitlines() if line.startswith(f"| {RULES[0]} |")]
+    assert row.startswith(f"| {RULES[0]} | {payload['results'][0]['mean_cost']:.1f} n/a | — | n/a |")
     assert not (tmp_path / "bounds").exists()
 
 
@@ -260,13 +266,31 @@ def test_unknown_rule_is_refused(tmp_path) -> None:
 
 
 def test_a_scenario_scores_the_named_rules_of_its_family(tmp_path) -> None:
-    """The rules of the choices apply only where a config enables them: named with a tamping rule, a tamping-only
-    scenario scores the tamping rule; named alone there, the scenario is refused by name."""
+    """The rules of the choices apply only where a config enables them: named with a tamping rule (or with every
+    tuned rule, "rules"), a tamping-only scenario scores the tamping rules and lists the other as not scored, with
+    the reason, as an agent that does not fit (it was dropped silently); named alone there, the scenario is refused
+    by its id."""
+    from trackenv_agents.rules.problems import tuned_params_for
+
     payload = run_leaderboard([ENV], rules=["choice-threshold", "grouped-threshold"], seeds=SEEDS[:1], bound=False,
                               out_dir=tmp_path, **TINY)
     assert [r["policy"] for r in payload["results"]] == ["grouped-threshold"]
-    with pytest.raises(ValueError, match="rules must name some of small's rules"):
+    assert list(payload["not_scored"][ENV]) == ["choice-threshold"]
+    assert payload["not_scored"][ENV]["choice-threshold"].startswith(
+        "no such rule on this scenario: its rules are budgeted-worst-first, grouped-threshold, ")
+    assert "Not scored here (no such rule on this scenario): choice-threshold." in format_leaderboard(payload)
+    every = run_leaderboard([ENV], rules=["rules", "choice-threshold"], seeds=SEEDS[:1], bound=False,
+                            out_dir=tmp_path, **TINY)  # (--policies rules,choice-threshold)
+    assert {r["policy"] for r in every["results"]} == set(tuned_params_for(scenario("small")))
+    assert list(every["not_scored"][ENV]) == ["choice-threshold"]
+    with pytest.raises(ValueError, match=f"rules must name some of {ENV}'s rules"):
         run_leaderboard([ENV], rules=["choice-threshold"], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
+
+
+def test_a_scenario_given_twice_is_refused(tmp_path) -> None:
+    """The same id twice wrote two identical tables: refused, naming it."""
+    with pytest.raises(ValueError, match=f"^envs name {ENV} more than once"):
+        run_leaderboard([ENV, ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
 
 
 def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp_path) -> None:

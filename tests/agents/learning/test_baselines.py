@@ -160,4 +160,7 @@ def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
     (tmp_path / "notes.txt").write_text("")
     with pytest.raises(ValueError, match="a .zip .* or a folder"):
         baseline_kind(tmp_path / "notes.txt")
+    # the folder of a trackenv train run (its model.zip inside, no RLlib summary): its .zip is the model
+    with pytest.raises(ValueError, match=f"a trained model is its .zip, not the run's folder: give {tmp_path}/model"):
+        baseline_kind(tmp_path)
     assert saved_baselines(tmp_path) == [] and saved_baselines(tmp_path / "none") == []

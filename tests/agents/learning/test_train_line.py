@@ -181,3 +181,23 @@ def test_shipped_60m_agent_plays_with_its_planner_advisor():
                                       episode_start=np.array([t == 0]))
         assert action.shape == (1, cfg.n_sections) and state[0].shape[1] == t + 1  # the SD seen so far
         obs, *_ = env.step(action[0])
+
+
+def test_a_best_iteration_dearer_than_the_advisor_is_warned_of():
+    """The probe's one-iteration run saved a policy that never tamps, +269.8 k€ [+38.6, +642.6] against its
+    advisor, and said nothing: one warning line where the CI lies above zero; none where it reaches zero or below,
+    nor on one episode (no CI)."""
+    from trackenv_agents.learning.line import dearer_than_advisor
+
+    def evaluation(mean: float, low: float, high: float, n: int = 16) -> dict:
+        return {"mean_cost": 900.0, "vs_baseline": {"b": "grouped-threshold", "n_episodes": n,
+                                                    "mean_difference": mean, "ci_low": low, "ci_high": high}}
+
+    warning = dearer_than_advisor(evaluation(269.8, 38.6, 642.6))
+    assert warning is not None and "\n" not in warning
+    assert warning.startswith("warning: the best held-out iteration costs +269.8 k€ [+38.6, +642.6] per episode "
+                              "more than its advisor grouped-threshold: the rule stays the better policy; more "
+                              "iterations (--iterations) or training episodes")
+    assert dearer_than_advisor(evaluation(20.0, 0.0, 40.0)) is None
+    assert dearer_than_advisor(evaluation(-13.7, -15.8, -11.6)) is None
+    assert dearer_than_advisor(evaluation(269.8, 269.8, 269.8, n=1)) is None
