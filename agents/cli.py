@@ -1119,8 +1119,9 @@ def build_parser() -> _Parser:
                     help=f"tune the rule's parameters on this line first: its grid and the shipped parameters on N "
                          f"training futures of 10 years (seeds 1000.., apart from the plan's), the cheapest planned "
                          f"with (0, the default: the shipped parameters, tuned on the preset; at most "
-                         f"{MAX_TUNE_FUTURES}; 8 is a good start; minutes: each candidate runs N ten-year futures; on "
-                         f"a network each line's rule, tuned on the line alone)")
+                         f"{MAX_TUNE_FUTURES}; 8 is a good start; minutes: each candidate runs N ten-year futures, or "
+                         f"half of them where it is clearly dearer; on a network each line's rule, tuned on the line "
+                         f"alone)")
     sp.add_argument("--compare", default=None, metavar="A,B,...",
                     help="plan each of these policies (names as --policy takes them) on the same futures and compare "
                          "them: each one's cost, its difference to the first's paired per future with a 95 %% CI, "

@@ -20,7 +20,7 @@ from typing import Any
 from trackenv.envs.choices import action_type_for
 
 from .evaluation.harness import TRAIN_SEEDS
-from .evaluation.tuning import tune
+from .evaluation.tuning import RACE_MARGIN, race
 from .plan_report import counted
 from .rules.choices import CHOICE_OFF, ChoiceThreshold, choice_grid
 from .rules.line import GroupedThreshold
@@ -40,7 +40,9 @@ class RuleTuning:
     ``seed``, the number of ``candidates`` searched and the values each parameter took among them (``searched``:
     only the parameters that varied; a parameter not in it was not tuned), the ``stages`` searched in turn where
     more than one, each its name and its number of candidates (:func:`tuning_stages`: a choice rule's campaign,
-    then its choices). ``alone``: the line was tuned
+    then its choices). ``dropped``: the candidates the race stopped early as clearly dearer
+    (:func:`~trackenv_agents.evaluation.tuning.race`), each its params, the futures it ran and its mean cost on
+    them. ``alone``: the line was tuned
     alone, as if it had a machine of its own (a line of a network)."""
 
     params: dict[str, Any]
@@ -53,6 +55,7 @@ class RuleTuning:
     searched: dict[str, list[Any]] = field(default_factory=dict)
     alone: bool = False
     stages: tuple[tuple[str, int], ...] = ()
+    dropped: tuple[dict[str, Any], ...] = ()
 
     @property
     def seeds(self) -> list[int]:
@@ -79,7 +82,8 @@ class RuleTuning:
                 "cost_keur": self.cost_keur, "shipped_cost_keur": self.shipped_cost_keur, "futures": self.futures,
                 "seeds": self.seeds, "years": TUNE_YEARS, "candidates": self.candidates,
                 "searched": {k: list(v) for k, v in self.searched.items()}, "at_edge": self.at_edge(),
-                "stages": [{"name": name, "candidates": n} for name, n in self.stages], "alone": self.alone}
+                "stages": [{"name": name, "candidates": n} for name, n in self.stages],
+                "dropped": [dict(d) for d in self.dropped], "alone": self.alone}
 
     def lines(self, policy: str) -> list[str]:
         """The plan's table's lines: what changed (a choice rule has a dozen parameters), both costs, what was
@@ -98,6 +102,11 @@ class RuleTuning:
                  + ", ".join(
                      f"{k} from {_shown(v[0])} to {_shown(v[-1])}" if len(v) > 2
                      else f"{k} {' or '.join(map(_shown, v))}" for k, v in self.searched.items())]
+        if self.dropped:
+            after = sorted({d["futures"] for d in self.dropped})
+            lines.append(f"  {len(self.dropped)} of them stopped after {' or '.join(map(str, after))} of the "
+                         f"{self.futures} futures: dearer than the best so far by more than {100 * RACE_MARGIN:g} %, "
+                         f"significantly (paired t-test, one-sided 2.5 %)")
         edge = self.at_edge()
         if edge:
             lines.append(f"  at the grid's edge: {', '.join(f'{k} {_shown(self.params[k])}' for k in edge)}: the "
@@ -162,8 +171,10 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
                    desc: str | None = None) -> RuleTuning:
     """Tune ``rule`` (a bound line rule with its shipped parameters: :func:`~trackenv_agents.planning.line_policy`)
     on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: the shipped parameters
-    and each stage's grid (:func:`tuning_stages`), every candidate scored on the same futures (one batched run a stage);
-    ``progress``: a progress bar a stage on stderr (``desc`` its text). ValueError for a policy that has nothing
+    and each stage's grid (:func:`tuning_stages`), every candidate scored on the same futures;
+    ``progress``: a progress bar a round on stderr (``desc`` its text). Each stage is a race
+    (:func:`~trackenv_agents.evaluation.tuning.race`): the candidates clearly dearer on the first futures stop
+    there; the shipped parameters run every future. ValueError for a policy that has nothing
     to tune (:func:`check_tunable`)."""
     check_tunable(rule, futures)
     shipped = dict(rule.params)
@@ -171,6 +182,7 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
     best, best_cost, shipped_cost = shipped, math.inf, math.inf
     tried: list[dict[str, Any]] = [shipped]
     counts: list[tuple[str, int]] = []
+    dropped: list[dict[str, Any]] = []
     named = tuning_stages(type(rule))
     for k, (name, stage) in enumerate(named):
         # the shipped parameters run in the first stage's batch
@@ -182,8 +194,9 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
         if len(named) > 1:
             text = (f"{desc or 'tune ' + type(rule).name}, stage {k + 1} of {len(named)}: {name} "
                     f"({len(candidates)} candidates)")
-        found = tune(type(rule), train, train_seeds=TRAIN_SEEDS[:futures], grid=candidates, progress=progress,
+        found = race(type(rule), train, TRAIN_SEEDS[:futures], candidates, keep=[shipped], progress=progress,
                      action_type=action_type_for(config), desc=text)
+        dropped += found["dropped"]
         if k == 0:
             shipped_cost = best_cost = float(next(row["mean_cost"] for row in found["table"]
                                                   if row["params"] == shipped))
@@ -191,7 +204,7 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
             best, best_cost = dict(found["best_params"]), float(found["best_mean_cost"])
         tried += [c for c in candidates if c not in tried]
     return RuleTuning(best, shipped, best_cost, shipped_cost, futures, TRAIN_SEEDS[0], len(tried),
-                      _searched(tried), stages=tuple(counts) if len(counts) > 1 else ())
+                      _searched(tried), stages=tuple(counts) if len(counts) > 1 else (), dropped=tuple(dropped))
 
 
 def _searched(candidates: list[dict[str, Any]]) -> dict[str, list[Any]]:

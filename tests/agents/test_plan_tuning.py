@@ -109,6 +109,12 @@ def test_the_table_says_what_was_searched_and_a_choice_at_the_grids_edge():
     inside = RuleTuning(dict(grid[1]), dict(grid[2]), 90.0, 100.0, 2, 1000, 3, searched, alone=True)
     assert inside.at_edge() == [] and "grid's edge" not in "\n".join(inside.lines("x"))
     assert inside.lines("x")[0].startswith("tuned on this line alone (as if it had a machine of its own)")
+    assert "stopped after" not in "\n".join(inside.lines("x")) and inside.to_dict()["dropped"] == []
+    raced = RuleTuning(dict(grid[1]), dict(grid[2]), 90.0, 100.0, 8, 1000, 3, searched,
+                       dropped=({"params": dict(grid[0]), "futures": 4, "mean_cost": 120.0},))
+    assert ("  1 of them stopped after 4 of the 8 futures: dearer than the best so far by more than 2 %, "
+            "significantly (paired t-test, one-sided 2.5 %)") in raced.lines("x")
+    assert raced.to_dict()["dropped"] == [{"params": grid[0], "futures": 4, "mean_cost": 120.0}]
 
 
 def test_the_plan_runs_the_tuned_rule_and_says_so(tmp_path, small_grid):
@@ -212,3 +218,24 @@ def test_line_rules_of_one_config_must_agree(tmp_path):
         NetworkRule(GroupedThreshold()).bind(net, line_rules=[GroupedThreshold()])
     with pytest.raises(ValueError, match=r"^line_rules: lines \[0, 1\] share one config but not"):
         NetworkRule(GroupedThreshold()).bind(net, line_rules=[GroupedThreshold(), GroupedThreshold(**LOW)])
+
+
+def test_each_stage_is_a_race_that_keeps_the_shipped_parameters(tmp_path, monkeypatch):
+    """tune_plan_rule runs each stage as a race (:func:`~trackenv_agents.evaluation.tuning.race`) on the training
+    futures, the shipped parameters kept to the end (their cost is reported), and gathers what stopped early."""
+    from trackenv_agents import plan_tuning
+
+    calls = []
+
+    def race(cls, config, seeds, grid, keep=(), **kw):
+        calls.append((list(seeds), list(keep)))
+        table = [{"params": g, "mean_cost": 100.0 + i} for i, g in enumerate(grid)]
+        stopped = [{"params": grid[-1], "futures": 4, "mean_cost": 150.0}]
+        return {"best_params": grid[0], "best_mean_cost": 100.0, "table": table[:-1], "dropped": stopped}
+
+    monkeypatch.setattr(plan_tuning, "race", race)
+    cfg = plan_config(write(tmp_path), years=0.5, **FAST)
+    tuning = tune_plan_rule(line_policy("grouped-threshold", cfg), cfg, 8)
+    shipped = {"trigger_mm": 3.5, "include_mm": 1.75}
+    assert calls == [(list(range(1000, 1008)), [shipped])]
+    assert tuning.params == shipped and tuning.shipped_cost_keur == 100.0 and len(tuning.dropped) == 1

@@ -282,6 +282,19 @@ def test_a_sections_own_speed_traffic_and_length_load_into_the_config(tmp_path):
     assert batch.traffic_factor.tolist() == [1.0, 1.0, 2.0, 1.0]
 
 
+def test_a_notes_column_is_refused_saying_where_notes_go(tmp_path, line_file):
+    """A spreadsheet's "comment" column (no known column near its name) is refused, saying that a note goes on a
+    line of its own starting with '#', which the loader skips."""
+    sections = line_file.parent / "sections.csv"
+    rows = [r for r in sections.read_text().splitlines() if r.strip() and not r.startswith("#")]
+    sections.write_text("\n".join([rows[0] + ",comment", *(r + ",checked 2025" for r in rows[1:])]) + "\n")
+    with pytest.raises(LineFileError, match=r"unknown column 'comment' .*a note goes on a line of its own starting "
+                                            r"with '#'"):
+        load_line(line_file)
+    sections.write_text("\n".join([rows[0], "# checked 2025", *rows[1:]]) + "\n")
+    assert len(load_line(line_file).sections) == len(rows) - 1
+
+
 def test_a_line_dict_is_checked_as_a_file(line_file):
     d = load_line(line_file).to_dict()
     d["sections"][1]["register"] = "bridge"

@@ -466,6 +466,10 @@ def _check_header(path: Path, header: list[str], columns: dict[str, Field]) -> N
         if name in seen:
             raise LineFileError(f"{path}, header: column {name!r} appears twice")
         seen.add(name)
+        if name not in columns and not difflib.get_close_matches(name, list(columns), n=1):
+            # (a spreadsheet's "comment" or "notes" column)
+            raise LineFileError(f"{path}, header: unknown column {name!r} (known: {_names(columns)}); the file "
+                                f"keeps no other columns: a note goes on a line of its own starting with '#'")
     _check_keys(str(path), "", dict.fromkeys(header, ""), columns, what="column", where="header")
 
 
