@@ -1,6 +1,6 @@
 """A plan's rule tuned on the line itself: ``trackenv plan LINE.yaml --tune N``.
 
-The shipped rules' thresholds were tuned on the presets (the default line runs at 100 km/h, 25 MGT a year). A
+The shipped rules' thresholds were tuned on the presets (the default line runs at 100 km/h, 15 MGT a year). A
 line of one's own differs: a faster line has tighter limits and a dearer geometry per millimetre, other traffic
 settles it at another rate. :func:`tune_plan_rule` searches the rule's grid (:meth:`param_grid`, plus the shipped
 parameters; a choice rule's campaign first, then its choices around the best campaign: :func:`tuning_stages`) on ``N``
