@@ -281,7 +281,9 @@ def engine_overrides(args: argparse.Namespace) -> dict[str, Any]:
     result was computed)."""
     given = list(getattr(args, "set", None) or [])
     names = [name.removeprefix("line_config.") for name, _ in given]  # a network's line field, as it is reported
-    twice = _repeated(names)
+    from .evaluation.line_compare import repeated
+
+    twice = repeated(names)
     if twice:
         raise UsageError(f"--set {', '.join(twice)}: given more than once")
     out: dict[str, Any] = dict(zip(names, (value for _, value in given), strict=True))
@@ -410,15 +412,12 @@ def _comma_items(text: str, option: str) -> list[str]:
     items = [x.strip() for x in text.split(",")]
     if "" in items:
         raise UsageError(f"{option} {text!r}: an empty item (a comma too many?)")
-    twice = _repeated(items)
+    from .evaluation.line_compare import repeated
+
+    twice = repeated(items)
     if twice:
         raise UsageError(f"{option} {', '.join(twice)}: given more than once")
     return items
-
-
-def _repeated(items: list[str]) -> list[str]:
-    """The items that ``items`` holds more than once, sorted."""
-    return sorted({x for x in items if items.count(x) > 1})
 
 
 @contextlib.contextmanager

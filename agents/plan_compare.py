@@ -27,7 +27,9 @@ def check_compared(names: list[str]) -> list[str]:
     names = [n.strip() for n in names if n.strip()]
     if len(names) < 2:
         raise ValueError(f"--compare needs at least two policies, comma-separated, got {names}")
-    twice = sorted({n for n in names if names.count(n) > 1})
+    from .evaluation.line_compare import repeated
+
+    twice = repeated(names)
     if twice:
         raise ValueError(f"--compare names {', '.join(twice)} more than once")
     return names

@@ -20,7 +20,7 @@ from typing import Any
 from trackenv.envs.choices import action_type_for
 
 from .evaluation.harness import TRAIN_SEEDS
-from .evaluation.tuning import RACE_MARGIN, race
+from .evaluation.tuning import RACE_LEVEL, RACE_MARGIN, race
 from .plan_report import counted
 from .rules.choices import CHOICE_OFF, ChoiceThreshold, choice_grid
 from .rules.line import GroupedThreshold
@@ -106,7 +106,7 @@ class RuleTuning:
             after = sorted({d["futures"] for d in self.dropped})
             lines.append(f"  {len(self.dropped)} of them stopped after {' or '.join(map(str, after))} of the "
                          f"{self.futures} futures: dearer than the best so far by more than {100 * RACE_MARGIN:g} %, "
-                         f"significantly (paired t-test, one-sided 2.5 %)")
+                         f"significantly (paired t-test, one-sided {100 * (1 - RACE_LEVEL):g} %)")
         edge = self.at_edge()
         if edge:
             lines.append(f"  at the grid's edge: {', '.join(f'{k} {_shown(self.params[k])}' for k in edge)}: the "

@@ -65,6 +65,7 @@ from .line_compare import (
     line_of,
     parse_seeds,
     policy_label,
+    repeated,
     scenario_of,
 )
 from .reporting import ci_text, count_text
@@ -417,7 +418,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     elif seeds is not None and not isinstance(seeds, Iterable):
         raise ValueError(f"seeds must be whole numbers (e.g. range(16), [0, 1]) or 'A:B', got {seeds!r}")
 
-    twice = sorted({e for e in envs if envs.count(e) > 1})
+    twice = repeated(envs)
     if twice:
         raise ValueError(f"envs name {', '.join(twice)} more than once: each scenario is scored once")
     unknown = [n for n in rules or () if n not in every_rule() and n != EVERY_TUNED_RULE]

@@ -4,6 +4,7 @@ calibration, written as JSON and PNG (the logic of the env and the calibration l
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,13 @@ def parse_seeds(text: str) -> list[int]:
     if not values or len(set(values)) != len(values):
         raise ValueError(form)
     return values
+
+
+def repeated(items: Sequence[str]) -> list[str]:
+    """The items that ``items`` holds more than once, sorted: what a list of ids, policies or rules to score is
+    refused for (each would be scored, or compared, twice)."""
+    items = list(items)
+    return sorted({x for x in items if items.count(x) > 1})
 
 
 def policy_label(label: str, config: Any, dispatch: str = NETWORK_DISPATCH, policy: Any = None) -> str:

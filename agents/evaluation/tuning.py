@@ -64,14 +64,22 @@ def tune_many(classes: Sequence[type[Heuristic]], cfg: ProblemConfig, train_seed
                             batch_size=batch_size, progress=progress, desc=desc, executor=executor)
     out: dict[int, dict] = {}
     for i, cls in enumerate(classes):
-        rows = sorted(({"params": dict(g), "mean_cost": float(r.cost.mean()),
-                        "tampings_per_km_year": float(r.tampings_per_km_year.mean()),
-                        "episode_costs": r.cost.tolist()}
-                       for (j, g), r in zip(cands, results, strict=True) if j == i),
-                      key=lambda row: row["mean_cost"])
-        out[i] = {"policy": getattr(cls, "name", cls.__name__), "best_params": rows[0]["params"],
-                  "best_mean_cost": rows[0]["mean_cost"], "table": rows}
+            out[i] = _found(cls, [_row(g, r.cost.tolist(), r.tampings_per_km_year.tolist())
+                               for (j, g), r in zip(cands, results, strict=True) if j == i])
     return out
+
+
+def _row(params: dict, episode_costs: list[float], tampings_per_km_year: list[float]) -> dict[str, Any]:
+    """A candidate's row of a search's table: its params, its mean cost and tampings and its per-episode costs."""
+    return {"params": dict(params), "mean_cost": float(np.mean(episode_costs)),
+            "tampings_per_km_year": float(np.mean(tampings_per_km_year)), "episode_costs": episode_costs}
+
+
+def _found(cls: type[Heuristic], rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A search's result: its ``table`` (``rows`` sorted by mean cost; ties in the grid's order) and the best."""
+    rows = sorted(rows, key=lambda row: float(row["mean_cost"]))
+    return {"policy": getattr(cls, "name", cls.__name__), "best_params": rows[0]["params"],
+            "best_mean_cost": rows[0]["mean_cost"], "table": rows}
 
 
 def race_rounds(futures: int) -> list[int]:
@@ -128,9 +136,4 @@ def race(policy_cls: type[Heuristic], config: LineConfig | dict | str | None, tr
             if diff.mean() > max(RACE_MARGIN * means[leader], spread):
                 alive.remove(i)
                 dropped.append({"params": grid[i], "futures": n, "mean_cost": means[i]})
-    rows: list[dict[str, Any]] = [{"params": grid[i], "mean_cost": float(np.mean(costs[i])),
-                                   "tampings_per_km_year": float(np.mean(tampings[i])), "episode_costs": costs[i]}
-                                  for i in alive]
-    rows.sort(key=lambda row: float(row["mean_cost"]))
-    return {"policy": getattr(policy_cls, "name", policy_cls.__name__), "best_params": rows[0]["params"],
-            "best_mean_cost": rows[0]["mean_cost"], "table": rows, "dropped": dropped}
+    return {**_found(policy_cls, [_row(grid[i], costs[i], tampings[i]) for i in alive]), "dropped": dropped}
