@@ -266,8 +266,9 @@ def _trained_model(path: Path, args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _executor(args: argparse.Namespace) -> Any:
-    """Where `evaluate` runs its batches of episodes: None (here, in turn), or a RayExecutor for ``--ray`` (a
-    local Ray) or ``--ray-address`` (agents/evaluation/distributed.py); the caller closes it."""
+    """Where `evaluate`, `leaderboard` and `plan --tune` run their batches of episodes: None (here, in turn), or a
+    RayExecutor for ``--ray`` (a local Ray) or ``--ray-address`` (agents/evaluation/distributed.py); the caller
+    closes it."""
     if not (args.ray or args.ray_address):
         return None
     from .evaluation.distributed import RayExecutor
@@ -536,16 +537,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
         check_tunable(rules[0], args.tune)
         check_apart(args.seed, args.futures, args.tune)
+    else:
+        for given, option in ((args.ray, "--ray"), (args.ray_address, "--ray-address"),
+                              (args.batch_size, "--batch-size")):
+            if given:
+                raise UsageError(f"{option} is for --tune's episodes: give --tune N (a plan's own futures run in "
+                                 f"one vector env, here)")
     t0 = time.perf_counter()
     out = Path(args.out or "results/plan")
     if args.compare is None:
-        plan = _one_plan(args, network, lines, args.policy, overrides)
+        executor = _executor(args)
+        try:
+            plan = _one_plan(args, network, lines, args.policy, overrides, executor=executor)
+        finally:
+            if executor is not None:
+                executor.close()
         notes = _plan_warnings(plan, network)
         for note in notes:
             print(f"trackenv plan: warning: {note}", file=sys.stderr)
         files = plan.write(out)
         d = plan.to_dict(files) if network is not None else plan.to_dict()  # a network's lines: their files too
-        payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0}
+        payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0,
+                   "ray": args.ray_address or ("local" if args.ray else None)}
         _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
         return 0
     return _compare_and_write(args, network, lines, policies, rules, overrides, out, t0)
@@ -597,11 +610,11 @@ def _plan_warnings(plan: Any, network: Any) -> list[str]:
 
 
 def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, overrides: dict[str, Any],
-              label: str | None = None, episode_years: float | None = None) -> Any:
+              label: str | None = None, episode_years: float | None = None, executor: Any = None) -> Any:
     """The plan of ``policy`` on the line or ``network`` with the command's options (``label``: what its
     progress bar says it plans, where several run; ``episode_years``: the futures' episode length, as
-    :func:`~trackenv_agents.planning.plan_line` takes it), with its progress bars on stderr (none with
-    ``--json``)."""
+    :func:`~trackenv_agents.planning.plan_line` takes it; ``executor``: where ``--tune`` runs its batches), with
+    its progress bars on stderr (none with ``--json``)."""
     from trackenv.envs.line_fit import FitWarning
 
     from .planning import plan_line
@@ -635,7 +648,7 @@ def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, o
     kwargs = dict(policy=policy, years=args.years, futures=args.futures, seed=args.seed, scenario=args.scenario,
                   progress=progress, episode_years=episode_years, **overrides)
     if args.tune:
-        kwargs["tune"] = args.tune
+        kwargs.update(tune=args.tune, executor=executor, batch_size=args.batch_size or 32)
     try:
         with warnings.catch_warnings():  # the fit's notes are said after the progress bar, not inside it
             warnings.simplefilter("ignore", FitWarning)
@@ -1126,6 +1139,13 @@ def build_parser() -> _Parser:
                          "them: each one's cost, its difference to the first's paired per future with a 95 %% CI, "
                          "and what it leaves at the end; each plan's files under --out, NUMBER-NAME/")
     engine(sp, plan=True)
+    sp.add_argument("--ray", action="store_true", help="run --tune's batches of episodes as tasks on a local Ray "
+                                                      "(trackenv[ray]); the same tuning")
+    sp.add_argument("--ray-address", default=None, metavar="ADDR",
+                    help="run --tune's batches on a Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
+    sp.add_argument("--batch-size", type=_positive(int), default=None, metavar="N",
+                    help="--tune's episodes per batch (one vector env, one task); on a cluster fewer spread wider "
+                         "(default 32)")
     sp.set_defaults(func=cmd_plan)
 
     sp = command("calibrate", "TampingLine without tamping and under a threshold rule vs published ranges")

@@ -255,9 +255,11 @@ def _line_files(files: Mapping[str, str], line: int) -> dict[str, str]:
     return {key.removeprefix(prefix): path for key, path in files.items() if key.startswith(prefix)}
 
 
-def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool) -> list[Any]:
+def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool, executor: Any = None,
+           batch_size: int = 32) -> list[Any]:
     """Each line's :class:`~trackenv_agents.plan_tuning.RuleTuning`: its rule tuned on ``tune`` futures of the
-    line alone, once per distinct line config (lines of equal files share it)."""
+    line alone, once per distinct line config (lines of equal files share it); ``executor`` and ``batch_size``
+    as :func:`~trackenv_agents.plan_tuning.tune_plan_rule` takes them."""
     from .plan_tuning import tune_plan_rule
 
     found: list[tuple[Any, Any]] = []
@@ -266,7 +268,8 @@ def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool) -> lis
         known = next((t for c, t in found if c == cfg), None)
         if known is None:
             try:
-                known = tune_plan_rule(rule, cfg, tune, progress=progress, desc=f"tune line {i} ({cfg.line.name})")
+                known = tune_plan_rule(rule, cfg, tune, progress=progress, desc=f"tune line {i} ({cfg.line.name})",
+                                       executor=executor, batch_size=batch_size)
             except ValueError as exc:
                 raise ValueError(f"line {i}: {exc}") from None
             known = dataclasses.replace(known, alone=True)
@@ -276,29 +279,31 @@ def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool) -> lis
 
 
 def check_network_policy(policy: str) -> None:
-    """ValueError for a policy that uses the choices beyond tamping (a choice rule, ``cpi-choice-agent``): the
-    network's machine tamps only."""
-    if policy in CHOICE_RULES or policy == CHOICE_AGENT:
+    """ValueError for a choice rule (its tamping is tuned with the choices beyond it, and the network's machine tamps
+    only). ``cpi-choice-agent`` is accepted: on a line whose action is tamping only it tamps from its network, as
+    the leaderboard plays it on the network."""
+    if policy in CHOICE_RULES:
         raise ValueError(f"policy {policy!r} uses the choices beyond tamping, and the network's machine tamps only: "
-                         f"plan it with a tamping rule ({', '.join(LINE_HEURISTICS)}) or cpi-agent")
+                         f"plan it with a tamping rule ({', '.join(LINE_HEURISTICS)}), cpi-agent or {CHOICE_AGENT}")
 
 
 def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
                  scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
-                 episode_years: float | None = None, **config: Any) -> NetworkPlan:
+                 episode_years: float | None = None, executor: Any = None, batch_size: int = 32,
+                 **config: Any) -> NetworkPlan:
     """Plan tamping on ``network`` (a network file's path or a
     :class:`~trackenv.envs.network_file.NetworkDescription`) for ``years`` from its ``as_of``: the line policy
     ``policy`` (:func:`~trackenv_agents.planning.line_policy`: a tamping rule with the tuned parameters of
-    ``scenario``, or the shipped ``cpi-agent``) played on every line by
+    ``scenario``, or a shipped agent: ``cpi-agent``, ``cpi-choice-agent`` tamping only) played on every line by
     :func:`~trackenv_agents.rules.network.network_play`, in ``futures`` futures (seeds ``seed``, ``seed + 1``,
     ...); each line modelled as :func:`~trackenv_agents.planning.plan_config` models it; ``config``: further
     :class:`~trackenv.envs.line_config.LineConfig` fields for every line (a ``capacity`` given here is the
     machine's, over the network file's). ``tune``: where > 0, each line's rule is first tuned on that many
     futures of the line alone (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`: as if it had a machine of its
-    own; lines of one config once). ``episode_years``: the futures' episode length, as
+    own; lines of one config once; its batches of ``batch_size`` episodes run by ``executor``, e.g. on Ray).
+    ``episode_years``: the futures' episode length, as
     :func:`~trackenv_agents.planning.plan_line` takes it. ``progress(1)`` after each quarter. ValueError for a
-    policy that uses the
-    choices beyond tamping (:func:`check_network_policy`) or cannot play a line (its reason, naming the line)."""
+    choice rule (:func:`check_network_policy`) or a policy that cannot play a line (its reason, naming the line)."""
     from gymnasium.vector import AutoresetMode
 
     from trackenv.envs.network_env import TampingNetworkVectorEnv
@@ -320,7 +325,8 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
         from .plan_tuning import check_apart
 
         check_apart(seed, futures, tune)
-    tunings = _tuned(rules, lines, tune, progress is not None) if tune else [None] * len(lines)
+    tunings = (_tuned(rules, lines, tune, progress is not None, executor=executor, batch_size=batch_size) if tune
+               else [None] * len(lines))
     rules = [rule if t is None else t.rule(rule, cfg) for rule, t, cfg in zip(rules, tunings, lines, strict=True)]
     steps = lines[0].horizon_steps
     horizon = episode_horizon(rules[0], episode_years)

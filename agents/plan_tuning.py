@@ -168,14 +168,15 @@ def tuning_stages(cls: type[Any]) -> list[tuple[str, Stage]]:
 
 
 def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
-                   desc: str | None = None) -> RuleTuning:
+                   desc: str | None = None, executor: Any = None, batch_size: int = 32) -> RuleTuning:
     """Tune ``rule`` (a bound line rule with its shipped parameters: :func:`~trackenv_agents.planning.line_policy`)
     on ``futures`` futures of ``config`` (the plan's line config) over :data:`TUNE_YEARS`: the shipped parameters
     and each stage's grid (:func:`tuning_stages`), every candidate scored on the same futures;
     ``progress``: a progress bar a round on stderr (``desc`` its text). Each stage is a race
     (:func:`~trackenv_agents.evaluation.tuning.race`): the candidates clearly dearer on the first futures stop
-    there; the shipped parameters run every future. ValueError for a policy that has nothing
-    to tune (:func:`check_tunable`)."""
+    there; the shipped parameters run every future. ``executor`` runs the races' batches of ``batch_size``
+    episodes (e.g. a :class:`~trackenv_agents.evaluation.distributed.RayExecutor`; None: here, in turn), with
+    the same result. ValueError for a policy that has nothing to tune (:func:`check_tunable`)."""
     check_tunable(rule, futures)
     shipped = dict(rule.params)
     train = config.replace(horizon_years=TUNE_YEARS)
@@ -195,7 +196,7 @@ def tune_plan_rule(rule: Any, config: Any, futures: int, progress: bool = False,
             text = (f"{desc or 'tune ' + type(rule).name}, stage {k + 1} of {len(named)}: {name} "
                     f"({len(candidates)} candidates)")
         found = race(type(rule), train, TRAIN_SEEDS[:futures], candidates, keep=[shipped], progress=progress,
-                     action_type=action_type_for(config), desc=text)
+                     action_type=action_type_for(config), desc=text, executor=executor, batch_size=batch_size)
         dropped += found["dropped"]
         if k == 0:
             shipped_cost = best_cost = float(next(row["mean_cost"] for row in found["table"]

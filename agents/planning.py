@@ -359,13 +359,15 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,
               scenario: str = "default", progress: Callable[[int], Any] | None = None, tune: int = 0,
-              episode_years: float | None = None, **config: Any) -> LinePlan:
+              episode_years: float | None = None, executor: Any = None, batch_size: int = 32,
+              **config: Any) -> LinePlan:
     """Plan maintenance on ``line`` (a line file's path or a :class:`~trackenv.envs.line_file.LineDescription`)
     for ``years`` from its ``as_of``: the policy ``policy`` (:func:`line_policy`) run in ``futures`` futures
     (episodes from seeds ``seed``, ``seed + 1``, ...) in one vector env, the line modelled as on the preset
     ``scenario`` (:data:`PLAN_SCENARIOS`); ``config``: further :class:`LineConfig` fields (costs, capacity, ...).
     ``tune``: where > 0, the rule's parameters are first tuned on that many futures of this line
-    (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`) instead of the shipped ones. ``progress(1)`` is called
+    (:func:`~trackenv_agents.plan_tuning.tune_plan_rule`, its batches of ``batch_size`` episodes run by
+    ``executor``, e.g. on Ray) instead of the shipped ones. ``progress(1)`` is called
     after each quarter (and the tuning, where asked, shows its own progress bar). ``episode_years``: the length of
     the futures' episodes, of which the plan takes its first ``years`` (default: ``years``, or a trained policy's
     training episodes, :func:`episode_horizon`); a future's draws depend on it, so policies compared on the same
@@ -381,7 +383,8 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
         from .plan_tuning import check_apart, tune_plan_rule
 
         check_apart(seed, futures, tune)
-        tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None, desc=f"tune {policy}")
+        tuning = tune_plan_rule(rule, cfg, tune, progress=progress is not None, desc=f"tune {policy}",
+                                executor=executor, batch_size=batch_size)
         rule = tuning.rule(rule, cfg)
     steps = cfg.horizon_steps
     horizon = episode_horizon(rule, episode_years)

@@ -1,7 +1,8 @@
 """One harness to score tamping policies: rules (:mod:`trackenv_agents.rules`) and trained agents alike.
 
 A policy is anything with SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)
--> (action, state)`` that accepts a batched observation dict. Each episode is identified by its seed: the
+-> (action, state)`` that accepts a batched observation dict, or a plain function of that dict returning the
+actions (:class:`CallablePolicy`). Each episode is identified by its seed: the
 envs of :class:`~trackenv.envs.vector.TampingVectorEnv` are reset with one seed each, so the same seed gives
 every policy the same track, ballast, initial level and (as long as the actions agree) tamping residuals:
 policies are compared on common random numbers and differences are paired
@@ -49,7 +50,8 @@ from ..rules.base import policy_params
 from .statistics import bootstrap_ci
 
 __all__ = [
-    "CHOICE_NAMES", "MACHINE_STEPS", "TEST_SEEDS", "TRAIN_SEEDS", "EvaluationResult", "bind_policy", "evaluate_many",
+    "CHOICE_NAMES", "MACHINE_STEPS", "TEST_SEEDS", "TRAIN_SEEDS", "CallablePolicy", "EvaluationResult", "as_policy",
+    "bind_policy", "evaluate_many",
     "evaluate_one", "machine_activity", "policy_name", "policy_params", "record_episode", "run_episodes",
 ]
 
@@ -167,9 +169,36 @@ def _vector_env(n: int, cfg: Any, action_type: str) -> TrackVectorEnv:
     return make_vector_env(cfg, n, action_type=action_type, autoreset_mode=AutoresetMode.NEXT_STEP)
 
 
+class CallablePolicy:
+    """A plain function of the batched observation, ``fn(obs) -> actions`` (one row per env), as a policy with
+    stable-baselines3's ``predict``: no memory, the same actions whether deterministic or not. Named by ``name``,
+    else the function's own name."""
+
+    def __init__(self, fn: Any, name: str | None = None) -> None:
+        if isinstance(fn, type) or not callable(fn):
+            raise ValueError(f"fn must be a function of the observation returning the actions, got {fn!r}")
+        self.fn = fn
+        self.name = name or getattr(fn, "__name__", None) or type(fn).__name__
+
+    def predict(self, obs: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        return np.asarray(self.fn(obs)), None
+
+
+def as_policy(policy: Any, name: str | None = None) -> Any:
+    """``policy`` as the harness plays it: an object with ``predict`` as it is, a plain function of the batched
+    observation (not a class) as a :class:`CallablePolicy` named ``name``; anything else as it is (refused where
+    it is played, with the reason)."""
+    if callable(getattr(policy, "predict", None)) or isinstance(policy, type) or not callable(policy):
+        return policy
+    return CallablePolicy(policy, name)
+
+
 def bind_policy(policy: Any, config: ProblemConfig) -> Any:
     """``policy`` as it plays ``config``: a rule that reads the problem's calendar or capacity (it has ``bind``)
-    bound to it, any other policy (a trained agent, any object with SB3's ``predict``) as it is."""
+    bound to it, a plain function as a :class:`CallablePolicy`, any other policy (a trained agent, any object with
+    SB3's ``predict``) as it is."""
+    policy = as_policy(policy)
     bind = getattr(policy, "bind", None)
     return bind(config) if callable(bind) else policy
 
@@ -220,7 +249,8 @@ def _checked_policies(policies: Sequence[Any]) -> None:
             hint = (" (load a saved model first)" if isinstance(p, (str, Path))
                     else " (a class: give an instance of it)" if isinstance(p, type) else "")
             raise ValueError(f"policy {p!r} has no predict(observation, state, episode_start, deterministic): a "
-                             f"policy is an object with stable-baselines3's predict{hint}")
+                             f"policy is an object with stable-baselines3's predict, or a function of the batched "
+                             f"observation returning the actions{hint}")
 
 
 def _take(obs: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
@@ -326,6 +356,7 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
         raise ValueError("seeds must not be empty")
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size!r}")
+    policies = [as_policy(p) for p in policies]
     _checked_policies(policies)
     bound = [bind_policy(p, cfg) for p in policies]
     slots = [(p, s) for p in range(len(bound)) for s in seeds]

@@ -53,7 +53,7 @@ import numpy as np
 from trackenv.envs.network import NetworkConfig
 
 from ..rules.network import NETWORK_DISPATCH
-from .harness import EvaluationResult, evaluate_many
+from .harness import EvaluationResult, as_policy, evaluate_many
 from .line_compare import (
     ENGINE_FIELDS,
     SECTION_CLASSES,
@@ -397,7 +397,8 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
                     **overrides: Any) -> dict[str, Any]:
     """Score ``rules`` (names of the rule family, with each preset's shipped tuned parameters; on each scenario
     those of its family, :func:`scored_rules`; default, or :data:`EVERY_TUNED_RULE` among them, all tuned rules) and
-    ``agents`` (name -> a policy with SB3's ``predict``) on every scenario of ``envs``, on ``seeds`` (default
+    ``agents`` (name -> a policy with SB3's ``predict``, or a function of the batched observation returning the
+    actions) on every scenario of ``envs``, on ``seeds`` (default
     :data:`DEFAULT_SEEDS` of each), and the bound where it applies (``bound``; saved searches read from
     ``searches``, the committed bound cache from ``shipped_bounds``; None: none). ``overrides`` change every
     scenario's config (e.g. a short ``horizon_years`` for tests, or the engine's options). An agent that does not
@@ -430,9 +431,10 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     scored = {env_id: scored_rules(env_id, line, rules) for env_id, line in lines.items()}
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
                                "config_overrides": dict(overrides)}
+    agents = {label: as_policy(agent, label) for label, agent in (agents or {}).items()}
     for env_id in envs:
         name, cfg, line, (wanted, no_such) = names[env_id], configs[env_id], lines[env_id], scored[env_id]
-        here, unfit = fitting_agents(agents or {}, cfg)
+        here, unfit = fitting_agents(agents, cfg)
         pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
         results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,

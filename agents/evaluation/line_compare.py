@@ -16,7 +16,7 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import NETWORK_DISPATCH, network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
-from .harness import CHOICE_NAMES, MACHINE_STEPS, bind_policy, evaluate_many, machine_activity, policy_name
+from .harness import CHOICE_NAMES, MACHINE_STEPS, as_policy, bind_policy, evaluate_many, machine_activity, policy_name
 from .reporting import ci_text, count_text, plot_comparison
 from .statistics import bootstrap_ci, paired_difference
 from .tuning import tune_many
@@ -190,7 +190,7 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     pols: list[Any] = [LINE_HEURISTICS["no-maintenance"]()] if "no-maintenance" in wanted else []
     pols += [family[n](**p) for n, p in params.items()]
     n_rules = len(pols)
-    extra = dict(extra or {})
+    extra = {key: as_policy(p, key) for key, p in (extra or {}).items()}  # a plain function too
     pols += list(extra.values())
     if network:  # each line policy on every line, the one machine sent where the requests are
         pols = [network_play(p) for p in pols]
@@ -223,10 +223,12 @@ def line_comparison(env_id: str = "trackenv/TampingLine-v0", seeds: list[int] | 
     (out / "line_compare.json").write_text(json.dumps(payload, indent=1, default=float))
     payload["plot"] = plot_comparison(res, str(out / "line_compare.png"))
     # the best rule and the trained policy, side by side
-    shown = ([by_name[best_rule]] if best_rule else []) + [by_name[label] for label in labels]
-    payload["episode_plot"] = (plot_network_episode(shown, cfg, seeds[0], str(out / "network_episode.png"))
+    names = ([best_rule] if best_rule else []) + labels
+    shown = [by_name[name] for name in names]
+    payload["episode_plot"] = (plot_network_episode(shown, cfg, seeds[0], str(out / "network_episode.png"), names)
                                if isinstance(cfg, NetworkConfig) else
-                               plot_line_episode(shown, line_cfg, seeds[0], str(out / "line_episode.png"), action_type))
+                               plot_line_episode(shown, line_cfg, seeds[0], str(out / "line_episode.png"), action_type,
+                                                 names))
     return payload
 
 
@@ -392,19 +394,20 @@ def format_line_table(payload: dict[str, Any]) -> str:
 
 
 def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
-                      action_type: str = "multibinary") -> str:
+                      action_type: str = "multibinary", names: Sequence[str] | None = None) -> str:
     """One episode under each of ``policies`` (one policy or a list, SB3-style ``predict``), side by side on
     shared axes: the true SD of every section over time (dotted: as last measured), tamping marked, each
-    panel's cost in its title."""
+    panel's cost in its title, which names the policy by ``names`` (its row's name; default its own)."""
     from matplotlib.figure import Figure
 
     from trackenv.envs.line import TampingLine
 
     pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    titles = list(names) if names is not None else [policy_name(p) for p in pols]
     fig = Figure(figsize=(10 * len(pols), 4.5))
     axes = fig.subplots(1, len(pols), sharey=True, squeeze=False)[0]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
-    for ax, pol in zip(axes, pols, strict=True):
+    for ax, pol, title in zip(axes, pols, titles, strict=True):
         env = TampingLine(cfg, action_type=action_type)
         obs, info = env.reset(seed=seed)
         sd, tam, meas, cost = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()], 0.0
@@ -429,7 +432,7 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
                 ax.plot(years[step], sd_[step, j], "v", color=col, ms=6)
         ax.axhline(batch.limits.sd_alert_m * 1e3, color="k", ls="--", lw=0.8, label="SD alert")
         ax.set_xlabel("year")
-        ax.set_title(f"{policy_name(pol)} on {cfg.n_sections} sections, seed {seed}: {cost:.0f} k€, "
+        ax.set_title(f"{title} on {cfg.n_sections} sections, seed {seed}: {cost:.0f} k€, "
                      f"{int(tam_.sum())} tampings in {int(tam_.any(axis=1).sum())} campaigns", fontsize=9)
     axes[0].set_ylabel("SD of D1 level [mm] (solid true, dotted measured; ▼ tamping)")
     axes[0].legend(fontsize=6, ncol=2)
@@ -438,11 +441,12 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
     return out_png
 
 
-def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: str) -> str:
+def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: str,
+                         names: Sequence[str] | None = None) -> str:
     """One network episode under each of ``policies`` (network policies with SB3-style ``predict``), a column
     each: on top the shared machine's line in every step (● worked there, ▶ moved there, · idle), below it one
     panel per line with the true SD of its sections (▼ tamped, at the SD it was tamped from); each column's cost
-    in its title."""
+    in its title, which names the policy by ``names`` (its row's name; default its own)."""
     import gymnasium as gym
     from matplotlib.figure import Figure
 
@@ -451,8 +455,9 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
     fig = Figure(figsize=(8 * len(pols), 1.6 + 2.2 * n_lines))
     axes = fig.subplots(n_lines + 1, len(pols), sharex=True, sharey="row", squeeze=False,
                         gridspec_kw={"height_ratios": [0.6] + [1.0] * n_lines})
+    titles = list(names) if names is not None else [policy_name(p) for p in pols]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
-    for col, pol in enumerate(pols):
+    for col, (pol, title) in enumerate(zip(pols, titles, strict=True)):
         env = gym.make("trackenv/TampingNetwork-v0", config=cfg)
         obs, info = env.reset(seed=seed)
         sd, tamped, machine, moved, chosen, cost = [info["section_sd_m"] * 1e3], [], [], [], [], 0.0
@@ -476,7 +481,7 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
                      label=f"{name} ({int(at.sum())} steps)")
         top.set_yticks(range(n_lines))
         top.set_ylim(-0.5, n_lines + 0.4)  # room for the legend above the top line
-        top.set_title(f"{policy_name(pol)}, seed {seed}: {cost:.0f} k€, {int(tamped_.sum())} tampings", fontsize=9)
+        top.set_title(f"{title}, seed {seed}: {cost:.0f} k€, {int(tamped_.sum())} tampings", fontsize=9)
         top.legend(fontsize=6, ncol=3, loc="upper right")
         for line in range(n_lines):
             ax = axes[line + 1, col]

@@ -464,11 +464,19 @@ class _LineTrainer:
             callbacks.append(make_checkpoint_callback(s.checkpoint_every_s, save, at_start=ckpt is None))
         if self.progress:
             callbacks.append(make_progress_callback(f"train {s.algo}", unit="section-step"))
+        rollout = int(self.model.n_steps) * int(self.model.n_envs)  # section-steps a roll-out collects
+        if self.verbose and total % rollout:
+            runs = -(-total // rollout)
+            print(f"[note] {s.algo} collects whole roll-outs of {rollout} section-steps "
+                  f"({rollout / config.n_sections:g} line-steps): total_timesteps={s.total_timesteps} line-steps "
+                  f"run as {runs} roll-out{'s' * (runs > 1)}, {runs * rollout // config.n_sections} line-steps",
+                  flush=True)
         t_ppo = time.time()
         start = int(self.model.num_timesteps) if ckpt is not None else 0
         self.model.learn(total_timesteps=max(total - start, 0), callback=CallbackList(callbacks), tb_log_name=s.algo,
                          reset_num_timesteps=ckpt is None)
-        return {"line_steps": s.total_timesteps, "wall_seconds": time.time() - t_ppo,
+        return {"line_steps": s.total_timesteps, "line_steps_run": int(self.model.num_timesteps) // config.n_sections,
+                "wall_seconds": time.time() - t_ppo,
                 "resumed_from_line_steps": None if ckpt is None else start // config.n_sections,
                 "evaluations": eval_cb.history if eval_cb is not None else []}
 

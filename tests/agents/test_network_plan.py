@@ -107,6 +107,15 @@ def test_every_line_is_planned_on_the_networks_calendar_and_scenario():
         plan_network(EXAMPLE_NETWORK, years=0.25, futures=1, scenario="wet", policy="choice-threshold")
 
 
+def test_the_choice_agent_plans_a_network_tamping_only():
+    """``cpi-choice-agent`` plays the network as the leaderboard plays it (its tamping, the lines' action tamping
+    only), where a choice rule is refused."""
+    plan = plan_network(EXAMPLE_NETWORK, years=0.5, futures=1, scenario="wet", policy="cpi-choice-agent")
+    assert plan.policy == "cpi-choice-agent" and np.isfinite(plan.costs).all()
+    assert all(p.choices == ("tamp",) for p in plan.lines)
+    assert sum(float(p.share.sum()) for p in plan.lines) > 0  # it tamped somewhere
+
+
 def test_plan_plans_a_network_file(tmp_path, capsys):
     out = tmp_path / "plan"
     assert main(["plan", str(EXAMPLE_NETWORK), "--years", "0.5", "--futures", "2", "--json", "--out", str(out)]) == 0

@@ -143,6 +143,57 @@ def test_plan_tune_from_the_command_line(tmp_path, capsys, small_grid):
     assert "tuning grouped-threshold on 1 ten-year future of the line first" in out.err  # --json: no bars
 
 
+class _InTurn:
+    """An executor with ``map`` that runs here, in turn, counting the batches it is given."""
+
+    def __init__(self) -> None:
+        self.batches = 0
+
+    def map(self, fn, items):
+        items = list(items)
+        self.batches += len(items)
+        return [fn(item) for item in items]
+
+
+def test_an_executor_runs_the_tunings_batches_with_the_same_result(tmp_path, small_grid):
+    """``executor`` (Ray's, on a cluster) runs the races' batches of ``batch_size`` episodes: the same tuning as
+    in one process, in as many batches as the episodes ask."""
+    cfg = plan_config(write(tmp_path), years=0.5, **FAST)
+    rule = line_policy("grouped-threshold", cfg)
+    here = tune_plan_rule(rule, cfg, 2)
+    executor = _InTurn()
+    there = tune_plan_rule(rule, cfg, 2, executor=executor, batch_size=1)
+    assert executor.batches == 4  # two candidates, two futures each, one episode a batch
+    assert (there.params, there.cost_keur, there.shipped_cost_keur) == (here.params, here.cost_keur,
+                                                                         here.shipped_cost_keur)
+
+
+def test_plan_ray_hands_the_tuning_a_ray_executor_and_closes_it(tmp_path, capsys, small_grid, monkeypatch):
+    """``plan --tune N --ray`` tunes through a RayExecutor (Ray itself not started here: the stub runs the tuning
+    in this process), closed after; ``--ray``, ``--ray-address`` or ``--batch-size`` without ``--tune`` are
+    refused, one line each."""
+    from trackenv_agents import plan_tuning
+    from trackenv_agents.evaluation.distributed import RayExecutor
+
+    seen, real = {}, plan_tuning.tune_plan_rule
+
+    def tune(rule, cfg, futures, progress=False, desc=None, executor=None, batch_size=32):
+        seen.update(executor=executor, batch_size=batch_size)
+        return real(rule, cfg, futures, progress, desc)
+
+    monkeypatch.setattr(plan_tuning, "tune_plan_rule", tune)
+    closed = []
+    monkeypatch.setattr(RayExecutor, "close", lambda self: closed.append(self))
+    line = str(write(tmp_path))
+    assert main(["plan", line, "--years", "0.25", "--futures", "1", "--tune", "1", "--engine", "fast", "--ray",
+                 "--batch-size", "4", "--json", "--out", str(tmp_path / "plan")]) == 0
+    assert isinstance(seen["executor"], RayExecutor) and closed == [seen["executor"]] and seen["batch_size"] == 4
+    assert json.loads(capsys.readouterr().out)["ray"] == "local"
+    for option in (["--ray"], ["--ray-address", "auto"], ["--batch-size", "8"]):
+        assert main(["plan", line, *option]) == 2
+        assert f"{option[0]} is for --tune's episodes: give --tune N" in capsys.readouterr().err
+
+
 def test_the_tunings_limits_are_checked_before_the_plan_starts(tmp_path, capsys):
     """What cannot be tuned, a number of futures out of range and a plan's futures among the training futures
     are one line each, exit status 2, before the fit and the futures run."""
@@ -188,8 +239,8 @@ def test_a_networks_lines_are_tuned_each_on_its_own_and_play_their_tuned_rules(t
                                        "lines: [slow/line.yaml, slow_copy/line.yaml, fast/line.yaml]\nmove_cost: 10\n")
     tuned, real = [], plan_tuning.tune_plan_rule
 
-    def tune_plan_rule(rule, cfg, futures, progress=False, desc=None):
-        tuning = real(rule, cfg, futures, progress, desc)
+    def tune_plan_rule(rule, cfg, futures, progress=False, desc=None, **kw):
+        tuning = real(rule, cfg, futures, progress, desc, **kw)
         tuned.append(cfg.speed_kmh)
         # the fast line keeps the shipped parameters, the slow one takes the low trigger: two rules on one network
         params = dict(LOW) if cfg.speed_kmh == 100 else dict(tuning.shipped_params)

@@ -206,6 +206,22 @@ def test_a_history_in_cm_and_a_curve_that_misses_its_runs_warn(tmp_path):
     assert len([x for x in w if issubclass(x.category, FitWarning)]) == 2
 
 
+def test_a_last_tamping_decades_ago_asks_for_the_unit(tmp_path):
+    """K10.4's years_since_tamping 30 (months, meant as 2.5 years): a warning asking whether it is given in months;
+    20 years, the threshold itself, none."""
+    for years, noted in ((30, True), (20, False)):
+        sections = SECTIONS.replace("K10.4,180,transition,,,,,1.0,5,", f"K10.4,180,transition,,,,,{years},5,")
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            fit = history_fit(LineConfig(line=write(tmp_path / str(years), sections=sections)))
+        notes = {f.section: f.note for f in fit.sections if f.note}
+        assert set(notes) == ({"K10.4"} if noted else set()), notes
+        if noted:
+            assert notes["K10.4"].startswith("years_since_tamping 30: no tamping in more than 20 years")
+            assert "months?" in notes["K10.4"]
+            assert len([x for x in w if issubclass(x.category, FitWarning)]) == 1
+
+
 @pytest.mark.slow
 def test_the_example_line_fits_without_a_warning():
     """The shipped example (made by the engine, so consistent) contradicts neither check: their thresholds

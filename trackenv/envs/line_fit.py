@@ -57,8 +57,8 @@ the table: a given ``rate_factor`` whose curve's residual exceeds the fitted fac
 :data:`FIT_CONFLICT_ERRORS` times the fit's error, an SD that does not drop across the stated last tamping
 (:data:`FIT_NO_DROP_SHARE`), an SD that drops after it (a tamping the file does not state,
 :data:`FIT_DROP_ERRORS`), a fitted curve that misses its runs by far (:data:`FIT_POOR_ERRORS`), or a history
-whose every SD is below what tamped track measures (:data:`FIT_LOW_SD_MM`: an SD in cm). The file's values are
-used either way.
+whose every SD is below what tamped track measures (:data:`FIT_LOW_SD_MM`: an SD in cm), or a last tamping more
+than :data:`FIT_LONG_UNTAMPED_YEARS` ago (months given as years?). The file's values are used either way.
 """
 
 from __future__ import annotations
@@ -113,6 +113,10 @@ FIT_POOR_ERRORS = 3.0
 #: and more; the engine's tamping leaves ~0.14 mm plus a quarter of the SD before plus its residual shape):
 #: most likely an SD in cm, a warning **[assumption]**.
 FIT_LOW_SD_MM = 0.3
+#: A section last tamped longer ago than this [year] is noted: track under traffic is tamped every few years (a
+#: quiet branch's cycle ~10-15 years), so such a value is more often months given as years; the file's value is
+#: used **[assumption]**.
+FIT_LONG_UNTAMPED_YEARS = 20.0
 #: The grid of the rate factor's posterior (log-spaced), of ρ and the number of SD₀ values.
 RATE_GRID = np.exp(np.linspace(math.log(0.02), math.log(50.0), 81))
 RHO_GRID = np.linspace(-1.0, 1.0, 25)
@@ -330,7 +334,7 @@ def history_fit(config: LineConfig) -> HistoryFit:
     for j, s in enumerate(line.sections):
         t, sd = points[s.id]
         drop = _drop_note(line, s, config)
-        note = "; ".join(n for n in (_tamping_note(line, s), drop, _low_sd_note(line, s)) if n)
+        note = "; ".join(n for n in (_untamped_note(s), _tamping_note(line, s), drop, _low_sd_note(line, s)) if n)
         if not line.measurements(s.id):
             fit = SectionFit(s.id, "no history")
         elif s.id in need:
@@ -364,6 +368,16 @@ def _given_note(s: Section, fit: SectionFit, config: LineConfig) -> str:
             f"{fit.residual_mm:.3f} mm RMS, the fitted factor {fit.fitted_rate_factor:.2f} by "
             f"{fit.fitted_residual_mm:.3f} mm (more than {FIT_CONFLICT_ERRORS:g} x the fit's error of "
             f"{error_mm:.3f} mm apart); the given factor is used: check it or leave it blank to fit it")
+
+
+def _untamped_note(s: Section) -> str:
+    """Where the section was last tamped more than :data:`FIT_LONG_UNTAMPED_YEARS` before ``as_of``: a sentence
+    asking for the unit; else ""."""
+    if s.years_since_tamping <= FIT_LONG_UNTAMPED_YEARS:
+        return ""
+    return (f"years_since_tamping {s.years_since_tamping:g}: no tamping in more than "
+            f"{FIT_LONG_UNTAMPED_YEARS:g} years is rare on track under traffic; is it given in months? (the "
+            f"section starts settled by {s.years_since_tamping:g} years of its traffic)")
 
 
 def _tamping_note(line: LineDescription, s: Section) -> str:

@@ -267,3 +267,29 @@ def test_a_policys_bad_actions_are_refused_naming_it_not_cast_to_wait(policy, me
         evaluate_many([policy], problem_config("small").replace(horizon_years=0.5), seeds=[0, 1])
     result = evaluate_many([_Constant(1.0)], problem_config("small").replace(horizon_years=0.5), seeds=[0, 1])
     assert result[0].n_episodes == 2  # whole numbers given as floats are actions
+
+
+def test_a_plain_function_of_the_batch_is_a_policy():
+    """A function of the batched observation returning the actions plays as the same policy written with SB3's
+    predict (:class:`CallablePolicy`, named by the function), and its bad actions are refused naming it."""
+    from trackenv.envs.problems import problem_config
+
+    def tamp_above(obs):
+        return (obs["section_sd"] >= 1.0).astype(int)
+
+    class TampAbove:
+        name = "tamp-above-object"
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            return tamp_above(obs), state
+
+    cfg = problem_config("small").replace(horizon_years=1.0)
+    plain, written = evaluate_many([tamp_above, TampAbove()], cfg, seeds=[0, 1])
+    assert plain.policy == "tamp_above" and plain.cost.tolist() == written.cost.tolist()
+    assert plain.section_tampings.sum() > 0
+
+    def halves(obs):
+        return np.full(obs["section_sd"].shape, 0.5)
+
+    with pytest.raises(ValueError, match=r"policy 'halves': predict returned actions that are not whole numbers"):
+        evaluate_many([halves], cfg, seeds=[0])

@@ -297,7 +297,7 @@ def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp
     """On the network every rule and agent runs on every line through NetworkRule (dispatched by value, named
     network-by-value(...)), the
     best of its rules is the reference, an agent's row is its NetworkRule's episodes, and there is no bound."""
-    from trackenv_agents.evaluation.harness import evaluate_many
+    from trackenv_agents.evaluation.harness import CallablePolicy, evaluate_many
     from trackenv_agents.evaluation.leaderboard import DEFAULT_SEEDS, DEFAULT_SUITE
     from trackenv_agents.rules import GroupedThreshold, NetworkRule
 
@@ -307,11 +307,15 @@ def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp
     class Eager(GroupedThreshold):  # a line policy that is no tuned rule
         name = "eager"
 
+    def above_two(obs):  # a plain function of the batch is a policy too, named by its key
+        return (obs["section_sd"] >= 2.0).astype(int)
+
     agent = Eager(trigger_mm=1.0, include_mm=0.5)
-    payload = run_leaderboard([net], rules=RULES, agents={"eager": agent}, seeds=SEEDS, out_dir=tmp_path, **tiny)
+    payload = run_leaderboard([net], rules=RULES, agents={"eager": agent, "mine": above_two}, seeds=SEEDS,
+                              out_dir=tmp_path, **tiny)
     rows = {r["policy"]: r for r in payload["results"]}
     assert set(rows) == {"network-by-value(grouped-threshold)", "network-by-value(section-threshold)",
-                         "network-by-value(eager)"}
+                         "network-by-value(eager)", "network-by-value(mine)"}
     assert payload["best_rule"][net] == min(("network-by-value(grouped-threshold)",
                                              "network-by-value(section-threshold)"),
                                             key=lambda name: rows[name]["mean_cost"])
@@ -319,8 +323,10 @@ def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp
     bound = payload["bound"][net]
     assert bound["available"] is False and "share one tamping machine" in bound["reason"]
     config = NetworkConfig.coerce(None, **tiny)
-    (direct,) = evaluate_many([NetworkRule(agent, "value").bind(config)], config, SEEDS)
+    direct, mine = evaluate_many([NetworkRule(agent, "value").bind(config),
+                                  NetworkRule(CallablePolicy(above_two), "value").bind(config)], config, SEEDS)
     assert rows["network-by-value(eager)"]["episode_costs"] == direct.cost.tolist()
+    assert rows["network-by-value(mine)"]["episode_costs"] == mine.cost.tolist()
     assert rows["network-by-value(eager)"]["params"]["line_rule"] == "eager"
     assert "No normalised score: 2 lines share one tamping machine" in format_leaderboard(payload)
     assert not (tmp_path / "bounds").exists()

@@ -27,7 +27,7 @@ def test_agent_headline_pairs_the_agent_with_the_best_rule_whichever_policy_is_b
     assert "-10.0 k€" in agent_headline(payload, "planner") and agent_headline(payload, "rule") is None
 
 
-def test_a_users_own_policy_is_scored_as_the_agents_page_shows(tmp_path):
+def test_a_users_own_policy_is_scored_as_the_agents_page_shows(tmp_path, monkeypatch):
     """The page's example: a class with SB3's predict on a batch, scored against a tuned rule with the seeds as a
     range (they failed when the JSON was written), its row named by its key in ``extra`` (as run_leaderboard names
     its agents; it was the policy's ``name``) and labelled by its params; a key that names a scored rule is
@@ -39,9 +39,18 @@ def test_a_users_own_policy_is_scored_as_the_agents_page_shows(tmp_path):
         def predict(self, obs, state=None, episode_start=None, deterministic=True):
             return (obs["section_sd"] >= 2.5).astype(np.int8), state
 
+    from matplotlib.axes import Axes
+
+    titles: list[str] = []
+    set_title = Axes.set_title
+    monkeypatch.setattr(Axes, "set_title", lambda ax, text, *a, **k: titles.append(text) or set_title(ax, text, *a,
+                                                                                                       **k))
     result = line_comparison("trackenv/TampingLineSmall-v0", seeds=range(2), rules=["grouped-threshold"],
                              extra={"mine": TampAbove()}, progress=False, out_dir=str(tmp_path), horizon_years=1.0)
     assert result["seeds"] == [0, 1] and result["extra"] == ["mine"]
+    # the episode figure names each panel as its row is named (it used the policy's own name)
+    panels = [t.split(" on ")[0] for t in titles if " sections, seed 0" in t]
+    assert panels == ["grouped-threshold", "mine"]
     assert {r["policy"] for r in result["results"]} == {"mine", "grouped-threshold"}
     mine = next(r for r in result["results"] if r["policy"] == "mine")
     assert mine["params"] == {"threshold_mm": 2.5} and mine["n_episodes"] == 2

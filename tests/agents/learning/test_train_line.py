@@ -96,7 +96,7 @@ def test_saved_policy_loads_with_its_advisor_and_acts_the_same(tmp_path, fast_li
 
 
 @pytest.mark.slow
-def test_policy_iteration_improves_over_its_start(tmp_path, fast_line):
+def test_policy_iteration_improves_over_its_start(tmp_path, fast_line, capsys):
     """The advisor, and so the first policy, is a bad rule: tamp every section whenever allowed (a section
     threshold of 0 mm), with tamping at 10 k€ a section. One iteration of counterfactual forks finds that most
     of those tampings cost more than they save: the learnt policy's cost on held-out episodes falls below half
@@ -105,15 +105,18 @@ def test_policy_iteration_improves_over_its_start(tmp_path, fast_line):
     cfg = fast_line.replace(tamping_cost_per_m=0.05)
     hp = {"advisor": "section-threshold", "advisor_params": {"threshold_mm": 0.0}, "episodes_per_iteration": 6,
           "fit_epochs": 30, "net_arch": [32, 32], "n_steps": 8, "batch_size": 48, "n_epochs": 1, "eval_freq": 16}
-    path = train_line(cfg, iterations=1, total_timesteps=16, n_envs=1, seed=20_000, out_dir=tmp_path / "run",
-                      hyperparams=hp, progress=True, eval_seeds=list(range(100, 106)), verbose=0)
+    path = train_line(cfg, iterations=1, total_timesteps=12, n_envs=1, seed=20_000, out_dir=tmp_path / "run",
+                      hyperparams=hp, progress=True, eval_seeds=list(range(100, 106)), verbose=1)
+    # 12 line-steps of 6 section agents, in roll-outs of 8 steps of the 6: two whole roll-outs, said so
+    assert "total_timesteps=12 line-steps run as 2 roll-outs, 16 line-steps" in capsys.readouterr().out
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     (it,) = summary["iterations"]
     start, learnt = summary["baseline"]["mean_cost"], it["evaluation"]["mean_cost"]
     assert it["samples"] > 20 and it["other_choice_cheaper"] > 0.3
     assert learnt < 0.5 * start, (start, learnt)
     assert it["evaluation"]["vs_baseline"]["ci_high"] < 0
-    assert summary["line_steps_per_second"] > 0 and summary["ppo"]["line_steps"] == 16
+    assert summary["line_steps_per_second"] > 0 and summary["ppo"]["line_steps"] == 12
+    assert summary["ppo"]["line_steps_run"] == 16
     assert summary["ppo"]["evaluations"] and (tmp_path / "run" / "best_model.zip").exists()
     assert (tmp_path / "run" / "checkpoints" / "iteration_0.zip").exists()
     assert list((tmp_path / "run" / "policy_iteration").glob("events.out.tfevents*"))  # TensorBoard
