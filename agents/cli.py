@@ -522,7 +522,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
                              "(--policy NAME --tune N)")
         if args.policy != DEFAULT_PLAN_POLICY:
             raise UsageError("give the policies to compare in --compare, not --policy")
-        policies = check_compared(args.compare.split(","))
+        policies = check_compared(_comma_items(args.compare, "--compare"))  # an empty item refused, as elsewhere
     if network is not None:
         from .network_plan import check_network_policy
 

@@ -515,7 +515,8 @@ def test_plan_compares_policies_on_the_same_futures(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--compare", "grouped-threshold"], "--compare needs at least two policies"),
-    (["--compare", "grouped-threshold,grouped-threshold"], "--compare names grouped-threshold more than once"),
+    (["--compare", "grouped-threshold,grouped-threshold"], "--compare grouped-threshold: given more than once"),
+    (["--compare", "grouped-threshold,,no-maintenance"], "an empty item (a comma too many?)"),
     (["--compare", "grouped-threshold,no-such-rule"], "no-such-rule"),
     (["--compare", "a,b", "--tune", "2"], "tune one policy at a time"),
     (["--compare", "a,b", "--policy", "no-maintenance"], "give the policies to compare in --compare"),
