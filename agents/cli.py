@@ -553,13 +553,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
             if executor is not None:
                 executor.close()
         notes = _plan_warnings(plan, network)
-        for note in notes:
-            print(f"trackenv plan: warning: {note}", file=sys.stderr)
+        _say_warnings(notes)
         files = plan.write(out)
         d = plan.to_dict(files) if network is not None else plan.to_dict()  # a network's lines: their files too
         payload = {**d, "files": files, "warnings": notes, "wall_time_s": time.perf_counter() - t0,
                    "ray": args.ray_address or ("local" if args.ray else None)}
-        _emit(args, payload, plan.table() + "\n" + "wrote " + ", ".join(files.values()))
+        _emit(args, payload, plan.table() + "\n" + _warnings_line(notes) + "wrote " + ", ".join(files.values()))
         return 0
     return _compare_and_write(args, network, lines, policies, rules, overrides, out, t0)
 
@@ -589,8 +588,7 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, polic
         notes += [f"{label}: {note}" for note in _plan_warnings(plan, network)]
         folders.append(out / f"{k + 1}-{Path(policy).stem}")
         written[label] = plan.write(folders[-1])
-    for note in notes:
-        print(f"trackenv plan: warning: {note}", file=sys.stderr)
+    _say_warnings(notes)
     comparison = compare_plans(plans, episode)
     files = {"compare_csv": write_comparison(comparison, out)}
     payload = {"comparison": comparison, "files": files, "plan_files": written, "warnings": notes,
@@ -598,15 +596,37 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, polic
     whose = ("each policy's plan in these futures (a rule's own --policy plan runs shorter episodes: other draws)"
              if episode is not None else "each policy's plan (as --policy plans it)")
     _emit(args, payload, f"{format_comparison(comparison)}\n{whose}: {', '.join(map(str, folders))}\n"
-                         f"wrote {files['compare_csv']}")
+                         f"{_warnings_line(notes)}wrote {files['compare_csv']}")
     return 0
+
+
+#: At most this many of a plan's warnings are printed on stderr (the JSON's "warnings" has every one).
+PRINTED_WARNINGS = 8
+
+
+def _say_warnings(notes: list[str]) -> None:
+    """A plan's warnings on stderr, at most :data:`PRINTED_WARNINGS` (a file in a wrong unit warns for every
+    section), the rest counted."""
+    for note in notes[:PRINTED_WARNINGS]:
+        print(f"trackenv plan: warning: {note}", file=sys.stderr)
+    if len(notes) > PRINTED_WARNINGS:
+        print(f"trackenv plan: warning: ... and {len(notes) - PRINTED_WARNINGS} more (--json lists every one)",
+              file=sys.stderr)
+
+
+def _warnings_line(notes: list[str]) -> str:
+    """The table's line that counts the plan's warnings (stderr has them): "" where there are none."""
+    from .plan_report import counted
+
+    return f"{counted(len(notes), 'warning', 'warnings')} on stderr (the JSON's \"warnings\")\n" if notes else ""
 
 
 def _plan_warnings(plan: Any, network: Any) -> list[str]:
     """The warnings of a line's plan, or of every line of a network's (:func:`~.planning.plan_warnings`)."""
     from .planning import plan_warnings
 
-    return [note for line in (plan.lines if network is not None else (plan,)) for note in plan_warnings(line)]
+    lines = plan.lines if network is not None else (plan,)
+    return [note for line in lines for note in plan_warnings(line, alone=network is None)]
 
 
 def _one_plan(args: argparse.Namespace, network: Any, lines: Any, policy: str, overrides: dict[str, Any],

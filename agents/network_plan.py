@@ -121,8 +121,8 @@ class NetworkPlan:
             "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
                           "p90": float(np.quantile(total, 0.9)), "move_mean": float(moves.mean())},
             "end_state": self.end_state(),
-            "line_plans": [{**line.to_dict(), "files": _line_files(files or {}, i), "warnings": plan_warnings(line)}
-                           for i, line in enumerate(self.lines)],
+            "line_plans": [{**line.to_dict(), "files": _line_files(files or {}, i),
+                            "warnings": plan_warnings(line, alone=False)} for i, line in enumerate(self.lines)],
         }
 
     def table(self) -> str:

@@ -139,6 +139,9 @@ GEOMETRY_NOTE = ("geometry is a notional cost of poor track geometry (poorer rid
 UNMET_REASONS = ("not_enabled", "recent_work", "machine", "capacity", "budget", "unknown")
 #: At most this many sections of one choice get a line of their numbers in the table.
 SECTION_LINES = 8
+#: At most this many section ids of one choice in a quarter's row of the table (the rest counted: plan.csv and the
+#: JSON list them all).
+QUARTER_IDS = 12
 #: At most this many section ids label the plot's line axis (more sections: every n-th).
 SECTION_LABELS = 20
 
@@ -149,6 +152,34 @@ def rule_thresholds(params: dict[str, Any]) -> dict[str, float]:
     levels, left out; none for a trained policy."""
     return {k: float(v) for k, v in params.items() if k.endswith("_mm") and "margin" not in k
             and isinstance(v, int | float) and not isinstance(v, bool) and v > 0}
+
+
+def scenario_note(scenario: str) -> str | None:
+    """What the preset ``scenario`` adds to a line file's model, in a line of the table (None for the default):
+    the wet line's hidden wet spots and the short-defect line's defects are the model's draws, not the file's."""
+    from trackenv.envs.line_config import SCENARIOS, LineConfig
+
+    fields = SCENARIOS.get(scenario, {})
+    if not fields.get("choices"):
+        return None
+    c = LineConfig.from_dict(dict(fields))
+    text = (f"scenario {scenario}: every choice (spot tamping, drainage, renewal, inspections, surveys) and the "
+            f"contact sensor")
+    if scenario == "wet":
+        text += (f"; beside the file's known wet zones the model draws hidden wet spots on about "
+                 f"{c.wet_spot_probability:.0%} of the sections, {c.wet_spot_active_share:.0%} of them working from "
+                 f"the start, which a survey finds (an assumption: a wetter line than the default)")
+    elif scenario == "defects":
+        text += (f"; the model draws short defects (joints, welds, failed sleepers: about {c.local_defects_mean:g} a "
+                 f"section, {c.local_defect_length_m:g} m each settling {c.local_defect_rate_factor:g} times faster; "
+                 f"an assumption, the file lists none)")
+    return text
+
+
+def _listed(ids: Sequence[str]) -> str:
+    """Section ids for a quarter's row: at most :data:`QUARTER_IDS`, the rest counted."""
+    more = f" ... and {len(ids) - QUARTER_IDS} more (plan.csv)" if len(ids) > QUARTER_IDS else ""
+    return " ".join(ids[:QUARTER_IDS]) + more
 
 
 def _rounded(values: np.ndarray) -> list[float]:
@@ -279,6 +310,7 @@ class LinePlan:
             "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
             "beyond_validity_peak_mm": self.beyond_validity(),
+            "q1_model_sd": [i for i, m in zip(ids, self.model_read()["sd"], strict=True) if m],
             "tuning": None if self.tuning is None else self.tuning.to_dict(),
             "end_state": self.end_state(),
         }
@@ -311,13 +343,16 @@ class LinePlan:
                  f"{years_text(self.years)}, {counted(self.futures, 'future', 'futures')}{engine}"
                  f"{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
+                 *([f"  possession capacity: {counted(self.capacity, 'section', 'sections')} of work a quarter "
+                    f"(--set capacity=N)"] if self.capacity is not None else []),
+                 *([f"  {note}"] if (note := scenario_note(self.scenario)) else []),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
                 what = self.tamp_text(q, row["tamp"]) or "-"
             else:
-                what = "; ".join(f"{name} {' '.join(row[name])}" for name in self.choices if row[name]) or "-"
+                what = "; ".join(f"{name} {_listed(row[name])}" for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
         lines += [*self.decision_lines(), self.recording_note(), *self.validity_lines()]
         c = d["cost_keur"]
@@ -370,7 +405,7 @@ class LinePlan:
         """The ids of the sections recommended for tamping in ``quarter`` as the table gives them: a ballast
         renewal marked "(renewal)", and a note where they are more than the capacity."""
         renewals = self.renewals(quarter)
-        text = " ".join(f"{i} (renewal)" if i in renewals else i for i in tamped)
+        text = _listed([f"{i} (renewal)" if i in renewals else i for i in tamped])
         if self.capacity is not None and len(tamped) > self.capacity:
             text += (f" (more than the capacity of {self.capacity}: each future tamps at most {self.capacity}; "
                      f"listed, those of at least half the futures)")
@@ -439,15 +474,27 @@ class LinePlan:
                 "budget": "beyond the annual budget left", "unknown": "for a reason the plan does not know"}[key]
 
     def _section_lines(self, at: np.ndarray, what: str, why: Callable[[int], str] | None = None) -> list[str]:
-        """:meth:`_section_line` of the sections ``at`` in line order, at most :data:`SECTION_LINES` of them (the
-        rest counted: their numbers are in plan.csv and the JSON); ``why(j)``: words after ``what`` in section
-        ``j``'s line, in brackets."""
+        """:meth:`_section_line` of the sections ``at``, the worst measured SD first, at most :data:`SECTION_LINES`
+        of them (the rest counted: their numbers are in plan.csv and the JSON); ``why(j)``: words after ``what`` in
+        section ``j``'s line, in brackets."""
+        if "measured_sd_mm" in self.state:
+            at = at[np.argsort(-self.state["measured_sd_mm"][0, at], kind="stable")]
         lines = [self._section_line(int(j), what if why is None else f"{what} ({why(int(j))})")
                  for j in at[:SECTION_LINES]]
         if len(at) > SECTION_LINES:
             where = "--json" if what.startswith("asked") else "plan.csv, --json"  # plan.csv has what was done
             lines.append(f"  ... and {len(at) - SECTION_LINES} more {what} ({where})")
         return lines
+
+    def model_read(self) -> dict[str, np.ndarray]:
+        """(sections,) bool each: where Q1's measured SD (``sd``) and D1 mean-to-peak (``peak``) are the model's
+        own reading at ``as_of``, not a run of the file (no run since the section's last tamping, or a run without
+        its peak: :func:`~trackenv.envs.line_fit.last_runs`). Such a number is a draw of the model: measure the
+        section before acting on it."""
+        from trackenv.envs.line_fit import last_runs
+
+        runs = last_runs(self.line)
+        return {"sd": np.isnan(runs["last_sd_m"]), "peak": np.isnan(runs["last_peak_m"])}
 
     def _section_line(self, j: int, what: str) -> str:
         st = {k: float(v[0, j]) for k, v in self.state.items()}
@@ -459,9 +506,13 @@ class LinePlan:
         tag = f" ({', '.join(known)})" if known else ""
         if what == "tamp" and st.get("renewal_due", 0.0) >= RENEWAL_SHARE:
             what = f"tamp, a ballast renewal in {st['renewal_due']:.0%} of the futures"
-        return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
-                f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
-                f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
+        read = self.model_read()
+        sd_read = "the model's SD (no run in the file since its last tamping: measure it first)" if read["sd"][j] \
+            else "measured SD"
+        peak_read = "the model's peak" if read["peak"][j] and not read["sd"][j] else "peak"
+        return (f"  {section.id}{tag} {what}: {sd_read} {st['measured_sd_mm']:.2f} (SD alert "
+                f"{lim['sd_alert']:g}), {peak_read} {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, "
+                f"intervention {lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
                 f"{st['measurement_age_years']:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
 
     def write(self, folder: Path) -> dict[str, str]:

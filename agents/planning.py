@@ -71,6 +71,7 @@ from .plan_report import (
     rule_thresholds,
     step_date,
     summary_lines,
+    years_text,
 )
 from .shipped import SHIPPED_AGENTS
 
@@ -78,11 +79,14 @@ from .shipped import SHIPPED_AGENTS
 #: lengths and traffic) to the file.
 PLAN_SCENARIOS = tuple(name for name, fields_ in SCENARIOS.items() if not set(fields_) & set(LINE_FILE_FIELDS))
 DEFAULT_POLICY = "grouped-threshold"
+#: The share of a line file's sections surveyed for wet spots before a plan starts beyond the file's known wet
+#: zones (:func:`plan_config`): none, whatever the scenario's.
+PLAN_SURVEYED_SHARE = 0.0
 
-__all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "RECOMMEND_SHARE", "SECTION_LABELS",
-           "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_limits", "line_plan", "line_policy",
-           "line_summary", "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
-           "trained_horizon_years", "unmet_reasons"]
+__all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "PLAN_SURVEYED_SHARE",
+           "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan",
+           "line_limits", "line_plan", "line_policy", "line_summary", "plan_config", "plan_line", "plan_warnings",
+           "rule_thresholds", "step_date", "summary_lines", "trained_horizon_years", "unmet_reasons"]
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
@@ -133,13 +137,19 @@ def plan_config(line: Any, scenario: str = "default", years: float | None = None
     """The :class:`~trackenv.envs.line_config.LineConfig` of ``line`` (a line file's path or a
     :class:`~trackenv.envs.line_file.LineDescription`) modelled as on the preset ``scenario``
     (:data:`PLAN_SCENARIOS`), with further ``config`` fields; ``years``: the plan's, its horizon (checked under
-    that name, in the config's range: whole steps, at least one, at most ``MAX_HORIZON_YEARS``)."""
+    that name, in the config's range: whole steps, at least one, at most ``MAX_HORIZON_YEARS``).
+
+    What the line's owner knows of its wet spots is the file's known wet zones (surveyed from the start): a
+    scenario's ``surveyed_share`` (the wet line surveys half its sections before the start) would reveal wet spots
+    the model drew and the file does not know, and plan their drainage, so a plan takes none unless ``config``
+    gives one (:data:`PLAN_SURVEYED_SHARE`); the other sections may hide a wet spot that a survey finds."""
     if scenario not in PLAN_SCENARIOS:
         raise ValueError(f"scenario must be one of {', '.join(PLAN_SCENARIOS)} (those that take the line's sections "
                          f"and traffic from its file), got {scenario!r}")
     if years is not None:
         steps_per_year = config.get("steps_per_year", LineConfig.steps_per_year)
         config["horizon_years"] = check_horizon("years", years, steps_per_year)
+    config.setdefault("surveyed_share", PLAN_SURVEYED_SHARE)
     return preset(scenario, line=line, **config)
 
 
@@ -319,13 +329,40 @@ def _record_parts(parts: dict[str, np.ndarray], step_parts: dict[str, Any], step
             parts.setdefault(key, np.zeros(shape))[:, step] = np.asarray(value)
 
 
-def plan_warnings(plan: LinePlan) -> list[str]:
+def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
     """The warnings of a line's plan, each naming its line file: the history fit's notes on its sections, then the
-    sections that went beyond the model's validity (:meth:`LinePlan.validity_lines`). ``trackenv plan`` prints them
-    and puts them in the JSON, a network's per line and all together."""
+    sections that went beyond the model's validity (:meth:`LinePlan.validity_lines`), then, for a line planned
+    ``alone`` (not a network's, whose machine may be elsewhere), a plan that recommends nothing while the line
+    runs past its SD alert (:func:`_idle_note`). ``trackenv plan`` prints them and puts them in the JSON, a
+    network's per line and all together."""
     source = plan.line.source
     notes = [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
-    return notes + [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()]
+    idle = _idle_note(plan) if alone else None
+    return notes + [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()] + (
+        [f"{source}: {idle}"] if idle else [])
+
+
+def _idle_note(plan: LinePlan) -> str | None:
+    """Where the plan recommends nothing in any quarter while more sections end at or above their SD alert than
+    started there: a sentence saying so, naming the rule's trigger where it lies above most sections' SD alert (a
+    rule tuned on a slower preset line waits past this line's alert); else None."""
+    end = plan.end_state()
+    if plan.recommended.any() or end is None or "sections_at_sd_alert_end" not in end:
+        return None
+    if end["sections_at_sd_alert_end"] <= end["sections_at_sd_alert_start"]:
+        return None
+    text = (f"nothing is recommended in {years_text(plan.years)} while the sections at or above their SD alert grow "
+            f"from {end['sections_at_sd_alert_start']:.1f} to {end['sections_at_sd_alert_end']:.1f} of "
+            f"{end['sections']} (means over the futures)")
+    key = next((k for k in ("trigger_mm", "threshold_mm") if k in plan.policy_params), None)
+    alert = plan.limits_mm.get("sd_alert")
+    if key is not None and alert is not None:
+        above = int((float(plan.policy_params[key]) > alert).sum())
+        if above > alert.size / 2:
+            text += (f": the rule's {key} {float(plan.policy_params[key]):g} mm is above the SD alert of {above} of "
+                     f"{alert.size} sections (median {float(np.median(alert)):g} mm at their speeds), so it waits "
+                     f"past it; --tune 8 tunes it on this line")
+    return text
 
 
 def line_limits(batch: Any, row: int, n_sections: int) -> dict[str, np.ndarray]:
@@ -377,6 +414,8 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from trackenv.envs.line import TampingLineVectorEnv
 
     cfg = plan_config(line, scenario, years=years, **config)
+    if "capacity" in config and config["capacity"] != cfg.capacity:  # the config cuts it to the file's sections
+        raise ValueError(f"capacity must be at most the line's {cfg.n_sections} sections, got {config['capacity']!r}")
     rule = line_policy(policy, cfg, scenario, years=years)
     tuning = None
     if tune:

@@ -150,7 +150,8 @@ def test_a_plan_with_every_choice_recommends_each_by_name(tmp_path, capsys):
     out = tmp_path / "plan"
     assert main(["plan", str(write(tmp_path)), "--scenario", "wet", "--policy", "choice-threshold", "--years", "0.5",
                  "--futures", "2", "--out", str(out)]) == 0
-    assert "(scenario wet)" in capsys.readouterr().out
+    table = capsys.readouterr().out
+    assert "(scenario wet)" in table and "the model draws hidden wet spots on about 35% of the sections" in table
     with open(out / "plan.csv") as f:
         rows = list(csv.DictReader(f))
     assert rows and {r["choice"] for r in rows} <= set(plan.choices)
@@ -212,7 +213,8 @@ def test_the_fits_warnings_come_after_the_progress_bar_and_in_the_json(tmp_path,
     assert len(notes) == 1 and notes[0].startswith("trackenv plan: warning: ") and "section K11.23" in notes[0]
     assert main([*argv, "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
-    assert len(payload["warnings"]) == 1 and "rate_factor 1.7 contradicts the history" in payload["warnings"][0]
+    fit = [w for w in payload["warnings"] if "section K11.23" in w]
+    assert len(fit) == 1 and "rate_factor 1.7 contradicts the history" in fit[0]
 
 
 def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
@@ -546,3 +548,70 @@ def test_compared_with_a_trained_policy_every_policy_runs_its_training_episodes(
     assert not np.allclose(costs, short.costs.sum(axis=1))  # the half-year episodes draw other futures
     with pytest.raises(ValueError, match="trained on episodes of 10 years"):
         plan_line(line, policy="cpi-agent", years=0.5, futures=1, episode_years=5.0, **FAST)
+
+
+def test_a_plan_says_which_first_readings_are_the_models_and_lists_the_worst_first(rough_plan):
+    """Section D has no recording-car run in the file: Q1's SD there is the model's draw, and its line says so (it
+    read "measured SD", and an engineer would act on it); the JSON lists it. A quarter's sections are listed worst
+    measured SD first (the worst were hidden behind "... and 2 more" in line order)."""
+    from trackenv_agents.plan_report import _listed
+
+    plan, _ = rough_plan
+    assert plan.to_dict()["q1_model_sd"] == ["D"] and plan.model_read()["sd"].tolist() == [False, False, False, True]
+    assert "D (known wet) tamp: the model's SD (no run in the file since its last tamping: measure it first)" in \
+        plan._section_line(3, "tamp")
+    assert "B (transition) tamp: measured SD" in plan._section_line(1, "tamp")
+    listed = [line.split()[0] for line in plan._section_lines(np.arange(4), "tamp")]
+    assert listed == [plan.line.sections[j].id for j in np.argsort(-plan.state["measured_sd_mm"][0], kind="stable")]
+    assert listed[0] == "B"  # the rough section
+    ids = [f"S{i}" for i in range(15)]
+    assert _listed(ids) == " ".join(ids[:12]) + " ... and 3 more (plan.csv)" and _listed(ids[:3]) == "S0 S1 S2"
+
+
+def test_a_capacity_above_the_lines_sections_is_refused_not_cut(tmp_path, capsys):
+    """A config cuts a capacity above the file's sections to their number (the default 6 on 4 sections); given to
+    a plan it was cut silently while the header said "changed: capacity=300": now refused, naming the limit."""
+    line = write(tmp_path)
+    with pytest.raises(ValueError, match="capacity must be at most the line's 4 sections, got 5"):
+        plan_line(line, years=0.25, futures=1, capacity=5)
+    assert main(["plan", str(line), "--set", "capacity=5", "--years", "0.25", "--futures", "1", "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "capacity must be at most the line's 4 sections, got 5" in capsys.readouterr().err
+    assert plan_line(line, years=0.25, futures=1, capacity=4, **FAST).capacity == 4
+
+
+def test_a_wet_plan_knows_the_files_wet_zones_only(tmp_path):
+    """The wet preset surveys half its sections before the start; on a line file that revealed wet spots the model
+    drew as known and planned their drainage (a probe's plan drained a section the file did not flag). A plan knows
+    the file's known wet zones (D) and nothing else unless ``surveyed_share`` is given."""
+    from trackenv.envs.line import TampingLine
+    from trackenv_agents.planning import plan_config
+
+    cfg = plan_config(write(tmp_path), "wet", years=0.5)
+    assert cfg.surveyed_share == 0.0 and plan_config(write(tmp_path), "wet", surveyed_share=0.5).surveyed_share == 0.5
+    for seed in range(4):
+        obs, _ = TampingLine(cfg).reset(seed=seed)
+        assert obs["section_survey"].tolist() == [-1, -1, -1, 1]
+
+
+def test_a_plan_that_recommends_nothing_while_the_line_passes_its_alert_warns(tmp_path, capsys):
+    """Half a year of the shipped grouped threshold (trigger 3.5 mm) on the fit test line recommends nothing while
+    sections pass their SD alert (2.25 mm at 100 km/h): a warning names the trigger and --tune; a network's line
+    (whose machine may be elsewhere) gets none; stderr prints at most PRINTED_WARNINGS, the table counts them."""
+    from test_line_fit import write as write_fit_line
+
+    from trackenv_agents.cli import PRINTED_WARNINGS, _say_warnings
+    from trackenv_agents.planning import plan_warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        plan = plan_line(write_fit_line(tmp_path / "line"), years=0.5, futures=1, **FAST)
+    end = plan.end_state()
+    assert not plan.recommended.any() and end["sections_at_sd_alert_end"] > end["sections_at_sd_alert_start"]
+    (idle,) = [w for w in plan_warnings(plan) if "nothing is recommended" in w]
+    assert "the rule's trigger_mm 3.5 mm is above the SD alert of 4 of 4 sections" in idle and "--tune 8" in idle
+    assert not [w for w in plan_warnings(plan, alone=False) if "nothing is recommended" in w]
+    _say_warnings([f"note {i}" for i in range(PRINTED_WARNINGS + 3)])
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == PRINTED_WARNINGS + 1
+    assert err[-1] == "trackenv plan: warning: ... and 3 more (--json lists every one)"
