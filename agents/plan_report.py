@@ -154,6 +154,24 @@ def rule_thresholds(params: dict[str, Any]) -> dict[str, float]:
             and isinstance(v, int | float) and not isinstance(v, bool) and v > 0}
 
 
+#: The cost parts by what they are to a track manager: money spent on the track, traffic disrupted, and the notional
+#: cost of poor geometry (:data:`GEOMETRY_NOTE`), each named and with its parts.
+COST_GROUPS = {
+    "spent": ("spent on the track (possessions, track work, inspections, surveys)",
+              ("possession", "tamping", "renewal", "spot_tamping", "drainage", "inspection", "survey")),
+    "disruption": ("traffic disrupted (speed restrictions, closures at the immediate-action limit)",
+                   ("speed_restriction", "immediate_action")),
+    "notional": ("notional (geometry, alerts)", ("geometry", "alert")),
+}
+
+
+def cost_groups(parts: dict[str, float]) -> dict[str, float]:
+    """The mean cost parts ``parts`` [k€] summed by :data:`COST_GROUPS` (a group none of whose parts is there left
+    out): what the headline cost is made of."""
+    return {name: float(sum(parts[k] for k in keys if k in parts))
+            for name, (_, keys) in COST_GROUPS.items() if any(k in parts for k in keys)}
+
+
 def scenario_note(scenario: str) -> str | None:
     """What the preset ``scenario`` adds to a line file's model, in a line of the table (None for the default):
     the wet line's hidden wet spots and the short-defect line's defects are the model's draws, not the file's."""
@@ -308,6 +326,7 @@ class LinePlan:
             "cost_keur": {"mean": float(total.mean()), "p10": float(np.quantile(total, 0.1)),
                           "p90": float(np.quantile(total, 0.9))},
             "cost_parts_mean_keur": {k: float(v.mean()) for k, v in self.parts.items()},
+            "cost_groups_mean_keur": cost_groups({k: float(v.mean()) for k, v in self.parts.items()}),
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
             "beyond_validity_peak_mm": self.beyond_validity(),
             "q1_model_sd": [i for i, m in zip(ids, self.model_read()["sd"], strict=True) if m],
@@ -359,6 +378,9 @@ class LinePlan:
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
         lines.append(f"cost over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
                      f"over 10-90 % of the futures ({parts})")
+        groups = cost_groups(d["cost_parts_mean_keur"])
+        if groups:
+            lines.append("  " + "; ".join(f"{COST_GROUPS[name][0]} {value:.0f} k€" for name, value in groups.items()))
         if "geometry" in self.parts:
             lines.append(f"  ({GEOMETRY_NOTE})")
         end = self.end_state_line()
@@ -375,11 +397,26 @@ class LinePlan:
         """What the rule's parameters were tuned on: this line (``--tune``: what the tuning chose), or the
         preset, with how to tune them here (a rule with thresholds only; none for a trained policy)."""
         if self.tuning is not None:
-            return self.tuning.lines(self.policy)
-        if not rule_thresholds(self.policy_params):
+            return [*self.tuning.lines(self.policy), *self.choices_line()]
+        thresholds = rule_thresholds(self.policy_params)
+        if not thresholds:
             return []
-        return [f"parameters: the shipped ones, tuned on the {self.scenario} preset's line; --tune 8 tunes them on "
-                f"this line first (minutes)"]
+        shown = ", ".join(f"{k} {v:g}" for k, v in thresholds.items())
+        return [f"parameters: the shipped ones ({shown}), tuned on the {self.scenario} preset's line; --tune 8 tunes "
+                f"them on this line first (minutes)", *self.choices_line()]
+
+    def choices_line(self) -> list[str]:
+        """For a choice rule on a scenario with choices, which of them its parameters switch on (a scenario's
+        tuned rule may switch every one off: the grouped threshold itself)."""
+        from .rules.choices import CHOICE_RULES, choices_on
+
+        if self.policy not in CHOICE_RULES or self.choices == ("tamp",):
+            return []
+        on = choices_on(self.policy_params)
+        if not on:
+            return ["  choices beyond tamping: none (its parameters switch every one off: the grouped threshold "
+                    "itself; --tune 8 searches them on this line)"]
+        return [f"  choices beyond tamping: {', '.join(on)}"]
 
     def beyond_validity(self) -> dict[str, float]:
         """The sections whose true D1 mean-to-peak went beyond what the model represents

@@ -62,7 +62,7 @@ from .base import as_batch
 from .line import GroupedThreshold, stale_measurement
 
 __all__ = ["CHOICE_OFF", "CHOICE_RULES", "SPOT_PEAKS_MM", "ChoiceThreshold", "ChoiceThresholdNoLooking",
-           "ChoiceThresholdSpotOnly", "choice_grid", "choice_view", "choices_off", "fresh_memory",
+           "ChoiceThresholdSpotOnly", "choice_grid", "choice_view", "choices_off", "choices_on", "fresh_memory",
            "regrowth_mm_per_year", "remember_work"]
 
 #: the shortest time between a tamping and the measurement that a growth rate is read over [year]
@@ -326,6 +326,19 @@ def choice_grid(cls: type[ChoiceThreshold], base: Mapping[str, float]) -> list[d
 def choices_off(cls: type[ChoiceThreshold]) -> dict[str, Any]:
     """The parameters of ``cls`` with every choice but tamping off (the grouped threshold itself)."""
     return {key: value for key, (readers, value) in CHOICE_OFF.items() if readers & cls.uses}
+
+
+#: The parameters of :data:`CHOICE_OFF` that tune a choice switched on by another (a growth rate, an age), not a
+#: switch themselves.
+_MODIFIERS = frozenset({"fast_growth_mm_per_year", "inspect_age_years"})
+
+
+def choices_on(params: Mapping[str, Any]) -> list[str]:
+    """The choices beyond tamping that a choice rule's ``params`` switch on (in the order of
+    :data:`~trackenv.envs.choices.CHOICES`): those with a switch of :data:`CHOICE_OFF` away from its off value."""
+    on = {choice for key, (readers, off) in CHOICE_OFF.items()
+          if key not in _MODIFIERS and key in params and params[key] != off for choice in readers}
+    return [c for c in CHOICES[2:] if c in on]
 
 
 CHOICE_RULES: dict[str, type[ChoiceThreshold]] = {

@@ -128,7 +128,8 @@ def test_the_plan_runs_the_tuned_rule_and_says_so(tmp_path, small_grid):
     assert "in-sample" in plan.table()
     plain = plan_line(line, years=0.5, futures=2, **FAST)
     assert plain.tuning is None and plain.to_dict()["tuning"] is None and "tuned on this line" not in plain.table()
-    assert "parameters: the shipped ones, tuned on the default preset's line; --tune 8" in plain.table()
+    assert ("parameters: the shipped ones (trigger_mm 3.5, include_mm 1.75), tuned on the default preset's line; "
+            "--tune 8") in plain.table()
     if plan.policy_params == plain.policy_params:  # the same rule: the same plan
         np.testing.assert_array_equal(plan.costs, plain.costs)
 

@@ -615,3 +615,24 @@ def test_a_plan_that_recommends_nothing_while_the_line_passes_its_alert_warns(tm
     err = capsys.readouterr().err.splitlines()
     assert len(err) == PRINTED_WARNINGS + 1
     assert err[-1] == "trackenv plan: warning: ... and 3 more (--json lists every one)"
+
+
+def test_the_cost_is_split_into_spend_disruption_and_notional_and_a_choice_rule_says_what_it_uses(rough_plan,
+                                                                                                   tmp_path):
+    """The headline cost is mostly the notional geometry cost: the table and the JSON split it into money spent on
+    the track, disrupted traffic and the notional parts (the groups add up to the total). A choice rule's plan says
+    which choices its parameters switch on: on the `choices` preset none (its tuned rule is the grouped threshold;
+    an engineer saw "the choices" do nothing and could not see why)."""
+    from trackenv_agents.plan_report import COST_GROUPS
+
+    plan, _ = rough_plan
+    d = plan.to_dict()
+    groups = d["cost_groups_mean_keur"]
+    assert set(groups) == set(COST_GROUPS) and sum(groups.values()) == pytest.approx(d["cost_keur"]["mean"])
+    assert groups["spent"] > 0 and f"spent on the track (possessions, track work, inspections, surveys) " \
+        f"{groups['spent']:.0f} k€" in plan.table()
+    assert "parameters: the shipped ones (trigger_mm 3.5, include_mm 1.75)" in plan.table()
+    quiet = plan_line(write(tmp_path), policy="choice-threshold", scenario="choices", years=0.25, futures=1, **FAST)
+    assert "choices beyond tamping: none (its parameters switch every one off" in quiet.table()
+    wet = plan_line(write(tmp_path), policy="choice-threshold", scenario="wet", years=0.25, futures=1, **FAST)
+    assert "choices beyond tamping: spot_tamp, drainage, survey" in wet.table()
