@@ -73,20 +73,24 @@ from .plan_report import (
     summary_lines,
     years_text,
 )
-from .shipped import SHIPPED_AGENTS
+from .shipped import SHIPPED_AGENTS, TRACK60_AGENT_NAME
 
 #: The scenarios a line from a file can be planned in: those that leave the line's own fields (its sections,
 #: lengths and traffic) to the file.
 PLAN_SCENARIOS = tuple(name for name, fields_ in SCENARIOS.items() if not set(fields_) & set(LINE_FILE_FIELDS))
 DEFAULT_POLICY = "grouped-threshold"
+#: A line file whose last recording-car run is older than this before its ``as_of`` [year] gets a plan warning: the
+#: recording car runs on a main line once or several times a year **[assumption]**, so such a file is likely old or
+#: its ``as_of`` a typo.
+STALE_RUN_YEARS = 2.0
 #: The share of a line file's sections surveyed for wet spots before a plan starts beyond the file's known wet
 #: zones (:func:`plan_config`): none, whatever the scenario's.
 PLAN_SURVEYED_SHARE = 0.0
 
 __all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "PLAN_SURVEYED_SHARE",
-           "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STATE_COLUMNS", "UNMET_REASONS", "LinePlan",
-           "line_limits", "line_plan", "line_policy", "line_summary", "plan_config", "plan_line", "plan_warnings",
-           "rule_thresholds", "step_date", "summary_lines", "trained_horizon_years", "unmet_reasons"]
+           "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STALE_RUN_YEARS", "STATE_COLUMNS", "UNMET_REASONS",
+           "LinePlan", "line_limits", "line_plan", "line_policy", "line_summary", "plan_config", "plan_line",
+           "plan_warnings", "rule_thresholds", "step_date", "summary_lines", "trained_horizon_years", "unmet_reasons"]
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
@@ -126,11 +130,14 @@ def line_policy(name: str, config: Any, scenario: str | None = None, years: floa
         with_choices = [s for s in PLAN_SCENARIOS if tuple(preset(s).choices) != ("tamp",)]
         raise ValueError(f"policy {name!r} uses the choices beyond tamping: plan with --scenario "
                          f"{', '.join(with_choices[:-1])} or {with_choices[-1]}")
-    known = [*rules, *SHIPPED_AGENTS]
-    close = difflib.get_close_matches(name, known, n=1)
+    # the 60 m track's agent plans no line; the choice rules are named for the scenarios that have the choices
+    known = [*rules, *(a for a in SHIPPED_AGENTS if a != TRACK60_AGENT_NAME)]
+    close = difflib.get_close_matches(name, [*known, *every_rule()], n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
-    raise ValueError(f"unknown policy {name!r}{hint}; known: {', '.join(known)} or the path of a trained policy "
-                     "(.zip)")
+    beyond = [r for r in every_rule() if r not in rules]
+    more = f" (with --scenario choices, wet or defects also {', '.join(beyond)})" if beyond else ""
+    raise ValueError(f"unknown policy {name!r}{hint}; known: {', '.join(known)}{more} or the path of a trained "
+                     "policy (.zip)")
 
 
 def plan_config(line: Any, scenario: str = "default", years: float | None = None, **config: Any) -> Any:
@@ -337,6 +344,11 @@ def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
     network's per line and all together."""
     source = plan.line.source
     notes = [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
+    last = line_summary(plan.line)["last_recording"]
+    if last is not None and last["years_before"] > STALE_RUN_YEARS:
+        notes.append(f"{source}: the last recording-car run in the file ({last['date']}) is "
+                     f"{last['years_before']:.1f} years before as_of: the plan's start projects the sections' state "
+                     f"over those years; a newer run (or as_of) gives a surer start")
     idle = _idle_note(plan) if alone else None
     return notes + [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()] + (
         [f"{source}: {idle}"] if idle else [])

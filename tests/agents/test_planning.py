@@ -106,7 +106,10 @@ def test_a_malformed_file_is_one_line_and_exit_2(tmp_path, capsys, kind):
 
 def test_plan_refuses_an_unknown_policy_and_a_missing_file(tmp_path, capsys):
     assert main(["plan", str(write(tmp_path)), "--policy", "greedy"]) == 2
-    assert "unknown policy 'greedy'; known: " in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # the line's rules and agents (not the 60 m track's, which plans no line), the choice rules for their scenarios
+    assert "unknown policy 'greedy'; known: " in err and "cpi-track60-agent" not in err
+    assert "cpi-choice-agent (with --scenario choices, wet or defects also choice-threshold," in err
     assert main(["plan", str(write(tmp_path)), "--policy", "grouped-treshold"]) == 2
     assert "unknown policy 'grouped-treshold' (did you mean 'grouped-threshold'?)" in capsys.readouterr().err
     assert main(["plan", str(tmp_path / "none.yaml")]) == 2
@@ -636,3 +639,17 @@ def test_the_cost_is_split_into_spend_disruption_and_notional_and_a_choice_rule_
     assert "choices beyond tamping: none (its parameters switch every one off" in quiet.table()
     wet = plan_line(write(tmp_path), policy="choice-threshold", scenario="wet", years=0.25, futures=1, **FAST)
     assert "choices beyond tamping: spot_tamp, drainage, survey" in wet.table()
+
+
+def test_a_file_whose_last_run_is_years_old_warns(tmp_path):
+    """A line file measured last 6 years before its ``as_of`` (an old file, or an ``as_of`` typo) plans from the
+    model's projection over those years: a warning says so; the loader's test line (measured a month before) none."""
+    from trackenv_agents.planning import plan_warnings
+
+    old = write(tmp_path, line=LINE.replace("as_of: 2026-01-01", "as_of: 2031-12-01"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        stale = [w for w in plan_warnings(plan_line(old, years=0.25, futures=1, **FAST)) if "recording-car" in w]
+    assert len(stale) == 1 and "(2025-12-01) is 6.0 years before as_of" in stale[0]
+    fresh = plan_line(write(tmp_path), years=0.25, futures=1, **FAST)
+    assert not [w for w in plan_warnings(fresh) if "recording-car" in w]

@@ -193,7 +193,10 @@ FAULTS = {
                                ["row 3", "6 cells where the header has 7 columns"]),
     "too many sections": (dict(sections=SECTIONS.splitlines()[1] + "\n"
                                + "".join(f"X{i},200,plain,no,,1,0\n" for i in range(300))),
-                          ["sections (300 rows)", "n_sections must be an integer in [1, 256], got 300"]),
+                          ["sections (300 rows)", "n_sections must be an integer in [1, 256], got 300",
+                           "split the line into lines of a network file"]),
+    "tonnage in kilotonnes": (dict(line=LINE.replace("annual_mgt: 15", "annual_mgt: 15000")),
+                              ["traffic.annual_mgt", "got 15000; it looks like kt/year: give it in MGT/year"]),
     # YAML takes a date-shaped value for a date and fails to build one, outside its own errors
     "impossible date in the line file": (dict(line=LINE.replace("as_of: 2026-01-01", "as_of: 2026-13-01")),
                                          ["line.yaml, line", "'2026-13-01' is not a date", "month must be in 1..12"]),
@@ -521,3 +524,11 @@ def test_only_a_cost_above_its_range_is_taken_for_euros(tmp_path):
     with pytest.raises(LineFileError) as err:
         load_line(write(tmp_path, line=LINE + "costs:\n  tamping_cost_per_m: -0.01\n"))
     assert "euros" not in str(err.value)
+
+
+def test_a_register_class_is_read_in_any_case(tmp_path):
+    """``Plain`` and ``TRANSITION`` are the classes they name (the ``wet`` column took any case, the register did
+    not); a word of another meaning is still refused with the likely class."""
+    line = load_line(write(tmp_path, sections=SECTIONS.replace("A,200,plain", "A,200,Plain")
+                           .replace("B,200,transition", "B,200,TRANSITION")))
+    assert [s.register for s in line.sections][:2] == ["plain", "transition"]

@@ -86,6 +86,11 @@ def check_horizon(name: str, years: Any, steps_per_year: int) -> float:
     return years
 
 
+#: The most sections a line has (its sections' statics and the observation grow with them; a longer line is a
+#: network of lines).
+MAX_SECTIONS = 256
+
+
 @dataclass(frozen=True)
 class LineConfig(ConfigBase):
     """Everything that defines a TampingLine problem. SI units unless the name says otherwise; costs in k€.
@@ -337,7 +342,7 @@ class LineConfig(ConfigBase):
         self._take_line()
         # each check stores the value back in its canonical type
         c, ci = partial(check_field, self), partial(check_int_field, self)
-        ci("n_sections", low=1, high=256)
+        ci("n_sections", low=1, high=MAX_SECTIONS)
         lo, hi = PER_SECTION_BOUNDS["section_length_m"]
         c("section_length_m", low=lo, high=hi)
         ci("sections_per_segment", low=1, high=64)

@@ -112,7 +112,7 @@ SECTION_COLUMNS: dict[str, Field] = {
     "section": Field("-", True, "the section's id: unique, any text (a kilometre post, an asset number)"),
     "length_m": Field("m", True, "section length: what its tamping, renewal and geometry cost and its possession "
                       "work scale with (its physics is the line's segment either way)", *SECTION_LENGTH_RANGE_M),
-    "register": Field("-", True, "asset-register class: " + ", ".join(REGISTER_CLASSES) + " (transition: a "
+    "register": Field("-", True, "asset-register class (any case): " + ", ".join(REGISTER_CLASSES) + " (transition: a "
                       "bridge or culvert approach; switch_or_crossing: switches and crossings, level crossings)"),
     "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage): yes, y, true or 1; "
                  "no, n, false or 0 (any case); blank: no"),
@@ -540,7 +540,8 @@ def _in_range(where: str, name: str, v: float, f: Field, why: str = "") -> float
 def _unit_hint(v: float, lo: float | None, hi: float | None, unit: str) -> str:
     """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %, an axle
     load in kg or kN)."""
-    others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),), "MGT/year": ((1e-6, "t/year"),),
+    others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),),
+              "MGT/year": ((1e-6, "t/year"), (1e-3, "kt/year")),
               "t": ((1e-3, "kg"), (1 / 9.81, "kN")),
               "-": ((1e-2, "per cent"),) if hi is not None and hi <= 1 else ()}.get(unit, ())
     for scale, name in others:
@@ -573,9 +574,11 @@ def _date(where: str, name: str, value: Any) -> str:
 
 
 def _choice(where: str, name: str, value: Any, choices: tuple[str, ...]) -> str:
+    """``value`` as one of ``choices``, in any case (``Plain`` is ``plain``, as ``wet`` takes ``Yes``); else a
+    LineFileError with the likely word."""
     text = _text(where, name, value)
-    if text in choices:
-        return text
+    if text.lower() in choices:
+        return text.lower()
     said = _SAID_OTHERWISE.get(text.lower())
     hint = [said] if said in choices else difflib.get_close_matches(text, choices, n=1)
     did = f"; did you mean {hint[0]!r}?" if hint else ""
@@ -736,6 +739,9 @@ def _config_check(where: str, key: str, config_field: str, value: float, unit: s
     except ValueError as e:
         lo_hi = _config_range(str(e))
         hint = _unit_hint(value, *lo_hi, unit) if lo_hi else ""
+        if config_field == "n_sections" and value > 1:
+            hint += ("; split the line into lines of a network file (trackenv plan NETWORK.yaml plans them "
+                     "together) or give it longer sections")
         raise LineFileError(f"{where}, {key}: {e}{hint}") from None
 
 
