@@ -532,3 +532,23 @@ def test_a_register_class_is_read_in_any_case(tmp_path):
     line = load_line(write(tmp_path, sections=SECTIONS.replace("A,200,plain", "A,200,Plain")
                            .replace("B,200,transition", "B,200,TRANSITION")))
     assert [s.register for s in line.sections][:2] == ["plain", "transition"]
+
+
+def test_a_chainage_column_checks_the_files_order(tmp_path):
+    """``km`` (optional) gives each section's start: a file in chainage order loads (a gap is a chainage jump) and
+    round-trips its chainage; a sheet re-sorted by another column, or two sections that overlap, is refused naming
+    the row and the section above."""
+    ordered = (SECTIONS.replace("tampings_since_renewal\n", "tampings_since_renewal,km\n")
+               .replace("A,200,plain,no,,2,1", "A,200,plain,no,,2,1,12.0")
+               .replace("B,200,transition,no,,3,2", "B,200,transition,no,,3,2,12.2")
+               .replace("C,200,switch_or_crossing,no,30,1.5,0", "C,200,switch_or_crossing,no,30,1.5,0,13.5")
+               .replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.5,3,"))
+    line = load_line(write(tmp_path, sections=ordered))
+    assert [s.km for s in line.sections] == [12.0, 12.2, 13.5, None]
+    assert LineDescription.from_dict(line.to_dict()).sections == line.sections
+    swapped = ordered.replace(",12.2\n", ",11.9\n")
+    with pytest.raises(LineFileError, match=r"row 4 \(section B\), km: starts at km 11.9, before section A "
+                                            r"\(km 12, 200 m\) ends at km 12.2: the rows are out of chainage order"):
+        load_line(write(tmp_path, sections=swapped))
+    with pytest.raises(LineFileError, match="ends at km 12.2: the two overlap"):
+        load_line(write(tmp_path, sections=ordered.replace(",12.2\n", ",12.1\n")))

@@ -127,7 +127,14 @@ SECTION_COLUMNS: dict[str, Field] = {
                                     0, 100),
     "rate_factor": Field("-", False, "the section's settlement-rate factor where it is known (1: typical plain "
                          "track); blank: drawn per episode, or fitted to the measured history", 0.01, 100.0),
+    "km": Field("km", False, "the chainage where the section starts (its kilometre post): rising down the file, and "
+                "no section starting before the one above it ends (a gap is fine: a chainage jump, sections not in "
+                "the file); it checks the file's order, which the line's model follows; blank: not known",
+                -1000.0, 10000.0),
 }
+#: Two sections overlap where one starts more than this before the one above it ends [m] (a chainage given to
+#: the metre, lengths rounded).
+CHAINAGE_TOLERANCE_M = 1.0
 
 #: The columns of the history CSV: one row per recording-car run and section, in date order per section.
 #: The SD range is a plausibility window (good track ~0.5 mm, poor ~3-5 mm over 200 m; EN 13848-6): a value
@@ -158,6 +165,7 @@ class Section:
     years_since_tamping: float
     tampings_since_renewal: int
     rate_factor: float | None = None
+    km: float | None = None
 
     @property
     def register_index(self) -> int:
@@ -274,6 +282,8 @@ class LineDescription:
                                    "tampings_since_renewal": s.tampings_since_renewal}
             if s.rate_factor is not None:
                 row["rate_factor"] = s.rate_factor
+            if s.km is not None:
+                row["km"] = s.km
             sections.append(row)
         history = []
         for m in self.history:
@@ -660,6 +670,7 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
     cols = SECTION_COLUMNS
     # the values already checked (the line's were, with its traffic)
     checked: dict[str, set[float]] = {k: {line[k]} for k in ("annual_mgt", "speed_kmh", "freight_share")}
+    above: Section | None = None  # the last section with a chainage
     for where, row in rows:
         sid = _text(where, "section", row["section"])
         if not sid:
@@ -689,11 +700,31 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         rate = row.get("rate_factor")
         rate_factor = None if _blank(rate) else _in_range(at, "rate_factor", _number(at, "rate_factor", rate, "-"),
                                                           cols["rate_factor"], " (1: typical plain track)")
+        km = None if _blank(row.get("km")) else _in_range(at, "km", _number(at, "km", row["km"], "km"), cols["km"])
         out.append(Section(id=sid, length_m=length, register=_choice(at, "register", row["register"],
                                                                      REGISTER_CLASSES),
                            wet=_yes_no(at, "wet", row.get("wet")), years_since_tamping=years,
-                           tampings_since_renewal=count, rate_factor=rate_factor, **traffic))
+                           tampings_since_renewal=count, rate_factor=rate_factor, km=km, **traffic))
+        if km is not None:
+            _check_chainage(at, out[-1], above)
+            above = out[-1]
     return out
+
+
+def _check_chainage(at: str, section: Section, above: Section | None) -> None:
+    """A LineFileError where ``section`` starts before ``above`` (the last section above it with a chainage) ends,
+    by more than :data:`CHAINAGE_TOLERANCE_M`: the rows are out of chainage order (a sheet sorted by another
+    column) or overlap."""
+    if above is None or above.km is None or section.km is None:
+        return
+    end = above.km + above.length_m / 1000.0
+    if section.km >= end - CHAINAGE_TOLERANCE_M / 1000.0:
+        return
+    why = ("the rows are out of chainage order (a sheet sorted by another column?)" if section.km < above.km else
+           "the two overlap")
+    raise LineFileError(f"{at}, km: starts at km {section.km:g}, before section {above.id} (km {above.km:g}, "
+                        f"{above.length_m:g} m) ends at km {end:g}: {why}; list the sections in the order of rising "
+                        f"chainage, each after the one above it")
 
 
 def _history(rows: Sequence[tuple[str, Mapping[str, Any]]], ids: set[str], as_of: str) -> list[Measurement]:
