@@ -167,9 +167,14 @@ COST_GROUPS = {
 
 def cost_groups(parts: dict[str, float]) -> dict[str, float]:
     """The mean cost parts ``parts`` [k€] summed by :data:`COST_GROUPS` (a group none of whose parts is there left
-    out): what the headline cost is made of."""
-    return {name: float(sum(parts[k] for k in keys if k in parts))
-            for name, (_, keys) in COST_GROUPS.items() if any(k in parts for k in keys)}
+    out; a part of no group under ``other``, so that the groups add up to the total): what the headline cost is
+    made of."""
+    out = {name: float(sum(parts[k] for k in keys if k in parts))
+           for name, (_, keys) in COST_GROUPS.items() if any(k in parts for k in keys)}
+    grouped = {k for _, keys in COST_GROUPS.values() for k in keys}
+    if set(parts) - grouped:
+        out["other"] = float(sum(v for k, v in parts.items() if k not in grouped))
+    return out
 
 
 def scenario_note(scenario: str) -> str | None:
@@ -380,7 +385,8 @@ class LinePlan:
                      f"over 10-90 % of the futures ({parts})")
         groups = cost_groups(d["cost_parts_mean_keur"])
         if groups:
-            lines.append("  " + "; ".join(f"{COST_GROUPS[name][0]} {value:.0f} k€" for name, value in groups.items()))
+            lines.append("  " + "; ".join(f"{COST_GROUPS.get(name, ('other',))[0]} {value:.0f} k€"
+                                          for name, value in groups.items()))
         if "geometry" in self.parts:
             lines.append(f"  ({GEOMETRY_NOTE})")
         end = self.end_state_line()
