@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -371,7 +372,8 @@ class LinePlan:
                     f"(--set capacity=N)"] if self.capacity is not None else []),
                  *([f"  {note}"] if (note := scenario_note(self.scenario)) else []),
                  *self.tuning_lines(),
-                 f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least half the futures)"]
+                 f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least "
+                 f"{math.ceil(RECOMMEND_SHARE * self.futures - 1e-9)} of the {self.futures} futures)"]
         for q, row in enumerate(d["quarters"]):
             if self.choices == ("tamp",):
                 what = self.tamp_text(q, row["tamp"]) or "-"

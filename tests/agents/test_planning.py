@@ -567,6 +567,7 @@ def test_a_plan_says_which_first_readings_are_the_models_and_lists_the_worst_fir
     listed = [line.split()[0] for line in plan._section_lines(np.arange(4), "tamp")]
     assert listed == [plan.line.sections[j].id for j in np.argsort(-plan.state["measured_sd_mm"][0], kind="stable")]
     assert listed[0] == "B"  # the rough section
+    assert "recommended (in at least 1 of the 2 futures)" in plan.table()  # "half" of two futures is either one
     ids = [f"S{i}" for i in range(15)]
     assert _listed(ids) == " ".join(ids[:12]) + " ... and 3 more (plan.csv)" and _listed(ids[:3]) == "S0 S1 S2"
 
