@@ -531,6 +531,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario (and what --tune cannot tune) before the fit and the futures
     config = plan_config(lines[0], args.scenario, years=args.years, **overrides)
+    if network is None and "capacity" in overrides and overrides["capacity"] != config.capacity:
+        raise UsageError(f"capacity must be at most the line's {config.n_sections} sections, got "
+                         f"{overrides['capacity']!r}")  # (plan_line refuses it too, after the start's bar)
     rules = [line_policy(policy, config, args.scenario, years=args.years) for policy in policies]
     if args.tune:
         from .plan_tuning import check_apart, check_tunable

@@ -25,7 +25,17 @@ from typing import Any
 
 import numpy as np
 
-from .plan_report import LinePlan, counted, end_state, line_summary, step_date, summary_lines, years_text
+from .plan_report import (
+    GEOMETRY_NOTE,
+    LinePlan,
+    cost_groups_text,
+    counted,
+    end_state,
+    line_summary,
+    step_date,
+    summary_lines,
+    years_text,
+)
 from .planning import (
     DEFAULT_POLICY,
     _run_futures,
@@ -142,15 +152,22 @@ class NetworkPlan:
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
             out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
+        guessed = [set(plan["q1_model_sd"]) for plan in d["line_plans"]]
+        starred = False
         for q, row in enumerate(d["quarters"]):
             where = [f"line {i} {s:.0%}" for i, s in enumerate(row["works_on"]) if s > 0]
             where += [f"idle on line {i} {s:.0%}" for i, s in enumerate(row["idle_on"]) if s > 0]
             where += [f"moving to line {i} {m:.0%}" for i, m in enumerate(row["moving_to"]) if m > 0]
-            tamped = [f"line {i}: {line.tamp_text(q, plan['quarters'][q]['tamp'])}"
+            tamped = [f"line {i}: {line.tamp_text(q, plan['quarters'][q]['tamp'], guessed[i] if q == 0 else set())}"
                       for i, (plan, line) in enumerate(zip(d["line_plans"], self.lines, strict=True))
                       if plan["quarters"][q]["tamp"]]
+            starred |= q == 0 and any(i in guessed[k] for k, plan in enumerate(d["line_plans"])
+                                      for i in plan["quarters"][0]["tamp"])
             out.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {', '.join(where) or '-'}; "
                        f"{'; '.join(tamped) or '-'}")
+        if starred:
+            out.append("* on the model's reading only: the file has no run of the section since its last tamping; "
+                       "measure it before acting")
         for i, line in enumerate(self.lines):
             decisions = line.decision_lines()
             if decisions:
@@ -162,11 +179,15 @@ class NetworkPlan:
             total = line.costs.sum(axis=1)
             out.append(f"cost of line {i} over {years_text(self.years)}: {total.mean():.0f} k€ mean, "
                        f"{np.quantile(total, 0.1):.0f}-{np.quantile(total, 0.9):.0f} k€ over 10-90 % of the futures")
+            groups = cost_groups_text({k: float(v.mean()) for k, v in line.parts.items()})
+            if groups:
+                out.append(f"  {groups}")
             end = line.end_state_line()
             if end is not None:
                 out.append(f"  {end}")
         out.append(f"cost of the network over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-"
                    f"{c['p90']:.0f} k€ over 10-90 % of the futures (moving the machine {c['move_mean']:.0f} k€)")
+        out.append(f"  ({GEOMETRY_NOTE})")
         return "\n".join(out)
 
     def figure(self) -> Any:
@@ -208,8 +229,9 @@ class NetworkPlan:
         bottom.plot(edges, summed(self.move_costs).mean(axis=0), color="0.5", ls="--", lw=1, label="moves")
         bottom.set_ylabel("cost summed to the end of the quarter [k€]")
         step = max(len(self.dates) // 8, 1)
-        bottom.set_xticks(quarters[::step], [self.dates[q] for q in quarters[::step]], fontsize=7)
-        bottom.set_xlabel("quarter from")
+        # a date at the start of its quarter: the cost curve's 0 at as_of, each bar between its quarter's dates
+        bottom.set_xticks(edges[:-1][::step], [self.dates[q] for q in quarters[::step]], fontsize=7)
+        bottom.set_xlabel("date (each bar: the quarter from its date to the next)")
         bottom.legend(fontsize=7, loc="upper left")
         fig.tight_layout()
         return fig

@@ -178,6 +178,12 @@ def cost_groups(parts: dict[str, float]) -> dict[str, float]:
     return out
 
 
+def cost_groups_text(parts: dict[str, float]) -> str:
+    """:func:`cost_groups` of the mean cost parts ``parts`` [k€] as a line of a table ("" without parts)."""
+    return "; ".join(f"{COST_GROUPS.get(name, ('other',))[0]} {value:.0f} k€"
+                     for name, value in cost_groups(parts).items())
+
+
 def scenario_note(scenario: str) -> str | None:
     """What the preset ``scenario`` adds to a line file's model, in a line of the table (None for the default):
     the wet line's hidden wet spots and the short-defect line's defects are the model's draws, not the file's."""
@@ -229,7 +235,9 @@ class LinePlan:
     section's largest true D1 mean-to-peak in any future (sections,; :meth:`beyond_validity`), and the rule's
     ``tuning`` on the line where the plan asked for one (:class:`~trackenv_agents.plan_tuning.RuleTuning`; None:
     the shipped parameters), and each section's true SD at the start and the end of each future (``sd_start_mm``,
-    ``sd_end_mm``, (futures, sections) mm; None: not known): what the plan leaves (:meth:`end_state`)."""
+    ``sd_end_mm``, (futures, sections) mm; None: not known): what the plan leaves (:meth:`end_state`); and
+    ``renewed_share`` (quarters, sections): of the futures that tamp a section in a quarter, the share in which
+    that tamping is a ballast renewal (None: not known)."""
 
     line: Any
     policy: str
@@ -260,6 +268,7 @@ class LinePlan:
     tuning: Any = None
     sd_start_mm: np.ndarray | None = None
     sd_end_mm: np.ndarray | None = None
+    renewed_share: np.ndarray | None = None
 
     @property
     def share(self) -> np.ndarray:
@@ -336,6 +345,7 @@ class LinePlan:
             "fit": {"fitted": len(self.fit.fitted), "median_residual_mm": self.fit.to_dict()["median_residual_mm"]},
             "beyond_validity_peak_mm": self.beyond_validity(),
             "q1_model_sd": [i for i, m in zip(ids, self.model_read()["sd"], strict=True) if m],
+            "choices_on": self.choices_on(),
             "tuning": None if self.tuning is None else self.tuning.to_dict(),
             "end_state": self.end_state(),
         }
@@ -374,21 +384,28 @@ class LinePlan:
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least "
                  f"{math.ceil(RECOMMEND_SHARE * self.futures - 1e-9)} of the {self.futures} futures)"]
+        guessed = {s.id for s, m in zip(self.line.sections, self.model_read()["sd"], strict=True) if m}
+        starred = False
         for q, row in enumerate(d["quarters"]):
+            star = guessed if q == 0 else set()
+            starred |= any(i in star for name in self.choices for i in row[name])
             if self.choices == ("tamp",):
-                what = self.tamp_text(q, row["tamp"]) or "-"
+                what = self.tamp_text(q, row["tamp"], star) or "-"
             else:
-                what = "; ".join(f"{name} {_listed(row[name])}" for name in self.choices if row[name]) or "-"
+                what = "; ".join(f"{name} {_listed([i + '*' if i in star else i for i in row[name]])}"
+                                 for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
+        if starred:
+            lines.append("* on the model's reading only: the file has no run of the section since its last tamping; "
+                         "measure it before acting")
         lines += [*self.decision_lines(), self.recording_note(), *self.validity_lines()]
         c = d["cost_keur"]
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
         lines.append(f"cost over {years_text(self.years)}: {c['mean']:.0f} k€ mean, {c['p10']:.0f}-{c['p90']:.0f} k€ "
                      f"over 10-90 % of the futures ({parts})")
-        groups = cost_groups(d["cost_parts_mean_keur"])
+        groups = cost_groups_text(d["cost_parts_mean_keur"])
         if groups:
-            lines.append("  " + "; ".join(f"{COST_GROUPS.get(name, ('other',))[0]} {value:.0f} k€"
-                                          for name, value in groups.items()))
+            lines.append(f"  {groups}")
         if "geometry" in self.parts:
             lines.append(f"  ({GEOMETRY_NOTE})")
         end = self.end_state_line()
@@ -413,14 +430,20 @@ class LinePlan:
         return [f"parameters: the shipped ones ({shown}), tuned on the {self.scenario} preset's line; --tune 8 tunes "
                 f"them on this line first (minutes)", *self.choices_line()]
 
-    def choices_line(self) -> list[str]:
-        """For a choice rule on a scenario with choices, which of them its parameters switch on (a scenario's
-        tuned rule may switch every one off: the grouped threshold itself)."""
+    def choices_on(self) -> list[str] | None:
+        """For a choice rule on a scenario with choices, the choices beyond tamping its parameters switch on (a
+        scenario's tuned rule may switch every one off: the grouped threshold itself); None for another policy."""
         from .rules.choices import CHOICE_RULES, choices_on
 
         if self.policy not in CHOICE_RULES or self.choices == ("tamp",):
+            return None
+        return choices_on(self.policy_params)
+
+    def choices_line(self) -> list[str]:
+        """:meth:`choices_on` as a line of the table (none for another policy)."""
+        on = self.choices_on()
+        if on is None:
             return []
-        on = choices_on(self.policy_params)
         if not on:
             return ["  choices beyond tamping: none (its parameters switch every one off: the grouped threshold "
                     "itself; --tune 8 searches them on this line)"]
@@ -446,11 +469,12 @@ class LinePlan:
                 f"costs that follow are not physical (the scenario's defect and wet-spot rates: "
                 f"local_defect_rate_factor, wet_spot_rate_factor)"]
 
-    def tamp_text(self, quarter: int, tamped: list[str]) -> str:
+    def tamp_text(self, quarter: int, tamped: list[str], star: set[str] | frozenset[str] = frozenset()) -> str:
         """The ids of the sections recommended for tamping in ``quarter`` as the table gives them: a ballast
-        renewal marked "(renewal)", and a note where they are more than the capacity."""
+        renewal marked "(renewal)", those of ``star`` with a ``*`` (Q1 on the model's reading only), and a note
+        where they are more than the capacity."""
         renewals = self.renewals(quarter)
-        text = _listed([f"{i} (renewal)" if i in renewals else i for i in tamped])
+        text = _listed([f"{i}{'*' if i in star else ''}{' (renewal)' if i in renewals else ''}" for i in tamped])
         if self.capacity is not None and len(tamped) > self.capacity:
             text += (f" (more than the capacity of {self.capacity}: each future tamps at most {self.capacity}; "
                      f"listed, those of at least half the futures)")
@@ -458,8 +482,9 @@ class LinePlan:
 
     def renewals(self, quarter: int) -> set[str]:
         """The ids of the sections whose tamping in ``quarter`` is a ballast renewal in at least
-        :data:`RENEWAL_SHARE` of the futures."""
-        due = self.state.get("renewal_due")
+        :data:`RENEWAL_SHARE` of the futures that tamp them (:attr:`renewed_share`; a plan without it: of all the
+        futures, by ``renewal_due``, which can mark a tamping that is a renewal only in futures that do not tamp)."""
+        due = self.state.get("renewal_due") if self.renewed_share is None else self.renewed_share
         if due is None:
             return set()
         return {s.id for s, share in zip(self.line.sections, due[quarter], strict=True) if share >= RENEWAL_SHARE}
@@ -519,11 +544,12 @@ class LinePlan:
                 "budget": "beyond the annual budget left", "unknown": "for a reason the plan does not know"}[key]
 
     def _section_lines(self, at: np.ndarray, what: str, why: Callable[[int], str] | None = None) -> list[str]:
-        """:meth:`_section_line` of the sections ``at``, the worst measured SD first, at most :data:`SECTION_LINES`
-        of them (the rest counted: their numbers are in plan.csv and the JSON); ``why(j)``: words after ``what`` in
-        section ``j``'s line, in brackets."""
+        """:meth:`_section_line` of the sections ``at``, those measured first (then those on the model's reading
+        only, :meth:`model_read`), each the worst measured SD first, at most :data:`SECTION_LINES` of them (the rest
+        counted: their numbers are in plan.csv and the JSON); ``why(j)``: words after ``what`` in section ``j``'s
+        line, in brackets."""
         if "measured_sd_mm" in self.state:
-            at = at[np.argsort(-self.state["measured_sd_mm"][0, at], kind="stable")]
+            at = at[np.lexsort((-self.state["measured_sd_mm"][0, at], self.model_read()["sd"][at]))]
         lines = [self._section_line(int(j), what if why is None else f"{what} ({why(int(j))})")
                  for j in at[:SECTION_LINES]]
         if len(at) > SECTION_LINES:
@@ -549,13 +575,18 @@ class LinePlan:
                                        ("switch or crossing", section.register == "switch_or_crossing"),
                                        ("known wet", section.wet)) if on]
         tag = f" ({', '.join(known)})" if known else ""
-        if what == "tamp" and st.get("renewal_due", 0.0) >= RENEWAL_SHARE:
+        if what == "tamp" and self.renewed_share is not None and self.renewed_share[0, j] >= RENEWAL_SHARE:
+            what = f"tamp, a ballast renewal in {self.renewed_share[0, j]:.0%} of the futures that tamp it"
+        elif what == "tamp" and self.renewed_share is None and st.get("renewal_due", 0.0) >= RENEWAL_SHARE:
             what = f"tamp, a ballast renewal in {st['renewal_due']:.0%} of the futures"
-        read = self.model_read()
-        sd_read = "the model's SD (no run in the file since its last tamping: measure it first)" if read["sd"][j] \
-            else "measured SD"
-        peak_read = "the model's peak" if read["peak"][j] and not read["sd"][j] else "peak"
-        return (f"  {section.id}{tag} {what}: {sd_read} {st['measured_sd_mm']:.2f} (SD alert "
+        if self.model_read()["sd"][j]:  # a draw of the model where the file has no run: not a measurement
+            return (f"  {section.id}{tag} {what}, on the model's reading only (the file has no run of it since its "
+                    f"last tamping: measure it before acting): SD {st['measured_sd_mm']:.2f} (SD alert "
+                    f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
+                    f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}); true SD "
+                    f"{st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
+        peak_read = "the model's peak" if self.model_read()["peak"][j] else "peak"
+        return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
                 f"{lim['sd_alert']:g}), {peak_read} {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, "
                 f"intervention {lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
                 f"{st['measurement_age_years']:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")

@@ -248,7 +248,9 @@ class _Futures:
     of futures in which the policy asked for a choice that was not applied (steps, sections), the number of
     futures in which that was for each of :data:`UNMET_REASONS` (each (steps, sections)), each section's largest
     true D1 mean-to-peak in any future and step (sections,) mm, its true SD at the start and at the end of each
-    future (``sd_start_mm``, ``sd_end_mm``: (futures, sections) mm); on a network the ``machine``'s record."""
+    future (``sd_start_mm``, ``sd_end_mm``: (futures, sections) mm); on a network the ``machine``'s record; and
+    ``renewed_share`` (steps, sections): of the futures that tamp a section in a step, the share in which that
+    tamping is a ballast renewal (0 where none tamps it)."""
 
     share: np.ndarray
     costs: np.ndarray
@@ -260,6 +262,7 @@ class _Futures:
     sd_start_mm: np.ndarray
     sd_end_mm: np.ndarray
     machine: _MachineRecord | None = None
+    renewed_share: np.ndarray | None = None
 
     def line(self, index: int, at: slice) -> _Futures:
         """A network's line ``index`` (its sections ``at``) as the futures of a line: its sections' shares,
@@ -270,7 +273,8 @@ class _Futures:
                         {k: v[:, :, index] for k, v in m.line_part_costs.items()},
                         {k: v[:, at] for k, v in self.state.items()}, self.unmet_share[:, at],
                         {k: v[:, at] for k, v in self.unmet_reasons.items()}, self.peak_max_mm[at],
-                        self.sd_start_mm[:, at], self.sd_end_mm[:, at])
+                        self.sd_start_mm[:, at], self.sd_end_mm[:, at],
+                        renewed_share=None if self.renewed_share is None else self.renewed_share[:, at])
 
 
 #: why the env did not apply what was asked in one step: (want, applied codes, allowed, measured SD, info) ->
@@ -296,19 +300,25 @@ def _run_futures(env: Any, rule: Any, steps: int, seeds: list[int], progress: Ca
     out = _Futures(np.zeros((steps, sections, len(CHOICES))), np.zeros((futures, steps)), {},
                    {key: np.zeros((steps, sections)) for key in STATE_COLUMNS}, np.zeros((steps, sections)),
                    {key: np.zeros((steps, sections), dtype=np.int64) for key in UNMET_REASONS}, np.zeros(sections),
-                   np.array(info["section_sd_mm"], dtype=float), np.zeros((futures, sections)))
+                   np.array(info["section_sd_mm"], dtype=float), np.zeros((futures, sections)),
+                   renewed_share=np.zeros((steps, sections)))
     if "line_costs" in info:  # a network: each line's costs, and the machine
         lines = np.shape(info["line_costs"])[1]
         out.machine = _MachineRecord(np.zeros((futures, steps, lines)), {}, np.zeros((futures, steps), np.int64),
                                      np.zeros((futures, steps), bool), np.zeros((futures, steps), bool))
+    tamp = CHOICES.index("tamp")
     for step in range(steps):
-        _record_state(out.state, step, obs, info, env.batch.renewing(), line_sections)
+        renewing = np.asarray(env.batch.renewing()).reshape(np.shape(obs["section_sd"]))
+        _record_state(out.state, step, obs, info, renewing, line_sections)
         action, _ = rule.predict(obs, deterministic=True)
         allowed, measured_sd = env.batch.allowed(), obs["section_sd"]  # as the env resolves the step's work
         obs, reward, _, _, info = env.step(action)
         codes = np.asarray(info["section_choices"])  # (futures, sections)
         want = np.asarray(action if asked is None else asked(action)).reshape(codes.shape).astype(np.int64)
         out.share[step] = (codes[..., None] == np.arange(len(CHOICES))).mean(axis=0)
+        tamped = codes == tamp
+        assert out.renewed_share is not None
+        out.renewed_share[step] = (tamped & renewing).sum(axis=0) / np.maximum(tamped.sum(axis=0), 1)
         out.unmet_share[step] = ((want != 0) & (codes == 0)).mean(axis=0)
         for key, value in why(want, codes, allowed, measured_sd, info).items():
             out.unmet_reasons[key][step] = value.sum(axis=0)
@@ -359,7 +369,8 @@ def _idle_note(plan: LinePlan) -> str | None:
     started there: a sentence saying so, naming the rule's trigger where it lies above most sections' SD alert (a
     rule tuned on a slower preset line waits past this line's alert); else None."""
     end = plan.end_state()
-    if plan.recommended.any() or end is None or "sections_at_sd_alert_end" not in end:
+    if plan.policy == "no-maintenance" or plan.recommended.any() or end is None or \
+            "sections_at_sd_alert_end" not in end:  # (no maintenance recommends nothing by design)
         return None
     if end["sections_at_sd_alert_end"] <= end["sections_at_sd_alert_start"]:
         return None
@@ -403,7 +414,8 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
                     config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm,
-                    tuning=tuning, sd_start_mm=run.sd_start_mm, sd_end_mm=run.sd_end_mm)
+                    tuning=tuning, sd_start_mm=run.sd_start_mm, sd_end_mm=run.sd_end_mm,
+                    renewed_share=run.renewed_share)
 
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,

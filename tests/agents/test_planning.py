@@ -430,7 +430,8 @@ def test_a_recommended_tamping_that_is_a_ballast_renewal_says_so(tmp_path):
     plan = plan_line(write(tmp_path, sections=due, history=ROUGH_B), years=0.25, futures=2, **FAST)
     b = [s.id for s in plan.line.sections].index("B")
     assert plan.recommended[0, b] == 1 and plan.state["renewal_due"][0, b] == 1.0
-    assert "B (transition) tamp, a ballast renewal in 100% of the futures:" in plan.table()
+    assert "B (transition) tamp, a ballast renewal in 100% of the futures that tamp it:" in plan.table()
+    assert plan.renewed_share[0, b] == 1.0
     (q1,) = [row for row in plan.table().splitlines() if row.startswith("Q1 ")]
     assert "B (renewal)" in q1
     rows = [r for r in csv.DictReader((Path(plan.write(tmp_path / "plan")["plan_csv"])).open())
@@ -561,11 +562,14 @@ def test_a_plan_says_which_first_readings_are_the_models_and_lists_the_worst_fir
 
     plan, _ = rough_plan
     assert plan.to_dict()["q1_model_sd"] == ["D"] and plan.model_read()["sd"].tolist() == [False, False, False, True]
-    assert "D (known wet) tamp: the model's SD (no run in the file since its last tamping: measure it first)" in \
-        plan._section_line(3, "tamp")
+    guessed = plan._section_line(3, "tamp")
+    assert guessed.startswith("  D (known wet) tamp, on the model's reading only (the file has no run of it since "
+                              "its last tamping: measure it before acting): SD ")
+    assert "years old" not in guessed  # (it read "0.00 years old", as if just measured)
     assert "B (transition) tamp: measured SD" in plan._section_line(1, "tamp")
     listed = [line.split()[0] for line in plan._section_lines(np.arange(4), "tamp")]
-    assert listed == [plan.line.sections[j].id for j in np.argsort(-plan.state["measured_sd_mm"][0], kind="stable")]
+    measured = [j for j in np.argsort(-plan.state["measured_sd_mm"][0], kind="stable") if j != 3]
+    assert listed == [plan.line.sections[j].id for j in measured] + ["D"]  # the model's reading last
     assert listed[0] == "B"  # the rough section
     assert "recommended (in at least 1 of the 2 futures)" in plan.table()  # "half" of two futures is either one
     ids = [f"S{i}" for i in range(15)]
@@ -615,6 +619,10 @@ def test_a_plan_that_recommends_nothing_while_the_line_passes_its_alert_warns(tm
     (idle,) = [w for w in plan_warnings(plan) if "nothing is recommended" in w]
     assert "the rule's trigger_mm 3.5 mm is above the SD alert of 4 of 4 sections" in idle and "--tune 8" in idle
     assert not [w for w in plan_warnings(plan, alone=False) if "nothing is recommended" in w]
+    import dataclasses  # no maintenance recommends nothing by design: no warning (noise in a --compare)
+
+    assert not [w for w in plan_warnings(dataclasses.replace(plan, policy="no-maintenance"))
+                if "nothing is recommended" in w]
     _say_warnings([f"note {i}" for i in range(PRINTED_WARNINGS + 3)])
     err = capsys.readouterr().err.splitlines()
     assert len(err) == PRINTED_WARNINGS + 1
@@ -654,3 +662,25 @@ def test_a_file_whose_last_run_is_years_old_warns(tmp_path):
     assert len(stale) == 1 and "(2025-12-01) is 6.0 years before as_of" in stale[0]
     fresh = plan_line(write(tmp_path), years=0.25, futures=1, **FAST)
     assert not [w for w in plan_warnings(fresh) if "recording-car" in w]
+
+
+def test_the_renewal_mark_and_the_model_reading_star_say_what_the_futures_did(rough_plan):
+    """"(renewal)" marks a recommended tamping that is a renewal in most of the futures that tamp the section (a
+    network plan marked a tamping whose renewal was due only in the future that had tamped it the quarter before,
+    while its costs held no renewal); Q1's ids on the model's reading only carry a ``*`` and the table says why."""
+    import dataclasses
+
+    plan, _ = rough_plan
+    due = {k: v.copy() for k, v in plan.state.items()}
+    due["renewal_due"][0, 1] = 0.5  # due in one of the two futures
+    for renewed, marked in ((0.0, False), (1.0, True)):
+        share = np.zeros_like(plan.renewed_share)
+        share[0, 1] = renewed
+        assert ("B" in dataclasses.replace(plan, state=due, renewed_share=share).renewals(0)) is marked
+    assert plan.tamp_text(0, ["B", "D"], {"D"}) == "B D*"
+    choice = plan.choice_share.copy()
+    choice[0, 3] = 0.0
+    choice[0, 3, 1] = 1.0  # D (no run in the file) tamped in Q1 in every future
+    table = dataclasses.replace(plan, choice_share=choice).table()
+    (q1,) = [row for row in table.splitlines() if row.startswith("Q1 ")]
+    assert "D*" in q1 and "* on the model's reading only: the file has no run of the section" in table

@@ -117,6 +117,12 @@ def test_lines_dated_more_than_a_step_apart_are_refused(tmp_path):
         load_network(path).config()
     branch.write_text(branch.read_text().replace("as_of: 2026-05-01", "as_of: 2026-02-01"))
     assert load_network(path).config().n_lines == 2  # within a quarter: they step together from 2026-02-01
+    # up to 92 days (the longest calendar quarter, 1 October to 1 January) is one step; a day more is not
+    branch.write_text(branch.read_text().replace("as_of: 2026-02-01", "as_of: 2026-04-03"))
+    assert load_network(path).config().n_lines == 2
+    branch.write_text(branch.read_text().replace("as_of: 2026-04-03", "as_of: 2026-04-04"))
+    with pytest.raises(LineFileError, match="is 93 days before .* within one step \\(92 days\\)"):
+        load_network(path).config()
 
 
 @pytest.mark.parametrize("field, where", [("move_cost", "move_cost: 20, in k€"),

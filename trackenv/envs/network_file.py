@@ -20,6 +20,7 @@ latest of them. Every fault raises :class:`~trackenv.envs.line_file.LineFileErro
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
@@ -101,15 +102,16 @@ class NetworkDescription:
                 lines.append(LineConfig.from_dict({**line_fields, "line": line}))
             except ValueError as exc:
                 raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): {exc}") from None
-        step_days = DAYS_PER_YEAR / lines[0].steps_per_year
+        # a step in whole days, rounded up: 92 for a quarter, so that 1 October and 1 January step together
+        step_days = math.ceil(DAYS_PER_YEAR / lines[0].steps_per_year)
         for i, line in enumerate(self.lines):
             late = -line.years_before(self.as_of) * DAYS_PER_YEAR  # days from its as_of to the latest
-            if late > step_days:
+            if late > step_days + 1e-9:
                 k, latest = next((k, other) for k, other in enumerate(self.lines) if other.as_of == self.as_of)
                 raise LineFileError(f"{self.source}, lines[{i}] ({line.source}): as_of {line.as_of} is {late:.0f} "
                                     f"days before the network's latest ({self.as_of}, lines[{k}]: "
                                     f"{latest.source}); the lines step together, so "
-                                    f"their states must be dated within one step ({step_days:.0f} days): bring "
+                                    f"their states must be dated within one step ({step_days} days): bring "
                                     f"the file up to its last measurements")
         move_cost = NetworkConfig.move_cost if self.move_cost is None else self.move_cost
         try:
