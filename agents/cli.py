@@ -1136,10 +1136,10 @@ def build_parser() -> _Parser:
     sp.add_argument("--policy", default=DEFAULT_PLAN_POLICY, metavar="NAME",
                     help="a line rule: no-maintenance, uniform-periodic, section-threshold, grouped-threshold, "
                          "register-periodic, budgeted-worst-first (with its tuned parameters); cpi-agent (the shipped "
-                         "agent, at most the 10 years it was trained on) or the path of a trained per-section policy; "
-                         "with a scenario that has every choice also choice-threshold, choice-threshold-no-looking, "
-                         "choice-threshold-spot-only and cpi-choice-agent (the shipped agent of the lines with every "
-                         "choice)")
+                         "agent, at most the 10 years it was trained on), cpi-choice-agent (the shipped agent of the "
+                         "lines with every choice; its tamping on a tamping-only line or a network) or the path of a "
+                         "trained per-section policy; with a scenario that has every choice (not on a network) also "
+                         "choice-threshold, choice-threshold-no-looking and choice-threshold-spot-only")
     sp.add_argument("--scenario", default="default", choices=("default", "choices", "wet", "defects"),
                     help="how the line is modelled beyond its file: default (hidden parts as on the default line, "
                          "tamping only), choices (every intervention and inspection), wet (a wet, poorly drained "
