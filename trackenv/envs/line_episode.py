@@ -604,21 +604,26 @@ class LineBatch:
         above, at the section's own traffic); the rate factor the file gives, or a draw from its posterior given
         the history (:func:`~trackenv.envs.line_fit.rate_multipliers`), in place of the drawn one; and the SD the
         history gives at the start (the drawn shape and settlement scaled to it:
-        :func:`~trackenv.envs.line_fit.start_levels`).
+        :func:`~trackenv.envs.line_fit.start_levels`); every SD there is the section's as the engine measures
+        it (with ``local_defect_near_m``, its drawn local defects once in its length:
+        :func:`~trackenv.envs.line_fit.sd_weights`).
         Everything is drawn first, as without a file, so the draws and their order do not change."""
         c = self.config
         if c.line is None:
             return
-        from .line_fit import drawn_section_factor, line_overrides, rate_multipliers, start_levels, zone_factors
+        from .line_fit import (drawn_section_factor, line_overrides, rate_multipliers, sd_weights, start_levels,
+                               zone_factors)
 
         # a line file's config has one section per segment (LineConfig refuses more): section j is segment j
         o, r, rs, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sleepers
+        # the SD of a section as measured (its local defects once in its length; None: the segment's own SD)
+        weights = sd_weights(self.defect_near[rs], c.section_length_m * self.length_factor[r], c)
         old_rate, old_k = zone_factors(self.register[r], n, c)
         new_rate, new_k = zone_factors(o.register, n, c)
         drawn = drawn_section_factor(self.base_rate[rs] / old_rate, c)
         rate = self.base_rate[rs] / old_rate * new_rate
         rate[o.wet] *= np.where(self.wet_mask[rs][o.wet], c.wet_spot_rate_factor, 1.0)
-        self.base_rate[rs] = rate * rate_multipliers(o, drawn, rate, c)[:, None]
+        self.base_rate[rs] = rate * rate_multipliers(o, drawn, rate, c, weights)[:, None]
         self.wet_onset[rs] = np.where(o.wet, -1, self.wet_onset[rs])
         self.wet_active[rs] = o.wet
         base = Track.realistic(c.segment_length_m)
@@ -638,7 +643,8 @@ class LineBatch:
         known = np.flatnonzero(~np.isnan(o.start_sd_m))
         rows = rs.start + known
         self.offset[rows], self.u[rows] = start_levels(self.offset[rows], self.u[rows],
-                                                       o.sd_after_tamping_m[known], o.start_sd_m[known])
+                                                       o.sd_after_tamping_m[known], o.start_sd_m[known],
+                                                       None if weights is None else weights[known])
 
     def _file_readings(self, b: int) -> None:
         """Line ``b``'s first observation as a planner knows it at ``as_of``: each section's last recording-car run

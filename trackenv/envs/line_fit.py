@@ -259,13 +259,15 @@ def last_runs(line: LineDescription) -> dict[str, np.ndarray]:
 
 
 def rate_multipliers(overrides: LineOverrides, drawn: np.ndarray, rate: np.ndarray,
-                     config: LineConfig) -> np.ndarray:
+                     config: LineConfig, weights: np.ndarray | None = None) -> np.ndarray:
     """(S,) what each section's drawn per-sleeper rates (S, n) (its register's and known wet zone's factors in,
     tamping damage out) are multiplied by, given the section factors ``drawn`` of the episode's draw: the
     file's factor over the drawn one where the file gives one; where the history is fitted, a draw from the
     posterior (the quantile of the drawn factor under the prior, lognormal with log-SD ``rate_sigma``, taken to
     the same quantile of the posterior) times the class's typical rate-field roughness over this draw's, so
-    that the draw's settlement grows as the history says whatever its hidden field; else 1."""
+    that the draw's settlement grows as the history says whatever its hidden field (its local defects
+    included: the roughness weighs the sleepers as the section's SD does, ``weights`` of :func:`sd_weights`;
+    None: the segment's own); else 1."""
     o = overrides
     out = np.where(np.isnan(o.rate_factor), 1.0, o.rate_factor / drawn)
     fitted = np.flatnonzero(~np.isnan(o.rate_cdf[:, 0]))
@@ -274,16 +276,47 @@ def rate_multipliers(overrides: LineOverrides, drawn: np.ndarray, rate: np.ndarr
         z = (np.log(drawn[fitted]) + sigma**2 / 2) / sigma if sigma > 0 else np.zeros(fitted.size)
         k = np.array([math.exp(float(np.interp(ndtr(zj), o.rate_cdf[j], np.log(RATE_GRID))))
                       for zj, j in zip(z, fitted, strict=True)])
-        out[fitted] = k * o.roughness[fitted] / roughness(rate[fitted])
+        w = None if weights is None else weights[fitted]
+        out[fitted] = k * o.roughness[fitted] / roughness(rate[fitted], w)
     return out
 
 
-def roughness(rate: np.ndarray) -> np.ndarray:
+def roughness(rate: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """(rows,) the SD of the D1 of per-sleeper rate factors (rows, n): how unevenly a segment settles. The
     settlement's D1 SD in the engine follows it closely (its log correlates at 0.97 with the dynamic
     settlement's after three years over 48 draws of a plain section), so it carries a history's growth into an
-    episode's draw of the hidden field."""
-    return _centred_d1(rate).std(axis=1)
+    episode's draw of the hidden field. With ``weights`` (:func:`sd_weights`), the SD as the section's is taken
+    (its local defects once in its length)."""
+    return weighted_sd(_centred_d1(rate), weights)
+
+
+def sd_weights(near: np.ndarray, length_m: np.ndarray, config: LineConfig) -> np.ndarray | None:
+    """(rows, n) the weight of each sleeper's squared D1 deviation in the SD of the section a segment represents,
+    as the engine takes it (``LineBatch._segment_sd``) with ``local_defect_near_m``: the sleepers within that
+    reach of a local defect (``near``, (rows, n) bool) share w / L, the rest (L − w) / L, w their length and L
+    the section's (``length_m``, (rows,)); a segment without a defect, or all near one, uniform. None where
+    ``local_defect_near_m`` is 0: the segment's own SD (uniform weights), computed as before. Each row sums
+    to 1."""
+    if config.local_defect_near_m == 0:
+        return None
+    near = np.asarray(near, dtype=bool)
+    n = near.shape[1]
+    n_near = near.sum(axis=1)
+    n_far = n - n_near
+    share = np.minimum(n_near * SLEEPER_SPACING_M, length_m) / length_m
+    split = (n_near > 0) & (n_far > 0)
+    w_near = np.where(split, share / np.maximum(n_near, 1), 1.0 / n)
+    w_far = np.where(split, (1.0 - share) / np.maximum(n_far, 1), 1.0 / n)
+    return np.where(near, w_near[:, None], w_far[:, None])
+
+
+def weighted_sd(d1: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """(rows,) the SD of ``d1`` (rows, n) about each row's mean, its squared deviations weighted by ``weights``
+    (:func:`sd_weights`; None: uniform, ``d1.std(axis=1)``)."""
+    if weights is None:
+        return d1.std(axis=1)
+    dev = d1 - d1.mean(axis=1, keepdims=True)
+    return np.sqrt((weights * dev * dev).sum(axis=1))
 
 
 def _line(config: LineConfig) -> LineDescription:
@@ -534,7 +567,12 @@ def _growth(config: LineConfig, cls: tuple[str, bool, float, float, float], year
                             annual_mgt=line.annual_mgt * factor, speed_kmh=speed, freight_share=share,
                             years_since_tamping=FIT_PREVIOUS_CYCLE_YEARS, tampings_since_renewal=0, rate_factor=1.0)
     proto_line = replace(line, sections=(proto_section,), history=(), source=f"{line.source} (fit)")
-    proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year)
+    # without local defects: a defect's settlement runs away on some draws (its dynamic force feeds it: 5-10 times
+    # the settlement per roughness of the others, 30 mm SD in a year next to a transition's stiff half), so the
+    # class's mean curve would follow those draws and no section's history; the fit is of the section's own
+    # field, as without defects, and the episode's draw (its defects included) is scaled to it
+    proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year,
+                           local_defects_mean=0.0)
     phi, rough, rough_sd, rho = _simulated_growth(proto, steps)
     return _Growth(phi[0], float(rough[0]), float(rough_sd[0]), rho[0])
 
@@ -556,14 +594,18 @@ def _simulated_growth(proto: LineConfig, steps: int) -> tuple[np.ndarray, ...]:
     def rows(name: str) -> np.ndarray:
         return np.concatenate([batch.get_state(b).rows[name] for b in range(FIT_DRAWS)])
 
-    shape, rough = _centred_d1(rows("offset")), roughness(rows("base_rate"))
+    # the SDs as the engine measures the section's (its local defects once in its length, where counted so)
+    weights = sd_weights(rows("defect_near"), proto.section_length_m * rows("length_factor"), proto)
+    shape, rough = _centred_d1(rows("offset")), roughness(rows("base_rate"), weights)
+    shape_sd = weighted_sd(shape, weights)
     per_rough, rho = [np.zeros(FIT_DRAWS * S)], []
     for step in range(steps):
         batch.traffic_rows(every, step)
         settled = _centred_d1(rows("u"))
-        sd = settled.std(axis=1)
+        sd = weighted_sd(settled, weights)
         per_rough.append(sd / rough)
-        rho.append((shape * settled).mean(axis=1) / (shape.std(axis=1) * sd + 1e-300))
+        cov = (shape * settled).mean(axis=1) if weights is None else (weights * shape * settled).sum(axis=1)
+        rho.append(cov / (shape_sd * sd + 1e-300))
     log_rough = np.log(rough).reshape(FIT_DRAWS, S)
     typical = np.exp(log_rough.mean(axis=0))
     phi = np.array(per_rough).reshape(steps + 1, FIT_DRAWS, S).mean(axis=1).T * typical[:, None]
@@ -607,45 +649,52 @@ def drawn_section_factor(plain_rate: np.ndarray, config: LineConfig) -> np.ndarr
 
 
 def start_levels(shape: np.ndarray, settled: np.ndarray, sd_after_tamping: np.ndarray,
-                 start_sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 start_sd: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A section's post-tamping ``shape`` and its ``settled`` level since (rows, n) [m] scaled so that it starts
     at the SD its history gives, ``start_sd`` [m] per row: the shape to the fitted SD right after tamping
     ``sd_after_tamping`` (where fitted; NaN: as drawn), then the settlement to the start SD; where the shape
-    is rougher than that on its own, the shape instead (with the settlement at its least rough scale).
-    Returns the new (shape, settled)."""
+    is rougher than that on its own, the shape instead (with the settlement at its least rough scale). Each SD
+    is the section's as the engine measures it: with ``weights`` (:func:`sd_weights`, (rows, n)), its local
+    defects once in its length; None, the segment's own. Returns the new (shape, settled)."""
     shape, settled = shape.copy(), settled.copy()
     sd0 = np.asarray(sd_after_tamping, dtype=float)
     fitted = ~np.isnan(sd0)
     if fitted.any():  # the D1 filter is homogeneous (D1(s·z) = s·D1(z)): a ratio of SDs scales it exactly
-        own = d1_filter(shape[fitted], SLEEPER_SPACING_M).std(axis=1)
+        own = weighted_sd(d1_filter(shape[fitted], SLEEPER_SPACING_M), None if weights is None else weights[fitted])
         shape[fitted] *= (sd0[fitted] / np.maximum(own, 1e-12))[:, None]
-    s, reached = scale_to(settled, shape, start_sd)
+    s, reached = scale_to(settled, shape, start_sd, weights)
     settled *= s[:, None]
     if not reached.all():
         rest = ~reached
-        s_shape, _ = scale_to(shape[rest], settled[rest], np.asarray(start_sd)[rest])
+        s_shape, _ = scale_to(shape[rest], settled[rest], np.asarray(start_sd)[rest],
+                              None if weights is None else weights[rest])
         shape[rest] *= s_shape[:, None]
     return shape, settled
 
 
-def scale_to(x: np.ndarray, y: np.ndarray, target_sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def scale_to(x: np.ndarray, y: np.ndarray, target_sd: np.ndarray,
+             weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rows,) the factor s ≥ 0 per row with SD of D1(s·x + y) = ``target_sd`` [m], and whether it was reached.
     Were the D1 filter linear, SD² = s²·var(a) + 2s·cov(a, b) + var(b) with a, b the D1 of x and y, a quadratic
     in s: its root starts a secant iteration on the filter itself (whose end padding is fitted to the record,
     so it is additive only nearly) to 0.1 % of the target. Where no s reaches the target, the s of the least
-    SD."""
+    SD. With ``weights`` (:func:`sd_weights`) the SD weighs the squared deviations by them (the section's SD
+    with its local defects once), the same quadratic with weighted moments."""
     target = np.asarray(target_sd, dtype=float)
     a = d1_filter(x, SLEEPER_SPACING_M)
     b = d1_filter(y, SLEEPER_SPACING_M)
     a = a - a.mean(axis=1, keepdims=True)
     b = b - b.mean(axis=1, keepdims=True)
-    va, cab, vb = (a * a).mean(axis=1), (a * b).mean(axis=1), (b * b).mean(axis=1)
+    if weights is None:
+        va, cab, vb = (a * a).mean(axis=1), (a * b).mean(axis=1), (b * b).mean(axis=1)
+    else:
+        va, cab, vb = (weights * a * a).sum(axis=1), (weights * a * b).sum(axis=1), (weights * b * b).sum(axis=1)
     va = np.maximum(va, 1e-30)
     disc = cab * cab - va * (vb - target**2)
     s = np.maximum(np.where(disc >= 0, (-cab + np.sqrt(np.maximum(disc, 0.0))) / va, -cab / va), 0.0)
 
     def miss(scale: np.ndarray) -> np.ndarray:
-        return d1_filter(scale[:, None] * x + y, SLEEPER_SPACING_M).std(axis=1) - target
+        return weighted_sd(d1_filter(scale[:, None] * x + y, SLEEPER_SPACING_M), weights) - target
 
     prev = s * 1.02 + 1e-3
     f_prev, f = miss(prev), miss(s)
