@@ -215,6 +215,51 @@ def test_per_section_config_refuses_or_stores_canonical_values(per_section, n_se
         assert (cfg.section_values(name) == values).all()
 
 
+# a line's cells from Python: junk, and the words, dates and numbers a file holds
+cell = mostly(st.one_of(st.floats(-10, 300), st.integers(-5, 300), st.sampled_from(
+    ["yes", "no", "Y", "maybe", "plain", "Plain", "transition", "switch_or_crossing", "S&C", "2025-06-01",
+     "01/06/2025", "1,5", " 2 ", "1e3", "inf", "-0", "K1", ""])), 2)
+
+
+@settings(FUZZ, max_examples=EXAMPLES or 60)
+@given(section=st.dictionaries(st.sampled_from(["section", "length_m", "register", "wet", "annual_mgt", "speed_kmh",
+                                                "freight_share", "years_since_tamping", "tampings_since_renewal",
+                                                "rate_factor", "km", "chainage"]), cell, max_size=3),
+       run=st.dictionaries(st.sampled_from(["section", "date", "sd_mm", "peak_mm"]), cell, max_size=2),
+       key=st.sampled_from(["as_of", "name", "traffic", "costs", None]), value=cell)
+def test_a_line_dict_with_any_values_loads_or_is_refused_in_one_error(section, run, key, value) -> None:
+    """A line given from Python (``LineDescription.from_dict``: a file's keys, a row of its sections, incl. the
+    ``km`` column, and one of its history) with values of any type, not only the text of a file
+    (:func:`test_a_line_file_loads_or_is_refused_in_one_line`), loads, or is refused with one LineFileError (a
+    ValueError naming its place), quickly; a line that loads makes a config or is refused naming a field, never a
+    crash deep inside the loader or NaN in the line."""
+    from trackenv.envs.line_file import LineDescription, LineFileError
+
+    second = {"section": "K2", "length_m": 200, "register": "plain", "years_since_tamping": 1,
+              "tampings_since_renewal": 0}
+    first = {**second, "section": "K1", **section}
+    d: dict[str, Any] = {"name": "fuzz", "as_of": "2026-01-01",
+                         "traffic": {"annual_mgt": 15, "speed_kmh": 100, "freight_share": 0.3},
+                         "sections": [first, second],
+                         "history": [{"section": "K1", "date": "2025-06-01", "sd_mm": 1.2, **run}]}
+    if key is not None:
+        d[key] = value
+    t0 = time.perf_counter()
+    try:
+        line = LineDescription.from_dict(d, source="fuzz.yaml")
+    except LineFileError as e:
+        _assert_names(e, ["fuzz.yaml"])
+        _fast(t0, "the loader")
+        return
+    event("loaded")
+    assert all(math.isfinite(s.length_m) and math.isfinite(s.years_since_tamping) for s in line.sections)
+    assert all(math.isfinite(m.sd_mm) for m in line.history)
+    try:
+        LineConfig(line=line)
+    except ValueError as e:
+        _assert_names(e, CONFIG_FIELDS + ["line"])
+
+
 # three values each, mostly in the ranges of the fields (a share, a speed, a length or a tonnage)
 three_values = st.lists(st.one_of(st.floats(0, 1), st.floats(12, 300), st.floats(0, 400)), min_size=3, max_size=3)
 
