@@ -455,12 +455,18 @@ def test_a_quarter_recommending_more_than_the_capacity_says_so(rough_plan):
 
 
 def test_a_section_beyond_the_models_validity_is_named_by_its_id(tmp_path, capsys):
-    """Short defects settling 100 times faster run away within a year: the plan names the section by its id in its
-    table, its JSON and its warnings (not the engine's warning, which names a row of its batch)."""
+    """A section whose file gives it a rate factor of 100 (against its history) runs away within a year: the plan
+    names the section by its id in its table, its JSON and its warnings (not the engine's warning, which names a
+    row of its batch). (Short defects settling 100 times faster did this before a fitted section's start and rate
+    took its defects as its SD counts them; its history now holds its growth.)"""
+    from test_line_file import SECTIONS
+
+    sections = SECTIONS.replace("tampings_since_renewal\n", "tampings_since_renewal,rate_factor\n")
+    sections = "\n".join(row + ("," if not row.startswith(("section", "B,")) else ",100" if row.startswith("B,")
+                                 else "") for row in sections.strip().splitlines()) + "\n"
     out = tmp_path / "plan"
-    args = ["plan", str(write(tmp_path)), "--scenario", "defects", "--policy", "no-maintenance", "--years", "1",
-            "--futures", "2", "--set", "local_defect_rate_factor=100", "--engine", "fast", "--pass-reuse-mm", "1",
-            "--json", "--out", str(out)]
+    args = ["plan", str(write(tmp_path, sections=sections)), "--policy", "no-maintenance", "--years", "1",
+            "--futures", "2", "--engine", "fast", "--pass-reuse-mm", "1", "--json", "--out", str(out)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         assert main(args) == 0

@@ -231,3 +231,97 @@ def test_the_example_line_fits_without_a_warning():
         fit = history_fit(LineConfig(line=EXAMPLE))
     assert not any(s.note for s in fit.sections) and len(fit.fitted) > 50
     assert {f.name for f in dataclasses.fields(fit.sections[0])} >= {"fitted_rate_factor", "note"}
+
+
+# ---------------------------------------------------------------------- local defects (the "defects" scenario)
+DEFECTS_LINE = LINE.replace("as_of: 2025-06-30", "as_of: 2025-10-01").replace("annual_mgt: 12", "annual_mgt: 22")
+DEFECTS_SECTIONS = """\
+section,length_m,register,wet,annual_mgt,speed_kmh,freight_share,years_since_tamping,tampings_since_renewal
+K25.8,200,plain,no,,,,4.5,3
+K43.8,200,transition,no,28,,0.45,1.75,6
+K44.2,200,transition,no,28,,0.45,1.75,2
+K45.4,200,plain,no,28,,0.45,3.75,1
+"""
+DEFECTS_HISTORY = """\
+section,date,sd_mm,peak_mm
+K25.8,2022-10-01,0.98,2.9
+K25.8,2023-04-02,1.05,3.1
+K25.8,2023-10-01,1.22,3.4
+K25.8,2024-04-01,1.43,4.0
+K25.8,2024-09-30,1.38,3.7
+K25.8,2025-04-01,1.47,4.7
+K25.8,2025-10-01,1.60,4.9
+K43.8,2024-04-01,0.97,3.1
+K43.8,2024-09-30,1.33,4.0
+K43.8,2025-04-01,1.75,5.9
+K43.8,2025-10-01,1.91,5.1
+K44.2,2024-04-01,1.04,2.8
+K44.2,2024-09-30,1.52,5.0
+K44.2,2025-04-01,2.04,5.7
+K44.2,2025-10-01,2.46,8.4
+K45.4,2022-10-01,1.32,4.2
+K45.4,2023-04-02,1.35,3.5
+K45.4,2023-10-01,1.59,4.7
+K45.4,2024-04-01,1.73,5.7
+K45.4,2024-09-30,2.15,6.4
+K45.4,2025-04-01,2.44,7.7
+K45.4,2025-10-01,2.46,7.1
+"""
+
+
+def test_under_local_defects_a_section_starts_at_its_last_run_and_fits_as_without(tmp_path):
+    """With local defects counted once in a section's 200 m (the "defects" scenario), a section's SD is the
+    defect-weighted one: the start is scaled to that SD (not the 30 m segment's own, where a drawn defect weighs
+    seven times more), so a section measured at as_of starts within a couple of the car's errors of its last run
+    as without defects (it once started up to 1.2 mm off); and the fit's class simulations are of the sections'
+    own fields (a defect's runaway draws once drove two transition sections' rate to the grid's bottom with a
+    "misses the measured SD" warning), so the fit is the default scenario's."""
+    from trackenv.envs.line import TampingLine
+    from trackenv.envs.line_config import scenario
+    from trackenv.envs.line_fit import last_runs
+
+    folder = tmp_path / "line"
+    folder.mkdir()
+    (folder / "sections.csv").write_text(DEFECTS_SECTIONS)
+    (folder / "history.csv").write_text(DEFECTS_HISTORY)
+    (folder / "line.yaml").write_text(DEFECTS_LINE)
+    path = folder / "line.yaml"
+    plain = history_fit(LineConfig(line=path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FitWarning)  # no section's history is called wrong
+        config = scenario("defects", line=path, horizon_years=0.5)
+        fit = history_fit(config)
+    for with_defects, without in zip(fit.sections, plain.sections, strict=True):
+        assert with_defects.status == without.status == "fitted"
+        assert with_defects.residual_mm == pytest.approx(without.residual_mm, abs=0.02)
+        assert with_defects.rate_factor == pytest.approx(without.rate_factor, rel=0.1)
+        assert with_defects.residual_mm < 0.15
+    last = last_runs(config.line)["last_sd_m"] * 1e3
+    env = TampingLine(config)
+    near = []
+    for seed in range(4):
+        _, info = env.reset(seed=seed)
+        np.testing.assert_allclose(np.asarray(info["section_sd_m"]) * 1e3, last, atol=0.25)
+        near.append(env.batch.defect_near[:4].any(axis=1))
+    assert np.any(near)  # some sections drew a defect
+
+
+def test_the_fits_section_sd_is_the_engines():
+    """``sd_weights`` with ``weighted_sd`` give the section SD the engine observes (``LineBatch._segment_sd``, its
+    local defects once in its length), on the short-defect preset's draws: the fit scales the start to the same
+    number (two implementations of one weighting, kept equal here)."""
+    from trackenv.envs.line import TampingLine
+    from trackenv.envs.line_config import SLEEPER_SPACING_M, scenario
+    from trackenv.envs.line_fit import sd_weights, weighted_sd
+    from trackenv.physics.geometry import d1_filter
+
+    config = scenario("defects", n_sections=8, capacity=4, horizon_years=0.5)
+    env = TampingLine(config)
+    env.reset(seed=3)
+    batch = env.batch
+    segs = np.arange(config.n_sections)
+    assert batch.defect_near[segs].any()  # some segments drew a defect
+    d1 = d1_filter(batch.level[segs], SLEEPER_SPACING_M)
+    lengths = config.section_length_m * batch.length_factor[segs]
+    np.testing.assert_allclose(weighted_sd(d1, sd_weights(batch.defect_near[segs], lengths, config)),
+                               batch._segment_sd(d1, segs), rtol=1e-12)

@@ -611,8 +611,14 @@ class LineBatch:
         c = self.config
         if c.line is None:
             return
-        from .line_fit import (drawn_section_factor, line_overrides, rate_multipliers, sd_weights, start_levels,
-                               zone_factors)
+        from .line_fit import (
+            drawn_section_factor,
+            line_overrides,
+            rate_multipliers,
+            sd_weights,
+            start_levels,
+            zone_factors,
+        )
 
         # a line file's config has one section per segment (LineConfig refuses more): section j is segment j
         o, r, rs, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sleepers

@@ -48,6 +48,12 @@ without a file. With a ``rate_factor`` in the file, k is given (the drawn field'
 usual) and only ρ and SD₀ are fitted. How well the fit recovers rates the engine generated histories with is on
 the documentation's page "Lines from files" (``python experiments/line_example.py``).
 
+With local defects counted once in a section's length (``local_defect_near_m``), every SD above is the
+section's as the engine measures it (:func:`sd_weights`: the drawn defects' neighbourhoods weighted by their
+length over the section's), and the classes are simulated without local defects (a defect's settlement runs
+away on some draws, which would make the class's curve follow those draws): the fit is the same as without
+defects, and an episode's draw, its defects included, is scaled to it.
+
 A fitted section's simulated growth in an episode scatters around its measured one by what remains: the
 posterior's spread, the rest of the hidden field (its stiffness, the pattern beyond its roughness) and the
 dynamics.
