@@ -32,6 +32,7 @@ from .plan_report import (
     counted,
     end_state,
     line_summary,
+    recommend_count,
     step_date,
     summary_lines,
     years_text,
@@ -151,7 +152,8 @@ class NetworkPlan:
         for i, line in enumerate(self.lines):
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
             out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]
-        out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended")
+        out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended (in at "
+                   f"least {recommend_count(self.futures)} of the {self.futures} futures)")
         guessed = [set(plan["q1_model_sd"]) for plan in d["line_plans"]]
         starred = False
         for q, row in enumerate(d["quarters"]):

@@ -66,7 +66,7 @@ def compare_plans(plans: dict[str, Any], episode_years: float | None = None) -> 
             "engine": line.engine, "pass_reuse_mm": line.pass_reuse_tolerance_m * 1e3,
             "config_changes": dict(line.config_changes),
             "futures": first.futures, "seed": first.seed, "scenario": first.scenario, "episode_years": episode_years,
-            "reference": names[0], "results": rows}
+            "reference": names[0], "results": rows, "network": network is not None}
 
 
 def format_comparison(d: dict[str, Any]) -> str:
@@ -94,8 +94,9 @@ def format_comparison(d: dict[str, Any]) -> str:
                                       f"(from {e['sections_at_sd_alert_start']:.1f})")
         spread = f"{r['p10_keur']:.0f}-{r['p90_keur']:.0f}"
         out.append(f"{r['policy']:<{w}} {r['mean_keur']:>8.1f} {spread:>13}  {vs:<34} {cheaper:>8}  {left}")
-    out.append("cost: k€ over the plan (the network's with the machine's moves), mean and 10-90 % of the futures; a "
-               "policy cheaper within the plan may leave more to pay after it (the last column)")
+    whose = " (the network's with the machine's moves)" if d.get("network") else ""
+    out.append(f"cost: k€ over the plan{whose}, mean and 10-90 % of the futures; a policy cheaper within the plan "
+               f"may leave more to pay after it (the last column)")
     return "\n".join(out)
 
 

@@ -206,6 +206,11 @@ def scenario_note(scenario: str) -> str | None:
     return text
 
 
+def recommend_count(futures: int) -> int:
+    """In how many of ``futures`` a choice must be made to be recommended (:data:`RECOMMEND_SHARE` of them)."""
+    return math.ceil(RECOMMEND_SHARE * futures - 1e-9)
+
+
 def _listed(ids: Sequence[str]) -> str:
     """Section ids for a quarter's row: at most :data:`QUARTER_IDS`, the rest counted."""
     more = f" ... and {len(ids) - QUARTER_IDS} more (plan.csv)" if len(ids) > QUARTER_IDS else ""
@@ -383,7 +388,7 @@ class LinePlan:
                  *([f"  {note}"] if (note := scenario_note(self.scenario)) else []),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least "
-                 f"{math.ceil(RECOMMEND_SHARE * self.futures - 1e-9)} of the {self.futures} futures)"]
+                 f"{recommend_count(self.futures)} of the {self.futures} futures)"]
         guessed = {s.id for s, m in zip(self.line.sections, self.model_read()["sd"], strict=True) if m}
         starred = False
         for q, row in enumerate(d["quarters"]):
@@ -391,8 +396,11 @@ class LinePlan:
             starred |= any(i in star for name in self.choices for i in row[name])
             if self.choices == ("tamp",):
                 what = self.tamp_text(q, row["tamp"], star) or "-"
-            else:
-                what = "; ".join(f"{name} {_listed([i + '*' if i in star else i for i in row[name]])}"
+            else:  # the tamping marked as on a tamping-only line (its renewals, the model's readings)
+                renewals = self.renewals(q)
+                what = "; ".join(f"{name} " + _listed([f"{i}{'*' if i in star else ''}"
+                                                       f"{' (renewal)' if name == 'tamp' and i in renewals else ''}"
+                                                       for i in row[name]])
                                  for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
         if starred:
@@ -561,11 +569,14 @@ class LinePlan:
         """(sections,) bool each: where Q1's measured SD (``sd``) and D1 mean-to-peak (``peak``) are the model's
         own reading at ``as_of``, not a run of the file (no run since the section's last tamping, or a run without
         its peak: :func:`~trackenv.envs.line_fit.last_runs`). Such a number is a draw of the model: measure the
-        section before acting on it."""
+        section before acting on it. And ``age_years``: the age of the file's run at ``as_of`` (NaN where none),
+        each section's own (the observation's line-wide age is the newest reading's, the model's where a section
+        has no run)."""
         from trackenv.envs.line_fit import last_runs
 
         runs = last_runs(self.line)
-        return {"sd": np.isnan(runs["last_sd_m"]), "peak": np.isnan(runs["last_peak_m"])}
+        return {"sd": np.isnan(runs["last_sd_m"]), "peak": np.isnan(runs["last_peak_m"]),
+                "age_years": runs["last_run_age_years"]}
 
     def _section_line(self, j: int, what: str) -> str:
         st = {k: float(v[0, j]) for k, v in self.state.items()}
@@ -585,11 +596,12 @@ class LinePlan:
                     f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
                     f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}); true SD "
                     f"{st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
-        peak_read = "the model's peak" if self.model_read()["peak"][j] else "peak"
+        read = self.model_read()
+        peak_read = "the model's peak" if read["peak"][j] else "peak"
         return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
                 f"{lim['sd_alert']:g}), {peak_read} {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, "
                 f"intervention {lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
-                f"{st['measurement_age_years']:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
+                f"{read['age_years'][j]:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
 
     def write(self, folder: Path) -> dict[str, str]:
         """Write ``plan.csv`` (quarter, date, section, choice, share of futures, recommended, then the section's

@@ -347,21 +347,23 @@ def _record_parts(parts: dict[str, np.ndarray], step_parts: dict[str, Any], step
 
 
 def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
-    """The warnings of a line's plan, each naming its line file: the history fit's notes on its sections, then the
-    sections that went beyond the model's validity (:meth:`LinePlan.validity_lines`), then, for a line planned
-    ``alone`` (not a network's, whose machine may be elsewhere), a plan that recommends nothing while the line
-    runs past its SD alert (:func:`_idle_note`). ``trackenv plan`` prints them and puts them in the JSON, a
-    network's per line and all together."""
+    """The warnings of a line's plan, each naming its line file, the line's own first: a last recording-car run
+    more than :data:`STALE_RUN_YEARS` before ``as_of``, the sections that went beyond the model's validity
+    (:meth:`LinePlan.validity_lines`), for a line planned ``alone`` (not a network's, whose machine may be
+    elsewhere) a plan that recommends nothing while the line runs past its SD alert (:func:`_idle_note`); then
+    the history fit's notes on its sections. ``trackenv plan`` prints them and puts them in the JSON, a network's
+    per line and all together."""
     source = plan.line.source
-    notes = [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
+    notes = []  # the line's own first (the section notes may be many; stderr prints the first few)
     last = line_summary(plan.line)["last_recording"]
     if last is not None and last["years_before"] > STALE_RUN_YEARS:
         notes.append(f"{source}: the last recording-car run in the file ({last['date']}) is "
                      f"{last['years_before']:.1f} years before as_of: the plan's start projects the sections' state "
                      f"over those years; a newer run (or as_of) gives a surer start")
+    notes += [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()]
     idle = _idle_note(plan) if alone else None
-    return notes + [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()] + (
-        [f"{source}: {idle}"] if idle else [])
+    notes += [f"{source}: {idle}"] if idle else []
+    return notes + [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]
 
 
 def _idle_note(plan: LinePlan) -> str | None:

@@ -301,7 +301,7 @@ def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan,
             "means over the futures [mm]:") in text
     assert (f"  B (transition) tamp: measured SD {b:.2f} (SD alert 2.25), peak "
             f"{plan.state['measured_peak_mm'][0, 1]:.2f} (alert 12, intervention 15.5, immediate action 26), "
-            "0.00 years old; true SD") in text
+            "0.59 years old; true SD") in text  # its run of 2025-06-01 (it read 0.00: D's model reading at as_of)
     assert "recording-car runs: Q1 reads each section's last run in the file (the model's own at as_of where it " \
            "has none); the model's then every 4 quarters: the next 2027-01-01, after the plan" in text
     longer = dataclasses.replace(plan, dates=plan.dates * 3)  # six quarters
@@ -523,6 +523,7 @@ def test_plan_compares_policies_on_the_same_futures(tmp_path, capsys):
     assert main([*argv, "--compare", "grouped-threshold,no-maintenance"]) == 0
     table = capsys.readouterr().out
     assert "Policies compared on the same 2 futures of" in table and "no-maintenance" in table
+    assert "cost: k€ over the plan, mean" in table  # a line's (it named the network's moves on a line too)
 
 
 @pytest.mark.parametrize("extra, message", [
@@ -664,8 +665,15 @@ def test_a_file_whose_last_run_is_years_old_warns(tmp_path):
     old = write(tmp_path, line=LINE.replace("as_of: 2026-01-01", "as_of: 2031-12-01"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
-        stale = [w for w in plan_warnings(plan_line(old, years=0.25, futures=1, **FAST)) if "recording-car" in w]
+        plan = plan_line(old, years=0.25, futures=1, **FAST)
+    notes = plan_warnings(plan)
+    stale = [w for w in notes if "recording-car" in w]
     assert len(stale) == 1 and "(2025-12-01) is 6.0 years before as_of" in stale[0]
+    assert notes[0] == stale[0]  # the line's own warnings first: the section notes may be many (stderr prints 8)
+    # Q1's lines give each section's own run's age (the observation's line-wide age is the newest reading's)
+    for j in np.flatnonzero(~plan.model_read()["sd"]):
+        assert f"{plan.model_read()['age_years'][j]:.2f} years old" in plan._section_line(int(j), "tamp")
+        assert plan.model_read()["age_years"][j] > 5.9
     fresh = plan_line(write(tmp_path), years=0.25, futures=1, **FAST)
     assert not [w for w in plan_warnings(fresh) if "recording-car" in w]
 
@@ -684,6 +692,12 @@ def test_the_renewal_mark_and_the_model_reading_star_say_what_the_futures_did(ro
         share[0, 1] = renewed
         assert ("B" in dataclasses.replace(plan, state=due, renewed_share=share).renewals(0)) is marked
     assert plan.tamp_text(0, ["B", "D"], {"D"}) == "B D*"
+    # on a line with choices the tamping row marks its renewals too (it did only with tamping alone)
+    renewing = dataclasses.replace(plan, state=due, renewed_share=np.where(np.arange(4) == 1, 1.0, 0.0)[None]
+                                   .repeat(plan.renewed_share.shape[0], axis=0),
+                                   choices=("tamp", "spot_tamp", "drainage", "renew", "inspect", "survey"))
+    rows = [r for r in renewing.table().splitlines() if r.startswith("Q") and "tamp B" in r]
+    assert rows and all("B (renewal)" in r for r in rows)
     choice = plan.choice_share.copy()
     choice[0, 3] = 0.0
     choice[0, 3, 1] = 1.0  # D (no run in the file) tamped in Q1 in every future

@@ -552,3 +552,11 @@ def test_a_chainage_column_checks_the_files_order(tmp_path):
         load_line(write(tmp_path, sections=swapped))
     with pytest.raises(LineFileError, match="ends at km 12.2: the two overlap"):
         load_line(write(tmp_path, sections=ordered.replace(",12.2\n", ",12.1\n")))
+    # a kilometre post as km+m, and chainages in metres, each get the number to give
+    with pytest.raises(LineFileError, match=r"'12\+200' is not a number \[km\]; give the kilometre post as a "
+                                            r"decimal number of km \(12\+200 is 12.2\)"):
+        load_line(write(tmp_path, sections=ordered.replace(",12.2\n", ",12+200\n")))
+    metres = ordered.replace(",12.0\n", ",0\n").replace(",12.2\n", ",200\n").replace(",13.5\n", ",400\n")
+    with pytest.raises(LineFileError, match=r"km: the chainages step by the sections' lengths in metres \(0, 200, "
+                                            r"...\): give them in km \(0, 0.2, ...\)"):
+        load_line(write(tmp_path, sections=metres))

@@ -521,8 +521,11 @@ def _number(where: str, name: str, value: Any, unit: str) -> float:
         try:
             v = float(text)
         except ValueError:
-            comma = "; use a decimal point" if "," in text and _is_float(text.replace(",", ".")) else ""
-            raise LineFileError(f"{where}, {name}: {text!r} is not a number [{unit}]{comma}") from None
+            hint = "; use a decimal point" if "," in text and _is_float(text.replace(",", ".")) else ""
+            km, plus, m = text.partition("+")
+            if unit == "km" and plus and km.strip().isdigit() and _is_float(m):  # a chainage as km+m: 12+345
+                hint = f"; give the kilometre post as a decimal number of km ({text} is {int(km) + float(m) / 1e3:g})"
+            raise LineFileError(f"{where}, {name}: {text!r} is not a number [{unit}]{hint}") from None
     if not math.isfinite(v):
         raise LineFileError(f"{where}, {name}: must be a finite number [{unit}], got {value!r}")
     return v
@@ -550,7 +553,7 @@ def _in_range(where: str, name: str, v: float, f: Field, why: str = "") -> float
 def _unit_hint(v: float, lo: float | None, hi: float | None, unit: str) -> str:
     """Which other unit a value out of range would fit (a length in km, an SD in m or µm, a share in %, an axle
     load in kg or kN)."""
-    others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),),
+    others = {"mm": ((1e3, "m"), (1e-3, "µm")), "m": ((1e3, "km"),), "km": ((1e-3, "m"),),
               "MGT/year": ((1e-6, "t/year"), (1e-3, "kt/year")),
               "t": ((1e-3, "kg"), (1 / 9.81, "kN")),
               "-": ((1e-2, "per cent"),) if hi is not None and hi <= 1 else ()}.get(unit, ())
@@ -708,7 +711,21 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         if km is not None:
             _check_chainage(at, out[-1], above)
             above = out[-1]
+    _check_chainage_unit(rows, out)
     return out
+
+
+def _check_chainage_unit(rows: Sequence[tuple[str, Mapping[str, Any]]], sections: list[Section]) -> None:
+    """A LineFileError where the ``km`` column (three sections with one at least) steps by each section's length
+    taken as km: chainages in metres (0, 200, 400: a short line's fit the km range)."""
+    given = [(where, s.km, s.length_m) for (where, _), s in zip(rows, sections, strict=True) if s.km is not None]
+    if len(given) < 3 or not all(abs((b[1] - a[1]) - a[2]) <= CHAINAGE_TOLERANCE_M
+                                 for a, b in zip(given[:-1], given[1:], strict=True)):
+        return
+    where = given[1][0].rsplit(", row", 1)[0]
+    first, second = given[0][1], given[1][1]
+    raise LineFileError(f"{where}, km: the chainages step by the sections' lengths in metres ({first:g}, "
+                        f"{second:g}, ...): give them in km ({first / 1e3:g}, {second / 1e3:g}, ...)")
 
 
 def _check_chainage(at: str, section: Section, above: Section | None) -> None:
@@ -720,8 +737,8 @@ def _check_chainage(at: str, section: Section, above: Section | None) -> None:
     end = above.km + above.length_m / 1000.0
     if section.km >= end - CHAINAGE_TOLERANCE_M / 1000.0:
         return
-    why = ("the rows are out of chainage order (a sheet sorted by another column?)" if section.km < above.km else
-           "the two overlap")
+    why = ("the rows are out of chainage order (a sheet sorted by another column, or listed in falling "
+           "chainage?)" if section.km < above.km else "the two overlap")
     raise LineFileError(f"{at}, km: starts at km {section.km:g}, before section {above.id} (km {above.km:g}, "
                         f"{above.length_m:g} m) ends at km {end:g}: {why}; list the sections in the order of rising "
                         f"chainage, each after the one above it")
