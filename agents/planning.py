@@ -405,8 +405,6 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
     ``tuning``: the rule's tuning on the line, where asked (:class:`~trackenv_agents.plan_tuning.RuleTuning`)."""
     from trackenv.envs.line_fit import history_fit
 
-    from .evaluation.line_compare import without_engine
-
     params = getattr(rule, "params", None)
     return LinePlan(line, policy, float(years), run.costs.shape[0], seed, dates, run.share, run.costs,
                     {k: v.sum(axis=1) for k, v in run.part_costs.items()}, history_fit(cfg), scenario, choices,
@@ -415,9 +413,20 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     unmet_share=run.unmet_share, unmet_reasons=run.unmet_reasons,
                     min_steps_between_tampings=cfg.min_steps_between_tampings,
                     steps_per_year=cfg.steps_per_year, measurement_interval=cfg.measurement_interval,
-                    config_changes=without_engine(config), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm,
+                    config_changes=_changes(config, line), capacity=cfg.capacity, peak_max_mm=run.peak_max_mm,
                     tuning=tuning, sd_start_mm=run.sd_start_mm, sd_end_mm=run.sd_end_mm,
                     renewed_share=run.renewed_share)
+
+
+def _changes(config: dict[str, Any], line: Any) -> dict[str, Any]:
+    """The fields a plan was given that change its model: not the engine's options, nor a value the line file
+    sets anyway (``--set speed_kmh=120`` on a 120 km/h file changes nothing, and the header said it did)."""
+    from trackenv.envs.line_config import file_fields
+
+    from .evaluation.line_compare import without_engine
+
+    theirs = file_fields(line)
+    return {k: v for k, v in without_engine(config).items() if not (k in theirs and theirs[k] == v)}
 
 
 def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, futures: int = 8, seed: int = 0,

@@ -704,3 +704,11 @@ def test_the_renewal_mark_and_the_model_reading_star_say_what_the_futures_did(ro
     table = dataclasses.replace(plan, choice_share=choice).table()
     (q1,) = [row for row in table.splitlines() if row.startswith("Q1 ")]
     assert "D*" in q1 and "* on the model's reading only: the file has no run of the section" in table
+
+
+def test_a_value_the_file_sets_anyway_is_no_change(tmp_path):
+    """``--set speed_kmh=100`` on a 100 km/h file is taken (the same value) but changes nothing: the header's
+    "changed:" does not list it (it did); another field it does."""
+    plan = plan_line(write(tmp_path), years=0.25, futures=1, speed_kmh=100.0, possession_cost=9.0, **FAST)
+    assert plan.config_changes == {"possession_cost": 9.0}
+    assert "changed: possession_cost=9" in plan.table().splitlines()[0]
