@@ -83,14 +83,19 @@ DEFAULT_POLICY = "grouped-threshold"
 #: recording car runs on a main line once or several times a year **[assumption]**, so such a file is likely old or
 #: its ``as_of`` a typo.
 STALE_RUN_YEARS = 2.0
+#: A line plan warns where its possession capacity reaches each section less often than once in this many years
+#: (a line's sections are tamped every few years, a quiet branch's every 10-15 **[assumption]**): the default
+#: capacity of 6 sections a quarter on a 50 km line of 250 sections (the `long` preset's capacity is 25).
+CAPACITY_CYCLE_YEARS = 10.0
 #: The share of a line file's sections surveyed for wet spots before a plan starts beyond the file's known wet
 #: zones (:func:`plan_config`): none, whatever the scenario's.
 PLAN_SURVEYED_SHARE = 0.0
 
-__all__ = ["DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS", "PLAN_SURVEYED_SHARE",
-           "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STALE_RUN_YEARS", "STATE_COLUMNS", "UNMET_REASONS",
-           "LinePlan", "line_limits", "line_plan", "line_policy", "line_summary", "plan_config", "plan_line",
-           "plan_warnings", "rule_thresholds", "step_date", "summary_lines", "trained_horizon_years", "unmet_reasons"]
+__all__ = ["CAPACITY_CYCLE_YEARS", "DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS",
+           "PLAN_SURVEYED_SHARE", "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STALE_RUN_YEARS",
+           "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_limits", "line_plan", "line_policy", "line_summary",
+           "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
+           "trained_horizon_years", "unmet_reasons"]
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
@@ -350,8 +355,9 @@ def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
     """The warnings of a line's plan, each naming its line file, the line's own first: a last recording-car run
     more than :data:`STALE_RUN_YEARS` before ``as_of``, the sections that went beyond the model's validity
     (:meth:`LinePlan.validity_lines`), for a line planned ``alone`` (not a network's, whose machine may be
-    elsewhere) a plan that recommends nothing while the line runs past its SD alert (:func:`_idle_note`); then
-    the history fit's notes on its sections. ``trackenv plan`` prints them and puts them in the JSON, a network's
+    elsewhere) a capacity that reaches each section less often than every :data:`CAPACITY_CYCLE_YEARS` and a plan
+    that recommends nothing while the line runs past its SD alert (:func:`_idle_note`); then the history fit's
+    notes on its sections. ``trackenv plan`` prints them and puts them in the JSON, a network's
     per line and all together."""
     source = plan.line.source
     notes = []  # the line's own first (the section notes may be many; stderr prints the first few)
@@ -361,6 +367,11 @@ def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
                      f"{last['years_before']:.1f} years before as_of: the plan's start projects the sections' state "
                      f"over those years; a newer run (or as_of) gives a surer start")
     notes += [f"{source}: {text.removeprefix('warning: ')}" for text in plan.validity_lines()]
+    cycle = None if plan.capacity is None else len(plan.line.sections) / (plan.capacity * plan.steps_per_year)
+    if alone and cycle is not None and cycle > CAPACITY_CYCLE_YEARS:
+        notes.append(f"{source}: a possession capacity of {plan.capacity} sections a quarter reaches each of the "
+                     f"line's {len(plan.line.sections)} sections once in {cycle:.1f} years at best: give the line's "
+                     f"own with --set capacity=N")
     idle = _idle_note(plan) if alone else None
     notes += [f"{source}: {idle}"] if idle else []
     return notes + [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]

@@ -715,3 +715,21 @@ def test_a_value_the_file_sets_anyway_is_no_change(tmp_path):
     plan = plan_line(write(tmp_path), years=0.25, futures=1, speed_kmh=100.0, possession_cost=9.0, **FAST)
     assert plan.config_changes == {"possession_cost": 9.0}
     assert "changed: possession_cost=9" in plan.table().splitlines()[0]
+
+
+def test_a_capacity_that_reaches_each_section_once_in_a_decade_warns():
+    """The default capacity (6 sections a quarter) on a 250-section line reaches each section once in 10.4 years:
+    a probe planned a 50 km line with it unawares. A plan whose capacity reaches each section less often than
+    every CAPACITY_CYCLE_YEARS warns (the example's 100 sections at 2 a quarter: 12.5 years), at 3 a quarter
+    (8.3 years) not; a network's line (the machine's capacity) not."""
+    import dataclasses
+
+    from trackenv.lines import EXAMPLE
+    from trackenv_agents.planning import plan_warnings
+
+    plan = plan_line(EXAMPLE, years=0.25, futures=1, capacity=2, **FAST)
+    (cap,) = [w for w in plan_warnings(plan) if "possession capacity" in w]
+    assert "a possession capacity of 2 sections a quarter reaches each of the line's 100 sections once in 12.5 years" \
+        in cap and "--set capacity=N" in cap
+    assert not [w for w in plan_warnings(dataclasses.replace(plan, capacity=3)) if "possession capacity" in w]
+    assert not [w for w in plan_warnings(plan, alone=False) if "possession capacity" in w]
