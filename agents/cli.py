@@ -530,7 +530,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
             check_network_policy(policy)
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario (and what --tune cannot tune) before the fit and the futures
-    config = plan_config(lines[0], args.scenario, years=args.years, **overrides)
+    # (on a network a capacity given is the machine's: a line file's own capacity is not refused as a change)
+    file_capacity = network is not None and lines[0].capacity is not None
+    config = plan_config(lines[0], args.scenario, years=args.years,
+                         **{k: v for k, v in overrides.items() if not (file_capacity and k == "capacity")})
     if network is None and "capacity" in overrides and overrides["capacity"] != config.capacity:
         raise UsageError(f"capacity must be at most the line's {config.n_sections} sections, got "
                          f"{overrides['capacity']!r}")  # (plan_line refuses it too, after the start's bar)

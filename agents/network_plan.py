@@ -338,7 +338,10 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     desc = network if not isinstance(network, (str, Path)) else load_network(network)
     check_network_policy(policy)
     # every line modelled as in its own plan (a scenario's hidden parts and observation), the action tamping only
-    lines = [plan_config(line, scenario, years=years, **config) for line in desc.lines]
+    # (a capacity given here is the machine's: a line file's own capacity stays its line's, not refused as a change)
+    lines = [plan_config(line, scenario, years=years,
+                         **{k: v for k, v in config.items() if not (k == "capacity" and line.capacity is not None)})
+             for line in desc.lines]
     rules = []
     for i, cfg in enumerate(lines):
         try:

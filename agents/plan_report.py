@@ -379,12 +379,13 @@ class LinePlan:
 
         d = self.to_dict()
         engine = engine_note({"engine": self.engine, "pass_reuse_tolerance_m": self.pass_reuse_tolerance_m})
+        capacity_from = "the file's" if self.line.capacity is not None else "--set capacity=N"
         lines = [f"Plan for {d['line']} from {d['as_of']}: {self.policy} (scenario {self.scenario}), "
                  f"{years_text(self.years)}, {counted(self.futures, 'future', 'futures')}{engine}"
                  f"{changes_note(self.config_changes)}",
                  *summary_lines(d["line_summary"]),
                  *([f"  possession capacity: {counted(self.capacity, 'section', 'sections')} of work a quarter "
-                    f"(--set capacity=N)"] if self.capacity is not None else []),
+                    f"({capacity_from})"] if self.capacity is not None else []),
                  *([f"  {note}"] if (note := scenario_note(self.scenario)) else []),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least "

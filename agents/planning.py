@@ -371,7 +371,7 @@ def plan_warnings(plan: LinePlan, alone: bool = True) -> list[str]:
     if alone and cycle is not None and cycle > CAPACITY_CYCLE_YEARS:
         notes.append(f"{source}: a possession capacity of {plan.capacity} sections a quarter reaches each of the "
                      f"line's {len(plan.line.sections)} sections once in {cycle:.1f} years at best: give the line's "
-                     f"own with --set capacity=N")
+                     f"own (capacity: in the line file, or --set capacity=N)")
     idle = _idle_note(plan) if alone else None
     notes += [f"{source}: {idle}"] if idle else []
     return notes + [f"{source}, section {s.section}: {s.note}" for s in plan.fit.sections if s.note]

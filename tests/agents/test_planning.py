@@ -733,3 +733,13 @@ def test_a_capacity_that_reaches_each_section_once_in_a_decade_warns():
         in cap and "--set capacity=N" in cap
     assert not [w for w in plan_warnings(dataclasses.replace(plan, capacity=3)) if "possession capacity" in w]
     assert not [w for w in plan_warnings(plan, alone=False) if "possession capacity" in w]
+
+
+def test_a_plan_takes_the_files_capacity_and_names_it(tmp_path, capsys):
+    """A line file's ``capacity`` is the plan's (the header says it is the file's), and ``--set capacity`` of
+    another value is refused in one line as for the file's other fields."""
+    line = write(tmp_path, line=LINE + "capacity: 2\n")
+    plan = plan_line(line, years=0.25, futures=1, **FAST)
+    assert plan.capacity == 2 and "possession capacity: 2 sections of work a quarter (the file's)" in plan.table()
+    assert main(["plan", str(line), "--set", "capacity=3", "--years", "0.25", "--futures", "1"]) == 2
+    assert "capacity=3 conflicts with the line file" in capsys.readouterr().err

@@ -560,3 +560,25 @@ def test_a_chainage_column_checks_the_files_order(tmp_path):
     with pytest.raises(LineFileError, match=r"km: the chainages step by the sections' lengths in metres \(0, 200, "
                                             r"...\): give them in km \(0, 0.2, ...\)"):
         load_line(write(tmp_path, sections=metres))
+
+
+def test_a_line_files_capacity_is_its_possessions(tmp_path):
+    """``capacity`` in the file (sections of work a quarter) sets the line's config, round-trips, refuses a
+    ``--set`` of another value as the file's other fields do, and one outside [1, sections] names the range; on a
+    network it stays that line's while the machine's capacity applies to the lines that give none."""
+    from trackenv.envs.network import NetworkConfig
+
+    path = write(tmp_path, line=LINE + "capacity: 3\n")
+    line = load_line(path)
+    assert line.capacity == 3 and LineDescription.from_dict(line.to_dict()).capacity == 3
+    assert LineConfig(line=path).capacity == 3 and LineConfig(line=path, capacity=3).capacity == 3
+    with pytest.raises(ValueError, match="capacity=2 conflicts with the line file .* which sets it to 3"):
+        LineConfig(line=path, capacity=2)
+    other = tmp_path / "other"
+    other.mkdir()
+    for bad in (0, 5):
+        with pytest.raises(LineFileError, match=r"capacity: sections of work a quarter, in \[1, 4\] \(the line's "
+                                                rf"sections\), got {bad}"):
+            load_line(write(other, line=LINE + f"capacity: {bad}\n"))
+    net = NetworkConfig(line_config=[LineConfig(line=path), LineConfig(line=write(other))], capacity=2)
+    assert [c.capacity for c in net.line_config] == [3, 2]

@@ -695,8 +695,9 @@ class LineConfig(ConfigBase):
 
 def file_fields(line: Any) -> dict[str, Any]:
     """The fields of a config that the line file ``line`` (a description) sets, with its values: those of
-    :data:`LINE_FILE_FIELDS`, and the costs it gives (its ``costs`` mapping)."""
-    return {**{name: getattr(line, name) for name in LINE_FILE_FIELDS}, **dict(line.costs)}
+    :data:`LINE_FILE_FIELDS`, the costs it gives (its ``costs`` mapping) and its ``capacity`` where it gives one."""
+    own = {"capacity": line.capacity} if getattr(line, "capacity", None) is not None else {}
+    return {**{name: getattr(line, name) for name in LINE_FILE_FIELDS}, **dict(line.costs), **own}
 
 
 def _check_file_field(name: str, value: Any, line: Any) -> None:

@@ -80,6 +80,9 @@ LINE_KEYS: dict[str, Field] = {
     "history": Field("path", False, "the measured-history CSV file, relative to this file"),
     "costs": Field("-", False, "the line's own costs where they differ from the defaults (keys below): a branch's "
                    "speed restriction delays fewer trains than a main line's"),
+    "capacity": Field("sections", False, "the line's possession capacity: sections of work a quarter (at most its "
+                      "sections; default the config's, 6); on a network too (the machine's capacity, the network "
+                      "file's, applies to the lines that give none)", 1),
 }
 
 #: The keys of a line file's ``costs`` mapping: fields of :class:`~trackenv.envs.line_config.LineConfig` (whose
@@ -213,6 +216,7 @@ class LineDescription:
     description: str = ""
     source: str = field(default="<dict>", compare=False)
     costs: tuple[tuple[str, float], ...] = ()
+    capacity: int | None = None
 
     @property
     def n_sections(self) -> int:
@@ -297,6 +301,8 @@ class LineDescription:
             out["description"] = self.description
         if self.costs:
             out["costs"] = dict(self.costs)
+        if self.capacity is not None:
+            out["capacity"] = self.capacity
         if self.path is not None:  # a saved config names the file its line came from, from any folder
             out["source"] = str(Path(self.path).resolve())
         return out
@@ -646,9 +652,15 @@ def _build(source: str, doc: Mapping[str, Any], section_rows: Sequence[tuple[str
     sections = _sections(section_rows, line_traffic)
     _config_check(source, f"sections ({len(sections)} rows)", "n_sections", len(sections), "sections")
     history = _history(history_rows, {s.id for s in sections}, as_of)
+    capacity = None
+    if doc.get("capacity") is not None:
+        capacity = _integer(source, "capacity", doc["capacity"])
+        if not 1 <= capacity <= len(sections):
+            raise LineFileError(f"{source}, capacity: sections of work a quarter, in [1, {len(sections)}] (the "
+                                f"line's sections), got {capacity}")
     return LineDescription(name=name, as_of=as_of, sections=tuple(sections), history=tuple(history),
                            description=description, source=source, costs=_costs(source, doc.get("costs")),
-                           **line_traffic)
+                           capacity=capacity, **line_traffic)
 
 
 def _costs(source: str, costs: Any) -> tuple[tuple[str, float], ...]:

@@ -64,9 +64,9 @@ class NetworkConfig:
     * ``capacity``: sections the machine tamps per step on the line it is on (one line per step; at most that
       line's sections, in that line's ``section_length_m``; None: each line's own ``capacity``, 6 on the
       default line: one quarter's nights of a tamper at 0.5-2.2 km per working hour). It replaces the line
-      configs' ``capacity`` (cut to a line's sections where it has fewer; above every line's, an error) in the
-      stored line configs, so ``replace(capacity=None)`` afterwards keeps the replaced values (give the line
-      configs again for their own);
+      configs' ``capacity`` (cut to a line's sections where it has fewer; above every line's, an error; a line
+      file's own ``capacity``, its possessions, stays that line's) in the stored line configs, so
+      ``replace(capacity=None)`` afterwards keeps the replaced values (give the line configs again for their own);
     * ``move_cost``: moving the machine to another line (10 k€ **[assumption]**: a transfer run of the tamper
       and its crew over the network, of the order of a possession's call-out); the move takes the step in which
       it is asked (no tamping anywhere in that step);
@@ -96,7 +96,8 @@ class NetworkConfig:
             object.__setattr__(self, "capacity", lines[0].capacity)
         if self.capacity is not None:
             check_int_field(self, "capacity", low=1, high=max(line.n_sections for line in lines))
-            lines = tuple(line.replace(capacity=min(self.capacity, line.n_sections)) for line in lines)
+            lines = tuple(line if line.line is not None and line.line.capacity is not None  # a file's own stays
+                          else line.replace(capacity=min(self.capacity, line.n_sections)) for line in lines)
         _check_alike(lines)
         object.__setattr__(self, "line_config", lines[0] if all(line == lines[0] for line in lines) else lines)
         check_field(self, "move_cost", low=0.0, high=1e6)
