@@ -505,7 +505,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from trackenv.envs.line_file import load_line
     from trackenv.envs.network_file import load_network_or_none
 
-    from .planning import line_policy, plan_config
+    from .planning import check_capacity, line_policy, plan_config
 
     network = load_network_or_none(args.line)  # the file read once; None: a line file
     lines = network.lines if network is not None else (load_line(args.line),)
@@ -530,13 +530,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
             check_network_policy(policy)
         network.config(**overrides)  # the lines' dates and the machine's fields, before the fit and the futures
     # an unknown policy or scenario (and what --tune cannot tune) before the fit and the futures
-    # (on a network a capacity given is the machine's: a line file's own capacity is not refused as a change)
-    file_capacity = network is not None and lines[0].capacity is not None
-    config = plan_config(lines[0], args.scenario, years=args.years,
-                         **{k: v for k, v in overrides.items() if not (file_capacity and k == "capacity")})
-    if network is None and "capacity" in overrides and overrides["capacity"] != config.capacity:
-        raise UsageError(f"capacity must be at most the line's {config.n_sections} sections, got "
-                         f"{overrides['capacity']!r}")  # (plan_line refuses it too, after the start's bar)
+    if network is None:
+        config = plan_config(lines[0], args.scenario, years=args.years, **overrides)
+        check_capacity(overrides, config)  # (plan_line checks it too, after the start's progress bar)
+    else:
+        from .network_plan import line_fields
+
+        config = plan_config(lines[0], args.scenario, years=args.years, **line_fields(lines[0], overrides))
     rules = [line_policy(policy, config, args.scenario, years=args.years) for policy in policies]
     if args.tune:
         from .plan_tuning import check_apart, check_tunable

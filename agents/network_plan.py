@@ -27,6 +27,7 @@ import numpy as np
 
 from .plan_report import (
     GEOMETRY_NOTE,
+    MODEL_READING_NOTE,
     LinePlan,
     cost_groups_text,
     counted,
@@ -52,7 +53,7 @@ from .rules.choices import CHOICE_RULES
 from .rules.line import LINE_HEURISTICS
 from .shipped import CHOICE_AGENT_NAME as CHOICE_AGENT
 
-__all__ = ["NetworkPlan", "check_network_policy", "plan_network"]
+__all__ = ["NetworkPlan", "check_network_policy", "line_fields", "plan_network"]
 
 
 @dataclass
@@ -168,8 +169,7 @@ class NetworkPlan:
             out.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {', '.join(where) or '-'}; "
                        f"{'; '.join(tamped) or '-'}")
         if starred:
-            out.append("* on the model's reading only: the file has no run of the section since its last tamping; "
-                       "measure it before acting")
+            out.append(MODEL_READING_NOTE)
         for i, line in enumerate(self.lines):
             decisions = line.decision_lines()
             if decisions:
@@ -302,6 +302,12 @@ def _tuned(rules: list[Any], lines: list[Any], tune: int, progress: bool, execut
     return out
 
 
+def line_fields(line: Any, config: dict[str, Any]) -> dict[str, Any]:
+    """The fields ``config`` given to a network plan as they model its line ``line`` (a description): a
+    ``capacity`` there is the machine's, so a line file with its own keeps that (not refused as a change)."""
+    return {k: v for k, v in config.items() if not (k == "capacity" and line.capacity is not None)}
+
+
 def check_network_policy(policy: str) -> None:
     """ValueError for a choice rule (its tamping is tuned with the choices beyond it, and the network's machine tamps
     only). ``cpi-choice-agent`` is accepted: on a line whose action is tamping only it tamps from its network, as
@@ -338,10 +344,7 @@ def plan_network(network: Any, *, policy: str = DEFAULT_POLICY, years: float = 3
     desc = network if not isinstance(network, (str, Path)) else load_network(network)
     check_network_policy(policy)
     # every line modelled as in its own plan (a scenario's hidden parts and observation), the action tamping only
-    # (a capacity given here is the machine's: a line file's own capacity stays its line's, not refused as a change)
-    lines = [plan_config(line, scenario, years=years,
-                         **{k: v for k, v in config.items() if not (k == "capacity" and line.capacity is not None)})
-             for line in desc.lines]
+    lines = [plan_config(line, scenario, years=years, **line_fields(line, config)) for line in desc.lines]
     rules = []
     for i, cfg in enumerate(lines):
         try:

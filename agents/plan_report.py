@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -211,6 +212,17 @@ def recommend_count(futures: int) -> int:
     return math.ceil(RECOMMEND_SHARE * futures - 1e-9)
 
 
+#: The table's line under the quarters where a Q1 id carries a ``*`` (:meth:`LinePlan.model_read`).
+MODEL_READING_NOTE = ("* on the model's reading only: the file has no run of the section since its last tamping; "
+                      "measure it before acting")
+
+
+def _marked(ids: Sequence[str], star: set[str] | frozenset[str], renewals: set[str]) -> list[str]:
+    """Section ids as a quarter's row gives them: those of ``star`` (Q1 on the model's reading only) with a ``*``,
+    the tampings of ``renewals`` marked "(renewal)"."""
+    return [f"{i}{'*' if i in star else ''}{' (renewal)' if i in renewals else ''}" for i in ids]
+
+
 def _listed(ids: Sequence[str]) -> str:
     """Section ids for a quarter's row: at most :data:`QUARTER_IDS`, the rest counted."""
     more = f" ... and {len(ids) - QUARTER_IDS} more (plan.csv)" if len(ids) > QUARTER_IDS else ""
@@ -399,14 +411,11 @@ class LinePlan:
                 what = self.tamp_text(q, row["tamp"], star) or "-"
             else:  # the tamping marked as on a tamping-only line (its renewals, the model's readings)
                 renewals = self.renewals(q)
-                what = "; ".join(f"{name} " + _listed([f"{i}{'*' if i in star else ''}"
-                                                       f"{' (renewal)' if name == 'tamp' and i in renewals else ''}"
-                                                       for i in row[name]])
+                what = "; ".join(f"{name} {_listed(_marked(row[name], star, renewals if name == 'tamp' else set()))}"
                                  for name in self.choices if row[name]) or "-"
             lines.append(f"Q{q + 1:<7} {row['from']:<11} {row['cost_mean_keur']:>8.1f}  {what}")
         if starred:
-            lines.append("* on the model's reading only: the file has no run of the section since its last tamping; "
-                         "measure it before acting")
+            lines.append(MODEL_READING_NOTE)
         lines += [*self.decision_lines(), self.recording_note(), *self.validity_lines()]
         c = d["cost_keur"]
         parts = ", ".join(f"{k} {v:.0f}" for k, v in d["cost_parts_mean_keur"].items())
@@ -482,8 +491,7 @@ class LinePlan:
         """The ids of the sections recommended for tamping in ``quarter`` as the table gives them: a ballast
         renewal marked "(renewal)", those of ``star`` with a ``*`` (Q1 on the model's reading only), and a note
         where they are more than the capacity."""
-        renewals = self.renewals(quarter)
-        text = _listed([f"{i}{'*' if i in star else ''}{' (renewal)' if i in renewals else ''}" for i in tamped])
+        text = _listed(_marked(tamped, star, self.renewals(quarter)))
         if self.capacity is not None and len(tamped) > self.capacity:
             text += (f" (more than the capacity of {self.capacity}: each future tamps at most {self.capacity}; "
                      f"listed, those of at least half the futures)")
@@ -573,6 +581,11 @@ class LinePlan:
         section before acting on it. And ``age_years``: the age of the file's run at ``as_of`` (NaN where none),
         each section's own (the observation's line-wide age is the newest reading's, the model's where a section
         has no run)."""
+        return self._model_read
+
+    @functools.cached_property
+    def _model_read(self) -> dict[str, np.ndarray]:
+        """:meth:`model_read`, computed once per plan (every line of the table about a section asks)."""
         from trackenv.envs.line_fit import last_runs
 
         runs = last_runs(self.line)

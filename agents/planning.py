@@ -93,8 +93,8 @@ PLAN_SURVEYED_SHARE = 0.0
 
 __all__ = ["CAPACITY_CYCLE_YEARS", "DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS",
            "PLAN_SURVEYED_SHARE", "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STALE_RUN_YEARS",
-           "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "line_limits", "line_plan", "line_policy", "line_summary",
-           "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
+           "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "check_capacity", "line_limits", "line_plan", "line_policy",
+           "line_summary", "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
            "trained_horizon_years", "unmet_reasons"]
 
 
@@ -429,6 +429,13 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     renewed_share=run.renewed_share)
 
 
+def check_capacity(config: dict[str, Any], cfg: Any) -> None:
+    """ValueError where the fields ``config`` given for a line plan hold a ``capacity`` above the line's sections
+    (its config ``cfg`` cuts it to them, silently)."""
+    if "capacity" in config and config["capacity"] != cfg.capacity:
+        raise ValueError(f"capacity must be at most the line's {cfg.n_sections} sections, got {config['capacity']!r}")
+
+
 def _changes(config: dict[str, Any], line: Any) -> dict[str, Any]:
     """The fields a plan was given that change its model: not the engine's options, nor a value the line file
     sets anyway (``--set speed_kmh=120`` on a 120 km/h file changes nothing, and the header said it did)."""
@@ -460,8 +467,7 @@ def plan_line(line: Any, *, policy: str = DEFAULT_POLICY, years: float = 3.0, fu
     from trackenv.envs.line import TampingLineVectorEnv
 
     cfg = plan_config(line, scenario, years=years, **config)
-    if "capacity" in config and config["capacity"] != cfg.capacity:  # the config cuts it to the file's sections
-        raise ValueError(f"capacity must be at most the line's {cfg.n_sections} sections, got {config['capacity']!r}")
+    check_capacity(config, cfg)
     rule = line_policy(policy, cfg, scenario, years=years)
     tuning = None
     if tune:
