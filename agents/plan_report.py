@@ -668,10 +668,15 @@ class LinePlan:
         top, bottom = fig.subplots(2, 1, gridspec_kw={"height_ratios": [3, 1.4]})
         mesh = top.pcolormesh(km, quarters, self.share, cmap="Blues", vmin=0.0, vmax=1.0, shading="flat")
         colours = dict(zip(CHOICES[1:], ("crimson", "gold", "navy", "black", "limegreen", "magenta"), strict=True))
-        for name in self.choices:
-            q, j = np.nonzero(self.recommended == CHOICES.index(name))
-            top.scatter((km[j] + km[j + 1]) / 2, q + 0.5, marker="s", s=12, facecolors="none",
-                        edgecolors=colours[name], linewidths=0.8, label=name)
+        # each mark on a white halo (a navy drainage or a black renewal on a dark cell stays visible), the rarest
+        # choices drawn last (a quarter's two drainages on top of its 77 surveys' neighbouring marks)
+        marks = {name: np.nonzero(self.recommended == CHOICES.index(name)) for name in self.choices}
+        on_top = sorted(self.choices, key=lambda name: -marks[name][0].size)
+        for name, (q, j) in marks.items():
+            x, z = (km[j] + km[j + 1]) / 2, 2.0 + 0.1 * on_top.index(name)
+            top.scatter(x, q + 0.5, marker="s", s=12, facecolors="none", edgecolors="white", linewidths=2.4, zorder=z)
+            top.scatter(x, q + 0.5, marker="s", s=12, facecolors="none", edgecolors=colours[name], linewidths=0.9,
+                        label=name, zorder=z + 0.05)
         zones = {1: ("transition", "darkorange"), 2: ("switch or crossing", "purple")}
         for code, (label, colour) in zones.items():
             at = [i for i, s in enumerate(self.line.sections) if s.register_index == code]

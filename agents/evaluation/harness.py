@@ -78,6 +78,17 @@ def policy_name(policy: Any) -> str:
     return str(getattr(policy, "name", None) or type(policy).__name__)
 
 
+def distinct_names(names: Sequence[str]) -> list[str]:
+    """``names`` with a repeated one numbered from its second use ("<lambda>", "<lambda> (2)"): two plain
+    functions, or the same rule given twice, stay two rows that tables and paired comparisons can tell apart."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
+
+
 @dataclass
 class EvaluationResult:
     """Per-episode outcomes of one policy (arrays aligned with ``seeds``)."""
@@ -394,11 +405,11 @@ def evaluate_many(policies: Sequence[Any], config: ProblemConfig | dict | str | 
     moved = cat("machine_moved") if outs[0]["machine_moved"] is not None else None
     sections = {k: cat(k) for k in ("section_cost", "register", "wet_spot")}
     results = []
-    for p, pol in enumerate(bound):
+    for p, (pol, name) in enumerate(zip(bound, distinct_names([policy_name(b) for b in bound]), strict=True)):
         m = pol_of == p
         parts = {k: v[m] for k, v in parts_all.items()}
         results.append(EvaluationResult(
-            policy=policy_name(pol), params=policy_params(pol), config=cfg, seeds=seed_arr[m],
+            policy=name, params=policy_params(pol), config=cfg, seeds=seed_arr[m],
             cost=sum(parts.values()), cost_parts=parts, section_tampings=tampings[m],
             immediate_action_exceedances=exceed[m], final_mean_sd_mm=final_sd[m], sum_rewards=rewards[m],
             tamped=tamped[m], section_choices=chosen[m], machine_moved=None if moved is None else moved[m],

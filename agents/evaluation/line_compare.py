@@ -16,7 +16,16 @@ from trackenv.envs.network import NetworkConfig
 from ..rules.line import LINE_HEURISTICS
 from ..rules.network import NETWORK_DISPATCH, network_play
 from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
-from .harness import CHOICE_NAMES, MACHINE_STEPS, as_policy, bind_policy, evaluate_many, machine_activity, policy_name
+from .harness import (
+    CHOICE_NAMES,
+    MACHINE_STEPS,
+    as_policy,
+    bind_policy,
+    distinct_names,
+    evaluate_many,
+    machine_activity,
+    policy_name,
+)
 from .reporting import ci_text, count_text, plot_comparison
 from .statistics import bootstrap_ci, paired_difference
 from .tuning import tune_many
@@ -393,6 +402,13 @@ def format_line_table(payload: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _panels(policies: Any, cfg: Any, names: Sequence[str] | None) -> tuple[list[Any], list[str]]:
+    """An episode plot's policies (one or a list) bound to ``cfg``, and its panel titles: ``names`` (the rows'
+    names), else the policies' own, told apart as the harness names its rows (:func:`distinct_names`)."""
+    pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    return pols, list(names) if names is not None else distinct_names([policy_name(p) for p in pols])
+
+
 def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
                       action_type: str = "multibinary", names: Sequence[str] | None = None) -> str:
     """One episode under each of ``policies`` (one policy or a list, SB3-style ``predict``), side by side on
@@ -402,8 +418,7 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
 
     from trackenv.envs.line import TampingLine
 
-    pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
-    titles = list(names) if names is not None else [policy_name(p) for p in pols]
+    pols, titles = _panels(policies, cfg, names)
     fig = Figure(figsize=(10 * len(pols), 4.5))
     axes = fig.subplots(1, len(pols), sharey=True, squeeze=False)[0]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
@@ -450,12 +465,11 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
     import gymnasium as gym
     from matplotlib.figure import Figure
 
-    pols = [bind_policy(p, cfg) for p in (policies if isinstance(policies, (list, tuple)) else [policies])]
+    pols, titles = _panels(policies, cfg, names)
     n_lines, offsets = cfg.n_lines, cfg.line_offsets
     fig = Figure(figsize=(8 * len(pols), 1.6 + 2.2 * n_lines))
     axes = fig.subplots(n_lines + 1, len(pols), sharex=True, sharey="row", squeeze=False,
                         gridspec_kw={"height_ratios": [0.6] + [1.0] * n_lines})
-    titles = list(names) if names is not None else [policy_name(p) for p in pols]
     years = np.arange(cfg.horizon_steps + 1) / cfg.steps_per_year
     for col, (pol, title) in enumerate(zip(pols, titles, strict=True)):
         env = gym.make("trackenv/TampingNetwork-v0", config=cfg)

@@ -140,6 +140,7 @@ def test_a_plan_with_every_choice_recommends_each_by_name(tmp_path, capsys):
     """In a scenario with every choice the plan records each choice's share of futures (they add up to one per
     section and quarter), the rule takes that scenario's tuned parameters, and the JSON, table and CSV name the
     choices."""
+    from trackenv.envs.choices import CHOICES
     from trackenv_agents.planning import PLAN_SCENARIOS
 
     plan = plan_line(write(tmp_path), policy="choice-threshold", scenario="wet", years=0.5, futures=2)
@@ -150,6 +151,15 @@ def test_a_plan_with_every_choice_recommends_each_by_name(tmp_path, capsys):
     assert plan.choice_share[0, :, 6].sum() > 0
     quarter = plan.to_dict()["quarters"][0]
     assert set(plan.choices) <= set(quarter) and plan.to_dict()["scenario"] == "wet"
+    # the plot outlines each recommended choice on a white halo, a rarer choice above a commoner one
+    top = plan.figure().axes[0]
+    marks = {c.get_label(): c for c in top.collections if c.get_label() in plan.choices}
+    counts = {name: int((plan.recommended == CHOICES.index(name)).sum()) for name in marks}
+    assert counts["survey"] > 0
+    for name, mark in marks.items():
+        (halo,) = [c for c in top.collections if abs(c.zorder - (mark.zorder - 0.05)) < 1e-9]
+        assert np.array_equal(halo.get_offsets(), mark.get_offsets()) and halo.get_edgecolor()[0].tolist() == [1.0] * 4
+        assert all(mark.zorder > other.zorder for o, other in marks.items() if counts[o] > counts[name])
     out = tmp_path / "plan"
     assert main(["plan", str(write(tmp_path)), "--scenario", "wet", "--policy", "choice-threshold", "--years", "0.5",
                  "--futures", "2", "--out", str(out)]) == 0

@@ -293,3 +293,15 @@ def test_a_plain_function_of_the_batch_is_a_policy():
 
     with pytest.raises(ValueError, match=r"policy 'halves': predict returned actions that are not whole numbers"):
         evaluate_many([halves], cfg, seeds=[0])
+
+
+def test_two_policies_of_one_name_stay_two_rows():
+    """Two plain lambdas (both named ``<lambda>``) are two results named apart, in the order given, each with its
+    own episodes: a table or a paired comparison keyed by name cannot merge them."""
+    from trackenv.envs.problems import problem_config
+
+    cfg = problem_config("small").replace(horizon_years=1.0)
+    never, always = evaluate_many([lambda obs: np.zeros(obs["section_sd"].shape, dtype=int),
+                                   lambda obs: np.ones(obs["section_sd"].shape, dtype=int)], cfg, seeds=[0])
+    assert (never.policy, always.policy) == ("<lambda>", "<lambda> (2)")
+    assert never.section_tampings.sum() == 0 < always.section_tampings.sum()
