@@ -185,26 +185,46 @@ def cost_groups_text(parts: dict[str, float]) -> str:
                      for name, value in cost_groups(parts).items())
 
 
-def scenario_note(scenario: str) -> str | None:
-    """What the preset ``scenario`` adds to a line file's model, in a line of the table (None for the default):
-    the wet line's hidden wet spots and the short-defect line's defects are the model's draws, not the file's."""
+def scenario_note(scenario: str, line: Any = None, changes: dict[str, Any] | None = None) -> str | None:
+    """What the preset ``scenario`` adds to the line file ``line``'s model (a description; None: not known), in a
+    line of the table (None where nothing: the default preset on a file without known short defects or suspected
+    wet zones): the wet line's hidden wet spots and the short-defect line's defects are the model's draws, not the
+    file's; the file's own known defects and suspected wet zones are counted, with what the model does with them.
+    The figures are the preset's, or those of the plan's ``changes`` (its ``--set`` fields) where it gives them."""
     from trackenv.envs.line_config import SCENARIOS, LineConfig
 
     fields = SCENARIOS.get(scenario, {})
-    if not fields.get("choices"):
-        return None
-    c = LineConfig.from_dict(dict(fields))
-    text = (f"scenario {scenario}: every choice (spot tamping, drainage, renewal, inspections, surveys) and the "
-            f"contact sensor")
+    read = ("wet_spot_probability", "wet_spot_active_share", "suspected_wet_probability", "local_defects_mean",
+            "segment_length_m", "local_defect_length_m", "local_defect_rate_factor")
+    c = LineConfig.from_dict({**fields, **{k: v for k, v in (changes or {}).items() if k in read}})
+    sections = () if line is None else line.sections
+    known = sum(s.defects is not None for s in sections)
+    suspected = sum(s.wet_suspected for s in sections)
+    parts = []
+    if fields.get("choices"):
+        parts.append(f"scenario {scenario}: every choice (spot tamping, drainage, renewal, inspections, surveys) and "
+                     f"the contact sensor")
     if scenario == "wet":
-        text += (f"; beside the file's known wet zones the model draws hidden wet spots on about "
-                 f"{c.wet_spot_probability:.0%} of the sections, {c.wet_spot_active_share:.0%} of them working from "
-                 f"the start, which a survey finds (an assumption: a wetter line than the default)")
-    elif scenario == "defects":
-        text += (f"; the model draws short defects (joints, welds, failed sleepers: about {c.local_defects_mean:g} a "
-                 f"section, {c.local_defect_length_m:g} m each settling {c.local_defect_rate_factor:g} times faster; "
-                 f"an assumption, the file lists none)")
-    return text
+        parts.append(f"beside the file's known wet zones the model draws hidden wet spots on about "
+                     f"{c.wet_spot_probability:.0%} of the sections, {c.wet_spot_active_share:.0%} of them working "
+                     f"from the start, which a survey finds (an assumption: a wetter line than the default)")
+    defect = f"{c.local_defect_length_m:g} m each settling {c.local_defect_rate_factor:g} times faster"
+    if known and c.local_defects_mean > 0 and known < len(sections):
+        parts.append(f"short defects: the file's on {counted(known, 'section', 'sections')}, the model's draws on the "
+                     f"rest (about {c.local_defects_mean:g} a section; {defect}, counted once in a section's length: "
+                     f"an assumption)")
+    elif known:
+        rest = ", none on the rest" if known < len(sections) else ""
+        parts.append(f"short defects: the file's on {counted(known, 'section', 'sections')}{rest} ({defect}, counted "
+                     f"once in a section's length: an assumption)")
+    elif c.local_defects_mean > 0:
+        parts.append(f"the model draws short defects (joints, welds, failed sleepers: about {c.local_defects_mean:g} "
+                     f"a section, {defect}; an assumption, the file lists none)")
+    if suspected:
+        found = ", which a survey finds" if "survey" in c.choices else ""
+        parts.append(f"suspected wet: {counted(suspected, 'section', 'sections')}, each with a hidden wet spot in "
+                     f"{c.suspected_wet_probability:.0%} of the futures (an assumption){found}")
+    return "; ".join(parts) or None
 
 
 def recommend_count(futures: int) -> int:
@@ -398,7 +418,7 @@ class LinePlan:
                  *summary_lines(d["line_summary"]),
                  *([f"  possession capacity: {counted(self.capacity, 'section', 'sections')} of work a quarter "
                     f"({capacity_from})"] if self.capacity is not None else []),
-                 *([f"  {note}"] if (note := scenario_note(self.scenario)) else []),
+                 *([f"  {note}"] if (note := scenario_note(self.scenario, self.line, self.config_changes)) else []),
                  *self.tuning_lines(),
                  f"{'quarter':<8} {'from':<11} {'cost k€':>8}  recommended (in at least "
                  f"{recommend_count(self.futures)} of the {self.futures} futures)"]

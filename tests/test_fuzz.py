@@ -217,19 +217,19 @@ def test_per_section_config_refuses_or_stores_canonical_values(per_section, n_se
 
 # a line's cells from Python: junk, and the words, dates and numbers a file holds
 cell = mostly(st.one_of(st.floats(-10, 300), st.integers(-5, 300), st.sampled_from(
-    ["yes", "no", "Y", "maybe", "plain", "Plain", "transition", "switch_or_crossing", "S&C", "2025-06-01",
+    ["yes", "no", "Y", "maybe", "Suspected", "plain", "Plain", "transition", "switch_or_crossing", "S&C", "2025-06-01",
      "01/06/2025", "1,5", " 2 ", "1e3", "inf", "-0", "K1", ""])), 2)
 
 
 @settings(FUZZ, max_examples=EXAMPLES or 60)
 @given(section=st.dictionaries(st.sampled_from(["section", "length_m", "register", "wet", "annual_mgt", "speed_kmh",
                                                 "freight_share", "years_since_tamping", "tampings_since_renewal",
-                                                "rate_factor", "km", "chainage"]), cell, max_size=3),
+                                                "rate_factor", "km", "chainage", "defects"]), cell, max_size=3),
        run=st.dictionaries(st.sampled_from(["section", "date", "sd_mm", "peak_mm"]), cell, max_size=2),
        key=st.sampled_from(["as_of", "name", "traffic", "costs", None]), value=cell)
 def test_a_line_dict_with_any_values_loads_or_is_refused_in_one_error(section, run, key, value) -> None:
     """A line given from Python (``LineDescription.from_dict``: a file's keys, a row of its sections, incl. the
-    ``km`` column, and one of its history) with values of any type, not only the text of a file
+    ``km`` and ``defects`` columns and a suspected wet zone, and one of its history) with values of any type, not only the text of a file
     (:func:`test_a_line_file_loads_or_is_refused_in_one_line`), loads, or is refused with one LineFileError (a
     ValueError naming its place), quickly; a line that loads makes a config or is refused naming a field, never a
     crash deep inside the loader or NaN in the line."""
@@ -286,7 +286,8 @@ def test_a_line_with_per_section_values_refuses_or_steps_finitely(per_section, s
 choice_names = st.lists(st.sampled_from([*INTERVENTIONS, "grind", ""]), max_size=7)
 CHOICE_FIELDS = ["surveyed_share", "wet_spot_active_share", "local_defects_mean", "local_defect_length_m",
                  "local_defect_rate_factor", "local_defect_near_m", "spot_tamping_length_m", "spot_tamping_work",
-                 "spot_possession_share", "drainage_work", "renewal_work", "inspection_sd_noise_mm", "survey_cost"]
+                 "spot_possession_share", "drainage_work", "renewal_work", "inspection_sd_noise_mm", "survey_cost",
+                 "suspected_wet_probability"]
 
 
 @FUZZ

@@ -39,3 +39,34 @@ def test_planning_gives_the_reports_names():
     for name in ("LinePlan", "RECOMMEND_SHARE", "STATE_COLUMNS", "LIMIT_FIELDS", "GEOMETRY_NOTE", "SECTION_LINES",
                  "SECTION_LABELS", "UNMET_REASONS", "line_summary", "summary_lines", "rule_thresholds", "step_date"):
         assert getattr(planning, name) is getattr(plan_report, name) and name in planning.__all__
+
+
+def _line(defects: list[int | None], wet: list[str]):
+    from trackenv.envs.line_file import LineDescription
+
+    rows = [{"section": f"S{j}", "length_m": 200, "register": "plain", "wet": w, "years_since_tamping": 1,
+             "tampings_since_renewal": 0, **({} if d is None else {"defects": d})}
+            for j, (d, w) in enumerate(zip(defects, wet, strict=True))]
+    return LineDescription.from_dict({"name": "n", "as_of": "2026-01-01", "sections": rows,
+                                      "traffic": {"annual_mgt": 15, "speed_kmh": 100, "freight_share": 0.3}})
+
+
+def test_the_scenario_note_counts_the_files_known_defects_and_suspected_wet_zones():
+    """The header's scenario line says what the file adds to the model beside the preset: its known short defects
+    (and whether the model draws them on the rest) and its suspected wet zones (with the probability, the plan's
+    --set one where given); nothing on the default preset and a file without them."""
+    from trackenv_agents.plan_report import scenario_note
+
+    line = _line([2, None, 0, None], ["no", "suspected", "yes", "no"])
+    assert scenario_note("default") is None and scenario_note("default", _line([None], ["yes"])) is None
+    assert scenario_note("default", line) == (
+        "short defects: the file's on 2 sections, none on the rest (2.4 m each settling 2.5 times faster, counted "
+        "once in a section's length: an assumption); suspected wet: 1 section, each with a hidden wet spot in 50% of "
+        "the futures (an assumption)")
+    defects = scenario_note("defects", line, {"suspected_wet_probability": 0.3})
+    assert defects.startswith("scenario defects: every choice")
+    assert ("short defects: the file's on 2 sections, the model's draws on the rest (about 1 a section; 2.4 m each "
+            "settling 5 times faster" in defects)
+    assert "suspected wet: 1 section, each with a hidden wet spot in 30% of the futures (an assumption), which a " \
+           "survey finds" in defects
+    assert "the model draws short defects" in scenario_note("defects", _line([None], ["no"]))

@@ -12,7 +12,7 @@ import pytest
 
 import trackenv  # noqa: F401  (registers the ids)
 from trackenv.envs.line import TampingLine, TampingLineVectorEnv
-from trackenv.envs.line_config import LineConfig
+from trackenv.envs.line_config import SLEEPER_SPACING_M, LineConfig
 from trackenv.envs.line_episode import LineBatch
 from trackenv.envs.line_file import LineDescription, LineFileError, load_line
 from trackenv.envs.line_fit import drawn_section_factor, history_fit, line_overrides, zone_factors
@@ -46,6 +46,10 @@ B,2024-06-01,1.5,5
 B,2025-06-01,1.9,6
 C,2025-01-01,0.9,3
 """
+
+#: SECTIONS with a ``defects`` column: two known on B, none known on D, blank (not known) on A and C
+DEFECTS = (SECTIONS.replace("renewal\n", "renewal,defects\n").replace(",1\n", ",1,\n").replace(",2\n", ",2,2\n")
+           .replace(",0\n", ",0,\n").replace(",3\n", ",3,0\n"))
 
 
 def write(folder: Path, line: str = LINE, sections: str = SECTIONS, history: str | None = HISTORY) -> Path:
@@ -186,9 +190,21 @@ FAULTS = {
                                         ["row 6 (section B)", "peak_mm: 1.5 mm is below the SD 5 mm"]),
     "tampings not whole": (dict(sections=SECTIONS.replace("D,200,plain,yes,,0.5,3", "D,200,plain,yes,,0.5,2.5")),
                            ["row 6 (section D)", "tampings_since_renewal: must be a whole number"]),
-    "wet not yes/no": (dict(sections=SECTIONS.replace("D,200,plain,yes", "D,200,plain,maybe")),
-                       ["row 6 (section D)", "wet: 'maybe' is not yes or no (accepted, in any case: yes, y, true, 1 "
-                        "for yes; no, n, false, 0 or blank for no)"]),
+    "wet not yes/no": (dict(sections=SECTIONS.replace("D,200,plain,yes", "D,200,plain,damp")),
+                       ["row 6 (section D)", "wet: 'damp' is not yes, no or suspected (accepted, in any case: yes, y, "
+                        "true, 1 for yes; no, n, false, 0 or blank for no; suspected for a suspected wet zone)"]),
+    "wet maybe (suspected)": (dict(sections=SECTIONS.replace("D,200,plain,yes", "D,200,plain,Maybe")),
+                              ["row 6 (section D)", "wet: 'Maybe' is not yes, no or suspected",
+                               "did you mean 'suspected'?"]),
+    "defects not whole": (dict(sections=DEFECTS.replace("B,200,transition,no,,3,2,2", "B,200,transition,no,,3,2,1.5")),
+                          ["row 4 (section B)", "defects: must be a whole number, got '1.5'"]),
+    "defects above 20": (dict(sections=DEFECTS.replace("B,200,transition,no,,3,2,2", "B,200,transition,no,,3,2,21")),
+                         ["row 4 (section B)", "defects: 21 is outside [0, 20] (known short defects in the section)"]),
+    "defects negative": (dict(sections=DEFECTS.replace("B,200,transition,no,,3,2,2", "B,200,transition,no,,3,2,-1")),
+                         ["row 4 (section B)", "defects: -1 is outside [0, 20]"]),
+    "defects not a number": (dict(sections=DEFECTS.replace("B,200,transition,no,,3,2,2",
+                                                           "B,200,transition,no,,3,2,two")),
+                             ["row 4 (section B)", "defects: 'two' is not a number"]),
     "cells missing in a row": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,2,1")),
                                ["row 3", "6 cells where the header has 7 columns"]),
     "too many sections": (dict(sections=SECTIONS.splitlines()[1] + "\n"
@@ -582,3 +598,228 @@ def test_a_line_files_capacity_is_its_possessions(tmp_path):
             load_line(write(other, line=LINE + f"capacity: {bad}\n"))
     net = NetworkConfig(line_config=[LineConfig(line=path), LineConfig(line=write(other))], capacity=2)
     assert [c.capacity for c in net.line_config] == [3, 2]
+
+
+# ---------------------------------------------------------------------- known short defects, suspected wet zones
+NO_HISTORY = LINE.replace("history: history.csv\n", "")
+#: DEFECTS with C suspected wet, in mixed case (D stays known wet)
+SUSPECTED = DEFECTS.replace("C,200,switch_or_crossing,no", "C,200,switch_or_crossing,SusPected")
+
+
+def test_known_defects_and_a_suspected_wet_zone_load_and_round_trip(tmp_path):
+    """``defects`` (blank: not known) and ``wet`` = suspected (any case) load into the sections, neither makes a
+    section known wet, and the description round-trips through its dict (a blank count stays blank) and a
+    config's."""
+    line = load_line(write(tmp_path, sections=SUSPECTED))
+    assert [s.defects for s in line.sections] == [None, 2, None, 0]
+    assert [s.wet for s in line.sections] == [False, False, False, True]
+    assert [s.wet_suspected for s in line.sections] == [False, False, True, False]
+    rows = line.to_dict()["sections"]
+    assert [r["wet"] for r in rows] == ["no", "no", "suspected", "yes"]
+    assert ["defects" in r for r in rows] == [False, True, False, True]
+    assert LineDescription.from_dict(line.to_dict()) == line
+    config = LineConfig(line=line)
+    assert LineConfig.from_dict(config.to_dict()) == config
+    overrides = line_overrides(config)
+    assert overrides.defects.tolist() == [-1, 2, -1, 0]
+    assert overrides.wet.tolist() == [False, False, False, True]
+    assert overrides.wet_suspected.tolist() == [False, False, True, False]
+    (tmp_path / "plain").mkdir()
+    plain = load_line(write(tmp_path / "plain"))
+    assert all(s.defects is None and not s.wet_suspected for s in plain.sections)
+    assert "defects" not in plain.to_dict()["sections"][0]
+
+
+def test_a_file_with_known_defects_counts_them_once_in_the_section(tmp_path):
+    """A 30 m segment's own SD would weigh a defect about seven times more than once in its 200 m section: a file
+    that gives a count sets ``local_defect_near_m`` to the short-defect preset's 3 m, as it sets its other fields
+    (another value given as well is refused; the preset's equal one is taken), and a file without counts, or with
+    the column blank, leaves the config's (0 on the default line) as it was."""
+    from trackenv.envs.line_config import KNOWN_DEFECT_NEAR_M, SCENARIOS, scenario
+
+    folders = {name: tmp_path / name for name in ("known", "blank", "none")}
+    for folder in folders.values():
+        folder.mkdir()
+    known = write(folders["known"], sections=DEFECTS, line=NO_HISTORY, history=None)
+    blank = write(folders["blank"], sections=DEFECTS.replace(",2\n", ",\n").replace(",0\n", ",\n"), line=NO_HISTORY,
+                  history=None)
+    none = write(folders["none"], line=NO_HISTORY, history=None)
+    assert KNOWN_DEFECT_NEAR_M == SCENARIOS["defects"]["local_defect_near_m"] == 3.0
+    assert LineConfig(line=known).local_defect_near_m == 3.0
+    assert LineConfig(line=blank).local_defect_near_m == LineConfig(line=none).local_defect_near_m == 0.0
+    assert scenario("defects", line=known).local_defect_near_m == 3.0  # the preset's equal value
+    with pytest.raises(ValueError, match=r"local_defect_near_m=5.0 conflicts with the line file .*, which sets it to "
+                                         r"3.0: leave it out"):
+        LineConfig(line=known, local_defect_near_m=5.0)
+    with pytest.raises(ValueError, match=r"local_defect_near_m come\(s\) from the line file"):
+        LineConfig(line=known).replace(local_defect_near_m=1.0)
+    assert LineConfig(line=known).replace(line=load_line(none)).local_defect_near_m == 0.0  # the new file's
+    # an env's keywords go through replace: the default's 0 gives way to the file's (it is not given)
+    made = gym.make("trackenv/TampingLine-v0", line=str(known), horizon_years=0.5)
+    assert made.unwrapped.config.local_defect_near_m == 3.0
+    assert LineConfig(line=none, local_defect_near_m=5.0).local_defect_near_m == 5.0  # no counts: the config's
+
+
+def _defect_sleepers(path: Path, seed: int, **config) -> np.ndarray:
+    """(sections,) log_f of the ratio of each section's per-sleeper rates after reset(seed) to those of the same
+    file with every count 0 (f the defect's rate factor), summed over its sleepers: with
+    ``local_defect_in_zone = "multiply"`` each patch multiplies its sleepers' rates by f, so this is the number of
+    patches times a patch's sleepers, overlaps included."""
+    zero = path.parent / "zero"
+    zero.mkdir(exist_ok=True)
+    counted = (path.parent / "sections.csv").read_text().splitlines()
+    header = counted[1].split(",")
+    column = header.index("defects")
+    rows = [r.split(",") for r in counted[2:]]
+    for r in rows:
+        r[column] = "0"
+    write(zero, line=NO_HISTORY, sections="\n".join([counted[0], counted[1], *map(",".join, rows)]) + "\n",
+          history=None)
+    rates = []
+    for p in (path, zero / "line.yaml"):
+        env = TampingLine(line=p, horizon_years=0.5, **config)
+        env.reset(seed=seed)
+        rates.append(env.batch.base_rate[: env.config.n_sections].copy())
+    factor = env.config.local_defect_rate_factor
+    return (np.log(rates[0] / rates[1]) / np.log(factor)).sum(axis=1)
+
+
+@pytest.mark.parametrize("mean", [0.0, 1.0])
+def test_a_known_count_places_exactly_that_many_defects(tmp_path, mean):
+    """A section's known count is its number of short defects in every episode (their positions drawn anew), on
+    the default line (no defects drawn: ``local_defects_mean`` 0) and where the config draws them (mean 1): the
+    rates of each section's segment carry exactly count × the patch's sleepers of the defect's factor; a blank
+    section draws as the config does (none at mean 0)."""
+    sections = (DEFECTS.replace("A,200,plain,no,,2,1,", "A,200,plain,no,,2,1,3").replace(",3,2,2\n", ",3,2,\n")
+                .replace(",1.5,0,\n", ",1.5,0,1\n"))
+    path = write(tmp_path, line=NO_HISTORY, sections=sections, history=None)
+    assert [s.defects for s in load_line(path).sections] == [3, None, 1, 0]
+    c = LineConfig(line=path, local_defects_mean=mean)
+    patch = int(round(c.local_defect_length_m / SLEEPER_SPACING_M))  # a patch's sleepers
+    where = []
+    for seed in range(4):
+        defects = _defect_sleepers(path, seed, local_defects_mean=mean) / patch
+        np.testing.assert_allclose(defects[[0, 2, 3]], [3, 1, 0], atol=1e-6)
+        if mean == 0:
+            assert defects[1] == pytest.approx(0.0, abs=1e-6)  # blank: none drawn on the default line
+        env = TampingLine(line=path, horizon_years=0.5, local_defects_mean=mean)
+        env.reset(seed=seed)
+        near = env.batch.defect_near[:4]
+        assert near[0].any() and near[2].any() and not near[3].any()  # counted once: 3 m either side
+        where.append(np.flatnonzero(near[0]).tolist())
+    assert len({tuple(w) for w in where}) > 1  # the positions are drawn per episode
+
+
+def _first_steps(path: Path, seed: int, **config) -> tuple[dict, float]:
+    env = TampingLine(line=path, horizon_years=0.5, **config)
+    obs, _ = env.reset(seed=seed)
+    _, reward, *_ = env.step(np.array([1, 0, 0, 1], np.int8))
+    return obs, reward
+
+
+@pytest.mark.parametrize("preset", ["default", "defects"])
+def test_a_blank_defects_column_draws_as_without_it(tmp_path, preset):
+    """The column blank on every section gives the episode of the same file without it, bit for bit (the
+    Poisson draw is kept, on the default line and on the short-defect preset's, which draws defects); a count on
+    the last section only leaves the draws of the sections before it as they were."""
+    from trackenv.envs.line_config import SCENARIOS
+
+    fields = {k: v for k, v in SCENARIOS[preset].items() if k != "choices" and k != "contact_sensor"}
+    for name in ("without", "blank", "last"):
+        (tmp_path / name).mkdir()
+    blank_column = DEFECTS.replace(",2\n", ",\n").replace(",0\n", ",\n")
+    without = write(tmp_path / "without", line=NO_HISTORY, history=None)
+    blank = write(tmp_path / "blank", line=NO_HISTORY, sections=blank_column, history=None)
+    last = write(tmp_path / "last", line=NO_HISTORY, sections=blank_column.replace("D,200,plain,yes,,0.5,3,",
+                                                                                    "D,200,plain,yes,,0.5,3,2"),
+                 history=None)
+    drawn = []
+    for seed in (0, 1):
+        (obs_a, r_a), (obs_b, r_b) = _first_steps(without, seed, **fields), _first_steps(blank, seed, **fields)
+        assert r_a == r_b and obs_a.keys() == obs_b.keys()
+        for key in obs_a:
+            np.testing.assert_array_equal(obs_a[key], obs_b[key])
+        envs = [TampingLine(line=p, horizon_years=0.5, **fields) for p in (without, last)]
+        for env in envs:
+            env.reset(seed=seed)
+        if preset == "defects":  # the same reach either way: the near sleepers compare
+            np.testing.assert_array_equal(envs[0].batch.defect_near[:3], envs[1].batch.defect_near[:3])
+            drawn.append(envs[1].batch.defect_near[:3].any())
+        np.testing.assert_array_equal(envs[0].batch.base_rate[:3], envs[1].batch.base_rate[:3])
+    assert any(drawn) or preset == "default"  # the preset's blank sections drew defects
+
+
+def test_suspected_wet_sections_draw_their_spot_at_the_suspected_probability(tmp_path):
+    """A suspected section's hidden wet spot is there with ``suspected_wet_probability`` (0.5 by default), the
+    other sections' with ``wet_spot_probability`` (0 here, so exactly none), over 80 episodes (320 suspected
+    draws: the share within 4 standard errors, ±0.11, of 0.5); a suspected section is not known wet: no survey
+    result at the start and nothing working from it, unlike the known wet one. Its probability at 0 and 1 gives
+    none and all."""
+    sections = """\
+section,length_m,register,wet,years_since_tamping,tampings_since_renewal
+A,200,plain,suspected,2,1
+B,200,plain,Suspected,3,2
+C,200,plain,SUSPECTED,1,0
+D,200,plain,no,1,0
+E,200,plain,suspected,4,1
+F,200,plain,yes,1,0
+"""
+    path = write(tmp_path, line=NO_HISTORY, sections=sections, history=None)
+    suspected = np.array([True, True, True, False, True, False])
+
+    def draws(lines: int, **fields) -> tuple[np.ndarray, LineBatch]:
+        config = LineConfig(line=path, horizon_years=0.5, wet_spot_probability=0.0, **fields)
+        batch = LineBatch(config, lines)
+        batch.start(list(range(lines)), [np.random.default_rng([5, i]) for i in range(lines)])
+        return batch.wet_present().reshape(lines, 6), batch
+
+    wet, batch = draws(80)
+    assert abs(wet[:, suspected].mean() - 0.5) < 0.11
+    assert not wet[:, 3].any() and wet[:, 5].all()  # none elsewhere; the known one always
+    survey = batch.survey.reshape(80, 6)
+    assert (survey[:, suspected] == -1).all() and (survey[:, 5] == 1).all()  # not known: no survey result
+    assert not batch.wet_active.reshape(80, 6)[:, suspected].any() and batch.wet_active.reshape(80, 6)[:, 5].all()
+    assert draws(4, suspected_wet_probability=1.0)[0][:, suspected].all()
+    assert not draws(4, suspected_wet_probability=0.0)[0][:, suspected].any()
+
+
+def test_a_suspected_section_changes_nothing_but_its_wet_spots_probability(tmp_path):
+    """The suspected sections' probability takes the place of ``wet_spot_probability`` in the same uniform draw:
+    at the same probability the episode is that of the file without them, bit for bit; at another, only the wet
+    spots differ (every other draw of the episode is the same)."""
+    for name in ("plain", "suspected"):
+        (tmp_path / name).mkdir()
+    plain = write(tmp_path / "plain", line=NO_HISTORY, history=None)
+    suspected = write(tmp_path / "suspected", line=NO_HISTORY, history=None,
+                      sections=SECTIONS.replace("A,200,plain,no", "A,200,plain,suspected")
+                      .replace("C,200,switch_or_crossing,no", "C,200,switch_or_crossing,suspected"))
+    obs_a, r_a = _first_steps(plain, 2)
+    obs_b, r_b = _first_steps(suspected, 2, suspected_wet_probability=LineConfig.wet_spot_probability)
+    assert r_a == r_b
+    for key in obs_a:
+        np.testing.assert_array_equal(obs_a[key], obs_b[key])
+    envs = [TampingLine(line=p, horizon_years=0.5, **kw) for p, kw in ((plain, {}),
+                                                                       (suspected, {"suspected_wet_probability": 1.0}))]
+    for env in envs:
+        env.reset(seed=2)
+    a, b = (env.engine.get_state(0).rows for env in envs)
+    assert (b["wet_onset"][[0, 2]] >= 0).all()
+    for key in ("offset", "influence", "defect_near", "wet_mask"):
+        np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_suspected_wet_probability_is_checked():
+    with pytest.raises(ValueError, match=r"suspected_wet_probability must lie in \[0, 1\], got 1.5"):
+        LineConfig(suspected_wet_probability=1.5)
+    assert LineConfig().suspected_wet_probability == 0.5
+
+
+def test_an_env_made_with_keywords_takes_the_files_capacity_and_costs(tmp_path):
+    """``gym.make(id, line=..., **fields)`` builds the id's config and replaces the line into it: the fields the
+    new file sets (its capacity, its costs) give way to the file's, the id's defaults being no values given (they
+    once conflicted: "capacity=6 conflicts with the line file")."""
+    path = write(tmp_path, line=NO_HISTORY + "capacity: 3\ncosts:\n  speed_restriction_cost: 4\n", history=None)
+    env = gym.make("trackenv/TampingLine-v0", line=str(path), horizon_years=0.5)
+    assert (env.unwrapped.config.capacity, env.unwrapped.config.speed_restriction_cost) == (3, 4.0)
+    with pytest.raises(ValueError, match="capacity=2 conflicts with the line file"):
+        gym.make("trackenv/TampingLine-v0", line=str(path), capacity=2)

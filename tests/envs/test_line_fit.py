@@ -325,3 +325,36 @@ def test_the_fits_section_sd_is_the_engines():
     lengths = config.section_length_m * batch.length_factor[segs]
     np.testing.assert_allclose(weighted_sd(d1, sd_weights(batch.defect_near[segs], lengths, config)),
                                batch._segment_sd(d1, segs), rtol=1e-12)
+
+
+def test_a_section_with_known_defects_starts_at_its_history_like_the_others(tmp_path):
+    """A file's known short defects (its ``defects`` column, which counts them once in the section's length:
+    ``local_defect_near_m`` 3 m) go the drawn defects' way through the fit: the classes are simulated without
+    defects, so the fit is the same file's without the column (up to the rounding of uniform weights), and each
+    section, with its known defects in the episode's draw, starts at the SD its fit gives at as_of."""
+    from trackenv.envs.line import TampingLine
+
+    counted = (DEFECTS_SECTIONS.replace("renewal\n", "renewal,defects\n").replace(",4.5,3\n", ",4.5,3,2\n")
+               .replace(",1.75,6\n", ",1.75,6,\n").replace(",1.75,2\n", ",1.75,2,1\n")
+               .replace(",3.75,1\n", ",3.75,1,0\n"))
+    paths = {}
+    for name, sections in (("counted", counted), ("plain", DEFECTS_SECTIONS)):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "sections.csv").write_text(sections)
+        (folder / "history.csv").write_text(DEFECTS_HISTORY)
+        (folder / "line.yaml").write_text(DEFECTS_LINE)
+        paths[name] = folder / "line.yaml"
+    config = LineConfig(line=paths["counted"], horizon_years=0.5)
+    assert [s.defects for s in config.line.sections] == [2, None, 1, 0] and config.local_defect_near_m == 3.0
+    fit, plain = history_fit(config), history_fit(LineConfig(line=paths["plain"], horizon_years=0.5))
+    for known, without in zip(fit.sections, plain.sections, strict=True):
+        assert known.status == without.status == "fitted"
+        assert known.rate_factor == pytest.approx(without.rate_factor, rel=1e-6)
+        assert known.start_sd_mm == pytest.approx(without.start_sd_mm, rel=1e-6)
+    env = TampingLine(config)
+    for seed in range(3):
+        _, info = env.reset(seed=seed)
+        assert env.batch.defect_near[[0, 2]].any(axis=1).all() and not env.batch.defect_near[3].any()
+        np.testing.assert_allclose(np.asarray(info["section_sd_m"]) * 1e3, [f.start_sd_mm for f in fit.sections],
+                                   rtol=2e-3)

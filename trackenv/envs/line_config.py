@@ -67,9 +67,15 @@ PER_SECTION_BOUNDS: dict[str, tuple[float, float]] = {
     "section_length_m": (5.0, 1000.0), "speed_kmh": (5.0, 300.0), "annual_mgt": (0.1, 200.0),
     "freight_share": (0.0, 1.0)}
 #: The fields a line file sets (``line``): its number of sections, their length, the line's traffic and what
-#: differs per section.
+#: differs per section (and, where it gives them, its costs, capacity and :data:`KNOWN_DEFECT_NEAR_M`:
+#: :func:`file_fields`).
 LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt", "freight_share",
                     "freight_axle_load_t", "per_section")
+#: The ``local_defect_near_m`` [m] of a line file that gives known short defects (its ``defects`` column): each
+#: section counts its local defects once in its length, as the short-defect preset does (its value: 3 m either
+#: side hold about 95 % of a 2.4 m dip's D1 energy), not once every 30 m segment (about seven times over in a
+#: 200 m section's SD).
+KNOWN_DEFECT_NEAR_M = 3.0
 
 
 def check_horizon(name: str, years: Any, steps_per_year: int) -> float:
@@ -132,7 +138,10 @@ class LineConfig(ConfigBase):
     track), each resting on ``voided_residual_support`` (0.05) of its ballast stiffness **[assumption]**: a gap
     under the sleeper that the first millimetres of deflection close. **Hidden wet spots**: with probability
     ``wet_spot_probability`` per section and episode a ``wet_spot_length_m`` patch starts to settle
-    ``wet_spot_rate_factor`` times faster at a step drawn uniformly in the horizon; it is in no register.
+    ``wet_spot_rate_factor`` times faster at a step drawn uniformly in the horizon; it is in no register. On a
+    line file's sections whose ``wet`` column says ``suspected``, with probability ``suspected_wet_probability``
+    instead (0.5 **[assumption]**: a suspicion, e.g. from mud spots or a drainage record, is taken as an even
+    chance; set it to what your surveys find), from the same uniform draw.
     ``rate_scale`` multiplies all settlement (calibrated to the published SD growth, see ``trackenv calibrate``).
     ``initial_age_years``: each section was last tamped up to this long before the start (uniform), with up to
     ``initial_max_tampings`` tampings since renewal; its initial level is the German low-disturbance PSD scaled
@@ -188,7 +197,9 @@ class LineConfig(ConfigBase):
     sections surveyed before the start (needs "survey"). Drawn only where set (else nothing is drawn for them):
     ``wet_spot_active_share``, the share of wet spots working from the first step; ``local_defects_mean`` short
     local defects per segment (Poisson; a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch
-    (2.4 m) settling ``local_defect_rate_factor`` (2.5) times faster **[assumption]**; such a short patch lies
+    (2.4 m) settling ``local_defect_rate_factor`` (2.5) times faster **[assumption]** (on a line file's section
+    with a known count, its ``defects`` column, that count in place of the draw, whatever the mean, at drawn
+    positions); such a short patch lies
     mostly below the D1 band of 3-25 m, so it shows little in the measured level. ``local_defect_near_m`` (0:
     off) makes a section
     of ``section_length_m`` carry its segment's local defects once, instead of once every segment length: its SD
@@ -245,8 +256,11 @@ class LineConfig(ConfigBase):
     :class:`~trackenv.envs.line_file.LineDescription`; the documentation's page "Lines from files"): the file
     sets :data:`LINE_FILE_FIELDS` (the number of sections, the line's section length, speed and traffic, and
     ``per_section``: the lengths, speeds, tonnages and freight shares that differ between its sections), the
-    costs its ``costs`` mapping gives (:func:`file_fields`), and, per section, the register, known wet zones,
-    years since tamping and tampings since renewal. Giving one of those fields as well is an error unless it
+    costs its ``costs`` mapping gives (:func:`file_fields`), and, per section, the register, known (and
+    suspected) wet zones, years since tamping, tampings since renewal and the number of known short local defects.
+    A file that gives known defects (a count in its ``defects`` column) also sets ``local_defect_near_m`` to
+    :data:`KNOWN_DEFECT_NEAR_M` (3 m, the short-defect preset's), so that a section's defects, known and drawn,
+    count once in its length. Giving one of those fields as well is an error unless it
     equals the file's (:meth:`from_dict`, ``scenario``; :meth:`replace`, which the envs' keywords go through,
     refuses any; a config built directly cannot tell a value equal to the field's default from leaving it out,
     and the file's is taken).
@@ -281,6 +295,7 @@ class LineConfig(ConfigBase):
     switch_probability: float = 0.08
     switch_rate_factor: float = 4.0
     wet_spot_probability: float = 0.1
+    suspected_wet_probability: float = 0.5
     wet_spot_rate_factor: float = 5.0
     wet_spot_length_m: float = 6.0
     voided_sleepers_mean: float = 0.0
@@ -389,7 +404,8 @@ class LineConfig(ConfigBase):
         c("sleeper_rate_correlation_m", low=0.0, high=100.0)
         c("ballast_stiffness_cv", low=0.0, high=1.0)
         c("ballast_stiffness_factor", low=0.25, high=4.0)
-        for name in ("transition_probability", "switch_probability", "wet_spot_probability"):
+        for name in ("transition_probability", "switch_probability", "wet_spot_probability",
+                     "suspected_wet_probability"):
             c(name, low=0.0, high=1.0)
         c("transition_stiffness_ratio", low=0.2, high=10.0)
         for name in ("transition_rate_factor", "switch_rate_factor", "wet_spot_rate_factor"):
@@ -555,9 +571,12 @@ class LineConfig(ConfigBase):
             raise ValueError(f"{', '.join(given)} come(s) from the line file {source}: change the file, or leave "
                              f"{'them' if len(given) > 1 else 'it'} out")
         base = {**self.to_dict(), "line": self.line}  # the description itself: its source, no second check
-        if "line" in changes:  # the old line's values (or the scenario's) give way to the new file's
-            for name in LINE_FILE_FIELDS if self.line is None else file_fields(self.line):
-                del base[name]
+        if "line" in changes:  # the old line's values (or the scenario's, the defaults) give way to the new file's
+            new = line_description(changes["line"])
+            changes = {**changes, "line": new}
+            old = LINE_FILE_FIELDS if self.line is None else file_fields(self.line)
+            for name in {*old, *(file_fields(new) if new is not None else ())}:
+                base.pop(name, None)
         return self.from_dict({**base, **changes})
 
     def _check_capacity(self, ci: Any) -> None:
@@ -572,18 +591,9 @@ class LineConfig(ConfigBase):
 
     def _take_line(self) -> None:
         """Read ``line`` (a path, a dict of a line's keys, or a description) and set the fields it owns."""
-        if self.line is None:
+        line = line_description(self.line)
+        if line is None:
             return
-        from .line_file import LineDescription, load_line
-
-        line = self.line
-        if isinstance(line, (str, os.PathLike)):
-            line = load_line(line)
-        elif isinstance(line, dict):
-            line = LineDescription.from_dict(line)
-        elif not isinstance(line, LineDescription):
-            raise ValueError(f"line must be the path of a line file, a LineDescription or a dict, got "
-                             f"{type(line).__name__}")
         object.__setattr__(self, "line", line)
         if self.sections_per_segment != 1:
             raise ValueError(f"sections_per_segment must be 1 with a line file (each of its sections is a segment of "
@@ -693,10 +703,28 @@ class LineConfig(ConfigBase):
         return np.stack([self.axle_passes_per_step(share) for share in shares]) * self.traffic_factors[:, None]
 
 
+def line_description(line: Any) -> LineDescription | None:
+    """``line`` (the path of a line file, a dict of a line's keys, a description or None) as a description (None
+    for None); ValueError for anything else."""
+    from .line_file import LineDescription, load_line
+
+    if line is None or isinstance(line, LineDescription):
+        return line
+    if isinstance(line, (str, os.PathLike)):
+        return load_line(line)
+    if isinstance(line, dict):
+        return LineDescription.from_dict(line)
+    raise ValueError(f"line must be the path of a line file, a LineDescription or a dict, got {type(line).__name__}")
+
+
 def file_fields(line: Any) -> dict[str, Any]:
     """The fields of a config that the line file ``line`` (a description) sets, with its values: those of
-    :data:`LINE_FILE_FIELDS`, the costs it gives (its ``costs`` mapping) and its ``capacity`` where it gives one."""
+    :data:`LINE_FILE_FIELDS`, the costs it gives (its ``costs`` mapping), its ``capacity`` where it gives one, and
+    ``local_defect_near_m`` (:data:`KNOWN_DEFECT_NEAR_M`) where it gives known short defects (a count in its
+    ``defects`` column): a section's known defects then count once in its length."""
     own = {"capacity": line.capacity} if getattr(line, "capacity", None) is not None else {}
+    if getattr(line, "defects_known", False):
+        own["local_defect_near_m"] = KNOWN_DEFECT_NEAR_M
     return {**{name: getattr(line, name) for name in LINE_FILE_FIELDS}, **dict(line.costs), **own}
 
 
@@ -753,7 +781,7 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     # short possession at a fifth of a tamping possession's cost [assumption]; the full decision
     "defects": {"choices": INTERVENTIONS, "contact_sensor": True, "switch_probability": 0.2,
                 "local_defects_mean": 1.0, "local_defect_rate_factor": 5.0, "local_defect_in_zone": "faster",
-                "local_defect_near_m": 3.0, "spot_possession_share": 0.2},
+                "local_defect_near_m": KNOWN_DEFECT_NEAR_M, "spot_possession_share": 0.2},
 }
 
 

@@ -443,8 +443,8 @@ class LineBatch:
         patch = np.abs(np.arange(n) - mid) <= 2  # a stiff 3 m patch (crossing nose, level-crossing slab)
         rate[reg == 2] *= c.switch_rate_factor
         kfield[reg == 2] *= np.where(patch, 2.0, 1.0)
-        # hidden wet spots
-        wet = rng.random(R) < c.wet_spot_probability
+        # hidden wet spots (likelier on a line file's suspected wet zones: the same uniform draw)
+        wet = rng.random(R) < self._wet_spot_probability()
         onset = rng.integers(1, max(H, 2), size=R)
         wl = max(int(round(c.wet_spot_length_m / SLEEPER_SPACING_M)), 1)
         start = rng.integers(0, n - wl + 1, size=R)
@@ -527,18 +527,23 @@ class LineBatch:
 
     def _local_defects(self, rng: np.random.Generator, rate: np.ndarray, plain_rate: np.ndarray) -> np.ndarray:
         """Short local defects (joints, welds, crossing noses, a failed sleeper: a Poisson number per segment, mean
-        ``local_defects_mean``), each a ``local_defect_length_m`` patch settling ``local_defect_rate_factor`` times
-        faster, into ``rate`` (segments, n, with the zones' factors) in place: multiplied, or, with
-        ``local_defect_in_zone = "faster"``, the factor times ``plain_rate`` (the rate without the zones) where
-        that is faster than ``rate``; nothing is drawn when the mean is 0. Returns the sleepers of the patches
-        (segments, n) bool."""
+        ``local_defects_mean``; a line file's known count in place of the draw on its sections that give one,
+        :meth:`_known_defects`), each a ``local_defect_length_m`` patch at a drawn position settling
+        ``local_defect_rate_factor`` times faster, into ``rate`` (segments, n, with the zones' factors) in place:
+        multiplied, or, with ``local_defect_in_zone = "faster"``, the factor times ``plain_rate`` (the rate without
+        the zones) where that is faster than ``rate``. The Poisson counts are drawn as without known ones (none
+        when the mean is 0), then the known ones replace theirs, so a config or file without known counts draws as
+        before; nothing is drawn without either. Returns the sleepers of the patches (segments, n) bool."""
         c = self.config
         patches = np.zeros(rate.shape, dtype=bool)
-        if c.local_defects_mean == 0:
+        known = self._known_defects()
+        if c.local_defects_mean == 0 and not (known >= 0).any():
             return patches
         n = rate.shape[1]
         length = max(int(round(c.local_defect_length_m / SLEEPER_SPACING_M)), 1)
-        counts = np.asarray(rng.poisson(c.local_defects_mean, size=rate.shape[0]))
+        drawn = (np.asarray(rng.poisson(c.local_defects_mean, size=rate.shape[0])) if c.local_defects_mean > 0
+                 else np.zeros(rate.shape[0], dtype=np.int64))
+        counts = np.where(known >= 0, known, drawn)
         for j in range(rate.shape[0]):
             for start in rng.integers(0, n - length + 1, size=int(counts[j])):
                 patches[j, start : start + length] = True
@@ -586,6 +591,26 @@ class LineBatch:
         if mean == 0:
             return [np.zeros(0, dtype=np.int64)] * R
         return [rng.integers(2, n - 2, size=int(rng.poisson(mean))) for _ in range(R)]
+
+    def _known_defects(self) -> np.ndarray:
+        """(segments of a line,) the number of known short local defects on each, from the config's line file
+        (whose config has one section per segment); −1 where not known (drawn), everywhere without a file."""
+        if self.config.line is None:
+            return np.full(self.R, -1, dtype=np.int64)
+        from .line_fit import line_overrides
+
+        return line_overrides(self.config).defects
+
+    def _wet_spot_probability(self) -> float | np.ndarray:
+        """The probability of a hidden wet spot: ``wet_spot_probability``, or per segment (a line file's config
+        has one section per segment) ``suspected_wet_probability`` on the file's suspected wet zones."""
+        c = self.config
+        if c.line is None:
+            return c.wet_spot_probability
+        from .line_fit import line_overrides
+
+        suspected = line_overrides(c).wet_suspected
+        return np.where(suspected, c.suspected_wet_probability, c.wet_spot_probability)
 
     def _known_wet(self) -> np.ndarray:
         """(S,) the sections whose wet zone the config's line file knows: their survey is known from the start

@@ -1,13 +1,13 @@
 """Lines from files: the schema of a line file, its loader and its checks.
 
 A line is described by a YAML file (the line: its name, the date its state describes, its traffic) that names
-a CSV file of its sections (one row per section: length, register class, known wet zone, traffic, years since
-tamping, tampings since renewal) and, optionally, a CSV file of its measured history (recording-car runs:
-section, date, SD, mean-to-peak). :func:`load_line` reads them into a :class:`LineDescription`: frozen and
-hashable (tuples), so a :class:`~trackenv.envs.line_config.LineConfig` carries it (``LineConfig(line=...)``,
-``gym.make("trackenv/TampingLine-v0", line="my_line.yaml")``) and snapshots, pickling and config comparison
-keep working. The schema, with units, is on the documentation's page "Lines from files" and in
-:data:`LINE_KEYS`, :data:`SECTION_COLUMNS` and :data:`HISTORY_COLUMNS`.
+a CSV file of its sections (one row per section: length, register class, known or suspected wet zone, traffic,
+years since tamping, tampings since renewal, known short defects) and, optionally, a CSV file of its measured
+history (recording-car runs: section, date, SD, mean-to-peak). :func:`load_line` reads them into a
+:class:`LineDescription`: frozen and hashable (tuples), so a :class:`~trackenv.envs.line_config.LineConfig`
+carries it (``LineConfig(line=...)``, ``gym.make("trackenv/TampingLine-v0", line="my_line.yaml")``) and
+snapshots, pickling and config comparison keep working. The schema, with units, is on the documentation's page
+"Lines from files" and in :data:`LINE_KEYS`, :data:`SECTION_COLUMNS` and :data:`HISTORY_COLUMNS`.
 
 The files are in the units a railway uses (m, mm, MGT a year, km/h, years); the description keeps the file's
 values with the unit in each name, and gives the SD and mean-to-peak in SI too (``sd_m``). Every fault in a
@@ -110,6 +110,10 @@ TRAFFIC_KEYS: dict[str, Field] = {
 }
 DEFAULT_FREIGHT_AXLE_LOAD_T = 22.5
 
+#: The most known short local defects a section's row may give (``defects``, 0-20): twenty patches of the default
+#: 2.4 m already cover the 30 m segment that represents a section more than once, so a larger count is taken for a
+#: fault (another column's value) **[assumption]**.
+MAX_KNOWN_DEFECTS = 20
 #: The columns of the sections CSV, one row per section in line order.
 SECTION_COLUMNS: dict[str, Field] = {
     "section": Field("-", True, "the section's id: unique, any text (a kilometre post, an asset number)"),
@@ -118,7 +122,8 @@ SECTION_COLUMNS: dict[str, Field] = {
     "register": Field("-", True, "asset-register class (any case): " + ", ".join(REGISTER_CLASSES) + " (transition: a "
                       "bridge or culvert approach; switch_or_crossing: switches and crossings, level crossings)"),
     "wet": Field("yes/no", False, "a known wet zone (a cutting or formation with poor drainage): yes, y, true or 1; "
-                 "no, n, false or 0 (any case); blank: no"),
+                 "no, n, false or 0 (any case); blank: no; suspected (any case): not known wet, but a hidden wet spot "
+                 "is likelier than elsewhere (LineConfig's suspected_wet_probability)"),
     "annual_mgt": Field("MGT/year", False, "the section's tonnage (its axle passes); blank: the line's"),
     "speed_kmh": Field("km/h", False, "the section's speed (its passes, time steps and quality limits: a station's "
                        "switches, a restriction); blank: the line's"),
@@ -134,6 +139,9 @@ SECTION_COLUMNS: dict[str, Field] = {
                 "no section starting before the one above it ends (a gap is fine: a chainage jump, sections not in "
                 "the file); it checks the file's order, which the line's model follows; blank: not known",
                 -1000.0, 10000.0),
+    "defects": Field("-", False, "the number of known short local defects in the section (insulated joints, welds, "
+                     "a failed sleeper, a crossing nose), a whole number; blank: not known, drawn as the config draws "
+                     "them (LineConfig's local_defects_mean)", 0, MAX_KNOWN_DEFECTS),
 }
 #: Two sections overlap where one starts more than this before the one above it ends [m] (a chainage given to
 #: the metre, lengths rounded).
@@ -156,7 +164,10 @@ _YES, _NO = ("yes", "y", "true", "1"), ("no", "n", "false", "0", "")
 
 @dataclass(frozen=True)
 class Section:
-    """One section of a line file, in line order (SI where the unit is not in the name)."""
+    """One section of a line file, in line order (SI where the unit is not in the name). ``wet``: a known wet
+    zone; ``wet_suspected``: not known wet, but suspected (its hidden wet spot is likelier: the config's
+    ``suspected_wet_probability``); never both. ``defects``: the number of known short local defects (None: not
+    known, drawn as without a file)."""
 
     id: str
     length_m: float
@@ -169,6 +180,18 @@ class Section:
     tampings_since_renewal: int
     rate_factor: float | None = None
     km: float | None = None
+    wet_suspected: bool = False
+    defects: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.wet and self.wet_suspected:
+            raise ValueError(f"section {self.id}: wet and wet_suspected exclude each other (a known wet zone is "
+                             f"not merely suspected)")
+
+    @property
+    def wet_text(self) -> str:
+        """The ``wet`` column's value for this section: "yes" (known), "suspected" or "no"."""
+        return "yes" if self.wet else "suspected" if self.wet_suspected else "no"
 
     @property
     def register_index(self) -> int:
@@ -249,6 +272,13 @@ class LineDescription:
         return sum(s.length_m for s in self.sections)
 
     @property
+    def defects_known(self) -> bool:
+        """Whether the file gives a count of known short defects on any section (its ``defects`` column): its
+        config then counts each section's local defects once in the section's length
+        (:func:`~trackenv.envs.line_config.file_fields`: ``local_defect_near_m``)."""
+        return any(s.defects is not None for s in self.sections)
+
+    @property
     def path(self) -> str | None:
         """The file the line was read from; None for a line given as data (a dict, a saved config), whose
         ``source`` is a placeholder in angle brackets."""
@@ -280,7 +310,7 @@ class LineDescription:
         sections = []
         for s in self.sections:
             row: dict[str, Any] = {"section": s.id, "length_m": s.length_m, "register": s.register,
-                                   "wet": "yes" if s.wet else "no", "annual_mgt": s.annual_mgt,
+                                   "wet": s.wet_text, "annual_mgt": s.annual_mgt,
                                    "speed_kmh": s.speed_kmh, "freight_share": s.freight_share,
                                    "years_since_tamping": s.years_since_tamping,
                                    "tampings_since_renewal": s.tampings_since_renewal}
@@ -288,6 +318,8 @@ class LineDescription:
                 row["rate_factor"] = s.rate_factor
             if s.km is not None:
                 row["km"] = s.km
+            if s.defects is not None:
+                row["defects"] = s.defects
             sections.append(row)
         history = []
         for m in self.history:
@@ -611,16 +643,39 @@ _SAID_OTHERWISE = {"s&c": "switch_or_crossing", "s+c": "switch_or_crossing", "sw
                    "plain line": "plain", "plain track": "plain"}
 
 
-def _yes_no(where: str, name: str, value: Any) -> bool:
+_SUSPECTED = "suspected"
+#: other words for a suspected wet zone, for the hint (the file must say "suspected")
+_SUSPECTED_OTHERWISE = ("maybe", "suspect", "possible", "possibly", "probable", "probably", "likely", "perhaps",
+                        "?")
+
+
+def _wet(where: str, value: Any) -> str:
+    """The ``wet`` cell as "yes" (a known wet zone), "no" or "suspected", each in its accepted forms in any case
+    (a bool from a dict: yes or no); else a LineFileError listing them, with "suspected" for the words that mean
+    it."""
     if isinstance(value, bool):
-        return value
+        return "yes" if value else "no"
     text = "" if value is None else str(value).strip().lower()
     if text in _YES:
-        return True
+        return "yes"
     if text in _NO:
-        return False
-    raise LineFileError(f"{where}, {name}: {value!r} is not yes or no (accepted, in any case: "
-                        f"{', '.join(_YES)} for yes; {', '.join(_NO[:-1])} or blank for no)")
+        return "no"
+    if text == _SUSPECTED:
+        return _SUSPECTED
+    did = f"; did you mean {_SUSPECTED!r}?" if text in _SUSPECTED_OTHERWISE else ""
+    raise LineFileError(f"{where}, wet: {value!r} is not yes, no or {_SUSPECTED} (accepted, in any case: "
+                        f"{', '.join(_YES)} for yes; {', '.join(_NO[:-1])} or blank for no; {_SUSPECTED} for a "
+                        f"suspected wet zone){did}")
+
+
+def _defects(where: str, value: Any) -> int | None:
+    """The ``defects`` cell: a whole number of known short defects in :data:`SECTION_COLUMNS`' range, or None
+    where blank (not known)."""
+    if _blank(value):
+        return None
+    count = _integer(where, "defects", value)
+    _in_range(where, "defects", count, SECTION_COLUMNS["defects"], " (known short defects in the section)")
+    return count
 
 
 def _blank(value: Any) -> bool:
@@ -716,10 +771,12 @@ def _sections(rows: Sequence[tuple[str, Mapping[str, Any]]], line: dict[str, flo
         rate_factor = None if _blank(rate) else _in_range(at, "rate_factor", _number(at, "rate_factor", rate, "-"),
                                                           cols["rate_factor"], " (1: typical plain track)")
         km = None if _blank(row.get("km")) else _in_range(at, "km", _number(at, "km", row["km"], "km"), cols["km"])
+        wet = _wet(at, row.get("wet"))
         out.append(Section(id=sid, length_m=length, register=_choice(at, "register", row["register"],
                                                                      REGISTER_CLASSES),
-                           wet=_yes_no(at, "wet", row.get("wet")), years_since_tamping=years,
-                           tampings_since_renewal=count, rate_factor=rate_factor, km=km, **traffic))
+                           wet=wet == "yes", wet_suspected=wet == "suspected", years_since_tamping=years,
+                           tampings_since_renewal=count, rate_factor=rate_factor, km=km,
+                           defects=_defects(at, row.get("defects")), **traffic))
         if km is not None:
             _check_chainage(at, out[-1], above)
             above = out[-1]

@@ -3,7 +3,8 @@ history.
 
 :func:`line_overrides` turns a config's line file (:class:`~trackenv.envs.line_file.LineDescription`) into
 per-section arrays that the line engine applies over an episode's draws (``LineBatch._apply_line_file``): the
-register, the known wet zones, years since tamping and tampings since renewal, the rate factor where the file
+register, the known wet zones (and the suspected ones, whose hidden wet spot is likelier), the known number of
+short local defects, years since tamping and tampings since renewal, the rate factor where the file
 gives one, the posterior of the rate where the history gives one, and the SD the section starts from (a
 section's own length, speed and traffic come with the config: ``LineConfig.per_section``). Everything else (the
 within-section fields, hidden wet spots, the rates of sections without history) is drawn per episode as on a line
@@ -52,7 +53,10 @@ With local defects counted once in a section's length (``local_defect_near_m``),
 section's as the engine measures it (:func:`sd_weights`: the drawn defects' neighbourhoods weighted by their
 length over the section's), and the classes are simulated without local defects (a defect's settlement runs
 away on some draws, which would make the class's curve follow those draws): the fit is the same as without
-defects, and an episode's draw, its defects included, is scaled to it.
+defects, and an episode's draw, its defects included, is scaled to it. A file's known defects (its ``defects``
+column, which sets ``local_defect_near_m``) are placed with the drawn ones, before the file's values are
+applied, and take the same path: a section with known defects fits as its class does and starts at the SD its
+history gives.
 
 A fitted section's simulated growth in an episode scatters around its measured one by what remains: the
 posterior's spread, the rest of the hidden field (its stiffness, the pattern beyond its roughness) and the
@@ -199,7 +203,9 @@ class HistoryFit:
 @dataclass(frozen=True, eq=False)
 class LineOverrides:
     """Per section (line order), what the line file sets over an episode's draws: ``register`` (codes),
-    ``wet`` (known wet zones), ``years_since_tamping``,
+    ``wet`` (known wet zones), ``wet_suspected`` (suspected ones: their hidden wet spot drawn with the config's
+    ``suspected_wet_probability``), ``defects`` (the number of known short local defects; −1: not known, drawn),
+    ``years_since_tamping``,
     ``tampings_since_renewal``, ``rate_factor`` (the file's; NaN: none), ``rate_cdf`` (the posterior CDF of a
     fitted rate on :data:`RATE_GRID`; NaN rows: not fitted), ``start_sd_m`` (the SD at the start; NaN: as
     drawn), ``sd_after_tamping_m`` (the fitted SD right after the last tamping; NaN: as drawn), and the
@@ -208,6 +214,8 @@ class LineOverrides:
 
     register: np.ndarray
     wet: np.ndarray
+    wet_suspected: np.ndarray
+    defects: np.ndarray
     years_since_tamping: np.ndarray
     tampings_since_renewal: np.ndarray
     rate_factor: np.ndarray
@@ -229,6 +237,8 @@ def line_overrides(config: LineConfig) -> LineOverrides:
     arrays = LineOverrides(
         register=np.array([s.register_index for s in secs], dtype=np.int64),
         wet=np.array([s.wet for s in secs], dtype=bool),
+        wet_suspected=np.array([s.wet_suspected for s in secs], dtype=bool),
+        defects=np.array([-1 if s.defects is None else s.defects for s in secs], dtype=np.int64),
         years_since_tamping=np.array([s.years_since_tamping for s in secs]),
         tampings_since_renewal=np.array([s.tampings_since_renewal for s in secs], dtype=np.int64),
         rate_factor=np.array([math.nan if s.rate_factor is None else s.rate_factor for s in secs]),
@@ -577,8 +587,10 @@ def _growth(config: LineConfig, cls: tuple[str, bool, float, float, float], year
     # the settlement per roughness of the others, 30 mm SD in a year next to a transition's stiff half), so the
     # class's mean curve would follow those draws and no section's history; the fit is of the section's own
     # field, as without defects, and the episode's draw (its defects included) is scaled to it
+    # (the same for a file's known defects: a section's SD weighs them as drawn ones, the proto keeps the reach;
+    # the proto's section gives no count, so the file's reach, local_defect_near_m, is not the proto line's)
     proto = config.replace(line=proto_line, wet_spot_probability=0.0, horizon_years=steps / config.steps_per_year,
-                           local_defects_mean=0.0)
+                           local_defects_mean=0.0, local_defect_near_m=config.local_defect_near_m)
     phi, rough, rough_sd, rho = _simulated_growth(proto, steps)
     return _Growth(phi[0], float(rough[0]), float(rough_sd[0]), rho[0])
 
