@@ -229,10 +229,10 @@ cell = mostly(st.one_of(st.floats(-10, 300), st.integers(-5, 300), st.sampled_fr
        key=st.sampled_from(["as_of", "name", "traffic", "costs", None]), value=cell)
 def test_a_line_dict_with_any_values_loads_or_is_refused_in_one_error(section, run, key, value) -> None:
     """A line given from Python (``LineDescription.from_dict``: a file's keys, a row of its sections, incl. the
-    ``km`` and ``defects`` columns and a suspected wet zone, and one of its history) with values of any type, not only the text of a file
-    (:func:`test_a_line_file_loads_or_is_refused_in_one_line`), loads, or is refused with one LineFileError (a
-    ValueError naming its place), quickly; a line that loads makes a config or is refused naming a field, never a
-    crash deep inside the loader or NaN in the line."""
+    ``km`` and ``defects`` columns and a suspected wet zone, and one of its history) with values of any type, not
+    only the text of a file (:func:`test_a_line_file_loads_or_is_refused_in_one_line`), loads, or is refused with
+    one LineFileError (a ValueError naming its place), quickly; a line that loads makes a config or is refused
+    naming a field, never a crash deep inside the loader or NaN in the line."""
     from trackenv.envs.line_file import LineDescription, LineFileError
 
     second = {"section": "K2", "length_m": 200, "register": "plain", "years_since_tamping": 1,

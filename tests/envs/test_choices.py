@@ -312,6 +312,23 @@ def test_over_capacity_raise_names_the_work():
         env.step(np.array([DRAIN, DRAIN, 0, 0, 0, 0]))
 
 
+def test_over_capacity_raise_makes_a_masked_choice_nothing():
+    """With ``over_capacity="raise"`` a choice the masks forbid alone (a renewal's work of 3 in a possession of 2;
+    a drainage the budget left cannot pay) becomes nothing, as with "clip", instead of raising; what the masks
+    allow, asked for together beyond the capacity, still raises (above)."""
+    env = _env(capacity=2, renewal_work=3.0, over_capacity="raise", min_steps_between_tampings=0)
+    env.reset(seed=1)
+    assert not env.action_masks().reshape(6, -1)[0, RENEW]
+    info = env.step(np.array([RENEW, 0, 0, 0, 0, 0]))[4]
+    assert info["section_choices"].tolist() == [0] * 6 and info["cost"] > 0
+    env = _env(annual_budget=16.0, over_capacity="raise", min_steps_between_tampings=0)
+    env.reset(seed=1)
+    mask = env.action_masks().reshape(6, -1)
+    assert not mask[0, DRAIN] and mask[0, INSPECT]
+    info = env.step(np.array([DRAIN, INSPECT, 0, 0, 0, 0]))[4]
+    assert info["section_choices"].tolist() == [0, INSPECT, 0, 0, 0, 0]
+
+
 def test_the_budget_masks_what_it_cannot_pay_and_drops_the_mildest():
     env = _env(annual_budget=20.0, min_steps_between_tampings=0)
     env.reset(seed=2)
@@ -346,6 +363,23 @@ def test_info_counts_the_choices_and_the_reward_is_the_sum_of_the_parts():
     assert info["tamped_sections"].tolist() == [True, False, False, True, False, False]
     assert info["section_costs"].sum() + info["costs"]["possession"] == pytest.approx(-reward, rel=1e-12)
     assert env.observation_space.contains(obs)
+
+
+def test_a_tamping_the_budget_cannot_pay_is_masked_in_every_action_type():
+    """With an annual budget below a possession and a tamping, the tamp-or-wait masks (MultiBinary, Discrete)
+    forbid every tamping, as the choice masks' tamping column does: a masked learner is never offered what the env
+    would drop."""
+    config = LineConfig(n_sections=6, horizon_years=1.0, annual_budget=10.0)  # < 15 possession + 2 tamping
+    for action_type, width in (("multibinary", 2), ("discrete", None), ("choices", len(CHOICES))):
+        env = TampingLine(config, action_type=action_type)
+        env.reset(seed=3)
+        mask = env.action_masks()
+        tamp = mask[1:] if width is None else mask.reshape(6, width)[:, 1]
+        assert not tamp.any(), action_type
+    env = TampingLine(config.replace(annual_budget=100.0))
+    env.reset(seed=3)
+    allowed = env.unwrapped.engine.allowed()[0]  # affordable: the gap since the last tamping decides
+    assert allowed.sum() >= 3 and env.action_masks().reshape(6, 2)[:, 1].tolist() == allowed.tolist()
 
 
 def test_tamping_as_choices_is_tamping_as_multibinary():

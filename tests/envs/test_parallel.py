@@ -143,6 +143,56 @@ def test_masks_forbid_what_the_line_env_forbids():
     assert masked_requests >= 2  # section 2 at the start, section 0 the step after its tamping
 
 
+def test_an_agent_sees_its_request_dropped_and_the_line_clipped():
+    """Six requests for a capacity of 3 (the fourth joint action): the three sections not tamped say ``dropped``,
+    every agent ``clipped`` (the line env's flag); a masked request is dropped without clipping; a section that
+    waits is never dropped."""
+    _, _, parallel, _ = _pair(seed=11)
+    for joint in JOINT:
+        observations, _, _, _, infos = parallel.step(_actions(joint))
+        line = parallel.line_info
+        tamped = np.array([infos[agent]["tamped_sections"] for agent in AGENTS])
+        dropped = np.array([infos[agent]["dropped"] for agent in AGENTS])
+        np.testing.assert_array_equal(dropped, (joint == 1) & ~tamped)
+        assert all(infos[agent]["clipped"] == line["clipped"] for agent in AGENTS)
+    _, _, parallel, _ = _pair(seed=11)
+    parallel.step(_actions(JOINT[0]))
+    infos = parallel.step(_actions(JOINT[1]))[4]  # section 0 again, tamped last step: masked
+    assert infos["section_0"]["dropped"] and not infos["section_0"]["clipped"]
+    infos = parallel.step(_actions(JOINT[2]))[4]
+    infos = parallel.step(_actions(JOINT[3]))[4]  # six for three
+    assert sum(infos[agent]["dropped"] for agent in AGENTS) == 3 and infos["section_0"]["clipped"]
+
+
+def test_get_state_and_set_state_continue_the_episode_bit_for_bit():
+    """A snapshot after two steps, restored after the episode ended (every agent truncated), makes the agents live
+    again with the observations, infos and global state of that moment, and the same joint actions then give the
+    same rewards and observations; a second restore into another PettingZoo env of the config too."""
+    _, _, parallel, _ = _pair(seed=5)
+    for joint in JOINT[:2]:
+        observations, _, _, _, infos = parallel.step(_actions(joint))
+    snap, state = parallel.get_state(), parallel.state()
+    rest = [parallel.step(_actions(joint)) for joint in JOINT[2:]]
+    assert parallel.agents == []
+    for target in (parallel, line_parallel_env(SMALL, **SHORT)):
+        if target is not parallel:
+            target.reset(seed=0)  # another episode, then the snapshot
+        again_obs, again_infos = target.set_state(snap)
+        assert target.agents == AGENTS
+        np.testing.assert_array_equal(target.state(), state)
+        for agent in AGENTS:
+            np.testing.assert_array_equal(again_obs[agent]["observation"], observations[agent]["observation"])
+            np.testing.assert_array_equal(again_obs[agent]["action_mask"], observations[agent]["action_mask"])
+            assert again_infos[agent]["cost"] == infos[agent]["cost"]
+        for joint, (obs, rewards, _, truncations, _) in zip(JOINT[2:], rest, strict=True):
+            obs2, rewards2, _, truncations2, _ = target.step(_actions(joint))
+            assert rewards2 == rewards and truncations2 == truncations
+            for agent in AGENTS:
+                np.testing.assert_array_equal(obs2[agent]["observation"], obs[agent]["observation"])
+    with pytest.raises(RuntimeError, match="call reset"):
+        line_parallel_env(SMALL, **SHORT).get_state()
+
+
 CHOICE_IDS = ("trackenv/TampingLine-v1", "trackenv/TampingLineWet-v0")
 CHOICE_SMALL = {"n_sections": 4, "capacity": 3, "horizon_years": 0.75}  # 3 steps
 

@@ -27,7 +27,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from .batched import BatchedVectorEnv
-from .choices import CHOICES, enabled_codes, work_on_sections, work_per_code
+from .choices import CHOICES, TAMP, enabled_codes, work_on_sections, work_per_code
 from .common import action_mask, action_space, check_render_mode, check_reset_arguments, decode_action
 from .line_config import LineConfig
 from .problems import EnvConfig, problem_of
@@ -54,7 +54,12 @@ def _masks(engine: Any, config: EnvConfig, n_rows: int, action_type: str) -> np.
             free = enabled_codes(config.choices) & (work <= config.capacity + 1e-9)
             return action_mask(np.broadcast_to(free, (n_rows, config.n_sections, len(CHOICES))), action_type)
         return action_mask(engine.choice_mask(), action_type)
-    allowed = engine.allowed() if engine is not None else np.ones((n_rows, config.n_sections), bool)
+    if engine is None:
+        allowed = np.ones((n_rows, config.n_sections), bool)
+    elif isinstance(config, LineConfig):  # a tamping the env would apply alone: its gap, capacity and budget
+        allowed = engine.choice_mask()[..., TAMP]
+    else:
+        allowed = engine.allowed()
     return action_mask(allowed, action_type)
 
 
@@ -103,7 +108,9 @@ class TrackEnv(gym.Env):
         """Valid actions for masked algorithms (sb3-contrib's MaskablePPO): MultiBinary, (2·n_sections,) pairs
         [may-not-tamp, may-tamp] per section; Discrete, (n_sections + 1,); choices (MultiDiscrete),
         (n_sections · len(CHOICES),), each section's choices in turn (:meth:`LineBatch.choice_mask`). A section
-        tamped (or worked on) within the last ``min_steps_between_tampings`` steps may not be tamped."""
+        tamped (or worked on) within the last ``min_steps_between_tampings`` steps may not be tamped; on a line,
+        neither may one whose tamping alone is more work than the possession's capacity or, with an annual
+        budget, costs (with the possession) more than is left of it (the tamping column of the choice masks)."""
         return _masks(self.engine, self.config, 1, self.action_type)[0]
 
     def current_observation(self) -> dict[str, np.ndarray]:

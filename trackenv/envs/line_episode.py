@@ -923,11 +923,16 @@ class LineBatch:
         the config does not enable and track work on sections within ``min_steps_between_tampings`` of their last
         become "nothing"; over the possession's capacity (the work of the track work, in tamping-section
         equivalents) or over the remaining annual budget, the requested sections with the worst measured SD are
-        kept, each while it still fits ("clip"), or ValueError ("raise"). Returns (codes, clipped-per-line)."""
+        kept, each while it still fits ("clip": the line's ``clipped``, also where what was dropped is a choice
+        too large or too dear even alone, which the masks forbid), or ValueError ("raise": after every choice that
+        the masks forbid alone, :meth:`choice_mask`, became "nothing", so that only what the masks allow, asked
+        for together, raises). Returns (codes, clipped-per-line)."""
         c = self.config
         codes = np.asarray(want, dtype=np.int64)
         codes = np.where(self.enabled[codes], codes, NOTHING)
         codes = np.where(self.is_work[codes] & ~self.allowed(), NOTHING, codes)
+        if c.over_capacity == "raise" and codes.any():
+            codes = np.where(self._allowed_alone(codes), codes, NOTHING)
         sd = self.measured_sd.reshape(self.n_lines, self.S)
         clipped = np.zeros(self.n_lines, dtype=bool)
         work = self._work(codes)
@@ -954,6 +959,11 @@ class LineBatch:
                 codes = np.where(keep_worst(want_any, sd, keep), codes, NOTHING)
                 clipped |= too
         return codes, clipped
+
+    def _allowed_alone(self, codes: np.ndarray) -> np.ndarray:
+        """(n_lines, S) bool: whether the masks (:meth:`choice_mask`) allow each section's code of ``codes``
+        (n_lines, S), taken alone."""
+        return np.take_along_axis(self.choice_mask(), codes[..., None], axis=2)[..., 0]
 
     def apply(self, codes: np.ndarray) -> np.ndarray:
         """Apply the choices ``codes`` (n_lines, S; bool: tamp) at the start of the step (the measurements of

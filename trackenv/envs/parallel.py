@@ -112,7 +112,8 @@ class LineParallelEnv(ParallelEnv):
       order). ``feature_names`` names the entries in order; units and bounds are the line env's (its table:
       :class:`~trackenv.envs.line.TampingLine`).
     * ``"action_mask"``: int8 ``(2,)`` [may wait, may tamp]: 0 for tamp while the section is within
-      ``min_steps_between_tampings`` of its last tamping; with the choices ``(7,)``, one entry per code (the
+      ``min_steps_between_tampings`` of its last tamping, or where its tamping alone would not fit the possession
+      or what is left of an annual budget; with the choices ``(7,)``, one entry per code (the
       line env's ``action_masks()``, section by section: a choice not enabled, track work too soon after the
       last, work larger than the possession, a cost over what is left of the budget). The mask is in the
       observation only (PettingZoo's convention, which its API test samples with); what the sections' choices
@@ -130,8 +131,10 @@ class LineParallelEnv(ParallelEnv):
 
     **Infos** (per agent): every per-section entry of the line env's info at the agent's section
     (``tamped_sections``, ``section_costs``, ``section_sd_mm``, ``section_class``, ``wet_spot_active``, ...),
-    plus ``possession_share`` and ``cost`` (own + share, = −reward) in k€. The line env's whole info is
-    :attr:`line_info`.
+    plus ``possession_share`` and ``cost`` (own + share, = −reward) in k€, ``dropped`` (the agent asked for a
+    choice and its section got nothing: masked, too soon after its last track work, or cut for the possession's
+    capacity or the budget) and ``clipped`` (the line env's: the line's requests were cut for the capacity or the
+    budget). The line env's whole info is :attr:`line_info`.
 
     **Episode end.** No terminal state; every agent is truncated at the line env's horizon. ``step`` with no live
     agent raises RuntimeError until ``reset``.
@@ -140,7 +143,9 @@ class LineParallelEnv(ParallelEnv):
     rollout. ``options`` is accepted (PettingZoo's API passes it) and not used: the line env takes none.
 
     **State.** :meth:`state` is the line env's whole observation flattened (``state_space``), for centralised
-    critics.
+    critics. :meth:`get_state` and :meth:`set_state` copy and restore the episode (the line env's snapshot,
+    :mod:`~trackenv.envs.state`), e.g. for a tree search over joint actions: the restored moment's observations,
+    infos and live agents, as after the step that led there.
 
     **Rendering.** ``render_mode="rgb_array"`` (an argument of the line env): :meth:`render` is the line env's
     picture of the line.
@@ -219,8 +224,7 @@ class LineParallelEnv(ParallelEnv):
             raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
         self._obs, self._info = self.env.reset(seed=seed)
         self.agents = list(self.possible_agents)
-        n = len(self.possible_agents)
-        return self._observations(), self._infos(self._info, np.zeros(n), np.zeros(n))
+        return self._observations(), self._infos(self._info)
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict[str, dict], dict[str, float], dict[str, bool],
                                                        dict[str, bool], dict[str, dict]]:
@@ -230,19 +234,38 @@ class LineParallelEnv(ParallelEnv):
             raise RuntimeError("call reset() before step()" if self._obs is None else
                                "the episode has ended (every agent truncated at the horizon): call reset()")
         live = self.agents
-        self._obs, _, terminated, truncated, self._info = self.env.step(self._joint_action(actions))
-        info = self._info
-        own = np.asarray(info["section_costs"], dtype=float)
-        worked = IS_TRACK_WORK[np.asarray(info["section_choices"], dtype=np.int64)]
-        shares = possession_shares(sum(info["costs"][k] for k in SHARED_COST_KEYS), worked)
-        costs = own + shares
-        rewards = {agent: -float(costs[j]) for j, agent in enumerate(self.possible_agents)}
+        want = self._joint_action(actions)
+        self._obs, _, terminated, truncated, self._info = self.env.step(want)
+        infos = self._infos(self._info, want)
+        rewards = {agent: -infos[agent]["cost"] for agent in self.possible_agents}
         terminations = dict.fromkeys(live, bool(terminated))
         truncations = dict.fromkeys(live, bool(truncated))
-        observations, infos = self._observations(), self._infos(info, shares, costs)
+        observations = self._observations()
         if terminated or truncated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
+
+    def get_state(self) -> Any:
+        """A snapshot of the episode: the line env's :class:`~trackenv.envs.state.EnvState`, which
+        :meth:`set_state` of this or another PettingZoo env of the same line config (or the line env's own
+        ``set_state``) continues bit for bit."""
+        if self._obs is None:
+            raise RuntimeError("call reset() before get_state()")
+        return self.env.unwrapped.get_state()  # type: ignore[attr-defined]
+
+    def set_state(self, state: Any) -> tuple[dict[str, dict], dict[str, dict]]:
+        """Continue from ``state`` (from :meth:`get_state`, or a line env's of the same config), after a
+        ``reset`` of this env as the line env needs: the line env restored, every agent live unless that moment is
+        the horizon, and :meth:`state`, :attr:`line_info` and the returned observations and infos (as ``reset``
+        returns them) those of the restored moment, as after the step that led there. The snapshot is not
+        changed, so it can be restored again."""
+        line = self.env.unwrapped
+        line.set_state(state)  # type: ignore[attr-defined]
+        self._obs = line.current_observation()  # type: ignore[attr-defined]
+        self._info = line.get_state().last_info  # type: ignore[attr-defined]
+        ended = line.engine.step_count(0) >= line.config.horizon_steps  # type: ignore[attr-defined]
+        self.agents = [] if ended else list(self.possible_agents)
+        return self._observations(), self._infos(self._info)
 
     def _joint_action(self, actions: Mapping[str, Any]) -> np.ndarray:
         """The line env's action from one 0/1 (or one choice code) per live agent; ValueError naming what is
@@ -270,11 +293,23 @@ class LineParallelEnv(ParallelEnv):
         return {agent: {"observation": features[j], "action_mask": masks[j]}
                 for j, agent in enumerate(self.possible_agents)}
 
-    def _infos(self, info: Mapping[str, Any], shares: np.ndarray, costs: np.ndarray) -> dict[str, dict[str, Any]]:
+    def _infos(self, info: Mapping[str, Any], want: np.ndarray | None = None) -> dict[str, dict[str, Any]]:
+        """Each agent's info from the line env's ``info`` of a step (or a reset: no costs) and the joint action
+        ``want`` that led to it (None: unknown, nothing dropped)."""
         n = len(self.possible_agents)
         per_section = {k: v for k, v in info.items() if isinstance(v, np.ndarray) and v.shape == (n,)}
+        shares, costs = np.zeros(n), np.zeros(n)
+        if "section_costs" in info:  # a step's info
+            worked = IS_TRACK_WORK[np.asarray(info["section_choices"], dtype=np.int64)]
+            shares = possession_shares(sum(info["costs"][k] for k in SHARED_COST_KEYS), worked)
+            costs = np.asarray(info["section_costs"], dtype=float) + shares
+        applied = np.asarray(info.get("section_choices", np.zeros(n)), dtype=np.int64)
+        dropped = (np.zeros(n, bool) if want is None
+                   else (np.asarray(want, dtype=np.int64) != 0) & (applied == 0))
+        clipped = bool(info.get("clipped", False))
         return {agent: {**{k: v[j].item() for k, v in per_section.items()},
-                        "possession_share": float(shares[j]), "cost": float(costs[j])}
+                        "possession_share": float(shares[j]), "cost": float(costs[j]),
+                        "dropped": bool(dropped[j]), "clipped": clipped}
                 for j, agent in enumerate(self.possible_agents)}
 
     @property
