@@ -49,7 +49,9 @@ def line_summary(line: Any) -> dict[str, Any]:
     """What a plan reads from a line file (a :class:`~trackenv.envs.line_file.LineDescription`), in the file's
     units, for a reader to check them: the number of sections and the length [km], the ranges over the sections of
     the speed [km/h], the tonnage [MGT/year] and the freight share, the freight axle load [t], the counts of
-    transitions, switches or crossings and sections in known wet zones, the date of the last recording-car run in the
+    transitions, switches or crossings, sections in known and in suspected wet zones, the file's known short
+    defects (the sections that give a count, those with one or more, and their sum), the date of the last
+    recording-car run in the
     history with its age [years before ``as_of``] (None without a history), and the line's own costs [k€] where
     the file gives any."""
     sections = line.sections
@@ -66,6 +68,10 @@ def line_summary(line: Any) -> dict[str, Any]:
         "transitions": sum(s.register == "transition" for s in sections),
         "switches_crossings": sum(s.register == "switch_or_crossing" for s in sections),
         "known_wet": sum(bool(s.wet) for s in sections),
+        "suspected_wet": sum(s.wet_suspected for s in sections),
+        "known_defects": {"sections_given": sum(s.defects is not None for s in sections),
+                          "sections_with": sum(bool(s.defects) for s in sections),
+                          "defects": sum(s.defects or 0 for s in sections)},
         "last_recording": None if last is None else {"date": last, "years_before": line.years_before(last)},
         "costs": dict(line.costs),
     }
@@ -209,21 +215,25 @@ def scenario_note(scenario: str, line: Any = None, changes: dict[str, Any] | Non
                      f"{c.wet_spot_probability:.0%} of the sections, {c.wet_spot_active_share:.0%} of them working "
                      f"from the start, which a survey finds (an assumption: a wetter line than the default)")
     defect = f"{c.local_defect_length_m:g} m each settling {c.local_defect_rate_factor:g} times faster"
-    if known and c.local_defects_mean > 0 and known < len(sections):
-        parts.append(f"short defects: the file's on {counted(known, 'section', 'sections')}, the model's draws on the "
-                     f"rest (about {c.local_defects_mean:g} a section; {defect}, counted once in a section's length: "
-                     f"an assumption)")
-    elif known:
-        rest = ", none on the rest" if known < len(sections) else ""
-        parts.append(f"short defects: the file's on {counted(known, 'section', 'sections')}{rest} ({defect}, counted "
-                     f"once in a section's length: an assumption)")
+    if known:
+        flawed = [s.defects for s in sections if s.defects]
+        free = known - len(flawed)
+        given = (f"the file's {sum(flawed)} on {counted(len(flawed), 'section', 'sections')}"
+                 + (f" ({counted(free, 'section', 'sections')} known free of them)" if free else ""))
+        rest = ("" if known == len(sections) else f", the model's draws on the rest (about "
+                f"{c.local_defects_mean:g} a section)" if c.local_defects_mean > 0 else ", none on the rest")
+        parts.append(f"short defects: {given}{rest} ({defect}, on a zone the faster of the two, counted once in a "
+                     f"section's length: an assumption; the policies see the measurements, not these counts)")
     elif c.local_defects_mean > 0:
         parts.append(f"the model draws short defects (joints, welds, failed sleepers: about {c.local_defects_mean:g} "
                      f"a section, {defect}; an assumption, the file lists none)")
     if suspected:
         found = ", which a survey finds" if "survey" in c.choices else ""
+        start = (f", working from the start in {c.wet_spot_active_share:.0%} of them" if c.wet_spot_active_share > 0
+                 else "")
         parts.append(f"suspected wet: {counted(suspected, 'section', 'sections')}, each with a hidden wet spot in "
-                     f"{c.suspected_wet_probability:.0%} of the futures (an assumption){found}")
+                     f"{c.suspected_wet_probability:.0%} of the futures (an assumption; the other sections "
+                     f"{c.wet_spot_probability:.0%}) that starts at a quarter drawn over the horizon{start}{found}")
     return "; ".join(parts) or None
 
 
@@ -618,7 +628,9 @@ class LinePlan:
         section = self.line.sections[j]
         known = [name for name, on in (("transition", section.register == "transition"),
                                        ("switch or crossing", section.register == "switch_or_crossing"),
-                                       ("known wet", section.wet)) if on]
+                                       ("known wet", section.wet), ("suspected wet", section.wet_suspected),
+                                       (f"{counted(section.defects or 0, 'known short defect', 'known short defects')}",
+                                        bool(section.defects))) if on]
         tag = f" ({', '.join(known)})" if known else ""
         if what == "tamp" and self.renewed_share is not None and self.renewed_share[0, j] >= RENEWAL_SHARE:
             what = f"tamp, a ballast renewal in {self.renewed_share[0, j]:.0%} of the futures that tamp it"

@@ -60,13 +60,18 @@ def test_the_scenario_note_counts_the_files_known_defects_and_suspected_wet_zone
     line = _line([2, None, 0, None], ["no", "suspected", "yes", "no"])
     assert scenario_note("default") is None and scenario_note("default", _line([None], ["yes"])) is None
     assert scenario_note("default", line) == (
-        "short defects: the file's on 2 sections, none on the rest (2.4 m each settling 2.5 times faster, counted "
-        "once in a section's length: an assumption); suspected wet: 1 section, each with a hidden wet spot in 50% of "
-        "the futures (an assumption)")
+        "short defects: the file's 2 on 1 section (1 section known free of them), none on the rest (2.4 m each "
+        "settling 2.5 times faster, on a zone the faster of the two, counted once in a section's length: an "
+        "assumption; the policies see the measurements, not these counts); suspected wet: 1 section, each with a "
+        "hidden wet spot in 50% of the futures (an assumption; the other sections 10%) that starts at a quarter "
+        "drawn over the horizon")
     defects = scenario_note("defects", line, {"suspected_wet_probability": 0.3})
     assert defects.startswith("scenario defects: every choice")
-    assert ("short defects: the file's on 2 sections, the model's draws on the rest (about 1 a section; 2.4 m each "
-            "settling 5 times faster" in defects)
-    assert "suspected wet: 1 section, each with a hidden wet spot in 30% of the futures (an assumption), which a " \
-           "survey finds" in defects
+    assert ("short defects: the file's 2 on 1 section (1 section known free of them), the model's draws on the rest "
+            "(about 1 a section) (2.4 m each settling 5 times faster" in defects)
+    assert ("suspected wet: 1 section, each with a hidden wet spot in 30% of the futures (an assumption; the other "
+            "sections 10%) that starts at a quarter drawn over the horizon, which a survey finds") in defects
+    wet = scenario_note("wet", line)
+    assert "in 50% of the futures (an assumption; the other sections 35%) that starts at a quarter drawn over the " \
+           "horizon, working from the start in 40% of them, which a survey finds" in wet
     assert "the model draws short defects" in scenario_note("defects", _line([None], ["no"]))

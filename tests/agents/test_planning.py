@@ -241,7 +241,8 @@ def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
     summary = plan.to_dict()["line_summary"]
     assert summary == {"sections": 4, "length_km": 0.8, "speed_kmh": [100.0, 100.0], "annual_mgt": [15.0, 30.0],
                        "freight_share": [0.4, 0.4], "freight_axle_load_t": 22.5, "transitions": 1,
-                       "switches_crossings": 1, "known_wet": 1,
+                       "switches_crossings": 1, "known_wet": 1, "suspected_wet": 0,
+                       "known_defects": {"sections_given": 0, "sections_with": 0, "defects": 0},
                        "last_recording": {"date": "2025-12-01", "years_before": pytest.approx(31 / 365.25)},
                        "costs": {}}
     read = plan.table().splitlines()[1:3]
@@ -256,6 +257,12 @@ def test_the_plan_repeats_what_it_read_from_the_file(tmp_path):
     (tmp_path / "own").mkdir()
     own = load_line(write(tmp_path / "own", line=LINE + "costs:\n  speed_restriction_cost: 4\n"))
     assert line_summary(own)["costs"] == {"speed_restriction_cost": 4.0}
+    (tmp_path / "marked").mkdir()
+    from test_line_file import SUSPECTED
+
+    marked = line_summary(load_line(write(tmp_path / "marked", sections=SUSPECTED)))
+    assert marked["suspected_wet"] == 1 and marked["known_wet"] == 1
+    assert marked["known_defects"] == {"sections_given": 2, "sections_with": 1, "defects": 2}
     from trackenv_agents.plan_report import summary_lines
 
     assert summary_lines(line_summary(own))[2] == "  own costs: speed_restriction_cost 4 (k€; the rest the defaults)"
@@ -428,6 +435,19 @@ def test_the_costs_come_in_their_parts_and_the_plot_names_sections_and_dates(rou
     axes = plan.figure().axes
     labels = {t.get_text() for ax in [*axes, *(c for a in axes for c in a.child_axes)] for t in ax.get_xticklabels()}
     assert {"A", "B", "C", "D"} <= labels and {"2026-01-01", "2026-07-03"} <= labels
+
+
+def test_a_section_line_names_the_files_suspected_wet_zone_and_known_defects(tmp_path):
+    """Section B, rough and recommended in Q1, suspected wet with two known short defects in the file: its line in
+    the table says so beside its register."""
+    from test_line_file import SECTIONS
+
+    rows = [row + (",defects" if row.startswith("section,") else "" if row.startswith("#") else ",")
+            for row in SECTIONS.splitlines()]
+    marked = "\n".join(rows).replace("B,200,transition,no,,3,2,", "B,200,transition,Suspected,,3,2,2") + "\n"
+    assert "Suspected,,3,2,2" in marked
+    plan = plan_line(write(tmp_path, sections=marked, history=ROUGH_B), years=0.25, futures=1, **FAST)
+    assert "  B (transition, suspected wet, 2 known short defects) tamp: measured SD" in plan.table()
 
 
 def test_a_recommended_tamping_that_is_a_ballast_renewal_says_so(tmp_path):

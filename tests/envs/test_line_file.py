@@ -4,6 +4,7 @@ line, the engine applying it over the draws, the history fit, and the example li
 from __future__ import annotations
 
 import pickle
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -658,13 +659,58 @@ def test_a_file_with_known_defects_counts_them_once_in_the_section(tmp_path):
     made = gym.make("trackenv/TampingLine-v0", line=str(known), horizon_years=0.5)
     assert made.unwrapped.config.local_defect_near_m == 3.0
     assert LineConfig(line=none, local_defect_near_m=5.0).local_defect_near_m == 5.0  # no counts: the config's
+    # and a defect on a zone settles at the faster rate, as on the preset (multiplied, a few ran away)
+    assert LineConfig(line=known).local_defect_in_zone == "faster" == SCENARIOS["defects"]["local_defect_in_zone"]
+    assert LineConfig(line=none).local_defect_in_zone == "multiply"
+
+
+def test_a_section_gives_no_more_known_defects_than_its_segment_holds(tmp_path):
+    """Three known defects (each 2.4 m with 3 m either side) fit the 30 m segment that stands for a section; a
+    fourth is refused naming the section and what to do (split it in the file), not modelled as a segment full of
+    overlapping patches (which settles more evenly: a smoother section)."""
+    three = write(tmp_path, sections=DEFECTS.replace(",3,2,2\n", ",3,2,3\n"), line=NO_HISTORY, history=None)
+    config = LineConfig(line=three)
+    assert config.known_defects_fit() == 3 and max(s.defects or 0 for s in config.line.sections) == 3
+    four = write(tmp_path, sections=DEFECTS.replace(",3,2,2\n", ",3,2,4\n"), line=NO_HISTORY, history=None)
+    with pytest.raises(ValueError, match=r"section B gives 4 known short defects; the 30 m segment that stands for "
+                                         r"a section in the model holds at most 3 apart .*split the section"):
+        LineConfig(line=four)
+
+
+def test_known_defects_on_a_switch_do_not_run_away(tmp_path):
+    """A station's switch at 60 km/h with three known joints, a year without maintenance on the default line: the
+    file's defects settle at the faster of their rate and the switch's (not 4 × 2.5 times plain track, which took
+    such a section past the engine's validity within a quarter), so no episode leaves the model's validity."""
+    sections = DEFECTS.replace("C,200,switch_or_crossing,no,30,1.5,0,", "C,200,switch_or_crossing,no,30,1.5,0,3")
+    assert ",1.5,0,3" in sections
+    line = NO_HISTORY.replace("speed_kmh: 100", "speed_kmh: 60")
+    assert line != NO_HISTORY
+    path = write(tmp_path, sections=sections, line=line, history=None)
+    for seed in range(3):
+        env = TampingLine(line=path, horizon_years=1.0)
+        env.reset(seed=seed)
+        for _ in range(4):
+            info = env.step(np.zeros(4, np.int8))[4]
+            assert not np.any(info["beyond_validity"]) and info["section_sd_mm"].max() < 10.0
+
+
+def test_a_suspicion_below_the_ordinary_chance_of_a_wet_spot_warns(tmp_path):
+    """suspected_wet_probability below wet_spot_probability makes the file's suspected zones less likely wet than
+    its other sections: a warning naming both; none without suspected zones or at the defaults."""
+    path = write(tmp_path, sections=SUSPECTED, line=NO_HISTORY, history=None)
+    with pytest.warns(UserWarning, match=r"suspected_wet_probability = 0.2 is below wet_spot_probability = 0.35"):
+        LineConfig(line=path, suspected_wet_probability=0.2, wet_spot_probability=0.35)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        LineConfig(line=path)
+        (tmp_path / "dry").mkdir()
+        LineConfig(line=write(tmp_path / "dry", line=NO_HISTORY, history=None), suspected_wet_probability=0.0)
 
 
 def _defect_sleepers(path: Path, seed: int, **config) -> np.ndarray:
-    """(sections,) log_f of the ratio of each section's per-sleeper rates after reset(seed) to those of the same
-    file with every count 0 (f the defect's rate factor), summed over its sleepers: with
-    ``local_defect_in_zone = "multiply"`` each patch multiplies its sleepers' rates by f, so this is the number of
-    patches times a patch's sleepers, overlaps included."""
+    """(sections,) the number of each section's sleepers whose rate after reset(seed) differs from that of the
+    same file with every count 0: with a defect's factor above every zone's (the file's ``local_defect_in_zone``
+    is "faster"), the sleepers of its patches, a patch's sleepers times their number where they lie apart."""
     zero = path.parent / "zero"
     zero.mkdir(exist_ok=True)
     counted = (path.parent / "sections.csv").read_text().splitlines()
@@ -680,16 +726,16 @@ def _defect_sleepers(path: Path, seed: int, **config) -> np.ndarray:
         env = TampingLine(line=p, horizon_years=0.5, **config)
         env.reset(seed=seed)
         rates.append(env.batch.base_rate[: env.config.n_sections].copy())
-    factor = env.config.local_defect_rate_factor
-    return (np.log(rates[0] / rates[1]) / np.log(factor)).sum(axis=1)
+    return (rates[0] != rates[1]).sum(axis=1)
 
 
 @pytest.mark.parametrize("mean", [0.0, 1.0])
 def test_a_known_count_places_exactly_that_many_defects(tmp_path, mean):
     """A section's known count is its number of short defects in every episode (their positions drawn anew), on
     the default line (no defects drawn: ``local_defects_mean`` 0) and where the config draws them (mean 1): the
-    rates of each section's segment carry exactly count × the patch's sleepers of the defect's factor; a blank
-    section draws as the config does (none at mean 0)."""
+    rates of each section's segment carry exactly count × the patch's sleepers of the defect's factor (the known
+    patches lie apart: each in its own third of the segment); a blank section draws as the config does (none at
+    mean 0)."""
     sections = (DEFECTS.replace("A,200,plain,no,,2,1,", "A,200,plain,no,,2,1,3").replace(",3,2,2\n", ",3,2,\n")
                 .replace(",1.5,0,\n", ",1.5,0,1\n"))
     path = write(tmp_path, line=NO_HISTORY, sections=sections, history=None)
@@ -698,7 +744,7 @@ def test_a_known_count_places_exactly_that_many_defects(tmp_path, mean):
     patch = int(round(c.local_defect_length_m / SLEEPER_SPACING_M))  # a patch's sleepers
     where = []
     for seed in range(4):
-        defects = _defect_sleepers(path, seed, local_defects_mean=mean) / patch
+        defects = _defect_sleepers(path, seed, local_defects_mean=mean, local_defect_rate_factor=10.0) / patch
         np.testing.assert_allclose(defects[[0, 2, 3]], [3, 1, 0], atol=1e-6)
         if mean == 0:
             assert defects[1] == pytest.approx(0.0, abs=1e-6)  # blank: none drawn on the default line

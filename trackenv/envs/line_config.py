@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, fields
 from functools import partial
 from typing import TYPE_CHECKING, Any
@@ -76,6 +77,10 @@ LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt",
 #: side hold about 95 % of a 2.4 m dip's D1 energy), not once every 30 m segment (about seven times over in a
 #: 200 m section's SD).
 KNOWN_DEFECT_NEAR_M = 3.0
+#: The ``local_defect_in_zone`` of a line file that gives known short defects: a defect on a zone's sleepers
+#: settles at the faster of its own rate and the zone's, as on the short-defect preset; multiplied (4 × 2.5 on a
+#: switch) a few of them ran away past the engine's validity in a quarter.
+KNOWN_DEFECT_IN_ZONE = "faster"
 
 
 def check_horizon(name: str, years: Any, steps_per_year: int) -> float:
@@ -259,11 +264,12 @@ class LineConfig(ConfigBase):
     costs its ``costs`` mapping gives (:func:`file_fields`), and, per section, the register, known (and
     suspected) wet zones, years since tamping, tampings since renewal and the number of known short local defects.
     A file that gives known defects (a count in its ``defects`` column) also sets ``local_defect_near_m`` to
-    :data:`KNOWN_DEFECT_NEAR_M` (3 m, the short-defect preset's), so that a section's defects, known and drawn,
-    count once in its length. Giving one of those fields as well is an error unless it
-    equals the file's (:meth:`from_dict`, ``scenario``; :meth:`replace`, which the envs' keywords go through,
-    refuses any; a config built directly cannot tell a value equal to the field's default from leaving it out,
-    and the file's is taken).
+    :data:`KNOWN_DEFECT_NEAR_M` (3 m) and ``local_defect_in_zone`` to :data:`KNOWN_DEFECT_IN_ZONE` ("faster"),
+    the short-defect preset's, so that a section's defects, known and drawn, count once in its length and one on a
+    zone does not run away; a section may give at most :meth:`known_defects_fit` (3). Giving one of those fields
+    as well is an error unless it equals the file's (:meth:`from_dict`, ``scenario``; :meth:`replace`, which the
+    envs' keywords go through, refuses any; a config built directly cannot tell a value equal to the field's
+    default from leaving it out, and the file's is taken).
     Where the file gives a measured history the section's
     rate factor is fitted to it (:mod:`trackenv.envs.line_fit`). What
     the file does not know is drawn per episode as without one. ``capacity`` is at most the file's number of
@@ -501,6 +507,8 @@ class LineConfig(ConfigBase):
             raise ValueError(f"local_defect_near_m = {self.local_defect_near_m:g} needs sections_per_segment = 1 "
                              f"(a section represented by a segment of its own), got sections_per_segment = "
                              f"{self.sections_per_segment}")
+        self._check_known_defects()
+        self._check_suspected_wet()
 
     def _check_pass_time_steps(self) -> None:
         """The dynamics' own bound on the time steps of a pass (``MAX_TIME_STEPS``), read here so that the config
@@ -588,6 +596,38 @@ class LineConfig(ConfigBase):
             raise ValueError(f"capacity must be in [1, {n}] on a line of {n} sections, got {default} (the default "
                              f"where capacity is not given): set capacity")
         bounded_by(self, "n_sections", ci, "capacity", low=1, high=self.n_sections)
+
+    def known_defects_fit(self) -> int:
+        """The most known short local defects that the segment standing for a section holds apart: each a
+        ``local_defect_length_m`` patch with ``local_defect_near_m`` of neighbourhood either side (3 with the
+        defaults: 30 m / (2.4 + 2 · 3) m). More would overlap and fill the segment, and the section's SD would no
+        longer count each once in its length (a fuller segment settles more evenly: a smoother section)."""
+        return max(int(self.segment_length_m // (self.local_defect_length_m + 2 * self.local_defect_near_m)), 1)
+
+    def _check_known_defects(self) -> None:
+        """ValueError naming the first section of the line file whose known short defects do not fit its segment
+        (:meth:`known_defects_fit`), and how to describe it instead."""
+        if self.line is None or not self.line.defects_known:
+            return
+        most = self.known_defects_fit()
+        for s in self.line.sections:
+            if s.defects is not None and s.defects > most:
+                raise ValueError(
+                    f"line file {self.line.label}: section {s.id} gives {s.defects} known short defects; the "
+                    f"{self.segment_length_m:g} m segment that stands for a section in the model holds at most "
+                    f"{most} apart (each {self.local_defect_length_m:g} m with {self.local_defect_near_m:g} m "
+                    f"either side): split the section in the file into shorter ones (each is a segment of its "
+                    f"own, whatever its length), each with its own defects")
+
+    def _check_suspected_wet(self) -> None:
+        """A warning where the line file's suspected wet zones are less likely wet than its other sections
+        (``suspected_wet_probability`` below ``wet_spot_probability``): a suspicion that lowers the chance."""
+        if self.line is None or not any(s.wet_suspected for s in self.line.sections):
+            return
+        if self.suspected_wet_probability < self.wet_spot_probability:
+            warnings.warn(f"suspected_wet_probability = {self.suspected_wet_probability:g} is below "
+                          f"wet_spot_probability = {self.wet_spot_probability:g}: the line file's suspected wet "
+                          f"zones are less likely wet than its other sections", UserWarning, stacklevel=3)
 
     def _take_line(self) -> None:
         """Read ``line`` (a path, a dict of a line's keys, or a description) and set the fields it owns."""
@@ -720,11 +760,13 @@ def line_description(line: Any) -> LineDescription | None:
 def file_fields(line: Any) -> dict[str, Any]:
     """The fields of a config that the line file ``line`` (a description) sets, with its values: those of
     :data:`LINE_FILE_FIELDS`, the costs it gives (its ``costs`` mapping), its ``capacity`` where it gives one, and
-    ``local_defect_near_m`` (:data:`KNOWN_DEFECT_NEAR_M`) where it gives known short defects (a count in its
-    ``defects`` column): a section's known defects then count once in its length."""
-    own = {"capacity": line.capacity} if getattr(line, "capacity", None) is not None else {}
+    ``local_defect_near_m`` (:data:`KNOWN_DEFECT_NEAR_M`) and ``local_defect_in_zone``
+    (:data:`KNOWN_DEFECT_IN_ZONE`) where it gives known short defects (a count in its ``defects`` column): a
+    section's known defects then count once in its length, and one on a zone settles at the faster rate."""
+    own: dict[str, Any] = {"capacity": line.capacity} if getattr(line, "capacity", None) is not None else {}
     if getattr(line, "defects_known", False):
         own["local_defect_near_m"] = KNOWN_DEFECT_NEAR_M
+        own["local_defect_in_zone"] = KNOWN_DEFECT_IN_ZONE
     return {**{name: getattr(line, name) for name in LINE_FILE_FIELDS}, **dict(line.costs), **own}
 
 

@@ -467,7 +467,8 @@ class LineBatch:
             self.inspect_noise[:, r] = rng.standard_normal((H + 1, S, 2))
         if c.wet_spot_active_share > 0:  # wet spots already working: they start in the first step
             onset = np.where(rng.random(R) < c.wet_spot_active_share, 0, onset)
-        self.defect_near[rs] = self._near_defects(self._local_defects(rng, rate, plain_rate))
+        patches = self._local_defects(rng, rate, plain_rate)
+        self.defect_near[rs] = self._near_defects(patches)
         surveyed = rng.random(S) < c.surveyed_share if c.surveyed_share > 0 else np.zeros(S, dtype=bool)
         self.sd_after_tamping[r] = 0.0
         # a segment's zone belongs to the sections over its middle (all of it where a segment is one section)
@@ -497,7 +498,7 @@ class LineBatch:
             self.influence[rs.start + j] = sim.support_influence
         # the settlement since the last tamping: advance the fresh state over its age at the mean load
         self._settled_since(rs, age)
-        self._apply_line_file(b)
+        self._apply_line_file(b, patches)
         self.last_work[r] = self.last_tamped[r]
         self.survey[r] = np.where(surveyed | self._known_wet(), self.wet_present()[r], -1)
 
@@ -528,7 +529,8 @@ class LineBatch:
     def _local_defects(self, rng: np.random.Generator, rate: np.ndarray, plain_rate: np.ndarray) -> np.ndarray:
         """Short local defects (joints, welds, crossing noses, a failed sleeper: a Poisson number per segment, mean
         ``local_defects_mean``; a line file's known count in place of the draw on its sections that give one,
-        :meth:`_known_defects`), each a ``local_defect_length_m`` patch at a drawn position settling
+        :meth:`_known_defects`, spread along the segment: each at a drawn position in its own k-th of it), each a
+        ``local_defect_length_m`` patch at a drawn position settling
         ``local_defect_rate_factor`` times faster, into ``rate`` (segments, n, with the zones' factors) in place:
         multiplied, or, with ``local_defect_in_zone = "faster"``, the factor times ``plain_rate`` (the rate without
         the zones) where that is faster than ``rate``. The Poisson counts are drawn as without known ones (none
@@ -545,7 +547,12 @@ class LineBatch:
                  else np.zeros(rate.shape[0], dtype=np.int64))
         counts = np.where(known >= 0, known, drawn)
         for j in range(rate.shape[0]):
-            for start in rng.integers(0, n - length + 1, size=int(counts[j])):
+            k = int(counts[j])
+            if known[j] > 0:  # known ones lie apart, as in their section: each in its own k-th of the segment
+                starts = (np.arange(k) * n) // k + rng.integers(0, max(n // k - length, 0) + 1, size=k)
+            else:
+                starts = rng.integers(0, n - length + 1, size=k)
+            for start in starts:
                 patches[j, start : start + length] = True
                 if c.local_defect_in_zone == "multiply":
                     rate[j, start : start + length] *= c.local_defect_rate_factor
@@ -621,10 +628,12 @@ class LineBatch:
 
         return line_overrides(self.config).wet
 
-    def _apply_line_file(self, b: int) -> None:
+    def _apply_line_file(self, b: int, patches: np.ndarray) -> None:
         """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
         the drawn values (:func:`~trackenv.envs.line_fit.line_overrides`): the register, with its zones' rate
-        and stiffness (the statics rebuilt where they change); known wet zones (the drawn patch, wet from the
+        and stiffness (the statics rebuilt where they change; on the sleepers of the local defects' ``patches``
+        (segments, n) bool, with ``local_defect_in_zone = "faster"``, the faster of the defect's and the file's
+        zone's rate, as the draw does against a drawn zone); known wet zones (the drawn patch, wet from the
         start instead of hidden); tampings since renewal and years since tamping with the settlement since (as
         above, at the section's own traffic); the rate factor the file gives, or a draw from its posterior given
         the history (:func:`~trackenv.envs.line_fit.rate_multipliers`), in place of the drawn one; and the SD the
@@ -653,6 +662,9 @@ class LineBatch:
         new_rate, new_k = zone_factors(o.register, n, c)
         drawn = drawn_section_factor(self.base_rate[rs] / old_rate, c)
         rate = self.base_rate[rs] / old_rate * new_rate
+        if c.local_defect_in_zone == "faster" and patches.any():  # a short defect against the file's zone
+            f = c.local_defect_rate_factor  # (drawn as max(drawn zone, f) × plain; multiplied ones swap as above)
+            rate = np.where(patches, self.base_rate[rs] / np.maximum(old_rate, f) * np.maximum(new_rate, f), rate)
         rate[o.wet] *= np.where(self.wet_mask[rs][o.wet], c.wet_spot_rate_factor, 1.0)
         self.base_rate[rs] = rate * rate_multipliers(o, drawn, rate, c, weights)[:, None]
         self.wet_onset[rs] = np.where(o.wet, -1, self.wet_onset[rs])
