@@ -79,7 +79,7 @@ LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt",
 KNOWN_DEFECT_NEAR_M = 3.0
 #: The ``local_defect_in_zone`` of a line file that gives known short defects: a defect on a zone's sleepers
 #: settles at the faster of its own rate and the zone's, as on the short-defect preset; multiplied (4 × 2.5 on a
-#: switch) a few of them ran away past the engine's validity in a quarter.
+#: switch) four on a 60 km/h switch ran past the engine's validity within a quarter.
 KNOWN_DEFECT_IN_ZONE = "faster"
 
 
