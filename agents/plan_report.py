@@ -220,8 +220,8 @@ def scenario_note(scenario: str, line: Any = None, changes: dict[str, Any] | Non
         free = known - len(flawed)
         given = (f"the file's {sum(flawed)} on {counted(len(flawed), 'section', 'sections')}"
                  + (f" ({counted(free, 'section', 'sections')} known free of them)" if free else ""))
-        rest = ("" if known == len(sections) else f", the model's draws on the rest (about "
-                f"{c.local_defects_mean:g} a section)" if c.local_defects_mean > 0 else ", none on the rest")
+        rest = ("" if known == len(sections) else f", the model's draws on the rest, about "
+                f"{c.local_defects_mean:g} a section" if c.local_defects_mean > 0 else ", none on the rest")
         parts.append(f"short defects: {given}{rest} ({defect}, on a zone the faster of the two, counted once in a "
                      f"section's length: an assumption; the policies see the measurements, not these counts)")
     elif c.local_defects_mean > 0:

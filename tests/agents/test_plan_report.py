@@ -67,8 +67,8 @@ def test_the_scenario_note_counts_the_files_known_defects_and_suspected_wet_zone
         "drawn over the horizon")
     defects = scenario_note("defects", line, {"suspected_wet_probability": 0.3})
     assert defects.startswith("scenario defects: every choice")
-    assert ("short defects: the file's 2 on 1 section (1 section known free of them), the model's draws on the rest "
-            "(about 1 a section) (2.4 m each settling 5 times faster" in defects)
+    assert ("short defects: the file's 2 on 1 section (1 section known free of them), the model's draws on the rest, "
+            "about 1 a section (2.4 m each settling 5 times faster" in defects)
     assert ("suspected wet: 1 section, each with a hidden wet spot in 30% of the futures (an assumption; the other "
             "sections 10%) that starts at a quarter drawn over the horizon, which a survey finds") in defects
     wet = scenario_note("wet", line)
