@@ -34,6 +34,7 @@ from .plan_report import (
     end_state,
     line_summary,
     recommend_count,
+    scenario_note,
     step_date,
     summary_lines,
     years_text,
@@ -152,7 +153,9 @@ class NetworkPlan:
                f"machine is on line {self.network.start_line} now"]
         for i, line in enumerate(self.lines):
             out.append(f"line {i}: {line.line.name} ({line.line.source})")
-            out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *line.tuning_lines()]]
+            note = scenario_note(line.scenario, line.line, line.config_changes)  # the file's defects, suspicions
+            out += [f"  {text}" for text in [*summary_lines(line_summary(line.line)), *([note] if note else []),
+                                             *line.tuning_lines()]]
         out.append(f"{'quarter':<8} {'from':<11} {'cost k€':>8}  machine (share of futures); recommended (in at "
                    f"least {recommend_count(self.futures)} of the {self.futures} futures)")
         guessed = [set(plan["q1_model_sd"]) for plan in d["line_plans"]]

@@ -190,6 +190,27 @@ def test_two_copies_of_a_line_keep_their_files_and_the_plans_capacity_is_the_mac
     assert "line 1: Example Branch Line (synthetic) (" in plan.table() and "branch_copy.yaml)" in plan.table()
 
 
+def test_a_network_plan_names_each_lines_known_defects_and_suspected_wet_zones(tmp_path):
+    """A network of the branch and a copy whose file gives known short defects and a suspected wet zone: the copy's
+    lines in the table's header count them, as a line's plan does; the plain branch's say nothing of them."""
+    for path in EXAMPLE_NETWORK.parent.glob("example_branch*"):
+        shutil.copy(path, tmp_path / path.name)
+    rows = (tmp_path / "example_branch_sections.csv").read_text().splitlines()
+    marked = [rows[0] + ",defects", rows[1] + ",2", rows[2].replace(",no,", ",suspected,") + ",",
+              *(row + "," for row in rows[3:])]
+    (tmp_path / "marked_sections.csv").write_text("\n".join(marked) + "\n")
+    (tmp_path / "marked.yaml").write_text((tmp_path / "example_branch.yaml").read_text().replace(
+        "example_branch_sections.csv", "marked_sections.csv"))
+    network = tmp_path / "network.yaml"
+    network.write_text("name: branch and marked copy\nlines:\n  - example_branch.yaml\n  - marked.yaml\n")
+    table = plan_network(network, years=0.25, futures=1).table()
+    header = table.split("quarter  ")[0]
+    plain, copy = header.split("line 1: ")
+    assert "short defects" not in plain and "suspected wet" not in plain
+    assert "short defects: the file's 2 on 1 section, none on the rest" in copy
+    assert "suspected wet: 1 section, each with a hidden wet spot in 50% of the futures" in copy
+
+
 def test_a_networks_first_line_draws_the_futures_of_a_network_of_it_alone(network_plan, tmp_path):
     """The docs compare a line with and without sharing the machine this way: a network file listing the first
     line alone, planned with the same seed, gives that line the same futures (the same quarters while the machine
