@@ -68,8 +68,8 @@ PER_SECTION_BOUNDS: dict[str, tuple[float, float]] = {
     "section_length_m": (5.0, 1000.0), "speed_kmh": (5.0, 300.0), "annual_mgt": (0.1, 200.0),
     "freight_share": (0.0, 1.0)}
 #: The fields a line file sets (``line``): its number of sections, their length, the line's traffic and what
-#: differs per section (and, where it gives them, its costs, capacity and :data:`KNOWN_DEFECT_NEAR_M`:
-#: :func:`file_fields`).
+#: differs per section (and, where it gives them, its costs, capacity, and with known short defects
+#: :data:`KNOWN_DEFECT_NEAR_M` and :data:`KNOWN_DEFECT_IN_ZONE`: :func:`file_fields`).
 LINE_FILE_FIELDS = ("n_sections", "section_length_m", "speed_kmh", "annual_mgt", "freight_share",
                     "freight_axle_load_t", "per_section")
 #: The ``local_defect_near_m`` [m] of a line file that gives known short defects (its ``defects`` column): each
@@ -203,8 +203,8 @@ class LineConfig(ConfigBase):
     ``wet_spot_active_share``, the share of wet spots working from the first step; ``local_defects_mean`` short
     local defects per segment (Poisson; a joint, a weld, a failed sleeper), each a ``local_defect_length_m`` patch
     (2.4 m) settling ``local_defect_rate_factor`` (2.5) times faster **[assumption]** (on a line file's section
-    with a known count, its ``defects`` column, that count in place of the draw, whatever the mean, at drawn
-    positions); such a short patch lies
+    with a known count, its ``defects`` column, that count in place of the draw, whatever the mean, apart at
+    drawn positions, at most :meth:`known_defects_fit`); such a short patch lies
     mostly below the D1 band of 3-25 m, so it shows little in the measured level. ``local_defect_near_m`` (0:
     off) makes a section
     of ``section_length_m`` carry its segment's local defects once, instead of once every segment length: its SD

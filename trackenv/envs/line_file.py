@@ -110,9 +110,9 @@ TRAFFIC_KEYS: dict[str, Field] = {
 }
 DEFAULT_FREIGHT_AXLE_LOAD_T = 22.5
 
-#: The most known short local defects a section's row may give (``defects``, 0-20): twenty patches of the default
-#: 2.4 m already cover the 30 m segment that represents a section more than once, so a larger count is taken for a
-#: fault (another column's value) **[assumption]**.
+#: The most known short local defects a section's row may give (``defects``, 0-20): a larger count is taken for a
+#: fault (another column's value) **[assumption]**. The model holds fewer in the 30 m segment that represents a
+#: section (3 with the defaults: ``LineConfig.known_defects_fit``), which the config checks.
 MAX_KNOWN_DEFECTS = 20
 #: The columns of the sections CSV, one row per section in line order.
 SECTION_COLUMNS: dict[str, Field] = {

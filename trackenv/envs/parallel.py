@@ -7,6 +7,7 @@ which says so when PettingZoo is missing. The class is built only on the line en
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -262,7 +263,7 @@ class LineParallelEnv(ParallelEnv):
         line = self.env.unwrapped
         line.set_state(state)  # type: ignore[attr-defined]
         self._obs = line.current_observation()  # type: ignore[attr-defined]
-        self._info = line.get_state().last_info  # type: ignore[attr-defined]
+        self._info = copy.deepcopy(state.last_info)  # the info of the step that led there, as the line env keeps
         ended = line.engine.step_count(0) >= line.config.horizon_steps  # type: ignore[attr-defined]
         self.agents = [] if ended else list(self.possible_agents)
         return self._observations(), self._infos(self._info)
