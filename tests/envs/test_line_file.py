@@ -173,7 +173,8 @@ FAULTS = {
                                  "needs ',' between cells"]),
     "unquoted decimal comma": (dict(history=HISTORY.replace("B,2023-06-01,1.2,4", "B,2023-06-01,1,2,4")),
                                ["history.csv, row 5", "5 cells where the header has 4 columns",
-                                "a decimal comma? the cells '1', '2' look like 1,2 split in two: use a decimal point"]),
+                                "a decimal comma? the cells '1', '2' look like 1,2 split in two: use a decimal point",
+                                "(1.2); other such neighbours: '2', '4'"]),
     "trailing comma": (dict(sections=SECTIONS.replace("A,200,plain,no,,2,1", "A,200,plain,no,,2,1,")),
                        ["row 3", "8 cells where the header has 7 columns", "(a trailing ',')"]),
     "axle load in kg": (dict(line=LINE.replace("freight_share: 0.4", "freight_share: 0.4\n  freight_axle_load_t: "

@@ -495,17 +495,20 @@ def _check_separator(path: Path, header: list[str]) -> None:
 
 def _extra_cells_hint(cells: list[str], n_columns: int) -> str:
     """For a row with more cells than the header: the likely cause, or "". Extra empty cells at its end: a
-    trailing ','; else two neighbouring cells of digits: a decimal comma (1,3 for 1.3) splitting a number."""
+    trailing ','; else two neighbouring cells of digits: a decimal comma (1,3 for 1.3) splitting a number (every
+    such pair named: which one was split, the row alone cannot tell)."""
     extra = len(cells) - n_columns
     if extra <= 0:
         return ""
     if not any(cells[n_columns:]):
         return f"; it ends in {extra} empty cell{'s' * (extra > 1)} more (a trailing ',')"
-    for a, b in zip(cells, cells[1:]):
-        if re.fullmatch(r"[-+]?\d+", a) and re.fullmatch(r"\d+", b):
-            return (f"; a decimal comma? the cells {a!r}, {b!r} look like {a},{b} split in two: use a decimal "
-                    f"point ({a}.{b})")
-    return ""
+    pairs = [(a, b) for a, b in zip(cells, cells[1:]) if re.fullmatch(r"[-+]?\d+", a) and re.fullmatch(r"\d+", b)]
+    if not pairs:
+        return ""
+    (a, b), others = pairs[0], pairs[1:]  # the row alone cannot tell which pair was one number: name them all
+    more = f"; other such neighbours: {', '.join(f'{x!r}, {y!r}' for x, y in others)}" if others else ""
+    return (f"; a decimal comma? the cells {a!r}, {b!r} look like {a},{b} split in two: use a decimal point "
+            f"({a}.{b}){more}")
 
 
 def _check_header(path: Path, header: list[str], columns: dict[str, Field]) -> None:
