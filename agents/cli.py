@@ -310,6 +310,10 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     rules = _comma_items(args.rules, "--rules") if args.rules else None
     overrides = engine_overrides(args)
     extra = _line_policies(args)
+    if "horizon_years" in overrides:
+        from .evaluation.line_compare import env_config
+
+        _say_horizon_notes("evaluate", extra, {args.env: env_config(args.env, **overrides).horizon_years})
     executor = _executor(args)
     try:
         with _refusals_of("--rules", "rules"):
@@ -479,6 +483,10 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
 
         agents = {name: ModelPredictive() if path == ModelPredictive.name else load_baseline(path, name=name)
                   for name, path in agent_files.items()}
+    if "horizon_years" in overrides:
+        from .evaluation.line_compare import env_config
+
+        _say_horizon_notes("leaderboard", agents, {e: env_config(e, **overrides).horizon_years for e in envs})
     executor = _executor(args)
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()
@@ -610,6 +618,23 @@ def _compare_and_write(args: argparse.Namespace, network: Any, lines: Any, polic
 PRINTED_WARNINGS = 8
 
 
+def _say_horizon_notes(command: str, policies: dict[str, Any], horizons: dict[str, float]) -> None:
+    """A note on stderr for each trained policy scored in episodes (``horizons``: env id -> years, a ``--set
+    horizon_years``) of another length than it was trained on: its ``time`` feature, the share of the episode gone,
+    then runs at another pace than it learnt it (``trackenv plan --compare`` runs such a policy's episodes at its
+    own length instead)."""
+    from .planning import trained_horizon_years
+
+    for name, policy in policies.items():
+        trained = trained_horizon_years(policy)
+        for env_id, years in horizons.items():
+            if trained is not None and abs(trained - years) > 1e-9:
+                print(f"trackenv {command}: note: {name} was trained on {trained:g}-year episodes and is scored "
+                      f"here on {years:g}-year ones of {env_id} (--set horizon_years): its time feature, the share "
+                      f"of the episode gone, now runs {trained / years:g} times as fast as it learnt it",
+                      file=sys.stderr)
+
+
 def _say_warnings(notes: list[str]) -> None:
     """A plan's warnings on stderr, at most :data:`PRINTED_WARNINGS` (a file in a wrong unit warns for every
     section), the rest counted."""
@@ -722,20 +747,28 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _line_payload(path: Path, wall: float, out: Path, note: str = "") -> tuple[dict[str, Any], str]:
     """The JSON payload and the human summary of a line training run (from its summary.json; ``note`` ends its
-    last line, :func:`_set_note`), and last a warning where its best held-out iteration is dearer than the advisor rule
-    (:func:`~.learning.line.dearer_than_advisor`; the payload's ``warning``, else None)."""
+    last line, :func:`_set_note`), and last a warning where the best held-out evaluation of ``best_model.zip`` (the
+    best iteration's, or after a PPO stage, which keeps it from its own evaluations, that stage's best) is dearer
+    than the advisor rule (:func:`~.learning.line.dearer_than_advisor`; the payload's ``warning``, else None)."""
     from .evaluation.reporting import ci_text, count_text
     from .learning.line import dearer_than_advisor
 
     summary = json.loads((out / "summary.json").read_text())
     evals = [it["evaluation"] for it in summary["iterations"] if "evaluation" in it]
+    what = "iteration"
+    ppo = [e for e in (summary.get("ppo") or {}).get("evaluations") or [] if "vs_baseline" in e]
+    if ppo:  # the PPO stage keeps best_model.zip from its own evaluations (its first: the best iteration's policy)
+        evals = [{**e, "mean_cost": -e["mean_return"]} for e in ppo]
+        what = "evaluation of the PPO stage"
     best = min(evals, key=lambda e: e["mean_cost"]) if evals else None
-    warning = None if best is None else dearer_than_advisor(best)
+    warning = None if best is None else dearer_than_advisor(best, what)
     payload = {"model": str(path), "wall_time_s": wall, **summary, "warning": warning}
     human = f"trained -> {path} in {wall:.0f} s"
     if best is not None:
         d = best["vs_baseline"]
-        human += (f"\nbest held-out iteration: {best['mean_cost']:.1f} k€, vs {d['b']} {d['mean_difference']:+.1f} k€ "
+        after = f" (after {best['timesteps']} section-steps)" if "timesteps" in best else ""
+        human += (f"\nbest held-out {what}{after}: {best['mean_cost']:.1f} k€, vs {d['b']} "
+                  f"{d['mean_difference']:+.1f} k€ "
                   f"{ci_text(d['ci_low'], d['ci_high'], d['n_episodes'], signed=True)} on "
                   f"{count_text(d['n_episodes'], 'paired episode')} "
                   f"(best_model.zip; export it with experiments/train_line.py --export)")
@@ -1191,10 +1224,12 @@ def build_parser() -> _Parser:
                  "train a PPO agent (stable-baselines3), hyper-parameters from agents/learning/hyperparams/ppo.yml")
     out(sp, "runs/ppo")
     sp.add_argument("--algo", choices=("ppo", "maskable_ppo"), default=None,
-                    help=f"algorithm (default: the hyper-parameter file's, {hp.get('algo', 'ppo')})")
+                    help=f"the 60 m track's algorithm (default: the hyper-parameter file's, {hp.get('algo', 'ppo')}); "
+                         f"a line's learner reads its own from the file")
     sp.add_argument("--timesteps", type=_positive(int), default=None, metavar="N",
                     help=f"env steps to train for (default: the hyper-parameter file's, "
-                         f"{hp.get('total_timesteps', 'n/a')})")
+                         f"{hp.get('total_timesteps', 'n/a')}); with a TampingLine --env the line-steps of "
+                         f"MaskablePPO after the policy iterations (default 0: none)")
     sp.add_argument("--n-envs", type=_positive(int), default=None, metavar="N",
                     help=f"envs stepped together (default: the hyper-parameter file's, {hp.get('n_envs', 'n/a')})")
     sp.add_argument("--workers", type=_positive(int), default=1, metavar="N",
@@ -1212,7 +1247,8 @@ def build_parser() -> _Parser:
                     help="YAML (RL Zoo form) or flat JSON overriding agents/learning/hyperparams/ppo.yml key by key")
     sp.add_argument("--env", default=None, metavar="ID",
                     help="a TampingLine id: train the line's per-section policy (counterfactual policy iteration, "
-                         "then MaskablePPO for --timesteps line-steps; default runs/ppo_line)")
+                         "then MaskablePPO for --timesteps line-steps; default runs/ppo_line); your line: --env "
+                         "trackenv/TampingLine-v0 --set line=PATH.yaml")
     sp.add_argument("--iterations", type=_positive(int), default=None, metavar="N",
                     help="with a TampingLine --env: policy iterations (default: the hyper-parameter file's)")
     engine(sp)

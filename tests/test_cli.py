@@ -185,6 +185,19 @@ def test_evaluate_ray_reaches_the_line_comparison(monkeypatch, capsys):
     assert seen["executor"] is None and json.loads(capsys.readouterr().out)["ray"] is None
 
 
+def test_a_trained_agent_scored_at_another_horizon_is_noted(tmp_path, capsys):
+    """``--set horizon_years=1`` scores the shipped agent, trained on 10-year episodes, in 1-year ones: stderr says
+    so (its time feature runs 10 times as fast); at the preset's horizon, nothing."""
+    argv = ["evaluate", "--env", "trackenv/TampingLineSmall-v0", "--seeds", "0:1", "--rules", "grouped-threshold",
+            "--out", str(tmp_path)]
+    assert main([*argv, "--set", "horizon_years=1"]) == 0
+    assert ("trackenv evaluate: note: cpi-agent was trained on 10-year episodes and is scored here on 1-year ones of "
+            "trackenv/TampingLineSmall-v0 (--set horizon_years): its time feature, the share of the episode gone, now "
+            "runs 10 times as fast as it learnt it") in capsys.readouterr().err
+    assert main([*argv, "--set", "horizon_years=10"]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_set_changes_a_field_of_the_scenario_and_the_table_says_so(tmp_path, capsys):
     """``--set FIELD=VALUE`` scores a variant of the preset from the command line (it had no way to): the JSON
     records the config and what changed, the table's first line names the changes; a misspelt field or a value out
@@ -779,6 +792,25 @@ def test_a_line_run_dearer_than_its_advisor_ends_with_a_warning(tmp_path):
     summary(-5.0, 3.0)
     payload, human = _line_payload(tmp_path / "model.zip", 1.0, tmp_path)
     assert payload["warning"] is None and "warning" not in human
+
+
+def test_a_line_run_with_a_ppo_stage_reports_the_stages_best_model(tmp_path):
+    """After a PPO stage, best_model.zip is the best of the stage's own evaluations (its first: the best
+    iteration's policy), not the best iteration: the summary names that evaluation (a probe's run said 103.6 k€,
+    the iteration's, where best_model.zip cost 89.1)."""
+    from trackenv_agents.cli import _line_payload
+
+    def vs(diff: float) -> dict:
+        return {"b": "grouped-threshold", "n_episodes": 2, "mean_difference": diff, "ci_low": diff - 30.0,
+                "ci_high": diff + 40.0}
+
+    (tmp_path / "summary.json").write_text(json.dumps({
+        "iterations": [{"iteration": 0, "evaluation": {"mean_cost": 103.6, "vs_baseline": vs(28.9)}}],
+        "ppo": {"evaluations": [{"timesteps": 0, "mean_return": -103.6, "vs_baseline": vs(28.9)},
+                                {"timesteps": 62400, "mean_return": -89.1, "vs_baseline": vs(14.4)}]}}))
+    _, human = _line_payload(tmp_path / "model.zip", 1.0, tmp_path)
+    assert human.splitlines()[1].startswith("best held-out evaluation of the PPO stage (after 62400 section-steps): "
+                                            "89.1 k€, vs grouped-threshold +14.4 k€")
 
 
 def test_leaderboard_policies_name_both_shipped_line_agents():

@@ -402,6 +402,12 @@ def format_line_table(payload: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _batch_of_one(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """One env's observation as a batch of one (a leading axis of 1 on every key): what the harness hands every
+    policy's ``predict``, and what a policy written for it expects."""
+    return {k: np.asarray(v)[None] for k, v in obs.items()}
+
+
 def _panels(policies: Any, cfg: Any, names: Sequence[str] | None) -> tuple[list[Any], list[str]]:
     """An episode plot's policies (one or a list) bound to ``cfg``, and its panel titles: ``names`` (the rows'
     names), else the policies' own, told apart as the harness names its rows (:func:`distinct_names`)."""
@@ -427,9 +433,9 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
         obs, info = env.reset(seed=seed)
         sd, tam, meas, cost = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()], 0.0
         state = None
-        for t in range(cfg.horizon_steps):
-            a, state = pol.predict(obs, state=state, episode_start=np.array([t == 0]))
-            obs, r, _, _, info = env.step(a)
+        for t in range(cfg.horizon_steps):  # predict on a batch of one, as the harness calls every policy
+            a, state = pol.predict(_batch_of_one(obs), state=state, episode_start=np.array([t == 0]))
+            obs, r, _, _, info = env.step(np.asarray(a)[0])
             sd.append(info["section_sd_m"] * 1e3)
             meas.append(obs["section_sd"].copy())
             tam.append(info["tamped_sections"])
@@ -476,7 +482,8 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
         obs, info = env.reset(seed=seed)
         sd, tamped, machine, moved, chosen, cost = [info["section_sd_m"] * 1e3], [], [], [], [], 0.0
         for t in range(cfg.horizon_steps):
-            obs, r, _, _, info = env.step(pol.predict(obs, episode_start=np.array([t == 0]))[0])
+            obs, r, _, _, info = env.step(np.asarray(pol.predict(_batch_of_one(obs),
+                                                                 episode_start=np.array([t == 0]))[0])[0])
             sd.append(info["section_sd_m"] * 1e3)
             tamped.append(info["tamped_sections"])
             machine.append(info["machine_line"])

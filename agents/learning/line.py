@@ -496,17 +496,18 @@ class _LineTrainer:
                 if self.checkpoint_count else None}
 
 
-def dearer_than_advisor(evaluation: dict[str, Any]) -> str | None:
+def dearer_than_advisor(evaluation: dict[str, Any], what: str = "iteration") -> str | None:
     """One warning line where a held-out evaluation of :func:`train_line` (an iteration's ``evaluation`` in
-    summary.json; the run's best one) is dearer than the advisor rule, paired on at least 2 episodes with the whole
-    95 % CI of the difference above zero: the run then saved a policy the rule beats (``best_model.zip`` is only
-    the best of its iterations), and says so rather than leave it to pass for an improvement; None otherwise."""
+    summary.json, or with ``what`` another, e.g. the MaskablePPO stage's; the run's best one) is dearer than the
+    advisor rule, paired on at least 2 episodes with the whole 95 % CI of the difference above zero: the run then
+    saved a policy the rule beats (``best_model.zip`` is only the best of its evaluations), and says so rather than
+    leave it to pass for an improvement; None otherwise."""
     d = evaluation["vs_baseline"]
     if d["n_episodes"] < 2 or d["ci_low"] <= 0:
         return None
     from ..evaluation.reporting import ci_text
 
-    return (f"warning: the best held-out iteration costs {d['mean_difference']:+.1f} k€ "
+    return (f"warning: the best held-out {what} costs {d['mean_difference']:+.1f} k€ "
             f"{ci_text(d['ci_low'], d['ci_high'], d['n_episodes'], signed=True)} per episode more than its advisor "
             f"{d['b']}: the rule stays the better policy; more iterations (--iterations) or training episodes "
             "(episodes_per_iteration in --hyperparams) are needed")

@@ -74,6 +74,31 @@ def test_the_network_episode_figure_draws_lines_of_their_own(tmp_path):
     assert matplotlib.image.imread(out).ndim == 3
 
 
+def test_the_episode_plots_hand_predict_a_batch_as_the_harness_does(tmp_path):
+    """A policy written for the harness's contract (``predict`` gets a batch of observations, one row per env) draws
+    the line's and the network's episode figures: both plots call it with a batch of one (a probe's policy met one
+    env's unbatched observation there and failed, after its scores had run)."""
+    from trackenv.envs.line_config import LineConfig
+    from trackenv.envs.network import NetworkConfig
+    from trackenv_agents.evaluation.line_compare import plot_line_episode, plot_network_episode
+
+    class BatchOnly:
+        name = "batch-only"
+        calls = 0
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            sd = obs["section_sd"]
+            assert sd.ndim == 2 and obs["time"].ndim == 2, "one env's observation, not a batch"
+            BatchOnly.calls += 1
+            return (sd >= 1.0).astype(np.int8), state
+
+    line = LineConfig(n_sections=6, capacity=3, horizon_years=0.5)
+    plot_line_episode([BatchOnly()], line, 0, str(tmp_path / "l.png"))
+    network = NetworkConfig.coerce(None, line_config=["small", "small"], horizon_years=0.5)
+    plot_network_episode([BatchOnly()], network, 0, str(tmp_path / "n.png"))
+    assert BatchOnly.calls == line.horizon_steps + network.horizon_steps
+
+
 def test_a_line_file_is_named_by_its_path_in_what_changed():
     """A table's "changed:" names a line file by its path, not by the whole line (100 kB for the example) nor the
     fields and per-section values the file sets; the JSON's "config" keeps the line itself."""
