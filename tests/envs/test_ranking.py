@@ -11,7 +11,7 @@ import pytest
 from gymnasium import spaces
 
 import trackenv.envs  # noqa: F401  (registers the ids)
-from trackenv.envs.choices import CHOICES, INTERVENTIONS, NOTHING, code
+from trackenv.envs.choices import CHOICES, INTERVENTIONS, NOTHING, code, work_per_code
 from trackenv.envs.ranking import PRECEDENCE, rank_mask, ranked_choice_masks, ranked_to_choices, score_keys
 from trackenv.envs.wrappers import (
     MultiDiscreteActions,
@@ -92,6 +92,17 @@ def test_ranked_masks_allow_counts_up_to_the_sections_allowed() -> None:
     np.testing.assert_array_equal(out, [[1, 1, 1, 1, 1], [1, 1, 0, 0, 0], [1, 0, 0, 0, 0]])
 
 
+def test_ranked_masks_stop_at_what_fits_the_possession() -> None:
+    """With each section's work and the capacity, a head's count stops where its allowed sections no longer fit
+    together, least work first (drainage of 2 each in a possession of 3: one; 0.5 and 2 and 2 in 3: two), and a
+    choice of no work (survey) is not capped."""
+    masks = ALL_ALLOWED.reshape(4, -1).copy()
+    work = np.array([[2.0, 2.0, 2.0, 2.0], [2.0, 0.5, 2.0, 9.0], [0.0, 0.0, 0.0, 0.0]])
+    masks[3, RENEW] = False  # the renewal of work 9 is not allowed: it counts for nothing
+    out = ranked_choice_masks(masks.ravel(), ("drainage", "renew", "survey"), (work, 3.0)).reshape(3, 5)
+    np.testing.assert_array_equal(out, [[1, 1, 0, 0, 0], [1, 1, 1, 0, 0], [1, 1, 1, 1, 1]])
+
+
 def _masked_counts(rng: np.random.Generator, ranked_mask: np.ndarray) -> np.ndarray:
     """A count per head drawn among those the ranked mask allows."""
     return np.array([rng.choice(np.flatnonzero(row)) for row in ranked_mask])
@@ -103,6 +114,7 @@ def test_decoded_choices_are_always_allowed_by_the_env_masks(env_id) -> None:
     choices: every decoded code is one the env's mask allows, the ranked masks are those the env's imply, and
     the env applies the decoded codes (or drops some to nothing for the joint capacity or budget)."""
     env = RankedActions(gym.make(env_id, **SMALL, annual_budget=60.0, min_steps_between_tampings=0))
+    config = env.unwrapped.config
     assert env.heads == INTERVENTIONS
     assert env.action_space == spaces.MultiDiscrete([5] * len(INTERVENTIONS))
     rng = np.random.default_rng(0)
@@ -112,8 +124,11 @@ def test_decoded_choices_are_always_allowed_by_the_env_masks(env_id) -> None:
         for step in range(8):
             env_mask = env.unwrapped.action_masks().reshape(4, len(CHOICES))
             ranked_mask = env.action_masks().reshape(len(INTERVENTIONS), 5)
-            for j, name in enumerate(INTERVENTIONS):
-                np.testing.assert_array_equal(ranked_mask[j], np.arange(5) <= env_mask[:, code(name)].sum())
+            for j, name in enumerate(INTERVENTIONS):  # the sections allowed, as many as fit the possession
+                allowed = env_mask[:, code(name)]
+                work = np.full(4, float(work_per_code(config.choice_work)[code(name)]))  # one length: equal works
+                fits = int((np.cumsum(work[allowed]) <= config.capacity + 1e-9).sum())
+                np.testing.assert_array_equal(ranked_mask[j], np.arange(5) <= fits)
             masked_by_budget += int((~env_mask[:, 1:]).sum())
             counts = _masked_counts(rng, ranked_mask) if step % 2 else rng.integers(0, 5, len(INTERVENTIONS))
             codes = env.action(counts)

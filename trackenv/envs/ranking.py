@@ -11,7 +11,8 @@ mask lets get ``h`` now. A section marked by several heads gets the first of the
 decoded code is therefore one the env's mask allows for its section; the joint limits (the possession's capacity,
 the annual budget), which the env's masks do not cover, are resolved by the env as for any action (its
 ``over_capacity`` rule). The masks of the ranked form (:func:`ranked_choice_masks`) allow a count up to the number
-of sections the env's mask lets get the head's choice; a larger count (masked) decodes as that number.
+of sections the env's mask lets get the head's choice, and (given their work and the capacity) up to as many of
+them as fit the possession together; a larger count (masked) decodes as the number of sections allowed.
 
 The scores read the observation only (what a planner has). A section's *growth* is its measured SD over the
 years since its last tamping, with at least :data:`MIN_GROWTH_YEARS` (so that a section just tamped does not look
@@ -157,14 +158,22 @@ def ranked_to_choices(k, observation: Mapping[str, np.ndarray], masks, heads: Se
     return codes[0] if raw.ndim == 1 else codes
 
 
-def ranked_choice_masks(masks, heads: Sequence[str]) -> np.ndarray:
+def ranked_choice_masks(masks, heads: Sequence[str], fit: tuple[np.ndarray, float] | None = None) -> np.ndarray:
     """The masks of the ranked choices (bool, (len(heads) · (S + 1),) or (rows, ...)), head after head as
     sb3-contrib reads a MultiDiscrete mask, from the env's flat masks ``masks`` ((S · 7,) or (rows, S · 7)):
     count ``k`` of a head is valid when it does not exceed the number of sections that may get the head's choice
-    now (0 always)."""
+    now (0 always), nor, with ``fit`` (per head each section's work, (heads, S), and the possession's capacity),
+    the number of them that fit the possession together, least work first (a larger count of that head alone
+    would always be clipped; what the heads ask together, the env still resolves)."""
     raw = np.asarray(masks, dtype=bool)
     n_sections = raw.shape[-1] // len(CHOICES)
     eligible = _eligible(raw, n_sections)
     available = np.stack([eligible[:, :, CHOICES.index(h)].sum(axis=1) for h in heads], axis=1)  # (rows, heads)
+    if fit is not None:
+        work, capacity = fit
+        for i, h in enumerate(heads):
+            w = np.sort(np.where(eligible[:, :, CHOICES.index(h)], np.asarray(work)[i], np.inf), axis=1)
+            holds = (np.cumsum(w, axis=1) <= capacity + 1e-9).sum(axis=1)
+            available[:, i] = np.minimum(available[:, i], holds)
     out = (np.arange(n_sections + 1)[None, None, :] <= available[:, :, None]).reshape(eligible.shape[0], -1)
     return out[0] if raw.ndim == 1 else out

@@ -46,13 +46,13 @@ from gymnasium.vector import AutoresetMode, VectorActionWrapper, VectorEnv, Vect
 from gymnasium.vector.utils import batch_space
 
 from .batched import check_autoreset_mode
-from .choices import CHOICES
+from .choices import CHOICES, code, work_on_sections, work_per_code
 from .common import numeric_action
 from .ranking import rank_mask, ranked_choice_masks, ranked_to_choices, ranked_to_sections, score_keys
 
 __all__ = [
     "ActionMaskObservation", "MultiDiscreteActions", "RankedActions", "RankedVectorActions",
-    "SectionObservation", "SectionVectorObservation", "choices_of", "make_ranked", "make_ranked_vector",
+    "SectionObservation", "SectionVectorObservation", "choices_of", "config_of", "make_ranked", "make_ranked_vector",
     "n_sections_of", "rank_mask", "ranked_choice_masks", "ranked_to_choices", "ranked_to_sections", "section_keys",
 ]
 
@@ -74,13 +74,19 @@ def n_sections_of(env: gym.Env | VectorEnv) -> int:
     return int(n)
 
 
+def config_of(env: gym.Env | VectorEnv) -> Any:
+    """The config of a (wrapped) trackenv env or vector env (over Gymnasium's SyncVectorEnv, its first env's); None
+    for an env without one."""
+    base = env.unwrapped
+    if getattr(base, "config", None) is None and getattr(base, "envs", None):  # SyncVectorEnv: its first env's
+        return config_of(base.envs[0])  # type: ignore[union-attr]
+    return getattr(base, "config", None)
+
+
 def choices_of(env: gym.Env | VectorEnv) -> tuple[str, ...]:
     """The enabled interventions of a (wrapped) trackenv env, in the order of the action codes:
     ``config.choices`` (``("tamp",)`` for an env without it)."""
-    base = env.unwrapped
-    if getattr(base, "config", None) is None and getattr(base, "envs", None):  # SyncVectorEnv: its first env's
-        return choices_of(base.envs[0])  # type: ignore[union-attr]
-    return tuple(getattr(getattr(base, "config", None), "choices", ("tamp",)))
+    return tuple(getattr(config_of(env), "choices", ("tamp",)))
 
 
 def section_keys(space: spaces.Space, n_sections: int) -> list[str]:
@@ -116,7 +122,7 @@ class _RankedForm:
     :func:`ranked_to_choices`, masked by :func:`ranked_choice_masks`). TypeError for any other env."""
 
     def __init__(self, owner: str, action_space: spaces.Space, observation_space: spaces.Space, n_sections: int,
-                 choices: tuple[str, ...]) -> None:
+                 choices: tuple[str, ...], config: Any = None) -> None:
         if action_space == spaces.MultiBinary(n_sections):
             self.heads: tuple[str, ...] | None = None
             keys: tuple[str, ...] = (SD_KEY,)
@@ -134,6 +140,13 @@ class _RankedForm:
             keys += (SURVEY_KEY,)  # drainage ranks by what a survey found where the observation says it
         self.keys = tuple(dict.fromkeys(keys))
         self.n_sections = n_sections
+        #: per head, each section's work in the possession, and the possession's capacity (the counts' masks stop
+        #: where the head's eligible sections, least work first, no longer fit); None: no cap (no config)
+        self.fit: tuple[np.ndarray, float] | None = None
+        if self.heads is not None and config is not None and hasattr(config, "choice_work"):
+            per_code = work_per_code(config.choice_work)
+            self.fit = (np.stack([work_on_sections(per_code, np.full(n_sections, code(h)), config.length_factors)
+                                  for h in self.heads]), float(config.capacity))
 
     @property
     def width(self) -> int:
@@ -156,7 +169,7 @@ class _RankedForm:
         """(rows, mask size) the valid ranked actions."""
         if self.heads is None:
             return np.ones((rows, self.n_sections + 1), dtype=bool)
-        return np.asarray(ranked_choice_masks(env_masks(), self.heads)).reshape(rows, -1)
+        return np.asarray(ranked_choice_masks(env_masks(), self.heads, self.fit)).reshape(rows, -1)
 
 
 # --- single-env wrappers ---
@@ -170,7 +183,8 @@ class RankedActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     The choices (``action_type="choices"``): ``MultiDiscrete([n_sections + 1] * len(heads))``, one count per
     enabled intervention (:attr:`heads`, the env's ``config.choices``), each marking the sections that rank first
     by the head's score among those the env's mask lets get it (:func:`ranked_to_choices`); :meth:`action_masks`
-    allows a count up to the number of such sections (:func:`ranked_choice_masks`).
+    allows a count up to the number of such sections that fit the possession together (:func:`ranked_choice_masks`:
+    a larger count of that choice alone would always be clipped).
 
     Wrap the env's own Dict observation (apply observation wrappers outside this one)."""
 
@@ -179,7 +193,8 @@ class RankedActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         gym.ActionWrapper.__init__(self, env)
         n = n_sections_of(env)
         self.n_sections = n
-        self._form = _RankedForm("RankedActions", env.action_space, env.observation_space, n, choices_of(env))
+        self._form = _RankedForm("RankedActions", env.action_space, env.observation_space, n, choices_of(env),
+                                 config_of(env))
         self.heads = self._form.heads
         """The interventions counted by the action, in order (None over a tamp-or-wait env)."""
         self.action_space = self._form.space
@@ -290,7 +305,7 @@ class RankedVectorActions(VectorActionWrapper):
         n = n_sections_of(env)
         self.n_sections = n
         self._form = _RankedForm("RankedVectorActions", env.single_action_space, env.single_observation_space, n,
-                                 choices_of(env))
+                                 choices_of(env), config_of(env))
         self.heads = self._form.heads
         self.single_action_space = self._form.space
         self.action_space = batch_space(self.single_action_space, env.num_envs)
