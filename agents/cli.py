@@ -310,10 +310,16 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     rules = _comma_items(args.rules, "--rules") if args.rules else None
     overrides = engine_overrides(args)
     extra = _line_policies(args)
-    if "horizon_years" in overrides:
-        from .evaluation.line_compare import env_config
+    if {"horizon_years", "capacity"} & set(overrides):
+        from .evaluation.line_compare import env_config, line_of
 
-        _say_horizon_notes("evaluate", extra, {args.env: env_config(args.env, **overrides).horizon_years})
+        config = env_config(args.env, **overrides)
+        _say_horizon_notes("evaluate", extra, {args.env: config.horizon_years})
+        asked, line = overrides.get("capacity"), line_of(config)
+        if asked is not None and getattr(line, "line", None) is not None and line.capacity < asked:
+            print(f"trackenv evaluate: note: --set capacity={asked:g} is more than the line file's "
+                  f"{line.n_sections} sections: the line's capacity is {line.capacity} (trackenv plan refuses it)",
+                  file=sys.stderr)
     executor = _executor(args)
     try:
         with _refusals_of("--rules", "rules"):

@@ -198,6 +198,21 @@ def test_a_trained_agent_scored_at_another_horizon_is_noted(tmp_path, capsys):
     assert "note:" not in capsys.readouterr().err
 
 
+def test_a_capacity_above_a_line_files_sections_is_noted(tmp_path, capsys):
+    """``--set capacity=50`` on the 30-section branch: the config cuts it to 30 (documented), and evaluate says so
+    on stderr (plan refuses it); within the sections, nothing."""
+    from trackenv.lines import EXAMPLE
+
+    branch = str(Path(EXAMPLE).parent / "example_branch.yaml")
+    argv = ["evaluate", "--env", "trackenv/TampingLine-v0", "--set", f"line={branch}", "--set", "horizon_years=0.5",
+            "--seeds", "0:1", "--rules", "grouped-threshold", "--policy", "rules", "--out", str(tmp_path)]
+    assert main([*argv, "--set", "capacity=50"]) == 0
+    assert ("trackenv evaluate: note: --set capacity=50 is more than the line file's 30 sections: the line's "
+            "capacity is 30") in capsys.readouterr().err
+    assert main([*argv, "--set", "capacity=8"]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_set_changes_a_field_of_the_scenario_and_the_table_says_so(tmp_path, capsys):
     """``--set FIELD=VALUE`` scores a variant of the preset from the command line (it had no way to): the JSON
     records the config and what changed, the table's first line names the changes; a misspelt field or a value out
