@@ -664,13 +664,16 @@ class LinePlan:
     def _write_choices(self, path: Path) -> None:
         with path.open("w", newline="") as f:
             w = csv.writer(f, lineterminator="\n")
-            w.writerow(["quarter", "from", "section", "choice", "share_of_futures", "recommended", *self.state])
+            w.writerow(["quarter", "from", "section", "choice", "share_of_futures", "recommended", *self.state,
+                        "register", "wet", "defects"])
             for q, (date, shares, rec) in enumerate(zip(self.dates, self.choice_share, self.recommended,
                                                        strict=True)):
                 for j, (s, share, r) in enumerate(zip(self.line.sections, shares, rec, strict=True)):
                     state = [f"{v[q, j]:.3f}" for v in self.state.values()]
+                    known = [s.register, s.wet_text, "" if s.defects is None else s.defects]  # the file's, to filter
                     for code in np.flatnonzero(share[1:] > 0) + 1:
-                        w.writerow([q + 1, date, s.id, CHOICES[code], f"{share[code]:.3f}", int(r == code), *state])
+                        w.writerow([q + 1, date, s.id, CHOICES[code], f"{share[code]:.3f}", int(r == code), *state,
+                                    *known])
 
     def _write_costs(self, path: Path) -> None:
         with path.open("w", newline="") as f:

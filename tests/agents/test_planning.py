@@ -300,6 +300,7 @@ def test_the_plan_records_the_state_each_quarter_decided_on(rough_plan, tmp_path
         row = next(r for r in csv.DictReader(f) if r["quarter"] == "1" and r["section"] == "B")
     assert float(row["measured_sd_mm"]) == pytest.approx(plan.state["measured_sd_mm"][0, 1], abs=1e-3)
     assert {"measured_peak_mm", "measurement_age_years", "sd_mm", "peak_mm"} <= set(row)
+    assert (row["register"], row["wet"], row["defects"]) == ("transition", "no", "")  # the file's, to filter by
 
 
 def test_the_table_gives_the_numbers_behind_the_decision_to_take_now(rough_plan, monkeypatch):
