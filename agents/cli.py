@@ -312,12 +312,13 @@ def cmd_evaluate_line(args: argparse.Namespace) -> int:
     extra = _line_policies(args)
     if {"horizon_years", "capacity"} & set(overrides):
         from .evaluation.line_compare import env_config, line_of
+        from .planning import capacity_cut
 
         config = env_config(args.env, **overrides)
         _say_horizon_notes("evaluate", extra, {args.env: config.horizon_years})
-        asked, line = overrides.get("capacity"), line_of(config)
-        if asked is not None and getattr(line, "line", None) is not None and line.capacity < asked:
-            print(f"trackenv evaluate: note: --set capacity={asked:g} is more than the line file's "
+        line = line_of(config)
+        if capacity_cut(overrides, line):
+            print(f"trackenv evaluate: note: --set capacity={overrides['capacity']:g} is more than the line file's "
                   f"{line.n_sections} sections: the line's capacity is {line.capacity} (trackenv plan refuses it)",
                   file=sys.stderr)
     executor = _executor(args)

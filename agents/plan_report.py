@@ -203,9 +203,10 @@ def scenario_note(scenario: str, line: Any = None, changes: dict[str, Any] | Non
     read = ("wet_spot_probability", "wet_spot_active_share", "suspected_wet_probability", "local_defects_mean",
             "segment_length_m", "local_defect_length_m", "local_defect_rate_factor")
     c = LineConfig.from_dict({**fields, **{k: v for k, v in (changes or {}).items() if k in read}})
-    sections = () if line is None else line.sections
-    known = sum(s.defects is not None for s in sections)
-    suspected = sum(s.wet_suspected for s in sections)
+    summary: dict[str, Any] = line_summary(line) if line is not None else {  # the file's defects, suspicions
+        "sections": 0, "suspected_wet": 0, "known_defects": {"sections_given": 0, "sections_with": 0, "defects": 0}}
+    sections, suspected, defects = summary["sections"], summary["suspected_wet"], summary["known_defects"]
+    known = defects["sections_given"]
     parts = []
     if fields.get("choices"):
         parts.append(f"scenario {scenario}: every choice (spot tamping, drainage, renewal, inspections, surveys) and "
@@ -216,11 +217,10 @@ def scenario_note(scenario: str, line: Any = None, changes: dict[str, Any] | Non
                      f"from the start, which a survey finds (an assumption: a wetter line than the default)")
     defect = f"{c.local_defect_length_m:g} m each settling {c.local_defect_rate_factor:g} times faster"
     if known:
-        flawed = [s.defects for s in sections if s.defects]
-        free = known - len(flawed)
-        given = (f"the file's {sum(flawed)} on {counted(len(flawed), 'section', 'sections')}"
+        free = known - defects["sections_with"]
+        given = (f"the file's {defects['defects']} on {counted(defects['sections_with'], 'section', 'sections')}"
                  + (f" ({counted(free, 'section', 'sections')} known free of them)" if free else ""))
-        rest = ("" if known == len(sections) else f", the model's draws on the rest, about "
+        rest = ("" if known == sections else f", the model's draws on the rest, about "
                 f"{c.local_defects_mean:g} a section" if c.local_defects_mean > 0 else ", none on the rest")
         parts.append(f"short defects: {given}{rest} ({defect}, on a zone the faster of the two, counted once in a "
                      f"section's length: an assumption; the policies see the measurements, not these counts)")
@@ -636,18 +636,17 @@ class LinePlan:
             what = f"tamp, a ballast renewal in {self.renewed_share[0, j]:.0%} of the futures that tamp it"
         elif what == "tamp" and self.renewed_share is None and st.get("renewal_due", 0.0) >= RENEWAL_SHARE:
             what = f"tamp, a ballast renewal in {st['renewal_due']:.0%} of the futures"
-        if self.model_read()["sd"][j]:  # a draw of the model where the file has no run: not a measurement
-            return (f"  {section.id}{tag} {what}, on the model's reading only (the file has no run of it since its "
-                    f"last tamping: measure it before acting): SD {st['measured_sd_mm']:.2f} (SD alert "
-                    f"{lim['sd_alert']:g}), peak {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention "
-                    f"{lim['intervention']:g}, immediate action {lim['immediate_action']:g}); true SD "
-                    f"{st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
+        sd = f"SD {st['measured_sd_mm']:.2f} (SD alert {lim['sd_alert']:g})"
+        peak = (f"{st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, intervention {lim['intervention']:g}, "
+                f"immediate action {lim['immediate_action']:g})")
+        truth = f"true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}"
         read = self.model_read()
+        if read["sd"][j]:  # a draw of the model where the file has no run: not a measurement
+            return (f"  {section.id}{tag} {what}, on the model's reading only (the file has no run of it since its "
+                    f"last tamping: measure it before acting): {sd}, peak {peak}; {truth}")
         peak_read = "the model's peak" if read["peak"][j] else "peak"
-        return (f"  {section.id}{tag} {what}: measured SD {st['measured_sd_mm']:.2f} (SD alert "
-                f"{lim['sd_alert']:g}), {peak_read} {st['measured_peak_mm']:.2f} (alert {lim['alert']:g}, "
-                f"intervention {lim['intervention']:g}, immediate action {lim['immediate_action']:g}), "
-                f"{read['age_years'][j]:.2f} years old; true SD {st['sd_mm']:.2f}, peak {st['peak_mm']:.2f}")
+        return (f"  {section.id}{tag} {what}: measured {sd}, {peak_read} {peak}, {read['age_years'][j]:.2f} years "
+                f"old; {truth}")
 
     def write(self, folder: Path) -> dict[str, str]:
         """Write ``plan.csv`` (quarter, date, section, choice, share of futures, recommended, then the section's

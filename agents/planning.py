@@ -93,9 +93,9 @@ PLAN_SURVEYED_SHARE = 0.0
 
 __all__ = ["CAPACITY_CYCLE_YEARS", "DEFAULT_POLICY", "GEOMETRY_NOTE", "LIMIT_FIELDS", "PLAN_SCENARIOS",
            "PLAN_SURVEYED_SHARE", "RECOMMEND_SHARE", "SECTION_LABELS", "SECTION_LINES", "STALE_RUN_YEARS",
-           "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "check_capacity", "line_limits", "line_plan", "line_policy",
-           "line_summary", "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date", "summary_lines",
-           "trained_horizon_years", "unmet_reasons"]
+           "STATE_COLUMNS", "UNMET_REASONS", "LinePlan", "capacity_cut", "check_capacity", "line_limits", "line_plan",
+           "line_policy", "line_summary", "plan_config", "plan_line", "plan_warnings", "rule_thresholds", "step_date",
+           "summary_lines", "trained_horizon_years", "unmet_reasons"]
 
 
 def line_policy(name: str, config: Any, scenario: str | None = None, years: float | None = None) -> Any:
@@ -429,10 +429,16 @@ def line_plan(line: Any, cfg: Any, run: _Futures, limits: dict[str, np.ndarray],
                     renewed_share=run.renewed_share)
 
 
+def capacity_cut(config: dict[str, Any], cfg: Any) -> bool:
+    """Whether the fields ``config`` given for a line hold a ``capacity`` that its config ``cfg`` cut to the line
+    file's sections (silently: a file's config takes at most its sections)."""
+    return "capacity" in config and config["capacity"] != cfg.capacity
+
+
 def check_capacity(config: dict[str, Any], cfg: Any) -> None:
     """ValueError where the fields ``config`` given for a line plan hold a ``capacity`` above the line's sections
-    (its config ``cfg`` cuts it to them, silently)."""
-    if "capacity" in config and config["capacity"] != cfg.capacity:
+    (:func:`capacity_cut`)."""
+    if capacity_cut(config, cfg):
         raise ValueError(f"capacity must be at most the line's {cfg.n_sections} sections, got {config['capacity']!r}")
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 from gymnasium import spaces
@@ -59,6 +60,9 @@ from .common import observation_space as common_observation_space
 from .costs import section_quality_costs
 from .info import step_info
 from .line_config import REGISTER_CLASSES, SLEEPER_SPACING_M, LineConfig
+
+if TYPE_CHECKING:  # line_fit builds its fit on this module's engine: each imports the other where used
+    from .line_fit import LineOverrides
 
 COST_KEYS = LineConfig.cost_keys()
 #: The largest wheel/rail force the model is taken to represent, in static wheel loads: impact forces at dipped
@@ -599,34 +603,33 @@ class LineBatch:
             return [np.zeros(0, dtype=np.int64)] * R
         return [rng.integers(2, n - 2, size=int(rng.poisson(mean))) for _ in range(R)]
 
-    def _known_defects(self) -> np.ndarray:
-        """(segments of a line,) the number of known short local defects on each, from the config's line file
-        (whose config has one section per segment); −1 where not known (drawn), everywhere without a file."""
+    def _file(self) -> LineOverrides | None:
+        """What the config's line file sets over the draws (:func:`~trackenv.envs.line_fit.line_overrides`, cached
+        per config; its config has one section per segment), or None without a file."""
         if self.config.line is None:
-            return np.full(self.R, -1, dtype=np.int64)
+            return None
         from .line_fit import line_overrides
 
-        return line_overrides(self.config).defects
+        return line_overrides(self.config)
+
+    def _known_defects(self) -> np.ndarray:
+        """(segments of a line,) the number of known short local defects on each, from the config's line file;
+        −1 where not known (drawn), everywhere without a file."""
+        o = self._file()
+        return np.full(self.R, -1, dtype=np.int64) if o is None else o.defects
 
     def _wet_spot_probability(self) -> float | np.ndarray:
-        """The probability of a hidden wet spot: ``wet_spot_probability``, or per segment (a line file's config
-        has one section per segment) ``suspected_wet_probability`` on the file's suspected wet zones."""
-        c = self.config
-        if c.line is None:
-            return c.wet_spot_probability
-        from .line_fit import line_overrides
-
-        suspected = line_overrides(c).wet_suspected
-        return np.where(suspected, c.suspected_wet_probability, c.wet_spot_probability)
+        """The probability of a hidden wet spot: ``wet_spot_probability``, or per segment
+        ``suspected_wet_probability`` on the line file's suspected wet zones."""
+        c, o = self.config, self._file()
+        return c.wet_spot_probability if o is None else np.where(o.wet_suspected, c.suspected_wet_probability,
+                                                                 c.wet_spot_probability)
 
     def _known_wet(self) -> np.ndarray:
         """(S,) the sections whose wet zone the config's line file knows: their survey is known from the start
         (a survey would find it), so a policy reads it as surveyed, not as a section to survey."""
-        if self.config.line is None:
-            return np.zeros(self.S, dtype=bool)
-        from .line_fit import line_overrides
-
-        return line_overrides(self.config).wet
+        o = self._file()
+        return np.zeros(self.S, dtype=bool) if o is None else o.wet
 
     def _apply_line_file(self, b: int, patches: np.ndarray) -> None:
         """Line ``b``'s draws overridden by what the config's line file knows (nothing without one), in place of
@@ -642,20 +645,13 @@ class LineBatch:
         it (with ``local_defect_near_m``, its drawn local defects once in its length:
         :func:`~trackenv.envs.line_fit.sd_weights`).
         Everything is drawn first, as without a file, so the draws and their order do not change."""
-        c = self.config
-        if c.line is None:
+        c, o = self.config, self._file()
+        if o is None:
             return
-        from .line_fit import (
-            drawn_section_factor,
-            line_overrides,
-            rate_multipliers,
-            sd_weights,
-            start_levels,
-            zone_factors,
-        )
+        from .line_fit import drawn_section_factor, rate_multipliers, sd_weights, start_levels, zone_factors
 
         # a line file's config has one section per segment (LineConfig refuses more): section j is segment j
-        o, r, rs, n = line_overrides(c), self.rows(b), self.segments(b), c.n_sleepers
+        r, rs, n = self.rows(b), self.segments(b), c.n_sleepers
         # the SD of a section as measured (its local defects once in its length; None: the segment's own SD)
         weights = sd_weights(self.defect_near[rs], c.section_length_m * self.length_factor[r], c)
         old_rate, old_k = zone_factors(self.register[r], n, c)
@@ -695,12 +691,10 @@ class LineBatch:
         run at the start; the line's last run the latest of them. Sections without a usable run (none, or one
         before their last tamping) keep the model's reading. Nothing is drawn, so the
         episode's draws do not change."""
-        c = self.config
-        if c.line is None:
+        c, o = self.config, self._file()
+        if o is None:
             return
-        from .line_fit import line_overrides
-
-        o, r = line_overrides(c), self.rows(b)
+        r = self.rows(b)
         known = np.flatnonzero(~np.isnan(o.last_sd_m))
         if not known.size:
             return
