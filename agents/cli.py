@@ -491,9 +491,12 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
         agents = {name: ModelPredictive() if path == ModelPredictive.name else load_baseline(path, name=name)
                   for name, path in agent_files.items()}
     if "horizon_years" in overrides:
+        from .evaluation.leaderboard import fitting_agents
         from .evaluation.line_compare import env_config
 
-        _say_horizon_notes("leaderboard", agents, {e: env_config(e, **overrides).horizon_years for e in envs})
+        for env_id in envs:  # each scenario's note for the agents scored there only
+            config = env_config(env_id, **overrides)
+            _say_horizon_notes("leaderboard", fitting_agents(agents, config)[0], {env_id: config.horizon_years})
     executor = _executor(args)
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()

@@ -873,3 +873,18 @@ def test_the_leaderboard_says_why_each_policy_is_not_scored_grouped_by_reason():
     table = format_leaderboard(payload)
     assert "Not scored here (each sees the observation of the line it was trained on): a, b." in table
     assert "Not scored here (needs an SD measured every step without error): model-predictive." in table
+
+
+def test_leaderboard_horizon_notes_name_only_the_scenarios_where_the_agent_is_scored(monkeypatch, capsys, tmp_path):
+    """`--set horizon_years=2` with the 60 m track's agent on the 60 m track and a line: the note on its time
+    feature is said for the 60 m track, where it is scored, and not for the line, where it is not."""
+    import trackenv_agents.evaluation.leaderboard as lb
+
+    monkeypatch.setattr(lb, "run_leaderboard", lambda envs, **kw: {"results": [], "bound": {}, "seeds": {},
+                                                                    "best_rule": {}})
+    argv = ["leaderboard", "--env", "trackenv/Tamping-v1,trackenv/TampingLineSmall-v0", "--policies",
+            "rules,cpi-track60-agent", "--set", "horizon_years=2", "--no-bound", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "trackenv leaderboard: note:" in line]
+    assert len(notes) == 1 and "cpi-track60-agent was trained on" in notes[0], notes
+    assert "ones of trackenv/Tamping-v1 (--set horizon_years)" in notes[0]

@@ -237,7 +237,7 @@ def test_choices_split_the_possession_among_the_sections_with_track_work():
             assert rewards[agent] == pytest.approx(-(info["section_costs"][j] + share), rel=1e-12, abs=1e-12)
         kinds |= {CHOICES[c] for c in info["section_choices"]}
     assert {"inspect", "survey"} & kinds and {"spot_tamp", "drainage", "renew"} & kinds  # the rule was exercised
-    with pytest.raises(ValueError, match=r"must be a choice code in \[0, 6\], got 7"):
+    with pytest.raises(ValueError, match=r"must be a choice code in \[0, 6\] \(an integer\), got 7"):
         parallel.reset(seed=0)
         parallel.step({**dict.fromkeys(agents, 0), "section_1": 7})
 
@@ -286,8 +286,11 @@ def test_errors():
         env.step({agent: 0 for agent in AGENTS[:5]})
     with pytest.raises(ValueError, match=r"unknown \['section_9'\]"):
         env.step({**_actions(JOINT[1]), "section_9": 0})
-    with pytest.raises(ValueError, match=r"actions\['section_1'\] must be 0 \(wait\) or 1 \(tamp\), got 2"):
-        env.step({**_actions(JOINT[1]), "section_1": 2})
+    for wrong in (2, 1.0, True, np.array([1]), "1", None):  # as the line env, only an integer of the space
+        with pytest.raises(ValueError, match=r"actions\['section_1'\] must be 0 \(wait\) or 1 \(tamp\) "
+                                             r"\(an integer\), got "):
+            env.step({**_actions(JOINT[1]), "section_1": wrong})
+    assert env.agents == AGENTS  # a refused step changes nothing
     with pytest.raises(ValueError, match="agent must be one of"):
         env.observation_space("section_6")
     with pytest.raises(ValueError, match="options must be a dict"):

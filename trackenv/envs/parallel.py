@@ -281,10 +281,10 @@ class LineParallelEnv(ParallelEnv):
                              f"unknown {unknown}")
         want = np.zeros(len(self.possible_agents), dtype=np.int8 if self._codes == 2 else np.int64)
         for j, agent in enumerate(self.possible_agents):
-            value = np.asarray(actions[agent])
-            if value.size != 1 or value.ravel()[0] not in range(self._codes):
-                raise ValueError(f"actions[{agent!r}] must be {allowed}, got {actions[agent]!r}")
-            want[j] = int(value.ravel()[0])
+            value = actions[agent]  # what the agent's Discrete space contains: an integer, not 1.0 nor [1]
+            if isinstance(value, bool) or not self.action_spaces[agent].contains(value):
+                raise ValueError(f"actions[{agent!r}] must be {allowed} (an integer), got {value!r}")
+            want[j] = int(value)
         return want
 
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
