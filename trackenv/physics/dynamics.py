@@ -30,7 +30,15 @@ from ._checks import (
     check_time_steps,
 )
 from .contact import HertzContact, LinearContact
-from .timestep import DT_REFERENCE_S, auto_time_step, check_dt_option, check_time_step, contact_period
+from .timestep import (
+    DT_REFERENCE_S,
+    MAX_SLOPE_CHANGE_PER_STEP,
+    auto_time_step,
+    check_dt_option,
+    check_time_step,
+    contact_period,
+    slope_change_per_step,
+)
 from .track import HALF_BANDWIDTH, Track, add_supports, hermite_shape, rail_bands
 from .vehicle import Car, Train, VehicleSystem, Wheelset
 from .window_ends import check_window_ends, static_ends
@@ -670,10 +678,13 @@ def simulate_passes(
     """Run one vehicle pass over each of a batch of tracks and/or irregularities (one result per row).
 
     ``tracks``: one Track (shared by every row) or one per row; ``irregularities``: None, an array (n_rows,
-    n_sleepers or n_nodes) of rail level [m] (downward positive), or a list of such rows or callables z(x).
+    n_sleepers or n_nodes) of rail level [m] (downward positive; between its points a natural cubic spline, which
+    is smooth and swings beside a lone spike: a piecewise-linear or kinked level is given as a callable), or a list
+    of such rows or callables z(x).
     ``speed`` [m/s] > 0; ``dt`` [s] within the bounds of :mod:`trackenv.physics.timestep`, or "auto": the
     coarsest step that keeps peak forces within 0.5 % of the reference step (that module's contract; a row whose
-    wheel loses contact is rerun at the reference step, so rows of one batch may differ in dt).
+    wheel loses contact or whose rail level has a kink is rerun at the reference step, so rows of one batch may
+    differ in dt).
     ``start``: "static" (vehicle and track in static equilibrium at the start), "rest" (the paper's transient: the
     vehicle is set on the unloaded track and drops in) or "steady": the periodic steady state of the vehicle
     running at ``speed`` over a track that continues the row's first sleeper (the track's entry) for ever, at the
@@ -774,11 +785,22 @@ def _simulate_passes(tracks, vehicle, speed, irregularities, *, dt, contact, sta
     batch = _Batch(tracks, irr_rows, settlement, system, law, speed, dt, start, x_start, x_end, margins[0],
                    sleeper_force_measure, backend=backend, device=device, ends=window_ends)
     results, lost = _simulate_batch(batch)
-    if auto and dt > DT_REFERENCE_S and lost:
-        # the contract covers passes that keep contact: rows where a wheel left the rail run at the reference step
-        _rerun_rows(results, lost, tracks, irr_rows, settlement, system, speed, dt=DT_REFERENCE_S,
-                    window_bays=margins[0], **options)
+    if auto and dt > DT_REFERENCE_S:
+        # the contract covers passes that keep contact over a rail without kinks: the other rows (a wheel left the
+        # rail, or the level changes slope within a step) run at the reference step
+        unresolved = sorted(set(lost) | set(_kinked_rows(results)))
+        if unresolved:
+            _rerun_rows(results, unresolved, tracks, irr_rows, settlement, system, speed, dt=DT_REFERENCE_S,
+                        window_bays=margins[0], **options)
     return results
+
+
+def _kinked_rows(results: list[PassResult]) -> list[int]:
+    """The rows whose rail level under the wheels changes slope by more than the auto step resolves
+    (:data:`~trackenv.physics.timestep.MAX_SLOPE_CHANGE_PER_STEP`; the level after the start, which the static
+    sag of settled supports shifts at t = 0)."""
+    return [b for b, res in enumerate(results)
+            if slope_change_per_step(res.wheel_position[1:], res.irregularity[1:]) > MAX_SLOPE_CHANGE_PER_STEP]
 
 
 @dataclass(frozen=True, eq=False)
