@@ -152,3 +152,11 @@ def test_simulate_passes_names_malformed_rows(kw, name) -> None:
 def test_simulate_pass_refuses_a_profile_that_is_not_numbers(profile) -> None:
     with pytest.raises(ValueError, match="^irregularity must be an array of real numbers"):
         te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), 20.0, profile)
+
+
+@pytest.mark.parametrize("speed", [250.0, -10.0, 0.0])
+def test_a_speed_out_of_range_says_its_unit(speed) -> None:
+    """250 meant as km/h: the range is in m/s, and the message says so and how to convert."""
+    with pytest.raises(ValueError, match=r"^speed must lie in \(0, 200\], got .* \(m/s: 200 m/s is 720 km/h; a speed "
+                                         r"in km/h divided by 3\.6\)$"):
+        te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), speed=speed)

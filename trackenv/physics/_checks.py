@@ -181,7 +181,11 @@ def caller_stacklevel() -> int:
 def check_speed(speed, name: str = "speed") -> float:
     """A vehicle's speed [m/s] in (0, :data:`MAX_SPEED_M_PER_S`]; a warning above :data:`SERVICE_SPEED_M_PER_S`
     (outside the model's validity, or km/h given as m/s)."""
-    v = check_scalar(name, speed, low=0.0, high=MAX_SPEED_M_PER_S, low_inclusive=False)
+    try:
+        v = check_scalar(name, speed, low=0.0, high=MAX_SPEED_M_PER_S, low_inclusive=False)
+    except ValueError as error:  # the range is in m/s: say so where a speed in km/h is the likely slip
+        raise ValueError(f"{error} (m/s: {MAX_SPEED_M_PER_S:g} m/s is {MAX_SPEED_M_PER_S * 3.6:g} km/h; a speed in "
+                         f"km/h divided by 3.6)") from None
     if v > SERVICE_SPEED_M_PER_S:
         import warnings
 
