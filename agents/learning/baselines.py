@@ -13,6 +13,11 @@ Three kinds, told apart by what the path holds (:func:`baseline_kind`):
   flattened section-level observation) :class:`RLlibRankedPolicy`; with ``--multi-agent`` (one shared module for
   every section's agent of the PettingZoo interface) :class:`RLlibSectionPolicy`.
 
+A model trained with stable-baselines3 in one's own script (``model.learn`` on a trackenv env or one of the
+learner wrappers of :mod:`trackenv.envs.wrappers`) becomes an ``sb3`` policy with :func:`save_sb3_policy`, which
+writes the model and the sidecar the harness needs (what the env gave the model, its observation statistics, the
+line it was trained on).
+
 A policy of the ``sb3`` and ``rllib`` kinds sees the observation of the scenario it was trained on (its sizes are
 those of the line: flattened section arrays, a count of sections to tamp), so it is wrapped in
 :class:`TrainedPolicy`, whose :meth:`~TrainedPolicy.unfit_for` tells the leaderboard to score it on that
@@ -35,7 +40,7 @@ from ..rules.base import as_batch
 from .line_policy import may_tamp
 
 __all__ = ["BASELINE_KINDS", "RLLIB_SUMMARY", "SAVED_BASELINES", "RLlibRankedPolicy", "RLlibSectionPolicy",
-           "TrainedPolicy", "baseline_kind", "load_baseline", "rllib_module_dir", "saved_baselines"]
+           "TrainedPolicy", "baseline_kind", "load_baseline", "rllib_module_dir", "save_sb3_policy", "saved_baselines"]
 
 #: The kinds :func:`load_baseline` reads.
 BASELINE_KINDS = ("sb3", "line", "rllib")
@@ -87,7 +92,9 @@ def baseline_kind(path: str | Path) -> str:
             return "sb3"
         if line_meta_path(p).is_file():
             return "line"
-        raise ValueError(f"{p}: a trained .zip needs {stats_path(p).name} (experiments/train_ppo.py) or "
+        raise ValueError(f"{p}: a trained .zip needs {stats_path(p).name} (experiments/train_ppo.py; a model "
+                         f"trained with stable-baselines3 in a script of one's own: save it with "
+                         f"trackenv_agents.learning.baselines.save_sb3_policy(model, env, path)) or "
                          f"{line_meta_path(p).name} (trackenv train --env ID) beside it")
     raise ValueError(f"{p}: a trained policy is a .zip (stable-baselines3) or a folder of "
                      f"experiments/train_rllib.py, got a {p.suffix or 'file without a suffix'}")
@@ -111,6 +118,86 @@ def load_baseline(path: str | Path, name: str | None = None) -> Any:
             raise ValueError(f"{stats_path(p)}: no 'config' (the line it was trained on)")
         return TrainedPolicy(load_trained(p, name=label), LineConfig.coerce(trained), label, kind, p)
     return _load_rllib(p, label)
+
+
+#: wrappers of a single env that change nothing a model sees or does (Gymnasium's own, SB3's Monitor)
+_TRANSPARENT_WRAPPERS = ("TimeLimit", "OrderEnforcing", "PassiveEnvChecker", "RecordEpisodeStatistics", "Monitor")
+#: what :func:`save_sb3_policy` can describe to the harness: the wrappers between the model and the env, outermost
+#: first (without the transparent ones) -> the sidecar's ``action_type`` (None: the env's own)
+_SCORABLE_PIPELINES = {(): None, ("MultiDiscreteActions",): None, ("SectionObservation",): None,
+                       ("SectionObservation", "MultiDiscreteActions"): None,
+                       ("SectionObservation", "RankedActions"): "ranked"}
+
+
+def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any = None) -> Path:
+    """Save a stable-baselines3 / sb3-contrib ``model`` (PPO, MaskablePPO, A2C or DQN) trained on ``env`` so that
+    the harness, ``trackenv evaluate --model PATH`` and ``trackenv leaderboard --policies PATH`` score it: the model
+    at ``path`` (``.zip``) and beside it ``<stem>_obs_stats.json``: the observation keys the model reads, their
+    statistics (``vec_normalize``'s, a ``VecNormalize`` the model was trained in; none: the observation as the env
+    gives it), the algorithm, the action type and the line's config (the scenario it is scored on).
+
+    ``env``: the env the model was trained on, or one built the same way: a trackenv env (``gym.make`` of an id,
+    tamp-or-wait or with the choices), possibly in :class:`~trackenv.envs.wrappers.SectionObservation`,
+    :class:`~trackenv.envs.wrappers.MultiDiscreteActions`, or :func:`~trackenv.envs.wrappers.make_ranked` over a
+    tamp-or-wait env, or an SB3 ``DummyVecEnv`` / ``VecNormalize`` of one. Another pipeline (a flattened
+    observation, ranked counts of the choices, a wrapper of one's own) is refused with ValueError naming it: the
+    harness gives a policy the env's own observation and takes the env's own actions, and can only undo these.
+    The harness plays the model without action masks (the env drops what it forbids)."""
+    import gymnasium as gym
+
+    from .checkpoint import save_model_atomic, write_json_atomic
+    from .tamping import SB3_ALGOS, stats_path
+
+    algo = next((name for name, (_, cls) in SB3_ALGOS.items() if type(model).__name__ == cls), None)
+    if algo is None:
+        raise ValueError(f"model must be one of {sorted(cls for _, cls in SB3_ALGOS.values())} (stable-baselines3 "
+                         f"or sb3-contrib), got {type(model).__name__}")
+    if vec_normalize is None and type(env).__name__ == "VecNormalize":
+        vec_normalize = env
+    while hasattr(env, "venv"):  # SB3's vector wrappers
+        env = env.venv
+    if hasattr(env, "envs"):  # DummyVecEnv: its first env
+        env = env.envs[0]
+    if not isinstance(env, gym.Env):
+        raise ValueError(f"env must be the Gymnasium env the model was trained on (or a DummyVecEnv of it), got "
+                         f"{type(env).__name__}")
+    pipeline, inner = [], env
+    while isinstance(inner, gym.Wrapper):
+        if type(inner).__name__ not in _TRANSPARENT_WRAPPERS:
+            pipeline.append(type(inner).__name__)
+        inner = inner.env
+    config = getattr(inner, "config", None)
+    if config is None or not hasattr(config, "to_dict"):
+        raise ValueError(f"env must be a trackenv env (gym.make of a trackenv id), got {type(inner).__name__}")
+    choices = isinstance(inner.action_space, gym.spaces.MultiDiscrete)
+    if tuple(pipeline) not in _SCORABLE_PIPELINES or (choices and "RankedActions" in pipeline):
+        raise ValueError(f"a model trained through {' > '.join(pipeline)} cannot be scored by the harness, which "
+                         "gives a policy the env's own observation and takes its own actions: save_sb3_policy "
+                         "takes the env, SectionObservation, MultiDiscreteActions and make_ranked over a tamp-or-wait "
+                         "env (not a flattened observation nor ranked counts of the choices)")
+    space = env.observation_space
+    if not isinstance(space, gym.spaces.Dict):
+        raise ValueError(f"env's observation must be the trackenv Dict (or SectionObservation's), got {space}")
+    keys = list(space.spaces)
+    if vec_normalize is not None:
+        rms = vec_normalize.obs_rms
+        mean, var = {k: rms[k].mean.tolist() for k in keys}, {k: rms[k].var.tolist() for k in keys}
+        clip, eps = float(vec_normalize.clip_obs), float(vec_normalize.epsilon)
+    else:  # the identity: (x - 0) / sqrt(1 + 0), clipped nowhere
+        shapes = {k: space[k].shape or () for k in keys}
+        mean = {k: np.zeros(shapes[k]).tolist() for k in keys}
+        var = {k: np.ones(shapes[k]).tolist() for k in keys}
+        clip, eps = float(np.finfo(np.float32).max), 0.0
+    action_type = _SCORABLE_PIPELINES[tuple(pipeline)] or ("choices" if choices else "multibinary")
+    path = Path(path)
+    if path.suffix != ".zip":
+        raise ValueError(f"path must end in .zip (the model's file), got {str(path)!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_model_atomic(model, path)
+    write_json_atomic(stats_path(path), {"obs_keys": keys, "mean": mean, "var": var, "clip_obs": clip,
+                                         "epsilon": eps, "algo": algo, "action_type": action_type,
+                                         "config": config.to_dict(), "saved_by": "save_sb3_policy"})
+    return path
 
 
 class TrainedPolicy:

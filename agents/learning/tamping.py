@@ -16,6 +16,7 @@ training too); the baselines are the heuristics (:class:`~trackenv_agents.rules.
 from __future__ import annotations
 
 import copy
+import importlib
 import json
 import shutil
 import time
@@ -169,16 +170,18 @@ def single_torch_thread() -> None:
     torch.set_num_threads(1)
 
 
+#: the stable-baselines3 / sb3-contrib algorithms a saved model is loaded with, by the name its sidecar gives
+#: (``algo``): module and class
+SB3_ALGOS: dict[str, tuple[str, str]] = {"ppo": ("stable_baselines3", "PPO"), "a2c": ("stable_baselines3", "A2C"),
+                                         "dqn": ("stable_baselines3", "DQN"),
+                                         "maskable_ppo": ("sb3_contrib", "MaskablePPO")}
+
+
 def _algo_class(algo: str):
-    if algo == "ppo":
-        from stable_baselines3 import PPO
-
-        return PPO
-    if algo == "maskable_ppo":
-        from sb3_contrib import MaskablePPO
-
-        return MaskablePPO
-    raise ValueError(f"algo must be 'ppo' or 'maskable_ppo', got {algo!r}")
+    if algo not in SB3_ALGOS:
+        raise ValueError(f"algo must be one of {sorted(SB3_ALGOS)}, got {algo!r}")
+    module, name = SB3_ALGOS[algo]
+    return getattr(importlib.import_module(module), name)
 
 
 # --- policies on raw observations ---

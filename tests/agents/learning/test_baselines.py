@@ -155,7 +155,7 @@ def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match=f"must hold {RLLIB_SUMMARY}"):
         baseline_kind(tmp_path)
     (tmp_path / "model.zip").write_bytes(b"")
-    with pytest.raises(ValueError, match="needs model_obs_stats.json .* or model_meta.json"):
+    with pytest.raises(ValueError, match="needs model_obs_stats.json .*save_sb3_policy.* or model_meta.json"):
         baseline_kind(tmp_path / "model.zip")
     (tmp_path / "notes.txt").write_text("")
     with pytest.raises(ValueError, match="a .zip .* or a folder"):
@@ -164,3 +164,84 @@ def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match=f"a trained model is its .zip, not the run's folder: give {tmp_path}/model"):
         baseline_kind(tmp_path)
     assert saved_baselines(tmp_path) == [] and saved_baselines(tmp_path / "none") == []
+
+
+def _rollout_costs(model, env, seeds) -> list[float]:
+    """Each seed's episode cost (k€, minus the summed rewards) of ``model`` acting deterministically in ``env``."""
+    costs = []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        total, done = 0.0, False
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total -= float(reward)
+            done = terminated or truncated
+        costs.append(total)
+    return costs
+
+
+@pytest.mark.parametrize("env_id, ranked", [(SMALL, True), (SMALL, False), ("trackenv/TampingLineWet-v0", False)])
+def test_a_model_trained_in_ones_own_script_is_scored_as_it_acts_in_its_env(env_id, ranked, tmp_path) -> None:
+    """A PPO trained with SB3 directly (ranked actions on the section-level observation, the env's MultiBinary
+    actions, the choice codes of the wet line), saved with save_sb3_policy: load_baseline scores it on its line
+    with the costs it gets acting in its own env, episode by episode, and on no other line."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from trackenv.envs.wrappers import make_ranked
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    env = make_ranked(env_id, **SHORT) if ranked else gym.make(env_id, **SHORT)
+    model = PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.learn(8)
+    path = save_sb3_policy(model, env, tmp_path / "mine.zip")
+    assert baseline_kind(path) == "sb3"
+    policy = load_baseline(path, name="mine")
+    config = env.unwrapped.config
+    assert policy.unfit_for(config) is None and "horizon_years" in policy.unfit_for(config.replace(horizon_years=2.0))
+    result = evaluate_one(policy, config, [0, 1])
+    np.testing.assert_allclose(result.cost, _rollout_costs(model, env, [0, 1]), rtol=1e-9)
+
+
+def test_save_sb3_policy_keeps_the_vecnormalize_statistics(tmp_path) -> None:
+    """Trained in a VecNormalize, the saved policy normalises a raw observation with its statistics, as the model
+    saw it in training."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(SMALL, **SHORT)]), norm_reward=False)
+    model = PPO("MultiInputPolicy", venv, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.learn(8)
+    policy = load_baseline(save_sb3_policy(model, venv, tmp_path / "normed.zip"))
+    raw = venv.get_original_obs()
+    theirs = venv.normalize_obs(raw)
+    ours = policy.policy.normalize(raw)
+    for key, value in theirs.items():
+        np.testing.assert_allclose(ours[key], value, rtol=1e-6, atol=1e-6)
+
+
+def test_save_sb3_policy_refuses_what_the_harness_cannot_undo(tmp_path) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from trackenv.envs.wrappers import make_ranked
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    flat = make_ranked(SMALL, flat=True, **SHORT)
+    with pytest.raises(ValueError, match="trained through FlattenObservation > SectionObservation > RankedActions "
+                                         "cannot be scored"):
+        save_sb3_policy(PPO("MlpPolicy", flat, n_steps=8, batch_size=8, device="cpu"), flat, tmp_path / "x.zip")
+    ranked_choices = make_ranked("trackenv/TampingLineWet-v0", **SHORT)
+    with pytest.raises(ValueError, match="not a flattened observation nor ranked counts of the choices"):
+        save_sb3_policy(PPO("MultiInputPolicy", ranked_choices, n_steps=8, batch_size=8, device="cpu"),
+                        ranked_choices, tmp_path / "x.zip")
+    with pytest.raises(ValueError, match="model must be one of .*got str"):
+        save_sb3_policy("model", gym.make(SMALL), tmp_path / "x.zip")
+    env = gym.make(SMALL, **SHORT)
+    with pytest.raises(ValueError, match="path must end in .zip"):
+        save_sb3_policy(PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, device="cpu"), env, tmp_path / "x")
+    assert not list(tmp_path.iterdir())  # nothing written by a refusal
