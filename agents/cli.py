@@ -490,13 +490,19 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
 
         agents = {name: ModelPredictive() if path == ModelPredictive.name else load_baseline(path, name=name)
                   for name, path in agent_files.items()}
-    if "horizon_years" in overrides:
+    if agents:
         from .evaluation.leaderboard import fitting_agents
         from .evaluation.line_compare import env_config
 
-        for env_id in envs:  # each scenario's note for the agents scored there only
-            config = env_config(env_id, **overrides)
-            _say_horizon_notes("leaderboard", fitting_agents(agents, config)[0], {env_id: config.horizon_years})
+        fits = {env_id: fitting_agents(agents, env_config(env_id, **overrides)) for env_id in envs}
+        if "horizon_years" in overrides:
+            for env_id, (here, _) in fits.items():  # each scenario's note for the agents scored there only
+                _say_horizon_notes("leaderboard", here, {env_id: env_config(env_id, **overrides).horizon_years})
+        for name in agents:  # a policy asked for and scored nowhere: say why where the page only groups it
+            if all(name in unfit for _, unfit in fits.values()):
+                why = "; ".join(f"{env_id}: {unfit[name]}" for env_id, (_, unfit) in fits.items())
+                print(f"trackenv leaderboard: note: {name} is scored on none of the scenarios given ({why})",
+                      file=sys.stderr)
     executor = _executor(args)
     out = Path(args.out or "results/leaderboard")
     t0 = time.perf_counter()

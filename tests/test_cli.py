@@ -888,3 +888,25 @@ def test_leaderboard_horizon_notes_name_only_the_scenarios_where_the_agent_is_sc
     notes = [line for line in capsys.readouterr().err.splitlines() if "trackenv leaderboard: note:" in line]
     assert len(notes) == 1 and "cpi-track60-agent was trained on" in notes[0], notes
     assert "ones of trackenv/Tamping-v1 (--set horizon_years)" in notes[0]
+
+
+def test_leaderboard_says_why_a_policy_asked_for_is_scored_nowhere(monkeypatch, capsys, tmp_path):
+    """A model saved from a script of one's own on 1-year episodes, asked for on the 10-year small line: the page
+    only groups it as not scored; stderr says why (its horizon), as the JSON's not_scored does."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    import trackenv_agents.evaluation.leaderboard as lb
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    env = gym.make("trackenv/TampingLineSmall-v0", horizon_years=1.0)
+    path = save_sb3_policy(PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, device="cpu"), env,
+                           tmp_path / "mine.zip")
+    monkeypatch.setattr(lb, "run_leaderboard", lambda envs, **kw: {"results": [], "bound": {}, "seeds": {},
+                                                                    "best_rule": {}})
+    argv = ["leaderboard", "--env", "trackenv/TampingLineSmall-v0", "--policies", f"grouped-threshold,{path}",
+            "--no-bound", "--json", "--out", str(tmp_path / "lb")]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert (f"trackenv leaderboard: note: {tmp_path.name}/mine is scored on none of the scenarios given "
+            "(trackenv/TampingLineSmall-v0: trained on another line: horizon_years 1.0 (here 10.0))") in err

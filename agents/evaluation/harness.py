@@ -244,7 +244,12 @@ def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...], top: int)
 def _predict(policy: Any, obs: dict[str, np.ndarray], state: Any, episode_start: np.ndarray) -> tuple[Any, Any]:
     """``policy.predict`` on a batch, checked to return SB3's pair (actions, state): a bare array would unpack
     into its first two rows."""
-    out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True)
+    try:
+        out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True)
+    except Exception as error:  # e.g. a network fed another line's sizes: say whose predict it was
+        error.add_note(f"raised by predict of policy {policy_name(policy)!r} on a batch of {len(episode_start)} "
+                       "observations")
+        raise
     if not (isinstance(out, tuple) and len(out) == 2):
         raise ValueError(f"policy {policy_name(policy)!r}: predict must return a pair (actions, state) as "
                          f"stable-baselines3's does (state None for a policy without memory), got "

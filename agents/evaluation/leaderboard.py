@@ -44,7 +44,7 @@ import functools
 import hashlib
 import json
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -431,14 +431,28 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
     scored = {env_id: scored_rules(env_id, line, rules) for env_id, line in lines.items()}
     payload: dict[str, Any] = {"results": [], "bound": {}, "seeds": {}, "best_rule": {},
                                "config_overrides": dict(overrides)}
+    if agents is not None and not isinstance(agents, Mapping):
+        raise ValueError(f"agents must be a dict of name -> policy, got {type(agents).__name__}")
     agents = {label: as_policy(agent, label) for label, agent in (agents or {}).items()}
+    for env_id in envs:  # a policy named as a rule scored there would take the rule's row: before anything runs
+        taken = [label for label in agents
+                 if policy_label(label, configs[env_id], policy=agents[label]) in scored[env_id][0]]
+        if taken:
+            raise ValueError(f"agents name {', '.join(taken)} as a rule scored on {env_id}: give each policy a name "
+                             "of its own")
     for env_id in envs:
         name, cfg, line, (wanted, no_such) = names[env_id], configs[env_id], lines[env_id], scored[env_id]
         here, unfit = fitting_agents(agents, cfg)
         pols = [on_network(p, cfg) for p in [tuned_rule(line, n) for n in wanted] + list(here.values())]
         env_seeds = [int(s) for s in (seeds if seeds is not None else DEFAULT_SEEDS.get(env_id, range(16)))]
-        results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
-                                executor=executor)
+        try:
+            results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
+                                    executor=executor)
+        except Exception as error:  # which scenario, and which agents played there (a policy's error names it)
+            error.add_note(f"while scoring {env_id} (the rules {', '.join(wanted)} and the agents "
+                           f"{', '.join(here) or 'none'}); a policy that cannot play a scenario says so in "
+                           "unfit_for(config), and is left out there")
+            raise
         for r, label in zip(results[len(wanted):], here, strict=True):
             r.policy = policy_label(label, cfg, policy=here[label])
         rule_results = sorted(results[:len(wanted)], key=lambda r: float(r.cost.mean()))

@@ -293,6 +293,33 @@ def test_a_scenario_given_twice_is_refused(tmp_path) -> None:
         run_leaderboard([ENV, ENV], rules=RULES[:1], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
 
 
+def test_agents_are_a_dict_named_apart_from_the_rules_and_a_failing_one_names_its_scenario(tmp_path) -> None:
+    """A probe's slips from Python: agents as a list (an AttributeError deep inside), an agent named as a rule
+    scored there (two rows of that name, neither compared), a policy whose predict fails (a raw error that named
+    neither the policy nor the scenario)."""
+    def wait(obs):
+        return np.zeros_like(obs["section_sd"], dtype=np.int8)
+
+    with pytest.raises(ValueError, match="^agents must be a dict of name -> policy, got list"):
+        run_leaderboard([ENV], rules=RULES[:1], agents=[wait], seeds=SEEDS[:1], bound=False, out_dir=tmp_path, **TINY)
+    with pytest.raises(ValueError, match=f"^agents name {RULES[0]} as a rule scored on {ENV}: give each policy a "
+                                         "name of its own"):
+        run_leaderboard([ENV], rules=RULES[:1], agents={RULES[0]: wait}, seeds=SEEDS[:1], bound=False,
+                        out_dir=tmp_path, **TINY)
+
+    class Broken:
+        name = "broken"
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            raise RuntimeError("Sizes of tensors must match")
+
+    with pytest.raises(RuntimeError, match="Sizes of tensors") as caught:
+        run_leaderboard([ENV], rules=RULES[:1], agents={"mine": Broken()}, seeds=SEEDS[:1], bound=False,
+                        out_dir=tmp_path, **TINY)
+    notes = " ".join(caught.value.__notes__)
+    assert "predict of policy 'broken'" in notes and f"while scoring {ENV}" in notes and "unfit_for" in notes
+
+
 def test_the_network_scores_its_lines_policies_on_every_line_without_a_bound(tmp_path) -> None:
     """On the network every rule and agent runs on every line through NetworkRule (dispatched by value, named
     network-by-value(...)), the
