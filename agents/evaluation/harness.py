@@ -241,13 +241,22 @@ def _checked_actions(policy: Any, action: Any, shape: tuple[int, ...], top: int)
     return values
 
 
+def add_note(error: BaseException, note: str) -> None:
+    """``error.add_note(note)`` (Python 3.11: the traceback shows it under the message); on 3.10 the note is kept
+    in ``__notes__`` alone."""
+    if hasattr(error, "add_note"):
+        error.add_note(note)
+    else:  # pragma: no cover - Python 3.10
+        error.__notes__ = [*getattr(error, "__notes__", []), note]  # type: ignore[attr-defined]
+
+
 def _predict(policy: Any, obs: dict[str, np.ndarray], state: Any, episode_start: np.ndarray) -> tuple[Any, Any]:
     """``policy.predict`` on a batch, checked to return SB3's pair (actions, state): a bare array would unpack
     into its first two rows."""
     try:
         out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True)
     except Exception as error:  # e.g. a network fed another line's sizes: say whose predict it was
-        error.add_note(f"raised by predict of policy {policy_name(policy)!r} on a batch of {len(episode_start)} "
+        add_note(error, f"raised by predict of policy {policy_name(policy)!r} on a batch of {len(episode_start)} "
                        "observations")
         raise
     if not (isinstance(out, tuple) and len(out) == 2):

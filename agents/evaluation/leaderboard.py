@@ -53,7 +53,7 @@ import numpy as np
 from trackenv.envs.network import NetworkConfig
 
 from ..rules.network import NETWORK_DISPATCH
-from .harness import EvaluationResult, as_policy, evaluate_many
+from .harness import EvaluationResult, add_note, as_policy, evaluate_many
 from .line_compare import (
     ENGINE_FIELDS,
     SECTION_CLASSES,
@@ -449,7 +449,7 @@ def run_leaderboard(envs: Sequence[str] = DEFAULT_SUITE, rules: Sequence[str] | 
             results = evaluate_many(pols, cfg, env_seeds, batch_size=batch_size, progress=progress, desc=name,
                                     executor=executor)
         except Exception as error:  # which scenario, and which agents played there (a policy's error names it)
-            error.add_note(f"while scoring {env_id} (the rules {', '.join(wanted)} and the agents "
+            add_note(error, f"while scoring {env_id} (the rules {', '.join(wanted)} and the agents "
                            f"{', '.join(here) or 'none'}); a policy that cannot play a scenario says so in "
                            "unfit_for(config), and is left out there")
             raise
