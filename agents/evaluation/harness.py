@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import inspect
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -250,11 +251,22 @@ def add_note(error: BaseException, note: str) -> None:
         error.__notes__ = [*getattr(error, "__notes__", []), note]  # type: ignore[attr-defined]
 
 
-def _predict(policy: Any, obs: dict[str, np.ndarray], state: Any, episode_start: np.ndarray) -> tuple[Any, Any]:
-    """``policy.predict`` on a batch, checked to return SB3's pair (actions, state): a bare array would unpack
-    into its first two rows."""
+def takes_action_masks(policy: Any) -> bool:
+    """Whether ``policy.predict`` has an ``action_masks`` argument (sb3-contrib's MaskablePPO, a loaded SB3
+    policy): the harness then gives it the env's masks, one row per env."""
     try:
-        out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True)
+        return "action_masks" in inspect.signature(policy.predict).parameters
+    except (TypeError, ValueError):  # pragma: no cover - a predict without a signature
+        return False
+
+
+def _predict(policy: Any, obs: dict[str, np.ndarray], state: Any, episode_start: np.ndarray,
+             masks: np.ndarray | None = None) -> tuple[Any, Any]:
+    """``policy.predict`` on a batch (with the env's ``masks`` where given), checked to return SB3's pair
+    (actions, state): a bare array would unpack into its first two rows."""
+    extra = {} if masks is None else {"action_masks": masks}
+    try:
+        out = policy.predict(obs, state=state, episode_start=episode_start, deterministic=True, **extra)
     except Exception as error:  # e.g. a network fed another line's sizes: say whose predict it was
         add_note(error, f"raised by predict of policy {policy_name(policy)!r} on a batch of {len(episode_start)} "
                        "observations")
@@ -316,9 +328,12 @@ def _run_chunk(env: TrackVectorEnv, slots: list[tuple[int, int]], policies: Sequ
     else:
         actions = np.zeros((n, cfg.n_sections), dtype=np.int8)
     top = {"discrete": cfg.n_sections, "choices": len(CHOICES) - 1}.get(action_type, 1)
+    masked = {p for p in groups if takes_action_masks(policies[p])}
     for t in range(cfg.horizon_steps):
+        masks = np.asarray(env.action_masks()) if masked else None
         for p, idx in groups.items():
-            a, states[p] = _predict(policies[p], _take(obs, idx), states[p], np.full(idx.size, t == 0))
+            a, states[p] = _predict(policies[p], _take(obs, idx), states[p], np.full(idx.size, t == 0),
+                                    None if masks is None or p not in masked else masks[idx])
             actions[idx] = _checked_actions(policies[p], a, actions[idx].shape, top)
         obs, r, _, trunc, info = env.step(actions)
         rewards += r

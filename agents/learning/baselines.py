@@ -36,6 +36,7 @@ import numpy as np
 from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig
 from trackenv.envs.wrappers import ranked_to_sections
 
+from ..evaluation.harness import takes_action_masks
 from ..rules.base import as_batch
 from .line_policy import may_tamp
 
@@ -125,7 +126,7 @@ _TRANSPARENT_WRAPPERS = ("TimeLimit", "OrderEnforcing", "PassiveEnvChecker", "Re
 #: what :func:`save_sb3_policy` can describe to the harness: the wrappers between the model and the env, outermost
 #: first (without the transparent ones) -> the sidecar's ``action_type`` (None: the env's own)
 _SCORABLE_PIPELINES = {(): None, ("MultiDiscreteActions",): None, ("SectionObservation",): None,
-                       ("SectionObservation", "MultiDiscreteActions"): None,
+                       ("SectionObservation", "MultiDiscreteActions"): None, ("RankedActions",): "ranked",
                        ("SectionObservation", "RankedActions"): "ranked"}
 
 
@@ -138,11 +139,12 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
 
     ``env``: the env the model was trained on, or one built the same way: a trackenv env (``gym.make`` of an id,
     tamp-or-wait or with the choices), possibly in :class:`~trackenv.envs.wrappers.SectionObservation`,
-    :class:`~trackenv.envs.wrappers.MultiDiscreteActions`, or :func:`~trackenv.envs.wrappers.make_ranked` over a
-    tamp-or-wait env, or an SB3 ``DummyVecEnv`` / ``VecNormalize`` of one. Another pipeline (a flattened
-    observation, ranked counts of the choices, a wrapper of one's own) is refused with ValueError naming it: the
-    harness gives a policy the env's own observation and takes the env's own actions, and can only undo these.
-    The harness plays the model without action masks (the env drops what it forbids)."""
+    :class:`~trackenv.envs.wrappers.MultiDiscreteActions`, :class:`~trackenv.envs.wrappers.RankedActions` or
+    :func:`~trackenv.envs.wrappers.make_ranked` (ranked counts of tamping, or of each choice), or an SB3
+    ``DummyVecEnv`` / ``VecNormalize`` of one. Another pipeline (a flattened observation, a wrapper of one's own)
+    is refused with ValueError naming it: the harness gives a policy the env's own observation and masks and takes
+    the env's own actions, and can only undo these. A MaskablePPO is played with its masks (the env's, or those
+    of its ranked counts), as in training."""
     import gymnasium as gym
 
     from .checkpoint import save_model_atomic, write_json_atomic
@@ -170,11 +172,11 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
     if config is None or not hasattr(config, "to_dict"):
         raise ValueError(f"env must be a trackenv env (gym.make of a trackenv id), got {type(inner).__name__}")
     choices = isinstance(inner.action_space, gym.spaces.MultiDiscrete)
-    if tuple(pipeline) not in _SCORABLE_PIPELINES or (choices and "RankedActions" in pipeline):
+    if tuple(pipeline) not in _SCORABLE_PIPELINES:
         raise ValueError(f"a model trained through {' > '.join(pipeline)} cannot be scored by the harness, which "
-                         "gives a policy the env's own observation and takes its own actions: save_sb3_policy "
-                         "takes the env, SectionObservation, MultiDiscreteActions and make_ranked over a tamp-or-wait "
-                         "env (not a flattened observation nor ranked counts of the choices)")
+                         "gives a policy the env's own observation and masks and takes its own actions: "
+                         "save_sb3_policy takes the env, SectionObservation, MultiDiscreteActions, RankedActions and "
+                         "make_ranked (not a flattened observation, nor a wrapper of one's own)")
     space = env.observation_space
     if not isinstance(space, gym.spaces.Dict):
         raise ValueError(f"env's observation must be the trackenv Dict (or SectionObservation's), got {space}")
@@ -188,7 +190,8 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
         mean = {k: np.zeros(shapes[k]).tolist() for k in keys}
         var = {k: np.ones(shapes[k]).tolist() for k in keys}
         clip, eps = float(np.finfo(np.float32).max), 0.0
-    action_type = _SCORABLE_PIPELINES[tuple(pipeline)] or ("choices" if choices else "multibinary")
+    ranked = _SCORABLE_PIPELINES[tuple(pipeline)] == "ranked"
+    action_type = ("ranked_choices" if choices else "ranked") if ranked else ("choices" if choices else "multibinary")
     path = Path(path)
     if path.suffix != ".zip":
         raise ValueError(f"path must end in .zip (the model's file), got {str(path)!r}")
@@ -211,9 +214,12 @@ class TrainedPolicy:
         self.params: dict[str, Any] = {"kind": kind, "path": str(path)}
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
-                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+                deterministic: bool = True, action_masks: Any = None) -> tuple[np.ndarray, Any]:
+        """The policy's ``predict``; the env's ``action_masks`` go on to a policy that takes them (an SB3 model's:
+        MaskablePPO's masks, the decoding of ranked counts of the choices)."""
+        extra = {} if action_masks is None or not takes_action_masks(self.policy) else {"action_masks": action_masks}
         return self.policy.predict(observation, state=state, episode_start=episode_start,
-                                   deterministic=deterministic)
+                                   deterministic=deterministic, **extra)
 
     def reset(self) -> None:
         reset = getattr(self.policy, "reset", None)

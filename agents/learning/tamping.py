@@ -29,9 +29,10 @@ import numpy as np
 
 from trackenv.envs.line_config import LineConfig
 from trackenv.envs.problems import problem_config
+from trackenv.envs.wrappers import ranked_choice_masks, ranked_fit
 
 from ..evaluation.harness import evaluate_one
-from .actions import RANKED, env_action_type, ranked_to_sections
+from .actions import RANKED, RANKED_CHOICES, env_action_type, ranked_to_choices, ranked_to_sections
 from .checkpoint import (
     CHECKPOINT_FILE,
     META_FILE,
@@ -190,11 +191,14 @@ class NormalizedPolicy:
     (one observation dict, or a batched one), the interface of SB3's ``model.predict``.
 
     A model trained in the ``ranked`` parameterisation (:mod:`trackenv_agents.learning.actions`) answers with the env's
-    MultiBinary actions (its count of worst sections translated on the observation's SD)."""
+    MultiBinary actions (its count of worst sections translated on the observation's SD); one in ``ranked_choices``
+    (a count per enabled choice of the line ``config``) with the env's choice codes, decoded on the observation and
+    the env's action masks, which ``predict`` then needs (``action_masks``, as the harness passes them). Given the
+    env's masks, a MaskablePPO model is masked with its own (the env's, or those of its ranked counts)."""
 
     def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
                  epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo",
-                 action_type: str = "multibinary") -> None:
+                 action_type: str = "multibinary", config: Any = None) -> None:
         self.model = model
         self.obs_keys = list(obs_keys)
         self.mean = {k: np.asarray(mean[k], dtype=np.float64) for k in self.obs_keys}
@@ -204,6 +208,14 @@ class NormalizedPolicy:
         self.name = name
         self.algo = algo
         self.action_type = action_type
+        self.heads: tuple[str, ...] | None = None
+        self.fit: tuple[np.ndarray, float] | None = None
+        if action_type == RANKED_CHOICES:  # what its counts rank: the line's enabled choices, capped by the possession
+            if config is None:
+                raise ValueError("a ranked_choices policy needs the config of the line it was trained on")
+            line = LineConfig.coerce(config)
+            self.heads = tuple(line.choices)
+            self.fit = ranked_fit(line, self.heads, line.n_sections)
 
     @classmethod
     def from_vecnormalize(cls, model, vecnorm, obs_keys: Sequence[str], **kw) -> NormalizedPolicy:
@@ -220,12 +232,30 @@ class NormalizedPolicy:
 
     def predict(self, observation: dict, state=None, episode_start=None, deterministic: bool = True,
                 action_masks: np.ndarray | None = None):
-        kw = {} if action_masks is None or self.algo != "maskable_ppo" else {"action_masks": action_masks}
+        """The env's actions for ``observation``; ``action_masks``: the env's (``env.action_masks()``), or None."""
+        own = self._own_masks(action_masks)
+        kw = {} if own is None or self.algo != "maskable_ppo" else {"action_masks": own}
         action, state = self.model.predict(self.normalize(observation), state=state, episode_start=episode_start,
                                            deterministic=deterministic, **kw)
         if self.action_type == RANKED:
             action = ranked_to_sections(action, observation["section_sd"])
+        elif self.action_type == RANKED_CHOICES:
+            if action_masks is None:
+                raise ValueError(f"policy {self.name!r} answers in ranked counts of the choices, which decode on the "
+                                 "env's action masks: predict(observation, action_masks=env.action_masks())")
+            assert self.heads is not None
+            action = ranked_to_choices(action, observation, action_masks, self.heads)
         return action, state
+
+    def _own_masks(self, env_masks: np.ndarray | None) -> np.ndarray | None:
+        """The model's masks from the env's: none for ranked counts of tamping (every count is valid), the counts'
+        masks for ranked choices, else the env's own."""
+        if env_masks is None or self.action_type == RANKED:
+            return None
+        if self.action_type == RANKED_CHOICES:
+            assert self.heads is not None
+            return ranked_choice_masks(env_masks, self.heads, self.fit)
+        return np.asarray(env_masks)
 
     def stats_dict(self) -> dict:
         return {"obs_keys": self.obs_keys, "mean": {k: v.tolist() for k, v in self.mean.items()},
@@ -620,4 +650,4 @@ def load_trained(path: str | Path | None = None, name: str = "ppo") -> Normalize
     model = _algo_class(algo).load(str(path), device="cpu")
     return NormalizedPolicy(model, stats["obs_keys"], stats["mean"], stats["var"], stats["clip_obs"],
                             stats["epsilon"], name=name, algo=algo,
-                            action_type=stats.get("action_type", "multibinary"))
+                            action_type=stats.get("action_type", "multibinary"), config=stats.get("config"))

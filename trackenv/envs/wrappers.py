@@ -53,7 +53,8 @@ from .ranking import rank_mask, ranked_choice_masks, ranked_to_choices, ranked_t
 __all__ = [
     "ActionMaskObservation", "MultiDiscreteActions", "RankedActions", "RankedVectorActions",
     "SectionObservation", "SectionVectorObservation", "choices_of", "config_of", "make_ranked", "make_ranked_vector",
-    "n_sections_of", "rank_mask", "ranked_choice_masks", "ranked_to_choices", "ranked_to_sections", "section_keys",
+    "n_sections_of", "rank_mask", "ranked_choice_masks", "ranked_fit", "ranked_to_choices", "ranked_to_sections",
+    "section_keys",
 ]
 
 SD_KEY = "section_sd"
@@ -115,6 +116,15 @@ def _vector_masks(env) -> np.ndarray:
     return np.asarray(env.action_masks())
 
 
+def ranked_fit(config: Any, heads: tuple[str, ...], n_sections: int) -> tuple[np.ndarray, float]:
+    """What caps the ranked choices' counts (:func:`ranked_choice_masks`' ``fit``): per head of ``heads``, each of
+    the ``n_sections`` sections' work in the possession for that choice, and the possession's capacity, from a
+    line ``config``."""
+    per_code = work_per_code(config.choice_work)
+    return (np.stack([work_on_sections(per_code, np.full(n_sections, code(h)), config.length_factors)
+                      for h in heads]), float(config.capacity))
+
+
 class _RankedForm:
     """What a ranked wrapper decodes, batched: over a tamp-or-wait env (``MultiBinary(n)``), one count
     (``Discrete(n + 1)``, :func:`ranked_to_sections`, every count valid); over an env with the choices
@@ -144,9 +154,7 @@ class _RankedForm:
         #: where the head's eligible sections, least work first, no longer fit); None: no cap (no config)
         self.fit: tuple[np.ndarray, float] | None = None
         if self.heads is not None and config is not None and hasattr(config, "choice_work"):
-            per_code = work_per_code(config.choice_work)
-            self.fit = (np.stack([work_on_sections(per_code, np.full(n_sections, code(h)), config.length_factors)
-                                  for h in self.heads]), float(config.capacity))
+            self.fit = ranked_fit(config, self.heads, n_sections)
 
     @property
     def width(self) -> int:

@@ -166,14 +166,16 @@ def test_paths_without_a_trained_policy_are_refused(tmp_path) -> None:
     assert saved_baselines(tmp_path) == [] and saved_baselines(tmp_path / "none") == []
 
 
-def _rollout_costs(model, env, seeds) -> list[float]:
-    """Each seed's episode cost (k€, minus the summed rewards) of ``model`` acting deterministically in ``env``."""
+def _rollout_costs(model, env, seeds, masked: bool) -> list[float]:
+    """Each seed's episode cost (k€, minus the summed rewards) of ``model`` acting deterministically in ``env``
+    (``masked``: with the env's action masks, as MaskablePPO trains)."""
     costs = []
     for seed in seeds:
         obs, _ = env.reset(seed=seed)
         total, done = 0.0, False
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            extra = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
+            action, _ = model.predict(obs, deterministic=True, **extra)
             obs, reward, terminated, truncated, _ = env.step(action)
             total -= float(reward)
             done = terminated or truncated
@@ -181,19 +183,23 @@ def _rollout_costs(model, env, seeds) -> list[float]:
     return costs
 
 
-@pytest.mark.parametrize("env_id, ranked", [(SMALL, True), (SMALL, False), ("trackenv/TampingLineWet-v0", False)])
-def test_a_model_trained_in_ones_own_script_is_scored_as_it_acts_in_its_env(env_id, ranked, tmp_path) -> None:
-    """A PPO trained with SB3 directly (ranked actions on the section-level observation, the env's MultiBinary
-    actions, the choice codes of the wet line), saved with save_sb3_policy: load_baseline scores it on its line
-    with the costs it gets acting in its own env, episode by episode, and on no other line."""
+@pytest.mark.parametrize("env_id, pipeline, algo", [
+    (SMALL, "ranked", "ppo"), (SMALL, "env", "ppo"), (SMALL, "multidiscrete", "maskable_ppo"),
+    ("trackenv/TampingLineWet-v0", "env", "ppo"), ("trackenv/TampingLineWet-v0", "ranked", "maskable_ppo")])
+def test_a_model_trained_in_ones_own_script_is_scored_as_it_acts_in_its_env(env_id, pipeline, algo, tmp_path) -> None:
+    """A model trained with SB3 directly (ranked counts on the section-level observation, the env's own actions,
+    MultiDiscrete pairs, the choice codes of the wet line, ranked counts of each choice), saved with
+    save_sb3_policy: load_baseline scores it on its line with the costs it gets acting in its own env (a
+    MaskablePPO with its masks there, as in training), episode by episode, and on no other line."""
     import gymnasium as gym
-    from stable_baselines3 import PPO
 
-    from trackenv.envs.wrappers import make_ranked
+    from trackenv.envs.wrappers import MultiDiscreteActions, make_ranked
     from trackenv_agents.learning.baselines import save_sb3_policy
+    from trackenv_agents.learning.tamping import _algo_class
 
-    env = make_ranked(env_id, **SHORT) if ranked else gym.make(env_id, **SHORT)
-    model = PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    env = {"ranked": lambda: make_ranked(env_id, **SHORT), "env": lambda: gym.make(env_id, **SHORT),
+           "multidiscrete": lambda: MultiDiscreteActions(gym.make(env_id, **SHORT))}[pipeline]()
+    model = _algo_class(algo)("MultiInputPolicy", env, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
     model.learn(8)
     path = save_sb3_policy(model, env, tmp_path / "mine.zip")
     assert baseline_kind(path) == "sb3"
@@ -201,7 +207,12 @@ def test_a_model_trained_in_ones_own_script_is_scored_as_it_acts_in_its_env(env_
     config = env.unwrapped.config
     assert policy.unfit_for(config) is None and "horizon_years" in policy.unfit_for(config.replace(horizon_years=2.0))
     result = evaluate_one(policy, config, [0, 1])
-    np.testing.assert_allclose(result.cost, _rollout_costs(model, env, [0, 1]), rtol=1e-9)
+    np.testing.assert_allclose(result.cost, _rollout_costs(model, env, [0, 1], algo == "maskable_ppo"), rtol=1e-9)
+    if policy.policy.action_type == "ranked_choices":  # its counts decode on the env's masks: asked for by name
+        obs, _ = gym.make(env_id, **SHORT).reset(seed=0)
+        with pytest.raises(ValueError, match="policy 'mine' answers in ranked counts of the choices, which decode "
+                                             "on the env's action masks"):
+            policy.predict(obs)
 
 
 def test_save_sb3_policy_keeps_the_vecnormalize_statistics(tmp_path) -> None:
@@ -235,10 +246,6 @@ def test_save_sb3_policy_refuses_what_the_harness_cannot_undo(tmp_path) -> None:
     with pytest.raises(ValueError, match="trained through FlattenObservation > SectionObservation > RankedActions "
                                          "cannot be scored"):
         save_sb3_policy(PPO("MlpPolicy", flat, n_steps=8, batch_size=8, device="cpu"), flat, tmp_path / "x.zip")
-    ranked_choices = make_ranked("trackenv/TampingLineWet-v0", **SHORT)
-    with pytest.raises(ValueError, match="not a flattened observation nor ranked counts of the choices"):
-        save_sb3_policy(PPO("MultiInputPolicy", ranked_choices, n_steps=8, batch_size=8, device="cpu"),
-                        ranked_choices, tmp_path / "x.zip")
     with pytest.raises(ValueError, match="model must be one of .*got str"):
         save_sb3_policy("model", gym.make(SMALL), tmp_path / "x.zip")
     env = gym.make(SMALL, **SHORT)
