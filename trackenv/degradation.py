@@ -29,11 +29,13 @@ from .physics._checks import check_array, check_bool, check_choice, check_int, c
 from .physics.dynamics import (
     OVERLOAD_FACTOR,
     SLEEPER_FORCE_MEASURES,
+    OverloadWarning,
     PassResult,
     _vehicle_system,
     check_window_bays,
     lapack_lower,
     simulate_passes,
+    static_deflection_note,
 )
 from .physics.engine import CLASSIC_ENGINE, PassEngine, check_engine
 from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState, implicit_settlement_step
@@ -202,6 +204,11 @@ class TrackDegradation:
         check_window_bays(pass_options.get("window_bays", "auto"))
         self.feedback = check_choice("feedback", feedback, FEEDBACKS)
         self.on_runaway = check_choice("on_runaway", on_runaway, ON_RUNAWAY)
+        soft = static_deflection_note([track], float(np.max(self.system.static_wheel_loads)))
+        if soft is not None:  # the passes run with on_overload="ignore": a track in kN/m is named here, once
+            import warnings
+
+            warnings.warn(soft, OverloadWarning, stacklevel=2)
         self.interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
         self.engine = check_engine(engine)
         self._differential: list[float] = []  # differential settlement increment per iteration [m]

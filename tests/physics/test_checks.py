@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -160,3 +161,27 @@ def test_a_speed_out_of_range_says_its_unit(speed) -> None:
     with pytest.raises(ValueError, match=r"^speed must lie in \(0, 200\], got .* \(m/s: 200 m/s is 720 km/h; a speed "
                                          r"in km/h divided by 3\.6\)$"):
         te.simulate_pass(te.Track.seed(), te.Wheelset.seed(), speed=speed)
+
+
+def test_a_track_in_kilonewtons_per_metre_is_named_even_far_from_the_rails_ends() -> None:
+    """Pads and ballast entered in kN/m (60e3 and 100e3): a pass kept clear of the rail's ends gives no overload
+    (106 kN against 100 static) while the rail sinks 178 mm; the static deflection names the unit, warned or
+    raised as the overload is, and a soft real track (1 MN/m pads and ballast, 25 mm) passes without a word."""
+    wheel = te.Wheelset(mass=1800.0, static_load=100e3 - 900.0 * 9.81)
+
+    def track(pad, ballast):
+        return te.Track.uniform(61, pad_stiffness=pad, pad_damping=30e3, sleeper_mass=157.4,
+                                ballast_stiffness=ballast, ballast_damping=60e3, rail_bending_stiffness=6.42e6,
+                                rail_mass=60.2)
+
+    with pytest.warns(te.OverloadWarning, match=r"^the track: the rail would deflect 177\.7 mm under the static "
+                                                r"wheel load of 100 kN .* Check the units \(stiffness N/m, not kN/m"):
+        te.simulate_pass(track(60e3, 100e3), wheel, speed=100 / 3.6, x_start=15.0, x_end=20.0)
+    with pytest.raises(te.OverloadError, match="would deflect"):
+        te.simulate_pass(track(60e3, 100e3), wheel, speed=100 / 3.6, x_start=15.0, x_end=20.0, on_overload="raise")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        te.simulate_pass(track(60e3, 100e3), wheel, speed=100 / 3.6, x_start=15.0, x_end=20.0, on_overload="ignore")
+        te.simulate_pass(track(1e6, 1e6), wheel, speed=100 / 3.6, x_start=15.0, x_end=20.0)
+    with pytest.warns(te.OverloadWarning, match=r"^the track: the rail would deflect 177\.7 mm"):
+        te.TrackDegradation(track(60e3, 100e3), wheel, law=te.HettlerLaw(), speed=100 / 3.6)

@@ -50,6 +50,10 @@ ON_OVERLOAD = ("warn", "raise", "ignore")
 #: range (dynamic factors from track geometry stay below about 2; a load dropped onto the track at rest gives 2)
 #: **[assumption]**: a wrong unit (stiffness in kN/m, a level in mm) or an irregularity far beyond service limits.
 OVERLOAD_FACTOR = 3.0
+#: [m] the rail's static deflection under the largest static wheel load (a Winkler beam on the track's mean
+#: supports) above which no ballasted track stands: 0.5-3 mm in service, 25 mm with pads and ballast of 1 MN/m
+#: (the softest the window's validation covers); stiffnesses in kN/m give some 100-200 mm **[assumption]**
+MAX_STATIC_DEFLECTION_M = 0.05
 
 
 class OverloadWarning(RuntimeWarning):
@@ -723,7 +727,42 @@ def simulate_passes(
                                    support_settlement=support_settlement, backend=backend, device=device)
     if on_overload != "ignore":
         check_overload(results, on_overload)
+        check_static_deflection(_as_tracks(tracks), results, on_overload)
     return results
+
+
+def static_deflection_note(tracks: Sequence[Track], load: float) -> str | None:
+    """Why ``tracks`` (one, or one per row) are no ballasted track, or None: the rail would deflect statically by
+    more than :data:`MAX_STATIC_DEFLECTION_M` under the wheel ``load`` [N] (``Track.winkler_deflection``), as a
+    track entered in kN/m does; the worst row is named."""
+    deflection = [t.winkler_deflection(load) for t in tracks]
+    worst = int(np.argmax(deflection))
+    if deflection[worst] <= MAX_STATIC_DEFLECTION_M:
+        return None
+    t = tracks[worst]
+    where = f"row {worst} of {len(tracks)}" if len(tracks) > 1 else "the track"
+    return (f"{where}: the rail would deflect {deflection[worst] * 1e3:.4g} mm under the static wheel load of "
+            f"{load / 1e3:.4g} kN (a beam on the track's mean supports: pads {float(np.mean(t.pad_stiffness)):.3g} "
+            f"N/m, ballast {float(np.mean(t.ballast_stiffness)):.3g} N/m, EI {t.rail_bending_stiffness:.3g} N·m²), "
+            f"where a ballasted track deflects 0.5-3 mm. Check the units (stiffness N/m, not kN/m; EI N·m²)")
+
+
+def check_static_deflection(tracks: Sequence[Track], results: Sequence[PassResult],
+                            on_overload: str = "warn") -> str | None:
+    """Warn or raise (``on_overload``, as :func:`check_overload`) where :func:`static_deflection_note` finds a row's
+    track deflecting too far under its largest static wheel load: a track entered in kN/m, which a pass kept clear
+    of the rail's ends shows by no overload. Returns the message, or None."""
+    load = max(float(np.max(r.static_wheel_load)) for r in results)
+    note = static_deflection_note(tracks, load)
+    if note is None:
+        return None
+    msg = f"{note}; pass on_overload='ignore' where such a track is meant"
+    if on_overload == "raise":
+        raise OverloadError(msg)
+    import warnings
+
+    warnings.warn(msg, OverloadWarning, stacklevel=caller_stacklevel())
+    return msg
 
 
 def check_overload(results: Sequence[PassResult], on_overload: str = "warn") -> str | None:
