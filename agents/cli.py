@@ -372,7 +372,7 @@ def _policy_files(item: str, rule_names: list[str], agents: dict[str, str]) -> d
     baselines of experiments/saved/baselines/) or the path of a trained policy (a .zip of stable-baselines3, a
     folder of experiments/train_rllib.py; the kind is told by the files there,
     :func:`~trackenv_agents.learning.baselines.baseline_kind`), named by :func:`model_label` (by its absolute path
-    where a rule, a shipped agent or one of ``agents`` has that name)."""
+    where a rule, a shipped agent or one of ``agents`` has that name), or ``NAME=PATH``: that path named NAME."""
     from .rules.model_predictive import ModelPredictive
 
     if item in SHIPPED_AGENTS:
@@ -388,6 +388,13 @@ def _policy_files(item: str, rule_names: list[str], agents: dict[str, str]) -> d
             raise UsageError(f"--policies baselines: no trained baseline in {SAVED_BASELINES}")
         cwd = Path.cwd()  # shown (and saved in the leaderboard's params) relative to it where under it
         return {p.stem: str(p.relative_to(cwd) if p.is_relative_to(cwd) else p) for p in found}
+    label, named, path = item.partition("=")
+    if named and label and "/" not in label:  # NAME=PATH: the row's name given
+        reserved = {*rule_names, *SHIPPED_AGENTS, *agents, "rules", "baselines", ModelPredictive.name}
+        if label in reserved:
+            raise UsageError(f"--policies {item}: the name {label!r} is taken (a rule, a shipped policy or another "
+                             "item): give each policy a name of its own")
+        return {label: next(iter(_policy_files(path, rule_names, agents).values()))}
     if item.endswith(".py"):
         raise UsageError(f"--policies {item}: the command takes trained policies by path (.zip, or a folder of "
                          "experiments/train_rllib.py), not Python code; score a policy object from Python with "
@@ -1169,7 +1176,7 @@ def build_parser() -> _Parser:
                          "step without error), baselines (those committed in "
                          "experiments/saved/baselines/), paths of trained policies (a stable-baselines3 "
                          ".zip, a folder of experiments/train_rllib.py; each scored on the line it was trained on, "
-                         "a per-section policy on every line)")
+                         "a per-section policy on every line), each named by its folder and file or as NAME=PATH")
     sp.add_argument("--no-bound", action="store_true",
                     help="skip the hindsight bound (the normalised scores are then null)")
     engine(sp)

@@ -736,10 +736,11 @@ def test_leaderboard_names_trained_files_by_their_run_as_evaluate_does(tmp_path,
 def test_leaderboard_refuses_one_policy_given_twice(given, tmp_path, monkeypatch, capsys):
     """The same model twice (as written, or by another relative or absolute path) was scored twice under two
     names: one line naming --policies and the repeated item, exit status 2, before anything runs."""
-    model = tmp_path / "run1" / "model.zip"
-    model.parent.mkdir()
-    model.write_bytes(b"")
-    (model.parent / "model_obs_stats.json").write_text("{}")
+    for run in ("run1", "run2"):
+        model = tmp_path / run / "model.zip"
+        model.parent.mkdir()
+        model.write_bytes(b"")
+        (model.parent / "model_obs_stats.json").write_text("{}")
     monkeypatch.chdir(tmp_path)
     items = [g.format(model) for g in given]
     assert main(["leaderboard", "--policies", ",".join(["grouped-threshold", *items]), "--out",
@@ -910,3 +911,24 @@ def test_leaderboard_says_why_a_policy_asked_for_is_scored_nowhere(monkeypatch, 
     err = capsys.readouterr().err
     assert (f"trackenv leaderboard: note: {tmp_path.name}/mine is scored on none of the scenarios given "
             "(trackenv/TampingLineSmall-v0: trained on another line: horizon_years 1.0 (here 10.0))") in err
+
+
+def test_leaderboard_policies_name_a_path_as_name_equals_path(tmp_path, monkeypatch):
+    """`--policies rules,mine=run1/model.zip`: the row is named "mine"; a name taken by a rule, a shipped agent or
+    another item is refused, and the path is checked as any path is."""
+    from trackenv_agents.cli import UsageError, _leaderboard_policies
+
+    for run in ("run1", "run2"):
+        model = tmp_path / run / "model.zip"
+        model.parent.mkdir()
+        model.write_bytes(b"")
+        (model.parent / "model_obs_stats.json").write_text("{}")
+    monkeypatch.chdir(tmp_path)
+    assert _leaderboard_policies("rules,mine=run1/model.zip", ["grouped-threshold"]) == (
+        None, {"mine": "run1/model.zip"})
+    for taken in ("grouped-threshold=run1/model.zip", "cpi-agent=run1/model.zip",
+                  "mine=run1/model.zip,mine=run2/model.zip"):
+        with pytest.raises(UsageError, match="is taken .* give each policy a name of its own"):
+            _leaderboard_policies(f"rules,{taken}", ["grouped-threshold"])
+    with pytest.raises(UsageError, match="no trained policy at nope.zip"):
+        _leaderboard_policies("rules,mine=nope.zip", ["grouped-threshold"])
