@@ -199,6 +199,7 @@ def test_run_rejects_bad_iterations(sim_a: te.TrackDegradation, iterations) -> N
 @pytest.mark.parametrize("kwargs, match", [
     ({"initial_level": np.full(51, np.nan)}, "initial_level"),
     ({"initial_level": np.zeros(50)}, "initial_level"),
+    ({"initial_level": np.full(51, 2.0)}, r"initial_level must be <= 0.5 everywhere, got max 2"),  # mm as m
     ({"foo": 1}, "unknown option"),
     ({"windowbays": 4}, "unknown option"),
     ({"cycles_per_iteration": 0}, "cycles_per_iteration"),
@@ -283,9 +284,57 @@ def test_a_diverging_loop_raises_when_asked() -> None:
 
 
 def test_adaptive_stepping_that_runs_out_of_passes_is_reported() -> None:
+    """... with advice that fits: adaptive stepping is on already, so its budget and tolerance are named."""
     sim = heavy_fast(cycles_per_iteration=1e6, adaptive=True, max_passes_per_iteration=4)
-    with pytest.warns(te.RunawayWarning, match="ran out of passes"):
+    with pytest.warns(te.RunawayWarning, match="ran out of passes.*raise max_passes_per_iteration \\(now 4\\) or "
+                                               "max_increment") as caught:
         sim.advance()
+    assert "use adaptive=True" not in str(caught[0].message)
+
+
+def test_a_sleeper_force_beyond_the_laws_range_stops_the_loop_by_name() -> None:
+    """A loop run away so far that a sleeper carries more than the laws take (1e7 N): a RunawayError that says
+    so, whatever on_runaway says, not the law's range error from inside (a probe's adaptive run after a partial
+    tamping)."""
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), on_runaway="ignore")
+    force = np.full(track_a().n_sleepers, 50e3)
+    force[7] = 1.2e7
+    with pytest.raises(te.RunawayError, match="sleeper 7 carries 1.2e\\+04 kN.*beyond the settlement laws' range"):
+        sim.check_sleeper_forces(force)
+
+
+class _OwnLaw:
+    """A law of one's own by the protocol: u = answer(F, N) and its inverse on a log law."""
+
+    name = "own"
+
+    def __init__(self, sign: float = 1.0, nan: bool = False) -> None:
+        self.sign, self.nan = sign, nan
+
+    def settlement(self, force, cycles):
+        u = self.sign * 1e-9 * np.asarray(force) * np.log10(1.0 + np.asarray(cycles))
+        return np.full(np.shape(u), np.nan) if self.nan else u
+
+    def equivalent_cycles(self, force, settlement):
+        return 10.0 ** (np.abs(np.asarray(settlement)) / (1e-9 * np.maximum(np.asarray(force), 1.0))) - 1.0
+
+
+@pytest.mark.parametrize("feedback", ["irregularity", "support"])
+def test_a_law_of_ones_own_runs_and_one_that_answers_nonsense_is_named(feedback: str) -> None:
+    """A law of one's own settles by its formula; one returning negative settlements settled as nothing, one
+    returning NaN failed as the state's own error or as an unconverged Newton step: now both name the law; the
+    class given for an instance is named too."""
+    sim = te.TrackDegradation(track_a(), loaded_wheelset(), law=_OwnLaw(), feedback=feedback)
+    sim.run(1)
+    assert np.all(sim.level > 0.0)
+    for bad in (_OwnLaw(sign=-1.0), _OwnLaw(nan=True)):
+        with pytest.raises(ValueError, match="^law 'own': settlement\\(force, cycles\\) must return finite "
+                                             "settlements >= 0"):
+            te.TrackDegradation(track_a(), loaded_wheelset(), law=bad, feedback=feedback).run(1)
+    with pytest.raises(ValueError, match="^law must be an instance, e.g. HettlerLaw\\(\\), got the class"):
+        te.TrackDegradation(track_a(), loaded_wheelset(), law=te.HettlerLaw)
+    with pytest.raises(ValueError, match="^law must be an instance"):
+        te.SettlementState.zeros(3).advance(te.HettlerLaw, 5e4, 5e4)
 
 
 def test_converging_loops_do_not_warn(recwarn: pytest.WarningsRecorder) -> None:

@@ -33,6 +33,7 @@ from .physics.settlement import (
     ShentonLaw,
     make_law,
 )
+from .physics.tamping import TampingModel
 from .physics.track import Track
 from .physics.vehicle import Car, Train, VehicleSystem, Wheelset
 
@@ -61,6 +62,7 @@ __all__ = [
     "SettlementLaw",
     "SettlementState",
     "ShentonLaw",
+    "TampingModel",
     "Track",
     "TrackDegradation",
     "RunawayError",

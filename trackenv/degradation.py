@@ -38,7 +38,14 @@ from .physics.dynamics import (
     static_deflection_note,
 )
 from .physics.engine import CLASSIC_ENGINE, PassEngine, check_engine
-from .physics.settlement import HettlerLaw, SettlementLaw, SettlementState, implicit_settlement_step
+from .physics.settlement import (
+    MAX_FORCE_N,
+    HettlerLaw,
+    SettlementLaw,
+    SettlementState,
+    check_law,
+    implicit_settlement_step,
+)
 from .physics.tamping import TampingModel, TampingResult, tamp
 from .physics.timestep import check_dt_option
 from .physics.track import Track
@@ -140,7 +147,7 @@ class TrackDegradation:
     (see the module docstring); ``adaptive``: split an increment where the largest *differential* settlement
     increment (deviation from the zone's mean increment, which is what changes the dynamics) would exceed
     ``max_increment`` [m], so results do not depend on the step size; ``initial_level``: the rail level at the
-    start [m] per sleeper (downward positive); ``rate_factor``: per-sleeper multiplier of the law's
+    start [m] per sleeper (downward positive, within ±0.5 m); ``rate_factor``: per-sleeper multiplier of the law's
     settlement (ballast condition varies along a track); ``feedback``: how settlement reaches the next pass:
     "irregularity" (the paper's: the per-sleeper settlement, interpolated, is the rail's level irregularity) or
     "support" (the ballast's base under each sleeper is lowered by its settlement and the rail bends over the
@@ -182,9 +189,7 @@ class TrackDegradation:
         self.track = track
         self.vehicle = vehicle
         self.system = _vehicle_system(vehicle)
-        self.law = HettlerLaw() if law is None else law
-        if not all(hasattr(self.law, a) for a in ("settlement", "equivalent_cycles")):
-            raise ValueError("law must implement settlement(force, cycles) and equivalent_cycles(force, u)")
+        self.law = HettlerLaw() if law is None else check_law(law)
         self.cycles_per_iteration = check_scalar("cycles_per_iteration", cycles_per_iteration, low=1.0, high=1e9)
         self.speed = check_speed(speed)
         approach_sleepers = check_int("approach_sleepers", approach_sleepers, low=2, high=200)
@@ -215,7 +220,9 @@ class TrackDegradation:
         n = track.n_sleepers
         self.n_extra = self.zone_sleepers(track.sleeper_spacing, self.system.span, approach_sleepers)
         self.model_track = track.extended(self.n_extra, self.n_extra)
-        self.offset = np.zeros(n) if initial_level is None else check_array("initial_level", initial_level, shape=(n,))
+        # [m]: half a metre off the design level is no track (a level in mm lands far beyond it)
+        self.offset = (np.zeros(n) if initial_level is None
+                       else check_array("initial_level", initial_level, shape=(n,), low=-0.5, high=0.5))
         self.base_rate = (
             np.ones(n)
             if rate_factor is None
@@ -393,18 +400,20 @@ class TrackDegradation:
         settles without :meth:`advance`. Returns the message, or None."""
         static = float(np.max(self.system.static_wheel_loads))
         peak = float(np.max(force, initial=0.0))
-        if static <= 0 or peak <= RUNAWAY_FORCE_FACTOR * static or self.on_runaway == "ignore":
+        beyond = peak > MAX_FORCE_N  # the laws cannot take it: the loop stops, whatever on_runaway says
+        if not beyond and (static <= 0 or peak <= RUNAWAY_FORCE_FACTOR * static or self.on_runaway == "ignore"):
             return None
         k = int(np.argmax(force))
         step = float(np.max(np.abs(np.diff(self.level)), initial=0.0))
         msg = (
-            f"sleeper {k} carries {peak / 1e3:.4g} kN, {peak / static:.3g} times the static wheel load, after "
-            f"{self.cycles:.4g} cycles (largest level step between neighbouring sleepers {step * 1e3:.3g} mm): "
+            f"sleeper {k} carries {peak / 1e3:.4g} kN, {peak / max(static, 1.0):.3g} times the static wheel load, "
+            f"after {self.cycles:.4g} cycles (largest level step between neighbouring sleepers {step * 1e3:.3g} mm): "
             "the settlement loop is outside its validity. Reduce the cycles per step, tamp less aggressively "
             "(a design-line lift next to settled track), or check the inputs"
         )
-        if self.on_runaway == "raise":
-            raise RunawayError(msg)
+        if beyond or self.on_runaway == "raise":
+            raise RunawayError(msg + (f" (beyond the settlement laws' range of {MAX_FORCE_N:.3g} N: the loop stops)"
+                                      if beyond else ""))
         import warnings
 
         warnings.warn(msg, RunawayWarning, stacklevel=3)
@@ -446,9 +455,12 @@ class TrackDegradation:
             )
         if why is None or self.on_runaway == "ignore":
             return None
+        smaller = (f"raise max_passes_per_iteration (now {self.max_passes_per_iteration}) or max_increment (now "
+                   f"{self.max_increment:.3g} m)" if self.adaptive
+                   else f"use adaptive=True (max_increment {self.max_increment:.3g} m)")
         msg = (
             f"settlement loop diverging after {self.cycles:.4g} cycles: {why}. Reduce cycles_per_iteration "
-            f"(now {self.cycles_per_iteration:.4g}), use adaptive=True (max_increment {self.max_increment:.3g} m), "
+            f"(now {self.cycles_per_iteration:.4g}), {smaller}, "
             "or feedback='support' (the settled supports carry less: self-limiting)"
         )
         if self.on_runaway == "raise":

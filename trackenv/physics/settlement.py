@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -662,6 +662,7 @@ class SettlementState:
         equals r·law.settlement(F, N_total) up to float rounding. Where F = 0 nothing changes; where the
         (bounded) law cannot reach u under F, the settlement stays and the equivalent cycles become +inf.
         """
+        check_law(law)
         dn = check_scalar("delta_cycles", delta_cycles, low=0.0)
         f = check_array("force", force, low=0.0, high=MAX_FORCE_N)
         n = self.n
@@ -764,16 +765,46 @@ def advance_settlement(
     if loaded.any():
         r = np.broadcast_to(rate_factor, u.shape)[loaded]
         u_l, f_l, dn_l = u[loaded], f[loaded], dn[loaded]
-        # the module's laws take their unchecked path (the arrays are ours); any other law goes by the protocol
-        inverse = law._equivalent_cycles_of if isinstance(law, _SeparableLaw) else law.equivalent_cycles
-        forward = law._settlement_of if isinstance(law, _SeparableLaw) else law.settlement
+        # the module's laws take their unchecked path (the arrays are ours); any other law goes by the protocol,
+        # its answers checked (a negative or NaN settlement would otherwise settle as nothing, without a word)
+        inverse: Callable[..., Any]
+        forward: Callable[..., Any]
+        if isinstance(law, _SeparableLaw):
+            own, inverse, forward = True, law._equivalent_cycles_of, law._settlement_of
+        else:
+            own, inverse, forward = False, law.equivalent_cycles, law.settlement
         n_eq = np.asarray(inverse(f_l, u_l / r), dtype=np.float64)
+        if not own:
+            _check_law_answer(law, "equivalent_cycles(force, settlement)", n_eq, "cycles >= 0 (+inf allowed)")
         fin = np.isfinite(n_eq)
         u_new = u_l.copy()
-        u_new[fin] = np.maximum(r[fin] * np.asarray(forward(f_l[fin], n_eq[fin] + dn_l[fin])), u_l[fin])
+        u_fwd = np.asarray(forward(f_l[fin], n_eq[fin] + dn_l[fin]), dtype=np.float64)
+        if not own:
+            _check_law_answer(law, "settlement(force, cycles)", u_fwd, "finite settlements >= 0 [m]", finite=True)
+        u_new[fin] = np.maximum(r[fin] * u_fwd, u_l[fin])
         u[loaded] = u_new
         c[loaded] = np.where(fin, n_eq + dn_l, np.inf)
     return u, c
+
+
+def _check_law_answer(law: Any, call: str, values: np.ndarray, allowed: str, finite: bool = False) -> None:
+    """ValueError naming a law of one's own (the protocol's) whose ``call`` returned values outside ``allowed``:
+    NaN or negative (and, with ``finite``, infinite)."""
+    bad = np.isnan(values) | (values < 0.0) | (~np.isfinite(values) if finite else False)
+    if np.any(bad):
+        name = getattr(law, "name", None) or type(law).__name__
+        raise ValueError(f"law {name!r}: {call} must return {allowed}, got {values[bad][:4].tolist()}")
+
+
+def check_law(law: Any) -> Any:
+    """``law`` if it is a settlement law (an instance with ``settlement(force, cycles)`` and
+    ``equivalent_cycles(force, settlement)``: :class:`SettlementLaw`), else ValueError saying what it needs."""
+    if isinstance(law, type):
+        raise ValueError(f"law must be an instance, e.g. {law.__name__}(), got the class {law.__name__}")
+    if not all(callable(getattr(law, a, None)) for a in ("settlement", "equivalent_cycles")):
+        raise ValueError(f"law must implement settlement(force, cycles) and equivalent_cycles(force, settlement), "
+                         f"got {type(law).__name__}")
+    return law
 
 
 def implicit_settlement_step(
