@@ -121,12 +121,14 @@ def test_masked_sections_are_not_counted_and_not_worked():
 
 
 def test_reward_is_the_sum_of_the_lines_and_the_move():
+    """... and exactly minus info["cost"], as on a line (it differed in the last digit: a probe's exact check)."""
     env = _network()
     env.reset(seed=8)
     for action in (_ask({0: [0]}), _ask({1: [1, 2]}), _ask({1: [1, 2]})):
         _, reward, _, _, info = env.step(action)
-        assert reward == pytest.approx(-info["cost"], rel=1e-12)
+        assert reward == -info["cost"]
         assert info["cost"] == pytest.approx(info["line_costs"].sum() + info["costs"]["move"], rel=1e-12)
+        assert info["cost"] == pytest.approx(sum(info["costs"].values()), rel=1e-12)
         for part, per_line in info["line_cost_parts"].items():
             assert info["costs"][part] == pytest.approx(per_line.sum(), rel=1e-12)
 

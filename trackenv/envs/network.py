@@ -468,7 +468,7 @@ class NetworkBatch:
         parts[MOVE_COST_KEY] = float(move)
         out: dict[str, Any] = {
             "costs": parts,
-            "cost": float(sum(parts.values())),
+            "cost": float(sum(info["cost"] for info in line_infos) + move),  # summed as the reward is: = −reward
             "line_costs": np.array([info["cost"] for info in line_infos]),
             "line_cost_parts": {k: np.array([info["costs"][k] for info in line_infos]) for k in line_infos[0]["costs"]},
             "machine_line": int(self.machine[b]),
