@@ -430,3 +430,19 @@ def test_sleeper_forces_beyond_the_models_validity_are_reported_when_settling() 
     strict = te.TrackDegradation(track_a(), loaded_wheelset(), feedback="support", on_runaway="raise")
     with pytest.raises(te.RunawayError, match="outside its validity"):
         strict.settle(forced, 1000.0)
+
+
+def test_adaptive_stepping_takes_a_restart_it_cannot_split_whole() -> None:
+    """After a partial tamping the restarted sleepers settle more than max_increment within one cycle (the law's
+    initial settlement): adaptive stepping spent its 64 passes on one-cycle steps and left the rest of the
+    iteration to one step on their forces, and three iterations later a probe's run stopped on the law's force
+    range. The first iteration after the tamping is now taken whole, in one pass, as without adaptive stepping."""
+    wheel = te.Wheelset(mass=1800.0, static_load=100e3)
+    sim = te.TrackDegradation(te.Track.seed().scaled(ballast_stiffness=3.0, from_sleeper=30), wheel,
+                              cycles_per_iteration=1e5, speed=100 / 3.6, adaptive=True)
+    sim.run(2)
+    tamped = np.zeros(sim.track.n_sleepers, dtype=bool)
+    tamped[20:41] = True
+    sim.tamp(tamped, te.TampingModel(), rng=np.random.default_rng(1))
+    record = sim.advance()
+    assert record.passes == 1 and np.isfinite(sim.level).all()

@@ -356,6 +356,11 @@ class TrackDegradation:
 
         if differential(cycles) <= self.max_increment:
             return cycles
+        if differential(min(cycles, 1.0)) > self.max_increment:
+            # the law settles more than max_increment within one cycle (a restart's initial settlement after a
+            # partial tamping): no split bounds it, and 63 passes of one cycle each would leave the rest of the
+            # iteration to one step taken on their forces; take the step whole, as without adaptive stepping
+            return cycles
         lo, hi = 0.0, math.log(cycles + 1.0)
         for _ in range(40):  # bisection on log(1 + ΔN)
             mid = 0.5 * (lo + hi)
