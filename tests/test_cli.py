@@ -736,11 +736,10 @@ def test_leaderboard_names_trained_files_by_their_run_as_evaluate_does(tmp_path,
 def test_leaderboard_refuses_one_policy_given_twice(given, tmp_path, monkeypatch, capsys):
     """The same model twice (as written, or by another relative or absolute path) was scored twice under two
     names: one line naming --policies and the repeated item, exit status 2, before anything runs."""
-    for run in ("run1", "run2"):
-        model = tmp_path / run / "model.zip"
-        model.parent.mkdir()
-        model.write_bytes(b"")
-        (model.parent / "model_obs_stats.json").write_text("{}")
+    model = tmp_path / "run1" / "model.zip"
+    model.parent.mkdir()
+    model.write_bytes(b"")
+    (model.parent / "model_obs_stats.json").write_text("{}")
     monkeypatch.chdir(tmp_path)
     items = [g.format(model) for g in given]
     assert main(["leaderboard", "--policies", ",".join(["grouped-threshold", *items]), "--out",
