@@ -91,9 +91,11 @@ def vee(x, x0=14.3, change=4e-3, half_length=0.5):
 def test_a_kink_in_the_rail_falls_back_to_reference_step():
     """A dipped joint whose slope changes by 4 mrad rings the wheel on the rail faster than the auto step
     resolves (its contact peak 1.3 % off at 4e-4 s, 100 km/h): that row runs at the reference step and gives
-    its results, the smooth row beside it keeps the auto step, and a step the caller chose is kept."""
-    both = te.simulate_passes(TRACK, WHEEL_20T, 100 / 3.6, [vee, dip], dt="auto")
-    assert both[0].dt == DT_REFERENCE_S and both[1].dt > DT_REFERENCE_S
+    its results, the smooth rows beside it keep the auto step (a dip given as a smooth function, and the V given as
+    an array: a spline, which cannot kink, is not checked), and a step the caller chose is kept."""
+    sampled = vee(TRACK.sleeper_positions)  # the same dip as an array: a cubic spline through it, not checked
+    both = te.simulate_passes(TRACK, WHEEL_20T, 100 / 3.6, [vee, dip, sampled], dt="auto")
+    assert both[0].dt == DT_REFERENCE_S and both[1].dt > DT_REFERENCE_S and both[2].dt > DT_REFERENCE_S
     ref = simulate_pass(TRACK, WHEEL_20T, 100 / 3.6, vee, dt=DT_REFERENCE_S)
     np.testing.assert_array_equal(both[0].contact_force, ref.contact_force)
     coarse = simulate_pass(TRACK, WHEEL_20T, 100 / 3.6, vee, dt=4e-4)

@@ -827,19 +827,20 @@ def _simulate_passes(tracks, vehicle, speed, irregularities, *, dt, contact, sta
     if auto and dt > DT_REFERENCE_S:
         # the contract covers passes that keep contact over a rail without kinks: the other rows (a wheel left the
         # rail, or the level changes slope within a step) run at the reference step
-        unresolved = sorted(set(lost) | set(_kinked_rows(results)))
+        unresolved = sorted(set(lost) | set(_kinked_rows(results, irr_rows)))
         if unresolved:
             _rerun_rows(results, unresolved, tracks, irr_rows, settlement, system, speed, dt=DT_REFERENCE_S,
                         window_bays=margins[0], **options)
     return results
 
 
-def _kinked_rows(results: list[PassResult]) -> list[int]:
+def _kinked_rows(results: list[PassResult], irregularities: list) -> list[int]:
     """The rows whose rail level under the wheels changes slope by more than the auto step resolves
     (:data:`~trackenv.physics.timestep.MAX_SLOPE_CHANGE_PER_STEP`; the level after the start, which the static
-    sag of settled supports shifts at t = 0)."""
-    return [b for b, res in enumerate(results)
-            if slope_change_per_step(res.wheel_position[1:], res.irregularity[1:]) > MAX_SLOPE_CHANGE_PER_STEP]
+    sag of settled supports shifts at t = 0). Only a level given as a function can kink: an array is a natural
+    cubic spline between its points, smooth in slope and curvature (the envs' rows, which skip the check)."""
+    return [b for b, (res, irr) in enumerate(zip(results, irregularities, strict=True)) if callable(irr)
+            and slope_change_per_step(res.wheel_position[1:], res.irregularity[1:]) > MAX_SLOPE_CHANGE_PER_STEP]
 
 
 @dataclass(frozen=True, eq=False)
