@@ -19,12 +19,14 @@ from ..rules.problems import rules_for, tuned_file_for, tuned_params_for
 from .harness import (
     CHOICE_NAMES,
     MACHINE_STEPS,
+    _predict,
     as_policy,
     bind_policy,
     distinct_names,
     evaluate_many,
     machine_activity,
     policy_name,
+    takes_action_masks,
 )
 from .reporting import ci_text, count_text, plot_comparison
 from .statistics import bootstrap_ci, paired_difference
@@ -408,6 +410,15 @@ def _batch_of_one(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: np.asarray(v)[None] for k, v in obs.items()}
 
 
+def _predict_one(policy: Any, obs: dict[str, np.ndarray], state: Any, first: bool, env: Any) -> tuple[np.ndarray, Any]:
+    """``policy``'s action for one env's ``obs``, called as the harness calls it (:func:`harness._predict` on a batch
+    of one; the env's masks where ``predict`` takes them: a MaskablePPO, ranked counts of the choices), and its
+    state."""
+    masks = np.asarray(env.get_wrapper_attr("action_masks")())[None] if takes_action_masks(policy) else None
+    action, state = _predict(policy, _batch_of_one(obs), state, np.array([first]), masks)
+    return np.asarray(action)[0], state
+
+
 def _panels(policies: Any, cfg: Any, names: Sequence[str] | None) -> tuple[list[Any], list[str]]:
     """An episode plot's policies (one or a list) bound to ``cfg``, and its panel titles: ``names`` (the rows'
     names), else the policies' own, told apart as the harness names its rows (:func:`distinct_names`)."""
@@ -434,8 +445,8 @@ def plot_line_episode(policies: Any, cfg: LineConfig, seed: int, out_png: str,
         sd, tam, meas, cost = [info["section_sd_m"] * 1e3], [], [obs["section_sd"].copy()], 0.0
         state = None
         for t in range(cfg.horizon_steps):  # predict on a batch of one, as the harness calls every policy
-            a, state = pol.predict(_batch_of_one(obs), state=state, episode_start=np.array([t == 0]))
-            obs, r, _, _, info = env.step(np.asarray(a)[0])
+            a, state = _predict_one(pol, obs, state, t == 0, env)
+            obs, r, _, _, info = env.step(a)
             sd.append(info["section_sd_m"] * 1e3)
             meas.append(obs["section_sd"].copy())
             tam.append(info["tamped_sections"])
@@ -481,9 +492,10 @@ def plot_network_episode(policies: Any, cfg: NetworkConfig, seed: int, out_png: 
         env = gym.make("trackenv/TampingNetwork-v0", config=cfg)
         obs, info = env.reset(seed=seed)
         sd, tamped, machine, moved, chosen, cost = [info["section_sd_m"] * 1e3], [], [], [], [], 0.0
+        state = None
         for t in range(cfg.horizon_steps):
-            obs, r, _, _, info = env.step(np.asarray(pol.predict(_batch_of_one(obs),
-                                                                 episode_start=np.array([t == 0]))[0])[0])
+            a, state = _predict_one(pol, obs, state, t == 0, env)
+            obs, r, _, _, info = env.step(a)
             sd.append(info["section_sd_m"] * 1e3)
             tamped.append(info["tamped_sections"])
             machine.append(info["machine_line"])

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig
-from trackenv.envs.wrappers import ranked_to_sections
+from trackenv.envs.wrappers import ranked_to_choices, ranked_to_sections
 
 from ..evaluation.harness import takes_action_masks
 from ..rules.base import as_batch
@@ -122,11 +122,13 @@ def load_baseline(path: str | Path, name: str | None = None) -> Any:
 
 
 #: wrappers of a single env that change nothing a model sees or does (Gymnasium's own, SB3's Monitor)
-_TRANSPARENT_WRAPPERS = ("TimeLimit", "OrderEnforcing", "PassiveEnvChecker", "RecordEpisodeStatistics", "Monitor")
+_TRANSPARENT_WRAPPERS = ("TimeLimit", "OrderEnforcing", "PassiveEnvChecker", "RecordEpisodeStatistics", "Monitor",
+                         "ActionMasker")  # (sb3-contrib's: the harness gives the env's own masks)
 #: what :func:`save_sb3_policy` can describe to the harness: the wrappers between the model and the env, outermost
 #: first (without the transparent ones) -> the sidecar's ``action_type`` (None: the env's own)
 _SCORABLE_PIPELINES = {(): None, ("MultiDiscreteActions",): None, ("SectionObservation",): None,
-                       ("SectionObservation", "MultiDiscreteActions"): None, ("RankedActions",): "ranked",
+                       ("SectionObservation", "MultiDiscreteActions"): None,
+                       ("MultiDiscreteActions", "SectionObservation"): None, ("RankedActions",): "ranked",
                        ("SectionObservation", "RankedActions"): "ranked"}
 
 
@@ -162,7 +164,8 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
         env = env.envs[0]
     if not isinstance(env, gym.Env):
         raise ValueError(f"env must be the Gymnasium env the model was trained on (or a DummyVecEnv of it), got "
-                         f"{type(env).__name__}")
+                         f"{type(env).__name__}: give one env built the same way (for a vector env of ranked "
+                         "actions, make_ranked(id, ...); the PettingZoo agents are scored as an RLlib run)")
     pipeline, inner = [], env
     while isinstance(inner, gym.Wrapper):
         if type(inner).__name__ not in _TRANSPARENT_WRAPPERS:
@@ -180,16 +183,24 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
     space = env.observation_space
     if not isinstance(space, gym.spaces.Dict):
         raise ValueError(f"env's observation must be the trackenv Dict (or SectionObservation's), got {space}")
+    if (getattr(model, "observation_space", space) != space
+            or getattr(model, "action_space", env.action_space) != env.action_space):
+        raise ValueError(f"the model's spaces are not env's: it was trained on another env or wrapper (model: "
+                         f"{model.observation_space} -> {model.action_space}; env: {space} -> {env.action_space}); "
+                         "give the env it was trained on")
     keys = list(space.spaces)
-    if vec_normalize is not None:
+    normalised: list[str] = []
+    if vec_normalize is not None and getattr(vec_normalize, "norm_obs", True):
+        normalised = [k for k in (getattr(vec_normalize, "norm_obs_keys", None) or keys) if k in keys]
+    shapes = {k: space[k].shape or () for k in keys}
+    mean = {k: np.zeros(shapes[k]).tolist() for k in keys}  # the identity where the model saw the env's own
+    var = {k: np.ones(shapes[k]).tolist() for k in keys}
+    clip, eps = float(np.finfo(np.float32).max), 0.0
+    if normalised:
         rms = vec_normalize.obs_rms
-        mean, var = {k: rms[k].mean.tolist() for k in keys}, {k: rms[k].var.tolist() for k in keys}
+        mean.update({k: rms[k].mean.tolist() for k in normalised})
+        var.update({k: rms[k].var.tolist() for k in normalised})
         clip, eps = float(vec_normalize.clip_obs), float(vec_normalize.epsilon)
-    else:  # the identity: (x - 0) / sqrt(1 + 0), clipped nowhere
-        shapes = {k: space[k].shape or () for k in keys}
-        mean = {k: np.zeros(shapes[k]).tolist() for k in keys}
-        var = {k: np.ones(shapes[k]).tolist() for k in keys}
-        clip, eps = float(np.finfo(np.float32).max), 0.0
     ranked = _SCORABLE_PIPELINES[tuple(pipeline)] == "ranked"
     action_type = ("ranked_choices" if choices else "ranked") if ranked else ("choices" if choices else "multibinary")
     path = Path(path)
@@ -197,9 +208,11 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
         raise ValueError(f"path must end in .zip (the model's file), got {str(path)!r}")
     path.parent.mkdir(parents=True, exist_ok=True)
     save_model_atomic(model, path)
+    raw = [k for k in keys if k not in normalised]
     write_json_atomic(stats_path(path), {"obs_keys": keys, "mean": mean, "var": var, "clip_obs": clip,
                                          "epsilon": eps, "algo": algo, "action_type": action_type,
-                                         "config": config.to_dict(), "saved_by": "save_sb3_policy"})
+                                         "config": config.to_dict(), "raw_keys": raw if normalised else [],
+                                         "saved_by": "save_sb3_policy"})
     return path
 
 
@@ -288,7 +301,8 @@ def _load_rllib(run_dir: Path, name: str) -> TrainedPolicy:
 
         env = make_ranked(env_id, **env_config)
         config = env.unwrapped.config  # type: ignore[attr-defined]
-        policy = RLlibRankedPolicy(module, list(env.observation_space.spaces), name)  # type: ignore[attr-defined]
+        policy = RLlibRankedPolicy(module, list(env.observation_space.spaces), name,  # type: ignore[attr-defined]
+                                   heads=env.get_wrapper_attr("heads"))
         env.close()
     return TrainedPolicy(policy, config, name, "rllib", run_dir)
 
@@ -316,22 +330,35 @@ class RLlibRankedPolicy:
     """An RLModule trained on the flat ranked view of a line (:func:`trackenv.envs.wrappers.make_ranked` with
     ``flat=True``): the section-level observation, its keys in ``obs_keys`` order flattened to one row, gives
     logits over ``Discrete(n_sections + 1)``; the count ``k`` tamps the ``k`` sections of largest measured SD
-    (:func:`~trackenv.envs.wrappers.ranked_to_sections`). ``rng``: the draws of ``deterministic=False``."""
+    (:func:`~trackenv.envs.wrappers.ranked_to_sections`). On a line with the choices (``heads``: the enabled
+    interventions, :attr:`~trackenv.envs.wrappers.RankedActions.heads`) the logits are one block of
+    ``n_sections + 1`` per head, each head's count chosen in its block (as RLlib's MultiDiscrete distribution
+    does) and decoded on the env's ``action_masks`` (:func:`~trackenv.envs.wrappers.ranked_to_choices`, as the
+    wrapper decoded them in training); it was scored as one tamping count before. ``rng``: the draws of
+    ``deterministic=False``."""
 
     def __init__(self, module: Any, obs_keys: list[str], name: str = "rllib-ppo",
-                 rng: np.random.Generator | None = None) -> None:
+                 rng: np.random.Generator | None = None, heads: tuple[str, ...] | None = None) -> None:
         self.module = module
         self.obs_keys = list(obs_keys)
         self.name = name
         self._rng = rng
+        self.heads = None if heads is None else tuple(heads)
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
-                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+                deterministic: bool = True, action_masks: Any = None) -> tuple[np.ndarray, Any]:
         b, batched = as_batch(dict(observation))
-        n = b["section_sd"].shape[0]
+        n, s = b["section_sd"].shape
         x = np.concatenate([np.asarray(b[k], dtype=np.float32).reshape(n, -1) for k in self.obs_keys], axis=1)
-        counts = _choose(_logits(self.module, x), deterministic, self._rng)
-        act = ranked_to_sections(counts, b["section_sd"])
+        logits = _logits(self.module, x)
+        if self.heads is None:
+            act = ranked_to_sections(_choose(logits, deterministic, self._rng), b["section_sd"])
+        else:
+            if action_masks is None:
+                raise ValueError(f"policy {self.name!r} answers in ranked counts of the choices, which decode on the "
+                                 "env's action masks: predict(observation, action_masks=env.action_masks())")
+            counts = _choose(logits.reshape(n, len(self.heads), s + 1), deterministic, self._rng)
+            act = ranked_to_choices(counts, b, np.asarray(action_masks).reshape(n, -1), self.heads)
         return (act if batched else act[0]), state
 
 
@@ -352,6 +379,10 @@ class RLlibSectionPolicy:
         self._rng = rng
         agent = parallel_env.possible_agents[0]
         self._order = list(parallel_env.observation_space(agent).spaces)  # the Dict's keys, as flattened
+        if parallel_env.action_space(agent).n != 2:  # its masks and actions would be read as tamp or wait
+            raise ValueError(f"{name}: an RLlib run of the PettingZoo agents on a line with the choices (each agent "
+                             f"acts in {parallel_env.action_space(agent)}) cannot be scored yet: the scorer reads "
+                             "tamp or wait only")
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:

@@ -198,7 +198,7 @@ class NormalizedPolicy:
 
     def __init__(self, model, obs_keys: Sequence[str], mean: dict, var: dict, clip_obs: float = 10.0,
                  epsilon: float = 1e-8, name: str = "ppo", algo: str = "ppo",
-                 action_type: str = "multibinary", config: Any = None) -> None:
+                 action_type: str = "multibinary", config: Any = None, raw_keys: Sequence[str] = ()) -> None:
         self.model = model
         self.obs_keys = list(obs_keys)
         self.mean = {k: np.asarray(mean[k], dtype=np.float64) for k in self.obs_keys}
@@ -208,6 +208,8 @@ class NormalizedPolicy:
         self.name = name
         self.algo = algo
         self.action_type = action_type
+        #: the keys the model read as the env gives them (a VecNormalize that normalised only some, or none)
+        self.raw_keys = [k for k in raw_keys if k in self.obs_keys]
         self.heads: tuple[str, ...] | None = None
         self.fit: tuple[np.ndarray, float] | None = None
         if action_type == RANKED_CHOICES:  # what its counts rank: the line's enabled choices, capped by the possession
@@ -226,9 +228,9 @@ class NormalizedPolicy:
 
     def normalize(self, obs: dict) -> dict:
         obs = filter_observation(obs, self.obs_keys)
-        return {k: np.clip((np.asarray(obs[k], dtype=np.float64) - self.mean[k]) / np.sqrt(self.var[k]
-                                                                                           + self.epsilon),
-                           -self.clip_obs, self.clip_obs).astype(np.float32) for k in self.obs_keys}
+        return {k: np.asarray(obs[k], dtype=np.float32) if k in self.raw_keys else
+                np.clip((np.asarray(obs[k], dtype=np.float64) - self.mean[k]) / np.sqrt(self.var[k] + self.epsilon),
+                        -self.clip_obs, self.clip_obs).astype(np.float32) for k in self.obs_keys}
 
     def predict(self, observation: dict, state=None, episode_start=None, deterministic: bool = True,
                 action_masks: np.ndarray | None = None):
@@ -260,7 +262,8 @@ class NormalizedPolicy:
     def stats_dict(self) -> dict:
         return {"obs_keys": self.obs_keys, "mean": {k: v.tolist() for k, v in self.mean.items()},
                 "var": {k: v.tolist() for k, v in self.var.items()}, "clip_obs": self.clip_obs,
-                "epsilon": self.epsilon, "algo": self.algo, "action_type": self.action_type}
+                "epsilon": self.epsilon, "algo": self.algo, "action_type": self.action_type,
+                **({"raw_keys": self.raw_keys} if self.raw_keys else {})}
 
 
 # --- callbacks ---
@@ -650,4 +653,5 @@ def load_trained(path: str | Path | None = None, name: str = "ppo") -> Normalize
     model = _algo_class(algo).load(str(path), device="cpu")
     return NormalizedPolicy(model, stats["obs_keys"], stats["mean"], stats["var"], stats["clip_obs"],
                             stats["epsilon"], name=name, algo=algo,
-                            action_type=stats.get("action_type", "multibinary"), config=stats.get("config"))
+                            action_type=stats.get("action_type", "multibinary"), config=stats.get("config"),
+                            raw_keys=stats.get("raw_keys", ()))

@@ -235,6 +235,42 @@ def test_save_sb3_policy_keeps_the_vecnormalize_statistics(tmp_path) -> None:
         np.testing.assert_allclose(ours[key], value, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("normalise", [{"norm_obs": False}, {"norm_obs_keys": ["section_sd"]}])
+def test_save_sb3_policy_reads_a_vecnormalize_of_some_keys_or_none(normalise, tmp_path) -> None:
+    """A VecNormalize of the rewards only, or of some observation keys (a probe's AttributeError and KeyError):
+    the saved policy normalises as the model saw in training, the other keys passed as the env gives them."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(SMALL, **SHORT)]), **normalise)
+    model = PPO("MultiInputPolicy", venv, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    model.learn(8)
+    policy = load_baseline(save_sb3_policy(model, venv, tmp_path / "some.zip"))
+    raw = venv.get_original_obs()
+    theirs, ours = venv.normalize_obs(raw), policy.policy.normalize(raw)
+    for key, value in theirs.items():
+        np.testing.assert_allclose(ours[key], value, rtol=1e-6, atol=1e-6)
+
+
+def test_a_ranked_choices_model_plays_its_episode_plot_with_the_envs_masks(tmp_path) -> None:
+    """`trackenv evaluate --model` of a model in ranked counts of the choices failed after its table: the episode
+    plot called predict without the env's masks. The plot now calls every policy as the harness does."""
+    from sb3_contrib import MaskablePPO
+
+    from trackenv.envs.wrappers import make_ranked
+    from trackenv_agents.evaluation.line_compare import plot_line_episode
+    from trackenv_agents.learning.baselines import save_sb3_policy
+
+    env = make_ranked("trackenv/TampingLineWet-v0", **SHORT)
+    model = MaskablePPO("MultiInputPolicy", env, n_steps=8, batch_size=8, n_epochs=1, seed=0, device="cpu")
+    policy = load_baseline(save_sb3_policy(model, env, tmp_path / "ranked.zip"))
+    out = plot_line_episode(policy, env.unwrapped.config, 0, str(tmp_path / "episode.png"), action_type="choices")
+    assert (tmp_path / "episode.png").stat().st_size > 0 and out.endswith("episode.png")
+
+
 def test_save_sb3_policy_refuses_what_the_harness_cannot_undo(tmp_path) -> None:
     import gymnasium as gym
     from stable_baselines3 import PPO
@@ -249,6 +285,53 @@ def test_save_sb3_policy_refuses_what_the_harness_cannot_undo(tmp_path) -> None:
     with pytest.raises(ValueError, match="model must be one of .*got str"):
         save_sb3_policy("model", gym.make(SMALL), tmp_path / "x.zip")
     env = gym.make(SMALL, **SHORT)
+    with pytest.raises(ValueError, match="the model's spaces are not env's: it was trained on another env"):
+        save_sb3_policy(PPO("MultiInputPolicy", make_ranked(SMALL, **SHORT), n_steps=8, batch_size=8, device="cpu"),
+                        env, tmp_path / "x.zip")
+    with pytest.raises(ValueError, match="give one env built the same way .*make_ranked"):
+        save_sb3_policy(PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, device="cpu"), object(),
+                        tmp_path / "x.zip")
     with pytest.raises(ValueError, match="path must end in .zip"):
         save_sb3_policy(PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, device="cpu"), env, tmp_path / "x")
     assert not list(tmp_path.iterdir())  # nothing written by a refusal
+
+
+class _FixedLogits:
+    """An RLModule stand-in: the same action logits for every row of the batch."""
+
+    def __init__(self, logits: np.ndarray) -> None:
+        self.logits = np.asarray(logits, dtype=np.float32)
+
+    def forward_inference(self, batch):
+        import torch
+
+        return {"action_dist_inputs": torch.as_tensor(np.tile(self.logits, (len(batch["obs"]), 1)))}
+
+
+def test_a_flat_rllib_run_on_the_choices_decodes_one_count_per_choice() -> None:
+    """An RLlib module trained on the flat ranked view of the wet line answers one block of logits per choice: it
+    was read as one tamping count (a probe's run scored 33 % below the rule, against twice the rule's cost in its
+    own env). Each block's count is now decoded on the env's masks, as the wrapper did in training; without the
+    masks it is refused by name. A multi-agent run on the choices is refused, not misread."""
+    from trackenv.envs.multiagent import line_parallel_env
+    from trackenv.envs.wrappers import make_ranked, ranked_to_choices
+    from trackenv_agents.learning.baselines import RLlibRankedPolicy, RLlibSectionPolicy
+
+    env = make_ranked("trackenv/TampingLineWet-v0", flat=True, **SHORT)
+    env.reset(seed=0)
+    heads = env.get_wrapper_attr("heads")
+    line = env.unwrapped
+    s = line.config.n_sections
+    logits = np.random.default_rng(1).normal(size=len(heads) * (s + 1))
+    counts = logits.reshape(len(heads), s + 1).argmax(axis=1)
+    keys = list(env.get_wrapper_attr("keys"))
+    policy = RLlibRankedPolicy(_FixedLogits(logits), keys, "flat", heads=heads)
+    obs, masks = line.current_observation(), line.action_masks()
+    batch = {k: np.asarray(v)[None] for k, v in obs.items()}
+    action, _ = policy.predict(batch, action_masks=masks[None])
+    np.testing.assert_array_equal(action[0], ranked_to_choices(counts, obs, masks, heads))
+    with pytest.raises(ValueError, match="'flat' answers in ranked counts of the choices"):
+        policy.predict(batch)
+    with pytest.raises(ValueError, match="on a line with the choices .* cannot be scored yet"):
+        RLlibSectionPolicy(_FixedLogits(np.zeros(7)), line_parallel_env("trackenv/TampingLineWet-v0", **SHORT),
+                           line.config, "shared")
