@@ -501,10 +501,11 @@ def cmd_leaderboard(args: argparse.Namespace) -> int:
         from .evaluation.leaderboard import fitting_agents
         from .evaluation.line_compare import env_config
 
-        fits = {env_id: fitting_agents(agents, env_config(env_id, **overrides)) for env_id in envs}
+        configs = {env_id: env_config(env_id, **overrides) for env_id in envs}
+        fits = {env_id: fitting_agents(agents, config) for env_id, config in configs.items()}
         if "horizon_years" in overrides:
             for env_id, (here, _) in fits.items():  # each scenario's note for the agents scored there only
-                _say_horizon_notes("leaderboard", here, {env_id: env_config(env_id, **overrides).horizon_years})
+                _say_horizon_notes("leaderboard", here, {env_id: configs[env_id].horizon_years})
         for name in agents:  # a policy asked for and scored nowhere: say why where the page only groups it
             if all(name in unfit for _, unfit in fits.values()):
                 why = "; ".join(f"{env_id}: {unfit[name]}" for env_id, (_, unfit) in fits.items())

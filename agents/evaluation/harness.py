@@ -254,8 +254,11 @@ def add_note(error: BaseException, note: str) -> None:
 def takes_action_masks(policy: Any) -> bool:
     """Whether ``policy.predict`` has an ``action_masks`` argument (sb3-contrib's MaskablePPO, a loaded SB3
     policy): the harness then gives it the env's masks, one row per env."""
+    predict = getattr(policy, "predict", None)
+    if not callable(predict):  # (no predict at all: the harness refuses it where it plays)
+        return False
     try:
-        return "action_masks" in inspect.signature(policy.predict).parameters
+        return "action_masks" in inspect.signature(predict).parameters
     except (TypeError, ValueError):  # pragma: no cover - a predict without a signature
         return False
 

@@ -16,6 +16,7 @@ adapter (:class:`~trackenv_agents.learning.sb3_vec.TampingSB3VecEnv`) takes, the
 
 from __future__ import annotations
 
+import numpy as np
 from gymnasium import spaces
 
 from trackenv.envs.common import action_space
@@ -30,7 +31,7 @@ VEC_ACTION_TYPES = (*ACTION_TYPES, "choices", RANKED_CHOICES)
 _ENV_ACTION_TYPE = {RANKED: "multibinary", RANKED_CHOICES: "choices"}
 
 __all__ = ["ACTION_TYPES", "RANKED", "RANKED_CHOICES", "VEC_ACTION_TYPES", "agent_action_space",
-           "check_action_type", "env_action_type", "ranked_to_choices", "ranked_to_sections"]
+           "check_action_type", "decode_ranked_choices", "env_action_type", "ranked_to_choices", "ranked_to_sections"]
 
 
 def check_action_type(action_type: str, allowed: tuple[str, ...] = VEC_ACTION_TYPES) -> str:
@@ -52,3 +53,13 @@ def agent_action_space(config: LineConfig, action_type: str) -> spaces.Space:
     if action_type == RANKED_CHOICES:
         return spaces.MultiDiscrete([config.n_sections + 1] * len(config.choices))
     return action_space(config, action_type)
+
+
+def decode_ranked_choices(name: str, counts, observation, masks, heads) -> np.ndarray:
+    """The env's choice codes of a trained policy's ranked ``counts`` of the choices ``heads``
+    (:func:`ranked_to_choices` on its ``observation``), which decode on the env's action ``masks``: without them,
+    ValueError naming the policy ``name`` and how to give them."""
+    if masks is None:
+        raise ValueError(f"policy {name!r} answers in ranked counts of the choices, which decode on the env's action "
+                         "masks: predict(observation, action_masks=env.action_masks())")
+    return ranked_to_choices(counts, observation, masks, heads)

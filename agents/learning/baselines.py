@@ -34,10 +34,11 @@ from typing import Any
 import numpy as np
 
 from trackenv.envs.line_config import LINE_FILE_FIELDS, LineConfig
-from trackenv.envs.wrappers import ranked_to_choices, ranked_to_sections
+from trackenv.envs.wrappers import ranked_to_sections
 
 from ..evaluation.harness import takes_action_masks
 from ..rules.base import as_batch
+from .actions import decode_ranked_choices
 from .line_policy import may_tamp
 
 __all__ = ["BASELINE_KINDS", "RLLIB_SUMMARY", "SAVED_BASELINES", "RLlibRankedPolicy", "RLlibSectionPolicy",
@@ -193,9 +194,9 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
     if vec_normalize is not None and getattr(vec_normalize, "norm_obs", True):
         normalised = [k for k in (getattr(vec_normalize, "norm_obs_keys", None) or keys) if k in keys]
     shapes = {k: space[k].shape or () for k in keys}
-    mean = {k: np.zeros(shapes[k]).tolist() for k in keys}  # the identity where the model saw the env's own
+    mean = {k: np.zeros(shapes[k]).tolist() for k in keys}  # unread for the raw keys (the env's own, as it gave them)
     var = {k: np.ones(shapes[k]).tolist() for k in keys}
-    clip, eps = float(np.finfo(np.float32).max), 0.0
+    clip, eps = 10.0, 1e-8  # (VecNormalize's defaults; read only where it normalised)
     if normalised:
         rms = vec_normalize.obs_rms
         mean.update({k: rms[k].mean.tolist() for k in normalised})
@@ -211,8 +212,7 @@ def save_sb3_policy(model: Any, env: Any, path: str | Path, vec_normalize: Any =
     raw = [k for k in keys if k not in normalised]
     write_json_atomic(stats_path(path), {"obs_keys": keys, "mean": mean, "var": var, "clip_obs": clip,
                                          "epsilon": eps, "algo": algo, "action_type": action_type,
-                                         "config": config.to_dict(), "raw_keys": raw if normalised else [],
-                                         "saved_by": "save_sb3_policy"})
+                                         "config": config.to_dict(), "raw_keys": raw, "saved_by": "save_sb3_policy"})
     return path
 
 
@@ -225,12 +225,13 @@ class TrainedPolicy:
         self.config = config
         self.name = name
         self.params: dict[str, Any] = {"kind": kind, "path": str(path)}
+        self._takes_masks = takes_action_masks(policy)  # asked once: predict runs every step
 
     def predict(self, observation: Mapping[str, Any], state: Any = None, episode_start: Any = None,
                 deterministic: bool = True, action_masks: Any = None) -> tuple[np.ndarray, Any]:
         """The policy's ``predict``; the env's ``action_masks`` go on to a policy that takes them (an SB3 model's:
         MaskablePPO's masks, the decoding of ranked counts of the choices)."""
-        extra = {} if action_masks is None or not takes_action_masks(self.policy) else {"action_masks": action_masks}
+        extra = {} if action_masks is None or not self._takes_masks else {"action_masks": action_masks}
         return self.policy.predict(observation, state=state, episode_start=episode_start,
                                    deterministic=deterministic, **extra)
 
@@ -354,11 +355,9 @@ class RLlibRankedPolicy:
         if self.heads is None:
             act = ranked_to_sections(_choose(logits, deterministic, self._rng), b["section_sd"])
         else:
-            if action_masks is None:
-                raise ValueError(f"policy {self.name!r} answers in ranked counts of the choices, which decode on the "
-                                 "env's action masks: predict(observation, action_masks=env.action_masks())")
             counts = _choose(logits.reshape(n, len(self.heads), s + 1), deterministic, self._rng)
-            act = ranked_to_choices(counts, b, np.asarray(action_masks).reshape(n, -1), self.heads)
+            masks = None if action_masks is None else np.asarray(action_masks).reshape(n, -1)
+            act = decode_ranked_choices(self.name, counts, b, masks, self.heads)
         return (act if batched else act[0]), state
 
 

@@ -32,7 +32,7 @@ from trackenv.envs.problems import problem_config
 from trackenv.envs.wrappers import ranked_choice_masks, ranked_fit
 
 from ..evaluation.harness import evaluate_one
-from .actions import RANKED, RANKED_CHOICES, env_action_type, ranked_to_choices, ranked_to_sections
+from .actions import RANKED, RANKED_CHOICES, decode_ranked_choices, env_action_type, ranked_to_sections
 from .checkpoint import (
     CHECKPOINT_FILE,
     META_FILE,
@@ -242,11 +242,7 @@ class NormalizedPolicy:
         if self.action_type == RANKED:
             action = ranked_to_sections(action, observation["section_sd"])
         elif self.action_type == RANKED_CHOICES:
-            if action_masks is None:
-                raise ValueError(f"policy {self.name!r} answers in ranked counts of the choices, which decode on the "
-                                 "env's action masks: predict(observation, action_masks=env.action_masks())")
-            assert self.heads is not None
-            action = ranked_to_choices(action, observation, action_masks, self.heads)
+            action = decode_ranked_choices(self.name, action, observation, action_masks, self.heads)
         return action, state
 
     def _own_masks(self, env_masks: np.ndarray | None) -> np.ndarray | None:
